@@ -1,0 +1,90 @@
+"""Measure ``env.step`` throughput of the lawn environments beside Gymnasium's CartPole-v1.
+
+Unwrapped environments, pre-sampled actions, one core; each figure is the best of
+``--repeats`` timed runs of ``--steps`` steps (resets between episodes are excluded from the
+timing). Prints a table and checks the targets of issue #2:
+
+* ``lawn/Joint-v0`` at K = 4: at least 30,000 steps/s and within 7x of CartPole's step time;
+* ``lawn/Comm-v0`` at K = 4: at least 3,000 steps/s.
+
+Usage: ``python benchmarks/env_throughput.py [--steps 20000] [--repeats 5] [--json out.json]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import lawn_env  # noqa: F401  (registers the ids)
+
+
+def measure(env_id: str, steps: int, repeats: int, seed: int = 0, **kwargs) -> float:
+    env = gym.make(env_id, **kwargs).unwrapped
+    env.action_space.seed(seed)
+    actions = [env.action_space.sample() for _ in range(steps)]
+    best = float("inf")
+    for _ in range(repeats):
+        env.reset(seed=seed)
+        elapsed = 0.0
+        i = 0
+        while i < steps:
+            start = time.perf_counter()
+            done = False
+            while i < steps and not done:
+                _, _, terminated, truncated, _ = env.step(actions[i])
+                done = terminated or truncated
+                i += 1
+            elapsed += time.perf_counter() - start
+            if done:
+                env.reset()
+        best = min(best, elapsed)
+    env.close()
+    return steps / best
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=int, default=20000)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--json", help="also write the figures to this JSON file")
+    args = parser.parse_args(argv)
+
+    rows = []
+    cartpole = measure("CartPole-v1", args.steps, args.repeats)
+    rows.append(("CartPole-v1", "-", cartpole))
+    for env_id in ("lawn/Joint-v0", "lawn/Comm-v0"):
+        for k in (4, 32):
+            steps = args.steps if (env_id == "lawn/Joint-v0" or k == 4) else max(args.steps // 10, 500)
+            rows.append((env_id, k, measure(env_id, steps, args.repeats, num_agvs=k)))
+
+    print(f"python {platform.python_version()}, numpy {np.__version__}, gymnasium {gym.__version__}, "
+          f"{os.cpu_count()} cores, {platform.processor() or platform.machine()}")
+    print(f"{'env':<16}{'K':>4}{'steps/s':>12}{'us/step':>10}{'x CartPole time':>17}")
+    for env_id, k, rate in rows:
+        print(f"{env_id:<16}{k!s:>4}{rate:>12,.0f}{1e6 / rate:>10.1f}{cartpole / rate:>17.1f}")
+
+    joint4 = next(r for e, k, r in rows if e == "lawn/Joint-v0" and k == 4)
+    comm4 = next(r for e, k, r in rows if e == "lawn/Comm-v0" and k == 4)
+    checks = [
+        ("Joint-v0 K=4 >= 30,000 steps/s", joint4 >= 30000),
+        ("Joint-v0 K=4 within 7x of CartPole step time", cartpole / joint4 <= 7.0),
+        ("Comm-v0 K=4 >= 3,000 steps/s", comm4 >= 3000),
+    ]
+    for name, ok in checks:
+        print(f"[{'PASS' if ok else 'FAIL'}] {name}")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"rows": [{"env": e, "K": k, "steps_per_s": r} for e, k, r in rows],
+                       "checks": {n: ok for n, ok in checks}}, fh, indent=2)
+    return 0 if all(ok for _, ok in checks) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,48 @@
+"""lawn_env: wireless predictive control over low-altitude networks, as RL environments.
+
+``import lawn_env`` registers ``lawn/Joint-v0`` and ``lawn/Comm-v0`` with Gymnasium
+(``gym.make("lawn_env:lawn/Joint-v0")`` works without the import). ``lawn_env.parallel_env``
+builds the PettingZoo environment. The physics lives in :mod:`lawn_env.channel`,
+:mod:`lawn_env.dynamics`, :mod:`lawn_env.drone` and :mod:`lawn_env.references`.
+"""
+
+from gymnasium.envs.registration import register, registry
+
+from . import channel, dynamics, drone, presets, references
+from .config import ChannelConfig, ControlConfig, DroneConfig, ReferenceConfig, ScenarioConfig
+from .core import Simulation, Snapshot
+from .envs import CommEnv, JointEnv, LawnParallelEnv, parallel_env
+from .spaces import ObservationLayout
+
+__version__ = "0.1.0"
+
+#: Registered environment ids and their entry points: the one registry the CLI reads.
+ENV_IDS = {
+    "lawn/Joint-v0": "lawn_env.envs.joint:JointEnv",
+    "lawn/Comm-v0": "lawn_env.envs.comm:CommEnv",
+}
+
+for _env_id, _entry_point in ENV_IDS.items():
+    if _env_id not in registry:
+        register(id=_env_id, entry_point=_entry_point, disable_env_checker=False)
+
+__all__ = [
+    "ENV_IDS",
+    "ChannelConfig",
+    "ControlConfig",
+    "DroneConfig",
+    "ReferenceConfig",
+    "ScenarioConfig",
+    "Simulation",
+    "Snapshot",
+    "ObservationLayout",
+    "JointEnv",
+    "CommEnv",
+    "LawnParallelEnv",
+    "parallel_env",
+    "channel",
+    "dynamics",
+    "drone",
+    "presets",
+    "references",
+]

@@ -1,0 +1,290 @@
+"""Short-packet drone-to-AGV link with Nakagami-m fading (MODEL.md §2).
+
+Pure numpy functions, vectorized over any leading shape. All functions take *linear*
+quantities (power in W, gain as a ratio); the config's dB values are converted by
+:class:`LinkParams`. Distances are 3-D drone–AGV distances in m.
+
+Equations
+---------
+* FBL rate (Polyanskiy–Poor–Verdú normal approximation), bit/s/Hz:
+  ``R(G) = log2(1+G) - sqrt(V/l) Q^{-1}(eps) log2(e)``, ``V = 1 - (1+G)^{-2}``.
+  ``paper_form=True`` drops ``log2(e)`` as the paper prints it (a units slip, MODEL.md §2).
+* SNR threshold: the root of ``R(G) = R_th`` on the increasing branch, found by bracketed root
+  finding above the closed-form turning point, cached per ``(R_th, l, eps, paper_form)``.
+  ``blocklength=inf`` gives the IBL threshold ``2^R_th - 1``.
+* Outage (Prop. 1): ``P = gammainc(m, x)`` (regularized lower incomplete gamma) with
+  ``x = m G_th (rho + d^2 sigma^2 / (alpha0 p)) / (1 - rho)``; for perfect CSI (rho = 0) this is
+  ``x = m g``, ``g = d^2 G_th sigma^2 / (alpha0 p)``. ``p = 0`` gives ``P = 1``.
+  The MMSE CE error is treated as noise: ``G_eff = (1-rho) beta |h|^2 p / (rho beta p + sigma^2)``.
+* Success ``psi = 1 - P = gammaincc(m, x)``, with derivatives in log form.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize, special
+
+__all__ = [
+    "LOG2E",
+    "LinkParams",
+    "fbl_rate",
+    "ibl_rate",
+    "rate_turning_point",
+    "snr_threshold",
+    "outage_probability",
+    "success_probability",
+    "success_and_gradients",
+    "outage_argument",
+    "outage_argument_sq",
+    "delivered_from_fading",
+    "sample_normalized_fading",
+    "realized_snr",
+    "sample_fading",
+    "sample_delivery",
+    "distance_sq",
+    "POWER_FLOOR_W",
+]
+
+LOG2E = 1.0 / math.log(2.0)
+
+
+def _dispersion_factor(blocklength: float, bler: float, paper_form: bool) -> float:
+    """sqrt(1/l) Q^{-1}(eps) [log2 e]: the coefficient of sqrt(V) in the FBL rate."""
+    qinv = -special.ndtri(bler)  # Q^{-1}(eps) = -Phi^{-1}(eps), exact for small eps
+    factor = qinv / math.sqrt(blocklength)
+    return factor if paper_form else factor * LOG2E
+
+
+def ibl_rate(snr: np.ndarray | float) -> np.ndarray:
+    """Shannon rate log2(1 + SNR), bit/s/Hz (the IBL limit of :func:`fbl_rate`)."""
+    return np.log2(1.0 + np.asarray(snr, dtype=float))
+
+
+def fbl_rate(snr: np.ndarray | float, blocklength: float, bler: float, paper_form: bool = False) -> np.ndarray:
+    """Achievable FBL rate in bit/s/Hz at linear SNR ``snr`` (MODEL.md §2).
+
+    ``blocklength=math.inf`` returns the IBL rate.
+    """
+    snr = np.asarray(snr, dtype=float)
+    if math.isinf(blocklength):
+        return ibl_rate(snr)
+    dispersion = 1.0 - (1.0 + snr) ** -2
+    return np.log2(1.0 + snr) - np.sqrt(dispersion) * _dispersion_factor(blocklength, bler, paper_form)
+
+
+def rate_turning_point(blocklength: float, bler: float, paper_form: bool = False) -> float:
+    """SNR at which the FBL rate is minimal (R' = 0), in closed form.
+
+    R'(G) = 0 reduces to ``(1+G) sqrt((1+G)^2 - 1) = c`` with ``c = Q^{-1}(eps)/sqrt(l)`` for the
+    log2(e) form (the paper's equation) and ``c ln 2`` for the paper's printed form; so
+    ``(1+G)^2 = 1/2 + sqrt(1/4 + c^2)``.
+    """
+    c = -special.ndtri(bler) / math.sqrt(blocklength)
+    if paper_form:
+        c *= math.log(2.0)
+    return math.sqrt(0.5 + math.sqrt(0.25 + c * c)) - 1.0
+
+
+@functools.lru_cache(maxsize=256)
+def _snr_threshold_cached(rate: float, blocklength: float, bler: float, paper_form: bool) -> float:
+    if math.isinf(blocklength):
+        return 2.0**rate - 1.0
+    lo = rate_turning_point(blocklength, bler, paper_form)
+    # R(G) >= log2(1+G) - factor, so G_hi = 2^(rate + factor) - 1 has R(G_hi) >= rate.
+    hi = 2.0 ** (rate + _dispersion_factor(blocklength, bler, paper_form) + 1.0)
+
+    def f(g: float) -> float:
+        return float(fbl_rate(g, blocklength, bler, paper_form)) - rate
+
+    return optimize.brentq(f, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps, maxiter=500)
+
+
+def snr_threshold(rate: float, blocklength: float, bler: float, paper_form: bool = False) -> float:
+    """Linear SNR at which the FBL rate equals ``rate`` bit/s/Hz (increasing branch).
+
+    ``blocklength=math.inf`` gives the IBL threshold ``2^rate - 1``. Cached.
+    """
+    rate = float(rate)
+    if not rate > 0 or not math.isfinite(rate):
+        raise ValueError(f"rate={rate!r}: the rate threshold must be a finite positive number (bit/s/Hz)")
+    if not 0.0 < bler < 1.0:
+        raise ValueError(f"bler={bler!r}: must lie in (0, 1)")
+    if not blocklength > 0:
+        raise ValueError(f"blocklength={blocklength!r}: must be positive (or math.inf for IBL)")
+    return _snr_threshold_cached(rate, float(blocklength), float(bler), bool(paper_form))
+
+
+@dataclass(frozen=True)
+class LinkParams:
+    """Linear link parameters shared by the simulator and the planners.
+
+    ``snr_threshold`` is G_th; ``ce_error_var`` is rho (0 for perfect CSI).
+    """
+
+    snr_threshold: float
+    alpha0: float
+    noise_power_w: float
+    m: int
+    altitude_m: float
+    ce_error_var: float = 0.0
+
+    @classmethod
+    def from_config(cls, config, *, planning: bool = False) -> "LinkParams":
+        """Link of a :class:`~lawn_env.config.ScenarioConfig`.
+
+        With ``planning=True`` and ``channel.ce_aware_planning=False`` the CE error is ignored
+        (a CSI-unaware planner's model of the link).
+        """
+        ch = config.channel
+        blocklength = math.inf if ch.infinite_blocklength else ch.blocklength
+        rho = ch.ce_error_var if (ch.ce_aware_planning or not planning) else 0.0
+        return cls(
+            snr_threshold=snr_threshold(ch.rate_threshold_bps_hz, blocklength, ch.bler, ch.paper_rate_form),
+            alpha0=ch.alpha0,
+            noise_power_w=ch.noise_power_w,
+            m=ch.nakagami_m,
+            altitude_m=config.drone.altitude_m,
+            ce_error_var=rho,
+        )
+
+    @functools.cached_property
+    def coefficients(self) -> tuple[float, float]:
+        """(c_d, c_ce) with the outage argument x = c_d d^2 / p + c_ce (see :func:`outage_argument_sq`)."""
+        return _outage_coefficients(self.snr_threshold, self.alpha0, self.noise_power_w, self.m, self.ce_error_var)
+
+    def outage_argument_sq(self, power_w, distance_sq_m2):
+        """x of Prop. 1 for this link (fast path of :func:`outage_argument_sq`)."""
+        c_d, c_ce = self.coefficients
+        return _outage_argument(power_w, distance_sq_m2, c_d, c_ce)
+
+    @functools.cached_property
+    def _kwargs(self) -> dict:
+        return dict(
+            snr_threshold=self.snr_threshold,
+            alpha0=self.alpha0,
+            noise_power_w=self.noise_power_w,
+            m=self.m,
+            ce_error_var=self.ce_error_var,
+        )
+
+
+def distance_sq(drone_xy: np.ndarray, agv_xy: np.ndarray, altitude_m: float) -> np.ndarray:
+    """Squared 3-D distance d^2 = ||q - c||^2 + H^2, m^2 (broadcasts over leading axes)."""
+    diff = np.asarray(agv_xy, dtype=float) - drone_xy
+    return (diff * diff).sum(axis=-1) + altitude_m * altitude_m
+
+
+#: Powers are floored here before dividing; gammainc(m, x) is exactly 1.0 in double precision
+#: at that floor for any geometry, so p = 0 means outage probability 1 without inf/NaN.
+POWER_FLOOR_W = 1e-300
+
+
+def _outage_coefficients(snr_threshold, alpha0, noise_power_w, m, ce_error_var):
+    """(c_d, c_ce) with x = c_d d^2 / p + c_ce: c_d = m G_th sigma^2 / (alpha0 (1 - rho)), c_ce = m G_th rho / (1 - rho)."""
+    scale = m * snr_threshold / (1.0 - ce_error_var)
+    return scale * noise_power_w / alpha0, scale * ce_error_var
+
+
+def outage_argument_sq(power_w, distance_sq_m2, *, snr_threshold, alpha0, noise_power_w, m, ce_error_var=0.0):
+    """x of Prop. 1 from the squared distance: x = m G_th (rho + d^2 sigma^2 / (alpha0 p)) / (1 - rho).
+
+    Pr(outage) = Pr(|h|^2 < x / m) = gammainc(m, x) since m |h|^2 ~ Gamma(m, 1).
+    """
+    c_d, c_ce = _outage_coefficients(snr_threshold, alpha0, noise_power_w, m, ce_error_var)
+    return _outage_argument(power_w, distance_sq_m2, c_d, c_ce)
+
+
+def _outage_argument(power_w, distance_sq_m2, c_d: float, c_ce: float):
+    # the floor keeps p = 0 finite: x ~ 1e295, gammainc(m, x) == 1.0 exactly
+    x = distance_sq_m2 * c_d / (power_w + POWER_FLOOR_W)
+    return x + c_ce if c_ce else x
+
+
+def outage_argument(power_w, distance_m, *, snr_threshold, alpha0, noise_power_w, m, ce_error_var=0.0):
+    """The incomplete-gamma argument x of Prop. 1 (``x = m g`` for perfect CSI)."""
+    return outage_argument_sq(power_w, np.square(distance_m), snr_threshold=snr_threshold, alpha0=alpha0,
+                              noise_power_w=noise_power_w, m=m, ce_error_var=ce_error_var)
+
+
+def outage_probability(power_w, distance_m, *, snr_threshold, alpha0, noise_power_w, m, ce_error_var=0.0):
+    """Outage probability Pr(G < G_th) = gammainc(m, x) (Prop. 1, MODEL.md §2).
+
+    Evaluated with the regularized incomplete gamma function, accurate for tiny outage (the
+    paper's ``1 - e^{-mg} sum ...`` form loses all digits there). ``p = 0`` gives 1.
+    """
+    x = outage_argument(
+        power_w, distance_m, snr_threshold=snr_threshold, alpha0=alpha0,
+        noise_power_w=noise_power_w, m=m, ce_error_var=ce_error_var,
+    )
+    return special.gammainc(m, x)
+
+
+def success_probability(power_w, distance_m, *, snr_threshold, alpha0, noise_power_w, m, ce_error_var=0.0):
+    """psi = 1 - P = gammaincc(m, x), accurate also when psi is tiny."""
+    x = outage_argument(
+        power_w, distance_m, snr_threshold=snr_threshold, alpha0=alpha0,
+        noise_power_w=noise_power_w, m=m, ce_error_var=ce_error_var,
+    )
+    return special.gammaincc(m, x)
+
+
+def success_and_gradients(power_w, drone_xy, agv_xy, link: LinkParams):
+    """psi, d psi / d p (1/W) and d psi / d q (1/m, shape (..., 2)) for each link.
+
+    ``drone_xy`` broadcasts against ``agv_xy`` (..., 2). The derivatives use the log form of the
+    Gamma density: d psi/dx = -x^(m-1) e^(-x) / Gamma(m), with x decreasing in p and
+    increasing in d^2: dx/dp = -(x - x_ce)/p, dx/d(d^2) = (x - x_ce)/d^2,
+    x_ce = m G_th rho / (1 - rho) the part of x that power cannot remove. At p = 0 (floored at
+    ``POWER_FLOOR_W``) psi and both derivatives are 0.
+    """
+    p = np.maximum(np.asarray(power_w, dtype=float), POWER_FLOOR_W)
+    diff = np.asarray(drone_xy, dtype=float) - np.asarray(agv_xy, dtype=float)
+    d2 = np.einsum("...i,...i->...", diff, diff) + link.altitude_m**2
+    m = link.m
+    x = link.outage_argument_sq(p, d2)
+    excess = x - link.coefficients[1]  # x - x_ce > 0
+    psi = special.gammaincc(m, x)
+    density = np.exp((m - 1) * np.log(x) - x - special.gammaln(m))  # -d psi / dx
+    dpsi_dp = density * excess / p
+    dpsi_dq = (-2.0 * density * excess / d2)[..., None] * diff
+    return psi, dpsi_dp, dpsi_dq
+
+
+def realized_snr(power_w, distance_m, fading, *, alpha0, noise_power_w, ce_error_var=0.0):
+    """Effective SNR for fading power gains ``fading`` = |h|^2 (MMSE CE error as noise)."""
+    beta_p = alpha0 / np.square(distance_m) * np.asarray(power_w, dtype=float)
+    return (1.0 - ce_error_var) * beta_p * fading / (ce_error_var * beta_p + noise_power_w)
+
+
+def sample_fading(rng: np.random.Generator, m: int, size) -> np.ndarray:
+    """Nakagami-m power gains |h|^2 ~ Gamma(shape m, scale 1/m) (unit mean)."""
+    return rng.standard_gamma(m, size) / m
+
+
+def sample_normalized_fading(rng: np.random.Generator, m: int, size) -> np.ndarray:
+    """m |h|^2 ~ Gamma(m, 1): the fading on the scale of the outage argument x.
+
+    The same draws as :func:`sample_fading` times m (one generator call, one fewer operation)."""
+    return rng.standard_gamma(m, size)
+
+
+def delivered_from_fading(normalized_fading, outage_arg) -> np.ndarray:
+    """True where the command arrives: realized SNR >= G_th, i.e. ``m |h|^2 >= x``.
+
+    ``G_eff >= G_th`` rearranges to ``|h|^2 >= G_th (rho + sigma^2 d^2/(alpha0 p)) / (1 - rho) = x / m``
+    (:func:`realized_snr` computes the SNR itself; a test checks that the two forms agree).
+    Comparing the SNR with G_th is equivalent to comparing R(SNR) with R_th on the increasing
+    branch; below the turning point R < 0 < R_th, also an outage.
+    """
+    return normalized_fading >= outage_arg
+
+
+def sample_delivery(rng: np.random.Generator, power_w, distance_m, link: LinkParams) -> np.ndarray:
+    """Draw Nakagami-m fading and return True where the command arrives (MODEL.md §2)."""
+    distance_m = np.asarray(distance_m, dtype=float)
+    x = outage_argument(power_w, distance_m, **link._kwargs)
+    return delivered_from_fading(sample_normalized_fading(rng, link.m, x.shape), x)

@@ -1,0 +1,261 @@
+"""Scenario configuration: every quantity of MODEL.md §1–2 with its default and unit.
+
+The configuration is a tree of frozen dataclasses validated on construction (pydantic
+dataclasses, so a bad value raises ``ValueError`` naming the field, the value and the allowed
+range). Building from a dict rejects unknown keys by name. Fields marked *(decided)* are
+choices MODEL.md makes where the paper is silent; they are ordinary, overridable fields.
+
+Units are part of every field name (``_m``, ``_s``, ``_mps``, ``_db``, ``_dbw``, ``_dbm``,
+``_bps_hz``); the functions of :mod:`lawn_env.channel` take linear values, and the derived
+linear quantities are exposed as properties (``power_budget_w``, ``alpha0``, ``noise_power_w``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Annotated, Any, Literal, Mapping
+
+from pydantic import ConfigDict, Field, model_validator
+from pydantic.dataclasses import dataclass
+
+__all__ = [
+    "ChannelConfig",
+    "ControlConfig",
+    "DroneConfig",
+    "ReferenceConfig",
+    "ScenarioConfig",
+    "REFERENCE_FAMILIES",
+]
+
+_PYDANTIC = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
+
+PositiveFloat = Annotated[float, Field(gt=0)]
+Probability = Annotated[float, Field(gt=0, lt=1)]
+PositiveInt = Annotated[int, Field(ge=1, strict=True)]
+
+#: Reference-path families of :mod:`lawn_env.references` (MODEL.md §1).
+REFERENCE_FAMILIES = ("lemniscate", "rounded_rectangle", "sinusoid", "spline")
+
+
+@dataclass(frozen=True, config=_PYDANTIC)
+class ChannelConfig:
+    """Drone-to-AGV short-packet link (MODEL.md §2)."""
+
+    nakagami_m: PositiveInt = 2
+    """Nakagami shape m (a positive integer, paper)."""
+    alpha0_db: float = -50.0
+    """Reference channel gain at 1 m, dB (paper)."""
+    noise_power_dbm: float = -100.0
+    """Receiver noise power sigma^2, dBm (paper)."""
+    bandwidth_hz: PositiveFloat = 1e6
+    """Sub-channel bandwidth B, Hz; rates are in bit/s/Hz, B only converts them to bit/s (paper)."""
+    bler: Probability = 1e-6
+    """Block error rate epsilon, in (0, 1) (paper)."""
+    blocklength: PositiveInt = 1024
+    """Blocklength l, channel uses (paper)."""
+    rate_threshold_bps_hz: PositiveFloat = 10.0
+    """Rate threshold R_th, bit/s/Hz. 10 sits in the regime where outage matters (MODEL.md §8)."""
+    infinite_blocklength: bool = False
+    """Use the IBL rate log2(1 + SNR) instead of the FBL rate (the limit l -> inf)."""
+    paper_rate_form: bool = False
+    """Drop the log2(e) factor of the dispersion term, as the paper prints it (MODEL.md §2)."""
+    ce_error_var: Annotated[float, Field(ge=0, lt=1)] = 0.0
+    """Normalized channel-estimation error variance rho, in [0, 1) (MODEL.md §2)."""
+    ce_aware_planning: bool = True
+    """Planners inside the package (the Comm-v0 MPC, experts) use rho in their outage model;
+    False makes them CSI-unaware (they plan with rho = 0) *(decided)*."""
+
+    @property
+    def alpha0(self) -> float:
+        """Reference channel gain, linear."""
+        return 10.0 ** (self.alpha0_db / 10.0)
+
+    @property
+    def noise_power_w(self) -> float:
+        """Noise power, W."""
+        return 10.0 ** ((self.noise_power_dbm - 30.0) / 10.0)
+
+
+@dataclass(frozen=True, config=_PYDANTIC)
+class DroneConfig:
+    """Drone kinematics (MODEL.md §1)."""
+
+    altitude_m: PositiveFloat = 50.0
+    """Fixed flight altitude H, m (paper)."""
+    start_m: tuple[float, float] = (0.0, 100.0)
+    """Initial horizontal position q[1], m (paper)."""
+    max_speed_mps: PositiveFloat = 15.0
+    """Maximum horizontal speed V_max, m/s *(decided)*."""
+
+
+@dataclass(frozen=True, config=_PYDANTIC)
+class ControlConfig:
+    """Outage-aware MPC of each AGV (MODEL.md §3)."""
+
+    horizon: PositiveInt = 10
+    """Prediction horizon N_p, slots (paper)."""
+    q1_diag: tuple[float, float, float, float, float, float] = (1.0,) * 6
+    """Diagonal of the state-error weight Q1 (6 entries, >= 0) (paper: I6)."""
+    q2_diag: tuple[float, float] = (1.0, 1.0)
+    """Diagonal of the increment weight Q2 (2 entries, > 0) (paper: I2)."""
+    accel_max_mps2: PositiveFloat = 2.0
+    """Acceleration bound a_max per axis, m/s^2 *(decided)*."""
+    accel_increment_max_mps2: PositiveFloat = 1.0
+    """Increment bound per axis per slot, m/s^2 *(decided)*."""
+
+    @model_validator(mode="after")
+    def _check_weights(self) -> "ControlConfig":
+        if any(w < 0 for w in self.q1_diag):
+            raise ValueError(f"control.q1_diag={self.q1_diag}: every entry must be >= 0")
+        if any(w <= 0 for w in self.q2_diag):
+            raise ValueError(f"control.q2_diag={self.q2_diag}: every entry must be > 0 (Q2 positive definite)")
+        return self
+
+
+@dataclass(frozen=True, config=_PYDANTIC)
+class ReferenceConfig:
+    """Reference paths of the AGVs (MODEL.md §1, decided)."""
+
+    path_set: Literal["auto", "paper", "random"] = "auto"
+    """"paper": the fixed paper-like set (K = 3 or 4 only); "random": paths drawn at reset from
+    ``families`` with the episode seed; "auto": "paper" when K is 3 or 4, otherwise "random"."""
+    families: tuple[str, ...] = REFERENCE_FAMILIES
+    """Families the random set draws from."""
+    initial_offset_std_m: Annotated[float, Field(ge=0)] = 3.0
+    """Std of the initial AGV position offset from the reference start, per axis, m *(decided)*."""
+
+    @model_validator(mode="after")
+    def _check_families(self) -> "ReferenceConfig":
+        if not self.families:
+            raise ValueError("reference.families=(): give at least one of " + ", ".join(REFERENCE_FAMILIES))
+        unknown = [f for f in self.families if f not in REFERENCE_FAMILIES]
+        if unknown:
+            raise ValueError(
+                f"reference.families: unknown {unknown}; allowed: {', '.join(REFERENCE_FAMILIES)}"
+            )
+        return self
+
+
+@dataclass(frozen=True, config=_PYDANTIC)
+class ScenarioConfig:
+    """One scenario: K AGVs tracking reference paths, one drone serving them over FBL links.
+
+    Build with keywords (``ScenarioConfig(num_agvs=3)``), from a dict
+    (:meth:`from_dict`, rejects unknown keys), from a preset (:func:`lawn_env.presets.get`), or
+    derive one with :meth:`override` (dotted keys such as ``"channel.blocklength"``).
+    """
+
+    num_agvs: PositiveInt = 4
+    """Number of AGVs K (paper)."""
+    num_slots: PositiveInt = 120
+    """Episode length N in slots (paper: 120 slots = 60 s)."""
+    slot_s: PositiveFloat = 0.5
+    """Slot duration Delta-tau, s (paper)."""
+    area_m: tuple[float, float, float, float] = (0.0, 200.0, 0.0, 200.0)
+    """Area D as (x_min, x_max, y_min, y_max), m (paper)."""
+    power_budget_dbw: float = 0.0
+    """Total transmit power budget P_max, dBW (paper: 0 dBW)."""
+    channel: ChannelConfig = dataclasses.field(default_factory=ChannelConfig)
+    drone: DroneConfig = dataclasses.field(default_factory=DroneConfig)
+    control: ControlConfig = dataclasses.field(default_factory=ControlConfig)
+    reference: ReferenceConfig = dataclasses.field(default_factory=ReferenceConfig)
+
+    @model_validator(mode="after")
+    def _check_scenario(self) -> "ScenarioConfig":
+        x0, x1, y0, y1 = self.area_m
+        if not (x1 > x0 and y1 > y0):
+            raise ValueError(f"area_m={self.area_m}: need x_min < x_max and y_min < y_max")
+        qx, qy = self.drone.start_m
+        if not (x0 <= qx <= x1 and y0 <= qy <= y1):
+            raise ValueError(f"drone.start_m={self.drone.start_m} must lie inside area_m={self.area_m}")
+        if self.reference.path_set == "paper" and self.num_agvs not in (3, 4):
+            raise ValueError(
+                f"reference.path_set='paper' is defined for num_agvs 3 or 4, got num_agvs={self.num_agvs}; "
+                "use path_set='random' or 'auto'"
+            )
+        if self.control.accel_increment_max_mps2 > 2 * self.control.accel_max_mps2:
+            raise ValueError(
+                f"control.accel_increment_max_mps2={self.control.accel_increment_max_mps2} exceeds "
+                f"2 * accel_max_mps2={2 * self.control.accel_max_mps2}: the bound could never be active"
+            )
+        return self
+
+    # ----------------------------------------------------------------- derived quantities
+    @property
+    def power_budget_w(self) -> float:
+        """P_max, W."""
+        return 10.0 ** (self.power_budget_dbw / 10.0)
+
+    @property
+    def duration_s(self) -> float:
+        return self.num_slots * self.slot_s
+
+    @property
+    def uses_paper_paths(self) -> bool:
+        mode = self.reference.path_set
+        return mode == "paper" or (mode == "auto" and self.num_agvs in (3, 4))
+
+    # ----------------------------------------------------------------- (de)serialization
+    def to_dict(self) -> dict[str, Any]:
+        """Plain nested dict (JSON-serializable) that :meth:`from_dict` accepts back."""
+        return _to_plain(dataclasses.asdict(self))
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "ScenarioConfig":
+        """Build from a nested dict; unknown keys raise ``ValueError`` naming them."""
+        if not isinstance(data, Mapping):
+            raise TypeError(f"config must be a mapping, got {type(data).__name__}")
+        return cls(**dict(data))
+
+    def override(self, overrides: Mapping[str, Any] | None = None, **kwargs: Any) -> "ScenarioConfig":
+        """Return a copy with fields replaced.
+
+        Keys are top-level field names, dotted paths (``"channel.blocklength"``), or a section
+        name mapped to a dict of that section's fields (``channel={"blocklength": 256}``).
+        Unknown keys raise ``ValueError``; the result is validated again.
+        """
+        merged = dict(overrides or {})
+        merged.update(kwargs)
+        tree = self.to_dict()
+        for key, value in merged.items():
+            parts = key.split(".")
+            node = tree
+            for depth, part in enumerate(parts):
+                if not isinstance(node, dict) or part not in node:
+                    where = ".".join(parts[: depth + 1])
+                    raise ValueError(f"unknown config key {where!r}; valid keys: {_valid_keys(self)}")
+                if depth == len(parts) - 1:
+                    if isinstance(node[part], dict) and isinstance(value, Mapping):
+                        for sub in value:
+                            if sub not in node[part]:
+                                raise ValueError(
+                                    f"unknown config key '{key}.{sub}'; valid keys: {_valid_keys(self)}"
+                                )
+                        node[part] = {**node[part], **dict(value)}
+                    else:
+                        node[part] = value
+                else:
+                    node = node[part]
+        return type(self).from_dict(tree)
+
+
+def _to_plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _to_plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_to_plain(v) for v in value]
+    return value
+
+
+def _valid_keys(cfg: ScenarioConfig) -> str:
+    keys: list[str] = []
+
+    def walk(tree: dict, prefix: str) -> None:
+        for k, v in tree.items():
+            if isinstance(v, dict):
+                walk(v, f"{prefix}{k}.")
+            else:
+                keys.append(prefix + k)
+
+    walk(cfg.to_dict(), "")
+    return ", ".join(keys)

@@ -1,0 +1,246 @@
+"""The simulation core shared by every environment (one model, several views of it).
+
+:class:`Simulation` holds the state (augmented AGV states, drone position, slot index,
+references) and advances it one slot given the decisions of that slot: the acceleration
+increments to send, the power split and the drone's next position. It samples the links,
+applies delivered commands, computes the realized stage cost and accumulates the episode
+metrics of MODEL.md §6. It knows nothing about action or observation encodings; the
+environments do (see :mod:`lawn_env.spaces`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+from scipy import special
+
+from . import channel, drone, references
+from .config import ScenarioConfig
+from .dynamics import PredictionModel, stage_cost, step_augmented
+
+__all__ = ["Simulation", "Snapshot", "SlotRecord"]
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The full system state an external planner needs at the start of a slot.
+
+    ``x_aug`` (K, 6): augmented AGV states [x, y, v_x, v_y, u_x[n-1], u_y[n-1]];
+    ``reference`` (K, N_p+1, 6): reference augmented states [x, y, v_x, v_y, a_x, a_y] at slots
+    n..n+N_p; ``drone_position`` (2,): q[n-1], the position the drone moves from; ``slot``: n;
+    ``config``: the scenario. Arrays are copies.
+    """
+
+    x_aug: np.ndarray
+    reference: np.ndarray
+    drone_position: np.ndarray
+    slot: int
+    config: ScenarioConfig
+    last_power_w: np.ndarray = field(default=None)
+
+
+class SlotRecord(NamedTuple):
+    """What one slot produced (arrays are per AGV); ``Simulation.history`` is a list of these."""
+
+    tracking_cost: np.ndarray  # e' Q1 e at slot n+1 (e: augmented tracking error)
+    effort_cost: np.ndarray  # Delta-u' Q2 Delta-u of the delivered increment
+    delivered: np.ndarray  # bool
+    outage_probability: np.ndarray  # closed form at (p, q[n]) for the true link
+    applied_increment: np.ndarray  # (K, 2) after saturation and delivery, m/s^2
+    power_w: np.ndarray  # (K,)
+    drone_position: np.ndarray  # q[n], (2,)
+    agv_position: np.ndarray  # (K, 2) at slot n+1
+
+
+class Simulation:
+    """One scenario's dynamics, channel and bookkeeping.
+
+    ``reset(rng)`` draws the references (for random path sets) and the initial offsets from
+    ``rng``; ``step`` draws the fading from the same generator, so one seed fixes an episode.
+    """
+
+    def __init__(self, config: ScenarioConfig):
+        if not isinstance(config, ScenarioConfig):
+            raise TypeError(f"config must be a ScenarioConfig, got {type(config).__name__}")
+        self.config = config
+        self.num_agvs = config.num_agvs
+        self.num_slots = config.num_slots
+        self.horizon = config.control.horizon
+        self.slot_s = config.slot_s
+        self.model = PredictionModel.from_config(config)
+        self.link = channel.LinkParams.from_config(config)
+        self.planning_link = channel.LinkParams.from_config(config, planning=True)
+        self._link_kwargs = self.link._kwargs
+        self._ones2 = np.ones(2)
+        self._altitude_sq = config.drone.altitude_m**2
+        self.power_budget_w = config.power_budget_w
+        self.accel_max = config.control.accel_max_mps2
+        self.max_speed = config.drone.max_speed_mps
+        self.area = tuple(config.area_m)
+        self._area_lo = np.array([self.area[0], self.area[2]])
+        self._area_hi = np.array([self.area[1], self.area[3]])
+        self._q1 = np.asarray(config.control.q1_diag, dtype=float)
+        self._q2 = np.asarray(config.control.q2_diag, dtype=float)
+        self._a_aug_t = np.ascontiguousarray(self.model.a_aug.T)
+        self._b_aug_t = np.ascontiguousarray(self.model.b_aug.T)
+        self._paper_paths = references.paper_paths(self.num_agvs, self.area) if config.uses_paper_paths else None
+        self._paper_table = (
+            references.reference_table(self._paper_paths, self.num_slots + self.horizon + 1, self.slot_s)
+            if self._paper_paths is not None else None
+        )
+        self.paths = None
+        self.reference = None
+        self.x_aug = None
+        self.drone_position = None
+        self.slot = 0
+
+    # ------------------------------------------------------------------ episode
+    def reset(self, rng: np.random.Generator) -> None:
+        cfg = self.config
+        k = self.num_agvs
+        steps = self.num_slots + self.horizon + 1
+        if self._paper_paths is not None:
+            self.paths = self._paper_paths
+            self.reference = self._paper_table
+        else:
+            self.paths = references.random_paths(
+                rng, k, cfg.reference.families, self.area, duration_s=(steps - 1) * self.slot_s
+            )
+            self.reference = references.reference_table(self.paths, steps, self.slot_s)
+        self.rng = rng
+        offsets = rng.normal(0.0, cfg.reference.initial_offset_std_m, size=(k, 2))
+        x_aug = np.zeros((k, 6))
+        x_aug[:, 0:2] = np.clip(self.reference[:, 0, 0:2] + offsets, self._area_lo, self._area_hi)
+        x_aug[:, 2:4] = self.reference[:, 0, 2:4]
+        self.x_aug = x_aug
+        self.tracking_error = x_aug - self.reference[:, 0]
+        self.drone_position = np.array(cfg.drone.start_m, dtype=float)
+        self.slot = 0
+        self.last_power_w = np.full(k, self.power_budget_w / k)
+        self.last_delivered = np.ones(k, dtype=bool)
+        self.last_outage_probability = self.outage_probability(self.last_power_w, self.drone_position)
+        self.history: list[SlotRecord] = []
+        self._start_drone = self.drone_position.copy()
+        self._start_agv = x_aug[:, 0:2].copy()
+
+    # ------------------------------------------------------------------ channel helpers
+    def outage_probability(self, power_w: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
+        """Closed-form outage of the true link at the current AGV positions."""
+        dist = np.sqrt(channel.distance_sq(drone_position, self.x_aug[:, 0:2], self.link.altitude_m))
+        return channel.outage_probability(power_w, dist, **self.link._kwargs)
+
+    def planning_success(self, power_w: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
+        """psi of the planners' link model (CSI-aware or not, see ChannelConfig)."""
+        dist = np.sqrt(channel.distance_sq(drone_position, self.x_aug[:, 0:2], self.link.altitude_m))
+        return channel.success_probability(power_w, dist, **self.planning_link._kwargs)
+
+    def drone_target(self, velocity_mps: np.ndarray) -> np.ndarray:
+        """Next drone position for a commanded velocity (speed-limited, kept in the area)."""
+        return drone.move_drone(self.drone_position, velocity_mps, self.max_speed, self.slot_s, self.area)
+
+    def reference_window(self) -> np.ndarray:
+        """Reference augmented states at slots n..n+N_p: (K, N_p+1, 6) (a view)."""
+        return self.reference[:, self.slot : self.slot + self.horizon + 1]
+
+    def saturate_increment(self, du: np.ndarray) -> np.ndarray:
+        """Clip increments so that |u[n-1] + du| <= a_max per axis (the control set, by saturation)."""
+        u_prev = self.x_aug[:, 4:6]
+        u = u_prev + du
+        amax = self.accel_max
+        np.maximum(u, -amax, out=u)
+        np.minimum(u, amax, out=u)
+        u -= u_prev
+        return u
+
+    def snapshot(self) -> Snapshot:
+        return Snapshot(
+            x_aug=self.x_aug.copy(),
+            reference=self.reference_window().copy(),
+            drone_position=self.drone_position.copy(),
+            slot=self.slot,
+            config=self.config,
+            last_power_w=self.last_power_w.copy(),
+        )
+
+    # ------------------------------------------------------------------ one slot
+    def step(self, increment: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray) -> SlotRecord:
+        """Advance one slot.
+
+        ``increment`` (K, 2): the Delta-u to send (saturated here to the acceleration bound);
+        ``power_w`` (K,): feasible powers (p >= 0, sum <= P_max); ``drone_next`` (2,): q[n], a
+        feasible next drone position (use :meth:`drone_target`); the simulator keeps references to
+        ``power_w`` and ``drone_next``, so pass fresh arrays. Commands are sent from q[n]
+        to the AGVs at their slot-n positions and arrive with the sampled fading.
+        """
+        x_aug = self.x_aug
+        du = self.saturate_increment(increment)
+        link = self.link
+        diff = x_aug[:, 0:2] - drone_next
+        d2 = (diff * diff) @ self._ones2 + self._altitude_sq  # channel.distance_sq, inlined (hot)
+        x = link.outage_argument_sq(power_w, d2)
+        outage_p = special.gammainc(link.m, x)
+        delivered = channel.delivered_from_fading(channel.sample_normalized_fading(self.rng, link.m, self.num_agvs), x)
+        du *= delivered[:, None]
+        x_next = step_augmented(x_aug, du, self.model.a_aug, self.model.b_aug)
+        self.slot += 1
+        err = x_next - self.reference[:, self.slot]
+        tracking, effort = stage_cost(err, du, self._q1, self._q2)
+        self.x_aug = x_next
+        self.tracking_error = err
+        self.drone_position = drone_next
+        self.last_power_w = power_w
+        self.last_delivered = delivered
+        self.last_outage_probability = outage_p
+        record = SlotRecord(tracking, effort, delivered, outage_p, du, power_w, drone_next, x_next[:, 0:2])
+        self.history.append(record)
+        return record
+
+    @property
+    def done(self) -> bool:
+        """True once ``num_slots`` slots have run (the episode truncates)."""
+        return self.slot >= self.num_slots
+
+    def trajectories(self) -> dict:
+        """The episode so far as arrays: drone (n+1, 2), AGVs (n+1, K, 2), reference positions (n+1, K, 2),
+        and the per-slot records stacked (n, K) each."""
+        hist = self.history
+        drone_xy = np.vstack([self._start_drone] + [r.drone_position for r in hist])
+        agv_xy = np.stack([self._start_agv] + [r.agv_position for r in hist])
+        out = {
+            "drone_position": drone_xy,
+            "agv_position": agv_xy,
+            "reference_position": np.swapaxes(self.reference[:, : len(hist) + 1, 0:2], 0, 1),
+        }
+        for name in ("tracking_cost", "effort_cost", "delivered", "outage_probability", "power_w"):
+            out[name] = np.array([getattr(r, name) for r in hist])
+        return out
+
+    # ------------------------------------------------------------------ metrics
+    def episode_metrics(self) -> dict:
+        """Metrics of MODEL.md §6 over the slots run so far (decision time is the caller's)."""
+        n = self.slot
+        k = self.num_agvs
+        if n == 0:
+            raise RuntimeError("no slot has been simulated yet")
+        traj = self.trajectories()
+        tracking = float(traj["tracking_cost"].sum())
+        effort = float(traj["effort_cost"].sum())
+        pos_err = traj["agv_position"][1:] - traj["reference_position"][1:]
+        sq_err = (pos_err**2).sum(axis=(0, 2))
+        outages = n - traj["delivered"].sum(axis=0)
+        drone_steps = np.diff(traj["drone_position"], axis=0)
+        return {
+            "slots": n,
+            "control_cost": tracking + effort,
+            "tracking_cost": tracking,
+            "effort_cost": effort,
+            "rmse_m": float(np.sqrt(sq_err.sum() / (n * k))),
+            "rmse_per_agv_m": np.sqrt(sq_err / n).tolist(),
+            "outage_rate": float(outages.sum() / (n * k)),
+            "outage_rate_predicted": float(traj["outage_probability"].mean()),
+            "outage_rate_per_agv": (outages / n).tolist(),
+            "mean_power_w": traj["power_w"].mean(axis=0).tolist(),
+            "drone_path_length_m": float(np.sqrt((drone_steps**2).sum(axis=1)).sum()),
+        }

@@ -1,0 +1,177 @@
+"""AGV dynamics, the outage-aware prediction model and its cost (MODEL.md §3).
+
+State x = [x, y, v_x, v_y] (m, m/s), input u = [a_x, a_y] (m/s^2); augmented state
+x~ = [x; u[n-1]] in R^6 with input Delta-u[n] = u[n] - u[n-1]. Everything here is a pure
+function of arrays, vectorized over a leading AGV axis where it applies; the environments,
+the Comm-v0 MPC, the experts and the baselines all use these.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import linalg
+
+__all__ = [
+    "agv_matrices",
+    "augmented_matrices",
+    "terminal_weight",
+    "prediction_matrices",
+    "horizon_weights",
+    "increment_sum_matrix",
+    "PredictionModel",
+    "step_augmented",
+    "stage_cost",
+    "expected_cost_coefficients",
+]
+
+
+def agv_matrices(slot_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Constant-acceleration model x[n+1] = A x[n] + B u[n] (paper, Section II-B)."""
+    dt = float(slot_s)
+    a = np.eye(4)
+    a[0, 2] = a[1, 3] = dt
+    b = np.array([[dt * dt / 2, 0.0], [0.0, dt * dt / 2], [dt, 0.0], [0.0, dt]])
+    return a, b
+
+
+def augmented_matrices(slot_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """A~ = [[A, B], [0, I2]], B~ = [B; I2] for x~[n+1] = A~ x~[n] + B~ Delta-u[n]."""
+    a, b = agv_matrices(slot_s)
+    a_aug = np.block([[a, b], [np.zeros((2, 4)), np.eye(2)]])
+    b_aug = np.vstack([b, np.eye(2)])
+    return a_aug, b_aug
+
+
+def terminal_weight(a_aug: np.ndarray, b_aug: np.ndarray, q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """Q3: the stabilizing solution of the discrete algebraic Riccati equation (paper eq. for Q3)
+
+    Q3 = Q1 + A~' Q3 A~ - A~' Q3 B~ (Q2 + B~' Q3 B~)^-1 B~' Q3 A~.
+    """
+    q3 = linalg.solve_discrete_are(a_aug, b_aug, q1, q2)
+    return 0.5 * (q3 + q3.T)
+
+
+def prediction_matrices(a_aug: np.ndarray, b_aug: np.ndarray, horizon: int) -> tuple[np.ndarray, np.ndarray]:
+    """Condensed prediction chi = C x~ + psi F Delta-mu over i = 0..N_p.
+
+    C = [I; A~; ...; A~^N_p] (6(N_p+1) x 6); F block lower-triangular (6(N_p+1) x 2 N_p) with
+    block (i, j) = A~^(i-1-j) B~ for j < i, zero first block row.
+    """
+    nx, nu = b_aug.shape
+    powers = [np.eye(nx)]
+    for _ in range(horizon):
+        powers.append(a_aug @ powers[-1])
+    c = np.vstack(powers)
+    f = np.zeros((nx * (horizon + 1), nu * horizon))
+    for i in range(1, horizon + 1):
+        for j in range(i):
+            f[nx * i : nx * (i + 1), nu * j : nu * (j + 1)] = powers[i - 1 - j] @ b_aug
+    return c, f
+
+
+def horizon_weights(q1: np.ndarray, q2: np.ndarray, q3: np.ndarray, horizon: int) -> tuple[np.ndarray, np.ndarray]:
+    """Q4 = diag(Q1 x N_p, Q3), Q5 = diag(Q2 x N_p)."""
+    q4 = linalg.block_diag(*([q1] * horizon + [q3]))
+    q5 = linalg.block_diag(*([q2] * horizon))
+    return q4, q5
+
+
+def increment_sum_matrix(horizon: int) -> np.ndarray:
+    """T with (T Delta-mu)_i = sum_{j<=i} Delta-u_j per axis, so u_i = u[n-1] + (T Delta-mu)_i."""
+    return np.kron(np.tril(np.ones((horizon, horizon))), np.eye(2))
+
+
+@dataclass(frozen=True, eq=False)
+class PredictionModel:
+    """Everything the outage-aware MPC needs, built once per (slot, horizon, Q1, Q2).
+
+    Use :meth:`from_config`; instances are cached and shared (treat arrays as read-only).
+    """
+
+    slot_s: float
+    horizon: int
+    a_aug: np.ndarray
+    b_aug: np.ndarray
+    q1: np.ndarray
+    q2: np.ndarray
+    q3: np.ndarray
+    c: np.ndarray
+    f: np.ndarray
+    q4: np.ndarray
+    q5: np.ndarray
+    ftq4f: np.ndarray  # F' Q4 F, (2N_p, 2N_p)
+    ftq4: np.ndarray  # F' Q4, (2N_p, 6(N_p+1))
+    q4c: np.ndarray  # Q4 C, (6(N_p+1), 6)
+    increment_sum: np.ndarray  # T, (2N_p, 2N_p)
+
+    @classmethod
+    def from_config(cls, config) -> "PredictionModel":
+        ctl = config.control
+        return _build_model(float(config.slot_s), int(ctl.horizon), tuple(ctl.q1_diag), tuple(ctl.q2_diag))
+
+    @property
+    def num_inputs(self) -> int:
+        return 2 * self.horizon
+
+    def residual(self, x_aug: np.ndarray, chi_ref: np.ndarray) -> np.ndarray:
+        """r = C x~ - chi_ref per AGV: (K, 6) and (K, N_p+1, 6) -> (K, 6(N_p+1))."""
+        k = x_aug.shape[0]
+        return x_aug @ self.c.T - chi_ref.reshape(k, -1)
+
+    def predict(self, x_aug: np.ndarray, dmu: np.ndarray, psi) -> np.ndarray:
+        """Expected predicted states chi = C x~ + psi F Delta-mu, (K, N_p+1, 6)."""
+        k = x_aug.shape[0]
+        psi = np.broadcast_to(np.asarray(psi, dtype=float), (k,))
+        chi = x_aug @ self.c.T + psi[:, None] * (dmu.reshape(k, -1) @ self.f.T)
+        return chi.reshape(k, self.horizon + 1, -1)
+
+
+@functools.lru_cache(maxsize=32)
+def _build_model(slot_s: float, horizon: int, q1_diag: tuple, q2_diag: tuple) -> PredictionModel:
+    a_aug, b_aug = augmented_matrices(slot_s)
+    q1 = np.diag(np.asarray(q1_diag, dtype=float))
+    q2 = np.diag(np.asarray(q2_diag, dtype=float))
+    q3 = terminal_weight(a_aug, b_aug, q1, q2)
+    c, f = prediction_matrices(a_aug, b_aug, horizon)
+    q4, q5 = horizon_weights(q1, q2, q3, horizon)
+    ftq4 = f.T @ q4
+    arrays = dict(
+        a_aug=a_aug, b_aug=b_aug, q1=q1, q2=q2, q3=q3, c=c, f=f, q4=q4, q5=q5,
+        ftq4f=ftq4 @ f, ftq4=ftq4, q4c=q4 @ c, increment_sum=increment_sum_matrix(horizon),
+    )
+    for arr in arrays.values():
+        arr.setflags(write=False)
+    return PredictionModel(slot_s=slot_s, horizon=horizon, **arrays)
+
+
+def step_augmented(x_aug: np.ndarray, du: np.ndarray, a_aug: np.ndarray, b_aug: np.ndarray) -> np.ndarray:
+    """x~[n+1] = A~ x~[n] + B~ Delta-u, batched: (K, 6), (K, 2) -> (K, 6).
+
+    A lost command is ``du = 0`` (the AGV keeps u[n-1]; MODEL.md §3).
+    """
+    return x_aug @ a_aug.T + du @ b_aug.T
+
+
+def stage_cost(err: np.ndarray, du: np.ndarray, q1_diag: np.ndarray, q2_diag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Realized stage-cost terms per AGV: e' Q1 e and Delta-u' Q2 Delta-u (diagonal weights)."""
+    return (err * err) @ q1_diag, (du * du) @ q2_diag
+
+
+def expected_cost_coefficients(model: PredictionModel, x_aug: np.ndarray, chi_ref: np.ndarray, dmu: np.ndarray):
+    """L, S, W of J^_k(psi) = L psi^2 + 2 S psi + W for fixed Delta-mu (paper, P4).
+
+    L = Dmu' F'Q4F Dmu, S = (C x~ - chi_ref)' Q4 F Dmu, W = Dmu' Q5 Dmu + (C x~ - chi_ref)' Q4 (C x~ - chi_ref).
+    Shapes: x_aug (K, 6), chi_ref (K, N_p+1, 6), dmu (K, N_p, 2) -> three (K,) arrays.
+    """
+    k = x_aug.shape[0]
+    z = dmu.reshape(k, -1)
+    r = model.residual(x_aug, chi_ref)
+    fz = z @ model.f.T
+    q4fz = fz @ model.q4  # Q4 symmetric
+    lcoef = np.einsum("ki,ki->k", fz, q4fz)
+    scoef = np.einsum("ki,ki->k", r, q4fz)
+    wcoef = np.einsum("ki,ij,kj->k", z, model.q5, z) + np.einsum("ki,ij,kj->k", r, model.q4, r)
+    return lcoef, scoef, wcoef

@@ -1,0 +1,120 @@
+"""What the central environments share: config resolution, spaces, reset, info, render."""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import gymnasium as gym
+import numpy as np
+
+from .. import presets
+from ..config import ScenarioConfig
+from ..core import Simulation, Snapshot
+from ..spaces import ObservationLayout
+
+__all__ = ["resolve_config", "LawnEnvBase"]
+
+
+def resolve_config(config: ScenarioConfig | Mapping | str | None = None, **overrides: Any) -> ScenarioConfig:
+    """A ScenarioConfig from a config object, a dict, a preset name or None (the defaults),
+    with keyword overrides (top-level fields, or a section name mapped to a dict)."""
+    if config is None:
+        cfg = presets.get("default")
+    elif isinstance(config, ScenarioConfig):
+        cfg = config
+    elif isinstance(config, str):
+        cfg = presets.get(config)
+    elif isinstance(config, Mapping):
+        cfg = ScenarioConfig.from_dict(config)
+    else:
+        raise TypeError(
+            f"config must be a ScenarioConfig, a dict, a preset name ({', '.join(presets.names())}) or None; "
+            f"got {type(config).__name__}"
+        )
+    return cfg.override(overrides) if overrides else cfg
+
+
+class LawnEnvBase(gym.Env):
+    """Common machinery of ``lawn/Joint-v0`` and ``lawn/Comm-v0`` (not registered itself)."""
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 4}
+
+    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
+                 **overrides: Any):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode={render_mode!r}; valid: {self.metadata['render_modes']} or None")
+        self.config = resolve_config(config, **overrides)
+        self.render_mode = render_mode
+        self.sim = Simulation(self.config)
+        self.layout = ObservationLayout(self.config)
+        self.num_agvs = self.config.num_agvs
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(self.layout.size,), dtype=np.float32)
+        self._renderer = None
+        self._done = True
+
+    # ------------------------------------------------------------------ gym API
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
+        self.sim.reset(self.np_random)
+        self._done = False
+        self._on_reset()
+        if self.render_mode == "human":
+            self.render()
+        return self.layout.encode(self.sim), {"slot": 0}
+
+    def _on_reset(self) -> None:
+        """Hook for subclasses (e.g. solver workspaces)."""
+
+    def _check_running(self) -> None:
+        if self._done:
+            raise RuntimeError("the episode has ended (or reset() was never called); call reset() before step()")
+
+    def _finish_step(self, record, extra: dict | None = None):
+        cost_tracking = sum(record.tracking_cost.tolist())  # tolist + sum: cheaper than ndarray.sum for small K
+        cost_effort = sum(record.effort_cost.tolist())
+        info = {
+            "slot": self.sim.slot,
+            "reward_terms": {"tracking": -cost_tracking, "effort": -cost_effort},
+            "delivered": record.delivered,
+            "outage_probability": record.outage_probability,
+            "power_w": record.power_w,
+            "drone_position": record.drone_position,
+            "applied_increment": record.applied_increment,
+        }
+        if extra:
+            info.update(extra)
+        truncated = self.sim.done
+        if truncated:
+            self._done = True
+            info["episode_metrics"] = self.sim.episode_metrics()
+        if self.render_mode == "human":
+            self.render()
+        return self.layout.encode(self.sim), -(cost_tracking + cost_effort), False, truncated, info
+
+    # ------------------------------------------------------------------ extras
+    def snapshot(self) -> Snapshot:
+        """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
+        if self.sim.x_aug is None:
+            raise RuntimeError("call reset() before snapshot()")
+        return self.sim.snapshot()
+
+    def episode_metrics(self) -> dict:
+        return self.sim.episode_metrics()
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        if self.sim.x_aug is None:
+            raise RuntimeError("call reset() before render()")
+        if self._renderer is None:
+            from ..render import Renderer
+
+            self._renderer = Renderer(self.config, human=self.render_mode == "human")
+        return self._renderer.draw(self.sim)
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,96 @@
+"""``lawn/Comm-v0``: the agent allocates the communication resources; MPC drives the AGVs."""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import gymnasium as gym
+import numpy as np
+
+from ..config import ScenarioConfig
+from ..mpc import OutageAwareMPC
+from ..spaces import check_action, decode_power
+from .base import LawnEnvBase
+
+__all__ = ["CommEnv"]
+
+
+class CommEnv(LawnEnvBase):
+    """
+    ## Description
+
+    The communication-resource problem of the paper: every slot the agent chooses the split of
+    the power budget over the K links and the drone's move. Each AGV is driven by the
+    outage-aware MPC of MODEL.md §3: the QP P3 with the success probability psi_k of its link
+    at the chosen power and drone position, solved exactly (DAQP's dual active-set method,
+    one persistent warm-started workspace per AGV). Its first increment is sent and arrives or
+    not as in ``lawn/Joint-v0``. Good power and trajectory decisions raise psi where the MPC
+    needs it.
+
+    ## Action Space
+
+    ``Box(-1, 1, (K + 2,), float32)``:
+
+    | index      | meaning                 | scaling                                                 |
+    |------------|-------------------------|---------------------------------------------------------|
+    | 0 .. K-1   | power weight of link k  | ``w = (a+1)/2``, ``p = P_max w / max(1, sum w)``         |
+    | K .. K+1   | drone velocity (x, y)   | ``a * V_max`` m/s, clipped to norm V_max, kept in area   |
+
+    ## Observation Space
+
+    As ``lawn/Joint-v0`` (:class:`lawn_env.spaces.ObservationLayout`).
+
+    ## Rewards
+
+    As ``lawn/Joint-v0``: minus the realized stage cost, terms in ``info["reward_terms"]``.
+    ``info`` also reports the MPC's iterations, fallbacks and the planned psi; the wall-clock
+    solve time of the last step is ``env.unwrapped.last_mpc_solve_time_s``.
+
+    ## Starting State
+
+    As ``lawn/Joint-v0``.
+
+    ## Episode End
+
+    Truncation after ``num_slots`` slots; ``info["episode_metrics"]`` on the last step.
+
+    ## Arguments
+
+    ``gym.make("lawn/Comm-v0", config=None, render_mode=None, qp_backend="daqp", **overrides)``;
+    ``qp_backend`` is ``"daqp"``, ``"osqp"`` or ``"qpsolvers:<name>"`` (:mod:`lawn_env.mpc`).
+
+    ## Version History
+
+    * v0: initial version.
+    """
+
+    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
+                 qp_backend: str = "daqp", **overrides: Any):
+        super().__init__(config, render_mode, **overrides)
+        k = self.num_agvs
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(k + 2,), dtype=np.float32)
+        self._size = k + 2
+        self._vmax = self.config.drone.max_speed_mps
+        self._pmax = self.config.power_budget_w
+        self.mpc = OutageAwareMPC.from_config(self.config, backend=qp_backend)
+        self.last_mpc_solve_time_s = float("nan")
+
+    def _on_reset(self) -> None:
+        self.mpc.reset()  # episodes are independent of one another, warm starts included
+
+    def step(self, action):
+        self._check_running()
+        a = check_action(action, self._size)
+        k = self.num_agvs
+        power = decode_power(a[:k], self._pmax)
+        drone_next = self.sim.drone_target(a[k:] * self._vmax)
+        psi = self.sim.planning_success(power, drone_next)
+        solution = self.mpc.solve(self.sim.x_aug, self.sim.reference_window(), psi)
+        record = self.sim.step(solution.increments[:, 0, :], power, drone_next)
+        self.last_mpc_solve_time_s = solution.solve_time_s  # not in info: infos must be deterministic
+        extra = {
+            "mpc_iterations": solution.iterations,
+            "mpc_fallbacks": solution.num_fallbacks,
+            "success_probability_planned": psi,
+        }
+        return self._finish_step(record, extra)

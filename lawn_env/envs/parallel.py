@@ -1,0 +1,188 @@
+"""The multi-agent view: a PettingZoo ``ParallelEnv`` over the same simulation core."""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.utils import seeding
+from pettingzoo import ParallelEnv
+
+from ..config import ScenarioConfig
+from ..core import Simulation, Snapshot
+from ..spaces import ObservationLayout, check_action, decode_power
+from .base import resolve_config
+
+__all__ = ["LawnParallelEnv", "parallel_env"]
+
+
+class LawnParallelEnv(ParallelEnv):
+    """
+    ## Description
+
+    The system of ``lawn/Joint-v0`` with one agent per decision maker: ``"drone"`` chooses the
+    power split and its move, ``"agv_0"`` ... ``"agv_{K-1}"`` each choose their own acceleration
+    increment. All act simultaneously each slot; the AGVs' commands then cross the links as in
+    the central environments.
+
+    ## Action Spaces
+
+    * ``"drone"``: ``Box(-1, 1, (K + 2,))``: K power weights, then the velocity (scalings of
+      ``lawn/Comm-v0``).
+    * ``"agv_k"``: ``Box(-1, 1, (2,))``: the increment, ``a * Delta-a_max`` m/s^2, saturated to
+      the acceleration bound.
+
+    ## Observation Spaces
+
+    * ``"drone"``: the central observation of ``lawn/Joint-v0``.
+    * ``"agv_k"``: AGV k's block of that observation followed by the 3 global features (drone
+      position, time): ``agv_features + 3`` floats.
+
+    ## Rewards
+
+    ``"agv_k"``: minus its own realized stage cost; ``"drone"``: minus the total (the central
+    environments' reward). ``infos[agent]["reward_terms"]`` splits each.
+
+    ## Episode End
+
+    Truncation for every agent after ``num_slots`` slots; ``agents`` is then empty.
+
+    ## Arguments
+
+    ``lawn_env.parallel_env(config=None, render_mode=None, **overrides)`` as for ``gym.make``.
+    """
+
+    metadata = {"name": "lawn_v0", "render_modes": ["human", "rgb_array"], "render_fps": 4, "is_parallelizable": True}
+
+    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
+                 **overrides: Any):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode={render_mode!r}; valid: {self.metadata['render_modes']} or None")
+        self.config = resolve_config(config, **overrides)
+        self.render_mode = render_mode
+        self.sim = Simulation(self.config)
+        self.layout = ObservationLayout(self.config)
+        k = self.config.num_agvs
+        self.possible_agents = ["drone"] + [f"agv_{i}" for i in range(k)]
+        self.agents: list[str] = []
+        self._agv_index = {f"agv_{i}": i for i in range(k)}
+        self._observation_spaces = {
+            "drone": gym.spaces.Box(-np.inf, np.inf, shape=(self.layout.size,), dtype=np.float32),
+            **{a: gym.spaces.Box(-np.inf, np.inf, shape=(self.layout.agv_features + self.layout.global_features,),
+                                 dtype=np.float32) for a in self._agv_index},
+        }
+        self._action_spaces = {
+            "drone": gym.spaces.Box(-1.0, 1.0, shape=(k + 2,), dtype=np.float32),
+            **{a: gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for a in self._agv_index},
+        }
+        self._np_random, _ = seeding.np_random()
+        self._renderer = None
+
+    def observation_space(self, agent: str) -> gym.spaces.Box:
+        return self._lookup(self._observation_spaces, agent)
+
+    def action_space(self, agent: str) -> gym.spaces.Box:
+        return self._lookup(self._action_spaces, agent)
+
+    def _lookup(self, table: dict, agent: str):
+        try:
+            return table[agent]
+        except KeyError:
+            raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.possible_agents)}") from None
+
+    # ------------------------------------------------------------------ API
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        if seed is not None:
+            self._np_random, _ = seeding.np_random(seed)
+        # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
+        self.sim.reset(self._np_random)
+        self.agents = list(self.possible_agents)
+        observations = self._observations()
+        if self.render_mode == "human":
+            self.render()
+        return observations, {a: {} for a in self.agents}
+
+    def step(self, actions: dict):
+        if not self.agents:
+            raise RuntimeError("the episode has ended (or reset() was never called); call reset() before step()")
+        missing = [a for a in self.agents if a not in actions]
+        unknown = [a for a in actions if a not in self._action_spaces]
+        if missing or unknown:
+            raise ValueError(f"actions: missing agents {missing}, unknown agents {unknown}; expected {self.agents}")
+        k = self.config.num_agvs
+        drone_action = check_action(actions["drone"], k + 2, name="actions['drone']")
+        increment = np.empty((k, 2))
+        for agent, i in self._agv_index.items():
+            increment[i] = check_action(actions[agent], 2, name=f"actions[{agent!r}]")
+        increment *= self.config.control.accel_increment_max_mps2
+        power = decode_power(drone_action[:k], self.config.power_budget_w)
+        drone_next = self.sim.drone_target(drone_action[k:] * self.config.drone.max_speed_mps)
+        record = self.sim.step(increment, power, drone_next)
+
+        per_agv = record.tracking_cost + record.effort_cost
+        rewards = {"drone": -float(per_agv.sum())}
+        infos = {"drone": {
+            "reward_terms": {"tracking": -float(record.tracking_cost.sum()), "effort": -float(record.effort_cost.sum())},
+            "delivered": record.delivered, "outage_probability": record.outage_probability, "power_w": power,
+            "drone_position": self.sim.drone_position,
+        }}
+        for agent, i in self._agv_index.items():
+            rewards[agent] = -float(per_agv[i])
+            infos[agent] = {
+                "reward_terms": {"tracking": -float(record.tracking_cost[i]), "effort": -float(record.effort_cost[i])},
+                "delivered": bool(record.delivered[i]),
+            }
+        observations = self._observations()
+        truncated = self.sim.done
+        if truncated:
+            infos["drone"]["episode_metrics"] = self.sim.episode_metrics()
+        terminations = {a: False for a in self.agents}
+        truncations = {a: truncated for a in self.agents}
+        if truncated:
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return observations, rewards, terminations, truncations, infos
+
+    def _observations(self) -> dict:
+        central = self.layout.encode(self.sim)
+        blocks = self.layout.agv_blocks(central)
+        glob = central[-self.layout.global_features :]
+        obs = {"drone": central}
+        for agent, i in self._agv_index.items():
+            obs[agent] = np.concatenate([blocks[i], glob])
+        return obs
+
+    # ------------------------------------------------------------------ extras
+    def state(self) -> np.ndarray:
+        """Global state: the central observation."""
+        if self.sim.x_aug is None:
+            raise RuntimeError("call reset() before state()")
+        return self.layout.encode(self.sim)
+
+    def snapshot(self) -> Snapshot:
+        if self.sim.x_aug is None:
+            raise RuntimeError("call reset() before snapshot()")
+        return self.sim.snapshot()
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        if self._renderer is None:
+            from ..render import Renderer
+
+            self._renderer = Renderer(self.config, human=self.render_mode == "human")
+        return self._renderer.draw(self.sim)
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def parallel_env(config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
+                 **overrides: Any) -> LawnParallelEnv:
+    """Create the PettingZoo parallel environment (see :class:`LawnParallelEnv`)."""
+    return LawnParallelEnv(config, render_mode=render_mode, **overrides)

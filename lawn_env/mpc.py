@@ -1,0 +1,248 @@
+"""The outage-aware MPC of each AGV: problem P3 of the paper (MODEL.md §3, §4 step 1).
+
+For a fixed success probability psi_k the control block is one convex QP per AGV in
+z = Delta-mu_k (2 N_p increments):
+
+    min_z  z' G z + H z + M,   G = psi^2 F'Q4F + Q5,  H = 2 psi (C x~ - chi_ref)' Q4 F
+    s.t.   |z| <= Delta-a_max                 (increment bound, simple bounds)
+           |u[n-1] + T z| <= a_max            (acceleration bound over the horizon)
+
+which is solved as ``min 1/2 z' P z + q' z`` with ``P = 2 G``, ``q = H'``. The optimal value
+``V_k = 1/2 z*' P z* + q' z* + M`` is the expected cost J^_k of MODEL.md §3.
+
+Backends are named as in qpsolvers. ``"daqp"`` (default) and ``"osqp"`` keep one persistent
+solver workspace per AGV, updated in place and warm-started from the previous solve;
+``"qpsolvers:<name>"`` calls any other qpsolvers backend (stateless). A failed or inaccurate
+solve falls back to a cold OSQP solve at high accuracy, then to the always-feasible zero
+sequence; fallbacks are counted in the returned :class:`MPCSolution`, never raised.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .dynamics import PredictionModel
+
+__all__ = ["MPCSolution", "OutageAwareMPC", "BACKENDS", "qp_value"]
+
+
+@dataclass(frozen=True)
+class MPCSolution:
+    """Solution of the K control QPs at one slot."""
+
+    increments: np.ndarray  # (K, N_p, 2) Delta-mu_k, m/s^2
+    value: np.ndarray  # (K,) V_k = optimal J^_k
+    status: np.ndarray  # (K,) 0 primary backend, 1 fallback OSQP, 2 fallback zero sequence
+    iterations: np.ndarray  # (K,) solver iterations of the accepted solve
+    solve_time_s: float
+
+    @property
+    def num_fallbacks(self) -> int:
+        return int(np.count_nonzero(self.status))
+
+
+def qp_value(p: np.ndarray, q: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """1/2 z'Pz + q'z, batched over the leading axis."""
+    return 0.5 * np.einsum("ki,kij,kj->k", z, p, z) + np.einsum("ki,ki->k", q, z)
+
+
+class _DaqpBackend:
+    """One persistent ``daqp.Model`` per AGV (dual active set, exact, warm-started)."""
+
+    name = "daqp"
+
+    def __init__(self, num_agvs: int, constraint_matrix: np.ndarray):
+        import daqp
+
+        self._daqp = daqp
+        self._a = np.array(constraint_matrix, dtype=float, order="C")  # DAQP wants a writable buffer
+        self._models = [None] * num_agvs
+
+    def solve(self, k: int, p: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray):
+        model = self._models[k]
+        if model is None:
+            model = self._daqp.Model()
+            exitflag, _ = model.setup(p, q, self._a, upper, lower)
+            self._models[k] = model
+            if exitflag < 0:
+                self._models[k] = None
+                return None, 0
+        else:
+            if model.update(H=p, f=q, bupper=upper, blower=lower) < 0:
+                self._models[k] = None
+                return None, 0
+        x, _, exitflag, info = model.solve()
+        if exitflag != 1:
+            self._models[k] = None  # start the next solve from a fresh workspace
+            return None, info.get("iterations", 0)
+        return x, info["iterations"]
+
+
+class _OsqpBackend:
+    """One persistent ``osqp.OSQP`` per AGV, warm-started, polished, tight tolerances."""
+
+    name = "osqp"
+    settings = dict(eps_abs=1e-10, eps_rel=1e-10, polishing=True, polish_refine_iter=10,
+                    max_iter=50000, verbose=False, warm_starting=True)
+
+    def __init__(self, num_agvs: int, constraint_matrix: np.ndarray):
+        import osqp
+        from scipy import sparse
+
+        self._osqp = osqp
+        n = constraint_matrix.shape[1]
+        self._a = sparse.csc_matrix(np.vstack([np.eye(n), constraint_matrix]))
+        # column-major order of the upper triangle, matching CSC data of a dense triu matrix
+        rows, cols = np.triu_indices(n)
+        order = np.lexsort((rows, cols))
+        self._triu_csc = (rows[order], cols[order])
+        self._sparse = sparse
+        self._solvers = [None] * num_agvs
+
+    def solve(self, k, p, q, lower, upper):
+        solver = self._solvers[k]
+        px = p[self._triu_csc]
+        if solver is None:
+            solver = self._osqp.OSQP()
+            # the full upper-triangle structure, even where entries are zero, so updates fit
+            p_csc = self._sparse.csc_matrix((px, self._triu_csc), shape=p.shape)
+            solver.setup(P=p_csc, q=q, A=self._a, l=lower, u=upper, **self.settings)
+            self._solvers[k] = solver
+        else:
+            solver.update(Px=px, q=q, l=lower, u=upper)
+        res = solver.solve()
+        status = getattr(res.info, "status_val", None)
+        ok = (status == 1 or res.info.status == "solved") and np.all(np.isfinite(res.x))
+        if not ok:
+            self._solvers[k] = None
+            return None, int(res.info.iter)
+        return np.asarray(res.x), int(res.info.iter)
+
+
+class _QpsolversBackend:
+    """Any qpsolvers backend by name, stateless."""
+
+    def __init__(self, solver: str, num_agvs: int, constraint_matrix: np.ndarray):
+        import qpsolvers
+
+        if solver not in qpsolvers.available_solvers:
+            raise ValueError(
+                f"backend 'qpsolvers:{solver}': solver not installed; available: {', '.join(qpsolvers.available_solvers)}"
+            )
+        self._qpsolvers = qpsolvers
+        self._solver = solver
+        self.name = f"qpsolvers:{solver}"
+        self._g = np.vstack([constraint_matrix, -constraint_matrix])
+        self._n = constraint_matrix.shape[1]
+
+    def solve(self, k, p, q, lower, upper):
+        n = self._n
+        h = np.concatenate([upper[n:], -lower[n:]])
+        x = self._qpsolvers.solve_qp(p, q, G=self._g, h=h, lb=lower[:n], ub=upper[:n], solver=self._solver)
+        if x is None or not np.all(np.isfinite(x)):
+            return None, 0
+        return np.asarray(x), 0
+
+
+BACKENDS = {"daqp": _DaqpBackend, "osqp": _OsqpBackend}
+
+
+def _make_backend(name: str, num_agvs: int, constraint_matrix: np.ndarray):
+    if name in BACKENDS:
+        return BACKENDS[name](num_agvs, constraint_matrix)
+    if name.startswith("qpsolvers:"):
+        return _QpsolversBackend(name.split(":", 1)[1], num_agvs, constraint_matrix)
+    raise ValueError(f"unknown QP backend {name!r}; valid: {', '.join(BACKENDS)}, or 'qpsolvers:<solver name>'")
+
+
+class OutageAwareMPC:
+    """The K control QPs (P3) with persistent per-AGV solver workspaces.
+
+    ``solve(x_aug, chi_ref, psi)`` returns the optimal increment sequences. Build with
+    :meth:`from_config`. The same object serves the Comm-v0 environment and the experts.
+    """
+
+    def __init__(self, model: PredictionModel, num_agvs: int, accel_max: float, accel_increment_max: float,
+                 backend: str = "daqp"):
+        self.model = model
+        self.num_agvs = int(num_agvs)
+        self.accel_max = float(accel_max)
+        self.accel_increment_max = float(accel_increment_max)
+        n = model.num_inputs
+        self._n = n
+        self._constraint = model.increment_sum
+        self.backend = _make_backend(backend, self.num_agvs, self._constraint)
+        self._fallback = None  # built lazily: most runs never need it
+        self._box = np.full(n, self.accel_increment_max)
+        self._q5 = np.asarray(model.q5)
+        self._ftq4f = np.asarray(model.ftq4f)
+
+    @classmethod
+    def from_config(cls, config, backend: str = "daqp") -> "OutageAwareMPC":
+        ctl = config.control
+        return cls(PredictionModel.from_config(config), config.num_agvs, ctl.accel_max_mps2,
+                   ctl.accel_increment_max_mps2, backend=backend)
+
+    def reset(self) -> None:
+        """Drop the solver workspaces (warm starts): the next solve starts cold, so an episode's
+        solutions do not depend on the episodes before it."""
+        self.backend = _make_backend(self.backend.name, self.num_agvs, self._constraint)
+        self._fallback = None
+
+    # ------------------------------------------------------------------ problem data
+    def qp_data(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi: np.ndarray):
+        """P (K, n, n), q (K, n), constant M (K,), bounds lower/upper (K, 2n) of the K QPs.
+
+        The first n bounds are the simple increment bounds, the last n bound T z.
+        """
+        psi = np.asarray(psi, dtype=float)
+        r = self.model.residual(x_aug, chi_ref)
+        p = 2.0 * (psi[:, None, None] ** 2 * self._ftq4f + self._q5)
+        q = (2.0 * psi)[:, None] * (r @ self.model.ftq4.T)
+        const = np.einsum("ki,ij,kj->k", r, self.model.q4, r)
+        u_prev = np.tile(x_aug[:, 4:6], self.model.horizon)
+        k = x_aug.shape[0]
+        box = np.broadcast_to(self._box, (k, self._n))
+        lower = np.concatenate([-box, -self.accel_max - u_prev], axis=1)
+        upper = np.concatenate([box, self.accel_max - u_prev], axis=1)
+        return p, q, const, lower, upper
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi) -> MPCSolution:
+        """Solve the K QPs at success probabilities ``psi`` (K,)."""
+        start = time.perf_counter()
+        k = x_aug.shape[0]
+        if k != self.num_agvs:
+            raise ValueError(f"x_aug has {k} AGVs, the MPC was built for num_agvs={self.num_agvs}")
+        psi = np.broadcast_to(np.asarray(psi, dtype=float), (k,))
+        p, q, const, lower, upper = self.qp_data(x_aug, chi_ref, psi)
+        z = np.zeros((k, self._n))
+        status = np.zeros(k, dtype=np.int8)
+        iterations = np.zeros(k, dtype=np.int64)
+        for i in range(k):
+            x, its = self.backend.solve(i, p[i], q[i], lower[i], upper[i])
+            if x is None:
+                x, its, status[i] = self._fallback_solve(i, p[i], q[i], lower[i], upper[i])
+            z[i] = x
+            iterations[i] = its
+        value = qp_value(p, q, z) + const
+        return MPCSolution(
+            increments=z.reshape(k, self.model.horizon, 2),
+            value=value,
+            status=status,
+            iterations=iterations,
+            solve_time_s=time.perf_counter() - start,
+        )
+
+    def _fallback_solve(self, i, p, q, lower, upper):
+        if self.backend.name != "osqp":
+            if self._fallback is None:
+                self._fallback = _OsqpBackend(self.num_agvs, self._constraint)
+            x, its = self._fallback.solve(i, p, q, lower, upper)
+            if x is not None:
+                return x, its, 1
+        # the zero sequence is feasible whenever |u[n-1]| <= a_max, which the simulator keeps
+        return np.zeros(self._n), 0, 2

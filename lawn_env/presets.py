@@ -1,0 +1,43 @@
+"""Named scenario presets: plain :class:`~lawn_env.config.ScenarioConfig` instances.
+
+``get(name)`` returns one; an unknown name raises ``ValueError`` listing the valid ones.
+Register more with :func:`register` (a duplicate name raises).
+"""
+
+from __future__ import annotations
+
+from .config import ChannelConfig, ScenarioConfig
+
+__all__ = ["PRESETS", "get", "names", "register"]
+
+PRESETS: dict[str, ScenarioConfig] = {}
+
+
+def register(name: str, config: ScenarioConfig) -> None:
+    if name in PRESETS:
+        raise ValueError(f"preset {name!r} is already registered")
+    if not isinstance(config, ScenarioConfig):
+        raise TypeError(f"preset {name!r}: expected ScenarioConfig, got {type(config).__name__}")
+    PRESETS[name] = config
+
+
+def get(name: str) -> ScenarioConfig:
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(names())}") from None
+
+
+def names() -> list[str]:
+    return sorted(PRESETS)
+
+
+#: MODEL.md defaults: K = 4, R_th = 10 bit/s/Hz at 0 dBW, where outage is 1e-3 .. 0.7 (§8).
+register("default", ScenarioConfig())
+#: The paper's nominal point R_th = 1 bit/s/Hz: outage 1e-8 .. 1e-6 everywhere, so all policies
+#: tie (MODEL.md §8). Kept as a reference point, not as a regime for comparisons.
+register("paper-nominal", ScenarioConfig(channel=ChannelConfig(rate_threshold_bps_hz=1.0)))
+#: Three AGVs (the paper's first tracking figure), otherwise the defaults.
+register("k3", ScenarioConfig(num_agvs=3))
+#: Thirty-two AGVs on random paths, for scaling studies and benchmarks.
+register("k32", ScenarioConfig(num_agvs=32))

@@ -1,0 +1,93 @@
+"""Matplotlib rendering of a simulation: area, reference paths, AGVs, drone, links.
+
+Links are colored by their outage probability (log scale, 1e-6 .. 1). ``rgb_array`` draws on
+an off-screen Agg canvas; ``human`` opens a pyplot window and refreshes it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["Renderer", "plot_episode"]
+
+
+def _draw(ax, sim, *, links: bool = True, trails: bool = True, title: str | None = None):
+    from matplotlib import cm, colors
+
+    x0, x1, y0, y1 = sim.area
+    ax.clear()
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    k = sim.num_agvs
+    palette = [cm.tab10(i % 10) for i in range(k)]
+    ref = sim.reference[:, : sim.num_slots + 1]
+    for i in range(k):
+        ax.plot(ref[i, :, 0], ref[i, :, 1], "--", color=palette[i], lw=0.8, alpha=0.6)
+    traj = sim.trajectories()
+    agv = traj["agv_position"]
+    if trails and len(agv) > 1:
+        for i in range(k):
+            ax.plot(agv[:, i, 0], agv[:, i, 1], "-", color=palette[i], lw=1.4)
+    pos = sim.x_aug[:, 0:2]
+    ax.scatter(pos[:, 0], pos[:, 1], c=palette, s=30, zorder=3, label="AGVs")
+    q = sim.drone_position
+    trail = traj["drone_position"]
+    if trails and len(trail) > 1:
+        ax.plot(trail[:, 0], trail[:, 1], "-", color="k", lw=1.0, alpha=0.7)
+    ax.scatter([q[0]], [q[1]], marker="^", c="k", s=80, zorder=4, label="drone")
+    if links:
+        norm = colors.LogNorm(vmin=1e-6, vmax=1.0)
+        cmap = cm.get_cmap("viridis_r") if hasattr(cm, "get_cmap") else cm.viridis_r
+        outage = np.clip(sim.last_outage_probability, 1e-6, 1.0)
+        for i in range(k):
+            ax.plot([q[0], pos[i, 0]], [q[1], pos[i, 1]], color=cmap(norm(outage[i])), lw=1.5, zorder=2)
+    ax.set_title(title or f"slot {sim.slot}/{sim.num_slots}")
+    return ax
+
+
+class Renderer:
+    def __init__(self, config, human: bool = False):
+        self.human = human
+        if human:
+            import matplotlib.pyplot as plt
+
+            self._plt = plt
+            plt.ion()
+            self.fig, self.ax = plt.subplots(figsize=(6, 6))
+        else:
+            from matplotlib.backends.backend_agg import FigureCanvasAgg
+            from matplotlib.figure import Figure
+
+            self.fig = Figure(figsize=(6, 6), dpi=80)
+            self.canvas = FigureCanvasAgg(self.fig)
+            self.ax = self.fig.add_subplot(111)
+
+    def draw(self, sim):
+        _draw(self.ax, sim)
+        if self.human:
+            self.fig.canvas.draw_idle()
+            self._plt.pause(0.001)
+            return None
+        self.canvas.draw()
+        return np.asarray(self.canvas.buffer_rgba())[:, :, :3].copy()
+
+    def close(self):
+        if self.human:
+            self._plt.close(self.fig)
+
+
+def plot_episode(sim, path, title: str | None = None) -> None:
+    """Save a PNG (or any matplotlib format, by extension) of a finished or running episode."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7, 7), dpi=110)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(111)
+    _draw(ax, sim, title=title)
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)

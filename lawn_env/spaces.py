@@ -1,0 +1,235 @@
+"""Observation and action encodings shared by every environment and by the policies.
+
+Actions are normalized to [-1, 1]; the maps below turn them into physical decisions and back
+(the inverse maps let planners that think in watts and metres drive the environments).
+
+* Increments: ``Delta-u = a * Delta-a_max`` per axis; the simulator then saturates it so that
+  ``|u[n-1] + Delta-u| <= a_max`` (the control set, by saturation).
+* Power: ``w = (a + 1) / 2`` in [0, 1]^K, ``p = P_max * w / max(1, sum w)``. Every feasible
+  split (p >= 0, sum p <= P_max) is reachable, sum p <= P_max always holds, and the zero action
+  is the equal split for K >= 2.
+* Drone: ``v = a * V_max`` per axis, clipped radially to ``||v|| <= V_max``; the drone moves
+  ``v * Delta-tau`` and is clipped into the area.
+
+Observations are float32 vectors: K blocks of :attr:`ObservationLayout.agv_features` features
+followed by 3 global features (see :meth:`ObservationLayout.feature_names`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "ObservationLayout",
+    "check_action",
+    "decode_increments",
+    "encode_increments",
+    "decode_power",
+    "encode_power",
+    "decode_drone",
+    "encode_drone",
+    "POSITION_ERROR_SCALE_M",
+    "VELOCITY_SCALE_MPS",
+]
+
+#: Reference positions are observed relative to the AGV, divided by this (m).
+POSITION_ERROR_SCALE_M = 10.0
+#: Velocities are divided by this (m/s).
+VELOCITY_SCALE_MPS = 5.0
+
+
+def check_action(action, size: int, name: str = "action") -> np.ndarray:
+    """Validate a normalized action: shape ``(size,)``, finite, inside [-1, 1]. Returns float64."""
+    try:
+        a = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric array of shape ({size},): {exc}") from None
+    if a.shape != (size,):
+        if a.size == size:
+            a = a.reshape(size)
+        else:
+            raise ValueError(f"{name} has shape {a.shape}; expected ({size},) with entries in [-1, 1]")
+    values = a.tolist()  # Python min/max/sum beat numpy reductions on a few dozen floats
+    total = sum(values)
+    if total != total or max(values) > 1.0 or min(values) < -1.0:  # total is NaN if any entry is
+        bad = np.flatnonzero(~((a >= -1.0) & (a <= 1.0)))
+        raise ValueError(
+            f"{name} entries {bad.tolist()[:8]} = {a[bad].tolist()[:8]} are outside [-1, 1] or not finite; "
+            "actions are normalized (see the environment's Action Space)"
+        )
+    return a
+
+
+def decode_increments(a: np.ndarray, accel_increment_max: float) -> np.ndarray:
+    """(2K,) normalized -> (K, 2) increments in m/s^2 (before saturation)."""
+    return a.reshape(-1, 2) * accel_increment_max
+
+
+def encode_increments(du: np.ndarray, accel_increment_max: float) -> np.ndarray:
+    return np.clip(np.asarray(du, dtype=float).reshape(-1) / accel_increment_max, -1.0, 1.0)
+
+
+def decode_power(a: np.ndarray, power_budget_w: float) -> np.ndarray:
+    """(K,) normalized -> powers in W with sum <= P_max."""
+    total = 0.5 * (sum(a.tolist()) + a.shape[0])  # sum of w = (a + 1) / 2
+    return (a + 1.0) * (0.5 * power_budget_w / max(total, 1.0))
+
+
+def encode_power(power_w: np.ndarray, power_budget_w: float) -> np.ndarray:
+    """Inverse of :func:`decode_power` on the feasible set (p >= 0, sum p <= P_max)."""
+    p = np.asarray(power_w, dtype=float)
+    if np.any(p < -1e-12) or p.sum() > power_budget_w * (1 + 1e-9):
+        raise ValueError(f"power_w={p.tolist()} is not a feasible split of P_max={power_budget_w} W")
+    return np.clip(2.0 * p / power_budget_w - 1.0, -1.0, 1.0)
+
+
+def decode_drone(a: np.ndarray, max_speed_mps: float) -> np.ndarray:
+    """(2,) normalized -> commanded velocity in m/s (radial clipping happens in the move)."""
+    return a * max_speed_mps
+
+
+def encode_drone(next_position: np.ndarray, position: np.ndarray, max_speed_mps: float, slot_s: float) -> np.ndarray:
+    """Normalized drone action that moves from ``position`` to the feasible ``next_position``."""
+    v = (np.asarray(next_position, dtype=float) - np.asarray(position, dtype=float)) / (slot_s * max_speed_mps)
+    return np.clip(v, -1.0, 1.0)
+
+
+class ObservationLayout:
+    """The observation vector of the central environments, and its inverse.
+
+    Per AGV k (``agv_features = 17 + 6 (N_p + 1)`` floats):
+
+    ==================  ==========================================================  =====================================
+    slice               content                                                     scaling
+    ==================  ==========================================================  =====================================
+    0:2                 AGV position                                                (p - area center) / area half-extent
+    2:4                 AGV velocity                                                / 5 m/s
+    4:6                 previous acceleration u[n-1]                                / a_max
+    6:12                tracking error x~ - x~_ref[n] (position, velocity, accel.)  / 10 m, / 5 m/s, / a_max
+    12 : 12+6(N_p+1)    reference window i = 0..N_p: position relative to the       / 10 m, / 5 m/s, / a_max
+                        reference position at slot n, velocity, acceleration
+    next 2              AGV position relative to the drone                          / area half-extent
+    next 1              outage probability of the last transmission                 probability
+    next 1              last command delivered                                      0 or 1
+    next 1              last power                                                  / P_max
+    ==================  ==========================================================  =====================================
+
+    Global features (3, at the end): drone position (2, like AGV positions), slot n / N.
+    :meth:`decode` recovers the planner's state (the snapshot's arrays) from an observation.
+    """
+
+    global_features = 3
+
+    def __init__(self, config):
+        self.num_agvs = config.num_agvs
+        self.horizon = config.control.horizon
+        self.num_slots = config.num_slots
+        x0, x1, y0, y1 = config.area_m
+        self.center = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+        self.half_extent = np.array([(x1 - x0) / 2, (y1 - y0) / 2])
+        self.accel_max = config.control.accel_max_mps2
+        self.power_budget_w = config.power_budget_w
+        self.window = self.horizon + 1
+        self.agv_features = 17 + 6 * self.window
+        self.size = self.num_agvs * self.agv_features + self.global_features
+        self._ref_scale = np.array([1 / POSITION_ERROR_SCALE_M] * 2 + [1 / VELOCITY_SCALE_MPS] * 2 + [1 / self.accel_max] * 2)
+        self._state_scale = np.concatenate([1 / self.half_extent, [1 / VELOCITY_SCALE_MPS] * 2, [1 / self.accel_max] * 2])
+        self._state_shift = np.concatenate([self.center, np.zeros(4)])
+        self._state_shift_scaled = self._state_shift * self._state_scale
+        self._inv_half = 1.0 / self.half_extent
+        self._inv_power = 1.0 / self.power_budget_w
+        w0 = 12
+        w1 = w0 + 6 * self.window
+        self.slices = {
+            "state": slice(0, 6),
+            "error": slice(6, 12),
+            "reference": slice(w0, w1),
+            "relative_to_drone": slice(w1, w1 + 2),
+            "outage_probability": w1 + 2,
+            "delivered": w1 + 3,
+            "power": w1 + 4,
+        }
+        self._ref_source = None
+        self._windows = None
+        self._buffer = np.zeros(self.size)
+        k = self.num_agvs
+        g0 = k * self.agv_features
+        blocks = self._buffer[:g0].reshape(k, self.agv_features)
+        self._views = (
+            blocks[:, 0:6],  # state
+            blocks[:, 6:12],  # tracking error
+            blocks[:, w0:w1],  # reference window
+            blocks[:, w1 : w1 + 2],  # relative to the drone
+            blocks[:, w1 + 2],  # outage probability
+            blocks[:, w1 + 3],  # delivered
+            blocks[:, w1 + 4],  # power
+            self._buffer[g0 : g0 + 2],  # drone position
+        )
+
+    def feature_names(self) -> list[str]:
+        """Human-readable names of the per-AGV block, then of the globals."""
+        names = ["x", "y", "vx", "vy", "ux_prev", "uy_prev", "ex", "ey", "evx", "evy", "eux", "euy"]
+        for i in range(self.window):
+            names += [f"ref{i}_dx", f"ref{i}_dy", f"ref{i}_vx", f"ref{i}_vy", f"ref{i}_ax", f"ref{i}_ay"]
+        names += ["rel_drone_x", "rel_drone_y", "outage_prob", "delivered", "power_frac"]
+        return names + ["drone_x", "drone_y", "time_frac"]
+
+    def reference_windows(self, reference: np.ndarray) -> np.ndarray:
+        """Scaled windows for every slot: (K, slots, 6 (N_p+1)), positions relative to slot n's."""
+        k, steps, _ = reference.shape
+        slots = steps - self.window + 1
+        idx = np.arange(slots)[:, None] + np.arange(self.window)[None, :]
+        win = reference[:, idx].copy()  # (K, slots, W, 6)
+        win[..., 0:2] -= reference[:, :slots, None, 0:2]
+        return (win * self._ref_scale).reshape(k, slots, -1)
+
+    def encode(self, sim) -> np.ndarray:
+        """Observation of a :class:`~lawn_env.core.Simulation` at its current slot (a new array).
+
+        Filled into a persistent float64 buffer through fixed views, then cast once: this runs
+        every env step, so the reference windows are precomputed per episode.
+        """
+        if sim.reference is not self._ref_source:
+            self._ref_source = sim.reference
+            self._windows = self.reference_windows(sim.reference)
+        v_state, v_err, v_ref, v_rel, v_out, v_del, v_pow, v_drone = self._views
+        q = sim.drone_position
+        np.multiply(sim.x_aug, self._state_scale, out=v_state)
+        v_state -= self._state_shift_scaled
+        np.multiply(sim.tracking_error, self._ref_scale, out=v_err)
+        v_ref[:] = self._windows[:, sim.slot]
+        np.subtract(q, self.center, out=v_drone)
+        v_drone *= self._inv_half
+        np.subtract(v_state[:, 0:2], v_drone, out=v_rel)  # (pos - q) / half-extent
+        v_out[:] = sim.last_outage_probability
+        v_del[:] = sim.last_delivered
+        np.multiply(sim.last_power_w, self._inv_power, out=v_pow)
+        self._buffer[-1] = sim.slot / self.num_slots
+        return self._buffer.astype(np.float32)
+
+    def agv_blocks(self, obs: np.ndarray) -> np.ndarray:
+        """(K, agv_features) view of the per-AGV part."""
+        return np.asarray(obs)[: self.num_agvs * self.agv_features].reshape(self.num_agvs, self.agv_features)
+
+    def decode(self, obs: np.ndarray) -> dict:
+        """Planner state from an observation: ``x_aug`` (K, 6), ``reference`` (K, N_p+1, 6),
+        ``drone_position`` (2,), ``slot``, ``last_power_w`` (K,), ``outage_probability`` (K,).
+
+        Exact up to float32 rounding of the observation (about 1e-5 m in positions)."""
+        obs = np.asarray(obs, dtype=np.float64)
+        if obs.shape != (self.size,):
+            raise ValueError(f"observation has shape {obs.shape}; expected ({self.size},)")
+        blocks = self.agv_blocks(obs)
+        x_aug = blocks[:, 0:6] / self._state_scale + self._state_shift
+        error = blocks[:, 6:12] / self._ref_scale
+        win = blocks[:, self.slices["reference"]].reshape(self.num_agvs, self.window, 6) / self._ref_scale
+        win[:, :, 0:2] += (x_aug[:, 0:2] - error[:, 0:2])[:, None, :]  # + reference position at slot n
+        k = self.num_agvs * self.agv_features
+        return {
+            "x_aug": x_aug,
+            "reference": win,
+            "drone_position": obs[k : k + 2] * self.half_extent + self.center,
+            "slot": int(round(obs[-1] * self.num_slots)),
+            "last_power_w": blocks[:, self.slices["power"]] * self.power_budget_w,
+            "outage_probability": blocks[:, self.slices["outage_probability"]],
+        }
