@@ -1,0 +1,169 @@
+import math
+
+import numpy as np
+import pytest
+from scipy import special, stats
+
+from lawn_env import ScenarioConfig, channel, presets
+from lawn_env.channel import LinkParams
+
+
+@pytest.mark.parametrize("paper_form", [False, True])
+@pytest.mark.parametrize("blocklength", [64, 256, 1024, 8192])
+@pytest.mark.parametrize("rate", [0.1, 1.0, 4.0, 10.0])
+def test_rate_at_threshold_equals_rate(rate, blocklength, paper_form):
+    g = channel.snr_threshold(rate, blocklength, 1e-6, paper_form)
+    assert float(channel.fbl_rate(g, blocklength, 1e-6, paper_form)) == pytest.approx(rate, rel=1e-12, abs=1e-12)
+    # increasing branch: above the turning point
+    assert g > channel.rate_turning_point(blocklength, 1e-6, paper_form)
+
+
+@pytest.mark.parametrize("paper_form", [False, True])
+def test_turning_point_is_the_minimum(paper_form):
+    g0 = channel.rate_turning_point(1024, 1e-6, paper_form)
+    grid = g0 * np.array([0.9, 0.99, 1.0, 1.01, 1.1])
+    r = channel.fbl_rate(grid, 1024, 1e-6, paper_form)
+    assert np.argmin(r) == 2 and r[2] < 0
+
+
+def test_log2e_factor():
+    # the dispersion term of the correct form is log2(e) times the paper's printed one
+    g, l, eps = 5.0, 1024, 1e-6
+    gap_ok = math.log2(1 + g) - float(channel.fbl_rate(g, l, eps))
+    gap_paper = math.log2(1 + g) - float(channel.fbl_rate(g, l, eps, paper_form=True))
+    assert gap_ok / gap_paper == pytest.approx(1 / math.log(2))
+    assert gap_paper == pytest.approx(math.sqrt((1 - (1 + g) ** -2) / l) * stats.norm.isf(eps))
+
+
+def test_infinite_blocklength_limit():
+    rate = 6.0
+    ibl = channel.snr_threshold(rate, math.inf, 1e-6)
+    assert ibl == pytest.approx(2**rate - 1)
+    thresholds = [channel.snr_threshold(rate, l, 1e-6) for l in (256, 1024, 2**14, 2**20, 2**30)]
+    assert all(a > b for a, b in zip(thresholds, thresholds[1:]))  # longer blocks need less SNR
+    assert thresholds[-1] == pytest.approx(ibl, rel=1e-3)
+    snr = np.logspace(-1, 3, 9)
+    assert np.allclose(channel.fbl_rate(snr, 2**40, 1e-6), channel.ibl_rate(snr), atol=1e-4)
+    assert np.allclose(channel.fbl_rate(snr, math.inf, 1e-6), np.log2(1 + snr))
+
+
+def test_bad_threshold_arguments():
+    with pytest.raises(ValueError, match="rate"):
+        channel.snr_threshold(-1.0, 1024, 1e-6)
+    with pytest.raises(ValueError, match="bler"):
+        channel.snr_threshold(1.0, 1024, 2.0)
+    with pytest.raises(ValueError, match="blocklength"):
+        channel.snr_threshold(1.0, 0, 1e-6)
+
+
+def _link(m=2, rho=0.0, rate=None):
+    # CE error caps the SINR at (1 - rho) / rho |h|^2: at R_th = 10 (G_th ~ 1187) any rho above ~1e-3
+    # means certain outage, so CE cases use the paper's R_th = 1 (MODEL.md §8)
+    rate = rate if rate is not None else (1.0 if rho > 0 else 10.0)
+    cfg = ScenarioConfig(channel=dict(nakagami_m=m, ce_error_var=rho, rate_threshold_bps_hz=rate))
+    return LinkParams.from_config(cfg)
+
+
+@pytest.mark.parametrize(
+    "m, rho, target",
+    [(1, 0.0, 0.002), (2, 0.0, 0.01), (2, 0.0, 0.3), (2, 0.0, 0.9), (3, 0.0, 0.05), (2, 0.05, 0.2)],
+)
+def test_outage_closed_form_matches_monte_carlo(m, rho, target):
+    """Closed form (Prop. 1) against the frequency of the simulator's own fading sampler."""
+    link = _link(m, rho)
+    dist = 80.0
+    # find the power giving the target outage, then sample deliveries at that power
+    from scipy.optimize import brentq
+
+    power = brentq(lambda p: channel.outage_probability(p, dist, **link._kwargs) - target, 1e-12, 1e6)
+    p_closed = float(channel.outage_probability(power, dist, **link._kwargs))
+    n = 400_000
+    delivered = channel.sample_delivery(np.random.default_rng(7), np.full(n, power), np.full(n, dist), link)
+    p_mc = 1.0 - delivered.mean()
+    sigma = math.sqrt(p_closed * (1 - p_closed) / n)
+    assert abs(p_mc - p_closed) < 5 * sigma, (p_mc, p_closed, sigma)
+
+
+def test_realized_snr_agrees_with_fading_threshold(rng):
+    link = _link(2, 0.03)
+    power = rng.uniform(0.01, 1.0, 10_000)
+    dist = rng.uniform(50, 250, 10_000)
+    g = channel.sample_normalized_fading(rng, link.m, power.shape)
+    x = channel.outage_argument(power, dist, **link._kwargs)
+    via_threshold = channel.delivered_from_fading(g, x)
+    snr = channel.realized_snr(power, dist, g / link.m, alpha0=link.alpha0, noise_power_w=link.noise_power_w,
+                               ce_error_var=link.ce_error_var)
+    rate = channel.fbl_rate(snr, 1024, 1e-6)
+    via_rate = rate >= 1.0  # _link's R_th when rho > 0
+    mismatch = via_threshold != via_rate
+    # the two forms can differ only at the threshold itself (rounding), never in bulk
+    assert mismatch.sum() <= 2
+    assert via_threshold.mean() == pytest.approx(1 - channel.outage_probability(power, dist, **link._kwargs).mean(), abs=0.02)
+
+
+def test_outage_accurate_for_tiny_values():
+    link = presets.get("paper-nominal")
+    params = LinkParams.from_config(link)
+    p = channel.outage_probability(0.25, 60.0, **params._kwargs)
+    x = float(channel.outage_argument(0.25, 60.0, **params._kwargs))
+    # series for m = 2: P = 1 - e^-x (1 + x) = x^2/2 - x^3/3 + ...
+    assert p == pytest.approx(x**2 / 2 - x**3 / 3 + x**4 / 8, rel=1e-9)
+    naive = 1 - math.exp(-x) * (1 + x)  # the paper's form loses the digits
+    assert abs(naive - p) / p > 1e-6 or p > 1e-8
+
+
+def test_zero_power_means_outage_and_no_nan():
+    link = _link()
+    p = channel.outage_probability(np.array([0.0, 0.5]), np.array([60.0, 60.0]), **link._kwargs)
+    assert p[0] == 1.0 and 0 < p[1] < 1
+    psi, dp, dq = channel.success_and_gradients(np.array([0.0, 0.5]), np.zeros(2), np.array([[30.0, 40.0]] * 2), link)
+    assert psi[0] == 0.0 and dp[0] == 0.0 and np.all(dq[0] == 0.0)
+    assert np.all(np.isfinite(dp)) and np.all(np.isfinite(dq))
+
+
+@pytest.mark.parametrize("m, rho", [(1, 0.0), (2, 0.0), (4, 0.0), (2, 0.02)])
+def test_gradients_match_finite_differences(m, rho, rng):
+    link = _link(m, rho)
+    power = rng.uniform(0.05, 0.6, 6)
+    drone = rng.uniform(0, 200, (6, 2))
+    agv = rng.uniform(0, 200, (6, 2))
+    psi, dpsi_dp, dpsi_dq = channel.success_and_gradients(power, drone, agv, link)
+    dist = np.sqrt(channel.distance_sq(drone, agv, link.altitude_m))
+    assert np.allclose(psi, channel.success_probability(power, dist, **link._kwargs))
+    assert np.allclose(psi, 1 - channel.outage_probability(power, dist, **link._kwargs))
+    h = 1e-6
+    fd_p = (channel.success_and_gradients(power + h, drone, agv, link)[0]
+            - channel.success_and_gradients(power - h, drone, agv, link)[0]) / (2 * h)
+    assert np.allclose(dpsi_dp, fd_p, rtol=1e-5, atol=1e-9)
+    for axis in range(2):
+        e = np.zeros(2)
+        e[axis] = 1e-4
+        fd_q = (channel.success_and_gradients(power, drone + e, agv, link)[0]
+                - channel.success_and_gradients(power, drone - e, agv, link)[0]) / 2e-4
+        assert np.allclose(dpsi_dq[:, axis], fd_q, rtol=1e-5, atol=1e-9)
+
+
+def test_gammainc_form_equals_paper_sum_where_both_are_accurate():
+    x = np.linspace(0.5, 8, 20)
+    for m in (1, 2, 3, 5):
+        paper = 1 - np.exp(-x) * sum(x**i / math.factorial(i) for i in range(m))
+        assert np.allclose(special.gammainc(m, x), paper, rtol=1e-10)
+
+
+def test_regimes_of_model_md_section_8():
+    """Nominal point: outage 1e-8 .. 1e-6 everywhere; default: a visible range (MODEL.md §8)."""
+    grid = np.stack(np.meshgrid(np.linspace(0, 200, 21), np.linspace(0, 200, 21)), -1).reshape(-1, 2)
+    drone = np.array([100.0, 100.0])
+    corners = np.array([[0.0, 0.0], [200.0, 200.0]])
+    dmax = float(np.sqrt(channel.distance_sq(corners[0], corners[1], 50.0)))
+    nominal = LinkParams.from_config(presets.get("paper-nominal"))
+    equal = 1.0 / 4
+    worst = channel.outage_probability(equal, dmax, **nominal._kwargs)  # corner to corner: 3.6e-5
+    best = channel.outage_probability(equal, 50.0, **nominal._kwargs)  # straight above: 3.3e-8
+    from_center = channel.outage_probability(equal, np.sqrt(channel.distance_sq(drone, grid, 50.0)), **nominal._kwargs)
+    assert 1e-8 < best < worst < 1e-4
+    assert from_center.max() < 3e-6  # a drone anywhere central keeps every link at ~1e-6 or better
+    default = LinkParams.from_config(presets.get("default"))
+    d = np.sqrt(channel.distance_sq(drone, grid, 50.0))
+    p = channel.outage_probability(equal, d, **default._kwargs)
+    assert p.min() < 0.05 and p.max() > 0.5  # outage matters at the default point: 0.024 .. 0.63

@@ -1,0 +1,99 @@
+import numpy as np
+import pytest
+from scipy import linalg
+
+from lawn_env import ScenarioConfig, dynamics
+from lawn_env.dynamics import PredictionModel
+
+
+def _paper_matrices(dt):
+    """A~, B~ typed in from the paper, independently of the module."""
+    a = np.array([[1, 0, dt, 0], [0, 1, 0, dt], [0, 0, 1, 0], [0, 0, 0, 1]], dtype=float)
+    b = np.array([[dt**2 / 2, 0], [0, dt**2 / 2], [dt, 0], [0, dt]])
+    a_aug = np.zeros((6, 6))
+    a_aug[:4, :4] = a
+    a_aug[:4, 4:] = b
+    a_aug[4:, 4:] = np.eye(2)
+    b_aug = np.vstack([b, np.eye(2)])
+    return a_aug, b_aug
+
+
+@pytest.mark.parametrize("dt", [0.5, 0.1])
+def test_augmented_matrices_match_paper(dt):
+    a_aug, b_aug = dynamics.augmented_matrices(dt)
+    pa, pb = _paper_matrices(dt)
+    assert np.array_equal(a_aug, pa) and np.array_equal(b_aug, pb)
+
+
+@pytest.mark.parametrize("q1, q2", [((1,) * 6, (1, 1)), ((2, 2, 0.5, 0.5, 0.1, 0.1), (0.3, 3.0))])
+def test_dare_solution_against_scipy(q1, q2):
+    cfg = ScenarioConfig(control=dict(q1_diag=q1, q2_diag=q2))
+    model = PredictionModel.from_config(cfg)
+    pa, pb = _paper_matrices(cfg.slot_s)
+    ref = linalg.solve_discrete_are(pa, pb, np.diag(q1), np.diag(q2))
+    assert np.allclose(model.q3, ref, rtol=1e-10, atol=1e-10)
+    # and it satisfies the paper's Riccati equation for Q3
+    q3 = model.q3
+    rhs = (np.diag(q1) + pa.T @ q3 @ pa
+           - pa.T @ q3 @ pb @ np.linalg.solve(np.diag(q2) + pb.T @ q3 @ pb, pb.T @ q3 @ pa))
+    assert np.allclose(q3, rhs, rtol=1e-9, atol=1e-9)
+    # stabilizing: closed loop with the LQR gain has spectral radius < 1
+    gain = np.linalg.solve(np.diag(q2) + pb.T @ q3 @ pb, pb.T @ q3 @ pa)
+    assert np.max(np.abs(np.linalg.eigvals(pa - pb @ gain))) < 1
+
+
+@pytest.mark.parametrize("psi", [1.0, 0.7, 0.0])
+def test_condensed_prediction_equals_rollout(psi, rng):
+    cfg = ScenarioConfig()
+    model = PredictionModel.from_config(cfg)
+    pa, pb = _paper_matrices(cfg.slot_s)
+    k, n = 3, cfg.control.horizon
+    x0 = rng.normal(size=(k, 6))
+    dmu = rng.normal(size=(k, n, 2))
+    chi = model.predict(x0, dmu, psi)
+    for j in range(k):
+        x = x0[j]
+        assert np.allclose(chi[j, 0], x)
+        for i in range(n):
+            x = pa @ x + psi * pb @ dmu[j, i]  # expected dynamics (paper eq. evolution_cs)
+            assert np.allclose(chi[j, i + 1], x)
+    assert model.c.shape == (6 * (n + 1), 6) and model.f.shape == (6 * (n + 1), 2 * n)
+
+
+def test_step_augmented_matches_paper_dynamics(rng):
+    pa, pb = _paper_matrices(0.5)
+    x = rng.normal(size=(4, 6))
+    du = rng.normal(size=(4, 2))
+    out = dynamics.step_augmented(x, du, *dynamics.augmented_matrices(0.5))
+    assert np.allclose(out, x @ pa.T + du @ pb.T)
+    # the augmented state carries u[n] = u[n-1] + du
+    assert np.allclose(out[:, 4:6], x[:, 4:6] + du)
+
+
+def test_expected_cost_coefficients(rng):
+    cfg = ScenarioConfig()
+    model = PredictionModel.from_config(cfg)
+    k, n = 4, cfg.control.horizon
+    x0 = rng.normal(size=(k, 6))
+    ref = rng.normal(size=(k, n + 1, 6))
+    dmu = rng.normal(size=(k, n, 2))
+    lcoef, scoef, wcoef = dynamics.expected_cost_coefficients(model, x0, ref, dmu)
+    q4 = linalg.block_diag(*([np.eye(6)] * n + [model.q3]))
+    for psi in (0.2, 0.9):
+        chi = model.predict(x0, dmu, psi)
+        e = (chi - ref).reshape(k, -1)
+        direct = np.einsum("ki,ij,kj->k", e, q4, e) + (dmu.reshape(k, -1) ** 2).sum(1)
+        assert np.allclose(lcoef * psi**2 + 2 * scoef * psi + wcoef, direct)
+
+
+def test_stage_cost():
+    err = np.array([[1.0, 2, 0, 0, 0, 0], [0, 0, 1, 1, 1, 1]])
+    du = np.array([[1.0, 1.0], [0.0, 2.0]])
+    tracking, effort = dynamics.stage_cost(err, du, np.ones(6), np.array([1.0, 0.5]))
+    assert np.allclose(tracking, [5.0, 4.0]) and np.allclose(effort, [1.5, 2.0])
+
+
+def test_increment_sum_matrix():
+    t = dynamics.increment_sum_matrix(3)
+    dmu = np.array([1.0, -1.0, 0.5, 0.5, 0.25, 2.0])
+    assert np.allclose(t @ dmu, [1.0, -1.0, 1.5, -0.5, 1.75, 1.5])

@@ -1,0 +1,114 @@
+import numpy as np
+import pytest
+
+from lawn_env import ScenarioConfig, references
+from lawn_env.dynamics import PredictionModel
+from lawn_env.mpc import OutageAwareMPC
+
+CFG = ScenarioConfig()
+
+
+def _problems(rng, count, k=4):
+    table = references.reference_table(references.paper_paths(4), 131, 0.5)
+    for _ in range(count):
+        n = int(rng.integers(0, 110))
+        x = table[:k, n].copy()
+        x[:, 0:2] += rng.normal(0, 4, (k, 2))
+        x[:, 2:4] += rng.normal(0, 1, (k, 2))
+        x[:, 4:6] = rng.uniform(-2, 2, (k, 2))
+        yield x, table[:k, n : n + 11], rng.uniform(0.05, 1.0, k)
+
+
+def _cvxpy_value(x, ref, psi):
+    """The QP P3 written independently, straight from the paper's cost and MODEL.md's control set."""
+    cp = pytest.importorskip("cvxpy")
+    model = PredictionModel.from_config(CFG)
+    n = CFG.control.horizon
+    z = cp.Variable((n, 2))
+    cost = 0
+    state = x
+    cons = [cp.abs(z) <= 1.0]
+    u = x[4:6]
+    for i in range(n):
+        e = state - ref[i]
+        cost += cp.sum_squares(e) + cp.sum_squares(z[i])
+        state = model.a_aug @ state + psi * (model.b_aug @ z[i])
+        u = u + z[i]
+        cons.append(cp.abs(u) <= 2.0)
+    e = state - ref[n]
+    cost += cp.quad_form(e, model.q3)
+    prob = cp.Problem(cp.Minimize(cost), cons)
+    prob.solve(solver=cp.CLARABEL, tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12)
+    return prob.value, z.value
+
+
+@pytest.mark.parametrize("backend", ["daqp", "osqp"])
+def test_qp_solution_matches_independent_solve(backend, rng):
+    mpc = OutageAwareMPC.from_config(CFG, backend=backend)
+    for x, ref, psi in _problems(rng, 4):
+        sol = mpc.solve(x, ref, psi)
+        assert sol.num_fallbacks == 0
+        for k in range(4):
+            value, z = _cvxpy_value(x[k], ref[k], psi[k])
+            assert sol.value[k] == pytest.approx(value, rel=1e-6)
+            assert np.allclose(sol.increments[k], z, atol=1e-4)
+
+
+def test_solution_respects_control_set(rng):
+    mpc = OutageAwareMPC.from_config(CFG)
+    for x, ref, psi in _problems(rng, 20):
+        sol = mpc.solve(x, ref, psi)
+        dmu = sol.increments
+        assert np.all(np.abs(dmu) <= 1.0 + 1e-9)
+        u = x[:, None, 4:6] + np.cumsum(dmu, axis=1)
+        assert np.all(np.abs(u) <= 2.0 + 1e-9)
+
+
+def test_warm_start_gives_the_cold_answer(rng):
+    warm = OutageAwareMPC.from_config(CFG)
+    problems = list(_problems(rng, 10))
+    warm_vals = [warm.solve(*p).value for p in problems]
+    for p, v in zip(problems, warm_vals):
+        cold = OutageAwareMPC.from_config(CFG)
+        assert np.allclose(cold.solve(*p).value, v, rtol=1e-9)
+
+
+def test_value_is_the_expected_cost(rng):
+    from lawn_env.dynamics import expected_cost_coefficients
+
+    mpc = OutageAwareMPC.from_config(CFG)
+    x, ref, psi = next(_problems(rng, 1))
+    sol = mpc.solve(x, ref, psi)
+    l, s, w = expected_cost_coefficients(mpc.model, x, ref, sol.increments)
+    assert np.allclose(sol.value, l * psi**2 + 2 * s * psi + w)
+
+
+def test_zero_success_means_no_control_effort(rng):
+    mpc = OutageAwareMPC.from_config(CFG)
+    x, ref, _ = next(_problems(rng, 1))
+    sol = mpc.solve(x, ref, np.zeros(4))
+    assert np.allclose(sol.increments, 0.0)
+
+
+def test_infeasible_data_falls_back_without_raising(rng):
+    mpc = OutageAwareMPC.from_config(CFG)
+    x, ref, psi = next(_problems(rng, 1))
+    x[0, 4] = 5.0  # |u[n-1]| > a_max and more than one increment away: the QP is infeasible
+    sol = mpc.solve(x, ref, psi)
+    assert sol.status[0] == 2 and np.allclose(sol.increments[0], 0.0)
+    assert np.all(sol.status[1:] == 0) and sol.num_fallbacks == 1
+
+
+def test_unknown_backend_lists_valid_ones():
+    with pytest.raises(ValueError, match="valid: daqp, osqp"):
+        OutageAwareMPC.from_config(CFG, backend="gurobi")
+    with pytest.raises(ValueError, match="not installed"):
+        OutageAwareMPC.from_config(CFG, backend="qpsolvers:nonexistent")
+
+
+def test_qpsolvers_backend(rng):
+    pytest.importorskip("clarabel")
+    mpc = OutageAwareMPC.from_config(CFG, backend="qpsolvers:clarabel")
+    ref_mpc = OutageAwareMPC.from_config(CFG)
+    x, ref, psi = next(_problems(rng, 1))
+    assert np.allclose(mpc.solve(x, ref, psi).value, ref_mpc.solve(x, ref, psi).value, rtol=1e-5)

@@ -1,0 +1,73 @@
+import gymnasium as gym
+import numpy as np
+import pytest
+from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+import lawn_env
+
+
+def test_pettingzoo_api():
+    parallel_api_test(lawn_env.parallel_env(), num_cycles=150)
+
+
+def test_pettingzoo_seed():
+    parallel_seed_test(lambda: lawn_env.parallel_env(num_agvs=3))
+
+
+def test_spaces_are_stable_objects():
+    env = lawn_env.parallel_env()
+    for agent in env.possible_agents:
+        assert env.observation_space(agent) is env.observation_space(agent)
+        assert env.action_space(agent) is env.action_space(agent)
+    with pytest.raises(ValueError, match="unknown agent"):
+        env.action_space("agv_99")
+
+
+def test_lockstep_with_joint_env():
+    """Two views of one core: the same seed and decisions give the same trajectory and rewards."""
+    par = lawn_env.parallel_env()
+    joint = gym.make("lawn/Joint-v0").unwrapped
+    obs, _ = par.reset(seed=21)
+    jobs, _ = joint.reset(seed=21)
+    assert np.array_equal(obs["drone"], jobs)
+    rng = np.random.default_rng(0)
+    k = 4
+    while par.agents:
+        a = rng.uniform(-1, 1, 3 * k + 2).astype(np.float32)
+        actions = {"drone": a[2 * k :], **{f"agv_{i}": a[2 * i : 2 * i + 2] for i in range(k)}}
+        obs, rewards, terms, truncs, infos = par.step(actions)
+        jobs, jr, _, jtrunc, jinfo = joint.step(a)
+        assert np.array_equal(obs["drone"], jobs)
+        assert rewards["drone"] == pytest.approx(jr)
+        assert sum(rewards[f"agv_{i}"] for i in range(k)) == pytest.approx(jr)
+        blocks = joint.layout.agv_blocks(jobs)
+        for i in range(k):
+            assert np.array_equal(obs[f"agv_{i}"][: blocks.shape[1]], blocks[i])
+        assert all(truncs.values()) == jtrunc
+    assert par.agents == []
+    assert infos["drone"]["episode_metrics"] == jinfo["episode_metrics"]
+
+
+def test_missing_and_bad_actions():
+    env = lawn_env.parallel_env()
+    env.reset(seed=0)
+    acts = {a: env.action_space(a).sample() for a in env.agents}
+    partial = dict(acts)
+    partial.pop("agv_1")
+    with pytest.raises(ValueError, match="missing agents \\['agv_1'\\]"):
+        env.step(partial)
+    bad = dict(acts)
+    bad["agv_0"] = np.array([np.nan, 0.0])
+    with pytest.raises(ValueError, match="agv_0"):
+        env.step(bad)
+    with pytest.raises(ValueError, match="unknown agents \\['pilot'\\]"):
+        env.step({**acts, "pilot": np.zeros(2)})
+
+
+def test_state_and_render():
+    env = lawn_env.parallel_env(render_mode="rgb_array")
+    env.reset(seed=0)
+    assert env.state().shape == env.observation_space("drone").shape
+    frame = env.render()
+    assert frame.shape[2] == 3
+    env.close()

@@ -1,0 +1,44 @@
+import numpy as np
+import pytest
+
+from lawn_env import drone, spaces
+
+
+def test_power_map_respects_budget_and_inverts(rng):
+    for k in (1, 2, 4, 32):
+        for _ in range(200):
+            a = rng.uniform(-1, 1, k)
+            p = spaces.decode_power(a, 2.0)
+            assert np.all(p >= 0) and p.sum() <= 2.0 * (1 + 1e-12)
+        # every feasible split is reachable, exactly
+        target = rng.dirichlet(np.ones(k)) * rng.uniform(0.2, 2.0)
+        assert np.allclose(spaces.decode_power(spaces.encode_power(target, 2.0), 2.0), target)
+    assert np.allclose(spaces.decode_power(np.zeros(4), 1.0), 0.25)  # zero action: equal split
+    assert np.allclose(spaces.decode_power(-np.ones(3), 1.0), 0.0)
+    with pytest.raises(ValueError, match="not a feasible split"):
+        spaces.encode_power(np.array([0.8, 0.8]), 1.0)
+
+
+def test_drone_move_is_feasible_and_inverts(rng):
+    area = (0.0, 200.0, 0.0, 200.0)
+    for _ in range(500):
+        q = rng.uniform(0, 200, 2)
+        v = spaces.decode_drone(rng.uniform(-1, 1, 2), 15.0)
+        q2 = drone.move_drone(q, v, 15.0, 0.5, area)
+        assert np.linalg.norm(q2 - q) <= 7.5 + 1e-9 and np.all((q2 >= 0) & (q2 <= 200))
+        a = spaces.encode_drone(q2, q, 15.0, 0.5)
+        assert np.allclose(drone.move_drone(q, spaces.decode_drone(a, 15.0), 15.0, 0.5, area), q2)
+
+
+def test_increment_maps():
+    a = np.array([0.5, -1.0, 1.0, 0.0])
+    du = spaces.decode_increments(a, 1.0)
+    assert du.shape == (2, 2) and np.allclose(spaces.encode_increments(du, 1.0), a)
+
+
+def test_check_action_messages():
+    with pytest.raises(ValueError, match=r"entries \[1\]"):
+        spaces.check_action([0.0, 2.0, 0.0], 3)
+    with pytest.raises(ValueError, match="shape"):
+        spaces.check_action(np.zeros((2, 2)), 3)
+    assert spaces.check_action(np.zeros((1, 3)), 3).shape == (3,)
