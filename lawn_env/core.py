@@ -18,7 +18,7 @@ from scipy import special
 
 from . import channel, drone, references
 from .config import ScenarioConfig
-from .dynamics import PredictionModel, stage_cost, step_augmented
+from .dynamics import PredictionModel, packed_step_matrices
 
 __all__ = ["Simulation", "Snapshot", "SlotRecord"]
 
@@ -83,6 +83,7 @@ class Simulation:
         self._area_hi = np.array([self.area[1], self.area[3]])
         self._q1 = np.asarray(config.control.q1_diag, dtype=float)
         self._q2 = np.asarray(config.control.q2_diag, dtype=float)
+        self._packed_t, self._packed_w = packed_step_matrices(self.model.a_aug, self.model.b_aug, self._q1, self._q2)
         self._a_aug_t = np.ascontiguousarray(self.model.a_aug.T)
         self._b_aug_t = np.ascontiguousarray(self.model.b_aug.T)
         self._paper_paths = references.paper_paths(self.num_agvs, self.area) if config.uses_paper_paths else None
@@ -109,6 +110,7 @@ class Simulation:
                 rng, k, cfg.reference.families, self.area, duration_s=(steps - 1) * self.slot_s
             )
             self.reference = references.reference_table(self.paths, steps, self.slot_s)
+        self._reference_packed = np.concatenate([self.reference, np.zeros(self.reference.shape[:2] + (2,))], axis=2)
         self.rng = rng
         offsets = rng.normal(0.0, cfg.reference.initial_offset_std_m, size=(k, 2))
         x_aug = np.zeros((k, 6))
@@ -183,12 +185,15 @@ class Simulation:
         outage_p = special.gammainc(link.m, x)
         delivered = channel.delivered_from_fading(channel.sample_normalized_fading(self.rng, link.m, self.num_agvs), x)
         du *= delivered[:, None]
-        x_next = step_augmented(x_aug, du, self.model.a_aug, self.model.b_aug)
+        # step_augmented and stage_cost in one pass on packed rows [x~, du] (dynamics.packed_step_matrices)
+        packed = np.concatenate((x_aug, du), axis=1) @ self._packed_t  # [x~[n+1], du]
         self.slot += 1
-        err = x_next - self.reference[:, self.slot]
-        tracking, effort = stage_cost(err, du, self._q1, self._q2)
+        err = packed - self._reference_packed[:, self.slot]  # [x~[n+1] - x~_ref[n+1], du]
+        terms = (err * err) @ self._packed_w
+        tracking, effort = terms[:, 0], terms[:, 1]
+        x_next = packed[:, 0:6]
         self.x_aug = x_next
-        self.tracking_error = err
+        self.tracking_error = err[:, 0:6]
         self.drone_position = drone_next
         self.last_power_w = power_w
         self.last_delivered = delivered

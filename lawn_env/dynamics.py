@@ -24,6 +24,7 @@ __all__ = [
     "PredictionModel",
     "step_augmented",
     "stage_cost",
+    "packed_step_matrices",
     "expected_cost_coefficients",
 ]
 
@@ -158,6 +159,22 @@ def step_augmented(x_aug: np.ndarray, du: np.ndarray, a_aug: np.ndarray, b_aug: 
 def stage_cost(err: np.ndarray, du: np.ndarray, q1_diag: np.ndarray, q2_diag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Realized stage-cost terms per AGV: e' Q1 e and Delta-u' Q2 Delta-u (diagonal weights)."""
     return (err * err) @ q1_diag, (du * du) @ q2_diag
+
+
+def packed_step_matrices(a_aug: np.ndarray, b_aug: np.ndarray, q1_diag, q2_diag) -> tuple[np.ndarray, np.ndarray]:
+    """The transition and the stage cost on the packed row [x~, Delta-u] (8 entries), for the
+    simulator's hot path: ``[x~, du] @ T = [A~ x~ + B~ du, du]`` and, with ``e`` the packed
+    error ``[x~ - x~_ref, du]``, ``(e * e) @ W = [e' Q1 e, du' Q2 du]``. Built from the same
+    A~, B~, Q1, Q2 as :func:`step_augmented` and :func:`stage_cost` (a test checks they agree).
+    """
+    t = np.zeros((8, 8))
+    t[0:6, 0:6] = a_aug.T
+    t[6:8, 0:6] = b_aug.T
+    t[6:8, 6:8] = np.eye(2)
+    w = np.zeros((8, 2))
+    w[0:6, 0] = q1_diag
+    w[6:8, 1] = q2_diag
+    return t, w
 
 
 def expected_cost_coefficients(model: PredictionModel, x_aug: np.ndarray, chi_ref: np.ndarray, dmu: np.ndarray):

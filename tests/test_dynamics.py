@@ -97,3 +97,17 @@ def test_increment_sum_matrix():
     t = dynamics.increment_sum_matrix(3)
     dmu = np.array([1.0, -1.0, 0.5, 0.5, 0.25, 2.0])
     assert np.allclose(t @ dmu, [1.0, -1.0, 1.5, -0.5, 1.75, 1.5])
+
+
+def test_packed_step_equals_step_and_stage_cost(rng):
+    a_aug, b_aug = dynamics.augmented_matrices(0.5)
+    q1, q2 = rng.uniform(0.1, 2, 6), rng.uniform(0.1, 2, 2)
+    t, w = dynamics.packed_step_matrices(a_aug, b_aug, q1, q2)
+    x, du, ref = rng.normal(size=(5, 6)), rng.normal(size=(5, 2)), rng.normal(size=(5, 6))
+    packed = np.concatenate([x, du], axis=1) @ t
+    x_next = dynamics.step_augmented(x, du, a_aug, b_aug)
+    assert np.allclose(packed[:, :6], x_next) and np.allclose(packed[:, 6:], du)
+    err = packed - np.concatenate([ref, np.zeros((5, 2))], axis=1)
+    terms = (err * err) @ w
+    tracking, effort = dynamics.stage_cost(x_next - ref, du, q1, q2)
+    assert np.allclose(terms[:, 0], tracking) and np.allclose(terms[:, 1], effort)

@@ -1,0 +1,1 @@
+"""Training, evaluation, benchmarks, sweeps, figures and the ``lawn`` command line."""

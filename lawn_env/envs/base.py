@@ -84,7 +84,8 @@ class LawnEnvBase(gym.Env):
         }
         if extra:
             info.update(extra)
-        truncated = self.sim.done
+        sim = self.sim
+        truncated = sim.slot >= sim.num_slots
         if truncated:
             self._done = True
             info["episode_metrics"] = self.sim.episode_metrics()

@@ -1,0 +1,61 @@
+"""A simple scripted policy for ``lawn/Joint-v0``: the demo's driver and a sanity baseline.
+
+It reads only the observation (decoded with :class:`lawn_env.ObservationLayout`):
+
+* each AGV: a PD tracking law with acceleration feed-forward,
+  ``u = a_ref + k_p (p_ref - p) + k_d (v_ref - v)``, sent as the increment ``u - u[n-1]``;
+* power: split in proportion to the squared distance to each AGV (equalizes mean SNR);
+* drone: flies toward the centroid of the AGVs at full speed.
+
+It is not one of the paper's baselines (those arrive with the expert); it is the "do something
+reasonable" reference point for the demo and for smoke tests.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lawn_env import ObservationLayout, ScenarioConfig
+from lawn_env import spaces
+
+__all__ = ["HeuristicPolicy"]
+
+
+class HeuristicPolicy:
+    """PD tracking + distance-proportional power + centroid-seeking drone, from observations."""
+
+    def __init__(self, config: ScenarioConfig, kp: float = 0.4, kd: float = 0.9):
+        self.config = config
+        self.layout = ObservationLayout(config)
+        self.kp, self.kd = kp, kd
+
+    def reset(self, seed: int | None = None) -> None:
+        """Stateless; present for the common policy protocol."""
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        cfg = self.config
+        s = self.layout.decode(obs)
+        x, ref, q = s["x_aug"], s["reference"], s["drone_position"]
+        target = ref[:, 1]  # the reference one slot ahead
+        u = target[:, 4:6] + self.kp * (target[:, 0:2] - x[:, 0:2]) + self.kd * (target[:, 2:4] - x[:, 2:4])
+        amax = cfg.control.accel_max_mps2
+        du = np.clip(u, -amax, amax) - x[:, 4:6]
+        d2 = ((x[:, 0:2] - q) ** 2).sum(axis=1) + cfg.drone.altitude_m**2
+        power = cfg.power_budget_w * d2 / d2.sum()
+        centroid = x[:, 0:2].mean(axis=0)
+        step = centroid - q
+        dist = np.linalg.norm(step)
+        reach = cfg.drone.max_speed_mps * cfg.slot_s
+        q_next = centroid if dist <= reach else q + step * (reach / dist)
+        return np.concatenate([
+            spaces.encode_increments(du, cfg.control.accel_increment_max_mps2),
+            spaces.encode_power(power, cfg.power_budget_w),
+            spaces.encode_drone(q_next, q, cfg.drone.max_speed_mps, cfg.slot_s),
+        ]).astype(np.float32)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        """Stable-Baselines3-style ``predict`` (batched or single observations)."""
+        obs = np.asarray(observation)
+        if obs.ndim == 2:
+            return np.stack([self.act(o) for o in obs]), state
+        return self.act(obs), state

@@ -1,0 +1,7 @@
+#!/usr/bin/env bash
+# Set up the full environment (.venv) and run the test suite. Extra arguments go to pytest,
+# e.g. `bash scripts/test.sh -m slow` for the slow tests.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh full
+exec .venv/bin/python -m pytest -q "$@"
