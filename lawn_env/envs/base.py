@@ -12,7 +12,7 @@ from ..config import ScenarioConfig
 from ..core import Simulation, Snapshot
 from ..spaces import ObservationLayout
 
-__all__ = ["resolve_config", "LawnEnvBase"]
+__all__ = ["resolve_config", "SimulationView", "LawnEnvBase"]
 
 
 def resolve_config(config: ScenarioConfig | Mapping | str | None = None, **overrides: Any) -> ScenarioConfig:
@@ -34,22 +34,53 @@ def resolve_config(config: ScenarioConfig | Mapping | str | None = None, **overr
     return cfg.override(overrides) if overrides else cfg
 
 
-class LawnEnvBase(gym.Env):
-    """Common machinery of ``lawn/Joint-v0`` and ``lawn/Comm-v0`` (not registered itself)."""
+class SimulationView:
+    """What every view of a :class:`~lawn_env.core.Simulation` shares (the Gymnasium envs and the
+    PettingZoo env): config resolution, the core, the observation layout, snapshot, render, close."""
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 4}
 
-    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-                 **overrides: Any):
+    def _setup_view(self, config, render_mode, overrides) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode={render_mode!r}; valid: {self.metadata['render_modes']} or None")
         self.config = resolve_config(config, **overrides)
         self.render_mode = render_mode
         self.sim = Simulation(self.config)
         self.layout = ObservationLayout(self.config)
+        self._renderer = None
+
+    def snapshot(self) -> Snapshot:
+        """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
+        if self.sim.x_aug is None:
+            raise RuntimeError("call reset() before snapshot()")
+        return self.sim.snapshot()
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        if self.sim.x_aug is None:
+            raise RuntimeError("call reset() before render()")
+        if self._renderer is None:
+            from ..render import Renderer
+
+            self._renderer = Renderer(self.config, human=self.render_mode == "human")
+        return self._renderer.draw(self.sim)
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+class LawnEnvBase(SimulationView, gym.Env):
+    """Common machinery of ``lawn/Joint-v0`` and ``lawn/Comm-v0`` (not registered itself)."""
+
+    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
+                 **overrides: Any):
+        self._setup_view(config, render_mode, overrides)
         self.num_agvs = self.config.num_agvs
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(self.layout.size,), dtype=np.float32)
-        self._renderer = None
         self._done = True
 
     # ------------------------------------------------------------------ gym API
@@ -94,28 +125,5 @@ class LawnEnvBase(gym.Env):
         return self.layout.encode(self.sim), -(cost_tracking + cost_effort), False, truncated, info
 
     # ------------------------------------------------------------------ extras
-    def snapshot(self) -> Snapshot:
-        """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
-        if self.sim.x_aug is None:
-            raise RuntimeError("call reset() before snapshot()")
-        return self.sim.snapshot()
-
     def episode_metrics(self) -> dict:
         return self.sim.episode_metrics()
-
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
-            return None
-        if self.sim.x_aug is None:
-            raise RuntimeError("call reset() before render()")
-        if self._renderer is None:
-            from ..render import Renderer
-
-            self._renderer = Renderer(self.config, human=self.render_mode == "human")
-        return self._renderer.draw(self.sim)
-
-    def close(self):
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None

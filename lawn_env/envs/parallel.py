@@ -10,14 +10,13 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from ..config import ScenarioConfig
-from ..core import Simulation, Snapshot
-from ..spaces import ObservationLayout, check_action, decode_power
-from .base import resolve_config
+from ..spaces import check_action, decode_power
+from .base import SimulationView
 
 __all__ = ["LawnParallelEnv", "parallel_env"]
 
 
-class LawnParallelEnv(ParallelEnv):
+class LawnParallelEnv(SimulationView, ParallelEnv):
     """
     ## Description
 
@@ -57,12 +56,7 @@ class LawnParallelEnv(ParallelEnv):
 
     def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
                  **overrides: Any):
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode={render_mode!r}; valid: {self.metadata['render_modes']} or None")
-        self.config = resolve_config(config, **overrides)
-        self.render_mode = render_mode
-        self.sim = Simulation(self.config)
-        self.layout = ObservationLayout(self.config)
+        self._setup_view(config, render_mode, overrides)
         k = self.config.num_agvs
         self.possible_agents = ["drone"] + [f"agv_{i}" for i in range(k)]
         self.agents: list[str] = []
@@ -77,7 +71,6 @@ class LawnParallelEnv(ParallelEnv):
             **{a: gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for a in self._agv_index},
         }
         self._np_random, _ = seeding.np_random()
-        self._renderer = None
 
     def observation_space(self, agent: str) -> gym.spaces.Box:
         return self._lookup(self._observation_spaces, agent)
@@ -160,26 +153,6 @@ class LawnParallelEnv(ParallelEnv):
         if self.sim.x_aug is None:
             raise RuntimeError("call reset() before state()")
         return self.layout.encode(self.sim)
-
-    def snapshot(self) -> Snapshot:
-        if self.sim.x_aug is None:
-            raise RuntimeError("call reset() before snapshot()")
-        return self.sim.snapshot()
-
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
-            return None
-        if self._renderer is None:
-            from ..render import Renderer
-
-            self._renderer = Renderer(self.config, human=self.render_mode == "human")
-        return self._renderer.draw(self.sim)
-
-    def close(self):
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
 
 
 def parallel_env(config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
