@@ -38,6 +38,7 @@ __all__ = [
     "outage_probability",
     "success_probability",
     "success_and_gradients",
+    "success_and_power_gradient",
     "outage_argument",
     "outage_argument_sq",
     "delivered_from_fading",
@@ -232,26 +233,34 @@ def success_probability(power_w, distance_m, *, snr_threshold, alpha0, noise_pow
     return special.gammaincc(m, x)
 
 
+def _success_terms(power_w, distance_sq_m2, link: LinkParams):
+    """psi and g = x^(m-1) e^(-x) / Gamma(m) * (x - x_ce) >= 0, from which
+    d psi/dp = g / p and d psi/d(d^2) = -g / d^2 (x decreases in p, increases in d^2; x_ce is the
+    part of x that power cannot remove). Powers are floored at ``POWER_FLOOR_W``."""
+    p = np.maximum(power_w, POWER_FLOOR_W)
+    x = link.outage_argument_sq(p, distance_sq_m2)
+    m = link.m
+    density = np.exp((m - 1) * np.log(x) - x - special.gammaln(m))  # -d psi / dx
+    return special.gammaincc(m, x), density * (x - link.coefficients[1]), p
+
+
+def success_and_power_gradient(power_w, distance_sq_m2, link: LinkParams):
+    """psi and d psi / d p (1/W) of each link at squared distances ``distance_sq_m2`` (m^2)."""
+    psi, g, p = _success_terms(power_w, distance_sq_m2, link)
+    return psi, g / p
+
+
 def success_and_gradients(power_w, drone_xy, agv_xy, link: LinkParams):
     """psi, d psi / d p (1/W) and d psi / d q (1/m, shape (..., 2)) for each link.
 
     ``drone_xy`` broadcasts against ``agv_xy`` (..., 2). The derivatives use the log form of the
-    Gamma density: d psi/dx = -x^(m-1) e^(-x) / Gamma(m), with x decreasing in p and
-    increasing in d^2: dx/dp = -(x - x_ce)/p, dx/d(d^2) = (x - x_ce)/d^2,
-    x_ce = m G_th rho / (1 - rho) the part of x that power cannot remove. At p = 0 (floored at
-    ``POWER_FLOOR_W``) psi and both derivatives are 0.
+    Gamma density, d psi/dx = -x^(m-1) e^(-x) / Gamma(m), with dx/dp = -(x - x_ce)/p and
+    dx/d(d^2) = (x - x_ce)/d^2. At p = 0 (floored at ``POWER_FLOOR_W``) psi and both derivatives are 0.
     """
-    p = np.maximum(np.asarray(power_w, dtype=float), POWER_FLOOR_W)
     diff = np.asarray(drone_xy, dtype=float) - np.asarray(agv_xy, dtype=float)
     d2 = np.einsum("...i,...i->...", diff, diff) + link.altitude_m**2
-    m = link.m
-    x = link.outage_argument_sq(p, d2)
-    excess = x - link.coefficients[1]  # x - x_ce > 0
-    psi = special.gammaincc(m, x)
-    density = np.exp((m - 1) * np.log(x) - x - special.gammaln(m))  # -d psi / dx
-    dpsi_dp = density * excess / p
-    dpsi_dq = (-2.0 * density * excess / d2)[..., None] * diff
-    return psi, dpsi_dp, dpsi_dq
+    psi, g, p = _success_terms(power_w, d2, link)
+    return psi, g / p, (-2.0 * g / d2)[..., None] * diff
 
 
 def realized_snr(power_w, distance_m, fading, *, alpha0, noise_power_w, ce_error_var=0.0):

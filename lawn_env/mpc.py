@@ -26,7 +26,7 @@ import numpy as np
 
 from .dynamics import PredictionModel
 
-__all__ = ["MPCSolution", "OutageAwareMPC", "BACKENDS", "qp_value"]
+__all__ = ["MPCSolution", "OutageAwareMPC", "SlotData", "BACKENDS", "qp_value"]
 
 
 @dataclass(frozen=True)
@@ -42,6 +42,17 @@ class MPCSolution:
     @property
     def num_fallbacks(self) -> int:
         return int(np.count_nonzero(self.status))
+
+
+@dataclass(frozen=True)
+class SlotData:
+    """The psi-independent data of one slot's K QPs (see :meth:`OutageAwareMPC.prepare`)."""
+
+    residual: np.ndarray  # r = C x~ - chi_ref, (K, 6(N_p+1))
+    linear: np.ndarray  # F' Q4 r, (K, 2 N_p)
+    constant: np.ndarray  # M = r' Q4 r, (K,)
+    lower: np.ndarray  # (K, 4 N_p): increment bounds, then bounds on T z
+    upper: np.ndarray
 
 
 def qp_value(p: np.ndarray, q: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -193,32 +204,49 @@ class OutageAwareMPC:
         self._fallback = None
 
     # ------------------------------------------------------------------ problem data
+    def prepare(self, x_aug: np.ndarray, chi_ref: np.ndarray) -> "SlotData":
+        """The parts of the K QPs that do not depend on psi (one slot's state and reference)."""
+        k = x_aug.shape[0]
+        if k != self.num_agvs:
+            raise ValueError(f"x_aug has {k} AGVs, the MPC was built for num_agvs={self.num_agvs}")
+        r = self.model.residual(x_aug, chi_ref)
+        u_prev = np.tile(x_aug[:, 4:6], self.model.horizon)
+        box = np.broadcast_to(self._box, (k, self._n))
+        return SlotData(
+            residual=r,
+            linear=r @ self.model.ftq4.T,  # F' Q4 r, so H = 2 psi (F' Q4 r)'
+            constant=np.einsum("ki,ij,kj->k", r, self.model.q4, r),
+            lower=np.concatenate([-box, -self.accel_max - u_prev], axis=1),
+            upper=np.concatenate([box, self.accel_max - u_prev], axis=1),
+        )
+
     def qp_data(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi: np.ndarray):
         """P (K, n, n), q (K, n), constant M (K,), bounds lower/upper (K, 2n) of the K QPs.
 
         The first n bounds are the simple increment bounds, the last n bound T z.
         """
-        psi = np.asarray(psi, dtype=float)
-        r = self.model.residual(x_aug, chi_ref)
+        data = self.prepare(x_aug, chi_ref)
+        p, q = self._objective(data, np.asarray(psi, dtype=float))
+        return p, q, data.constant, data.lower, data.upper
+
+    def _objective(self, data: "SlotData", psi: np.ndarray):
         p = 2.0 * (psi[:, None, None] ** 2 * self._ftq4f + self._q5)
-        q = (2.0 * psi)[:, None] * (r @ self.model.ftq4.T)
-        const = np.einsum("ki,ij,kj->k", r, self.model.q4, r)
-        u_prev = np.tile(x_aug[:, 4:6], self.model.horizon)
-        k = x_aug.shape[0]
-        box = np.broadcast_to(self._box, (k, self._n))
-        lower = np.concatenate([-box, -self.accel_max - u_prev], axis=1)
-        upper = np.concatenate([box, self.accel_max - u_prev], axis=1)
-        return p, q, const, lower, upper
+        q = (2.0 * psi)[:, None] * data.linear
+        return p, q
 
     # ------------------------------------------------------------------ solve
     def solve(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi) -> MPCSolution:
         """Solve the K QPs at success probabilities ``psi`` (K,)."""
+        return self.solve_prepared(self.prepare(x_aug, chi_ref), psi)
+
+    def solve_prepared(self, data: "SlotData", psi) -> MPCSolution:
+        """Solve the K QPs of a prepared slot at success probabilities ``psi`` (K,): the AO's
+        control block calls this once per iteration with the same ``data``."""
         start = time.perf_counter()
-        k = x_aug.shape[0]
-        if k != self.num_agvs:
-            raise ValueError(f"x_aug has {k} AGVs, the MPC was built for num_agvs={self.num_agvs}")
+        k = self.num_agvs
         psi = np.broadcast_to(np.asarray(psi, dtype=float), (k,))
-        p, q, const, lower, upper = self.qp_data(x_aug, chi_ref, psi)
+        p, q = self._objective(data, psi)
+        lower, upper = data.lower, data.upper
         z = np.zeros((k, self._n))
         status = np.zeros(k, dtype=np.int8)
         iterations = np.zeros(k, dtype=np.int64)
@@ -228,7 +256,7 @@ class OutageAwareMPC:
                 x, its, status[i] = self._fallback_solve(i, p[i], q[i], lower[i], upper[i])
             z[i] = x
             iterations[i] = its
-        value = qp_value(p, q, z) + const
+        value = qp_value(p, q, z) + data.constant
         return MPCSolution(
             increments=z.reshape(k, self.model.horizon, 2),
             value=value,

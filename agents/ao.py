@@ -1,0 +1,365 @@
+"""The paper's joint optimization by alternating optimization (Algorithm 2; MODEL.md §4).
+
+Per slot: minimize the expected cost J^ over the increment sequences {Delta-mu_k}, the powers p
+and the drone position q, subject to the control set, sum p <= P_max, p >= 0, the speed disc and
+the area. The three blocks alternate until the relative decrease of J^ over an iteration is below
+``tolerance`` or ``max_iterations`` is reached:
+
+1. control (P3): one exact QP per AGV at psi_k(p_k, q), through the shared
+   :class:`lawn_env.mpc.OutageAwareMPC` (persistent, warm-started DAQP workspaces);
+2. power (P4): Algorithm 1, projected gradient with Armijo backtracking, analytic gradient,
+   exact projection onto the budget set, started from equal power;
+3. drone (P5/P6): SCA with the linear surrogate of the paper, minimized exactly over the speed
+   disc intersected with the area, with the safeguard of MODEL.md §4: a step is accepted only if
+   the true J^ does not increase (backtracking toward the current point).
+
+Each block keeps its previous value if its result would increase J^, so the objective trace is
+non-increasing by construction (the paper's convergence argument). Power and drone blocks are
+vectorized across AGVs (no per-AGV Python loops); the control block loops over the K solver
+workspaces.
+
+Decisions beyond the paper (documented settings, :class:`AOSettings`):
+
+* Armijo condition along the projection arc: ``J(p+) <= J(p) + beta grad'(p+ - p)``, which is
+  the paper's ``J(p) - beta rho ||grad||^2`` whenever the projection is inactive, and still
+  terminates when it is active (the paper's form can reject every step at the boundary);
+* the initial PGD step is ``P_max / ||grad||`` (the paper leaves rho unset), reduced by
+  ``1/(1 + rho_hat)`` before the first test, as Algorithm 1 writes it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Annotated, Sequence
+
+import numpy as np
+from pydantic import ConfigDict, Field
+from pydantic.dataclasses import dataclass as pydantic_dataclass
+from scipy import special
+
+from lawn_env import channel
+from lawn_env.config import ScenarioConfig
+from lawn_env.core import Snapshot
+from lawn_env.dynamics import PredictionModel
+from lawn_env.mpc import OutageAwareMPC, SlotData
+
+from .optim import linear_argmin_disc_box, project_budget
+
+__all__ = ["AOSettings", "Plan", "AOSolver", "SlotProblem", "expected_cost", "BLOCKS"]
+
+BLOCKS = ("control", "power", "drone")
+
+
+@pydantic_dataclass(frozen=True, config=ConfigDict(extra="forbid", allow_inf_nan=False))
+class AOSettings:
+    """Settings of the alternating optimization (the paper's symbols where it has them)."""
+
+    max_iterations: Annotated[int, Field(ge=1)] = 20
+    """iota_max, AO iterations per slot."""
+    tolerance: Annotated[float, Field(ge=0)] = 1e-3
+    """epsilon of Algorithm 2: stop when an iteration lowers J^ by less than this fraction."""
+    pgd_max_iterations: Annotated[int, Field(ge=1)] = 5
+    """Algorithm 1 iterations per power block (it continues from the current powers at the next
+    AO iteration, so the cap bounds the work per pass, not the accuracy of the AO)."""
+    pgd_tolerance: Annotated[float, Field(gt=0)] = 1e-6
+    """Algorithm 1 stops when ||p - p'|| < pgd_tolerance * P_max."""
+    pgd_armijo: Annotated[float, Field(gt=0, lt=1)] = 1e-4
+    """beta of the Armijo condition."""
+    pgd_backtrack: Annotated[float, Field(gt=0)] = 1.0
+    """rho_hat: each backtracking step divides rho by (1 + rho_hat)."""
+    pgd_max_backtracks: Annotated[int, Field(ge=1)] = 40
+    pgd_restart_equal: bool = False
+    """Start Algorithm 1 from equal power at every AO iteration (the literal reading); False starts
+    it from the current powers, which are equal power at the first iteration."""
+    sca_max_iterations: Annotated[int, Field(ge=1)] = 10
+    sca_tolerance_m: Annotated[float, Field(gt=0)] = 1e-2
+    """SCA stops when its step (after the safeguard's halvings) is shorter than this (m)."""
+    qp_backend: str = "daqp"
+    """QP backend of the control block (see :mod:`lawn_env.mpc`)."""
+
+
+@dataclass(frozen=True)
+class Plan:
+    """One slot's decision and how it was reached.
+
+    ``objective_trace`` has one row per AO iteration and one column per block (control, power,
+    drone): J^ after that block; NaN where a block is not run (baselines fix some blocks).
+    """
+
+    increments: np.ndarray  # (K, N_p, 2), m/s^2; the first row is sent
+    power_w: np.ndarray  # (K,)
+    drone_position: np.ndarray  # (2,), q[n]
+    objective: float  # J^ at the returned point
+    objective_trace: np.ndarray  # (iterations, 3)
+    iterations: int
+    solve_time_s: float
+    info: dict = field(default_factory=dict)
+
+
+class SlotProblem:
+    """One slot's per-slot problem: evaluates J^ and its pieces for any candidate."""
+
+    def __init__(self, solver: "AOSolver", snapshot: Snapshot):
+        self.solver = solver
+        self.x_aug = np.asarray(snapshot.x_aug, dtype=float)
+        self.reference = np.asarray(snapshot.reference, dtype=float)
+        self.q_prev = np.asarray(snapshot.drone_position, dtype=float)
+        k = solver.num_agvs
+        if self.x_aug.shape != (k, 6) or self.reference.shape != (k, solver.horizon + 1, 6):
+            raise ValueError(
+                f"snapshot shapes x_aug {self.x_aug.shape}, reference {self.reference.shape}; expected "
+                f"({k}, 6) and ({k}, {solver.horizon + 1}, 6) for this config"
+            )
+        self.agv_xy = self.x_aug[:, 0:2]
+        self.data: SlotData = solver.mpc.prepare(self.x_aug, self.reference)
+
+    # ------------------------------------------------------------------ pieces of J^
+    def coefficients(self, dmu: np.ndarray):
+        """L, S, W of J^_k = L psi^2 + 2 S psi + W for increments ``dmu`` (K, N_p, 2) (paper, P4)."""
+        model = self.solver.model
+        z = dmu.reshape(self.solver.num_agvs, -1)
+        lcoef = np.einsum("ki,ij,kj->k", z, model.ftq4f, z)
+        scoef = np.einsum("ki,ki->k", self.data.linear, z)
+        wcoef = np.einsum("ki,ij,kj->k", z, model.q5, z) + self.data.constant
+        return lcoef, scoef, wcoef
+
+    def distance_sq(self, q: np.ndarray) -> np.ndarray:
+        return channel.distance_sq(q, self.agv_xy, self.solver.link.altitude_m)
+
+    def success(self, power_w: np.ndarray, q: np.ndarray) -> np.ndarray:
+        return special.gammaincc(self.solver.link.m, self.solver.link.outage_argument_sq(power_w, self.distance_sq(q)))
+
+    def objective(self, dmu: np.ndarray, power_w: np.ndarray, q: np.ndarray) -> float:
+        lcoef, scoef, wcoef = self.coefficients(dmu)
+        psi = self.success(power_w, q)
+        return float(np.sum(lcoef * psi * psi + 2.0 * scoef * psi + wcoef))
+
+
+class AOSolver:
+    """Alternating optimization over (controls, power, drone) for one scenario config."""
+
+    def __init__(self, config: ScenarioConfig, settings: AOSettings | None = None):
+        self.config = config
+        self.settings = settings or AOSettings()
+        self.num_agvs = config.num_agvs
+        self.horizon = config.control.horizon
+        self.model = PredictionModel.from_config(config)
+        self.mpc = OutageAwareMPC.from_config(config, backend=self.settings.qp_backend)
+        self.link = channel.LinkParams.from_config(config, planning=True)
+        self.power_budget_w = config.power_budget_w
+        self.step_m = config.drone.max_speed_mps * config.slot_s
+        self.area = tuple(config.area_m)
+
+    def reset(self) -> None:
+        """Drop warm starts (per episode)."""
+        self.mpc.reset()
+
+    def equal_power(self) -> np.ndarray:
+        return np.full(self.num_agvs, self.power_budget_w / self.num_agvs)
+
+    # ------------------------------------------------------------------ blocks
+    def control_block(self, prob: SlotProblem, power_w, q, dmu, current: float):
+        """P3 at psi(p, q); keeps ``dmu`` if the new solve does not lower J^ (numerical safety)."""
+        psi = prob.success(power_w, q)
+        sol = self.mpc.solve_prepared(prob.data, psi)
+        value = float(sol.value.sum())
+        if dmu is None or value <= current:
+            return sol.increments, value, sol
+        return dmu, current, sol
+
+    def power_block(self, coef, d2: np.ndarray, p_current: np.ndarray, current: float):
+        """Algorithm 1 (from ``p_current``, or from equal power with ``pgd_restart_equal``);
+        returns the better of its result and ``p_current``.
+
+        Trial step: Barzilai-Borwein ``s's / s'y`` from the last two iterates when it is positive,
+        else ``P_max / ||grad||`` (the paper leaves the initial rho open); Algorithm 1 then divides
+        it by (1 + rho_hat) until the Armijo condition holds.
+        """
+        s = self.settings
+        lcoef, scoef, wcoef = coef
+        two_l, two_s, w_total = 2.0 * lcoef, 2.0 * scoef, float(wcoef.sum())
+        budget = self.power_budget_w
+        m = self.link.m
+        c_d, c_ce = self.link.coefficients
+        a = c_d * d2  # x = a / p + c_ce
+        log_norm = special.gammaln(m)
+        grow = 1.0 + s.pgd_backtrack
+        armijo = s.pgd_armijo
+
+        def evaluate(p):
+            pf = np.maximum(p, channel.POWER_FLOOR_W)
+            excess = a / pf
+            x = excess + c_ce if c_ce else excess
+            psi = special.gammaincc(m, x)
+            value = float(lcoef @ (psi * psi) + two_s @ psi) + w_total
+            return psi, value, pf, x, excess
+
+        def gradient(psi, pf, x, excess):
+            dpsi = np.exp(special.xlogy(m - 1, x) - x - log_norm) * excess / pf  # analytic d psi / d p
+            return (two_l * psi + two_s) * dpsi
+
+        p = self.equal_power() if s.pgd_restart_equal else np.array(p_current, dtype=float)
+        psi, value, pf, x, excess = evaluate(p)
+        grad = gradient(psi, pf, x, excess)
+        trial = None
+        iterations = 0
+        for iterations in range(1, s.pgd_max_iterations + 1):
+            gnorm = math.sqrt(float(grad @ grad))
+            if gnorm == 0.0:
+                break
+            rho = (trial if trial is not None else budget / gnorm) * grow
+            accepted = False
+            for _ in range(s.pgd_max_backtracks):
+                rho /= grow
+                p_new = project_budget(p - rho * grad, budget)
+                new = evaluate(p_new)
+                if new[1] <= value + armijo * float(grad @ (p_new - p)):
+                    accepted = True
+                    break
+            if not accepted:
+                break
+            step = p_new - p
+            grad_new = gradient(new[0], new[2], new[3], new[4])
+            sy = float(step @ (grad_new - grad))
+            trial = float(step @ step) / sy if sy > 0 else None
+            p, grad = p_new, grad_new
+            psi, value, pf, x, excess = new
+            if math.sqrt(float(step @ step)) < s.pgd_tolerance * budget:
+                break
+        if value <= current:
+            return p, value, iterations
+        return p_current, current, iterations
+
+    def drone_block(self, prob: SlotProblem, coef, power_w, q_current: np.ndarray, current: float):
+        """SCA over the speed disc and the area, with the monotonicity safeguard."""
+        s = self.settings
+        lcoef, scoef, wcoef = coef
+        m = self.link.m
+        c_d, c_ce = self.link.coefficients
+        gain = c_d / np.maximum(power_w, channel.POWER_FLOOR_W)  # x = gain d^2 + c_ce
+        agv_xy = prob.agv_xy
+        h2 = self.link.altitude_m**2
+        ones = np.ones(2)
+
+        def value_at(q):
+            diff = agv_xy - q
+            psi = special.gammaincc(m, ((diff * diff) @ ones + h2) * gain + c_ce)
+            return float(((lcoef * psi + 2.0 * scoef) * psi + wcoef).sum())
+
+        q, value = np.array(q_current, dtype=float), current
+        iterations = 0
+        t_start = 1.0  # the safeguard's backtracking starts from twice the last accepted fraction
+        for iterations in range(1, s.sca_max_iterations + 1):
+            psi, _, dpsi_dq = channel.success_and_gradients(power_w, q, agv_xy, self.link)
+            grad = (2.0 * lcoef * psi + 2.0 * scoef) @ dpsi_dq
+            target = linear_argmin_disc_box(grad, prob.q_prev, self.step_m, self.area)
+            step = target - q
+            length = math.hypot(step[0], step[1])
+            if length < s.sca_tolerance_m:
+                break
+            t = t_start
+            accepted = False
+            while t * length >= s.sca_tolerance_m:
+                cand = q + t * step
+                cand_value = value_at(cand)
+                if cand_value < value:
+                    accepted = True
+                    break
+                t *= 0.5
+            if not accepted:
+                break
+            q, value = cand, cand_value
+            if t * length < 2.0 * s.sca_tolerance_m:
+                break
+            t_start = min(1.0, 2.0 * t)
+        return q, value, iterations
+
+    # ------------------------------------------------------------------ the AO loop
+    def solve(self, snapshot: Snapshot, *, blocks: Sequence[str] = BLOCKS, increments: np.ndarray | None = None,
+              power_w: np.ndarray | None = None, drone_position: np.ndarray | None = None) -> Plan:
+        """Alternate the given ``blocks`` from the initial point and return the plan.
+
+        Blocks not in ``blocks`` stay at their initial values: ``increments`` (required when the
+        control block is off), ``power_w`` (default equal power), ``drone_position`` (default
+        hover at q[n-1]).
+        """
+        start = time.perf_counter()
+        unknown = [b for b in blocks if b not in BLOCKS]
+        if unknown:
+            raise ValueError(f"unknown AO blocks {unknown}; valid: {', '.join(BLOCKS)}")
+        if "control" not in blocks and increments is None:
+            raise ValueError("increments are required when the control block is not optimized")
+        prob = SlotProblem(self, snapshot)
+        p = self.equal_power() if power_w is None else np.asarray(power_w, dtype=float)
+        q = prob.q_prev.copy() if drone_position is None else np.asarray(drone_position, dtype=float)
+        dmu = None if increments is None else np.asarray(increments, dtype=float)
+        current = prob.objective(dmu, p, q) if dmu is not None else math.inf
+        trace = []
+        qp_fallbacks = 0
+        pgd_iterations = 0
+        sca_iterations = 0
+        iterations = 0
+        for iterations in range(1, self.settings.max_iterations + 1):
+            before = current
+            row = [math.nan, math.nan, math.nan]
+            if "control" in blocks:
+                dmu, current, sol = self.control_block(prob, p, q, dmu, current)
+                qp_fallbacks += sol.num_fallbacks
+                row[0] = current
+            coef = prob.coefficients(dmu)
+            if "power" in blocks:
+                p, current, its = self.power_block(coef, prob.distance_sq(q), p, current)
+                pgd_iterations += its
+                row[1] = current
+            if "drone" in blocks:
+                q, current, its = self.drone_block(prob, coef, p, q, current)
+                sca_iterations += its
+                row[2] = current
+            trace.append(row)
+            if math.isfinite(before) and before - current <= self.settings.tolerance * abs(before):
+                break
+        return Plan(
+            increments=dmu,
+            power_w=p,
+            drone_position=q,
+            objective=current,
+            objective_trace=np.array(trace),
+            iterations=iterations,
+            solve_time_s=time.perf_counter() - start,
+            info={
+                "qp_fallbacks": qp_fallbacks,
+                "pgd_iterations": pgd_iterations,
+                "sca_iterations": sca_iterations,
+                "success_probability": prob.success(p, q),
+            },
+        )
+
+
+def expected_cost(snapshot: Snapshot, accel_increments, power_w, drone_position, *, per_agv: bool = False):
+    """J^_n of MODEL.md §3 for any candidate (increments (K, N_p, 2), powers (K,), drone q[n] (2,)).
+
+    Uses the planners' link model (``channel.ce_aware_planning``); feasibility is not checked.
+    """
+    config = snapshot.config
+    k, n = config.num_agvs, config.control.horizon
+    dmu = np.asarray(accel_increments, dtype=float)
+    p = np.asarray(power_w, dtype=float)
+    q = np.asarray(drone_position, dtype=float)
+    if dmu.shape != (k, n, 2):
+        raise ValueError(f"accel_increments has shape {dmu.shape}; expected ({k}, {n}, 2)")
+    if p.shape != (k,):
+        raise ValueError(f"power_w has shape {p.shape}; expected ({k},)")
+    if q.shape != (2,):
+        raise ValueError(f"drone_position has shape {q.shape}; expected (2,)")
+    model = PredictionModel.from_config(config)
+    link = channel.LinkParams.from_config(config, planning=True)
+    x_aug = np.asarray(snapshot.x_aug, dtype=float)
+    r = model.residual(x_aug, np.asarray(snapshot.reference, dtype=float))
+    z = dmu.reshape(k, -1)
+    fz = z @ model.f.T
+    psi = special.gammaincc(link.m, link.outage_argument_sq(p, channel.distance_sq(q, x_aug[:, 0:2], link.altitude_m)))
+    e = r + psi[:, None] * fz  # chi - chi_ref with the expected dynamics
+    per = np.einsum("ki,ij,kj->k", e, model.q4, e) + np.einsum("ki,ij,kj->k", z, model.q5, z)
+    return per if per_agv else float(per.sum())
