@@ -1,6 +1,20 @@
-"""Policies that drive the lawn environments: the AO-MPC expert, the paper's baselines and
-wrappers for learned policies (later issues), plus a scripted heuristic for demos."""
+"""Policies that drive the lawn environments: the AO-MPC expert, the paper's baselines, a
+scripted heuristic, and (later) wrappers for learned policies. ``make_policy(name, config)``
+builds any of them; ``POLICIES`` is the registry."""
 
+from .ao import AOSettings, AOSolver, Plan, expected_cost
+from .policies import PAPER_POLICIES, POLICIES, Policy, make_policy, policy_names
 from .scripted import HeuristicPolicy
 
-__all__ = ["HeuristicPolicy"]
+__all__ = [
+    "AOSettings",
+    "AOSolver",
+    "Plan",
+    "expected_cost",
+    "Policy",
+    "POLICIES",
+    "PAPER_POLICIES",
+    "make_policy",
+    "policy_names",
+    "HeuristicPolicy",
+]

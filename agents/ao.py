@@ -47,7 +47,7 @@ from lawn_env.mpc import OutageAwareMPC, SlotData
 
 from .optim import linear_argmin_disc_box, project_budget
 
-__all__ = ["AOSettings", "Plan", "AOSolver", "SlotProblem", "expected_cost", "BLOCKS"]
+__all__ = ["AOSettings", "Plan", "AOSolver", "SlotProblem", "PowerObjective", "DroneObjective", "expected_cost", "BLOCKS"]
 
 BLOCKS = ("control", "power", "drone")
 
@@ -58,8 +58,11 @@ class AOSettings:
 
     max_iterations: Annotated[int, Field(ge=1)] = 20
     """iota_max, AO iterations per slot."""
-    tolerance: Annotated[float, Field(ge=0)] = 1e-3
-    """epsilon of Algorithm 2: stop when an iteration lowers J^ by less than this fraction."""
+    tolerance: Annotated[float, Field(ge=0)] = 1e-2
+    """epsilon of Algorithm 2: stop when an iteration lowers J^ by less than this fraction. The
+    paper gives no value and reports convergence "within a few iterations"; 1e-2 stops after 5-6
+    iterations on the default scenario. Tighter values keep lowering J^ slowly (see
+    ``benchmarks/expert_speed.py --tolerance-sweep``)."""
     pgd_max_iterations: Annotated[int, Field(ge=1)] = 5
     """Algorithm 1 iterations per power block (it continues from the current powers at the next
     AO iteration, so the cap bounds the work per pass, not the accuracy of the AO)."""
@@ -73,9 +76,17 @@ class AOSettings:
     pgd_restart_equal: bool = False
     """Start Algorithm 1 from equal power at every AO iteration (the literal reading); False starts
     it from the current powers, which are equal power at the first iteration."""
-    sca_max_iterations: Annotated[int, Field(ge=1)] = 10
+    sca_max_iterations: Annotated[int, Field(ge=1)] = 3
+    """SCA iterations per drone block (it continues from the current position at the next AO
+    iteration)."""
     sca_tolerance_m: Annotated[float, Field(gt=0)] = 1e-2
     """SCA stops when its step (after the safeguard's halvings) is shorter than this (m)."""
+    warm_start: bool = False
+    """Start the AO from the previous slot's powers (``snapshot.last_power_w``) instead of equal
+    power; the drone starts at q[n-1] either way (the paper leaves the initial point open).
+    Off by default: psi is flat near p = 0, so a link whose power collapsed to 0 has a zero
+    gradient and Algorithm 1 started there never gives it power again (the AGV then drifts on its
+    last acceleration); equal power re-evaluates every link each slot."""
     qp_backend: str = "daqp"
     """QP backend of the control block (see :mod:`lawn_env.mpc`)."""
 
@@ -137,6 +148,55 @@ class SlotProblem:
         return float(np.sum(lcoef * psi * psi + 2.0 * scoef * psi + wcoef))
 
 
+class PowerObjective:
+    """J^(p) = sum L psi(p)^2 + 2 S psi(p) + W for fixed increments and drone (problem P4), with
+    the analytic gradient of Algorithm 1: dJ/dp_k = (2 L_k psi_k + 2 S_k) d psi_k / d p_k."""
+
+    def __init__(self, coef, d2: np.ndarray, link: channel.LinkParams):
+        lcoef, scoef, wcoef = coef
+        self._l, self._two_l, self._two_s, self._w = lcoef, 2.0 * lcoef, 2.0 * scoef, float(wcoef.sum())
+        self._m = link.m
+        c_d, self._c_ce = link.coefficients
+        self._a = c_d * d2  # x = a / p + c_ce
+        self._log_norm = special.gammaln(link.m)
+
+    def value(self, p: np.ndarray):
+        """(J^, state) where state feeds :meth:`gradient`."""
+        pf = np.maximum(p, channel.POWER_FLOOR_W)
+        excess = self._a / pf
+        x = excess + self._c_ce if self._c_ce else excess
+        psi = special.gammaincc(self._m, x)
+        return float(self._l @ (psi * psi) + self._two_s @ psi) + self._w, (psi, pf, x, excess)
+
+    def gradient(self, state) -> np.ndarray:
+        psi, pf, x, excess = state
+        dpsi = np.exp(special.xlogy(self._m - 1, x) - x - self._log_norm) * excess / pf  # d psi / d p
+        return (self._two_l * psi + self._two_s) * dpsi
+
+
+class DroneObjective:
+    """J^(q) for fixed increments and powers (problem P5) and its gradient (paper eq. grad_q)."""
+
+    def __init__(self, coef, agv_xy: np.ndarray, power_w: np.ndarray, link: channel.LinkParams):
+        self._l, self._s, self._w = coef
+        self._agv = agv_xy
+        self._power = power_w
+        self._link = link
+        c_d, self._c_ce = link.coefficients
+        self._gain = c_d / np.maximum(power_w, channel.POWER_FLOOR_W)  # x = gain d^2 + c_ce
+        self._h2 = link.altitude_m**2
+        self._ones = np.ones(2)
+
+    def value(self, q: np.ndarray) -> float:
+        diff = self._agv - q
+        psi = special.gammaincc(self._link.m, ((diff * diff) @ self._ones + self._h2) * self._gain + self._c_ce)
+        return float(((self._l * psi + 2.0 * self._s) * psi + self._w).sum())
+
+    def gradient(self, q: np.ndarray) -> np.ndarray:
+        psi, _, dpsi_dq = channel.success_and_gradients(self._power, q, self._agv, self._link)
+        return (2.0 * self._l * psi + 2.0 * self._s) @ dpsi_dq
+
+
 class AOSolver:
     """Alternating optimization over (controls, power, drone) for one scenario config."""
 
@@ -151,6 +211,7 @@ class AOSolver:
         self.power_budget_w = config.power_budget_w
         self.step_m = config.drone.max_speed_mps * config.slot_s
         self.area = tuple(config.area_m)
+        self._memory: dict = {}
 
     def reset(self) -> None:
         """Drop warm starts (per episode)."""
@@ -169,6 +230,14 @@ class AOSolver:
             return sol.increments, value, sol
         return dmu, current, sol
 
+    def power_objective(self, coef, d2: np.ndarray) -> "PowerObjective":
+        """J^(p) for fixed increments (coefficients ``coef``) and squared distances ``d2``."""
+        return PowerObjective(coef, d2, self.link)
+
+    def drone_objective(self, prob: SlotProblem, coef, power_w: np.ndarray) -> "DroneObjective":
+        """J^(q) for fixed increments and powers."""
+        return DroneObjective(coef, prob.agv_xy, power_w, self.link)
+
     def power_block(self, coef, d2: np.ndarray, p_current: np.ndarray, current: float):
         """Algorithm 1 (from ``p_current``, or from equal power with ``pgd_restart_equal``);
         returns the better of its result and ``p_current``.
@@ -178,32 +247,14 @@ class AOSolver:
         it by (1 + rho_hat) until the Armijo condition holds.
         """
         s = self.settings
-        lcoef, scoef, wcoef = coef
-        two_l, two_s, w_total = 2.0 * lcoef, 2.0 * scoef, float(wcoef.sum())
         budget = self.power_budget_w
-        m = self.link.m
-        c_d, c_ce = self.link.coefficients
-        a = c_d * d2  # x = a / p + c_ce
-        log_norm = special.gammaln(m)
         grow = 1.0 + s.pgd_backtrack
         armijo = s.pgd_armijo
-
-        def evaluate(p):
-            pf = np.maximum(p, channel.POWER_FLOOR_W)
-            excess = a / pf
-            x = excess + c_ce if c_ce else excess
-            psi = special.gammaincc(m, x)
-            value = float(lcoef @ (psi * psi) + two_s @ psi) + w_total
-            return psi, value, pf, x, excess
-
-        def gradient(psi, pf, x, excess):
-            dpsi = np.exp(special.xlogy(m - 1, x) - x - log_norm) * excess / pf  # analytic d psi / d p
-            return (two_l * psi + two_s) * dpsi
-
+        objective = self.power_objective(coef, d2)
         p = self.equal_power() if s.pgd_restart_equal else np.array(p_current, dtype=float)
-        psi, value, pf, x, excess = evaluate(p)
-        grad = gradient(psi, pf, x, excess)
-        trial = None
+        value, state = objective.value(p)
+        grad = objective.gradient(state)
+        trial = self._memory.get("pgd_trial")  # the last BB step of this slot, if any
         iterations = 0
         for iterations in range(1, s.pgd_max_iterations + 1):
             gnorm = math.sqrt(float(grad @ grad))
@@ -214,20 +265,20 @@ class AOSolver:
             for _ in range(s.pgd_max_backtracks):
                 rho /= grow
                 p_new = project_budget(p - rho * grad, budget)
-                new = evaluate(p_new)
-                if new[1] <= value + armijo * float(grad @ (p_new - p)):
+                value_new, state_new = objective.value(p_new)
+                if value_new <= value + armijo * float(grad @ (p_new - p)):
                     accepted = True
                     break
             if not accepted:
                 break
             step = p_new - p
-            grad_new = gradient(new[0], new[2], new[3], new[4])
+            grad_new = objective.gradient(state_new)
             sy = float(step @ (grad_new - grad))
             trial = float(step @ step) / sy if sy > 0 else None
-            p, grad = p_new, grad_new
-            psi, value, pf, x, excess = new
+            p, grad, value = p_new, grad_new, value_new
             if math.sqrt(float(step @ step)) < s.pgd_tolerance * budget:
                 break
+        self._memory["pgd_trial"] = trial
         if value <= current:
             return p, value, iterations
         return p_current, current, iterations
@@ -235,25 +286,14 @@ class AOSolver:
     def drone_block(self, prob: SlotProblem, coef, power_w, q_current: np.ndarray, current: float):
         """SCA over the speed disc and the area, with the monotonicity safeguard."""
         s = self.settings
-        lcoef, scoef, wcoef = coef
-        m = self.link.m
-        c_d, c_ce = self.link.coefficients
-        gain = c_d / np.maximum(power_w, channel.POWER_FLOOR_W)  # x = gain d^2 + c_ce
-        agv_xy = prob.agv_xy
-        h2 = self.link.altitude_m**2
-        ones = np.ones(2)
-
-        def value_at(q):
-            diff = agv_xy - q
-            psi = special.gammaincc(m, ((diff * diff) @ ones + h2) * gain + c_ce)
-            return float(((lcoef * psi + 2.0 * scoef) * psi + wcoef).sum())
-
+        objective = self.drone_objective(prob, coef, power_w)
         q, value = np.array(q_current, dtype=float), current
         iterations = 0
-        t_start = 1.0  # the safeguard's backtracking starts from twice the last accepted fraction
+        # the safeguard's backtracking starts from twice the last accepted fraction (kept across the
+        # AO iterations of a slot)
+        t_start = self._memory.get("sca_t", 1.0)
         for iterations in range(1, s.sca_max_iterations + 1):
-            psi, _, dpsi_dq = channel.success_and_gradients(power_w, q, agv_xy, self.link)
-            grad = (2.0 * lcoef * psi + 2.0 * scoef) @ dpsi_dq
+            grad = objective.gradient(q)
             target = linear_argmin_disc_box(grad, prob.q_prev, self.step_m, self.area)
             step = target - q
             length = math.hypot(step[0], step[1])
@@ -263,7 +303,7 @@ class AOSolver:
             accepted = False
             while t * length >= s.sca_tolerance_m:
                 cand = q + t * step
-                cand_value = value_at(cand)
+                cand_value = objective.value(cand)
                 if cand_value < value:
                     accepted = True
                     break
@@ -274,6 +314,7 @@ class AOSolver:
             if t * length < 2.0 * s.sca_tolerance_m:
                 break
             t_start = min(1.0, 2.0 * t)
+        self._memory["sca_t"] = t_start
         return q, value, iterations
 
     # ------------------------------------------------------------------ the AO loop
@@ -292,7 +333,13 @@ class AOSolver:
         if "control" not in blocks and increments is None:
             raise ValueError("increments are required when the control block is not optimized")
         prob = SlotProblem(self, snapshot)
-        p = self.equal_power() if power_w is None else np.asarray(power_w, dtype=float)
+        self._memory = {}  # step sizes carried across the AO iterations of this slot
+        if power_w is not None:
+            p = np.asarray(power_w, dtype=float)
+        elif self.settings.warm_start and snapshot.last_power_w is not None:
+            p = project_budget(np.asarray(snapshot.last_power_w, dtype=float), self.power_budget_w)
+        else:
+            p = self.equal_power()
         q = prob.q_prev.copy() if drone_position is None else np.asarray(drone_position, dtype=float)
         dmu = None if increments is None else np.asarray(increments, dtype=float)
         current = prob.objective(dmu, p, q) if dmu is not None else math.inf

@@ -15,22 +15,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from lawn_env import ObservationLayout, ScenarioConfig
 from lawn_env import spaces
+
+from .policies import JOINT, Policy
 
 __all__ = ["HeuristicPolicy"]
 
 
-class HeuristicPolicy:
+class HeuristicPolicy(Policy):
     """PD tracking + distance-proportional power + centroid-seeking drone, from observations."""
 
-    def __init__(self, config: ScenarioConfig, kp: float = 0.4, kd: float = 0.9):
-        self.config = config
-        self.layout = ObservationLayout(config)
-        self.kp, self.kd = kp, kd
+    name = "heuristic"
+    env_ids = (JOINT,)
 
-    def reset(self, seed: int | None = None) -> None:
-        """Stateless; present for the common policy protocol."""
+    def __init__(self, config=None, env_id: str = JOINT, seed: int | None = None, kp: float = 0.4, kd: float = 0.9):
+        super().__init__(config, env_id, seed)
+        self.kp, self.kd = float(kp), float(kd)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         cfg = self.config
@@ -52,10 +52,3 @@ class HeuristicPolicy:
             spaces.encode_power(power, cfg.power_budget_w),
             spaces.encode_drone(q_next, q, cfg.drone.max_speed_mps, cfg.slot_s),
         ]).astype(np.float32)
-
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        """Stable-Baselines3-style ``predict`` (batched or single observations)."""
-        obs = np.asarray(observation)
-        if obs.ndim == 2:
-            return np.stack([self.act(o) for o in obs]), state
-        return self.act(obs), state

@@ -26,7 +26,7 @@ import numpy as np
 
 from .dynamics import PredictionModel
 
-__all__ = ["MPCSolution", "OutageAwareMPC", "SlotData", "BACKENDS", "qp_value"]
+__all__ = ["MPCSolution", "OutageAwareMPC", "SlotData", "BACKENDS"]
 
 
 @dataclass(frozen=True)
@@ -55,11 +55,6 @@ class SlotData:
     upper: np.ndarray
 
 
-def qp_value(p: np.ndarray, q: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """1/2 z'Pz + q'z, batched over the leading axis."""
-    return 0.5 * np.einsum("ki,kij,kj->k", z, p, z) + np.einsum("ki,ki->k", q, z)
-
-
 class _DaqpBackend:
     """One persistent ``daqp.Model`` per AGV (dual active set, exact, warm-started)."""
 
@@ -72,7 +67,8 @@ class _DaqpBackend:
         self._a = np.array(constraint_matrix, dtype=float, order="C")  # DAQP wants a writable buffer
         self._models = [None] * num_agvs
 
-    def solve(self, k: int, p: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray):
+    def solve(self, k: int, p: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+              bounds_changed: bool = True):
         model = self._models[k]
         if model is None:
             model = self._daqp.Model()
@@ -80,16 +76,17 @@ class _DaqpBackend:
             self._models[k] = model
             if exitflag < 0:
                 self._models[k] = None
-                return None, 0
+                return None, 0, 0.0
         else:
-            if model.update(H=p, f=q, bupper=upper, blower=lower) < 0:
+            flag = model.update(H=p, f=q, bupper=upper, blower=lower) if bounds_changed else model.update(H=p, f=q)
+            if flag < 0:
                 self._models[k] = None
-                return None, 0
-        x, _, exitflag, info = model.solve()
+                return None, 0, 0.0
+        x, fval, exitflag, info = model.solve()
         if exitflag != 1:
             self._models[k] = None  # start the next solve from a fresh workspace
-            return None, info.get("iterations", 0)
-        return x, info["iterations"]
+            return None, info.get("iterations", 0), 0.0
+        return x, info["iterations"], fval
 
 
 class _OsqpBackend:
@@ -113,7 +110,7 @@ class _OsqpBackend:
         self._sparse = sparse
         self._solvers = [None] * num_agvs
 
-    def solve(self, k, p, q, lower, upper):
+    def solve(self, k, p, q, lower, upper, bounds_changed: bool = True):
         solver = self._solvers[k]
         px = p[self._triu_csc]
         if solver is None:
@@ -129,8 +126,9 @@ class _OsqpBackend:
         ok = (status == 1 or res.info.status == "solved") and np.all(np.isfinite(res.x))
         if not ok:
             self._solvers[k] = None
-            return None, int(res.info.iter)
-        return np.asarray(res.x), int(res.info.iter)
+            return None, int(res.info.iter), 0.0
+        x = np.asarray(res.x)
+        return x, int(res.info.iter), float(0.5 * x @ p @ x + q @ x)
 
 
 class _QpsolversBackend:
@@ -149,13 +147,14 @@ class _QpsolversBackend:
         self._g = np.vstack([constraint_matrix, -constraint_matrix])
         self._n = constraint_matrix.shape[1]
 
-    def solve(self, k, p, q, lower, upper):
+    def solve(self, k, p, q, lower, upper, bounds_changed: bool = True):
         n = self._n
         h = np.concatenate([upper[n:], -lower[n:]])
         x = self._qpsolvers.solve_qp(p, q, G=self._g, h=h, lb=lower[:n], ub=upper[:n], solver=self._solver)
         if x is None or not np.all(np.isfinite(x)):
-            return None, 0
-        return np.asarray(x), 0
+            return None, 0, 0.0
+        x = np.asarray(x)
+        return x, 0, float(0.5 * x @ p @ x + q @ x)
 
 
 BACKENDS = {"daqp": _DaqpBackend, "osqp": _OsqpBackend}
@@ -187,9 +186,12 @@ class OutageAwareMPC:
         self._constraint = model.increment_sum
         self.backend = _make_backend(backend, self.num_agvs, self._constraint)
         self._fallback = None  # built lazily: most runs never need it
-        self._box = np.full(n, self.accel_increment_max)
-        self._q5 = np.asarray(model.q5)
-        self._ftq4f = np.asarray(model.ftq4f)
+        self._pos_box = np.full((self.num_agvs, n), self.accel_increment_max)
+        self._neg_box = -self._pos_box
+        self._u_index = np.tile([4, 5], model.horizon)
+        self._q5_2 = 2.0 * np.asarray(model.q5)
+        self._ftq4f_2 = 2.0 * np.asarray(model.ftq4f)
+        self._last_data = None
 
     @classmethod
     def from_config(cls, config, backend: str = "daqp") -> "OutageAwareMPC":
@@ -202,6 +204,7 @@ class OutageAwareMPC:
         solutions do not depend on the episodes before it."""
         self.backend = _make_backend(self.backend.name, self.num_agvs, self._constraint)
         self._fallback = None
+        self._last_data = None
 
     # ------------------------------------------------------------------ problem data
     def prepare(self, x_aug: np.ndarray, chi_ref: np.ndarray) -> "SlotData":
@@ -210,14 +213,13 @@ class OutageAwareMPC:
         if k != self.num_agvs:
             raise ValueError(f"x_aug has {k} AGVs, the MPC was built for num_agvs={self.num_agvs}")
         r = self.model.residual(x_aug, chi_ref)
-        u_prev = np.tile(x_aug[:, 4:6], self.model.horizon)
-        box = np.broadcast_to(self._box, (k, self._n))
+        u_prev = x_aug[:, self._u_index]  # u[n-1] repeated over the horizon, (K, 2 N_p)
         return SlotData(
             residual=r,
             linear=r @ self.model.ftq4.T,  # F' Q4 r, so H = 2 psi (F' Q4 r)'
-            constant=np.einsum("ki,ij,kj->k", r, self.model.q4, r),
-            lower=np.concatenate([-box, -self.accel_max - u_prev], axis=1),
-            upper=np.concatenate([box, self.accel_max - u_prev], axis=1),
+            constant=((r @ self.model.q4) * r).sum(axis=1),
+            lower=np.concatenate([self._neg_box, -self.accel_max - u_prev], axis=1),
+            upper=np.concatenate([self._pos_box, self.accel_max - u_prev], axis=1),
         )
 
     def qp_data(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi: np.ndarray):
@@ -230,7 +232,7 @@ class OutageAwareMPC:
         return p, q, data.constant, data.lower, data.upper
 
     def _objective(self, data: "SlotData", psi: np.ndarray):
-        p = 2.0 * (psi[:, None, None] ** 2 * self._ftq4f + self._q5)
+        p = (psi * psi)[:, None, None] * self._ftq4f_2 + self._q5_2  # P = 2 G = 2 (psi^2 F'Q4F + Q5)
         q = (2.0 * psi)[:, None] * data.linear
         return p, q
 
@@ -241,25 +243,33 @@ class OutageAwareMPC:
 
     def solve_prepared(self, data: "SlotData", psi) -> MPCSolution:
         """Solve the K QPs of a prepared slot at success probabilities ``psi`` (K,): the AO's
-        control block calls this once per iteration with the same ``data``."""
+        control block calls this once per iteration with the same ``data`` (the bounds are then
+        passed to the workspaces only once)."""
         start = time.perf_counter()
         k = self.num_agvs
-        psi = np.broadcast_to(np.asarray(psi, dtype=float), (k,))
+        psi = np.asarray(psi, dtype=float)
+        if psi.shape != (k,):
+            psi = np.broadcast_to(psi, (k,))
         p, q = self._objective(data, psi)
         lower, upper = data.lower, data.upper
-        z = np.zeros((k, self._n))
+        bounds_changed = data is not self._last_data
+        self._last_data = data
+        z = np.empty((k, self._n))
+        fval = np.empty(k)
         status = np.zeros(k, dtype=np.int8)
         iterations = np.zeros(k, dtype=np.int64)
+        solve = self.backend.solve
         for i in range(k):
-            x, its = self.backend.solve(i, p[i], q[i], lower[i], upper[i])
+            x, its, f = solve(i, p[i], q[i], lower[i], upper[i], bounds_changed)
             if x is None:
                 x, its, status[i] = self._fallback_solve(i, p[i], q[i], lower[i], upper[i])
+                f = 0.5 * x @ p[i] @ x + q[i] @ x
             z[i] = x
+            fval[i] = f
             iterations[i] = its
-        value = qp_value(p, q, z) + data.constant
         return MPCSolution(
             increments=z.reshape(k, self.model.horizon, 2),
-            value=value,
+            value=fval + data.constant,
             status=status,
             iterations=iterations,
             solve_time_s=time.perf_counter() - start,
@@ -269,7 +279,7 @@ class OutageAwareMPC:
         if self.backend.name != "osqp":
             if self._fallback is None:
                 self._fallback = _OsqpBackend(self.num_agvs, self._constraint)
-            x, its = self._fallback.solve(i, p, q, lower, upper)
+            x, its, _ = self._fallback.solve(i, p, q, lower, upper)
             if x is not None:
                 return x, its, 1
         # the zero sequence is feasible whenever |u[n-1]| <= a_max, which the simulator keeps

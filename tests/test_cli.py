@@ -28,3 +28,58 @@ def test_bad_override_is_one_clear_error(tmp_path, capsys):
     assert "channel.blocklength" in err and "greater than or equal to 1" in err
     assert main(["demo", "--out", str(tmp_path), "--set", "chanel.m=2"]) == 2
     assert "unknown config key 'chanel'" in capsys.readouterr().err
+
+
+def test_evaluate_writes_rows_csv_and_json(tmp_path, capsys):
+    import csv
+
+    out = tmp_path / "rows.csv"
+    assert main(["evaluate", "--policy", "epa", "--episodes", "2", "--seed", "4", "--out", str(out),
+                 "--set", "num_slots=12", "--workers", "1", "--quiet"]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert [r["seed"] for r in rows] == ["4", "5"] and all(r["policy"] == "epa" for r in rows)
+    for key in ("control_cost", "rmse_m", "outage_rate", "decision_time_median_s", "decision_time_p95_s",
+                "rmse_per_agv_m", "mean_power_w", "drone_path_length_m", "ao_iterations_mean"):
+        assert key in rows[0]
+    printed = capsys.readouterr().out
+    assert "| epa | 2 |" in printed
+    jout = tmp_path / "rows.json"
+    assert main(["evaluate", "--policy", "pid", "--env", "lawn/Comm-v0", "--episodes", "1", "--out", str(jout),
+                 "--set", "num_slots=8", "--quiet"]) == 0
+    data = json.loads(jout.read_text())
+    assert data[0]["env"] == "lawn/Comm-v0" and data[0]["slots"] == 8
+
+
+def test_evaluate_rejects_bad_inputs(tmp_path, capsys):
+    import pytest
+
+    assert main(["evaluate", "--policy", "epa", "--out", str(tmp_path / "rows.txt"), "--quiet"]) == 2
+    assert ".csv or .json" in capsys.readouterr().err
+    assert main(["evaluate", "--policy", "ao-mpc", "--out", str(tmp_path / "r.csv"), "--policy-arg",
+                 "tolerance=-2", "--quiet"]) == 2
+    assert "tolerance" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--policy", "nope", "--out", str(tmp_path / "r.csv")])
+    assert "invalid choice: 'nope'" in capsys.readouterr().err
+
+
+def test_parallel_evaluation_matches_serial(tmp_path):
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    args = ["evaluate", "--policy", "ao-mpc", "--episodes", "3", "--set", "num_slots=10", "--quiet"]
+    main(args + ["--out", str(a), "--workers", "1"])
+    main(args + ["--out", str(b), "--workers", "2"])
+    ra, rb = json.loads(a.read_text()), json.loads(b.read_text())
+    for x, y in zip(ra, rb):
+        for key in ("seed", "control_cost", "rmse_m", "outage_rate", "mean_power_w"):
+            assert x[key] == y[key]
+
+
+def test_benchmark_writes_table_and_plot(tmp_path, capsys):
+    out = tmp_path / "bench"
+    assert main(["benchmark", "--policies", "ao-mpc", "epa", "--episodes", "2", "--out", str(out),
+                 "--set", "num_slots=10", "--quiet"]) == 0
+    for name in ("episodes.csv", "summary.csv", "summary.md", "benchmark.png"):
+        assert (out / name).stat().st_size > 0
+    table = (out / "summary.md").read_text()
+    assert "| ao-mpc | 2 |" in table and "| epa | 2 |" in table
+    assert "control cost" in capsys.readouterr().out

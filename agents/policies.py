@@ -1,0 +1,275 @@
+"""The policy protocol and the registry of named policies.
+
+Every policy is built from a scenario config (not from an environment), drives one environment
+id, and offers ``reset(seed)``, ``act(obs) -> action`` and Stable-Baselines3's
+``predict(observation, state, episode_start, deterministic) -> (action, state)``, so the command
+line and SB3's ``evaluate_policy`` treat them all alike. Planners also offer ``plan(snapshot)``.
+
+Registered names (``make_policy(name, config)``):
+
+=============  =========================================================================
+``ao-mpc``     the paper's joint optimization (AO of control QPs, Algorithm 1, SCA)
+``epa``        equal power allocation; MPC control and drone optimization as the expert
+``sf``         straight flight at a seeded random speed; MPC control and PGD power
+``pid``        predictive PID tracking law; power and drone optimized on its predictions
+``lqr``        predictive LQR (the DARE gain); power and drone optimized likewise
+``heuristic``  scripted PD tracking, distance-proportional power, centroid-seeking drone
+=============  =========================================================================
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+from pydantic import ConfigDict
+from pydantic.dataclasses import dataclass as pydantic_dataclass
+
+from lawn_env import ObservationLayout, ScenarioConfig, spaces
+from lawn_env.core import Snapshot
+from lawn_env.drone import move_drone
+from lawn_env.envs.base import resolve_config
+
+from .ao import AOSettings, AOSolver, Plan
+from .tracking import lqr_gain, lqr_rollout, pid_rollout
+
+__all__ = [
+    "Policy",
+    "PlannerPolicy",
+    "AOMPCPolicy",
+    "EPAPolicy",
+    "SFPolicy",
+    "PIDPolicy",
+    "LQRPolicy",
+    "POLICIES",
+    "make_policy",
+    "policy_names",
+    "snapshot_from_observation",
+]
+
+JOINT, COMM = "lawn/Joint-v0", "lawn/Comm-v0"
+
+
+def snapshot_from_observation(layout: ObservationLayout, config: ScenarioConfig, obs) -> Snapshot:
+    """The planner's state recovered from an observation (float32-exact, see ObservationLayout.decode)."""
+    d = layout.decode(obs)
+    return Snapshot(x_aug=d["x_aug"], reference=d["reference"], drone_position=d["drone_position"],
+                    slot=d["slot"], config=config, last_power_w=d["last_power_w"])
+
+
+class Policy:
+    """Base of every policy: config, target environment, seeding and SB3-style ``predict``."""
+
+    name = "policy"
+    env_ids: tuple[str, ...] = (JOINT, COMM)
+    #: True when the policy keeps per-episode state (it then drives one environment at a time)
+    stateful = False
+
+    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT,
+                 seed: int | None = None):
+        self.config = resolve_config(config)
+        if env_id not in self.env_ids:
+            raise ValueError(f"policy {self.name!r} drives {', '.join(self.env_ids)}; got env_id={env_id!r}")
+        self.env_id = env_id
+        self.layout = ObservationLayout(self.config)
+        self._seed_rng = np.random.default_rng(seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start an episode; ``seed`` fixes any randomness of the policy (else its own stream)."""
+        rng = np.random.default_rng(seed) if seed is not None else self._seed_rng
+        self._on_reset(rng)
+
+    def _on_reset(self, rng: np.random.Generator) -> None:
+        pass
+
+    def act(self, obs) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        """Stable-Baselines3's signature: a single observation or a batch of them."""
+        obs = np.asarray(observation, dtype=np.float32)
+        if obs.ndim == 1:
+            return self.act(obs), state
+        if obs.ndim != 2:
+            raise ValueError(f"observation has shape {obs.shape}; expected ({self.layout.size},) or (n_envs, {self.layout.size})")
+        if obs.shape[0] > 1 and self.stateful:
+            raise ValueError(f"policy {self.name!r} keeps per-episode state: evaluate it on one environment at a time")
+        if episode_start is not None and np.asarray(episode_start).any():
+            self.reset()
+        return np.stack([self.act(o) for o in obs]), state
+
+
+class PlannerPolicy(Policy):
+    """A policy that plans from the full state (``plan(snapshot)``) and acts on observations."""
+
+    stateful = True
+
+    def __init__(self, config=None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
+        super().__init__(config, env_id, seed)
+        self.solver = AOSolver(self.config, AOSettings(**settings))
+        self.last_plan: Plan | None = None
+        c = self.config
+        self._scales = (c.control.accel_increment_max_mps2, c.power_budget_w, c.drone.max_speed_mps, c.slot_s)
+
+    def _on_reset(self, rng):
+        self.solver.reset()
+        self.last_plan = None
+
+    def plan(self, snapshot: Snapshot) -> Plan:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def act(self, obs) -> np.ndarray:
+        snapshot = snapshot_from_observation(self.layout, self.config, obs)
+        plan = self.plan(snapshot)
+        self.last_plan = plan
+        return self.action(plan, snapshot)
+
+    def action(self, plan: Plan, snapshot: Snapshot) -> np.ndarray:
+        """The normalized action of ``self.env_id`` that carries out ``plan``."""
+        inc_max, budget, vmax, dt = self._scales
+        parts = [
+            spaces.encode_power(plan.power_w, budget),
+            spaces.encode_drone(plan.drone_position, snapshot.drone_position, vmax, dt),
+        ]
+        if self.env_id == JOINT:
+            parts.insert(0, spaces.encode_increments(plan.increments[:, 0], inc_max))
+        return np.concatenate(parts).astype(np.float32)
+
+
+class AOMPCPolicy(PlannerPolicy):
+    """The paper's expert: alternating optimization over control, power and drone (agents.ao)."""
+
+    name = "ao-mpc"
+
+    def plan(self, snapshot: Snapshot) -> Plan:
+        return self.solver.solve(snapshot)
+
+
+class EPAPolicy(PlannerPolicy):
+    """Equal power allocation P_max / K; MPC control and drone optimization as the expert."""
+
+    name = "epa"
+
+    def plan(self, snapshot: Snapshot) -> Plan:
+        return self.solver.solve(snapshot, blocks=("control", "drone"), power_w=self.solver.equal_power())
+
+
+class SFPolicy(PlannerPolicy):
+    """Straight flight: a fixed heading (``heading_rad``, default east, across the area from the
+    start) at a constant speed drawn uniformly from (0, V_max] at each episode's reset; the drone
+    stops at the area's edge. MPC control and Algorithm 1 power as the expert."""
+
+    name = "sf"
+
+    def __init__(self, config=None, env_id: str = JOINT, seed: int | None = None, heading_rad: float = 0.0,
+                 **settings: Any):
+        if not math.isfinite(heading_rad):
+            raise ValueError(f"heading_rad={heading_rad!r} must be finite")
+        super().__init__(config, env_id, seed, **settings)
+        self.heading = np.array([math.cos(heading_rad), math.sin(heading_rad)])
+        self.speed_mps = self.config.drone.max_speed_mps  # drawn at reset
+
+    def _on_reset(self, rng):
+        super()._on_reset(rng)
+        self.speed_mps = self.config.drone.max_speed_mps * (1.0 - rng.random())  # in (0, V_max]
+
+    def plan(self, snapshot: Snapshot) -> Plan:
+        c = self.config
+        q_next = move_drone(snapshot.drone_position, self.speed_mps * self.heading, c.drone.max_speed_mps, c.slot_s,
+                            tuple(c.area_m))
+        return self.solver.solve(snapshot, blocks=("control", "power"), drone_position=q_next)
+
+
+@pydantic_dataclass(frozen=True, config=ConfigDict(extra="forbid", allow_inf_nan=False))
+class PIDGains:
+    """Gains of the predictive PID (per axis, SI units). Defaults from the grid search of
+    ``benchmarks/tune_pid.py`` (closed-loop control cost with perfect links, seeds 0-2): the best
+    gains with a non-zero integral term. The grid's overall best, kp = 0.3, ki = 0, kd = 0.6, costs
+    3 % less; the integral is kept so that the baseline is the PID the paper names."""
+
+    kp: float = 0.3
+    ki: float = 0.02
+    kd: float = 0.6
+    integral_limit: float = 10.0
+
+
+class PIDPolicy(PlannerPolicy):
+    """Predictive PID: the PID law rolled out over the horizon replaces the QP; power and drone are
+    optimized (Algorithm 1 + SCA, alternated) on the expected cost of its predicted inputs."""
+
+    name = "pid"
+
+    def __init__(self, config=None, env_id: str = JOINT, seed: int | None = None, gains: PIDGains | Mapping | None = None,
+                 **settings: Any):
+        super().__init__(config, env_id, seed, **settings)
+        self.gains = gains if isinstance(gains, PIDGains) else PIDGains(**dict(gains or {}))
+        self.integral = np.zeros((self.config.num_agvs, 2))
+
+    def _on_reset(self, rng):
+        super()._on_reset(rng)
+        self.integral = np.zeros((self.config.num_agvs, 2))
+
+    def plan(self, snapshot: Snapshot) -> Plan:
+        c, g = self.config, self.gains
+        increments, integral = pid_rollout(
+            snapshot.x_aug, snapshot.reference, self.integral, self.solver.model, (g.kp, g.ki, g.kd),
+            c.control.accel_max_mps2, c.control.accel_increment_max_mps2, g.integral_limit,
+        )
+        self.integral = integral  # the integrator advances with the step that is sent
+        return self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
+
+
+class LQRPolicy(PlannerPolicy):
+    """Predictive LQR: the fixed infinite-horizon gain of the same DARE (Q1, Q2) replaces the QP;
+    power and drone are optimized on the expected cost of its predicted inputs."""
+
+    name = "lqr"
+
+    def __init__(self, config=None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
+        super().__init__(config, env_id, seed, **settings)
+        self.gain = lqr_gain(self.solver.model)
+
+    def plan(self, snapshot: Snapshot) -> Plan:
+        c = self.config
+        increments = lqr_rollout(snapshot.x_aug, snapshot.reference, self.solver.model, self.gain,
+                                 c.control.accel_max_mps2, c.control.accel_increment_max_mps2)
+        return self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
+
+
+def _heuristic(config=None, env_id: str = JOINT, seed: int | None = None, **kwargs):
+    from .scripted import HeuristicPolicy
+
+    return HeuristicPolicy(config, env_id=env_id, seed=seed, **kwargs)
+
+
+#: The one registry of policy names; the command line reads its choices from here.
+POLICIES: dict[str, Any] = {
+    "ao-mpc": AOMPCPolicy,
+    "epa": EPAPolicy,
+    "sf": SFPolicy,
+    "pid": PIDPolicy,
+    "lqr": LQRPolicy,
+    "heuristic": _heuristic,
+}
+
+#: The paper's comparison: the expert and its four baselines.
+PAPER_POLICIES = ("ao-mpc", "epa", "sf", "pid", "lqr")
+
+
+def policy_names() -> list[str]:
+    return list(POLICIES)
+
+
+def make_policy(name: str, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT,
+                seed: int | None = None, **kwargs: Any) -> Policy:
+    """Build a registered policy for ``config`` driving ``env_id``.
+
+    Unknown names raise ``ValueError`` listing the valid ones; unknown or invalid settings raise
+    ``ValueError`` naming the setting.
+    """
+    try:
+        factory = POLICIES[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICIES)}") from None
+    return factory(config, env_id=env_id, seed=seed, **kwargs)

@@ -1,0 +1,71 @@
+"""Fixed-gain tracking laws of the predictive PID and LQR baselines (MODEL.md §5).
+
+Both are rolled out over the MPC horizon on the nominal model (every command delivered) to give
+the "predicted inputs over the horizon" that the power and drone blocks then optimize against;
+the first increment is the one sent. Every increment is saturated into the control set:
+``|Delta-u| <= Delta-a_max`` and ``|u| <= a_max`` per axis.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lawn_env.dynamics import PredictionModel, step_augmented
+
+__all__ = ["saturate", "pid_rollout", "lqr_gain", "lqr_rollout"]
+
+
+def saturate(u_desired: np.ndarray, u_prev: np.ndarray, accel_max: float, accel_increment_max: float) -> np.ndarray:
+    """The increment that moves u[n-1] toward ``u_desired`` inside the control set."""
+    u = np.clip(u_desired, -accel_max, accel_max)
+    return np.clip(u - u_prev, -accel_increment_max, accel_increment_max)
+
+
+def pid_rollout(x_aug: np.ndarray, reference: np.ndarray, integral: np.ndarray, model: PredictionModel,
+                gains: tuple[float, float, float], accel_max: float, accel_increment_max: float,
+                integral_limit: float) -> tuple[np.ndarray, np.ndarray]:
+    """PID per axis on the position error with velocity and acceleration feed-forward:
+    ``u[i] = a_ref[i+1] + k_p e_p + k_i I + k_d e_v`` (``e_v`` is the velocity error, the
+    derivative of the position error; ``a_ref[i+1]`` is the reference acceleration the cost
+    compares u[i] with, since the augmented state at i+1 carries u[i]). Returns the increments
+    (K, N_p, 2) and the integral after the first step.
+    """
+    kp, ki, kd = gains
+    dt = model.slot_s
+    x = x_aug.copy()
+    integ = integral.copy()
+    out = np.empty((x.shape[0], model.horizon, 2))
+    first_integral = None
+    for i in range(model.horizon):
+        ref = reference[:, i]
+        e_pos = ref[:, 0:2] - x[:, 0:2]
+        integ = np.clip(integ + e_pos * dt, -integral_limit, integral_limit)
+        if first_integral is None:
+            first_integral = integ.copy()
+        u = reference[:, i + 1, 4:6] + kp * e_pos + ki * integ + kd * (ref[:, 2:4] - x[:, 2:4])
+        du = saturate(u, x[:, 4:6], accel_max, accel_increment_max)
+        out[:, i] = du
+        x = step_augmented(x, du, model.a_aug, model.b_aug)
+    return out, first_integral
+
+
+def lqr_gain(model: PredictionModel) -> np.ndarray:
+    """The infinite-horizon gain of the DARE that gives Q3: ``(Q2 + B~'Q3B~)^-1 B~'Q3A~`` (2 x 6)."""
+    b, a, q3 = model.b_aug, model.a_aug, model.q3
+    return np.linalg.solve(model.q2 + b.T @ q3 @ b, b.T @ q3 @ a)
+
+
+def lqr_rollout(x_aug: np.ndarray, reference: np.ndarray, model: PredictionModel, gain: np.ndarray,
+                accel_max: float, accel_increment_max: float) -> np.ndarray:
+    """``Delta-u[i] = Delta-u_ref[i] - K (x~[i] - x~_ref[i])``, saturated, over the horizon:
+    increments (K, N_p, 2). ``Delta-u_ref[i] = a_ref[i+1] - a_ref[i]`` is the reference's own
+    increment (feed-forward), so that a reference the AGV sits on is followed exactly."""
+    x = x_aug.copy()
+    out = np.empty((x.shape[0], model.horizon, 2))
+    for i in range(model.horizon):
+        feedforward = reference[:, i + 1, 4:6] - reference[:, i, 4:6]
+        du_free = feedforward - (x - reference[:, i]) @ gain.T
+        du = saturate(x[:, 4:6] + du_free, x[:, 4:6], accel_max, accel_increment_max)
+        out[:, i] = du
+        x = step_augmented(x, du, model.a_aug, model.b_aug)
+    return out

@@ -1,0 +1,53 @@
+"""Grid search of the predictive PID's gains (the defaults of ``agents.policies.PIDGains``).
+
+Tracking only: perfect links (the ``paper-nominal`` preset, where outage is ~1e-6), equal power,
+hovering drone, so the gains are judged on control alone. Objective: mean realized control cost
+over seeds 0..2 of ``lawn/Joint-v0``. Prints the best gains and the ten best rows.
+
+Usage: ``python benchmarks/tune_pid.py``
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import gymnasium as gym
+import numpy as np
+
+import lawn_env  # noqa: F401
+from agents.tracking import pid_rollout
+from lawn_env import presets, spaces
+from lawn_env.dynamics import PredictionModel
+
+
+def episode_cost(kp: float, ki: float, kd: float, seed: int) -> float:
+    cfg = presets.get("paper-nominal")
+    env = gym.make("lawn/Joint-v0", config=cfg).unwrapped
+    model = PredictionModel.from_config(cfg)
+    env.reset(seed=seed)
+    integral = np.zeros((cfg.num_agvs, 2))
+    power = spaces.encode_power(np.full(cfg.num_agvs, cfg.power_budget_w / cfg.num_agvs), cfg.power_budget_w)
+    done = False
+    while not done:
+        snap = env.snapshot()
+        du, integral = pid_rollout(snap.x_aug, snap.reference, integral, model, (kp, ki, kd),
+                                   cfg.control.accel_max_mps2, cfg.control.accel_increment_max_mps2, 10.0)
+        action = np.concatenate([spaces.encode_increments(du[:, 0], cfg.control.accel_increment_max_mps2), power, [0.0, 0.0]])
+        _, _, _, done, info = env.step(action.astype(np.float32))
+    return info["episode_metrics"]["control_cost"]
+
+
+def main() -> None:
+    rows = []
+    for kp, ki, kd in itertools.product([0.1, 0.2, 0.3, 0.5, 0.8], [0.0, 0.02, 0.05], [0.4, 0.6, 0.9, 1.2]):
+        cost = float(np.mean([episode_cost(kp, ki, kd, seed) for seed in range(3)]))
+        rows.append((cost, kp, ki, kd))
+    rows.sort()
+    print(f"{'cost':>10} {'kp':>5} {'ki':>5} {'kd':>5}")
+    for cost, kp, ki, kd in rows[:10]:
+        print(f"{cost:10.1f} {kp:5.2f} {ki:5.2f} {kd:5.2f}")
+    print(f"best: kp={rows[0][1]}, ki={rows[0][2]}, kd={rows[0][3]}")
+
+
+if __name__ == "__main__":
+    main()

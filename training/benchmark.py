@@ -1,0 +1,53 @@
+"""``lawn benchmark``: the expert and the baselines on the same seeded episodes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+from lawn_env import ScenarioConfig
+
+from .evaluate import SUMMARY_METRICS, evaluate, format_table, summarize, write_rows
+
+__all__ = ["run_benchmark", "plot_summary"]
+
+
+def run_benchmark(policies: Sequence[str], env_id: str, config: ScenarioConfig, episodes: int, seed: int,
+                  out_dir: Path, workers: int = 1, progress: bool = True) -> tuple[list[dict], list[dict]]:
+    """Run every policy on seeds ``seed .. seed+episodes-1``; write ``episodes.csv``,
+    ``summary.csv``, ``summary.md`` and ``benchmark.png`` into ``out_dir``."""
+    tasks = [(name, env_id, config, seed + i, {}) for name in policies for i in range(episodes)]
+    rows = evaluate(tasks, workers=workers, progress=progress, desc="benchmark")
+    summary = summarize(rows)
+    out_dir = Path(out_dir)
+    write_rows(rows, out_dir / "episodes.csv")
+    write_rows(summary, out_dir / "summary.csv")
+    (out_dir / "summary.md").write_text(format_table(summary) + "\n")
+    plot_summary(summary, out_dir / "benchmark.png",
+                 title=f"{env_id}, K={config.num_agvs}, {episodes} seeds from {seed}: mean ± 95 % interval")
+    return rows, summary
+
+
+def plot_summary(summary: list[dict], path: Path, title: str = "") -> None:
+    """Bar chart of each summary metric with its 95 % interval."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(12, 3.6), dpi=110)
+    FigureCanvasAgg(fig)
+    names = [entry["policy"] for entry in summary]
+    colors = [f"C{i}" for i in range(len(names))]
+    for j, (key, label) in enumerate(SUMMARY_METRICS):
+        ax = fig.add_subplot(1, len(SUMMARY_METRICS), j + 1)
+        scale = 1e3 if key.startswith("decision_time") else 1.0
+        means = [entry[key] * scale for entry in summary]
+        errs = [entry[f"{key}_ci95"] * scale for entry in summary]
+        ax.bar(names, means, yerr=errs, color=colors, capsize=4)
+        ax.set_title(label.replace("(s)", "(ms)"), fontsize=10)
+        ax.tick_params(axis="x", labelrotation=45, labelsize=8)
+        if key == "control_cost" and max(means) > 20 * min(m for m in means if m > 0):
+            ax.set_yscale("log")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)

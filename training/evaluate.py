@@ -1,0 +1,155 @@
+"""Running policies on seeded episodes and summarizing the results.
+
+One episode is one seed: ``env.reset(seed=s)`` and ``policy.reset(s)``, so every policy of a
+comparison sees the same references, initial offsets and (for the same decisions) the same
+fading. Episodes are independent; they run in a process pool when ``workers > 1`` and the rows
+come back in seed order whatever the scheduling.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import gymnasium as gym
+import numpy as np
+from scipy import stats
+from tqdm.auto import tqdm
+
+import lawn_env
+from agents import make_policy
+from lawn_env import ScenarioConfig
+
+__all__ = ["run_episode", "evaluate", "summarize", "write_rows", "SUMMARY_METRICS"]
+
+#: Metrics summarized with a mean and a 95 % interval (name, label).
+SUMMARY_METRICS = (
+    ("control_cost", "control cost"),
+    ("rmse_m", "RMSE (m)"),
+    ("outage_rate", "outage rate"),
+    ("decision_time_median_s", "decision time (s)"),
+)
+
+
+def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
+                policy_kwargs: Mapping[str, Any] | None = None) -> dict:
+    """One seeded episode; returns a flat row of MODEL.md §6 metrics plus decision statistics."""
+    if env_id not in lawn_env.ENV_IDS:
+        raise ValueError(f"unknown env id {env_id!r}; valid: {', '.join(lawn_env.ENV_IDS)}")
+    env = gym.make(env_id, config=config)
+    agent = make_policy(policy, config, env_id=env_id, **dict(policy_kwargs or {}))
+    obs, _ = env.reset(seed=seed)
+    agent.reset(seed)
+    decision_s, ao_iterations, fallbacks = [], [], 0
+    done = False
+    info: dict = {}
+    while not done:
+        start = time.perf_counter()
+        action = agent.act(obs)
+        decision_s.append(time.perf_counter() - start)
+        plan = getattr(agent, "last_plan", None)
+        if plan is not None:
+            ao_iterations.append(plan.iterations)
+            fallbacks += plan.info.get("qp_fallbacks", 0)
+        obs, _, terminated, truncated, info = env.step(action)
+        fallbacks += info.get("mpc_fallbacks", 0)
+        done = terminated or truncated
+    env.close()
+    m = info["episode_metrics"]
+    row = {"policy": policy, "env": env_id, "seed": seed}
+    for key, value in m.items():
+        row[key] = json.dumps(value) if isinstance(value, list) else value
+    row["decision_time_median_s"] = float(np.median(decision_s))
+    row["decision_time_p95_s"] = float(np.percentile(decision_s, 95))
+    row["ao_iterations_mean"] = float(np.mean(ao_iterations)) if ao_iterations else math.nan
+    row["qp_fallbacks"] = fallbacks
+    return row
+
+
+def _run_task(task) -> dict:
+    return run_episode(*task)
+
+
+def evaluate(tasks: Iterable[tuple], workers: int = 1, progress: bool = True, desc: str = "episodes") -> list[dict]:
+    """Run ``(policy, env_id, config, seed, policy_kwargs)`` tasks; rows in task order."""
+    tasks = list(tasks)
+    bar = tqdm(total=len(tasks), desc=desc, unit="ep", disable=not progress, leave=False)
+    try:
+        if workers <= 1 or len(tasks) <= 1:
+            rows = []
+            for task in tasks:
+                rows.append(_run_task(task))
+                bar.update()
+            return rows
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = [pool.submit(_run_task, task) for task in tasks]
+            for fut in futures:
+                fut.add_done_callback(lambda _: bar.update())
+            return [fut.result() for fut in futures]
+    finally:
+        bar.close()
+
+
+def summarize(rows: list[dict], metrics=SUMMARY_METRICS, by: str = "policy") -> list[dict]:
+    """Mean and 95 % t-interval half-width of each metric per group, in first-seen group order."""
+    groups: dict[str, list[dict]] = {}
+    for row in rows:
+        groups.setdefault(row[by], []).append(row)
+    out = []
+    for name, members in groups.items():
+        entry = {by: name, "episodes": len(members)}
+        for key, _ in metrics:
+            values = np.array([float(r[key]) for r in members])
+            mean = float(values.mean())
+            half = float(stats.t.ppf(0.975, values.size - 1) * values.std(ddof=1) / math.sqrt(values.size)) if values.size > 1 else math.nan
+            entry[key] = mean
+            entry[f"{key}_ci95"] = half
+        out.append(entry)
+    return out
+
+
+def format_table(summary: list[dict], metrics=SUMMARY_METRICS, by: str = "policy") -> str:
+    """A Markdown table: mean ± 95 % interval per metric (decision time in ms)."""
+    header = [by, "episodes"] + [label.replace("(s)", "(ms)") for _, label in metrics]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for entry in summary:
+        cells = [str(entry[by]), str(entry["episodes"])]
+        for key, _ in metrics:
+            scale = 1e3 if key.startswith("decision_time") else 1.0
+            mean, half = entry[key] * scale, entry[f"{key}_ci95"] * scale
+            cells.append(f"{_fmt(mean)} ± {_fmt(half)}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _fmt(x: float) -> str:
+    if not math.isfinite(x):
+        return "n/a"
+    if x == 0 or 1e-2 <= abs(x) < 1e5:
+        return f"{x:.4g}" if abs(x) < 10 else f"{x:,.1f}" if abs(x) < 1000 else f"{x:,.0f}"
+    return f"{x:.3g}"
+
+
+def write_rows(rows: list[dict], path: str | Path) -> Path:
+    """Write rows as CSV or JSON, chosen by the file extension (``.csv`` or ``.json``)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".json"):
+        raise ValueError(f"--out {str(path)!r}: the extension must be .csv or .json, got {suffix or 'none'!r}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".json":
+        path.write_text(json.dumps(rows, indent=2))
+    else:
+        fields: list[str] = []
+        for row in rows:
+            fields += [k for k in row if k not in fields]
+        with path.open("w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=fields)
+            writer.writeheader()
+            writer.writerows(rows)
+    return path
