@@ -4,7 +4,6 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import lawn_env
 from agents import AOSettings, AOSolver, PAPER_POLICIES, expected_cost, make_policy, policy_names
 from agents.ao import SlotProblem
 from agents.optim import linear_argmin_disc_box, project_budget
