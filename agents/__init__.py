@@ -3,7 +3,8 @@ scripted heuristic, and (later) wrappers for learned policies. ``make_policy(nam
 builds any of them; ``POLICIES`` is the registry."""
 
 from .ao import AOSettings, AOSolver, Plan, expected_cost
-from .policies import PAPER_POLICIES, POLICIES, Policy, make_policy, policy_names
+from .policies import BENCHMARK_POLICIES, PAPER_POLICIES, POLICIES, Policy, make_policy, policy_names
+from .reduced import GlobalPlanner, ReducedGradientPlanner
 from .scripted import HeuristicPolicy
 
 __all__ = [
@@ -14,6 +15,9 @@ __all__ = [
     "Policy",
     "POLICIES",
     "PAPER_POLICIES",
+    "BENCHMARK_POLICIES",
+    "ReducedGradientPlanner",
+    "GlobalPlanner",
     "make_policy",
     "policy_names",
     "HeuristicPolicy",

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-__all__ = ["project_budget", "linear_argmin_disc_box"]
+__all__ = ["project_budget", "linear_argmin_disc_box", "project_disc_box", "disc_box_grid", "min_plus_allocation"]
 
 
 def project_budget(v: np.ndarray, total: float) -> np.ndarray:
@@ -83,3 +83,95 @@ def linear_argmin_disc_box(g: np.ndarray, center: np.ndarray, radius: float,
                     candidates.append((min(max(xx, x0), x1), ye))
     values = [gx * px + gy * py for px, py in candidates]
     return np.array(candidates[int(np.argmin(values))])
+
+
+def project_disc_box(point: np.ndarray, center: np.ndarray, radius: float,
+                     area_m: tuple[float, float, float, float]) -> np.ndarray:
+    """Exact Euclidean projection of ``point`` onto {||q - center|| <= radius} ∩ box.
+
+    The set is convex; its projection is the point itself, the disc's projection (if it lies in
+    the box), or the projection onto one of the box edges clipped to the part of the edge inside
+    the disc. ``center`` must lie in the box.
+    """
+    px, py = float(point[0]), float(point[1])
+    cx, cy = float(center[0]), float(center[1])
+    x0, x1, y0, y1 = area_m
+    dx, dy = px - cx, py - cy
+    dist = math.hypot(dx, dy)
+    inside_box = x0 <= px <= x1 and y0 <= py <= y1
+    if dist <= radius and inside_box:
+        return np.array([px, py])
+    candidates = []
+    if dist > radius:
+        qx, qy = cx + dx * radius / dist, cy + dy * radius / dist
+    else:
+        qx, qy = px, py
+    if x0 - 1e-12 <= qx <= x1 + 1e-12 and y0 - 1e-12 <= qy <= y1 + 1e-12:
+        candidates.append((min(max(qx, x0), x1), min(max(qy, y0), y1)))
+    r2 = radius * radius
+    for xe in (x0, x1):  # segment x = xe, y in [y0, y1] ∩ [cy - h, cy + h]
+        h2 = r2 - (xe - cx) ** 2
+        if h2 >= 0:
+            h = math.sqrt(h2)
+            lo, hi = max(y0, cy - h), min(y1, cy + h)
+            if lo <= hi:
+                candidates.append((xe, min(max(py, lo), hi)))
+    for ye in (y0, y1):
+        h2 = r2 - (ye - cy) ** 2
+        if h2 >= 0:
+            h = math.sqrt(h2)
+            lo, hi = max(x0, cx - h), min(x1, cx + h)
+            if lo <= hi:
+                candidates.append((min(max(px, lo), hi), ye))
+    best = min(candidates, key=lambda c: (c[0] - px) ** 2 + (c[1] - py) ** 2)
+    return np.array(best)
+
+
+def disc_box_grid(center: np.ndarray, radius: float, area_m: tuple[float, float, float, float],
+                  spacing: float) -> np.ndarray:
+    """Points of a square grid of ``spacing`` (m) centred on ``center`` that lie in the disc and
+    the box, plus the center itself: (n, 2)."""
+    half = int(math.floor(radius / spacing))
+    offsets = np.arange(-half, half + 1) * spacing
+    gx, gy = np.meshgrid(offsets, offsets, indexing="ij")
+    pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    pts = pts[(pts**2).sum(axis=1) <= radius * radius + 1e-9] + np.asarray(center, dtype=float)
+    x0, x1, y0, y1 = area_m
+    keep = (pts[:, 0] >= x0) & (pts[:, 0] <= x1) & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)
+    return pts[keep]
+
+
+def min_plus_allocation(costs: np.ndarray, chunk: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """Exact split of J units among K users on a grid: min over sum j_k <= J of sum_k costs[:, k, j_k].
+
+    ``costs`` (B, K, J+1) holds, for B independent problems (e.g. drone positions), user k's cost
+    with j units. Min-plus dynamic programming over users, vectorized over problems (in chunks to
+    bound memory). Returns the optimal values (B,) and allocations (B, K) in units.
+    """
+    b_total, k, levels = costs.shape
+    j = levels - 1
+    idx = np.arange(levels)
+    shift = idx[:, None] - idx[None, :]  # [budget, units] -> budget left for the earlier users
+    valid = shift >= 0
+    shift = np.where(valid, shift, 0)
+    values = np.empty(b_total)
+    alloc = np.empty((b_total, k), dtype=np.int64)
+    for s in range(0, b_total, chunk):
+        c = costs[s : s + chunk]
+        f = np.minimum.accumulate(c[:, 0, :], axis=1)  # first user, at most b units
+        first_choice = np.argmin(np.where(valid[None], c[:, 0, None, :], np.inf), axis=2)
+        choices = [first_choice]
+        for user in range(1, k):
+            total = f[:, shift] + c[:, user, None, :]  # (chunk, budget, units)
+            total = np.where(valid[None], total, np.inf)
+            arg = np.argmin(total, axis=2)
+            f = np.take_along_axis(total, arg[:, :, None], axis=2)[:, :, 0]
+            choices.append(arg)
+        best_budget = np.argmin(f, axis=1)
+        values[s : s + chunk] = f[np.arange(f.shape[0]), best_budget]
+        budget = best_budget
+        for user in range(k - 1, -1, -1):
+            units = choices[user][np.arange(f.shape[0]), budget]
+            alloc[s : s + chunk, user] = units
+            budget = budget - units
+    return values, alloc

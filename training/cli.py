@@ -110,7 +110,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_args(demo)
     demo.set_defaults(func=cmd_demo)
 
-    from agents import PAPER_POLICIES, policy_names
+    from agents import BENCHMARK_POLICIES, policy_names
 
     workers_default = min(2, os.cpu_count() or 1)
     ev = sub.add_parser("evaluate", help="run a policy on seeded episodes and write one row per episode")
@@ -127,7 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.set_defaults(func=cmd_evaluate)
 
     bm = sub.add_parser("benchmark", help="the expert and the baselines on the same seeded episodes")
-    bm.add_argument("--policies", nargs="+", default=list(PAPER_POLICIES), choices=policy_names())
+    bm.add_argument("--policies", nargs="+", default=list(BENCHMARK_POLICIES), choices=policy_names())
     bm.add_argument("--env", default="lawn/Joint-v0", choices=list(lawn_env.ENV_IDS))
     bm.add_argument("--episodes", type=int, default=20)
     bm.add_argument("--seed", type=int, default=0)

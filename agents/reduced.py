@@ -1,0 +1,326 @@
+"""The reduced per-slot problem and the planners built on it (MODEL.md §4, issue #4).
+
+For fixed (p, q) the control part splits into one convex QP per AGV whose optimal value V_k
+depends on (p, q) only through psi_k = psi(p_k, q). The per-slot problem is therefore
+
+    min over (p, q) of  Phi(p, q) = sum_k V_k(psi_k(p_k, q)),   p in the budget set, q in disc ∩ area,
+
+K + 2 variables, separable in p for fixed q. By the envelope theorem V_k'(psi) is the partial
+derivative of J^_k in psi at the QP optimum, ``2 psi L_k + 2 S_k``, free after each solve, so
+
+    dPhi/dp_k = V_k'(psi_k) dpsi_k/dp_k,    dPhi/dq = sum_k V_k'(psi_k) dpsi_k/dq.
+
+Two planners use this:
+
+* :class:`GlobalPlanner` (``"global-mpc"``): a reference for small K. Each V_k is tabulated on a
+  fine psi grid with exact QPs (cubic Hermite with the envelope slopes between points); drone
+  positions are searched on a fine grid of the disc ∩ area; for each position the power budget
+  is split exactly on a power grid by min-plus dynamic programming; the best point is then
+  polished by projected gradient on the exact Phi and its value is the exact Phi there (the QPs
+  re-solved at the returned (p, q)). Seconds per slot.
+* :class:`ReducedGradientPlanner` (``"rg-mpc"``): the fast expert. The same pipeline at a coarse
+  resolution (a few psi points, a coarse drone grid, a coarse power grid) picks a starting point;
+  it is compared by exact Phi with the previous slot's solution and with equal power at hover,
+  and the best is refined by projected gradient with Armijo backtracking and Barzilai-Borwein
+  steps on the exact Phi, alternating p and q, each evaluation K warm-started QPs.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Annotated
+
+import numpy as np
+from pydantic import ConfigDict, Field
+from pydantic.dataclasses import dataclass as pydantic_dataclass
+from scipy import special
+
+from lawn_env import channel
+from lawn_env.config import ScenarioConfig
+from lawn_env.core import Snapshot
+from lawn_env.mpc import OutageAwareMPC
+
+from .ao import Plan
+from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
+
+__all__ = ["ReducedProblem", "ValueTable", "ReducedSettings", "ReducedGradientPlanner", "GlobalPlanner",
+           "GlobalSettings"]
+
+
+@dataclass
+class Evaluation:
+    """Phi at one (p, q) with everything the gradient needs."""
+
+    phi: float
+    values: np.ndarray  # V_k (K,)
+    slopes: np.ndarray  # V_k'(psi_k) (K,), envelope derivative
+    psi: np.ndarray  # (K,)
+    increments: np.ndarray  # (K, N_p, 2), the QP solutions
+    power_w: np.ndarray
+    drone_position: np.ndarray
+    fallbacks: int
+
+
+class ReducedProblem:
+    """Phi(p, q) of one slot, evaluated with exact QPs (the shared, warm-started MPC)."""
+
+    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig):
+        self.mpc = mpc
+        self.link = link
+        self.config = config
+        self.x_aug = np.asarray(snapshot.x_aug, dtype=float)
+        self.reference = np.asarray(snapshot.reference, dtype=float)
+        self.q_prev = np.asarray(snapshot.drone_position, dtype=float)
+        self.agv_xy = self.x_aug[:, 0:2]
+        self.data = mpc.prepare(self.x_aug, self.reference)
+        self.budget = config.power_budget_w
+        self.radius = config.drone.max_speed_mps * config.slot_s
+        self.area = tuple(config.area_m)
+        self.evaluations = 0
+
+    # ------------------------------------------------------------------ exact
+    def values_at_psi(self, psi: np.ndarray):
+        """V_k(psi_k) and V_k'(psi_k) (envelope) with exact QPs: (K,), (K,), solution."""
+        sol = self.mpc.solve_prepared(self.data, psi)
+        z = sol.increments.reshape(psi.shape[0], -1)
+        model = self.mpc.model
+        lcoef = np.einsum("ki,ij,kj->k", z, model.ftq4f, z)
+        scoef = (self.data.linear * z).sum(axis=1)
+        return sol.value, 2.0 * psi * lcoef + 2.0 * scoef, sol
+
+    def success(self, power_w: np.ndarray, q: np.ndarray) -> np.ndarray:
+        d2 = channel.distance_sq(q, self.agv_xy, self.link.altitude_m)
+        return special.gammaincc(self.link.m, self.link.outage_argument_sq(power_w, d2))
+
+    def evaluate(self, power_w: np.ndarray, q: np.ndarray) -> Evaluation:
+        self.evaluations += 1
+        psi = self.success(power_w, q)
+        values, slopes, sol = self.values_at_psi(psi)
+        return Evaluation(float(values.sum()), values, slopes, psi, sol.increments, np.array(power_w, dtype=float),
+                          np.array(q, dtype=float), sol.num_fallbacks)
+
+    def gradient(self, ev: Evaluation) -> tuple[np.ndarray, np.ndarray]:
+        """(dPhi/dp (K,), dPhi/dq (2,)) by the envelope theorem and the analytic dpsi."""
+        _, dpsi_dp, dpsi_dq = channel.success_and_gradients(ev.power_w, ev.drone_position, self.agv_xy, self.link)
+        return ev.slopes * dpsi_dp, ev.slopes @ dpsi_dq
+
+    # ------------------------------------------------------------------ refinement
+    def refine(self, ev: Evaluation, iterations: int, armijo: float = 1e-4, max_backtracks: int = 20,
+               tolerance: float = 1e-10) -> Evaluation:
+        """Projected gradient on the exact Phi, alternating a step in p (onto the budget set) and a
+        step in q (onto the disc ∩ area), each with Armijo backtracking along the projection arc
+        and its own Barzilai-Borwein step. Unlike the paper's AO, every step sees the optimal
+        controls (Phi already minimizes over them), and separate steps for p (W) and q (m) avoid
+        the ill-conditioning of one joint step. Stops after ``iterations`` rounds or when a round
+        improves Phi by less than ``tolerance`` (relative)."""
+        steps: dict[str, float | None] = {"p": None, "q": None}
+        grad_p, grad_q = self.gradient(ev)
+        for _ in range(iterations):
+            improved = False
+            for block in ("p", "q"):
+                g = grad_p if block == "p" else grad_q
+                x = ev.power_w if block == "p" else ev.drone_position
+                gnorm = math.sqrt(float(g @ g))
+                if gnorm == 0.0:
+                    continue
+                alpha = steps[block] or 0.5 * (self.budget if block == "p" else self.radius) / gnorm
+                accepted = None
+                for _ in range(max_backtracks):
+                    if block == "p":
+                        x_new = project_budget(x - alpha * g, self.budget)
+                    else:
+                        x_new = project_disc_box(x - alpha * g, self.q_prev, self.radius, self.area)
+                    delta = x_new - x
+                    if float(delta @ delta) == 0.0:
+                        break
+                    cand = self.evaluate(x_new, ev.drone_position) if block == "p" else self.evaluate(ev.power_w, x_new)
+                    if cand.phi <= ev.phi + armijo * float(g @ delta):
+                        accepted = cand
+                        break
+                    alpha *= 0.5
+                if accepted is None:
+                    continue
+                new_grad_p, new_grad_q = self.gradient(accepted)
+                y = (new_grad_p - grad_p) if block == "p" else (new_grad_q - grad_q)
+                sy = float(delta @ y)
+                steps[block] = float(delta @ delta) / sy if sy > 0 else None
+                if ev.phi - accepted.phi > tolerance * abs(ev.phi):
+                    improved = True
+                ev, grad_p, grad_q = accepted, new_grad_p, new_grad_q
+            if not improved:
+                break
+        return ev
+
+    # ------------------------------------------------------------------ tabulated search
+    def table(self, psi_grid: np.ndarray) -> "ValueTable":
+        values = np.empty((psi_grid.size, self.x_aug.shape[0]))
+        slopes = np.empty_like(values)
+        for i, psi in enumerate(psi_grid):
+            v, s, _ = self.values_at_psi(np.full(self.x_aug.shape[0], psi))
+            values[i], slopes[i] = v, s
+        return ValueTable(psi_grid, values, slopes)
+
+    def grid_search(self, table: "ValueTable", positions: np.ndarray, levels: int, coarse_levels: int | None = None,
+                    keep: int = 4):
+        """Best (p, q) of the tabulated Phi over ``positions`` (n, 2) and power splits in units of
+        P_max / levels (exact on that grid, min-plus DP). With ``coarse_levels`` every position is
+        first scored on the coarser power grid and only the ``keep`` best are split finely.
+        Returns (value, p, q)."""
+        if coarse_levels is not None and coarse_levels < levels and positions.shape[0] > keep:
+            scores, _ = self._split(table, positions, coarse_levels)
+            positions = positions[np.argsort(scores)[:keep]]
+        values, alloc = self._split(table, positions, levels)
+        best = int(np.argmin(values))
+        return float(values[best]), alloc[best] * (self.budget / levels), positions[best]
+
+    def _split(self, table: "ValueTable", positions: np.ndarray, levels: int):
+        units = np.arange(levels + 1) * (self.budget / levels)
+        diff = positions[:, None, :] - self.agv_xy[None, :, :]
+        d2 = (diff**2).sum(axis=2) + self.link.altitude_m**2  # (n, K)
+        psi = special.gammaincc(self.link.m, self.link.outage_argument_sq(units[None, None, :], d2[:, :, None]))
+        return min_plus_allocation(table(psi))  # tabulated V_k for every (position, AGV, power level)
+
+
+class ValueTable:
+    """V_k(psi) on a psi grid with envelope slopes; cubic Hermite interpolation between points."""
+
+    def __init__(self, grid: np.ndarray, values: np.ndarray, slopes: np.ndarray):
+        self.grid = np.asarray(grid, dtype=float)
+        self.values = values  # (M, K)
+        self.slopes = slopes
+
+    def __call__(self, psi: np.ndarray) -> np.ndarray:
+        """Interpolated V for psi of shape (..., K, L) (AGVs on axis -2) or (K,)."""
+        psi = np.asarray(psi, dtype=float)
+        if psi.ndim == 1:
+            return self(psi[:, None])[:, 0]
+        g = self.grid
+        idx = np.clip(np.searchsorted(g, psi, side="right") - 1, 0, g.size - 2)
+        h = g[idx + 1] - g[idx]
+        t = (psi - g[idx]) / h
+        kk = np.arange(self.values.shape[1])[:, None]
+        v0, v1 = self.values[idx, kk], self.values[idx + 1, kk]
+        s0, s1 = self.slopes[idx, kk], self.slopes[idx + 1, kk]
+        t2 = t * t
+        t3 = t2 * t
+        return ((2 * t3 - 3 * t2 + 1) * v0 + (t3 - 2 * t2 + t) * h * s0 + (-2 * t3 + 3 * t2) * v1
+                + (t3 - t2) * h * s1)
+
+
+# ---------------------------------------------------------------------- planners
+_CFG = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+@pydantic_dataclass(frozen=True, config=_CFG)
+class ReducedSettings:
+    """Resolution and iteration budget of ``rg-mpc``."""
+
+    psi_points: Annotated[int, Field(ge=2)] = 9
+    """psi grid points (uniform on [0, 1]) of the tabulated V_k used to pick the starting point."""
+    drone_spacing_m: Annotated[float, Field(gt=0)] = 1.5
+    """Spacing of the drone grid over the disc ∩ area for the starting point."""
+    coarse_power_levels: Annotated[int, Field(ge=2)] = 12
+    """Every grid position is scored with power in units of P_max / coarse_power_levels ..."""
+    keep_positions: Annotated[int, Field(ge=1)] = 4
+    """... and the best ``keep_positions`` are split finely."""
+    power_levels: Annotated[int, Field(ge=2)] = 40
+    """Units of P_max / power_levels for the exact split of the starting point."""
+    refine_iterations: Annotated[int, Field(ge=0)] = 4
+    """Rounds of alternating projected-gradient steps (p, then q) on the exact Phi."""
+    qp_backend: str = "daqp"
+
+
+@pydantic_dataclass(frozen=True, config=_CFG)
+class GlobalSettings:
+    """Resolution of the global reference ``global-mpc``."""
+
+    psi_points: Annotated[int, Field(ge=2)] = 401
+    drone_spacing_m: Annotated[float, Field(gt=0)] = 0.5
+    power_levels: Annotated[int, Field(ge=2)] = 200
+    refine_iterations: Annotated[int, Field(ge=0)] = 60
+    qp_backend: str = "daqp"
+
+
+class _ReducedPlannerBase:
+    settings_class = ReducedSettings
+
+    def __init__(self, config: ScenarioConfig, settings=None):
+        self.config = config
+        self.settings = settings if settings is not None else self.settings_class()
+        self.mpc = OutageAwareMPC.from_config(config, backend=self.settings.qp_backend)
+        self.link = channel.LinkParams.from_config(config, planning=True)
+        self.psi_grid = np.linspace(0.0, 1.0, self.settings.psi_points)
+
+    def reset(self) -> None:
+        self.mpc.reset()
+
+    def _plan(self, problem: ReducedProblem, best: Evaluation, start: float, info: dict) -> Plan:
+        info.update(qp_evaluations=problem.evaluations, success_probability=best.psi,
+                    qp_fallbacks=best.fallbacks)
+        trace = np.array([[best.phi, math.nan, math.nan]])
+        return Plan(increments=best.increments, power_w=best.power_w, drone_position=best.drone_position,
+                    objective=best.phi, objective_trace=trace, iterations=1, solve_time_s=time.perf_counter() - start,
+                    info=info)
+
+    def _search(self, problem: ReducedProblem) -> Evaluation:
+        s = self.settings
+        table = problem.table(self.psi_grid)
+        positions = disc_box_grid(problem.q_prev, problem.radius, problem.area, s.drone_spacing_m)
+        _, p, q = problem.grid_search(table, positions, s.power_levels, s.coarse_power_levels, s.keep_positions)
+        return problem.evaluate(p, q)
+
+
+class ReducedGradientPlanner(_ReducedPlannerBase):
+    """``rg-mpc``: coarse tabulated search, then projected gradient on the exact Phi."""
+
+    def __init__(self, config: ScenarioConfig, settings: ReducedSettings | None = None):
+        super().__init__(config, settings)
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # previous slot's (p, velocity)
+
+    def reset(self) -> None:
+        super().reset()
+        self._last = None
+
+    def plan(self, snapshot: Snapshot) -> Plan:
+        start = time.perf_counter()
+        problem = ReducedProblem(self.mpc, self.link, snapshot, self.config)
+        k = self.config.num_agvs
+        starts = {"search": self._search(problem),
+                  "equal": problem.evaluate(np.full(k, problem.budget / k), problem.q_prev)}
+        if self._last is not None:
+            p_last, v_last = self._last
+            q_cont = project_disc_box(problem.q_prev + v_last, problem.q_prev, problem.radius, problem.area)
+            starts["previous"] = problem.evaluate(p_last, q_cont)
+        origin = min(starts, key=lambda name: starts[name].phi)
+        best = problem.refine(starts[origin], self.settings.refine_iterations)
+        self._last = (best.power_w.copy(), best.drone_position - problem.q_prev)
+        return self._plan(problem, best, start, {"start": origin,
+                                                 "start_values": {n: e.phi for n, e in starts.items()}})
+
+
+class GlobalPlanner(_ReducedPlannerBase):
+    """``global-mpc``: fine tabulated search, exact power split on a grid, exact polish."""
+
+    settings_class = GlobalSettings
+
+    def __init__(self, config: ScenarioConfig, settings: GlobalSettings | None = None):
+        super().__init__(config, settings)
+
+    def plan(self, snapshot: Snapshot) -> Plan:
+        start = time.perf_counter()
+        problem = ReducedProblem(self.mpc, self.link, snapshot, self.config)
+        s = self.settings
+        table = problem.table(self.psi_grid)
+        positions = disc_box_grid(problem.q_prev, problem.radius, problem.area, s.drone_spacing_m)
+        grid_value, p, q = problem.grid_search(table, positions, s.power_levels)
+        found = problem.evaluate(p, q)
+        best = problem.refine(found, s.refine_iterations)
+        info = {
+            "grid_value": grid_value,  # tabulated Phi at the grid optimum
+            "grid_exact_value": found.phi,  # exact Phi (QPs re-solved) at the grid optimum
+            "resolution": {"psi_points": s.psi_points, "drone_spacing_m": s.drone_spacing_m,
+                           "power_step_w": problem.budget / s.power_levels, "positions": int(positions.shape[0])},
+        }
+        return self._plan(problem, best, start, info)

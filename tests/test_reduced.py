@@ -1,0 +1,120 @@
+import itertools
+
+import numpy as np
+import pytest
+
+from agents import AOSolver, expected_cost
+from agents.optim import disc_box_grid, min_plus_allocation, project_disc_box
+from agents.reduced import GlobalPlanner, GlobalSettings, ReducedGradientPlanner, ReducedProblem
+from lawn_env import ScenarioConfig, channel
+from lawn_env.mpc import OutageAwareMPC
+from test_agents import _snapshots
+
+CFG = ScenarioConfig()
+
+
+def _problem(snap, backend="daqp"):
+    return ReducedProblem(OutageAwareMPC.from_config(CFG, backend=backend), channel.LinkParams.from_config(CFG, planning=True),
+                          snap, CFG)
+
+
+def test_envelope_derivative_matches_finite_differences(rng):
+    for snap in _snapshots(6, seed=11):
+        prob = _problem(snap)
+        psi = rng.uniform(0.1, 0.95, 4)
+        _, slopes, _ = prob.values_at_psi(psi)
+        h = 1e-6
+        up, _, _ = prob.values_at_psi(psi + h)
+        down, _, _ = prob.values_at_psi(psi - h)
+        assert np.allclose(slopes, (up - down) / (2 * h), rtol=1e-4, atol=1e-6 * np.abs(up).max())
+        assert np.all(slopes <= 1e-9)  # V_k is non-increasing in psi
+
+
+def test_phi_gradient_matches_finite_differences(rng):
+    for snap in _snapshots(4, seed=12):
+        prob = _problem(snap)
+        p = rng.uniform(0.1, 0.3, 4)
+        q = snap.drone_position
+        ev = prob.evaluate(p, q)
+        gp, gq = prob.gradient(ev)
+        for k in range(4):
+            e = np.zeros(4)
+            e[k] = 1e-6
+            fd = (prob.evaluate(p + e, q).phi - prob.evaluate(p - e, q).phi) / 2e-6
+            assert gp[k] == pytest.approx(fd, rel=1e-4, abs=1e-7 * ev.phi)
+        for axis in range(2):
+            e = np.zeros(2)
+            e[axis] = 1e-4
+            fd = (prob.evaluate(p, q + e).phi - prob.evaluate(p, q - e).phi) / 2e-4
+            assert gq[axis] == pytest.approx(fd, rel=1e-4, abs=1e-7 * ev.phi)
+
+
+def test_value_table_interpolates_v():
+    """Exact at the nodes; between them the error shrinks as the grid is refined (V_k is only
+    piecewise smooth: its curvature jumps where the QP's active set changes)."""
+    snap = _snapshots(1, seed=13)[0]
+    prob = _problem(snap)
+    errors = []
+    for n in (9, 65):
+        grid = np.linspace(0, 1, n)
+        table = prob.table(grid)
+        for g in grid[::4]:
+            assert np.allclose(table(np.full(4, g)), prob.values_at_psi(np.full(4, g))[0], rtol=1e-12)
+        mids = (grid[:-1] + grid[1:]) / 2
+        errors.append(max(np.max(np.abs(table(np.full(4, m)) / prob.values_at_psi(np.full(4, m))[0] - 1))
+                          for m in mids))
+    assert errors[0] < 0.08 and errors[1] < 0.008 and errors[1] < errors[0] / 5
+
+
+def test_global_value_is_reproduced_by_exact_qps():
+    cfg_settings = GlobalSettings(psi_points=101, drone_spacing_m=1.5, power_levels=60, refine_iterations=20)
+    planner = GlobalPlanner(CFG, cfg_settings)
+    for snap in _snapshots(3, seed=14):
+        plan = planner.plan(snap)
+        assert plan.objective == pytest.approx(expected_cost(snap, plan.increments, plan.power_w, plan.drone_position),
+                                               rel=1e-10)
+        # an independent solver at the returned (p, q)
+        prob = _problem(snap, backend="osqp")
+        assert prob.evaluate(plan.power_w, plan.drone_position).phi == pytest.approx(plan.objective, rel=1e-6)
+        assert plan.info["resolution"]["drone_spacing_m"] == 1.5
+        assert plan.objective <= plan.info["grid_exact_value"] + 1e-12  # the polish never makes it worse
+
+
+def test_rg_mpc_is_never_worse_than_the_paper_ao_on_sampled_slots():
+    rg = ReducedGradientPlanner(CFG)
+    ao = AOSolver(CFG)
+    for snap in _snapshots(10, seed=15):
+        rg.reset()
+        assert rg.plan(snap).objective <= ao.solve(snap).objective * (1 + 1e-6)
+
+
+def test_min_plus_allocation_against_brute_force(rng):
+    costs = rng.random((6, 3, 8))
+    values, alloc = min_plus_allocation(costs, chunk=4)
+    for b in range(6):
+        best = min(sum(costs[b, k, j[k]] for k in range(3))
+                   for j in itertools.product(range(8), repeat=3) if sum(j) <= 7)
+        assert values[b] == pytest.approx(best)
+        assert alloc[b].sum() <= 7
+        assert sum(costs[b, k, alloc[b, k]] for k in range(3)) == pytest.approx(values[b])
+
+
+def test_project_disc_box_against_dense_sampling(rng):
+    area = (0.0, 200.0, 0.0, 200.0)
+    ang = np.linspace(0, 2 * np.pi, 721)
+    for _ in range(150):
+        center = np.clip(rng.choice([rng.uniform(0, 200, 2), rng.choice([0.0, 200.0], 2) + rng.uniform(-4, 4, 2)]), 0, 200)
+        point = center + rng.normal(0, 10, 2)
+        q = project_disc_box(point, center, 7.5, area)
+        assert np.linalg.norm(q - center) <= 7.5 + 1e-9 and np.all((q >= -1e-12) & (q <= 200 + 1e-12))
+        rad = np.linspace(0, 7.5, 60)
+        pts = center + (rad[:, None, None] * np.stack([np.cos(ang), np.sin(ang)], -1)[None]).reshape(-1, 2)
+        pts = pts[(pts >= 0).all(1) & (pts <= 200).all(1)]
+        assert np.linalg.norm(q - point) <= np.linalg.norm(pts - point, axis=1).min() + 1e-9
+
+
+def test_disc_box_grid_is_feasible():
+    pts = disc_box_grid(np.array([1.0, 199.0]), 7.5, (0, 200, 0, 200), 1.5)
+    assert len(pts) > 5
+    assert np.all(np.linalg.norm(pts - [1.0, 199.0], axis=1) <= 7.5 + 1e-9)
+    assert np.all((pts >= 0) & (pts <= 200))
