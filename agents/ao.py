@@ -42,7 +42,7 @@ from scipy import special
 from lawn_env import channel
 from lawn_env.config import ScenarioConfig
 from lawn_env.core import Snapshot
-from lawn_env.dynamics import PredictionModel
+from lawn_env.dynamics import PredictionModel, cost_coefficients
 from lawn_env.mpc import OutageAwareMPC, SlotData
 
 from .optim import linear_argmin_disc_box, project_budget
@@ -129,12 +129,7 @@ class SlotProblem:
     # ------------------------------------------------------------------ pieces of J^
     def coefficients(self, dmu: np.ndarray):
         """L, S, W of J^_k = L psi^2 + 2 S psi + W for increments ``dmu`` (K, N_p, 2) (paper, P4)."""
-        model = self.solver.model
-        z = dmu.reshape(self.solver.num_agvs, -1)
-        lcoef = np.einsum("ki,ij,kj->k", z, model.ftq4f, z)
-        scoef = np.einsum("ki,ki->k", self.data.linear, z)
-        wcoef = np.einsum("ki,ij,kj->k", z, model.q5, z) + self.data.constant
-        return lcoef, scoef, wcoef
+        return cost_coefficients(self.solver.model, self.data.linear, self.data.constant, dmu)
 
     def distance_sq(self, q: np.ndarray) -> np.ndarray:
         return channel.distance_sq(q, self.agv_xy, self.solver.link.altitude_m)

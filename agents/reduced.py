@@ -40,6 +40,7 @@ from scipy import special
 from lawn_env import channel
 from lawn_env.config import ScenarioConfig
 from lawn_env.core import Snapshot
+from lawn_env.dynamics import cost_coefficients
 from lawn_env.mpc import OutageAwareMPC
 
 from .ao import Plan
@@ -84,11 +85,8 @@ class ReducedProblem:
     def values_at_psi(self, psi: np.ndarray):
         """V_k(psi_k) and V_k'(psi_k) (envelope) with exact QPs: (K,), (K,), solution."""
         sol = self.mpc.solve_prepared(self.data, psi)
-        z = sol.increments.reshape(psi.shape[0], -1)
-        model = self.mpc.model
-        lcoef = np.einsum("ki,ij,kj->k", z, model.ftq4f, z)
-        scoef = (self.data.linear * z).sum(axis=1)
-        return sol.value, 2.0 * psi * lcoef + 2.0 * scoef, sol
+        lcoef, scoef, _ = cost_coefficients(self.mpc.model, self.data.linear, self.data.constant, sol.increments)
+        return sol.value, 2.0 * psi * lcoef + 2.0 * scoef, sol  # envelope theorem: V' = dJ^/dpsi at z*
 
     def success(self, power_w: np.ndarray, q: np.ndarray) -> np.ndarray:
         d2 = channel.distance_sq(q, self.agv_xy, self.link.altitude_m)

@@ -26,6 +26,7 @@ __all__ = [
     "stage_cost",
     "packed_step_matrices",
     "expected_cost_coefficients",
+    "cost_coefficients",
 ]
 
 
@@ -183,12 +184,16 @@ def expected_cost_coefficients(model: PredictionModel, x_aug: np.ndarray, chi_re
     L = Dmu' F'Q4F Dmu, S = (C x~ - chi_ref)' Q4 F Dmu, W = Dmu' Q5 Dmu + (C x~ - chi_ref)' Q4 (C x~ - chi_ref).
     Shapes: x_aug (K, 6), chi_ref (K, N_p+1, 6), dmu (K, N_p, 2) -> three (K,) arrays.
     """
-    k = x_aug.shape[0]
-    z = dmu.reshape(k, -1)
     r = model.residual(x_aug, chi_ref)
-    fz = z @ model.f.T
-    q4fz = fz @ model.q4  # Q4 symmetric
-    lcoef = np.einsum("ki,ki->k", fz, q4fz)
-    scoef = np.einsum("ki,ki->k", r, q4fz)
-    wcoef = np.einsum("ki,ij,kj->k", z, model.q5, z) + np.einsum("ki,ij,kj->k", r, model.q4, r)
+    return cost_coefficients(model, r @ model.ftq4.T, ((r @ model.q4) * r).sum(axis=1), dmu)
+
+
+def cost_coefficients(model: PredictionModel, linear: np.ndarray, constant: np.ndarray, dmu: np.ndarray):
+    """L, S, W from the slot's precomputed ``linear`` = F'Q4 r (K, 2N_p) and ``constant`` =
+    r'Q4 r (K,) (see :meth:`lawn_env.mpc.OutageAwareMPC.prepare`); the one implementation of the
+    coefficients of P4. The envelope derivative of the QP's value in psi is ``2 psi L + 2 S``."""
+    z = dmu.reshape(linear.shape)
+    lcoef = ((z @ model.ftq4f) * z).sum(axis=1)
+    scoef = (linear * z).sum(axis=1)
+    wcoef = ((z @ model.q5) * z).sum(axis=1) + constant
     return lcoef, scoef, wcoef

@@ -83,3 +83,19 @@ def test_benchmark_writes_table_and_plot(tmp_path, capsys):
     table = (out / "summary.md").read_text()
     assert "| ao-mpc | 2 |" in table and "| epa | 2 |" in table
     assert "control cost" in capsys.readouterr().out
+
+
+def test_gap_command_writes_tables_and_figures(tmp_path, capsys):
+    out = tmp_path / "gap"
+    args = ["gap", "--policies", "ao-mpc", "rg-mpc", "--episodes", "1", "--every", "4", "--set", "num_slots=8",
+            "--convergence-slots", "2", "--out", str(out), "--quiet", "--workers", "1",
+            "--global-arg", "psi_points=41", "--global-arg", "drone_spacing_m=2.5", "--global-arg", "power_levels=40"]
+    assert main(args) == 0
+    for name in ("gap_rows.csv", "gap_summary.csv", "gap_summary.md", "gap.png", "convergence.csv", "convergence.png"):
+        assert (out / name).stat().st_size > 0
+    table = (out / "gap_summary.md").read_text()
+    assert "| ao-mpc | 2 |" in table and "| rg-mpc | 2 |" in table
+    printed = capsys.readouterr().out
+    assert "slot 2: after iteration 1" in printed
+    assert main(args[:-2] + ["--global-arg", "bogus=1"]) == 2
+    assert "bogus" in capsys.readouterr().err

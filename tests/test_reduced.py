@@ -118,3 +118,19 @@ def test_disc_box_grid_is_feasible():
     assert len(pts) > 5
     assert np.all(np.linalg.norm(pts - [1.0, 199.0], axis=1) <= 7.5 + 1e-9)
     assert np.all((pts >= 0) & (pts <= 200))
+
+
+def test_gap_rows_and_summary():
+    from training.gap import gap_episode, summarize_gaps
+
+    cfg = ScenarioConfig(num_slots=6)
+    rows = gap_episode(("ao-mpc", "rg-mpc"), "ao-mpc", cfg, seed=3, every=2,
+                       global_settings={"psi_points": 41, "drone_spacing_m": 2.5, "power_levels": 40})
+    assert [r["slot"] for r in rows if r["policy"] == "rg-mpc"] == [0, 2, 4]
+    for r in rows:
+        assert r["gap"] == pytest.approx((r["objective"] - r["global_objective"]) / r["global_objective"])
+    summary = summarize_gaps(rows)
+    assert {e["policy"] for e in summary} == {"ao-mpc", "rg-mpc"}
+    ao = next(e for e in summary if e["policy"] == "ao-mpc")
+    assert ao["slots"] == 3 and ao["gap_median"] <= ao["gap_p90"] <= ao["gap_max"]
+    assert 0 <= ao["worse_than_rg-mpc"] <= 3

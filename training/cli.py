@@ -4,6 +4,8 @@ Subcommands read their choices from the package registries (env ids, presets).
 ``lawn demo``: one seeded episode of ``lawn/Joint-v0`` under a scripted policy.
 ``lawn evaluate``: any registered policy on seeded episodes, one row per episode (CSV/JSON).
 ``lawn benchmark``: the expert and the baselines on the same seeds, a table and a bar plot.
+``lawn gap``: per-slot optimality gap of planners against the global reference, and the AO's
+convergence at chosen slots.
 """
 
 from __future__ import annotations
@@ -100,6 +102,39 @@ def cmd_benchmark(args) -> int:
     return 0
 
 
+def cmd_gap(args) -> int:
+    from agents import make_policy
+
+    from .gap import convergence, format_gap_table, run_gap, summarize_gaps, write_gap_outputs
+
+    cfg = _config(args)
+    global_settings = _parse_overrides(args.global_arg)
+    for name in args.policies + [args.driver]:
+        make_policy(name, cfg)  # fail fast
+    make_policy("global-mpc", cfg, **global_settings)
+    rows = run_gap(args.policies, args.driver, cfg, args.episodes, args.seed, args.every, workers=args.workers,
+                   progress=not args.quiet, global_settings=global_settings)
+    summary = summarize_gaps(rows)
+    conv = convergence(cfg, args.convergence_slots, seed=args.seed, driver=args.driver,
+                       global_settings=global_settings) if args.convergence_slots else []
+    write_gap_outputs(rows, summary, conv, Path(args.out))
+    print(f"lawn gap: driver {args.driver}, {args.episodes} episodes from seed {args.seed}, every {args.every} slots, "
+          f"preset {args.preset}, K={cfg.num_agvs}; gap = (J^ - J^_global) / J^_global")
+    print(format_gap_table(summary))
+    if conv:
+        print("convergence (paper's AO, 20 iterations, no early stop): J^ above the global reference")
+        for slot in args.convergence_slots:
+            sel = [r for r in conv if r["slot"] == slot]
+            if sel:
+                first = next(r for r in sel if r["block"] == "drone")
+                print(f"  slot {slot}: after iteration 1 {first['objective'] / first['global_objective'] - 1:+.2%}, "
+                      f"after 20 {sel[-1]['objective'] / sel[-1]['global_objective'] - 1:+.2%}, "
+                      f"rg-mpc {sel[-1]['rg_mpc_objective'] / sel[-1]['global_objective'] - 1:+.3%}")
+    print(f"wrote {args.out}/gap_rows.csv, gap_summary.csv, gap_summary.md, gap.png"
+          + (", convergence.csv, convergence.png" if conv else ""))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="lawn", description="Wireless predictive control over low-altitude networks.")
     parser.add_argument("--version", action="version", version=f"lawn {lawn_env.__version__}")
@@ -136,6 +171,22 @@ def build_parser() -> argparse.ArgumentParser:
     bm.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_config_args(bm)
     bm.set_defaults(func=cmd_benchmark)
+
+    gp = sub.add_parser("gap", help="per-slot optimality gap of planners against the global reference")
+    gp.add_argument("--policies", nargs="+", default=["ao-mpc", "rg-mpc"], choices=policy_names())
+    gp.add_argument("--driver", default="ao-mpc", choices=policy_names(), help="policy that runs the episodes")
+    gp.add_argument("--episodes", type=int, default=5)
+    gp.add_argument("--seed", type=int, default=0)
+    gp.add_argument("--every", type=int, default=3, help="compare at every n-th slot (default: %(default)s)")
+    gp.add_argument("--convergence-slots", type=int, nargs="*", default=[11, 19, 28, 41],
+                    help="slots of the first episode for the AO convergence figure (none to skip)")
+    gp.add_argument("--global-arg", action="append", default=[], metavar="KEY=VALUE",
+                    help="resolution of the global reference, e.g. --global-arg drone_spacing_m=0.25")
+    gp.add_argument("--out", default="runs/gap")
+    gp.add_argument("--workers", type=int, default=workers_default)
+    gp.add_argument("--quiet", action="store_true")
+    _add_config_args(gp)
+    gp.set_defaults(func=cmd_gap)
     return parser
 
 

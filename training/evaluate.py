@@ -77,17 +77,22 @@ def _run_task(task) -> dict:
 
 def evaluate(tasks: Iterable[tuple], workers: int = 1, progress: bool = True, desc: str = "episodes") -> list[dict]:
     """Run ``(policy, env_id, config, seed, policy_kwargs)`` tasks; rows in task order."""
-    tasks = list(tasks)
+    return _pool_map(_run_task, list(tasks), workers, progress, desc)
+
+
+def _pool_map(fn, tasks: list, workers: int, progress: bool, desc: str) -> list:
+    """``[fn(t) for t in tasks]`` in a process pool when ``workers > 1``, with a progress bar;
+    results in task order whatever the scheduling."""
     bar = tqdm(total=len(tasks), desc=desc, unit="ep", disable=not progress, leave=False)
     try:
         if workers <= 1 or len(tasks) <= 1:
-            rows = []
+            out = []
             for task in tasks:
-                rows.append(_run_task(task))
+                out.append(fn(task))
                 bar.update()
-            return rows
+            return out
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = [pool.submit(_run_task, task) for task in tasks]
+            futures = [pool.submit(fn, task) for task in tasks]
             for fut in futures:
                 fut.add_done_callback(lambda _: bar.update())
             return [fut.result() for fut in futures]
