@@ -7,7 +7,7 @@ from typing import Sequence
 
 from lawn_env import ScenarioConfig
 
-from .evaluate import SUMMARY_METRICS, evaluate, format_table, summarize, write_rows
+from .evaluate import SUMMARY_METRICS, evaluate, format_table, paired_cost_difference, summarize, write_rows
 
 __all__ = ["run_benchmark", "plot_summary"]
 
@@ -19,10 +19,14 @@ def run_benchmark(policies: Sequence[str], env_id: str, config: ScenarioConfig, 
     tasks = [(name, env_id, config, seed + i, {}) for name in policies for i in range(episodes)]
     rows = evaluate(tasks, workers=workers, progress=progress, desc="benchmark")
     summary = summarize(rows)
+    paired = paired_cost_difference(rows, policies[0])
+    for entry in summary:
+        mean, half = paired.get(entry["policy"], (float("nan"), float("nan")))
+        entry[f"cost_vs_{policies[0]}"], entry[f"cost_vs_{policies[0]}_ci95"] = mean, half
     out_dir = Path(out_dir)
     write_rows(rows, out_dir / "episodes.csv")
     write_rows(summary, out_dir / "summary.csv")
-    (out_dir / "summary.md").write_text(format_table(summary) + "\n")
+    (out_dir / "summary.md").write_text(format_table(summary, paired=paired, reference=policies[0]) + "\n")
     plot_summary(summary, out_dir / "benchmark.png",
                  title=f"{env_id}, K={config.num_agvs}, {episodes} seeds from {seed}: mean ± 95 % interval")
     return rows, summary

@@ -118,9 +118,27 @@ def summarize(rows: list[dict], metrics=SUMMARY_METRICS, by: str = "policy") -> 
     return out
 
 
-def format_table(summary: list[dict], metrics=SUMMARY_METRICS, by: str = "policy") -> str:
-    """A Markdown table: mean ± 95 % interval per metric (decision time in ms)."""
+def paired_cost_difference(rows: list[dict], reference: str, metric: str = "control_cost") -> dict[str, tuple[float, float]]:
+    """Per policy: mean and 95 % t-interval half-width of the per-seed relative difference
+    ``(x - x_ref) / x_ref`` against ``reference`` on the seeds both ran (a paired comparison)."""
+    ref = {r["seed"]: float(r[metric]) for r in rows if r["policy"] == reference}
+    out = {}
+    for name in dict.fromkeys(r["policy"] for r in rows):
+        diffs = np.array([(float(r[metric]) - ref[r["seed"]]) / ref[r["seed"]]
+                          for r in rows if r["policy"] == name and r["seed"] in ref])
+        if diffs.size > 1:
+            half = float(stats.t.ppf(0.975, diffs.size - 1) * diffs.std(ddof=1) / math.sqrt(diffs.size))
+            out[name] = (float(diffs.mean()), half)
+    return out
+
+
+def format_table(summary: list[dict], metrics=SUMMARY_METRICS, by: str = "policy",
+                 paired: dict[str, tuple[float, float]] | None = None, reference: str | None = None) -> str:
+    """A Markdown table: mean ± 95 % interval per metric (decision time in ms), and optionally the
+    paired relative cost difference against ``reference``."""
     header = [by, "episodes"] + [label.replace("(s)", "(ms)") for _, label in metrics]
+    if paired:
+        header.append(f"cost vs {reference} (paired)")
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for entry in summary:
         cells = [str(entry[by]), str(entry["episodes"])]
@@ -128,6 +146,9 @@ def format_table(summary: list[dict], metrics=SUMMARY_METRICS, by: str = "policy
             scale = 1e3 if key.startswith("decision_time") else 1.0
             mean, half = entry[key] * scale, entry[f"{key}_ci95"] * scale
             cells.append(f"{_fmt(mean)} ± {_fmt(half)}")
+        if paired:
+            mean, half = paired.get(entry[by], (math.nan, math.nan))
+            cells.append("–" if entry[by] == reference else f"{mean * 100:+.1f} % ± {half * 100:.1f} %")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

@@ -13,6 +13,7 @@ slots, against the global reference's value.
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -47,14 +48,19 @@ def gap_episode(policies: Sequence[str], driver: str, config: ScenarioConfig, se
         for name, policy in planners.items():
             start = time.perf_counter()
             plan = policy.plan(snap)
-            results[name] = (plan.objective, time.perf_counter() - start)
+            results[name] = (plan, time.perf_counter() - start)
         if slot % every == 0:
             glob = reference.plan(snap)
-            for name, (objective, seconds) in results.items():
-                rows.append({"seed": seed, "slot": slot, "policy": name, "objective": objective,
+            budget = config.power_budget_w
+            for name, (plan, seconds) in results.items():
+                rows.append({"seed": seed, "slot": slot, "policy": name, "objective": plan.objective,
                              "global_objective": glob.objective,
-                             "gap": (objective - glob.objective) / glob.objective, "decision_time_s": seconds,
-                             "global_time_s": glob.solve_time_s})
+                             "gap": (plan.objective - glob.objective) / glob.objective, "decision_time_s": seconds,
+                             "global_time_s": glob.solve_time_s,
+                             "min_power_share": float(plan.power_w.min() / budget),
+                             "global_min_power_share": float(glob.power_w.min() / budget),
+                             "power_w": json.dumps(plan.power_w.round(6).tolist()),
+                             "global_power_w": json.dumps(glob.power_w.round(6).tolist())})
         obs, _, _, done, _ = env.step(drive.act(obs))
         slot += 1
     return rows
@@ -86,9 +92,11 @@ def summarize_gaps(rows: list[dict], tolerance: float = 1e-6) -> list[dict]:
     for name in names:
         gaps = np.array([r["gap"] for r in rows if r["policy"] == name])
         times = np.array([r["decision_time_s"] for r in rows if r["policy"] == name])
+        shares = np.array([r["min_power_share"] for r in rows if r["policy"] == name])
         entry = {"policy": name, "slots": int(gaps.size), "gap_median": float(np.median(gaps)),
                  "gap_p90": float(np.percentile(gaps, 90)), "gap_max": float(gaps.max()),
-                 "decision_time_median_s": float(np.median(times))}
+                 "decision_time_median_s": float(np.median(times)),
+                 "slots_with_a_link_below_5pct_power": int((shares < 0.05).sum())}
         for other in names:
             if other != name:
                 entry[f"worse_than_{other}"] = sum(
@@ -97,15 +105,24 @@ def summarize_gaps(rows: list[dict], tolerance: float = 1e-6) -> list[dict]:
     return out
 
 
+def global_power_shares(rows: list[dict]) -> int:
+    """On how many compared slots the global reference gives some link less than 5 % of P_max."""
+    seen = {}
+    for r in rows:
+        seen[(r["seed"], r["slot"])] = r["global_min_power_share"]
+    return int(sum(1 for v in seen.values() if v < 0.05))
+
+
 def format_gap_table(summary: list[dict]) -> str:
-    header = ["planner", "slots", "gap median", "gap p90", "gap max", "decision time (ms)"]
+    header = ["planner", "slots", "gap median", "gap p90", "gap max", "decision time (ms)", "a link < 5 % power"]
     header += [f"worse than {k[len('worse_than_'):]}" for k in dict.fromkeys(
         k for e in summary for k in e if k.startswith("worse_than_"))]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     keys = list(dict.fromkeys(k for e in summary for k in e if k.startswith("worse_than_")))
     for e in summary:
         cells = [e["policy"], str(e["slots"]), f"{e['gap_median'] * 100:.3f} %", f"{e['gap_p90'] * 100:.3f} %",
-                 f"{e['gap_max'] * 100:.2f} %", f"{e['decision_time_median_s'] * 1e3:.2f}"]
+                 f"{e['gap_max'] * 100:.2f} %", f"{e['decision_time_median_s'] * 1e3:.2f}",
+                 f"{e['slots_with_a_link_below_5pct_power']}"]
         cells += [str(e[k]) if k in e else "–" for k in keys]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
