@@ -149,7 +149,6 @@ def min_plus_allocation(costs: np.ndarray, chunk: int = 64) -> tuple[np.ndarray,
     bound memory). Returns the optimal values (B,) and allocations (B, K) in units.
     """
     b_total, k, levels = costs.shape
-    j = levels - 1
     idx = np.arange(levels)
     shift = idx[:, None] - idx[None, :]  # [budget, units] -> budget left for the earlier users
     valid = shift >= 0

@@ -51,6 +51,7 @@ __all__ = [
     "POLICIES",
     "make_policy",
     "policy_names",
+    "is_policy_name",
     "snapshot_from_observation",
 ]
 
@@ -300,15 +301,33 @@ def policy_names() -> list[str]:
     return list(POLICIES)
 
 
-def make_policy(name: str, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT,
+def is_policy_name(name: str) -> bool:
+    """True for registered names and for ``sb3:DIR`` / ``bc:DIR`` / ``marl:DIR``."""
+    return name in POLICIES or (":" in name and name.split(":", 1)[0] in ("sb3", "bc", "marl"))
+
+
+def make_policy(name: str, config: ScenarioConfig | Mapping | str | None = None, env_id: str | None = None,
                 seed: int | None = None, **kwargs: Any) -> Policy:
     """Build a registered policy for ``config`` driving ``env_id``.
 
+    ``env_id`` defaults to ``lawn/Joint-v0`` (for trained agents: the env they were trained on).
     Unknown names raise ``ValueError`` listing the valid ones; unknown or invalid settings raise
     ``ValueError`` naming the setting.
     """
+    if isinstance(name, str) and ":" in name:
+        prefix, path = name.split(":", 1)
+        from .learned import LOADERS
+
+        if prefix not in LOADERS:
+            raise ValueError(f"unknown policy prefix {prefix!r} in {name!r}; valid: "
+                             f"{', '.join(p + ':DIR' for p in LOADERS)}")
+        explicit = config if config is not None else None
+        return LOADERS[prefix](path, resolve_config(explicit) if explicit is not None else None,
+                               env_id=env_id, seed=seed, **kwargs)
+    env_id = env_id or JOINT
     try:
         factory = POLICIES[name]
     except (KeyError, TypeError):
-        raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICIES)}") from None
+        raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICIES)}, "
+                         "or sb3:DIR, bc:DIR, marl:DIR for trained agents") from None
     return factory(config, env_id=env_id, seed=seed, **kwargs)

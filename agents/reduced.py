@@ -232,7 +232,8 @@ class ReducedSettings:
 
 @pydantic_dataclass(frozen=True, config=_CFG)
 class GlobalSettings:
-    """Resolution of the global reference ``global-mpc``."""
+    """Resolution of the global reference ``global-mpc`` (same meanings as :class:`ReducedSettings`;
+    every drone position is split at the full power resolution, no coarse stage)."""
 
     psi_points: Annotated[int, Field(ge=2)] = 401
     drone_spacing_m: Annotated[float, Field(gt=0)] = 0.5

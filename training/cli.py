@@ -6,6 +6,7 @@ Subcommands read their choices from the package registries (env ids, presets).
 ``lawn benchmark``: the expert and the baselines on the same seeds, a table and a bar plot.
 ``lawn gap``: per-slot optimality gap of planners against the global reference, and the AO's
 convergence at chosen slots.
+``lawn train``: Stable-Baselines3 agents, behaviour cloning and multi-agent training (rl extra).
 """
 
 from __future__ import annotations
@@ -74,7 +75,8 @@ def cmd_evaluate(args) -> int:
     kwargs = _policy_kwargs(args.policy_arg)
     from agents import make_policy
 
-    make_policy(args.policy, cfg, env_id=args.env, **kwargs)  # fail fast on bad names and settings
+    policy = make_policy(args.policy, cfg, env_id=args.env, **kwargs)  # fail fast on bad names and settings
+    args.env = args.env or policy.env_id
     tasks = [(args.policy, args.env, cfg, args.seed + i, kwargs) for i in range(args.episodes)]
     rows = evaluate(tasks, workers=args.workers, progress=not args.quiet, desc=args.policy)
     write_rows(rows, out)
@@ -90,6 +92,7 @@ def cmd_benchmark(args) -> int:
     from .benchmark import run_benchmark
 
     cfg = _config(args)
+    args.policies = list(args.policies) + _included(args.include)
     for name in args.policies:
         make_policy(name, cfg, env_id=args.env)  # fail fast
     _, summary = run_benchmark(args.policies, args.env, cfg, args.episodes, args.seed, Path(args.out),
@@ -136,6 +139,54 @@ def cmd_gap(args) -> int:
     return 0
 
 
+def cmd_train(args) -> int:
+    from .train import resume, train
+
+    if args.resume:
+        summary = resume(Path(args.resume), timesteps=args.timesteps, progress=not args.quiet)
+        out = args.resume
+    else:
+        missing = [flag for flag, value in (("--algo", args.algo), ("--env", args.env), ("--out", args.out)) if not value]
+        if missing:
+            raise ValueError(f"lawn train needs {', '.join(missing)} (or --resume DIR)")
+        if args.timesteps is None:
+            raise ValueError("lawn train needs --timesteps")
+        summary = train(args.algo, args.env, _config(args), args.timesteps, args.seed, Path(args.out),
+                        hp_overrides=_parse_overrides(args.hp), n_envs=args.n_envs, eval_every=args.eval_every,
+                        eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every,
+                        progress=not args.quiet, init_from=Path(args.init_from) if args.init_from else None)
+        out = args.out
+    print(f"lawn train: {summary['algo']} on {summary['env']}, seed {summary['seed']}, "
+          f"{summary['timesteps']} steps in {summary['wall_time_s']:.1f} s")
+    for key in ("final_eval_mean_return", "best_eval_mean_return", "bc_loss_first", "bc_loss_last"):
+        if summary.get(key) is not None:
+            print(f"  {key:<24}{summary[key]:.6g}")
+    print(f"wrote {out}/ (model.zip, run.json, config.json, hyperparams.json, learning curve, summary.md)")
+    return 0
+
+
+def _policy_name(value: str) -> str:
+    from agents.policies import is_policy_name, policy_names
+
+    if not is_policy_name(value):
+        raise argparse.ArgumentTypeError(
+            f"unknown policy {value!r}; valid: {', '.join(policy_names())}, or sb3:DIR, bc:DIR, marl:DIR")
+    return value
+
+
+def _included(paths: list[str]) -> list[str]:
+    """Policy names for trained run directories: marl:, bc: or sb3: by what run.json says."""
+    names = []
+    for path in paths:
+        run_file = Path(path) / "run.json"
+        if not run_file.exists():
+            raise ValueError(f"--include {path}: no run.json there (not a lawn train run directory)")
+        run = json.loads(run_file.read_text())
+        prefix = "marl" if run.get("env") == "lawn/Parallel-v0" else "bc" if run.get("trainer") == "bc" else "sb3"
+        names.append(f"{prefix}:{path}")
+    return names
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="lawn", description="Wireless predictive control over low-altitude networks.")
     parser.add_argument("--version", action="version", version=f"lawn {lawn_env.__version__}")
@@ -150,8 +201,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     workers_default = min(2, os.cpu_count() or 1)
     ev = sub.add_parser("evaluate", help="run a policy on seeded episodes and write one row per episode")
-    ev.add_argument("--policy", required=True, choices=policy_names())
-    ev.add_argument("--env", default="lawn/Joint-v0", choices=list(lawn_env.ENV_IDS))
+    ev.add_argument("--policy", required=True, type=_policy_name,
+                    help=f"{', '.join(policy_names())}, or sb3:DIR / bc:DIR / marl:DIR for trained agents")
+    ev.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
+                    help="default: lawn/Joint-v0, or the env a trained agent was trained on")
     ev.add_argument("--episodes", type=int, default=10)
     ev.add_argument("--seed", type=int, default=0, help="first seed; episode i uses seed + i")
     ev.add_argument("--out", required=True, help="rows file, .csv or .json")
@@ -165,6 +218,8 @@ def build_parser() -> argparse.ArgumentParser:
     bm = sub.add_parser("benchmark", help="the expert and the baselines on the same seeded episodes")
     bm.add_argument("--policies", nargs="+", default=list(BENCHMARK_POLICIES), choices=policy_names())
     bm.add_argument("--env", default="lawn/Joint-v0", choices=list(lawn_env.ENV_IDS))
+    bm.add_argument("--include", nargs="*", default=[], metavar="DIR",
+                    help="trained run directories (lawn train) to add to the comparison")
     bm.add_argument("--episodes", type=int, default=20)
     bm.add_argument("--seed", type=int, default=0)
     bm.add_argument("--out", default="runs/benchmark", help="output directory (default: %(default)s)")
@@ -172,6 +227,26 @@ def build_parser() -> argparse.ArgumentParser:
     bm.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_config_args(bm)
     bm.set_defaults(func=cmd_benchmark)
+
+    from .train import ALGOS, TRAIN_ENV_IDS
+
+    tr = sub.add_parser("train", help="train a Stable-Baselines3 agent (or behaviour cloning) on a lawn env")
+    tr.add_argument("--algo", choices=ALGOS)
+    tr.add_argument("--env", choices=TRAIN_ENV_IDS, help="lawn/Parallel-v0 is the multi-agent PettingZoo env")
+    tr.add_argument("--timesteps", type=int, help="environment steps (for bc: expert transitions)")
+    tr.add_argument("--seed", type=int, default=0)
+    tr.add_argument("--out", help="run directory")
+    tr.add_argument("--n-envs", type=int, default=None, help="parallel environments (default: the hyperparameter file)")
+    tr.add_argument("--hp", action="append", default=[], metavar="KEY=VALUE",
+                    help="hyperparameter override, e.g. --hp learning_rate=1e-4 (repeatable)")
+    tr.add_argument("--eval-every", type=int, default=5000, help="steps between evaluations")
+    tr.add_argument("--eval-episodes", type=int, default=5)
+    tr.add_argument("--checkpoint-every", type=int, default=10000, help="steps between checkpoints")
+    tr.add_argument("--init-from", metavar="DIR", help="start from a behaviour-cloned run of the same algorithm")
+    tr.add_argument("--resume", metavar="DIR", help="continue an interrupted run from its last checkpoint")
+    tr.add_argument("--quiet", action="store_true")
+    _add_config_args(tr)
+    tr.set_defaults(func=cmd_train)
 
     gp = sub.add_parser("gap", help="per-slot optimality gap of planners against the global reference")
     gp.add_argument("--policies", nargs="+", default=["ao-mpc", "rg-mpc"], choices=policy_names())

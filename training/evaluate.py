@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -91,7 +92,9 @@ def _pool_map(fn, tasks: list, workers: int, progress: bool, desc: str) -> list:
                 out.append(fn(task))
                 bar.update()
             return out
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        # forkserver: workers fork from a clean server process, never from a parent that has loaded
+        # torch (forking a process with live torch/OpenMP thread pools can deadlock the children)
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("forkserver")) as pool:
             futures = [pool.submit(fn, task) for task in tasks]
             for fut in futures:
                 fut.add_done_callback(lambda _: bar.update())

@@ -1,0 +1,134 @@
+"""Training round trips with tiny budgets (seconds each); skipped without the rl extra."""
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+pytest.importorskip("supersuit")
+
+from agents import make_policy  # noqa: E402
+from lawn_env import ScenarioConfig  # noqa: E402
+from training.cli import main  # noqa: E402
+from training.train import load_hyperparams, resume, train  # noqa: E402
+
+SMALL = ScenarioConfig(num_slots=12)
+FAST = {"ppo": {"n_steps": 64, "batch_size": 64, "n_epochs": 2}, "a2c": {"n_steps": 8},
+        "sac": {"learning_starts": 64, "buffer_size": 2000, "batch_size": 32},
+        "td3": {"learning_starts": 64, "buffer_size": 2000, "batch_size": 32}}
+
+
+def _train(tmp_path, algo, env_id="lawn/Joint-v0", steps=256, name=None, **kwargs):
+    out = tmp_path / (name or f"{algo}-{env_id.split('/')[-1]}")
+    hp = {**FAST.get(algo, {}), **kwargs.pop("hp_overrides", {})}
+    n_envs = kwargs.pop("n_envs", 2 if algo in ("ppo", "a2c") else 1)
+    summary = train(algo, env_id, SMALL, steps, 3, out, hp_overrides=hp, n_envs=n_envs, eval_every=128,
+                    eval_episodes=1, checkpoint_every=128, progress=False, **kwargs)
+    return out, summary
+
+
+def _run_episode(policy, env_id):
+    env = gym.make(env_id, config=SMALL)
+    obs, _ = env.reset(seed=0)
+    policy.reset(0)
+    done = False
+    while not done:
+        action = policy.act(obs)
+        assert env.action_space.contains(action)
+        obs, _, _, done, info = env.step(action)
+    return info["episode_metrics"]
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac", "td3", "a2c"])
+def test_train_save_load_evaluate(tmp_path, algo):
+    env_id = "lawn/Comm-v0" if algo == "sac" else "lawn/Joint-v0"
+    out, summary = _train(tmp_path, algo, env_id)
+    for name in ("model.zip", "vecnormalize.pkl", "run.json", "config.json", "hyperparams.json",
+                 "learning_curve.csv", "learning_curve.png", "summary.md"):
+        assert (out / name).exists(), name
+    assert (out / "tb").is_dir() and any((out / "checkpoints").glob("model_*_steps.zip"))
+    run = json.loads((out / "run.json").read_text())
+    assert run["num_timesteps"] >= 256 and run["hyperparams_version"] >= 1 and "torch" in run["versions"]
+    assert ScenarioConfig.from_dict(json.loads((out / "config.json").read_text())) == SMALL
+    policy = make_policy(f"sb3:{out}")
+    assert policy.env_id == env_id
+    metrics = _run_episode(policy, env_id)
+    assert np.isfinite(metrics["control_cost"])
+
+
+def test_same_seed_same_agent(tmp_path):
+    a, _ = _train(tmp_path, "ppo", name="a")
+    b, _ = _train(tmp_path, "ppo", name="b")
+    pa, pb = make_policy(f"sb3:{a}"), make_policy(f"sb3:{b}")
+    obs = gym.make("lawn/Joint-v0", config=SMALL).reset(seed=5)[0]
+    assert np.array_equal(pa.act(obs), pb.act(obs))
+
+
+def test_resume_continues_the_step_count(tmp_path):
+    out, _ = _train(tmp_path, "ppo", steps=256)
+    summary = resume(out, timesteps=512, progress=False)
+    run = json.loads((out / "run.json").read_text())
+    assert run["num_timesteps"] == 512 and summary["timesteps"] == 512
+    with pytest.raises(ValueError, match="no run.json"):
+        resume(tmp_path / "nowhere")
+
+
+def test_behaviour_cloning_reduces_loss_and_warm_starts_ppo(tmp_path):
+    out, summary = _train(tmp_path, "bc", "lawn/Comm-v0", steps=120, name="bc",
+                          hp_overrides={"epochs": 8, "dagger_iterations": 1, "dagger_timesteps": 36})
+    history = json.loads((out / "bc_losses.json").read_text())
+    assert history[0]["losses"][-1] < history[0]["losses"][0]
+    assert history[1]["samples"] == 156
+    assert summary["bc_loss_last"] < summary["bc_loss_first"]
+    metrics = _run_episode(make_policy(f"bc:{out}"), "lawn/Comm-v0")
+    assert np.isfinite(metrics["control_cost"])
+    # PPO started from the cloned policy: same weights before any update
+    from stable_baselines3 import PPO
+
+    from training.train import _init_from, make_train_env
+
+    env = make_train_env("lawn/Comm-v0", SMALL, 1, 0, {"norm_obs": True}, None)
+    model = PPO("MlpPolicy", env, policy_kwargs={"net_arch": [128, 128], "log_std_init": -1.0}, seed=0)
+    _init_from(model, out, env)
+    cloned = PPO.load(str(out / "model.zip"))
+    for p, q in zip(model.policy.parameters(), cloned.policy.parameters()):
+        assert np.array_equal(p.detach().numpy(), q.detach().numpy())
+
+
+def test_multi_agent_round_trip(tmp_path):
+    out, _ = _train(tmp_path, "ppo", "lawn/Parallel-v0", steps=128, n_envs=1)
+    policy = make_policy(f"marl:{out}")
+    assert policy.env_id == "lawn/Joint-v0"
+    obs = gym.make("lawn/Joint-v0", config=SMALL).reset(seed=1)[0]
+    agent_obs = policy.agent_observations(obs)
+    assert agent_obs.shape == (5, policy.model.observation_space.shape[0])
+    assert np.array_equal(agent_obs[:, -5:], np.eye(5))  # SuperSuit's one-hot agent indicator
+    metrics = _run_episode(policy, "lawn/Joint-v0")
+    assert np.isfinite(metrics["control_cost"])
+    with pytest.raises(ValueError, match="marl:"):
+        make_policy(f"sb3:{out}")
+
+
+def test_errors_name_the_problem(tmp_path, capsys):
+    with pytest.raises(ValueError, match="unknown algorithm 'ddpg'"):
+        load_hyperparams("ddpg", "lawn/Joint-v0")
+    with pytest.raises(ValueError, match="unknown env id 'lawn/Nope-v0'"):
+        load_hyperparams("ppo", "lawn/Nope-v0")
+    with pytest.raises(ValueError, match="unknown PPO hyperparameters \\['lerning_rate'\\]"):
+        train("ppo", "lawn/Joint-v0", SMALL, 64, 0, tmp_path / "x", hp_overrides={"lerning_rate": 1e-3}, progress=False)
+    with pytest.raises(ValueError, match="not a lawn train run directory"):
+        make_policy(f"sb3:{tmp_path / 'missing'}")
+    with pytest.raises(ValueError, match="unknown policy prefix 'zz'"):
+        make_policy("zz:somewhere")
+    with pytest.raises(SystemExit):
+        main(["train", "--algo", "ddpg", "--env", "lawn/Joint-v0", "--timesteps", "10", "--out", str(tmp_path / "y")])
+    assert "invalid choice: 'ddpg'" in capsys.readouterr().err
+    assert main(["train", "--resume", str(tmp_path / "nowhere"), "--quiet"]) == 2
+    assert "no run.json" in capsys.readouterr().err
+    assert main(["benchmark", "--include", str(tmp_path / "nowhere"), "--quiet", "--episodes", "1"]) == 2
+    assert "no run.json" in capsys.readouterr().err
+    out, _ = _train(tmp_path, "ppo", steps=64, name="exists")
+    with pytest.raises(ValueError, match="already holds a run"):
+        _train(tmp_path, "ppo", steps=64, name="exists")

@@ -1,0 +1,164 @@
+"""Behaviour cloning of an expert, with optional DAgger relabelling (``lawn train --algo bc``).
+
+1. Roll out the expert (``rg-mpc`` by default) for ``timesteps`` transitions of seeded episodes
+   and record (observation, action) pairs.
+2. Fit the policy network of an SB3 algorithm (``target``: PPO or SAC) by mean-squared error
+   between its deterministic action and the expert's, on observations normalized with the
+   expert data's running mean and variance (saved as ``vecnormalize.pkl``).
+3. DAgger: run the cloned policy for ``dagger_timesteps`` more transitions, label the states it
+   visits with the expert's actions, add them to the data set and fit again; ``dagger_iterations``
+   times.
+
+The result is an SB3 model in the run directory's usual layout, so ``lawn evaluate --policy
+bc:DIR`` and ``lawn train --algo ppo --init-from DIR`` use it directly.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any, Mapping
+
+import gymnasium as gym
+import numpy as np
+
+from agents import make_policy
+from lawn_env import ScenarioConfig
+
+__all__ = ["collect", "fit", "train_bc_run"]
+
+
+def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, actor=None):
+    """``steps`` transitions of seeded episodes; states visited by ``actor`` (default the expert)
+    and labelled with the expert's actions. Returns observations, expert actions and returns."""
+    env = gym.make(env_id, config=config)
+    expert = make_policy(expert_name, config, env_id=env_id)
+    obs_list, act_list, returns = [], [], []
+    episode = 0
+    while len(obs_list) < steps:
+        obs, _ = env.reset(seed=seed + episode)
+        expert.reset(seed + episode)
+        done, total = False, 0.0
+        while not done and len(obs_list) < steps:
+            label = expert.act(obs)  # the expert plans every slot, also when it does not act
+            obs_list.append(obs)
+            act_list.append(label)
+            action = label if actor is None else actor(obs)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total += reward
+            done = terminated or truncated
+        returns.append(total)
+        episode += 1
+    env.close()
+    return np.array(obs_list, dtype=np.float32), np.array(act_list, dtype=np.float32), returns
+
+
+def _deterministic_action(model, obs_tensor):
+    from stable_baselines3 import SAC
+
+    if isinstance(model, SAC):
+        return model.policy.actor(obs_tensor, deterministic=True)
+    return model.policy.get_distribution(obs_tensor).mode()
+
+
+def fit(model, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_size: int, learning_rate: float,
+        seed: int) -> list[float]:
+    """Mean-squared-error regression of the model's deterministic action on the expert's; returns
+    the loss of every epoch (over the whole data set, before the epoch's updates for epoch 0)."""
+    import torch
+
+    torch.manual_seed(seed)
+    policy = model.policy
+    params = list(model.policy.actor.parameters()) if hasattr(policy, "actor") else list(policy.parameters())
+    optimizer = torch.optim.Adam(params, lr=learning_rate)
+    x = torch.as_tensor(obs)
+    y = torch.as_tensor(actions)
+    rng = np.random.default_rng(seed)
+    losses = []
+
+    def full_loss() -> float:
+        with torch.no_grad():
+            return float(((_deterministic_action(model, x) - y) ** 2).mean())
+
+    losses.append(full_loss())
+    for _ in range(epochs):
+        order = rng.permutation(len(x))
+        for start in range(0, len(x), batch_size):
+            idx = torch.as_tensor(order[start : start + batch_size])
+            loss = ((_deterministic_action(model, x[idx]) - y[idx]) ** 2).mean()
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+        losses.append(full_loss())
+    return losses
+
+
+def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int, out_dir: Path,
+                 params: Mapping[str, Any], version: int, progress: bool = True) -> dict:
+    from stable_baselines3 import PPO, SAC
+    from stable_baselines3.common.running_mean_std import RunningMeanStd
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from .train import _versions, limit_torch_threads, write_learning_curve
+
+    limit_torch_threads()
+    if env_id not in ("lawn/Joint-v0", "lawn/Comm-v0"):
+        raise ValueError(f"behaviour cloning runs on lawn/Joint-v0 or lawn/Comm-v0, not {env_id!r}")
+    p = dict(params)
+    p.pop("n_envs", None)  # expert rollouts run in one environment
+    target = p.pop("target", "ppo")
+    targets = {"ppo": PPO, "sac": SAC}
+    if target not in targets:
+        raise ValueError(f"bc target {target!r}; valid: {', '.join(targets)}")
+    expert = p.pop("expert", "rg-mpc")
+    epochs, batch_size = int(p.pop("epochs", 30)), int(p.pop("batch_size", 256))
+    lr = float(p.pop("learning_rate", 1e-3))
+    dagger_iterations = int(p.pop("dagger_iterations", 0))
+    dagger_steps = int(p.pop("dagger_timesteps", 1200))
+    policy_kwargs = p.pop("policy_kwargs", {})
+    if target == "sac":
+        policy_kwargs = {k: v for k, v in policy_kwargs.items() if k != "log_std_init"}
+    if p:
+        raise ValueError(f"unknown bc hyperparameters {sorted(p)}; valid: expert, target, epochs, batch_size, "
+                         "learning_rate, dagger_iterations, dagger_timesteps, policy_kwargs")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    obs, actions, expert_returns = collect(env_id, config, expert, timesteps, seed)
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make(env_id, config=config)]), norm_reward=False)
+    venv.obs_rms = RunningMeanStd(shape=obs.shape[1:])
+    venv.obs_rms.update(obs.astype(np.float64))
+    venv.training = False
+    model = targets[target]("MlpPolicy", venv, seed=seed, policy_kwargs=policy_kwargs, verbose=0, device="cpu")
+
+    def normalized(o):
+        return venv.normalize_obs(o).astype(np.float32)
+
+    history = [{"round": 0, "samples": len(obs), "losses": fit(model, normalized(obs), actions, epochs, batch_size,
+                                                                lr, seed)}]
+    for it in range(1, dagger_iterations + 1):
+        def actor(o, _m=model):
+            a, _ = _m.predict(normalized(o), deterministic=True)
+            return np.clip(a, -1, 1).astype(np.float32)
+
+        new_obs, new_act, _ = collect(env_id, config, expert, dagger_steps, seed + 1000 * it, actor=actor)
+        obs, actions = np.concatenate([obs, new_obs]), np.concatenate([actions, new_act])
+        history.append({"round": it, "samples": len(obs),
+                        "losses": fit(model, normalized(obs), actions, epochs, batch_size, lr, seed + it)})
+    elapsed = time.perf_counter() - start
+    model.save(str(out_dir / "model.zip"))
+    venv.save(str(out_dir / "vecnormalize.pkl"))
+    resolved = {"expert": expert, "target": target, "epochs": epochs, "batch_size": batch_size, "learning_rate": lr,
+                "dagger_iterations": dagger_iterations, "dagger_timesteps": dagger_steps, "policy_kwargs": policy_kwargs}
+    spec = {"algo": target, "target": target, "trainer": "bc", "env": env_id, "seed": seed, "timesteps": timesteps,
+            "num_timesteps": int(len(obs)), "hyperparams_version": version, "wall_time_s": elapsed,
+            "expert_mean_return": float(np.mean(expert_returns)), "versions": _versions()}
+    (out_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
+    (out_dir / "hyperparams.json").write_text(json.dumps(resolved, indent=2))
+    (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
+    (out_dir / "bc_losses.json").write_text(json.dumps(history, indent=2))
+    summary = write_learning_curve(out_dir, spec)
+    summary.update(bc_loss_first=history[0]["losses"][0], bc_loss_last=history[-1]["losses"][-1])
+    venv.close()
+    return summary

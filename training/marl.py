@@ -1,0 +1,52 @@
+"""Multi-agent training on the PettingZoo env through SuperSuit (parameter sharing).
+
+The drone and the K AGVs act through one shared network: SuperSuit pads every agent's
+observation and action to a common size and appends a one-hot agent indicator
+(``agent_indicator_v0``), then flattens the agents into a vector environment for SB3. The AGVs
+share all parameters; the drone's outputs come from the same network conditioned on its
+indicator (SB3 trains one policy per VecEnv, so a separate drone network would need two
+coupled learners). ``agents.learned.MARLPolicy`` runs such a policy on ``lawn/Joint-v0``.
+"""
+
+from __future__ import annotations
+
+from lawn_env import ScenarioConfig, parallel_env
+
+__all__ = ["wrap_parallel", "make_marl_vec_env"]
+
+
+def wrap_parallel(config: ScenarioConfig):
+    """The PettingZoo env with SuperSuit's padding and agent indicator."""
+    import supersuit as ss
+
+    env = parallel_env(config)
+    env = ss.pad_observations_v0(env)
+    env = ss.pad_action_space_v0(env)
+    return ss.agent_indicator_v0(env, type_only=False)
+
+
+def make_marl_vec_env(config: ScenarioConfig, n_envs: int, seed: int):
+    """An SB3 VecEnv with one sub-environment per agent per copy of the system, seeded."""
+    import supersuit as ss
+    from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
+
+    class _Seeded(SB3VecEnvWrapper):
+        """SuperSuit's SB3 adapter with SB3's ``seed`` (the next reset uses it)."""
+
+        _next_seed = None
+
+        def seed(self, seed=None):
+            self._next_seed = seed
+            return [seed]
+
+        def reset(self, seed=None, options=None):
+            seed = seed if seed is not None else self._next_seed
+            self._next_seed = None
+            observations, self.reset_infos = self.venv.reset(seed=seed)
+            return observations
+
+    venv = ss.pettingzoo_env_to_vec_env_v1(wrap_parallel(config))
+    venv = ss.concat_vec_envs_v1(venv, n_envs, num_cpus=0, base_class="gymnasium")
+    wrapped = _Seeded(venv)
+    wrapped.seed(seed)
+    return wrapped
