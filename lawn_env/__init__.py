@@ -9,7 +9,7 @@ builds the PettingZoo environment. The physics lives in :mod:`lawn_env.channel`,
 from gymnasium.envs.registration import register, registry
 
 from . import channel, dynamics, drone, presets, references
-from .config import ChannelConfig, ControlConfig, DroneConfig, ReferenceConfig, ScenarioConfig
+from .config import ChannelConfig, ControlConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 from .core import Simulation, Snapshot
 from .envs import CommEnv, JointEnv, LawnParallelEnv, parallel_env
 from .spaces import ObservationLayout
@@ -32,6 +32,7 @@ __all__ = [
     "ControlConfig",
     "DroneConfig",
     "ReferenceConfig",
+    "DisturbanceConfig",
     "ScenarioConfig",
     "Simulation",
     "Snapshot",

@@ -23,6 +23,7 @@ __all__ = [
     "ControlConfig",
     "DroneConfig",
     "ReferenceConfig",
+    "DisturbanceConfig",
     "ScenarioConfig",
     "REFERENCE_FAMILIES",
 ]
@@ -136,6 +137,43 @@ class ReferenceConfig:
         return self
 
 
+NonNegative = Annotated[float, Field(ge=0)]
+
+
+@dataclass(frozen=True, config=_PYDANTIC)
+class DisturbanceConfig:
+    """The disturbance mode that stands in for the paper's AirSim validation (MODEL.md §7, decided).
+
+    All off by default; the ``disturbed`` preset switches them on with the values below in
+    brackets. Planners are not told about them: they plan with the nominal model.
+    """
+
+    wind_mps: tuple[float, float] = (0.0, 0.0)
+    """Mean wind drifting the drone, m/s [(2.0, 2.5), the paper's AirSim setting]."""
+    wind_gust_std_mps: NonNegative = 0.0
+    """Std of the per-slot gust added to the wind, m/s per axis [1.0]."""
+    actuator_lag_s: NonNegative = 0.0
+    """Time constant of a first-order lag between the commanded and the applied AGV acceleration, s [0.3]."""
+    process_noise_position_m: NonNegative = 0.0
+    """Std of the per-slot AGV position noise, m per axis [0.05]."""
+    process_noise_velocity_mps: NonNegative = 0.0
+    """Std of the per-slot AGV velocity noise, m/s per axis [0.05]."""
+    measurement_noise_position_m: NonNegative = 0.0
+    """Std of the noise on the AGV positions the policies observe, m per axis [0.2]."""
+    measurement_noise_velocity_mps: NonNegative = 0.0
+    """Std of the noise on the AGV velocities the policies observe, m/s per axis [0.1]."""
+    control_period_slots: PositiveInt = 1
+    """Commands are sent every this many slots (a reduced control rate); in between the AGVs keep
+    their last acceleration and nothing is transmitted [2]."""
+
+    @property
+    def active(self) -> bool:
+        return (any(self.wind_mps) or self.wind_gust_std_mps > 0 or self.actuator_lag_s > 0
+                or self.process_noise_position_m > 0 or self.process_noise_velocity_mps > 0
+                or self.measurement_noise_position_m > 0 or self.measurement_noise_velocity_mps > 0
+                or self.control_period_slots > 1)
+
+
 @dataclass(frozen=True, config=_PYDANTIC)
 class ScenarioConfig:
     """One scenario: K AGVs tracking reference paths, one drone serving them over FBL links.
@@ -159,6 +197,7 @@ class ScenarioConfig:
     drone: DroneConfig = dataclasses.field(default_factory=DroneConfig)
     control: ControlConfig = dataclasses.field(default_factory=ControlConfig)
     reference: ReferenceConfig = dataclasses.field(default_factory=ReferenceConfig)
+    disturbance: DisturbanceConfig = dataclasses.field(default_factory=DisturbanceConfig)
 
     @model_validator(mode="after")
     def _check_scenario(self) -> "ScenarioConfig":

@@ -18,7 +18,7 @@ from scipy import special
 
 from . import channel, drone, references
 from .config import ScenarioConfig
-from .dynamics import PredictionModel, packed_step_matrices
+from .dynamics import PredictionModel, packed_step_matrices, stage_cost
 
 __all__ = ["Simulation", "Snapshot", "SlotRecord"]
 
@@ -74,6 +74,9 @@ class Simulation:
         self.planning_link = channel.LinkParams.from_config(config, planning=True)
         self._link_kwargs = self.link._kwargs
         self._ones2 = np.ones(2)
+        self._disturbed = config.disturbance.active
+        lag = config.disturbance.actuator_lag_s
+        self._lag_alpha = float(np.exp(-config.slot_s / lag)) if lag > 0 else 0.0
         self._altitude_sq = config.drone.altitude_m**2
         self.power_budget_w = config.power_budget_w
         self.accel_max = config.control.accel_max_mps2
@@ -118,6 +121,10 @@ class Simulation:
         x_aug[:, 2:4] = self.reference[:, 0, 2:4]
         self.x_aug = x_aug
         self.tracking_error = x_aug - self.reference[:, 0]
+        self._applied = x_aug[:, 4:6].copy()
+        self.x_obs, self.error_obs = self.x_aug, self.tracking_error
+        if self._disturbed:
+            self._observe()
         self.drone_position = np.array(cfg.drone.start_m, dtype=float)
         self.slot = 0
         self.last_power_w = np.full(k, self.power_budget_w / k)
@@ -158,7 +165,7 @@ class Simulation:
 
     def snapshot(self) -> Snapshot:
         return Snapshot(
-            x_aug=self.x_aug.copy(),
+            x_aug=self.x_obs.copy(),  # measured state: what a planner would have
             reference=self.reference_window().copy(),
             drone_position=self.drone_position.copy(),
             slot=self.slot,
@@ -176,6 +183,8 @@ class Simulation:
         ``power_w`` and ``drone_next``, so pass fresh arrays. Commands are sent from q[n]
         to the AGVs at their slot-n positions and arrive with the sampled fading.
         """
+        if self._disturbed:
+            return self._step_disturbed(increment, power_w, drone_next)
         x_aug = self.x_aug
         du = self.saturate_increment(increment)
         link = self.link
@@ -192,8 +201,8 @@ class Simulation:
         terms = (err * err) @ self._packed_w
         tracking, effort = terms[:, 0], terms[:, 1]
         x_next = packed[:, 0:6]
-        self.x_aug = x_next
-        self.tracking_error = err[:, 0:6]
+        self.x_aug = self.x_obs = x_next
+        self.tracking_error = self.error_obs = err[:, 0:6]
         self.drone_position = drone_next
         self.last_power_w = power_w
         self.last_delivered = delivered
@@ -201,6 +210,65 @@ class Simulation:
         record = SlotRecord(tracking, effort, delivered, outage_p, du, power_w, drone_next, x_next[:, 0:2])
         self.history.append(record)
         return record
+
+    def _step_disturbed(self, increment, power_w, drone_next) -> SlotRecord:
+        """The slot with the disturbance mode on (MODEL.md §7): wind moves the drone after its
+        planned move, commands go out only every ``control_period_slots``, the applied AGV
+        acceleration lags the commanded one, the AGV state takes process noise, and what the
+        policies observe takes measurement noise. Same equations otherwise (channel, costs)."""
+        d = self.config.disturbance
+        rng = self.rng
+        wind = np.asarray(d.wind_mps, dtype=float)
+        if d.wind_gust_std_mps > 0:
+            wind = wind + rng.normal(0.0, d.wind_gust_std_mps, 2)
+        drone_next = np.clip(np.asarray(drone_next, dtype=float) + wind * self.slot_s, self._area_lo, self._area_hi)
+        x_aug = self.x_aug
+        du = self.saturate_increment(increment)
+        if self.slot % d.control_period_slots:
+            du[:] = 0.0  # no command this slot (reduced control rate): nothing is sent
+        d2 = channel.distance_sq(drone_next, x_aug[:, 0:2], self.link.altitude_m)
+        x = self.link.outage_argument_sq(power_w, d2)
+        outage_p = special.gammainc(self.link.m, x)
+        delivered = channel.delivered_from_fading(channel.sample_normalized_fading(rng, self.link.m, self.num_agvs), x)
+        du *= delivered[:, None]
+        commanded = x_aug[:, 4:6] + du  # u[n], what the AGV's controller is told
+        applied = commanded if d.actuator_lag_s <= 0 else (
+            self._lag_alpha * self._applied + (1.0 - self._lag_alpha) * commanded)
+        self._applied = applied
+        dt = self.slot_s
+        x_next = np.empty_like(x_aug)
+        x_next[:, 0:2] = x_aug[:, 0:2] + x_aug[:, 2:4] * dt + 0.5 * applied * dt * dt
+        x_next[:, 2:4] = x_aug[:, 2:4] + applied * dt
+        x_next[:, 4:6] = commanded
+        if d.process_noise_position_m > 0:
+            x_next[:, 0:2] += rng.normal(0.0, d.process_noise_position_m, (self.num_agvs, 2))
+        if d.process_noise_velocity_mps > 0:
+            x_next[:, 2:4] += rng.normal(0.0, d.process_noise_velocity_mps, (self.num_agvs, 2))
+        self.slot += 1
+        err = x_next - self.reference[:, self.slot]
+        tracking, effort = stage_cost(err, du, self._q1, self._q2)
+        self.x_aug = x_next
+        self.tracking_error = err
+        self._observe()
+        self.drone_position = drone_next
+        self.last_power_w = power_w
+        self.last_delivered = delivered
+        self.last_outage_probability = outage_p
+        record = SlotRecord(tracking, effort, delivered, outage_p, du, power_w, drone_next, x_next[:, 0:2])
+        self.history.append(record)
+        return record
+
+    def _observe(self) -> None:
+        """What the policies see: the state with measurement noise (the true state without it)."""
+        d = self.config.disturbance
+        if d.measurement_noise_position_m <= 0 and d.measurement_noise_velocity_mps <= 0:
+            self.x_obs, self.error_obs = self.x_aug, self.tracking_error
+            return
+        noise = np.zeros_like(self.x_aug)
+        noise[:, 0:2] = self.rng.normal(0.0, d.measurement_noise_position_m, (self.num_agvs, 2))
+        noise[:, 2:4] = self.rng.normal(0.0, d.measurement_noise_velocity_mps, (self.num_agvs, 2))
+        self.x_obs = self.x_aug + noise
+        self.error_obs = self.tracking_error + noise
 
     @property
     def done(self) -> bool:

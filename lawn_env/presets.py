@@ -6,7 +6,7 @@ Register more with :func:`register` (a duplicate name raises).
 
 from __future__ import annotations
 
-from .config import ChannelConfig, ScenarioConfig
+from .config import ChannelConfig, DisturbanceConfig, ScenarioConfig
 
 __all__ = ["PRESETS", "get", "names", "register"]
 
@@ -41,3 +41,9 @@ register("paper-nominal", ScenarioConfig(channel=ChannelConfig(rate_threshold_bp
 register("k3", ScenarioConfig(num_agvs=3))
 #: Thirty-two AGVs on random paths, for scaling studies and benchmarks.
 register("k32", ScenarioConfig(num_agvs=32))
+#: The default scenario with the disturbance mode on (MODEL.md §7: wind 2 m/s x, 2.5 m/s y with
+#: gusts, actuator lag, process and measurement noise, commands every second slot).
+register("disturbed", ScenarioConfig(disturbance=DisturbanceConfig(
+    wind_mps=(2.0, 2.5), wind_gust_std_mps=1.0, actuator_lag_s=0.3, process_noise_position_m=0.05,
+    process_noise_velocity_mps=0.05, measurement_noise_position_m=0.2, measurement_noise_velocity_mps=0.1,
+    control_period_slots=2)))

@@ -194,9 +194,9 @@ class ObservationLayout:
             self._windows = self.reference_windows(sim.reference)
         v_state, v_err, v_ref, v_rel, v_out, v_del, v_pow, v_drone = self._views
         q = sim.drone_position
-        np.multiply(sim.x_aug, self._state_scale, out=v_state)
+        np.multiply(sim.x_obs, self._state_scale, out=v_state)
         v_state -= self._state_shift_scaled
-        np.multiply(sim.tracking_error, self._ref_scale, out=v_err)
+        np.multiply(sim.error_obs, self._ref_scale, out=v_err)
         v_ref[:] = self._windows[:, sim.slot]
         np.subtract(q, self.center, out=v_drone)
         v_drone *= self._inv_half

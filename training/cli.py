@@ -7,6 +7,8 @@ Subcommands read their choices from the package registries (env ids, presets).
 ``lawn gap``: per-slot optimality gap of planners against the global reference, and the AO's
 convergence at chosen slots.
 ``lawn train``: Stable-Baselines3 agents, behaviour cloning and multi-agent training (rl extra).
+``lawn sweep``: a grid of config fields x policies x seeds into a tidy, resumable table.
+``lawn figures``: the paper's experiments from tables (running missing sweeps).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import argparse
 import json
 import os
 import sys
+import time
 from pathlib import Path
 
 import lawn_env
@@ -165,6 +168,33 @@ def cmd_train(args) -> int:
     return 0
 
 
+def cmd_sweep(args) -> int:
+    from .sweep import load_spec, run_sweep, summarize_sweep
+
+    spec = load_spec(args.spec)
+    rows = run_sweep(spec, Path(args.out), workers=args.workers, backend=args.backend, progress=not args.quiet)
+    print(f"lawn sweep {spec['name']}: {len(rows)} rows in {args.out}; mean ± 95 % interval")
+    print(summarize_sweep(rows, list(spec["grid"])))
+    return 0
+
+
+def cmd_figures(args) -> int:
+    from .figures import make_figures
+
+    start = time.perf_counter()
+    timings = make_figures(args.names, Path(args.out), quick=args.quick, workers=args.workers, progress=not args.quiet)
+    for name, seconds in timings.items():
+        print(f"  {name:<12}{seconds:8.1f} s   {args.out}/{name}.png, .pdf, data/{name}.csv")
+    print(f"lawn figures: {len(timings)} figures in {time.perf_counter() - start:.1f} s"
+          + (" (--quick)" if args.quick else ""))
+    from .figures import format_checks, trend_checks
+
+    table = format_checks(trend_checks(Path(args.out)))
+    (Path(args.out) / "trends.md").write_text(table + "\n")
+    print(table)
+    return 0
+
+
 def _policy_name(value: str) -> str:
     from agents.policies import is_policy_name, policy_names
 
@@ -247,6 +277,26 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--quiet", action="store_true")
     _add_config_args(tr)
     tr.set_defaults(func=cmd_train)
+
+    sw = sub.add_parser("sweep", help="run a grid of config fields x policies x seeds into a tidy table")
+    sw.add_argument("spec", help="sweep spec (YAML or JSON)")
+    sw.add_argument("--out", required=True, help="table (CSV); finished rows are skipped on rerun")
+    sw.add_argument("--workers", type=int, default=workers_default)
+    sw.add_argument("--backend", choices=["process", "ray"], default="process",
+                    help="process pool (default) or Ray (local, or the cluster at $RAY_ADDRESS)")
+    sw.add_argument("--quiet", action="store_true")
+    sw.set_defaults(func=cmd_sweep)
+
+    from .figures import EXPERIMENTS
+
+    fg = sub.add_parser("figures", help="the paper's experiments from tidy tables (running missing sweeps)")
+    fg.add_argument("names", nargs="*", choices=[[]] + list(EXPERIMENTS), metavar="NAME",
+                    help=f"figures to make (default: all): {', '.join(EXPERIMENTS)}")
+    fg.add_argument("--out", default="runs/figures")
+    fg.add_argument("--quick", action="store_true", help="reduced seeds, grids and episode length (tests)")
+    fg.add_argument("--workers", type=int, default=workers_default)
+    fg.add_argument("--quiet", action="store_true")
+    fg.set_defaults(func=cmd_figures)
 
     gp = sub.add_parser("gap", help="per-slot optimality gap of planners against the global reference")
     gp.add_argument("--policies", nargs="+", default=["ao-mpc", "rg-mpc"], choices=policy_names())

@@ -1,0 +1,121 @@
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from lawn_env import DisturbanceConfig, ScenarioConfig
+from training.figures import EXPERIMENTS, make_figures
+from training.sweep import load_spec, read_table, run_sweep
+
+SPEC = {"name": "t", "env": "lawn/Joint-v0", "preset": "default", "set": {"num_slots": 8},
+        "grid": {"channel.blocklength": [256, 1024]}, "policies": ["epa", "pid"], "seeds": 3}
+
+
+def _keys(rows):
+    return [(r["channel.blocklength"], r["policy"], r["seed"]) for r in rows]
+
+
+def test_sweep_rows_and_resume(tmp_path):
+    table = tmp_path / "t.csv"
+    partial = run_sweep(SPEC, table, max_runs=5, progress=False)
+    assert len(partial) == 5
+    rows = run_sweep(SPEC, table, progress=False)
+    assert len(rows) == 12 and len(set(_keys(rows))) == 12
+    again = run_sweep(SPEC, table, progress=False)  # nothing left to do
+    assert again == rows
+    uninterrupted = run_sweep(SPEC, tmp_path / "u.csv", progress=False)
+    by_key = {k: r["control_cost"] for k, r in zip(_keys(uninterrupted), uninterrupted)}
+    assert all(by_key[k] == r["control_cost"] for k, r in zip(_keys(rows), rows))
+    assert rows[0]["lawn_version"] and json.loads(rows[0]["config"])["num_slots"] == 8
+
+
+def test_sweep_survives_being_killed(tmp_path):
+    spec = dict(SPEC, seeds=6, set={"num_slots": 30})
+    spec_file = tmp_path / "spec.json"
+    spec_file.write_text(json.dumps(spec))
+    table = tmp_path / "k.csv"
+    cmd = [sys.executable, "-m", "training.cli", "sweep", str(spec_file), "--out", str(table), "--workers", "1", "--quiet"]
+    proc = subprocess.Popen(cmd, cwd=os.getcwd())
+    deadline = time.time() + 60
+    while time.time() < deadline and len(read_table(table)) < 3:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    killed = read_table(table)
+    assert 3 <= len(killed) < 24, "kill the sweep mid-run"
+    subprocess.run(cmd, cwd=os.getcwd(), check=True)
+    rows = read_table(table)
+    assert len(rows) == 24 and len(set(_keys(rows))) == 24
+    assert [r for r in rows[: len(killed)]] == killed  # finished rows kept as they were
+
+
+def test_sweep_spec_errors(tmp_path):
+    with pytest.raises(ValueError, match="unknown sweep spec keys \\['gird'\\]"):
+        load_spec({"gird": {}})
+    with pytest.raises(ValueError, match="unknown config key 'channel.blocklenght'"):
+        load_spec({"grid": {"channel.blocklenght": [1]}})
+    with pytest.raises(ValueError, match="unknown policy 'nope'"):
+        load_spec({"policies": ["nope"]})
+    with pytest.raises(ValueError, match="does not exist"):
+        load_spec(tmp_path / "none.yml")
+
+
+def test_ray_backend_runs_a_tiny_sweep(tmp_path):
+    pytest.importorskip("ray")
+    rows = run_sweep(dict(SPEC, seeds=1, policies=["epa"]), tmp_path / "r.csv", workers=2, backend="ray", progress=False)
+    assert len(rows) == 2
+
+
+def test_quick_figures_are_built_from_their_tables(tmp_path):
+    timings = make_figures([], tmp_path, quick=True, workers=2, progress=False)
+    assert set(timings) == set(EXPERIMENTS)
+    for name in EXPERIMENTS:
+        assert (tmp_path / f"{name}.png").stat().st_size > 5000 and (tmp_path / f"{name}.pdf").exists()
+        assert (tmp_path / "data" / f"{name}.csv").exists()
+    tables = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "data").glob("*.csv")}
+    for name in EXPERIMENTS:
+        (tmp_path / f"{name}.png").unlink()
+    make_figures([], tmp_path, quick=True, workers=1, progress=False)  # plots only: every table is complete
+    assert {p.name: p.stat().st_mtime_ns for p in (tmp_path / "data").glob("*.csv")} == tables
+    assert all((tmp_path / f"{name}.png").exists() for name in EXPERIMENTS)
+    with pytest.raises(ValueError, match="unknown figures"):
+        make_figures(["fig9"], tmp_path)
+    from training.figures import format_checks, trend_checks
+
+    checks = trend_checks(tmp_path)
+    assert {c["figure"] for c in checks} == {"convergence", "ce", "cdf", "rate", "blocklength", "disturbance"}
+    assert all(isinstance(c["holds"], bool) and c["evidence"] for c in checks)
+    assert format_checks(checks).count("\n") == len(checks) + 1
+
+
+def test_disturbance_mode():
+    with pytest.raises(ValueError, match="disturbance.actuator_lag_s"):
+        ScenarioConfig(disturbance={"actuator_lag_s": -1})
+    assert not ScenarioConfig().disturbance.active and DisturbanceConfig(control_period_slots=2).active
+    env = gym.make("lawn/Joint-v0", config="disturbed").unwrapped
+    obs, _ = env.reset(seed=0)
+    assert not np.allclose(env.sim.x_obs, env.sim.x_aug)  # policies see noisy measurements
+    q0 = env.sim.drone_position.copy()
+    a = np.zeros(env.action_space.shape, dtype=np.float32)
+    a[:8] = 0.5
+    _, _, _, _, info0 = env.step(a)  # slot 0: a command slot
+    assert not np.allclose(env.sim.drone_position, q0)  # the wind moved a drone that commanded no move
+    _, _, _, _, info1 = env.step(a)  # slot 1: no command (control period 2)
+    assert np.allclose(info1["applied_increment"], 0.0)
+    assert np.abs(info0["applied_increment"]).max() > 0
+    a_env = gym.make("lawn/Joint-v0", config="disturbed")
+    b_env = gym.make("lawn/Joint-v0", config="disturbed")
+    oa, _ = a_env.reset(seed=3)
+    ob, _ = b_env.reset(seed=3)
+    for _ in range(10):
+        act = np.full(a_env.action_space.shape, 0.1, dtype=np.float32)
+        oa, ra, *_ = a_env.step(act)
+        ob, rb, *_ = b_env.step(act)
+        assert np.array_equal(oa, ob) and ra == rb

@@ -1,0 +1,216 @@
+"""``lawn sweep SPEC``: a grid of config fields x policies x seeds, one tidy row per run.
+
+A spec (YAML or JSON, or a dict) names the grid::
+
+    name: blocklength
+    env: lawn/Joint-v0
+    preset: default                     # base scenario
+    set: {num_slots: 120}               # fixed overrides (dotted keys)
+    grid: {channel.blocklength: [256, 1024], channel.infinite_blocklength: [false]}
+                                        # a grid key "preset" switches the base preset
+    policies: [rg-mpc, ao-mpc, epa]
+    seeds: 10                           # or an explicit list
+
+Every combination is one episode; its row holds the grid values, the policy, the seed, the
+episode metrics and the software version. Rows are keyed by (grid values, policy, seed, env):
+rerunning a sweep skips finished rows, so a killed sweep resumes without losing or duplicating
+rows. The table (CSV) is rewritten atomically (temporary file + rename) after every finished
+run. Runs go to a local process pool, or to Ray with ``backend="ray"`` (optional extra).
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+import os
+from pathlib import Path
+from typing import Any, Mapping
+
+import lawn_env
+from lawn_env import presets
+
+__all__ = ["SweepSpec", "load_spec", "expand", "run_sweep", "read_table", "summarize_sweep"]
+
+
+class SweepSpec(dict):
+    """A validated sweep specification."""
+
+
+_SPEC_KEYS = {"name", "env", "preset", "set", "grid", "policies", "seeds", "policy_args"}
+
+
+def load_spec(spec: str | Path | Mapping[str, Any]) -> SweepSpec:
+    if not isinstance(spec, Mapping):
+        path = Path(spec)
+        if not path.exists():
+            raise ValueError(f"sweep spec {str(path)!r} does not exist")
+        text = path.read_text()
+        if path.suffix.lower() == ".json":
+            spec = json.loads(text)
+        else:
+            import yaml
+
+            spec = yaml.safe_load(text)
+    unknown = set(spec) - _SPEC_KEYS
+    if unknown:
+        raise ValueError(f"unknown sweep spec keys {sorted(unknown)}; valid: {', '.join(sorted(_SPEC_KEYS))}")
+    out = SweepSpec(name=spec.get("name", "sweep"), env=spec.get("env", "lawn/Joint-v0"),
+                    preset=spec.get("preset", "default"), set=dict(spec.get("set", {})),
+                    grid={k: list(v) for k, v in dict(spec.get("grid", {})).items()},
+                    policies=list(spec.get("policies", ["rg-mpc"])), policy_args=dict(spec.get("policy_args", {})))
+    seeds = spec.get("seeds", 5)
+    out["seeds"] = list(range(seeds)) if isinstance(seeds, int) else [int(s) for s in seeds]
+    if out["env"] not in lawn_env.ENV_IDS:
+        raise ValueError(f"sweep env {out['env']!r}; valid: {', '.join(lawn_env.ENV_IDS)}")
+    from agents import make_policy
+
+    for point in expand(out):  # validate every grid point and policy before running anything
+        cfg = point_config(out, point)
+        for name in out["policies"]:
+            make_policy(name, cfg, env_id=out["env"], **out["policy_args"].get(name, {}))
+    return out
+
+
+def point_config(spec: Mapping[str, Any], point: Mapping[str, Any]):
+    """The scenario of one grid point: its ``preset`` (a grid key may switch presets) with the
+    spec's fixed overrides, then the point's other values."""
+    rest = {k: v for k, v in point.items() if k != "preset"}
+    return presets.get(point.get("preset", spec["preset"])).override(spec["set"]).override(rest)
+
+
+def expand(spec: Mapping[str, Any]) -> list[dict]:
+    keys = list(spec["grid"])
+    return [dict(zip(keys, values)) for values in itertools.product(*(spec["grid"][k] for k in keys))] or [{}]
+
+
+def _key(row: Mapping[str, Any], grid_keys) -> tuple:
+    return tuple(str(row[k]) for k in grid_keys) + (str(row["policy"]), str(int(row["seed"])), str(row["env"]))
+
+
+def read_table(path: Path) -> list[dict]:
+    path = Path(path)
+    if not path.exists():
+        return []
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _write_atomic(rows: list[dict], path: Path) -> None:
+    fields: list[str] = []
+    for row in rows:
+        fields += [k for k in row if k not in fields]
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with tmp.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(rows)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def _run(task) -> dict:
+    from .evaluate import run_episode
+
+    point, policy, seed, env_id, cfg_dict, policy_kwargs, sweep_name = task
+    cfg = lawn_env.ScenarioConfig.from_dict(cfg_dict)
+    row = run_episode(policy, env_id, cfg, seed, policy_kwargs)
+    out = {"sweep": sweep_name, **{k: v for k, v in point.items()}}
+    out.update(row)
+    out["lawn_version"] = lawn_env.__version__
+    out["config"] = json.dumps(cfg.to_dict(), sort_keys=True)
+    return out
+
+
+def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: int = 1, backend: str = "process",
+              progress: bool = True, max_runs: int | None = None) -> list[dict]:
+    """Run the missing rows of ``spec`` into ``table`` (CSV); returns all rows of the table.
+
+    ``max_runs`` stops after that many new runs (for tests of resumption).
+    """
+    spec = load_spec(spec)
+    table = Path(table)
+    table.parent.mkdir(parents=True, exist_ok=True)
+    grid_keys = list(spec["grid"])
+    rows = read_table(table)
+    done = {_key(r, grid_keys) for r in rows}
+    tasks = []
+    for point in expand(spec):
+        cfg_dict = point_config(spec, point).to_dict()
+        for policy in spec["policies"]:
+            for seed in spec["seeds"]:
+                probe = {**{k: v for k, v in point.items()}, "policy": policy, "seed": seed, "env": spec["env"]}
+                if _key(probe, grid_keys) not in done:
+                    tasks.append((point, policy, seed, spec["env"], cfg_dict, spec["policy_args"].get(policy, {}),
+                                  spec["name"]))
+    if max_runs is not None:
+        tasks = tasks[:max_runs]
+    if not tasks:
+        return rows
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=len(tasks), desc=spec["name"], unit="run", disable=not progress, leave=False)
+    try:
+        for row in _execute(tasks, workers, backend):
+            rows.append(row)
+            _write_atomic(rows, table)
+            bar.update()
+    finally:
+        bar.close()
+    return read_table(table)
+
+
+def _execute(tasks, workers: int, backend: str):
+    """Yield rows as runs finish."""
+    if backend == "ray":
+        try:
+            import ray
+        except ImportError as exc:
+            raise ValueError("--backend ray needs Ray: pip install 'ray[default]'") from exc
+        if not ray.is_initialized():
+            ray.init(address=os.environ.get("RAY_ADDRESS"), num_cpus=None if os.environ.get("RAY_ADDRESS") else workers,
+                     include_dashboard=False, log_to_driver=False)
+        remote = ray.remote(_run)
+        pending = [remote.remote(t) for t in tasks]
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            yield ray.get(ready[0])
+        return
+    if backend != "process":
+        raise ValueError(f"unknown backend {backend!r}; valid: process, ray")
+    if workers <= 1:
+        for t in tasks:
+            yield _run(t)
+        return
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("forkserver")) as pool:
+        pending = {pool.submit(_run, t) for t in tasks}
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                yield fut.result()
+
+
+def summarize_sweep(rows: list[dict], grid_keys, metrics=("control_cost", "rmse_m", "outage_rate")) -> str:
+    """Markdown table: mean ± 95 % interval of ``metrics`` per grid point and policy."""
+    import math
+
+    import numpy as np
+    from scipy import stats
+
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault(tuple(str(r[k]) for k in grid_keys) + (r["policy"],), []).append(r)
+    header = list(grid_keys) + ["policy", "runs"] + list(metrics)
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for key, members in groups.items():
+        cells = list(key) + [str(len(members))]
+        for m in metrics:
+            v = np.array([float(r[m]) for r in members])
+            half = stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size) if v.size > 1 else float("nan")
+            cells.append(f"{v.mean():.4g} ± {half:.2g}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
