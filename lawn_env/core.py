@@ -203,11 +203,14 @@ class Simulation:
         x_next = packed[:, 0:6]
         self.x_aug = self.x_obs = x_next
         self.tracking_error = self.error_obs = err[:, 0:6]
-        self.drone_position = drone_next
-        self.last_power_w = power_w
-        self.last_delivered = delivered
-        self.last_outage_probability = outage_p
-        record = SlotRecord(tracking, effort, delivered, outage_p, du, power_w, drone_next, x_next[:, 0:2])
+        return self._record(SlotRecord(tracking, effort, delivered, outage_p, du, power_w, drone_next, x_next[:, 0:2]))
+
+    def _record(self, record: SlotRecord) -> SlotRecord:
+        """The slot's bookkeeping shared by both step paths (the AGV state is already updated)."""
+        self.drone_position = record.drone_position
+        self.last_power_w = record.power_w
+        self.last_delivered = record.delivered
+        self.last_outage_probability = record.outage_probability
         self.history.append(record)
         return record
 
@@ -250,13 +253,7 @@ class Simulation:
         self.x_aug = x_next
         self.tracking_error = err
         self._observe()
-        self.drone_position = drone_next
-        self.last_power_w = power_w
-        self.last_delivered = delivered
-        self.last_outage_probability = outage_p
-        record = SlotRecord(tracking, effort, delivered, outage_p, du, power_w, drone_next, x_next[:, 0:2])
-        self.history.append(record)
-        return record
+        return self._record(SlotRecord(tracking, effort, delivered, outage_p, du, power_w, drone_next, x_next[:, 0:2]))
 
     def _observe(self) -> None:
         """What the policies see: the state with measurement noise (the true state without it)."""

@@ -84,7 +84,7 @@ def evaluate(tasks: Iterable[tuple], workers: int = 1, progress: bool = True, de
 def _pool_map(fn, tasks: list, workers: int, progress: bool, desc: str) -> list:
     """``[fn(t) for t in tasks]`` in a process pool when ``workers > 1``, with a progress bar;
     results in task order whatever the scheduling."""
-    bar = tqdm(total=len(tasks), desc=desc, unit="ep", disable=not progress, leave=False)
+    bar = tqdm(total=len(tasks), desc=desc, unit="ep", disable=None if progress else True, leave=False)
     try:
         if workers <= 1 or len(tasks) <= 1:
             out = []

@@ -150,7 +150,7 @@ def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: 
         return rows
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=len(tasks), desc=spec["name"], unit="run", disable=not progress, leave=False)
+    bar = tqdm(total=len(tasks), desc=spec["name"], unit="run", disable=None if progress else True, leave=False)
     try:
         for row in _execute(tasks, workers, backend):
             rows.append(row)
