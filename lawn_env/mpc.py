@@ -209,9 +209,11 @@ class OutageAwareMPC:
     # ------------------------------------------------------------------ problem data
     def prepare(self, x_aug: np.ndarray, chi_ref: np.ndarray) -> "SlotData":
         """The parts of the K QPs that do not depend on psi (one slot's state and reference)."""
-        k = x_aug.shape[0]
-        if k != self.num_agvs:
-            raise ValueError(f"x_aug has {k} AGVs, the MPC was built for num_agvs={self.num_agvs}")
+        k = self.num_agvs
+        window = self.model.horizon + 1
+        if x_aug.shape != (k, 6) or chi_ref.shape != (k, window, 6):
+            raise ValueError(f"x_aug has shape {x_aug.shape} and chi_ref {chi_ref.shape}; this MPC (num_agvs={k}, "
+                             f"horizon={self.model.horizon}) needs ({k}, 6) and ({k}, {window}, 6)")
         r = self.model.residual(x_aug, chi_ref)
         u_prev = x_aug[:, self._u_index]  # u[n-1] repeated over the horizon, (K, 2 N_p)
         return SlotData(

@@ -112,3 +112,12 @@ def test_qpsolvers_backend(rng):
     ref_mpc = OutageAwareMPC.from_config(CFG)
     x, ref, psi = next(_problems(rng, 1))
     assert np.allclose(mpc.solve(x, ref, psi).value, ref_mpc.solve(x, ref, psi).value, rtol=1e-5)
+
+
+def test_shape_errors_name_the_shapes(rng):
+    mpc = OutageAwareMPC.from_config(CFG)
+    x, ref, psi = next(_problems(rng, 1))
+    with pytest.raises(ValueError, match=r"chi_ref \(4, 10, 6\).*needs \(4, 6\) and \(4, 11, 6\)"):
+        mpc.solve(x, ref[:, :10], psi)
+    with pytest.raises(ValueError, match="num_agvs=4"):
+        mpc.solve(x[:3], ref[:3], psi[:3])
