@@ -24,6 +24,10 @@ import lawn_env
 from lawn_env import presets
 
 
+class MissingExtra(RuntimeError):
+    """An optional dependency (the rl or ray extra) is not installed."""
+
+
 def _parse_overrides(items: list[str]) -> dict:
     """``key=value`` pairs with dotted keys; values parsed as JSON when possible."""
     out = {}
@@ -143,6 +147,12 @@ def cmd_gap(args) -> int:
 
 
 def cmd_train(args) -> int:
+    try:
+        import stable_baselines3  # noqa: F401
+        import supersuit  # noqa: F401
+    except ImportError as exc:
+        raise MissingExtra(f"training needs the rl extra ({exc.name} is missing): bash scripts/setup.sh full, "
+                           "or pip install torch==2.13.0 && pip install -e '.[rl]'") from None
     from .train import resume, train
 
     if args.resume:
@@ -323,6 +333,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:  # bad config values or names: one clear line, no traceback
         print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except MissingExtra as exc:
+        print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
+        return 3
 
 
 if __name__ == "__main__":
