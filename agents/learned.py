@@ -16,6 +16,7 @@ import numpy as np
 
 from lawn_env import ScenarioConfig
 
+from .errors import MissingExtra
 from .policies import COMM, JOINT, Policy
 
 __all__ = ["SB3Policy", "MARLPolicy", "LOADERS"]
@@ -31,8 +32,9 @@ def _read_run(path: Path) -> dict:
 def _load_model(path: Path, algo: str):
     try:
         from stable_baselines3 import A2C, PPO, SAC, TD3
-    except ImportError as exc:  # pragma: no cover - exercised only without the extra
-        raise RuntimeError("learned policies need the rl extra (torch, stable-baselines3)") from exc
+    except ImportError:  # exercised only without the extra
+        raise MissingExtra("trained agents need the rl extra: bash scripts/setup.sh full, "
+                           "or pip install torch==2.13.0 && pip install -e '.[rl]'") from None
     import torch
 
     torch.set_num_threads(1)  # small networks, one observation at a time

@@ -21,11 +21,8 @@ import time
 from pathlib import Path
 
 import lawn_env
+from agents.errors import MissingExtra
 from lawn_env import presets
-
-
-class MissingExtra(RuntimeError):
-    """An optional dependency (the rl or ray extra) is not installed."""
 
 
 def _parse_overrides(items: list[str]) -> dict:

@@ -166,8 +166,10 @@ def _execute(tasks, workers: int, backend: str):
     if backend == "ray":
         try:
             import ray
-        except ImportError as exc:
-            raise ValueError("--backend ray needs Ray: pip install 'ray[default]'") from exc
+        except ImportError:
+            from agents.errors import MissingExtra
+
+            raise MissingExtra("--backend ray needs Ray: pip install -e '.[ray]'") from None
         if not ray.is_initialized():
             ray.init(address=os.environ.get("RAY_ADDRESS"), num_cpus=None if os.environ.get("RAY_ADDRESS") else workers,
                      include_dashboard=False, log_to_driver=False)

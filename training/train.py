@@ -45,8 +45,11 @@ TRAIN_ENV_IDS = ("lawn/Joint-v0", "lawn/Comm-v0", "lawn/Parallel-v0", "CartPole-
 def _algos() -> dict[str, Any]:
     try:
         from stable_baselines3 import A2C, PPO, SAC, TD3
-    except ImportError as exc:  # pragma: no cover - exercised only without the extra
-        raise RuntimeError("training needs the rl extra: pip install torch==2.13.0 && pip install -e '.[rl]'") from exc
+    except ImportError:  # exercised only without the extra
+        from agents.errors import MissingExtra
+
+        raise MissingExtra("training needs the rl extra: bash scripts/setup.sh full, "
+                           "or pip install torch==2.13.0 && pip install -e '.[rl]'") from None
     return {"ppo": PPO, "sac": SAC, "td3": TD3, "a2c": A2C}
 
 
