@@ -321,8 +321,8 @@ def make_policy(name: str, config: ScenarioConfig | Mapping | str | None = None,
         if prefix not in LOADERS:
             raise ValueError(f"unknown policy prefix {prefix!r} in {name!r}; valid: "
                              f"{', '.join(p + ':DIR' for p in LOADERS)}")
-        explicit = config if config is not None else None
-        return LOADERS[prefix](path, resolve_config(explicit) if explicit is not None else None,
+        # no config: the agent's own training config (DIR/config.json)
+        return LOADERS[prefix](path, resolve_config(config) if config is not None else None,
                                env_id=env_id, seed=seed, **kwargs)
     env_id = env_id or JOINT
     try:
