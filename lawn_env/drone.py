@@ -10,15 +10,7 @@ import math
 
 import numpy as np
 
-__all__ = ["move_drone", "clip_to_speed", "project_feasible"]
-
-
-def clip_to_speed(velocity_mps: np.ndarray, max_speed_mps: float) -> np.ndarray:
-    """Scale a velocity (..., 2) radially so that its norm is at most ``max_speed_mps``."""
-    v = np.asarray(velocity_mps, dtype=float)
-    speed = np.sqrt(np.einsum("...i,...i->...", v, v))
-    scale = np.minimum(1.0, max_speed_mps / np.maximum(speed, 1e-300))
-    return v * scale[..., None] if v.ndim > 1 else v * scale
+__all__ = ["move_drone"]
 
 
 def move_drone(position_m: np.ndarray, velocity_mps: np.ndarray, max_speed_mps: float, slot_s: float,
@@ -36,12 +28,3 @@ def move_drone(position_m: np.ndarray, velocity_mps: np.ndarray, max_speed_mps: 
     qx = min(max(px + vx * slot_s, x0), x1)
     qy = min(max(py + vy * slot_s, y0), y1)
     return np.array([qx, qy])
-
-
-def project_feasible(target_m: np.ndarray, position_m: np.ndarray, max_step_m: float,
-                     area_m: tuple[float, float, float, float]) -> np.ndarray:
-    """A feasible next position toward ``target_m``: the target pulled onto the step disc around
-    ``position_m`` and clipped into the area (feasible, not the Euclidean projection onto the
-    disc-box intersection)."""
-    step = np.asarray(target_m, dtype=float) - np.asarray(position_m, dtype=float)
-    return move_drone(position_m, step, max_step_m, 1.0, area_m)

@@ -224,15 +224,6 @@ class OutageAwareMPC:
             upper=np.concatenate([self._pos_box, self.accel_max - u_prev], axis=1),
         )
 
-    def qp_data(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi: np.ndarray):
-        """P (K, n, n), q (K, n), constant M (K,), bounds lower/upper (K, 2n) of the K QPs.
-
-        The first n bounds are the simple increment bounds, the last n bound T z.
-        """
-        data = self.prepare(x_aug, chi_ref)
-        p, q = self._objective(data, np.asarray(psi, dtype=float))
-        return p, q, data.constant, data.lower, data.upper
-
     def _objective(self, data: "SlotData", psi: np.ndarray):
         p = (psi * psi)[:, None, None] * self._ftq4f_2 + self._q5_2  # P = 2 G = 2 (psi^2 F'Q4F + Q5)
         q = (2.0 * psi)[:, None] * data.linear
