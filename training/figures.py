@@ -57,6 +57,29 @@ def _figure(ncols=1, width=5.0, height=3.6):
     return fig
 
 
+class _single_axes:
+    """``with _single_axes(path, title, xlabel, ylabel) as ax:`` draws one axes and saves PNG+PDF."""
+
+    def __init__(self, path: Path, title: str, xlabel: str, ylabel: str, legend_size: int = 8):
+        self.path, self.labels, self.legend_size = path, (title, xlabel, ylabel), legend_size
+
+    def __enter__(self):
+        self.fig = _figure()
+        self.ax = self.fig.add_subplot(111)
+        return self.ax
+
+    def __exit__(self, *exc):
+        if exc[0] is None:
+            title, xlabel, ylabel = self.labels
+            self.ax.set_title(title, fontsize=9)
+            self.ax.set_xlabel(xlabel)
+            self.ax.set_ylabel(ylabel)
+            self.ax.legend(fontsize=self.legend_size)
+            self.fig.tight_layout()
+            _save(self.fig, self.path)
+        return False
+
+
 def _mean_ci(values):
     from scipy import stats
 
@@ -77,73 +100,47 @@ def _curve(ax, rows, x_key, y_key, policy, label=None, **kw):
 
 
 def plot_ce(rows, path: Path) -> None:
-    fig = _figure()
-    ax = fig.add_subplot(111)
-    for policy in dict.fromkeys(r["policy"] for r in rows):
-        _curve(ax, rows, "channel.ce_error_var", "rmse_m", policy)
-    ax.set_xlabel("normalized CE error variance ρ")
-    ax.set_ylabel("tracking RMSE (m)")
-    ax.set_title("RMSE vs channel-estimation error (R_th = 1, P_max = 0 dBW)", fontsize=9)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    _save(fig, path)
+    with _single_axes(path, "RMSE vs channel-estimation error (R_th = 1, P_max = 0 dBW)",
+                      "normalized CE error variance ρ", "tracking RMSE (m)") as ax:
+        for policy in dict.fromkeys(r["policy"] for r in rows):
+            _curve(ax, rows, "channel.ce_error_var", "rmse_m", policy)
 
 
 def plot_cdf(rows, path: Path) -> None:
-    fig = _figure()
-    ax = fig.add_subplot(111)
-    budgets = sorted({float(r["power_budget_dbw"]) for r in rows})
-    for i, p in enumerate(budgets):
-        for policy in EXPERTS:
-            vals = np.sort([float(r["rmse_m"]) for r in rows if r["policy"] == policy and float(r["power_budget_dbw"]) == p])
-            if vals.size:
-                ax.step(vals, np.arange(1, vals.size + 1) / vals.size, where="post", color=f"C{i}",
-                        ls=STYLE[policy][2] if policy == "rg-mpc" else "--", label=f"{policy}, {p:g} dBW")
-    ax.set_xlabel("tracking RMSE (m)")
-    ax.set_ylabel("CDF over seeds")
-    ax.set_title("CDF of RMSE under power budgets (R_th = 1)", fontsize=9)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    _save(fig, path)
+    with _single_axes(path, "CDF of RMSE under power budgets (R_th = 1)", "tracking RMSE (m)", "CDF over seeds",
+                      legend_size=7) as ax:
+        for i, p in enumerate(sorted({float(r["power_budget_dbw"]) for r in rows})):
+            for policy in EXPERTS:
+                vals = np.sort([float(r["rmse_m"]) for r in rows
+                                if r["policy"] == policy and float(r["power_budget_dbw"]) == p])
+                if vals.size:
+                    ax.step(vals, np.arange(1, vals.size + 1) / vals.size, where="post", color=f"C{i}",
+                            ls="-" if policy == "rg-mpc" else "--", label=f"{policy}, {p:g} dBW")
 
 
 def plot_rate(rows, path: Path) -> None:
-    fig = _figure()
-    ax = fig.add_subplot(111)
-    budgets = sorted({float(r["power_budget_dbw"]) for r in rows})
-    for i, p in enumerate(budgets):
-        sub = [r for r in rows if float(r["power_budget_dbw"]) == p]
-        for policy in EXPERTS:
-            _curve(ax, sub, "channel.rate_threshold_bps_hz", "control_cost", policy, label=f"{policy}, {p:g} dBW",
-                   color=f"C{i}", ls="-" if policy == "rg-mpc" else "--")
-    ax.set_yscale("log")
-    ax.set_xlabel("rate threshold R_th (bit/s/Hz)")
-    ax.set_ylabel("realized control cost")
-    ax.set_title("control cost vs rate threshold under power budgets", fontsize=9)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    _save(fig, path)
+    with _single_axes(path, "control cost vs rate threshold under power budgets", "rate threshold R_th (bit/s/Hz)",
+                      "realized control cost", legend_size=7) as ax:
+        for i, p in enumerate(sorted({float(r["power_budget_dbw"]) for r in rows})):
+            sub = [r for r in rows if float(r["power_budget_dbw"]) == p]
+            for policy in EXPERTS:
+                _curve(ax, sub, "channel.rate_threshold_bps_hz", "control_cost", policy,
+                       label=f"{policy}, {p:g} dBW", color=f"C{i}", ls="-" if policy == "rg-mpc" else "--")
+        ax.set_yscale("log")
 
 
 def plot_blocklength(rows, path: Path) -> None:
-    fig = _figure()
-    ax = fig.add_subplot(111)
     fbl = [r for r in rows if str(r["channel.infinite_blocklength"]) in ("False", "false", "0")]
     ibl = [r for r in rows if str(r["channel.infinite_blocklength"]) in ("True", "true", "1")]
-    for policy in dict.fromkeys(r["policy"] for r in fbl):
-        color = STYLE.get(policy, ("k",))[0]
-        _curve(ax, fbl, "channel.blocklength", "control_cost", policy)
-        limit = [float(r["control_cost"]) for r in ibl if r["policy"] == policy]
-        if limit:
-            ax.axhline(np.mean(limit), color=color, ls=":", lw=1)
-    ax.set_xscale("log", base=2)
-    ax.set_yscale("log")
-    ax.set_xlabel("blocklength l (channel uses); dotted: IBL limit of each policy")
-    ax.set_ylabel("realized control cost")
-    ax.set_title("control cost vs blocklength (R_th = 10, P_max = 0 dBW)", fontsize=9)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    _save(fig, path)
+    with _single_axes(path, "control cost vs blocklength (R_th = 10, P_max = 0 dBW)",
+                      "blocklength l (channel uses); dotted: IBL limit of each policy", "realized control cost") as ax:
+        for policy in dict.fromkeys(r["policy"] for r in fbl):
+            _curve(ax, fbl, "channel.blocklength", "control_cost", policy)
+            limit = [float(r["control_cost"]) for r in ibl if r["policy"] == policy]
+            if limit:
+                ax.axhline(np.mean(limit), color=STYLE.get(policy, ("k",))[0], ls=":", lw=1)
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log")
 
 
 def plot_bars(rows, path: Path) -> None:
