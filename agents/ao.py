@@ -150,22 +150,20 @@ class PowerObjective:
     def __init__(self, coef, d2: np.ndarray, link: channel.LinkParams):
         lcoef, scoef, wcoef = coef
         self._l, self._two_l, self._two_s, self._w = lcoef, 2.0 * lcoef, 2.0 * scoef, float(wcoef.sum())
-        self._m = link.m
-        c_d, self._c_ce = link.coefficients
-        self._a = c_d * d2  # x = a / p + c_ce
-        self._log_norm = special.gammaln(link.m)
+        self._d2 = d2
+        self._link = link
 
     def value(self, p: np.ndarray):
         """(J^, state) where state feeds :meth:`gradient`."""
         pf = np.maximum(p, channel.POWER_FLOOR_W)
-        excess = self._a / pf
-        x = excess + self._c_ce if self._c_ce else excess
-        psi = special.gammaincc(self._m, x)
-        return float(self._l @ (psi * psi) + self._two_s @ psi) + self._w, (psi, pf, x, excess)
+        x = self._link.outage_argument_sq(pf, self._d2)
+        psi = special.gammaincc(self._link.m, x)
+        return float(self._l @ (psi * psi) + self._two_s @ psi) + self._w, (psi, pf, x)
 
     def gradient(self, state) -> np.ndarray:
-        psi, pf, x, excess = state
-        dpsi = np.exp(special.xlogy(self._m - 1, x) - x - self._log_norm) * excess / pf  # d psi / d p
+        psi, pf, x = state
+        # d psi / d p = density(x) (x - x_ce) / p, as in channel.success_and_gradients (reusing x)
+        dpsi = channel.gamma_density(self._link.m, x) * (x - self._link.coefficients[1]) / pf
         return (self._two_l * psi + self._two_s) * dpsi
 
 

@@ -38,7 +38,7 @@ __all__ = [
     "outage_probability",
     "success_probability",
     "success_and_gradients",
-    "success_and_power_gradient",
+    "gamma_density",
     "outage_argument",
     "outage_argument_sq",
     "delivered_from_fading",
@@ -233,21 +233,18 @@ def success_probability(power_w, distance_m, *, snr_threshold, alpha0, noise_pow
     return special.gammaincc(m, x)
 
 
+def gamma_density(m: int, x):
+    """x^(m-1) e^(-x) / Gamma(m) = -d psi / dx, in log form (accurate for large x)."""
+    return np.exp(special.xlogy(m - 1, x) - x - special.gammaln(m))
+
+
 def _success_terms(power_w, distance_sq_m2, link: LinkParams):
     """psi and g = x^(m-1) e^(-x) / Gamma(m) * (x - x_ce) >= 0, from which
     d psi/dp = g / p and d psi/d(d^2) = -g / d^2 (x decreases in p, increases in d^2; x_ce is the
     part of x that power cannot remove). Powers are floored at ``POWER_FLOOR_W``."""
     p = np.maximum(power_w, POWER_FLOOR_W)
     x = link.outage_argument_sq(p, distance_sq_m2)
-    m = link.m
-    density = np.exp((m - 1) * np.log(x) - x - special.gammaln(m))  # -d psi / dx
-    return special.gammaincc(m, x), density * (x - link.coefficients[1]), p
-
-
-def success_and_power_gradient(power_w, distance_sq_m2, link: LinkParams):
-    """psi and d psi / d p (1/W) of each link at squared distances ``distance_sq_m2`` (m^2)."""
-    psi, g, p = _success_terms(power_w, distance_sq_m2, link)
-    return psi, g / p
+    return special.gammaincc(link.m, x), gamma_density(link.m, x) * (x - link.coefficients[1]), p
 
 
 def success_and_gradients(power_w, drone_xy, agv_xy, link: LinkParams):
