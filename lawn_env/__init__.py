@@ -12,6 +12,7 @@ from . import channel, dynamics, drone, presets, references
 from .config import ChannelConfig, ControlConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 from .core import Simulation, Snapshot
 from .envs import CommEnv, JointEnv, LawnParallelEnv, parallel_env
+from .interface import RL_INTERFACE, ActionLayout, RLInterface
 from .spaces import ObservationLayout
 
 __version__ = "0.1.0"
@@ -22,12 +23,26 @@ ENV_IDS = {
     "lawn/Comm-v0": "lawn_env.envs.comm:CommEnv",
 }
 
+#: The same environments with the RL interface (``interface="rl"``, :mod:`lawn_env.interface`):
+#: for training; comparisons always run the ids of :data:`ENV_IDS`.
+RL_ENV_IDS = {
+    "lawn/JointRL-v0": "lawn/Joint-v0",
+    "lawn/CommRL-v0": "lawn/Comm-v0",
+}
+
 for _env_id, _entry_point in ENV_IDS.items():
     if _env_id not in registry:
         register(id=_env_id, entry_point=_entry_point, disable_env_checker=False)
+for _env_id, _base in RL_ENV_IDS.items():
+    if _env_id not in registry:
+        register(id=_env_id, entry_point=ENV_IDS[_base], kwargs={"interface": "rl"}, disable_env_checker=False)
 
 __all__ = [
     "ENV_IDS",
+    "RL_ENV_IDS",
+    "RLInterface",
+    "RL_INTERFACE",
+    "ActionLayout",
     "ChannelConfig",
     "ControlConfig",
     "DroneConfig",

@@ -10,6 +10,7 @@ import numpy as np
 from .. import presets
 from ..config import ScenarioConfig
 from ..core import Simulation, Snapshot
+from ..interface import V0_INTERFACE, ActionLayout, RLInterface, resolve_interface
 from ..spaces import ObservationLayout
 
 __all__ = ["resolve_config", "SimulationView", "LawnEnvBase"]
@@ -40,14 +41,33 @@ class SimulationView:
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 4}
 
-    def _setup_view(self, config, render_mode, overrides) -> None:
+    def _setup_view(self, config, render_mode, overrides, interface=None, role: str = "joint") -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode={render_mode!r}; valid: {self.metadata['render_modes']} or None")
         self.config = resolve_config(config, **overrides)
         self.render_mode = render_mode
         self.sim = Simulation(self.config)
         self.layout = ObservationLayout(self.config)
+        self.interface: RLInterface = resolve_interface(interface)
+        self.actions = ActionLayout(self.config, role, self.interface)
+        self._plain = self.interface == V0_INTERFACE
         self._renderer = None
+
+    def _decide(self, action: np.ndarray):
+        """The slot's physical decisions (:class:`~lawn_env.interface.Decision`) for a checked action."""
+        sim = self.sim
+        return self.actions.decode(action, sim.x_obs, sim.reference_window(), sim.drone_position)
+
+    def _rewards_and_termination(self, costs) -> tuple[list[float], bool]:
+        """Rewards for the given stage costs and whether the episode terminates (RL interface),
+        the terminal penalty included in every reward of a terminating step."""
+        iface, sim = self.interface, self.sim
+        rewards = [iface.reward_from_cost(c) for c in costs]
+        terminated = iface.terminates(sim.tracking_error[:, 0:2])
+        if terminated:
+            penalty = iface.terminal_penalty(sim.num_slots - sim.slot)
+            rewards = [r + penalty for r in rewards]
+        return rewards, terminated
 
     def snapshot(self) -> Snapshot:
         """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
@@ -76,11 +96,14 @@ class SimulationView:
 class LawnEnvBase(SimulationView, gym.Env):
     """Common machinery of ``lawn/Joint-v0`` and ``lawn/Comm-v0`` (not registered itself)."""
 
+    role = "joint"
+
     def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-                 **overrides: Any):
-        self._setup_view(config, render_mode, overrides)
+                 interface: RLInterface | Mapping | str | None = None, **overrides: Any):
+        self._setup_view(config, render_mode, overrides, interface, self.role)
         self.num_agvs = self.config.num_agvs
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(self.layout.size,), dtype=np.float32)
+        self.observation_space = self.interface.observation_space(self.layout.size)
+        self.action_space = self.actions.space
         self._done = True
 
     # ------------------------------------------------------------------ gym API
@@ -88,11 +111,12 @@ class LawnEnvBase(SimulationView, gym.Env):
         super().reset(seed=seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
         self.sim.reset(self.np_random)
+        self.actions.reset()
         self._done = False
         self._on_reset()
         if self.render_mode == "human":
             self.render()
-        return self.layout.encode(self.sim), {"slot": 0}
+        return self.interface.observe(self.layout.encode(self.sim)), {"slot": 0}
 
     def _on_reset(self) -> None:
         """Hook for subclasses (e.g. solver workspaces)."""
@@ -104,8 +128,10 @@ class LawnEnvBase(SimulationView, gym.Env):
     def _finish_step(self, record, extra: dict | None = None):
         cost_tracking = sum(record.tracking_cost.tolist())  # tolist + sum: cheaper than ndarray.sum for small K
         cost_effort = sum(record.effort_cost.tolist())
+        cost = cost_tracking + cost_effort
         info = {
             "slot": self.sim.slot,
+            "stage_cost": cost,
             "reward_terms": {"tracking": -cost_tracking, "effort": -cost_effort},
             "delivered": record.delivered,
             "outage_probability": record.outage_probability,
@@ -116,13 +142,17 @@ class LawnEnvBase(SimulationView, gym.Env):
         if extra:
             info.update(extra)
         sim = self.sim
-        truncated = sim.slot >= sim.num_slots
-        if truncated:
+        if self._plain:  # the benchmark's hot path
+            reward, terminated = -cost, False
+        else:
+            (reward,), terminated = self._rewards_and_termination([cost])
+        truncated = sim.slot >= sim.num_slots and not terminated
+        if truncated or terminated:
             self._done = True
             info["episode_metrics"] = self.sim.episode_metrics()
         if self.render_mode == "human":
             self.render()
-        return self.layout.encode(self.sim), -(cost_tracking + cost_effort), False, truncated, info
+        return self.interface.observe(self.layout.encode(self.sim)), reward, terminated, truncated, info
 
     # ------------------------------------------------------------------ extras
     def episode_metrics(self) -> dict:

@@ -4,12 +4,10 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
-import gymnasium as gym
-import numpy as np
-
 from ..config import ScenarioConfig
+from ..interface import RLInterface
 from ..mpc import OutageAwareMPC
-from ..spaces import check_action, decode_power
+from ..spaces import check_action
 from .base import LawnEnvBase
 
 __all__ = ["CommEnv"]
@@ -42,7 +40,8 @@ class CommEnv(LawnEnvBase):
 
     ## Rewards
 
-    As ``lawn/Joint-v0``: minus the realized stage cost, terms in ``info["reward_terms"]``.
+    As ``lawn/Joint-v0``: minus the realized stage cost (``info["stage_cost"]``), terms in
+    ``info["reward_terms"]``; with ``interface="rl"`` bounded and scaled as there.
     ``info`` also reports the MPC's iterations, fallbacks and the planned psi; the wall-clock
     solve time of the last step is ``env.unwrapped.last_mpc_solve_time_s``.
 
@@ -52,26 +51,27 @@ class CommEnv(LawnEnvBase):
 
     ## Episode End
 
-    Truncation after ``num_slots`` slots; ``info["episode_metrics"]`` on the last step.
+    Truncation after ``num_slots`` slots; ``info["episode_metrics"]`` on the last step. With
+    ``interface="rl"``, termination past 25 m of tracking error as in ``lawn/Joint-v0``.
 
     ## Arguments
 
-    ``gym.make("lawn/Comm-v0", config=None, render_mode=None, qp_backend="daqp", **overrides)``;
-    ``qp_backend`` is ``"daqp"``, ``"osqp"`` or ``"qpsolvers:<name>"`` (:mod:`lawn_env.mpc`).
+    ``gym.make("lawn/Comm-v0", config=None, render_mode=None, qp_backend="daqp", interface=None,
+    **overrides)``; ``qp_backend`` is ``"daqp"``, ``"osqp"`` or ``"qpsolvers:<name>"``
+    (:mod:`lawn_env.mpc`); ``interface`` as for ``lawn/Joint-v0`` (``lawn/CommRL-v0`` is this env
+    with ``interface="rl"``: power ``p_k ∝ d_k^2 exp(2 a_k)`` spending the budget, drone toward
+    the AGVs' centroid ``+ a * 50 m``).
 
     ## Version History
 
-    * v0: initial version.
+    * v0: initial version; the ``interface`` keyword (opt-in) and ``info["stage_cost"]`` added later.
     """
 
+    role = "comm"
+
     def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-                 qp_backend: str = "daqp", **overrides: Any):
-        super().__init__(config, render_mode, **overrides)
-        k = self.num_agvs
-        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(k + 2,), dtype=np.float32)
-        self._size = k + 2
-        self._vmax = self.config.drone.max_speed_mps
-        self._pmax = self.config.power_budget_w
+                 qp_backend: str = "daqp", interface: RLInterface | Mapping | str | None = None, **overrides: Any):
+        super().__init__(config, render_mode, interface, **overrides)
         self.mpc = OutageAwareMPC.from_config(self.config, backend=qp_backend)
         self.last_mpc_solve_time_s = float("nan")
 
@@ -80,10 +80,7 @@ class CommEnv(LawnEnvBase):
 
     def step(self, action):
         self._check_running()
-        a = check_action(action, self._size)
-        k = self.num_agvs
-        power = decode_power(a[:k], self._pmax)
-        drone_next = self.sim.drone_target(a[k:] * self._vmax)
+        _, power, drone_next = self._decide(check_action(action, self.actions.size))
         psi = self.sim.planning_success(power, drone_next)
         solution = self.mpc.solve(self.sim.x_aug, self.sim.reference_window(), psi)
         record = self.sim.step(solution.increments[:, 0, :], power, drone_next)

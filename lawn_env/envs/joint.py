@@ -2,13 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, Mapping
-
-import gymnasium as gym
-import numpy as np
-
-from ..config import ScenarioConfig
-from ..spaces import check_action, decode_power
+from ..spaces import check_action
 from .base import LawnEnvBase
 
 __all__ = ["JointEnv"]
@@ -35,7 +29,12 @@ class JointEnv(LawnEnvBase):
     | 2K .. 3K-1   | power weight of link k               | ``w = (a+1)/2``, ``p = P_max w / max(1, sum w)``      |
     | 3K .. 3K+1   | drone velocity (x, y)                | ``a * V_max`` m/s, clipped to norm V_max, kept in area |
 
-    Actions outside [-1, 1], NaN, or of the wrong size raise ``ValueError``.
+    Actions outside [-1, 1], NaN, or of the wrong size raise ``ValueError``. With
+    ``interface="rl"`` (or ``RLInterface(action_scheme="anchored")``) the same box is measured
+    from a safe anchor: increments are a residual ``a * Delta-a_max`` on the outage-aware MPC's
+    first increment, power ``p_k ∝ d_k^2 exp(2 a_k)`` spends the budget, the drone flies toward
+    the AGVs' centroid ``+ a * 50 m`` (:mod:`lawn_env.interface`); the zero action is then a
+    sound policy.
 
     ## Observation Space
 
@@ -50,8 +49,9 @@ class JointEnv(LawnEnvBase):
 
     Minus the realized stage cost of the slot, summed over AGVs:
     ``e' Q1 e + Delta-u' Q2 Delta-u`` with ``e`` the augmented tracking error at slot n+1 and
-    ``Delta-u`` the delivered increment (0 when lost). ``info["reward_terms"]`` splits it into
-    ``tracking`` and ``effort``.
+    ``Delta-u`` the delivered increment (0 when lost). ``info["stage_cost"]`` is that cost and
+    ``info["reward_terms"]`` splits it (negated) into ``tracking`` and ``effort``, whatever the
+    interface. With ``interface="rl"`` the reward is ``-min(cost, 100) / 10``, in [-10, 0].
 
     ## Starting State
 
@@ -62,36 +62,28 @@ class JointEnv(LawnEnvBase):
     ## Episode End
 
     No termination; truncation after ``num_slots`` (120) slots. The last step's
-    ``info["episode_metrics"]`` holds the metrics of MODEL.md §6.
+    ``info["episode_metrics"]`` holds the metrics of MODEL.md §6. With ``interface="rl"`` the
+    episode terminates when an AGV is more than 25 m from its reference, and that step's reward
+    includes the reward floor (-10) for every slot not played, so ending early never pays.
 
     ## Arguments
 
-    ``gym.make("lawn/Joint-v0", config=None, render_mode=None, **overrides)``: ``config`` is a
-    :class:`~lawn_env.ScenarioConfig`, a dict or a preset name; overrides are top-level config
-    fields or a section mapped to a dict, e.g. ``num_agvs=3, channel={"blocklength": 256}``.
+    ``gym.make("lawn/Joint-v0", config=None, render_mode=None, interface=None, **overrides)``:
+    ``config`` is a :class:`~lawn_env.ScenarioConfig`, a dict or a preset name; overrides are
+    top-level config fields or a section mapped to a dict, e.g. ``num_agvs=3,
+    channel={"blocklength": 256}``. ``interface`` is None (the paper's benchmark), ``"rl"``,
+    or an :class:`~lawn_env.RLInterface` / dict of its fields; ``lawn/JointRL-v0`` is this env
+    with ``interface="rl"``.
 
     ## Version History
 
-    * v0: initial version.
+    * v0: initial version; the ``interface`` keyword (opt-in, the default is unchanged) and
+      ``info["stage_cost"]`` added later.
     """
 
-    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-                 **overrides: Any):
-        super().__init__(config, render_mode, **overrides)
-        k = self.num_agvs
-        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(3 * k + 2,), dtype=np.float32)
-        self._size = 3 * k + 2
-        ctl = self.config.control
-        self._inc_max = ctl.accel_increment_max_mps2
-        self._vmax = self.config.drone.max_speed_mps
-        self._pmax = self.config.power_budget_w
+    role = "joint"
 
     def step(self, action):
         self._check_running()
-        a = check_action(action, self._size)
-        k = self.num_agvs
-        increment = a[: 2 * k].reshape(k, 2) * self._inc_max
-        power = decode_power(a[2 * k : 3 * k], self._pmax)
-        vx, vy = a[3 * k :].tolist()
-        drone_next = self.sim.drone_target((vx * self._vmax, vy * self._vmax))
+        increment, power, drone_next = self._decide(check_action(action, self.actions.size))
         return self._finish_step(self.sim.step(increment, power, drone_next))

@@ -10,7 +10,8 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from ..config import ScenarioConfig
-from ..spaces import check_action, decode_power
+from ..interface import RLInterface
+from ..spaces import check_action
 from .base import SimulationView
 
 __all__ = ["LawnParallelEnv", "parallel_env"]
@@ -41,30 +42,36 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
     ## Rewards
 
     ``"agv_k"``: minus its own realized stage cost; ``"drone"``: minus the total (the central
-    environments' reward). ``infos[agent]["reward_terms"]`` splits each.
+    environments' reward). ``infos[agent]["reward_terms"]`` splits each. With
+    ``interface="rl"`` each reward is bounded and scaled (``-min(cost, 100) / 10``), the AGVs'
+    actions are residuals on the outage-aware MPC and the drone's are anchored as in
+    ``lawn/Comm-v0`` (:mod:`lawn_env.interface`).
 
     ## Episode End
 
-    Truncation for every agent after ``num_slots`` slots; ``agents`` is then empty.
+    Truncation for every agent after ``num_slots`` slots; ``agents`` is then empty. With
+    ``interface="rl"``, every agent terminates when an AGV is more than 25 m off its track, each
+    with the reward floor of the remaining slots added.
 
     ## Arguments
 
-    ``lawn_env.parallel_env(config=None, render_mode=None, **overrides)`` as for ``gym.make``.
+    ``lawn_env.parallel_env(config=None, render_mode=None, interface=None, **overrides)`` as for
+    ``gym.make``.
     """
 
     metadata = {"name": "lawn_v0", "render_modes": ["human", "rgb_array"], "render_fps": 4, "is_parallelizable": True}
 
     def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-                 **overrides: Any):
-        self._setup_view(config, render_mode, overrides)
+                 interface: RLInterface | Mapping | str | None = None, **overrides: Any):
+        self._setup_view(config, render_mode, overrides, interface, "joint")
         k = self.config.num_agvs
         self.possible_agents = ["drone"] + [f"agv_{i}" for i in range(k)]
         self.agents: list[str] = []
         self._agv_index = {f"agv_{i}": i for i in range(k)}
+        agv_size = self.layout.agv_features + self.layout.global_features
         self._observation_spaces = {
-            "drone": gym.spaces.Box(-np.inf, np.inf, shape=(self.layout.size,), dtype=np.float32),
-            **{a: gym.spaces.Box(-np.inf, np.inf, shape=(self.layout.agv_features + self.layout.global_features,),
-                                 dtype=np.float32) for a in self._agv_index},
+            "drone": self.interface.observation_space(self.layout.size),
+            **{a: self.interface.observation_space(agv_size) for a in self._agv_index},
         }
         self._action_spaces = {
             "drone": gym.spaces.Box(-1.0, 1.0, shape=(k + 2,), dtype=np.float32),
@@ -90,6 +97,7 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
             self._np_random, _ = seeding.np_random(seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
         self.sim.reset(self._np_random)
+        self.actions.reset()
         self.agents = list(self.possible_agents)
         observations = self._observations()
         if self.render_mode == "human":
@@ -104,42 +112,42 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         if missing or unknown:
             raise ValueError(f"actions: missing agents {missing}, unknown agents {unknown}; expected {self.agents}")
         k = self.config.num_agvs
-        drone_action = check_action(actions["drone"], k + 2, name="actions['drone']")
-        increment = np.empty((k, 2))
+        joint = np.empty(self.actions.size)  # the central action: increments, then the drone's part
+        joint[2 * k :] = check_action(actions["drone"], k + 2, name="actions['drone']")
         for agent, i in self._agv_index.items():
-            increment[i] = check_action(actions[agent], 2, name=f"actions[{agent!r}]")
-        increment *= self.config.control.accel_increment_max_mps2
-        power = decode_power(drone_action[:k], self.config.power_budget_w)
-        drone_next = self.sim.drone_target(drone_action[k:] * self.config.drone.max_speed_mps)
+            joint[2 * i : 2 * i + 2] = check_action(actions[agent], 2, name=f"actions[{agent!r}]")
+        increment, power, drone_next = self._decide(joint)
         record = self.sim.step(increment, power, drone_next)
 
         per_agv = record.tracking_cost + record.effort_cost
-        rewards = {"drone": -float(per_agv.sum())}
+        agent_rewards, terminated = self._rewards_and_termination([float(per_agv.sum())] + per_agv.tolist())
+        rewards = {"drone": agent_rewards[0]}
         infos = {"drone": {
             "reward_terms": {"tracking": -float(record.tracking_cost.sum()), "effort": -float(record.effort_cost.sum())},
             "delivered": record.delivered, "outage_probability": record.outage_probability, "power_w": power,
             "drone_position": self.sim.drone_position,
         }}
         for agent, i in self._agv_index.items():
-            rewards[agent] = -float(per_agv[i])
+            rewards[agent] = agent_rewards[i + 1]
             infos[agent] = {
                 "reward_terms": {"tracking": -float(record.tracking_cost[i]), "effort": -float(record.effort_cost[i])},
                 "delivered": bool(record.delivered[i]),
             }
+        infos["drone"]["stage_cost"] = float(per_agv.sum())
         observations = self._observations()
-        truncated = self.sim.done
-        if truncated:
+        truncated = self.sim.done and not terminated
+        if truncated or terminated:
             infos["drone"]["episode_metrics"] = self.sim.episode_metrics()
-        terminations = {a: False for a in self.agents}
+        terminations = {a: terminated for a in self.agents}
         truncations = {a: truncated for a in self.agents}
-        if truncated:
+        if truncated or terminated:
             self.agents = []
         if self.render_mode == "human":
             self.render()
         return observations, rewards, terminations, truncations, infos
 
     def _observations(self) -> dict:
-        central = self.layout.encode(self.sim)
+        central = self.interface.observe(self.layout.encode(self.sim))
         blocks = self.layout.agv_blocks(central)
         glob = central[-self.layout.global_features :]
         obs = {"drone": central}
@@ -152,10 +160,10 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         """Global state: the central observation."""
         if self.sim.x_aug is None:
             raise RuntimeError("call reset() before state()")
-        return self.layout.encode(self.sim)
+        return self.interface.observe(self.layout.encode(self.sim))
 
 
 def parallel_env(config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-                 **overrides: Any) -> LawnParallelEnv:
+                 interface: RLInterface | Mapping | str | None = None, **overrides: Any) -> LawnParallelEnv:
     """Create the PettingZoo parallel environment (see :class:`LawnParallelEnv`)."""
-    return LawnParallelEnv(config, render_mode=render_mode, **overrides)
+    return LawnParallelEnv(config, render_mode=render_mode, interface=interface, **overrides)

@@ -1,0 +1,280 @@
+"""The opt-in RL interface: action schemes, a bounded reward, termination and clipped features.
+
+The v0 environments are the paper's benchmark and stay as they are: raw actions, reward minus
+the realized stage cost, no termination, unclipped features. A learner started there sits in a
+failure basin (the zero action hovers at the start with equal power; lost commands keep an AGV
+accelerating; single slots cost up to 1e7), so every environment also takes
+``interface=RLInterface(...)`` (or ``interface="rl"`` for :data:`RL_INTERFACE`), which changes
+*how the agent talks to the scenario*, never the scenario:
+
+* **Action schemes** (:class:`ActionLayout`, one object that decodes and encodes every scheme,
+  used by the environments, the learned-policy wrappers and behaviour cloning):
+
+  - ``"direct"``: the v0 actions (:mod:`lawn_env.spaces`);
+  - ``"anchored"``: actions measured from a safe anchor, so the zero action is a good policy.
+    Drone: a target ``centroid of the AGVs + a * drone_offset_m`` per axis, flown toward at up
+    to V_max. Power: the budget is always spent, ``p_k ∝ d_k^2 exp(a_k power_log_range)`` with
+    ``d_k`` the 3-D distance from the drone's next position, so the zero action is the split
+    that equalizes every link's outage (``x ∝ d^2 / p``) and no link ever gets zero.
+    Increments (Joint): a residual ``a * residual_scale * Delta-a_max`` on the first increment
+    of the outage-aware MPC at each link's planned success probability (the QP P3 that drives
+    the AGVs of ``lawn/Comm-v0``, :class:`lawn_env.mpc.OutageAwareMPC`), clipped to the control
+    set. (A cheaper anchor, the unconstrained MPC's linear gain saturated afterwards, costs 20x
+    the MPC even with perfect links: the reference paths ask for more than the AGVs' acceleration
+    bounds at their corners, and only a controller that plans with the bounds takes them well.)
+
+* **Reward** ``"scaled"``: ``-min(cost, cost_clip) / cost_scale`` per slot, in
+  ``[-cost_clip / cost_scale, 0]``. The raw stage cost and its terms stay in ``info``.
+* **Termination** past ``termination_distance_m`` of position error of any AGV, with the reward
+  of the remaining slots at its floor added as a penalty, so that ending early is never better
+  than continuing (every remaining slot would have earned at least that floor).
+* **Observation clipping** to ``[-obs_clip, obs_clip]`` (the features are normalized to order
+  one; drift can otherwise blow them up).
+
+Evaluation never uses the interface: learned policies are wrapped to act on the v0
+environments (:class:`agents.learned.SB3Policy`), and every comparison reports the realized
+control cost of full episodes of the unmodified scenario.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal, Mapping, NamedTuple
+
+import gymnasium as gym
+import numpy as np
+from pydantic import ConfigDict, Field, model_validator
+from pydantic.dataclasses import dataclass
+
+from . import spaces
+from .channel import LinkParams, success_probability
+from .drone import move_drone
+from .mpc import OutageAwareMPC
+
+__all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "resolve_interface", "ActionLayout", "Decision",
+           "ROLES"]
+
+PositiveFloat = Annotated[float, Field(gt=0)]
+
+
+@dataclass(frozen=True, config=ConfigDict(extra="forbid", allow_inf_nan=False))
+class RLInterface:
+    """How an agent talks to the scenario (module docstring). The defaults are the v0 interface."""
+
+    action_scheme: Literal["direct", "anchored"] = "direct"
+    """``direct``: the v0 actions; ``anchored``: measured from a safe anchor."""
+    reward: Literal["cost", "scaled"] = "cost"
+    """``cost``: minus the stage cost (v0); ``scaled``: minus the clipped, scaled stage cost."""
+    cost_scale: PositiveFloat = 10.0
+    """Stage-cost units per unit of reward (the experts spend about 12 per slot at the defaults)."""
+    cost_clip: PositiveFloat = 100.0
+    """Stage cost counted at most per slot (reward floor ``-cost_clip / cost_scale``)."""
+    termination_distance_m: PositiveFloat | None = None
+    """End the episode when an AGV is farther than this from its reference (None: never)."""
+    obs_clip: PositiveFloat | None = None
+    """Clip every observation feature to ``[-obs_clip, obs_clip]`` (None: no clipping)."""
+    drone_offset_m: PositiveFloat = 50.0
+    """Anchored drone target: the AGVs' centroid plus ``a * drone_offset_m`` per axis, m."""
+    power_log_range: PositiveFloat = 2.0
+    """Anchored power: weights ``d^2 exp(a * power_log_range)``; links differ at most by e^(2 range) from the prior."""
+    residual_scale: PositiveFloat = 1.0
+    """Anchored increments: residual ``a * residual_scale * Delta-a_max`` on the tracking controller."""
+
+    @model_validator(mode="after")
+    def _check(self) -> "RLInterface":
+        if self.termination_distance_m is not None and self.reward != "scaled":
+            raise ValueError(
+                f"termination_distance_m={self.termination_distance_m} needs reward='scaled' (got "
+                f"reward={self.reward!r}): the penalty that makes ending early never pay is the reward floor "
+                "of the remaining slots, and the raw cost has no floor")
+        return self
+
+    @property
+    def reward_floor(self) -> float:
+        """The lowest reward of one slot (``-inf`` for the raw cost)."""
+        return -self.cost_clip / self.cost_scale if self.reward == "scaled" else -math.inf
+
+    def reward_from_cost(self, cost: float) -> float:
+        """The slot's reward for a realized stage cost."""
+        if self.reward == "cost":
+            return -cost
+        return -min(cost, self.cost_clip) / self.cost_scale
+
+    def terminal_penalty(self, remaining_slots: int) -> float:
+        """Added to the reward of a terminating step: the floor for every slot not played."""
+        return remaining_slots * self.reward_floor if remaining_slots > 0 else 0.0
+
+    def terminates(self, position_error_m: np.ndarray) -> bool:
+        """True when termination is on and some AGV's position error exceeds the bound."""
+        if self.termination_distance_m is None:
+            return False
+        d2 = (np.asarray(position_error_m) ** 2).sum(axis=-1)
+        return bool(d2.max() > self.termination_distance_m**2)
+
+    def observation_space(self, size: int) -> gym.spaces.Box:
+        bound = np.inf if self.obs_clip is None else self.obs_clip
+        return gym.spaces.Box(-bound, bound, shape=(size,), dtype=np.float32)
+
+    def observe(self, obs: np.ndarray) -> np.ndarray:
+        """The observation as the agent sees it (clipped in place when ``obs_clip`` is set)."""
+        if self.obs_clip is not None:
+            np.clip(obs, -self.obs_clip, self.obs_clip, out=obs)
+        return obs
+
+    def to_dict(self) -> dict[str, Any]:
+        return {f: getattr(self, f) for f in self.__dataclass_fields__}
+
+
+#: The paper's benchmark interface (what ``lawn/Joint-v0`` and ``lawn/Comm-v0`` use by default).
+V0_INTERFACE = RLInterface()
+#: The RL-ready interface (``interface="rl"``; the ids ``lawn/JointRL-v0`` and ``lawn/CommRL-v0``).
+RL_INTERFACE = RLInterface(action_scheme="anchored", reward="scaled", termination_distance_m=25.0, obs_clip=10.0)
+_NAMED = {"v0": V0_INTERFACE, "rl": RL_INTERFACE}
+
+
+def resolve_interface(interface: RLInterface | Mapping | str | None) -> RLInterface:
+    """An :class:`RLInterface` from itself, a dict of its fields, ``"v0"``/``"rl"`` or None (v0)."""
+    if interface is None:
+        return V0_INTERFACE
+    if isinstance(interface, RLInterface):
+        return interface
+    if isinstance(interface, str):
+        try:
+            return _NAMED[interface]
+        except KeyError:
+            raise ValueError(f"interface={interface!r}; valid names: {', '.join(_NAMED)}, "
+                             "or a dict of RLInterface fields") from None
+    if isinstance(interface, Mapping):
+        data = dict(interface)
+        base = resolve_interface(data.pop("base", "v0"))
+        return RLInterface(**{**base.to_dict(), **data})
+    raise TypeError(f"interface must be an RLInterface, a dict, 'v0', 'rl' or None; got {type(interface).__name__}")
+
+
+class Decision(NamedTuple):
+    """The physical decisions of one slot: increments (K, 2) m/s^2 (None when an MPC decides
+    them), powers (K,) W, the drone's next position (2,) m."""
+
+    increment: np.ndarray | None
+    power_w: np.ndarray
+    drone_next: np.ndarray
+
+
+#: What an action of each role decides: ``joint`` (increments, power, drone: Joint-v0),
+#: ``comm`` (power and drone: Comm-v0 and the parallel env's drone).
+ROLES = ("joint", "comm")
+
+
+class ActionLayout:
+    """Decode and encode the normalized actions of one role under one scheme.
+
+    ``decode(action, x_aug, reference, drone_position)`` turns a checked action in [-1, 1]
+    into a :class:`Decision`; ``encode(decision, x_aug, reference, drone_position)`` is its
+    inverse (exact for decisions the scheme can express; otherwise the nearest action, clipped).
+    The state arguments are the measured augmented states (K, 6), the reference window
+    (K, N_p+1, 6) and the drone's current position (2,); :class:`~lawn_env.core.Snapshot` and
+    the observation's decode carry the same arrays.
+    """
+
+    def __init__(self, config, role: str = "joint", interface: RLInterface | Mapping | str | None = None):
+        if role not in ROLES:
+            raise ValueError(f"role={role!r}; valid: {', '.join(ROLES)}")
+        self.interface = resolve_interface(interface)
+        self.scheme = self.interface.action_scheme
+        self.role = role
+        k = config.num_agvs
+        self.num_agvs = k
+        self._inc_size = 2 * k if role == "joint" else 0
+        self.size = self._inc_size + k + 2
+        self.space = gym.spaces.Box(-1.0, 1.0, shape=(self.size,), dtype=np.float32)
+        self._inc_max = config.control.accel_increment_max_mps2
+        self._pmax = config.power_budget_w
+        self._vmax = config.drone.max_speed_mps
+        self._dt = config.slot_s
+        self._area = tuple(config.area_m)
+        self._altitude_sq = config.drone.altitude_m**2
+        if self.scheme == "anchored":
+            self._link = LinkParams.from_config(config, planning=True)
+            self.mpc = OutageAwareMPC.from_config(config) if role == "joint" else None
+
+    def reset(self) -> None:
+        """Start an episode (the anchor MPC's warm starts are per episode, like the envs' MPC)."""
+        if self.scheme == "anchored" and self.mpc is not None:
+            self.mpc.reset()
+
+    # ------------------------------------------------------------------ decode
+    def decode(self, action: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
+               drone_position: np.ndarray) -> Decision:
+        a = action
+        k = self.num_agvs
+        comm = a[self._inc_size :]
+        if self.scheme == "direct":
+            power = spaces.decode_power(comm[:k], self._pmax)
+            vx, vy = comm[k:].tolist()
+            drone_next = move_drone(drone_position, (vx * self._vmax, vy * self._vmax), self._vmax, self._dt,
+                                    self._area)
+            increment = a[: 2 * k].reshape(k, 2) * self._inc_max if self._inc_size else None
+            return Decision(increment, power, drone_next)
+        drone_next = self._anchored_drone(comm[k:], x_aug, drone_position)
+        power = self._anchored_power(comm[:k], x_aug, drone_next)
+        increment = None
+        if self._inc_size:
+            increment = self.anchor_increment(x_aug, reference, power, drone_next)
+            increment += a[: 2 * k].reshape(k, 2) * (self.interface.residual_scale * self._inc_max)
+            np.clip(increment, -self._inc_max, self._inc_max, out=increment)
+        return Decision(increment, power, drone_next)
+
+    def _anchored_drone(self, a: np.ndarray, x_aug: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
+        target = x_aug[:, 0:2].mean(axis=0) + a * self.interface.drone_offset_m
+        step = target - drone_position
+        dist = math.hypot(*step.tolist())
+        reach = self._vmax * self._dt
+        velocity = step / self._dt if dist <= reach else step * (self._vmax / dist)
+        return move_drone(drone_position, velocity, self._vmax, self._dt, self._area)
+
+    def _power_prior(self, x_aug: np.ndarray, drone_next: np.ndarray) -> np.ndarray:
+        diff = x_aug[:, 0:2] - drone_next
+        return (diff * diff).sum(axis=1) + self._altitude_sq
+
+    def _anchored_power(self, a: np.ndarray, x_aug: np.ndarray, drone_next: np.ndarray) -> np.ndarray:
+        w = self._power_prior(x_aug, drone_next) * np.exp(a * self.interface.power_log_range)
+        return w * (self._pmax / w.sum())
+
+    def anchor_increment(self, x_aug: np.ndarray, reference: np.ndarray, power_w: np.ndarray,
+                         drone_next: np.ndarray) -> np.ndarray:
+        """The tracking controller under the residual: the outage-aware MPC's first increment at each
+        link's planned success probability, (K, 2) m/s^2 (a new array; before the residual)."""
+        d = np.sqrt(self._power_prior(x_aug, drone_next))
+        psi = success_probability(power_w, d, **self._link._kwargs)
+        return self.mpc.solve(x_aug, reference, psi).increments[:, 0, :].copy()
+
+    # ------------------------------------------------------------------ encode
+    def encode(self, decision: Decision, x_aug: np.ndarray, reference: np.ndarray | None,
+               drone_position: np.ndarray) -> np.ndarray:
+        """The action (float32) that decodes to ``decision`` (nearest one, clipped, otherwise)."""
+        power = np.asarray(decision.power_w, dtype=float)
+        drone_next = np.asarray(decision.drone_next, dtype=float)
+        if self.scheme == "direct":
+            parts = [spaces.encode_power(power, self._pmax),
+                     spaces.encode_drone(drone_next, drone_position, self._vmax, self._dt)]
+            if self._inc_size:
+                parts.insert(0, spaces.encode_increments(decision.increment, self._inc_max))
+            return np.concatenate(parts).astype(np.float32)
+        centroid = x_aug[:, 0:2].mean(axis=0)
+        target = drone_next
+        move = drone_next - drone_position
+        dist = math.hypot(*move.tolist())
+        reach = self._vmax * self._dt
+        if dist >= reach * (1 - 1e-9):  # a full-speed move: any target further along the ray gives it
+            u = move / dist
+            target = drone_position + max(dist, float((centroid - drone_position) @ u)) * u
+        a_drone = np.clip((target - centroid) / self.interface.drone_offset_m, -1.0, 1.0)
+        log_w = np.log(np.maximum(power, 1e-300) / self._power_prior(x_aug, drone_next))
+        log_w -= 0.5 * (log_w.max() + log_w.min())  # any common shift gives the same split: center the range
+        a_power = np.clip(log_w / self.interface.power_log_range, -1.0, 1.0)
+        parts = [a_power, a_drone]
+        if self._inc_size:
+            anchor = self.anchor_increment(x_aug, reference, power, drone_next)
+            scale = self.interface.residual_scale * self._inc_max
+            parts.insert(0, np.clip((np.asarray(decision.increment, dtype=float) - anchor) / scale, -1, 1).reshape(-1))
+        return np.concatenate(parts).astype(np.float32)
