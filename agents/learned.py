@@ -1,9 +1,12 @@
-"""Learned policies (Stable-Baselines3 run directories) behind the common policy protocol.
+"""Learned policies behind the common policy protocol, always acting on the v0 environments.
 
-``make_policy("sb3:DIR", config)`` loads ``DIR/model.zip`` with its normalization statistics;
-``bc:DIR`` is the same for behaviour-cloned policies (saved in SB3's format); ``marl:DIR`` runs a
-parameter-shared multi-agent policy on ``lawn/Joint-v0``. torch and SB3 are imported only here,
-when such a policy is built.
+``make_policy("sb3:DIR", config)`` loads a ``lawn train`` run directory (``bc:DIR`` the same for
+behaviour-cloned runs, ``marl:DIR`` a parameter-shared multi-agent run) and ``zoo:NAME`` a
+shipped agent (``agents/zoo/NAME``: policy weights, observation statistics and ``agent.json``).
+Whatever interface an agent was trained with (:mod:`lawn_env.interface`: anchored actions,
+clipped features), the wrapper reproduces it around the network and hands the v0 environment
+the equivalent v0 action, so every comparison runs the unmodified scenario. torch and SB3 are
+imported only here, when such a policy is built.
 """
 
 from __future__ import annotations
@@ -11,15 +14,21 @@ from __future__ import annotations
 import json
 import pickle
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from lawn_env import ScenarioConfig
+from lawn_env.interface import ActionLayout, RLInterface, resolve_interface
 
 from .errors import MissingExtra
 from .policies import COMM, JOINT, Policy
 
-__all__ = ["SB3Policy", "MARLPolicy", "LOADERS"]
+__all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "LOADERS", "ZOO_DIR", "zoo_agents", "export_agent"]
+
+#: Shipped agents: one folder per agent (``lawn zoo`` lists them).
+ZOO_DIR = Path(__file__).parent / "zoo"
+_RL_EXTRA = "trained agents need the rl extra: bash scripts/setup.sh full, or pip install torch==2.13.0 && pip install -e '.[rl]'"
 
 
 def _read_run(path: Path) -> dict:
@@ -29,92 +38,173 @@ def _read_run(path: Path) -> dict:
     return json.loads((path / "run.json").read_text())
 
 
-def _load_model(path: Path, algo: str):
+def _sb3():
     try:
-        from stable_baselines3 import A2C, PPO, SAC, TD3
+        import stable_baselines3
+        import torch
     except ImportError:  # exercised only without the extra
-        raise MissingExtra("trained agents need the rl extra: bash scripts/setup.sh full, "
-                           "or pip install torch==2.13.0 && pip install -e '.[rl]'") from None
-    import torch
-
+        raise MissingExtra(_RL_EXTRA) from None
     torch.set_num_threads(1)  # small networks, one observation at a time
-    classes = {"ppo": PPO, "sac": SAC, "td3": TD3, "a2c": A2C}
+    return stable_baselines3
+
+
+def _selected(path: Path) -> tuple[Path, Path]:
+    """The model a run directory stands for and its statistics: the one selected on the
+    validation seeds (``best_model.zip``) when the run kept one, else the final model."""
+    path = Path(path)
+    if (path / "best_model.zip").exists():
+        return path / "best_model.zip", path / "best_vecnormalize.pkl"
+    return path / "model.zip", path / "vecnormalize.pkl"
+
+
+def _load_model(path: Path, algo: str):
+    sb3 = _sb3()
+    classes = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3, "a2c": sb3.A2C}
     if algo not in classes:
-        raise ValueError(f"{path}: unknown algorithm {algo!r} in run.json")
-    return classes[algo].load(str(Path(path) / "model.zip"), device="cpu")
+        raise ValueError(f"{path}: unknown algorithm {algo!r} in run.json; valid: {', '.join(classes)}")
+    return classes[algo].load(str(_selected(path)[0]), device="cpu")
 
 
-def _load_normalizer(path: Path):
-    norm = Path(path) / "vecnormalize.pkl"
-    if not norm.exists():
-        return None
-    with open(norm, "rb") as fh:
-        stats = pickle.load(fh)
-    stats.training = False
-    return stats
+class ObsNormalizer:
+    """SB3 ``VecNormalize``'s observation transform, frozen: ``clip((x - mean) / sqrt(var + eps))``."""
+
+    def __init__(self, mean: np.ndarray, var: np.ndarray, clip: float, epsilon: float):
+        self.mean, self.var = np.asarray(mean, dtype=np.float64), np.asarray(var, dtype=np.float64)
+        self.clip, self.epsilon = float(clip), float(epsilon)
+
+    @classmethod
+    def from_vecnormalize(cls, venv) -> "ObsNormalizer | None":
+        if venv is None or not getattr(venv, "norm_obs", False):
+            return None
+        return cls(venv.obs_rms.mean, venv.obs_rms.var, venv.clip_obs, venv.epsilon)
+
+    @classmethod
+    def load(cls, path: Path) -> "ObsNormalizer | None":
+        """From ``vecnormalize.pkl`` (a run directory) or ``normalizer.npz`` (a shipped agent)."""
+        path = Path(path)
+        if not path.exists():
+            return None
+        if path.suffix == ".npz":
+            data = np.load(path)
+            return cls(data["mean"], data["var"], float(data["clip"]), float(data["epsilon"]))
+        try:
+            with open(path, "rb") as fh:
+                return cls.from_vecnormalize(pickle.load(fh))
+        except Exception as exc:  # a truncated or foreign pickle: say which file
+            raise ValueError(f"{path}: not a readable VecNormalize file ({type(exc).__name__}: {exc})") from None
+
+    def save(self, path: Path) -> None:
+        np.savez(path, mean=self.mean.astype(np.float32), var=self.var.astype(np.float32), clip=self.clip,
+                 epsilon=self.epsilon)
+
+    def normalize_obs(self, obs: np.ndarray) -> np.ndarray:
+        x = (np.asarray(obs, dtype=np.float64) - self.mean) / np.sqrt(self.var + self.epsilon)
+        return np.clip(x, -self.clip, self.clip).astype(np.float32)
 
 
 class SB3Policy(Policy):
-    """A trained SB3 agent: normalizes observations as in training, acts deterministically."""
+    """A trained single-agent network acting on ``lawn/Joint-v0`` or ``lawn/Comm-v0``.
+
+    ``network(obs) -> action`` is any deterministic SB3 predictor (a model or a bare policy);
+    observations pass through the training interface's clipping and the normalizer, actions
+    through the training scheme's decode and the v0 encode (:class:`lawn_env.ActionLayout`).
+    """
 
     name = "sb3"
     env_ids = (JOINT, COMM)
 
-    def __init__(self, path, config: ScenarioConfig | None = None, env_id: str | None = None, seed: int | None = None):
-        self.path = Path(path)
-        run = _read_run(self.path)
-        trained_config = ScenarioConfig.from_dict(json.loads((self.path / "config.json").read_text()))
-        trained_env = run["env"]
-        if trained_env not in self.env_ids:
-            raise ValueError(f"{self.path} was trained on {trained_env}; use marl:{self.path} for multi-agent runs")
-        env_id = env_id or trained_env
-        if env_id != trained_env:
-            raise ValueError(f"{self.path} was trained on {trained_env}, not {env_id}")
-        super().__init__(config if config is not None else trained_config, env_id, seed)
-        self.algo = run.get("target", run["algo"])
-        self.model = _load_model(self.path, self.algo)
-        self.normalizer = _load_normalizer(self.path)
-        expected = self.model.observation_space.shape
+    def __init__(self, network, config: ScenarioConfig, env_id: str, interface: RLInterface | dict | str | None = None,
+                 normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "sb3"):
+        super().__init__(config, env_id, seed)
+        self.network = network
+        self.normalizer = normalizer
+        self.interface = resolve_interface(interface)
+        role = "joint" if env_id == JOINT else "comm"
+        self.scheme = ActionLayout(self.config, role, self.interface)
+        self.v0 = ActionLayout(self.config, role, None)
+        self.name = label
+        expected = tuple(network.observation_space.shape)
         if expected != (self.layout.size,):
-            raise ValueError(f"{self.path} expects observations of shape {expected}; this scenario gives "
-                             f"({self.layout.size},): evaluate it with its training config ({self.path / 'config.json'})")
+            raise ValueError(f"{label} expects observations of shape {expected}; this scenario gives "
+                             f"({self.layout.size},): evaluate it with its training config")
+
+    @classmethod
+    def from_run(cls, path, config: ScenarioConfig | None = None, env_id: str | None = None,
+                 seed: int | None = None) -> "SB3Policy":
+        path = Path(path)
+        run = _read_run(path)
+        trained_env = run["env"]
+        if trained_env not in cls.env_ids:
+            raise ValueError(f"{path} was trained on {trained_env}; use marl:{path} for multi-agent runs")
+        if env_id not in (None, trained_env):
+            raise ValueError(f"{path} was trained on {trained_env}, not {env_id}")
+        trained_config = ScenarioConfig.from_dict(json.loads((path / "config.json").read_text()))
+        model = _load_model(path, run.get("target", run["algo"]))
+        return cls(model, config if config is not None else trained_config, trained_env, run.get("interface"),
+                   ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}")
+
+    def _on_reset(self, rng) -> None:
+        self.scheme.reset()
 
     def act(self, obs) -> np.ndarray:
-        x = np.asarray(obs, dtype=np.float32)
+        raw = np.asarray(obs, dtype=np.float32)
+        x = self.interface.observe(raw.copy())
         if self.normalizer is not None:
             x = self.normalizer.normalize_obs(x)
-        action, _ = self.model.predict(x, deterministic=True)
-        return np.clip(action, -1.0, 1.0).astype(np.float32)
+        action, _ = self.network.predict(x, deterministic=True)
+        action = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        if self.interface.action_scheme == "direct":
+            return action.astype(np.float32)
+        state = self.layout.decode(raw)
+        args = (state["x_aug"], state["reference"], state["drone_position"])
+        return self.v0.encode(self.scheme.decode(action, *args), *args)
 
 
 class MARLPolicy(Policy):
     """A parameter-shared multi-agent policy driving ``lawn/Joint-v0`` from the central observation:
-    each agent's observation is rebuilt as SuperSuit built it in training, and the AGVs' increments
-    and the drone's power and move are assembled into the joint action."""
+    each agent's observation is rebuilt as SuperSuit built it in training (padding, one-hot agent
+    indicator), the agents' actions are assembled into the central action of the training scheme
+    and carried to the v0 action like :class:`SB3Policy`."""
 
     name = "marl"
     env_ids = (JOINT,)
 
-    def __init__(self, path, config: ScenarioConfig | None = None, env_id: str | None = None, seed: int | None = None):
-        self.path = Path(path)
-        run = _read_run(self.path)
-        if run["env"] != "lawn/Parallel-v0":
-            raise ValueError(f"{self.path} was trained on {run['env']}, not the multi-agent env; use sb3:{self.path}")
-        trained_config = ScenarioConfig.from_dict(json.loads((self.path / "config.json").read_text()))
-        super().__init__(config if config is not None else trained_config, env_id or JOINT, seed)
-        self.model = _load_model(self.path, run["algo"])
-        self.normalizer = _load_normalizer(self.path)
+    def __init__(self, network, config: ScenarioConfig, interface: RLInterface | dict | str | None = None,
+                 normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "marl"):
+        super().__init__(config, JOINT, seed)
+        self.network = network
+        self.normalizer = normalizer
+        self.interface = resolve_interface(interface)
+        self.scheme = ActionLayout(self.config, "joint", self.interface)
+        self.v0 = ActionLayout(self.config, "joint", None)
+        self.name = label
         k = self.config.num_agvs
         self.n_agents = k + 1
-        self.obs_width = self.model.observation_space.shape[0] - self.n_agents
+        self.obs_width = network.observation_space.shape[0] - self.n_agents
         if self.obs_width != self.layout.size:
-            raise ValueError(f"{self.path} expects {self.model.observation_space.shape[0]} inputs; this scenario "
+            raise ValueError(f"{label} expects {network.observation_space.shape[0]} inputs; this scenario "
                              f"has K={k}: evaluate it with its training config")
+
+    @classmethod
+    def from_run(cls, path, config: ScenarioConfig | None = None, env_id: str | None = None,
+                 seed: int | None = None) -> "MARLPolicy":
+        path = Path(path)
+        run = _read_run(path)
+        if run["env"] != "lawn/Parallel-v0":
+            raise ValueError(f"{path} was trained on {run['env']}, not the multi-agent env; use sb3:{path}")
+        if env_id not in (None, JOINT):
+            raise ValueError(f"{path} is a multi-agent policy; it drives {JOINT}, not {env_id}")
+        trained_config = ScenarioConfig.from_dict(json.loads((path / "config.json").read_text()))
+        return cls(_load_model(path, run["algo"]), config if config is not None else trained_config,
+                   run.get("interface"), ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}")
+
+    def _on_reset(self, rng) -> None:
+        self.scheme.reset()
 
     def agent_observations(self, obs) -> np.ndarray:
         """(K+1, width): the drone's and each AGV's padded observation with its one-hot indicator,
-        in PettingZoo's agent order (drone, agv_0, ...)."""
-        central = np.asarray(obs, dtype=np.float32)
+        in PettingZoo's agent order (drone, agv_0, ...), as the agents see them (clipped)."""
+        central = self.interface.observe(np.array(obs, dtype=np.float32))
         blocks = self.layout.agv_blocks(central)
         glob = central[-self.layout.global_features:]
         out = np.zeros((self.n_agents, self.obs_width + self.n_agents), dtype=np.float32)
@@ -129,25 +219,79 @@ class MARLPolicy(Policy):
         x = self.agent_observations(obs)
         if self.normalizer is not None:
             x = self.normalizer.normalize_obs(x)
-        actions, _ = self.model.predict(x, deterministic=True)
-        actions = np.clip(actions, -1.0, 1.0)
+        actions, _ = self.network.predict(x, deterministic=True)
+        actions = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
         k = self.config.num_agvs
-        increments = actions[1:, :2].reshape(-1)
-        drone = actions[0, : k + 2]
-        return np.concatenate([increments, drone]).astype(np.float32)
+        central = np.concatenate([actions[1:, :2].reshape(-1), actions[0, : k + 2]])
+        if self.interface.action_scheme == "direct":
+            return central.astype(np.float32)
+        state = self.layout.decode(np.asarray(obs, dtype=np.float32))
+        args = (state["x_aug"], state["reference"], state["drone_position"])
+        return self.v0.encode(self.scheme.decode(central, *args), *args)
 
 
-def _sb3(path, config=None, env_id=None, seed=None, **kwargs):
-    if kwargs:
-        raise ValueError(f"learned policies take no settings; got {sorted(kwargs)}")
-    return SB3Policy(path, config, env_id, seed)
+# ---------------------------------------------------------------------- shipped agents (zoo)
+_POLICY_CLASSES = {"ppo": "stable_baselines3.common.policies:ActorCriticPolicy",
+                   "a2c": "stable_baselines3.common.policies:ActorCriticPolicy",
+                   "sac": "stable_baselines3.sac.policies:SACPolicy",
+                   "td3": "stable_baselines3.td3.policies:TD3Policy"}
 
 
-def _marl(path, config=None, env_id=None, seed=None, **kwargs):
-    if kwargs:
-        raise ValueError(f"learned policies take no settings; got {sorted(kwargs)}")
-    return MARLPolicy(path, config, env_id, seed)
+def export_agent(run_dir: Path, out_dir: Path, record: dict[str, Any]) -> Path:
+    """Write a run's policy network (weights only, no optimizer or value-function training state
+    beyond the network) and observation statistics as a shipped agent with ``agent.json``."""
+    run_dir, out_dir = Path(run_dir), Path(out_dir)
+    run = _read_run(run_dir)
+    algo = run.get("target", run["algo"])
+    model = _load_model(run_dir, algo)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    model.policy.save(str(out_dir / "policy.zip"))
+    normalizer = ObsNormalizer.load(_selected(run_dir)[1])
+    if normalizer is not None:
+        normalizer.save(out_dir / "normalizer.npz")
+    agent = {"algo": algo, "env": run["env"], "interface": run.get("interface"),
+             "config": json.loads((run_dir / "config.json").read_text()), **record}
+    (out_dir / "agent.json").write_text(json.dumps(agent, indent=2) + "\n")
+    return out_dir
 
 
-#: Prefixes of ``make_policy`` names that load a run directory: ``sb3:DIR``, ``bc:DIR``, ``marl:DIR``.
-LOADERS = {"sb3": _sb3, "bc": _sb3, "marl": _marl}
+def zoo_agents() -> dict[str, dict]:
+    """Shipped agents by name: their ``agent.json`` records."""
+    if not ZOO_DIR.is_dir():
+        return {}
+    return {p.parent.name: json.loads(p.read_text()) for p in sorted(ZOO_DIR.glob("*/agent.json"))}
+
+
+def _load_zoo(name: str, config=None, env_id=None, seed=None) -> Policy:
+    agents = zoo_agents()
+    if name not in agents:
+        raise ValueError(f"unknown zoo agent {name!r}; shipped: {', '.join(agents) or 'none'} (lawn zoo lists them)")
+    record = agents[name]
+    _sb3()
+    import importlib
+
+    module, cls_name = _POLICY_CLASSES[record["algo"]].split(":")
+    network = getattr(importlib.import_module(module), cls_name).load(str(ZOO_DIR / name / "policy.zip"), device="cpu")
+    cfg = config if config is not None else ScenarioConfig.from_dict(record["config"])
+    normalizer = ObsNormalizer.load(ZOO_DIR / name / "normalizer.npz")
+    if record["env"] == "lawn/Parallel-v0":
+        if env_id not in (None, JOINT):
+            raise ValueError(f"zoo:{name} is a multi-agent policy; it drives {JOINT}, not {env_id}")
+        return MARLPolicy(network, cfg, record["interface"], normalizer, seed, label=f"zoo:{name}")
+    if env_id not in (None, record["env"]):
+        raise ValueError(f"zoo:{name} was trained on {record['env']}, not {env_id}")
+    return SB3Policy(network, cfg, record["env"], record["interface"], normalizer, seed, label=f"zoo:{name}")
+
+
+def _no_settings(loader):
+    def load(path, config=None, env_id=None, seed=None, **kwargs):
+        if kwargs:
+            raise ValueError(f"learned policies take no settings; got {sorted(kwargs)}")
+        return loader(path, config, env_id, seed)
+
+    return load
+
+
+#: Prefixes of ``make_policy`` names for learned agents: ``sb3:DIR``, ``bc:DIR``, ``marl:DIR``, ``zoo:NAME``.
+LOADERS = {"sb3": _no_settings(SB3Policy.from_run), "bc": _no_settings(SB3Policy.from_run),
+           "marl": _no_settings(MARLPolicy.from_run), "zoo": _no_settings(_load_zoo)}

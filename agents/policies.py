@@ -301,9 +301,13 @@ def policy_names() -> list[str]:
     return list(POLICIES)
 
 
+#: Prefixes of learned agents' names (agents.learned.LOADERS): run directories and shipped agents.
+LEARNED_PREFIXES = ("sb3", "bc", "marl", "zoo")
+
+
 def is_policy_name(name: str) -> bool:
-    """True for registered names and for ``sb3:DIR`` / ``bc:DIR`` / ``marl:DIR``."""
-    return name in POLICIES or (":" in name and name.split(":", 1)[0] in ("sb3", "bc", "marl"))
+    """True for registered names and for ``sb3:DIR`` / ``bc:DIR`` / ``marl:DIR`` / ``zoo:NAME``."""
+    return name in POLICIES or (":" in name and name.split(":", 1)[0] in LEARNED_PREFIXES)
 
 
 def make_policy(name: str, config: ScenarioConfig | Mapping | str | None = None, env_id: str | None = None,
@@ -319,8 +323,8 @@ def make_policy(name: str, config: ScenarioConfig | Mapping | str | None = None,
         from .learned import LOADERS
 
         if prefix not in LOADERS:
-            raise ValueError(f"unknown policy prefix {prefix!r} in {name!r}; valid: "
-                             f"{', '.join(p + ':DIR' for p in LOADERS)}")
+            raise ValueError(f"unknown policy prefix {prefix!r} in {name!r}; valid: sb3:DIR, bc:DIR, marl:DIR, "
+                             "zoo:NAME")
         # no config: the agent's own training config (DIR/config.json)
         return LOADERS[prefix](path, resolve_config(config) if config is not None else None,
                                env_id=env_id, seed=seed, **kwargs)
@@ -329,5 +333,5 @@ def make_policy(name: str, config: ScenarioConfig | Mapping | str | None = None,
         factory = POLICIES[name]
     except (KeyError, TypeError):
         raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICIES)}, "
-                         "or sb3:DIR, bc:DIR, marl:DIR for trained agents") from None
+                         "or sb3:DIR, bc:DIR, marl:DIR, zoo:NAME for trained agents") from None
     return factory(config, env_id=env_id, seed=seed, **kwargs)

@@ -20,7 +20,7 @@ FAST = {"ppo": {"n_steps": 64, "batch_size": 64, "n_epochs": 2}, "a2c": {"n_step
         "td3": {"learning_starts": 64, "buffer_size": 2000, "batch_size": 32}}
 
 
-def _train(tmp_path, algo, env_id="lawn/Joint-v0", steps=256, name=None, **kwargs):
+def _train(tmp_path, algo, env_id="lawn/Joint-v0", steps=256, name=None, **kwargs):  # noqa: D401
     out = tmp_path / (name or f"{algo}-{env_id.split('/')[-1]}")
     hp = {**FAST.get(algo, {}), **kwargs.pop("hp_overrides", {})}
     n_envs = kwargs.pop("n_envs", 2 if algo in ("ppo", "a2c") else 1)
@@ -45,12 +45,13 @@ def _run_episode(policy, env_id):
 def test_train_save_load_evaluate(tmp_path, algo):
     env_id = "lawn/Comm-v0" if algo == "sac" else "lawn/Joint-v0"
     out, summary = _train(tmp_path, algo, env_id)
-    for name in ("model.zip", "vecnormalize.pkl", "run.json", "config.json", "hyperparams.json",
-                 "learning_curve.csv", "learning_curve.png", "summary.md"):
+    for name in ("model.zip", "vecnormalize.pkl", "best_model.zip", "best_vecnormalize.pkl", "run.json", "config.json",
+                 "hyperparams.json", "learning_curve.csv", "learning_curve.png", "summary.md"):
         assert (out / name).exists(), name
     assert (out / "tb").is_dir() and any((out / "checkpoints").glob("model_*_steps.zip"))
     run = json.loads((out / "run.json").read_text())
-    assert run["num_timesteps"] >= 256 and run["hyperparams_version"] >= 1 and "torch" in run["versions"]
+    assert run["num_timesteps"] >= 256 and run["hyperparams_version"] >= 2 and "torch" in run["versions"]
+    assert run["interface"]["action_scheme"] == "anchored"  # the RL interface is the default
     assert ScenarioConfig.from_dict(json.loads((out / "config.json").read_text())) == SMALL
     policy = make_policy(f"sb3:{out}")
     assert policy.env_id == env_id
@@ -103,7 +104,7 @@ def test_multi_agent_round_trip(tmp_path):
     assert policy.env_id == "lawn/Joint-v0"
     obs = gym.make("lawn/Joint-v0", config=SMALL).reset(seed=1)[0]
     agent_obs = policy.agent_observations(obs)
-    assert agent_obs.shape == (5, policy.model.observation_space.shape[0])
+    assert agent_obs.shape == (5, policy.network.observation_space.shape[0])
     assert np.array_equal(agent_obs[:, -5:], np.eye(5))  # SuperSuit's one-hot agent indicator
     metrics = _run_episode(policy, "lawn/Joint-v0")
     assert np.isfinite(metrics["control_cost"])
@@ -132,3 +133,82 @@ def test_errors_name_the_problem(tmp_path, capsys):
     out, _ = _train(tmp_path, "ppo", steps=64, name="exists")
     with pytest.raises(ValueError, match="already holds a run"):
         _train(tmp_path, "ppo", steps=64, name="exists")
+
+
+def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_path):
+    from training.evaluate import rollout
+    from training.train import VALIDATION_SEED_BASE
+
+    out, summary = _train(tmp_path, "ppo", "lawn/Comm-v0", steps=256, name="rl")
+    curve = (out / "learning_curve.csv").read_text().splitlines()
+    assert curve[0] == "timesteps,control_cost,control_cost_ci95" and len(curve) == 3  # at 128 and 256 steps
+    assert summary["best_validation_cost"] == min(float(line.split(",")[1]) for line in curve[1:])
+    policy = make_policy(f"sb3:{out}")
+    assert policy.interface.action_scheme == "anchored" and policy.env_id == "lawn/Comm-v0"
+    row = rollout(policy, "lawn/Comm-v0", SMALL, seed=VALIDATION_SEED_BASE)
+    assert row["slots"] == SMALL.num_slots  # no termination on the unmodified scenario
+
+
+def test_plain_v0_interface_on_request(tmp_path):
+    out, _ = _train(tmp_path, "ppo", steps=128, name="v0", interface="v0")
+    run = json.loads((out / "run.json").read_text())
+    assert run["interface"]["action_scheme"] == "direct" and run["interface"]["reward"] == "cost"
+    assert make_policy(f"sb3:{out}").interface.action_scheme == "direct"
+
+
+def test_several_training_seeds_in_one_command(tmp_path):
+    from training.train import train_seeds
+
+    result = train_seeds([3, 4], tmp_path / "multi", workers=1, progress=False, algo="ppo", env_id="lawn/Joint-v0",
+                         config=SMALL, timesteps=128, hp_overrides=FAST["ppo"], n_envs=2, eval_every=128,
+                         eval_episodes=1, checkpoint_every=128)
+    for s in (3, 4):
+        run = json.loads((tmp_path / "multi" / f"seed-{s}" / "run.json").read_text())
+        assert run["seed"] == s and (tmp_path / "multi" / f"seed-{s}" / "learning_curve.png").exists()
+    saved = json.loads((tmp_path / "multi" / "seeds.json").read_text())
+    assert saved["seeds"] == [3, 4] and len(saved["runs"]) == 2
+    best = [r["best_validation_cost"] for r in saved["runs"]]
+    assert saved["best_validation_cost_mean"] == pytest.approx(np.mean(best))
+    assert np.isfinite(saved["best_validation_cost_ci95"])
+    with pytest.raises(ValueError, match="distinct seeds"):
+        train_seeds([1, 1], tmp_path / "dup", algo="ppo", env_id="lawn/Joint-v0", config=SMALL, timesteps=64)
+
+
+def test_exported_agent_loads_as_zoo_name(tmp_path, monkeypatch):
+    import agents.learned as learned
+
+    out, _ = _train(tmp_path, "ppo", "lawn/Comm-v0", steps=128, name="exp")
+    monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
+    learned.export_agent(out, tmp_path / "zoo" / "tiny", {"label": "tiny test agent"})
+    files = sorted(p.name for p in (tmp_path / "zoo" / "tiny").iterdir())
+    assert files == ["agent.json", "normalizer.npz", "policy.zip"]
+    assert (tmp_path / "zoo" / "tiny" / "policy.zip").stat().st_size < 1_000_000
+    shipped, original = make_policy("zoo:tiny"), make_policy(f"sb3:{out}")
+    obs = gym.make("lawn/Comm-v0", config=SMALL).reset(seed=2)[0]
+    np.testing.assert_allclose(shipped.act(obs), original.act(obs), atol=1e-5)
+    with pytest.raises(ValueError, match="unknown zoo agent 'nope'; shipped: tiny"):
+        make_policy("zoo:nope")
+
+
+@pytest.mark.parametrize("name", sorted(__import__("agents.learned", fromlist=["zoo_agents"]).zoo_agents()))
+def test_shipped_agents_load_and_act(name):
+    from agents.learned import zoo_agents
+
+    record = zoo_agents()[name]
+    policy = make_policy(f"zoo:{name}")
+    assert policy.env_id == record["evaluated_on"]
+    env = gym.make(policy.env_id)
+    obs, _ = env.reset(seed=0)
+    policy.reset(0)
+    for _ in range(5):
+        action = policy.act(obs)
+        assert env.action_space.contains(action)
+        obs, *_ = env.step(action)
+
+
+def test_agents_are_shipped():
+    from agents.learned import zoo_agents
+
+    shipped = zoo_agents()
+    for name in ("ppo-comm", "ppo-joint", "ppo-marl"):
+        assert name in shipped, f"zoo:{name} is not shipped (lawn zoo build exports it)"

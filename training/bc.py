@@ -24,34 +24,45 @@ import gymnasium as gym
 import numpy as np
 
 from agents import make_policy
+from agents.learned import ObsNormalizer, SB3Policy
 from lawn_env import ScenarioConfig
+from lawn_env.interface import ActionLayout, Decision, resolve_interface
 
 __all__ = ["collect", "fit", "train_bc_run"]
 
 
-def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, actor=None):
-    """``steps`` transitions of seeded episodes; states visited by ``actor`` (default the expert)
-    and labelled with the expert's actions. Returns observations, expert actions and returns."""
+def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, interface, actor=None):
+    """``steps`` transitions of seeded episodes of the v0 env; states visited by ``actor`` (a v0
+    policy, default the expert) and labelled with the expert's decision encoded in the
+    interface's action scheme. Returns the observations as the learner sees them (the
+    interface's clipping), the labels and the episode costs."""
     env = gym.make(env_id, config=config)
     expert = make_policy(expert_name, config, env_id=env_id)
-    obs_list, act_list, returns = [], [], []
+    iface = resolve_interface(interface)
+    scheme = ActionLayout(config, "joint" if env_id == "lawn/Joint-v0" else "comm", iface)
+    obs_list, act_list, costs = [], [], []
     episode = 0
     while len(obs_list) < steps:
         obs, _ = env.reset(seed=seed + episode)
         expert.reset(seed + episode)
-        done, total = False, 0.0
+        if actor is not None:
+            actor.reset(seed + episode)
+        done = False
         while not done and len(obs_list) < steps:
-            label = expert.act(obs)  # the expert plans every slot, also when it does not act
-            obs_list.append(obs)
-            act_list.append(label)
-            action = label if actor is None else actor(obs)
-            obs, reward, terminated, truncated, _ = env.step(action)
-            total += reward
+            snap = env.unwrapped.snapshot()
+            v0_action = expert.act(obs)  # the expert plans every slot, also when it does not act
+            plan = expert.last_plan
+            decision = Decision(plan.increments[:, 0], plan.power_w, plan.drone_position)
+            obs_list.append(iface.observe(obs.copy()))
+            act_list.append(scheme.encode(decision, snap.x_aug, snap.reference, snap.drone_position))
+            action = v0_action if actor is None else actor.act(obs)
+            obs, _, terminated, truncated, info = env.step(action)
             done = terminated or truncated
-        returns.append(total)
+        if done:
+            costs.append(info["episode_metrics"]["control_cost"])
         episode += 1
     env.close()
-    return np.array(obs_list, dtype=np.float32), np.array(act_list, dtype=np.float32), returns
+    return np.array(obs_list, dtype=np.float32), np.array(act_list, dtype=np.float32), costs
 
 
 def _deterministic_action(model, obs_tensor):
@@ -100,7 +111,8 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     from stable_baselines3.common.running_mean_std import RunningMeanStd
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    from .train import _versions, limit_torch_threads, write_learning_curve
+    from .callbacks import ControlCostValidation
+    from .train import TRAIN_SEED_BASE, VALIDATION_SEED_BASE, _versions, limit_torch_threads, write_learning_curve
 
     limit_torch_threads()
     if env_id not in ("lawn/Joint-v0", "lawn/Comm-v0"):
@@ -116,17 +128,20 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     lr = float(p.pop("learning_rate", 1e-3))
     dagger_iterations = int(p.pop("dagger_iterations", 0))
     dagger_steps = int(p.pop("dagger_timesteps", 1200))
+    interface = resolve_interface(p.pop("interface", "v0"))
     policy_kwargs = p.pop("policy_kwargs", {})
     if target == "sac":
         policy_kwargs = {k: v for k, v in policy_kwargs.items() if k != "log_std_init"}
     if p:
-        raise ValueError(f"unknown bc hyperparameters {sorted(p)}; valid: expert, target, epochs, batch_size, "
-                         "learning_rate, dagger_iterations, dagger_timesteps, policy_kwargs")
+        raise ValueError(f"unknown bc hyperparameters {sorted(p)}; valid: expert, target, interface, epochs, "
+                         "batch_size, learning_rate, dagger_iterations, dagger_timesteps, policy_kwargs")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    obs, actions, expert_returns = collect(env_id, config, expert, timesteps, seed)
-    venv = VecNormalize(DummyVecEnv([lambda: gym.make(env_id, config=config)]), norm_reward=False)
+    episode_seed = TRAIN_SEED_BASE + 1000 * seed  # expert episodes never use test or validation seeds
+    obs, actions, expert_costs = collect(env_id, config, expert, timesteps, episode_seed, interface)
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make(env_id, config=config, interface=interface)]),
+                        norm_reward=False)
     venv.obs_rms = RunningMeanStd(shape=obs.shape[1:])
     venv.obs_rms.update(obs.astype(np.float64))
     venv.training = False
@@ -138,26 +153,31 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     history = [{"round": 0, "samples": len(obs), "losses": fit(model, normalized(obs), actions, epochs, batch_size,
                                                                 lr, seed)}]
     for it in range(1, dagger_iterations + 1):
-        def actor(o, _m=model):
-            a, _ = _m.predict(normalized(o), deterministic=True)
-            return np.clip(a, -1, 1).astype(np.float32)
-
-        new_obs, new_act, _ = collect(env_id, config, expert, dagger_steps, seed + 1000 * it, actor=actor)
+        actor = SB3Policy(model, config, env_id, interface, ObsNormalizer.from_vecnormalize(venv))
+        new_obs, new_act, _ = collect(env_id, config, expert, dagger_steps, episode_seed + 100 * it, interface,
+                                      actor=actor)
         obs, actions = np.concatenate([obs, new_obs]), np.concatenate([actions, new_act])
         history.append({"round": it, "samples": len(obs),
                         "losses": fit(model, normalized(obs), actions, epochs, batch_size, lr, seed + it)})
     elapsed = time.perf_counter() - start
     model.save(str(out_dir / "model.zip"))
     venv.save(str(out_dir / "vecnormalize.pkl"))
-    resolved = {"expert": expert, "target": target, "epochs": epochs, "batch_size": batch_size, "learning_rate": lr,
+    resolved = {"expert": expert, "target": target, "interface": interface.to_dict(), "epochs": epochs, "batch_size": batch_size, "learning_rate": lr,
                 "dagger_iterations": dagger_iterations, "dagger_timesteps": dagger_steps, "policy_kwargs": policy_kwargs}
     spec = {"algo": target, "target": target, "trainer": "bc", "env": env_id, "seed": seed, "timesteps": timesteps,
+            "interface": interface.to_dict(),
             "num_timesteps": int(len(obs)), "hyperparams_version": version, "wall_time_s": elapsed,
-            "expert_mean_return": float(np.mean(expert_returns)), "versions": _versions()}
+            "expert_mean_control_cost": float(np.mean(expert_costs)) if expert_costs else None,
+            "versions": _versions()}
     (out_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
     (out_dir / "hyperparams.json").write_text(json.dumps(resolved, indent=2))
     (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
     (out_dir / "bc_losses.json").write_text(json.dumps(history, indent=2))
+    validation = ControlCostValidation(env_id, config, interface.to_dict(), episodes=5, every=1, out_dir=out_dir,
+                                       seed_base=VALIDATION_SEED_BASE)
+    validation.model = model
+    mean, half = validation.validate()
+    (out_dir / "learning_curve.csv").write_text(f"timesteps,control_cost,control_cost_ci95\n{len(obs)},{mean},{half}\n")
     summary = write_learning_curve(out_dir, spec)
     summary.update(bc_loss_first=history[0]["losses"][0], bc_loss_last=history[-1]["losses"][-1])
     venv.close()

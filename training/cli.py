@@ -150,7 +150,7 @@ def cmd_train(args) -> int:
     except ImportError as exc:
         raise MissingExtra(f"training needs the rl extra ({exc.name} is missing): bash scripts/setup.sh full, "
                            "or pip install torch==2.13.0 && pip install -e '.[rl]'") from None
-    from .train import resume, train
+    from .train import resume, train, train_seeds
 
     if args.resume:
         summary = resume(Path(args.resume), timesteps=args.timesteps, progress=not args.quiet)
@@ -161,18 +161,53 @@ def cmd_train(args) -> int:
             raise ValueError(f"lawn train needs {', '.join(missing)} (or --resume DIR)")
         if args.timesteps is None:
             raise ValueError("lawn train needs --timesteps")
-        summary = train(args.algo, args.env, _config(args), args.timesteps, args.seed, Path(args.out),
-                        hp_overrides=_parse_overrides(args.hp), n_envs=args.n_envs, eval_every=args.eval_every,
-                        eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every,
-                        progress=not args.quiet, init_from=Path(args.init_from) if args.init_from else None)
+        kwargs = dict(algo=args.algo, env_id=args.env, config=_config(args), timesteps=args.timesteps,
+                      hp_overrides=_parse_overrides(args.hp), n_envs=args.n_envs, eval_every=args.eval_every,
+                      eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every,
+                      init_from=Path(args.init_from) if args.init_from else None, interface=args.interface)
+        if args.seeds:
+            result = train_seeds(args.seeds, Path(args.out), workers=args.workers, progress=not args.quiet, **kwargs)
+            print(f"lawn train: {args.algo} on {args.env}, seeds {args.seeds}")
+            for run in result["runs"]:
+                print(f"  seed {run['seed']}: best validation cost {run['best_validation_cost']:.6g} "
+                      f"at {run['best_at_timesteps']} steps, {run['timesteps']} steps in {run['wall_time_s']:.0f} s")
+            print(f"  across seeds: {result['best_validation_cost_mean']:.6g} ± "
+                  f"{result['best_validation_cost_ci95']:.3g} (95 % interval)")
+            print(f"wrote {args.out}/seed-*/ and {args.out}/seeds.json")
+            return 0
+        summary = train(seed=args.seed, out_dir=Path(args.out), progress=not args.quiet, **kwargs)
         out = args.out
     print(f"lawn train: {summary['algo']} on {summary['env']}, seed {summary['seed']}, "
           f"{summary['timesteps']} steps in {summary['wall_time_s']:.1f} s")
-    for key in ("final_eval_mean_return", "best_eval_mean_return", "bc_loss_first", "bc_loss_last"):
+    for key in ("final_validation_cost", "best_validation_cost", "best_at_timesteps", "bc_loss_first", "bc_loss_last"):
         if summary.get(key) is not None:
             print(f"  {key:<24}{summary[key]:.6g}")
     print(f"wrote {out}/ (model.zip, run.json, config.json, hyperparams.json, learning curve, summary.md)")
     return 0
+
+
+def cmd_zoo(args) -> int:
+    from .zoo import build_zoo, format_zoo_list, train_recipes
+
+    if args.action == "list":
+        print(format_zoo_list())
+        return 0
+    try:
+        import stable_baselines3  # noqa: F401
+    except ImportError:
+        raise MissingExtra("lawn zoo train/build need the rl extra: bash scripts/setup.sh full") from None
+    if args.action == "train":
+        dirs = train_recipes(Path(args.runs), args.only, workers=args.workers, progress=not args.quiet)
+        print(f"lawn zoo train: {len(dirs)} runs in {args.runs}")
+        return 0
+    table = build_zoo(Path(args.runs), Path(args.doc), Path(args.readme) if args.readme else None,
+                      workers=args.workers, progress=not args.quiet)
+    print(table)
+    print(f"wrote {args.doc}" + (f", the table in {args.readme}" if args.readme else "") + f" and {ZOO_HINT}")
+    return 0
+
+
+ZOO_HINT = "agents/zoo/<name>/ (policy.zip, normalizer.npz, agent.json)"
 
 
 def cmd_sweep(args) -> int:
@@ -272,18 +307,34 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--env", choices=TRAIN_ENV_IDS, help="lawn/Parallel-v0 is the multi-agent PettingZoo env")
     tr.add_argument("--timesteps", type=int, help="environment steps (for bc: expert transitions)")
     tr.add_argument("--seed", type=int, default=0)
+    tr.add_argument("--seeds", type=int, nargs="+", metavar="SEED",
+                    help="train one run per seed into OUT/seed-<s> (process pool, --workers) and summarize across seeds")
+    tr.add_argument("--workers", type=int, default=workers_default, help="processes for --seeds (default: %(default)s)")
+    tr.add_argument("--interface", default=None, choices=["rl", "v0"],
+                    help="the RL interface (default: the hyperparameter file's, rl) or the plain v0 interface")
     tr.add_argument("--out", help="run directory")
     tr.add_argument("--n-envs", type=int, default=None, help="parallel environments (default: the hyperparameter file)")
     tr.add_argument("--hp", action="append", default=[], metavar="KEY=VALUE",
                     help="hyperparameter override, e.g. --hp learning_rate=1e-4 (repeatable)")
-    tr.add_argument("--eval-every", type=int, default=5000, help="steps between evaluations")
-    tr.add_argument("--eval-episodes", type=int, default=5)
+    tr.add_argument("--eval-every", type=int, default=10000,
+                    help="steps between validations (full unmodified episodes, realized control cost)")
+    tr.add_argument("--eval-episodes", type=int, default=5, help="validation episodes (seeds 500000 + i)")
     tr.add_argument("--checkpoint-every", type=int, default=10000, help="steps between checkpoints")
     tr.add_argument("--init-from", metavar="DIR", help="start from a behaviour-cloned run of the same algorithm")
     tr.add_argument("--resume", metavar="DIR", help="continue an interrupted run from its last checkpoint")
     tr.add_argument("--quiet", action="store_true")
     _add_config_args(tr)
     tr.set_defaults(func=cmd_train)
+
+    zo = sub.add_parser("zoo", help="shipped learned agents: list them, train their recipes, benchmark and export")
+    zo.add_argument("action", nargs="?", default="list", choices=["list", "train", "build"])
+    zo.add_argument("--runs", default="runs/agents", help="training runs, one folder per recipe (default: %(default)s)")
+    zo.add_argument("--only", nargs="+", metavar="NAME", help="train only these recipes")
+    zo.add_argument("--doc", default="docs/LEARNED.md", help="build: the table's document (default: %(default)s)")
+    zo.add_argument("--readme", default="README.md", help="build: README whose learned-agents block is replaced")
+    zo.add_argument("--workers", type=int, default=workers_default)
+    zo.add_argument("--quiet", action="store_true")
+    zo.set_defaults(func=cmd_zoo)
 
     sw = sub.add_parser("sweep", help="run a grid of config fields x policies x seeds into a tidy table")
     sw.add_argument("spec", help="sweep spec (YAML or JSON)")

@@ -26,7 +26,7 @@ import lawn_env
 from agents import make_policy
 from lawn_env import ScenarioConfig
 
-__all__ = ["run_episode", "evaluate", "summarize", "write_rows", "SUMMARY_METRICS"]
+__all__ = ["rollout", "run_episode", "pool_map", "evaluate", "summarize", "write_rows", "SUMMARY_METRICS"]
 
 #: Metrics summarized with a mean and a 95 % interval (name, label).
 SUMMARY_METRICS = (
@@ -37,23 +37,22 @@ SUMMARY_METRICS = (
 )
 
 
-def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
-                policy_kwargs: Mapping[str, Any] | None = None) -> dict:
-    """One seeded episode; returns a flat row of MODEL.md §6 metrics plus decision statistics."""
+def rollout(policy, env_id: str, config: ScenarioConfig, seed: int) -> dict:
+    """One seeded, full episode of the unmodified scenario (``env_id`` of ``lawn_env.ENV_IDS``)
+    under a built policy; returns a flat row of MODEL.md §6 metrics plus decision statistics."""
     if env_id not in lawn_env.ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; valid: {', '.join(lawn_env.ENV_IDS)}")
     env = gym.make(env_id, config=config)
-    agent = make_policy(policy, config, env_id=env_id, **dict(policy_kwargs or {}))
     obs, _ = env.reset(seed=seed)
-    agent.reset(seed)
+    policy.reset(seed)
     decision_s, ao_iterations, fallbacks = [], [], 0
     done = False
     info: dict = {}
     while not done:
         start = time.perf_counter()
-        action = agent.act(obs)
+        action = policy.act(obs)
         decision_s.append(time.perf_counter() - start)
-        plan = getattr(agent, "last_plan", None)
+        plan = getattr(policy, "last_plan", None)
         if plan is not None:
             ao_iterations.append(plan.iterations)
             fallbacks += plan.info.get("qp_fallbacks", 0)
@@ -62,7 +61,7 @@ def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
         done = terminated or truncated
     env.close()
     m = info["episode_metrics"]
-    row = {"policy": policy, "env": env_id, "seed": seed}
+    row = {"policy": policy.name, "env": env_id, "seed": seed}
     for key, value in m.items():
         row[key] = json.dumps(value) if isinstance(value, list) else value
     row["decision_time_median_s"] = float(np.median(decision_s))
@@ -72,16 +71,25 @@ def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
     return row
 
 
+def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
+                policy_kwargs: Mapping[str, Any] | None = None) -> dict:
+    """One seeded episode of the named policy (:func:`rollout`)."""
+    agent = make_policy(policy, config, env_id=env_id, **dict(policy_kwargs or {}))
+    row = rollout(agent, env_id, config, seed)
+    row["policy"] = policy
+    return row
+
+
 def _run_task(task) -> dict:
     return run_episode(*task)
 
 
 def evaluate(tasks: Iterable[tuple], workers: int = 1, progress: bool = True, desc: str = "episodes") -> list[dict]:
     """Run ``(policy, env_id, config, seed, policy_kwargs)`` tasks; rows in task order."""
-    return _pool_map(_run_task, list(tasks), workers, progress, desc)
+    return pool_map(_run_task, list(tasks), workers, progress, desc)
 
 
-def _pool_map(fn, tasks: list, workers: int, progress: bool, desc: str) -> list:
+def pool_map(fn, tasks: list, workers: int, progress: bool, desc: str) -> list:
     """``[fn(t) for t in tasks]`` in a process pool when ``workers > 1``, with a progress bar;
     results in task order whatever the scheduling."""
     bar = tqdm(total=len(tasks), desc=desc, unit="ep", disable=None if progress else True, leave=False)

@@ -72,11 +72,11 @@ def _gap_task(task):
 
 def run_gap(policies: Sequence[str], driver: str, config: ScenarioConfig, episodes: int, seed: int, every: int,
             workers: int = 1, progress: bool = True, global_settings: Mapping[str, Any] | None = None) -> list[dict]:
-    from .evaluate import _pool_map
+    from .evaluate import pool_map
 
     tasks = [(tuple(policies), driver, config, seed + i, every, dict(global_settings or {})) for i in range(episodes)]
     rows = []
-    for episode_rows in _pool_map(_gap_task, tasks, workers, progress, desc="gap"):
+    for episode_rows in pool_map(_gap_task, tasks, workers, progress, desc="gap"):
         rows.extend(episode_rows)
     return rows
 

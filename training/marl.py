@@ -15,17 +15,17 @@ from lawn_env import ScenarioConfig, parallel_env
 __all__ = ["wrap_parallel", "make_marl_vec_env"]
 
 
-def wrap_parallel(config: ScenarioConfig):
-    """The PettingZoo env with SuperSuit's padding and agent indicator."""
+def wrap_parallel(config: ScenarioConfig, interface=None):
+    """The PettingZoo env (on the given interface) with SuperSuit's padding and agent indicator."""
     import supersuit as ss
 
-    env = parallel_env(config)
+    env = parallel_env(config, interface=interface)
     env = ss.pad_observations_v0(env)
     env = ss.pad_action_space_v0(env)
     return ss.agent_indicator_v0(env, type_only=False)
 
 
-def make_marl_vec_env(config: ScenarioConfig, n_envs: int, seed: int):
+def make_marl_vec_env(config: ScenarioConfig, n_envs: int, seed: int, interface=None):
     """An SB3 VecEnv with one sub-environment per agent per copy of the system, seeded."""
     import supersuit as ss
     from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
@@ -45,7 +45,7 @@ def make_marl_vec_env(config: ScenarioConfig, n_envs: int, seed: int):
             observations, self.reset_infos = self.venv.reset(seed=seed)
             return observations
 
-    venv = ss.pettingzoo_env_to_vec_env_v1(wrap_parallel(config))
+    venv = ss.pettingzoo_env_to_vec_env_v1(wrap_parallel(config, interface))
     venv = ss.concat_vec_envs_v1(venv, n_envs, num_cpus=0, base_class="gymnasium")
     wrapped = _Seeded(venv)
     wrapped.seed(seed)

@@ -5,10 +5,13 @@ One run directory holds everything needed to reload, evaluate, resume or audit t
 =====================  ==========================================================
 ``model.zip``          the SB3 model (final)
 ``vecnormalize.pkl``   observation/reward normalization statistics (if used)
-``run.json``           algorithm, env id, seed, timesteps, versions, hyperparameter file version
+``best_model.zip``     the model selected on the validation seeds (lowest control cost), and
+``best_vecnormalize.pkl`` its statistics; ``sb3:DIR`` loads these when present
+``run.json``           algorithm, env id, seed, timesteps, interface, versions, hyperparameter file version
 ``config.json``        the exact scenario config
 ``hyperparams.json``   the resolved hyperparameters (file + command-line overrides)
-``learning_curve.csv`` periodic evaluation: timesteps, mean and std episode return
+``learning_curve.csv`` periodic validation: timesteps, mean realized control cost of full
+                       episodes of the unmodified scenario on the validation seeds
 ``learning_curve.png`` the same, plotted
 ``summary.md``         a short human-readable summary
 ``checkpoints/``       periodic checkpoints (model and normalization), used by ``--resume``
@@ -16,7 +19,15 @@ One run directory holds everything needed to reload, evaluate, resume or audit t
 =====================  ==========================================================
 
 Hyperparameters come from ``training/hyperparams/<algo>.yml`` (versioned, per env id, in the
-spirit of rl-baselines3-zoo) and can be overridden with ``--hp key=value``.
+spirit of rl-baselines3-zoo) and can be overridden with ``--hp key=value``. Each entry names the
+interface the agent trains with (:mod:`lawn_env.interface`; ``rl`` by default, ``--interface v0``
+trains on the plain v0 interface). Whatever the interface, the periodic validation and every
+comparison run full 120-slot episodes of the unmodified scenario and report their realized
+control cost.
+
+Seeds. Training seed s draws its environments from ``TRAIN_SEED_BASE + 1000 s`` on; model
+selection uses the validation seeds ``VALIDATION_SEED_BASE + i``; ``lawn benchmark`` tests on
+seeds 0-19 by default. The three ranges never meet.
 """
 
 from __future__ import annotations
@@ -34,8 +45,15 @@ import numpy as np
 
 import lawn_env
 from lawn_env import ScenarioConfig
+from lawn_env.interface import resolve_interface
 
-__all__ = ["ALGOS", "TRAIN_ENV_IDS", "load_hyperparams", "train", "resume", "RunSpec"]
+__all__ = ["ALGOS", "TRAIN_ENV_IDS", "load_hyperparams", "train", "train_seeds", "resume", "RunSpec",
+           "TRAIN_SEED_BASE", "VALIDATION_SEED_BASE"]
+
+#: Training environments of seed s start at TRAIN_SEED_BASE + 1000 s (disjoint from test seeds 0-19).
+TRAIN_SEED_BASE = 1_000_000
+#: Validation (model selection) episodes use VALIDATION_SEED_BASE + i.
+VALIDATION_SEED_BASE = 500_000
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: Environment ids ``lawn train`` accepts; ``lawn/Parallel-v0`` is the PettingZoo env (parameter sharing).
@@ -55,7 +73,7 @@ def _algos() -> dict[str, Any]:
 
 #: The algorithm names ``lawn train`` accepts (``bc`` is behaviour cloning, training/bc.py).
 ALGOS = ("ppo", "sac", "td3", "a2c", "bc")
-_OWN_KEYS = ("n_envs", "normalize", "policy")
+_OWN_KEYS = ("n_envs", "normalize", "policy", "interface", "actor_warmup_steps", "init_log_std")
 
 
 def load_hyperparams(algo: str, env_id: str, overrides: Mapping[str, Any] | None = None) -> tuple[dict, int]:
@@ -83,17 +101,17 @@ def _check_algo_kwargs(cls, kwargs: Mapping[str, Any]) -> None:
 
 
 def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, normalize, monitor_dir: Path | None,
-                   vecnormalize_path: Path | None = None, training: bool = True):
-    """A seeded SB3 VecEnv (Monitor-wrapped) with optional VecNormalize."""
+                   vecnormalize_path: Path | None = None, training: bool = True, interface=None):
+    """A seeded SB3 VecEnv (Monitor-wrapped) with optional VecNormalize, on the given interface."""
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import VecNormalize
 
     if env_id == "lawn/Parallel-v0":
         from .marl import make_marl_vec_env
 
-        venv = make_marl_vec_env(config, n_envs, seed)
+        venv = make_marl_vec_env(config, n_envs, seed, interface=interface)
     else:
-        kwargs = {} if env_id == "CartPole-v1" else {"config": config}
+        kwargs = {} if env_id == "CartPole-v1" else {"config": config, "interface": interface}
         venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=kwargs,
                             monitor_dir=str(monitor_dir) if monitor_dir else None)
     if vecnormalize_path is not None:
@@ -116,13 +134,20 @@ class RunSpec(dict):
 def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: int, out_dir: Path,
           hp_overrides: Mapping[str, Any] | None = None, n_envs: int | None = None, eval_every: int = 5000,
           eval_episodes: int = 5, checkpoint_every: int = 10000, progress: bool = True,
-          init_from: Path | None = None) -> dict:
-    """Train an agent from scratch; returns the run summary (also written to ``out_dir``)."""
+          init_from: Path | None = None, interface: str | Mapping | None = None) -> dict:
+    """Train an agent from scratch; returns the run summary (also written to ``out_dir``).
+
+    ``interface`` (``"rl"``, ``"v0"`` or a dict of :class:`lawn_env.RLInterface` fields) replaces
+    the hyperparameter file's choice."""
     if timesteps < 1:
         raise ValueError(f"--timesteps must be >= 1, got {timesteps}")
     params, version = load_hyperparams(algo, env_id, hp_overrides)
     if n_envs is not None:
         params["n_envs"] = n_envs
+    if interface is not None:
+        params["interface"] = interface
+    if env_id != "CartPole-v1":
+        params["interface"] = resolve_interface(params.get("interface", "v0")).to_dict()
     out_dir = Path(out_dir)
     if (out_dir / "run.json").exists():
         raise ValueError(f"{out_dir} already holds a run; use --resume {out_dir} or another --out")
@@ -130,7 +155,15 @@ def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: 
         from .bc import train_bc_run
 
         return train_bc_run(env_id, config, timesteps, seed, out_dir, params, version, progress=progress)
+    if init_from is not None:
+        source = json.loads((Path(init_from) / "run.json").read_text()) if (Path(init_from) / "run.json").exists() else None
+        if source is None:
+            raise ValueError(f"--init-from {init_from}: no run.json there (not a lawn train run directory)")
+        if source.get("interface") != params.get("interface"):
+            raise ValueError(f"--init-from {init_from}: it was trained with interface {source.get('interface')}, "
+                             f"this run uses {params.get('interface')}; pass the same --interface")
     spec = RunSpec(algo=algo, env=env_id, seed=seed, timesteps=timesteps, hyperparams_version=version,
+                   interface=params.get("interface"),
                    eval_every=eval_every, eval_episodes=eval_episodes, checkpoint_every=checkpoint_every,
                    init_from=str(init_from) if init_from else None, versions=_versions())
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -180,9 +213,19 @@ def limit_torch_threads() -> None:
     torch.set_num_threads(1)
 
 
+def _lr_schedule(value):
+    """``lin_3e-4`` (rl-zoo's notation): linear decay from 3e-4 to 0 over the run; numbers as they are."""
+    if isinstance(value, str) and value.startswith("lin_"):
+        start = float(value[4:])
+        return lambda progress_remaining: progress_remaining * start
+    return value
+
+
 def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, start_model, progress: bool) -> dict:
-    from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
+    from stable_baselines3.common.callbacks import CheckpointCallback
     from stable_baselines3.common.utils import set_random_seed
+
+    from .callbacks import ActorWarmup, ControlCostValidation
 
     limit_torch_threads()
     algos = _algos()
@@ -191,14 +234,19 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
     n_envs = int(params.pop("n_envs", 1))
     normalize = params.pop("normalize", False)
     policy = params.pop("policy", "MlpPolicy")
+    interface = params.pop("interface", None)
+    warmup = int(params.pop("actor_warmup_steps", 0))
+    init_log_std = params.pop("init_log_std", None)
+    for key in ("learning_rate", "clip_range"):
+        if key in params:
+            params[key] = _lr_schedule(params[key])
     _check_algo_kwargs(cls, params)
     seed = int(spec["seed"])
     done_steps = start_model[2] if start_model else 0
-    env_seed = seed + done_steps  # a resumed run continues with fresh, still seeded, episodes
+    env_seed = TRAIN_SEED_BASE + 1000 * seed + done_steps  # a resumed run continues with fresh, still seeded, episodes
     set_random_seed(env_seed)
     env = make_train_env(spec["env"], config, n_envs, env_seed, normalize, out_dir / "monitor",
-                         vecnormalize_path=start_model[1] if start_model else None)
-    eval_env = make_train_env(spec["env"], config, 1, seed + 10_000, normalize, None, training=False)
+                         vecnormalize_path=start_model[1] if start_model else None, interface=interface)
     if start_model:
         model = cls.load(str(start_model[0]), env=env, tensorboard_log=str(out_dir / "tb"))
     else:
@@ -206,14 +254,20 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
                     tensorboard_log=str(out_dir / "tb"), **params)
         if spec.get("init_from"):
             _init_from(model, Path(spec["init_from"]), env)
+        if init_log_std is not None:  # exploration noise of a fine-tuned policy (after the cloned weights)
+            import torch
+
+            with torch.no_grad():
+                model.policy.log_std.fill_(float(init_log_std))
     remaining = int(spec["timesteps"]) - model.num_timesteps
-    callbacks = [
-        EvalCallback(eval_env, n_eval_episodes=int(spec["eval_episodes"]),
-                     eval_freq=max(int(spec["eval_every"]) // n_envs, 1), log_path=str(out_dir / "eval"),
-                     best_model_save_path=None, deterministic=True, verbose=0),
-        CheckpointCallback(save_freq=max(int(spec["checkpoint_every"]) // n_envs, 1),
-                           save_path=str(out_dir / "checkpoints"), name_prefix="model", save_vecnormalize=True),
-    ]
+    callbacks = [CheckpointCallback(save_freq=max(int(spec["checkpoint_every"]) // n_envs, 1),
+                                    save_path=str(out_dir / "checkpoints"), name_prefix="model", save_vecnormalize=True)]
+    if spec["env"] != "CartPole-v1":
+        callbacks.insert(0, ControlCostValidation(
+            spec["env"], config, interface, episodes=int(spec["eval_episodes"]),
+            every=max(int(spec["eval_every"]) // n_envs, 1), out_dir=out_dir, seed_base=VALIDATION_SEED_BASE))
+    if warmup > 0 and not start_model:
+        callbacks.append(ActorWarmup(warmup))
     start = time.perf_counter()
     if remaining > 0:
         model.learn(total_timesteps=remaining, callback=callbacks, reset_num_timesteps=start_model is None,
@@ -230,8 +284,32 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
     (out_dir / "run.json").write_text(json.dumps(spec_out, indent=2))
     summary = write_learning_curve(out_dir, spec_out)
     env.close()
-    eval_env.close()
     return summary
+
+
+def _train_seed_task(task) -> dict:
+    kwargs = task
+    return train(**kwargs)
+
+
+def train_seeds(seeds: list[int], out_dir: Path, workers: int = 1, progress: bool = True, **kwargs) -> dict:
+    """Train one run per seed into ``out_dir/seed-<s>`` (a process pool when ``workers > 1``) and
+    summarize the selected models' validation costs across seeds (mean and 95 % interval)."""
+    from .evaluate import pool_map
+    from .tables import mean_ci
+
+    if len(set(seeds)) != len(seeds) or not seeds:
+        raise ValueError(f"--seeds {seeds}: give one or more distinct seeds")
+    out_dir = Path(out_dir)
+    tasks = [dict(kwargs, seed=s, out_dir=out_dir / f"seed-{s}", progress=progress and workers <= 1) for s in seeds]
+    summaries = pool_map(_train_seed_task, tasks, workers, progress, desc="training runs")
+    best = [s["best_validation_cost"] for s in summaries]
+    mean, half = mean_ci(best)
+    result = {"algo": kwargs.get("algo"), "env": kwargs.get("env_id"), "seeds": list(seeds), "runs": summaries,
+              "best_validation_cost_mean": mean, "best_validation_cost_ci95": half,
+              "wall_time_s": [s["wall_time_s"] for s in summaries]}
+    (out_dir / "seeds.json").write_text(json.dumps(result, indent=2))
+    return result
 
 
 def _init_from(model, source: Path, env) -> None:
@@ -251,25 +329,23 @@ def _init_from(model, source: Path, env) -> None:
 
 
 def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict:
-    """learning_curve.csv / .png and summary.md from the periodic evaluations."""
+    """learning_curve.png and summary.md from the periodic validation (``learning_curve.csv``)."""
     out_dir = Path(out_dir)
-    path = out_dir / "eval" / "evaluations.npz"
+    path = out_dir / "learning_curve.csv"
     rows = []
     if path.exists():
-        data = np.load(path)
-        for t, res in zip(data["timesteps"], data["results"]):
-            rows.append({"timesteps": int(t), "mean_return": float(np.mean(res)), "std_return": float(np.std(res))})
-    from .evaluate import write_rows
+        import csv
 
+        rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(path.open())]
     if rows:
-        write_rows(rows, out_dir / "learning_curve.csv")
         _plot_curve(rows, out_dir / "learning_curve.png", f"{spec['algo']} on {spec['env']}, seed {spec['seed']}")
-    final = rows[-1] if rows else None
+    best = min(rows, key=lambda r: r["control_cost"]) if rows else None
     summary = {
         "algo": spec["algo"], "env": spec["env"], "seed": spec["seed"], "timesteps": spec.get("num_timesteps"),
-        "wall_time_s": spec.get("wall_time_s"),
-        "final_eval_mean_return": final["mean_return"] if final else None,
-        "best_eval_mean_return": max(r["mean_return"] for r in rows) if rows else None,
+        "wall_time_s": spec.get("wall_time_s"), "interface": spec.get("interface"),
+        "final_validation_cost": rows[-1]["control_cost"] if rows else None,
+        "best_validation_cost": best["control_cost"] if best else None,
+        "best_at_timesteps": int(best["timesteps"]) if best else None,
     }
     lines = [f"# {spec['algo']} on {spec['env']}", ""]
     lines += [f"- {k}: {v}" for k, v in summary.items()]
@@ -285,12 +361,13 @@ def _plot_curve(rows, path: Path, title: str) -> None:
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(111)
     t = [r["timesteps"] for r in rows]
-    m = np.array([r["mean_return"] for r in rows])
-    s = np.array([r["std_return"] for r in rows])
+    m = np.array([r["control_cost"] for r in rows])
+    s = np.array([r["control_cost_ci95"] for r in rows])
     ax.plot(t, m, "-o", ms=3)
-    ax.fill_between(t, m - s, m + s, alpha=0.2)
+    ax.fill_between(t, np.maximum(m - s, m * 0.1), m + s, alpha=0.2)
+    ax.set_yscale("log")
     ax.set_xlabel("environment steps")
-    ax.set_ylabel("evaluation return (mean ± std)")
+    ax.set_ylabel("validation control cost (mean, 95 % CI)")
     ax.set_title(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path)

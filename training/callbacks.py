@@ -1,0 +1,107 @@
+"""Stable-Baselines3 callbacks of ``lawn train``: validation on the real objective, actor warm-up."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from stable_baselines3.common.callbacks import BaseCallback
+
+from agents.learned import MARLPolicy, ObsNormalizer, SB3Policy
+from lawn_env import ScenarioConfig
+
+from .evaluate import rollout
+from .tables import mean_ci
+
+__all__ = ["ControlCostValidation", "ActorWarmup"]
+
+
+class ControlCostValidation(BaseCallback):
+    """Every ``every`` calls, run the current policy (deterministic, through the same wrapper as
+    ``sb3:DIR``) on ``episodes`` full episodes of the unmodified scenario with the validation
+    seeds ``seed_base + i``; append the mean realized control cost to ``learning_curve.csv`` and
+    keep the model with the lowest one as ``best_model.zip`` (+ ``best_vecnormalize.pkl``)."""
+
+    def __init__(self, env_id: str, config: ScenarioConfig, interface, episodes: int, every: int, out_dir: Path,
+                 seed_base: int):
+        super().__init__(verbose=0)
+        self.env_id, self.config, self.interface = env_id, config, interface
+        self.episodes, self.every, self.out_dir, self.seed_base = episodes, every, Path(out_dir), seed_base
+        self.curve = self.out_dir / "learning_curve.csv"
+        self.best = float("inf")
+        self._last = -1
+        if self.curve.exists():  # a resumed run: keep its history and its best
+            rows = list(csv.DictReader(self.curve.open()))
+            self.best = min((float(r["control_cost"]) for r in rows), default=float("inf"))
+
+    def _policy(self):
+        normalizer = ObsNormalizer.from_vecnormalize(self.model.get_vec_normalize_env())
+        if self.env_id == "lawn/Parallel-v0":
+            return MARLPolicy(self.model, self.config, self.interface, normalizer)
+        return SB3Policy(self.model, self.config, self.env_id, self.interface, normalizer)
+
+    def validate(self) -> tuple[float, float]:
+        policy = self._policy()
+        env_id = "lawn/Joint-v0" if self.env_id == "lawn/Parallel-v0" else self.env_id
+        costs = [rollout(policy, env_id, self.config, self.seed_base + i)["control_cost"]
+                 for i in range(self.episodes)]
+        return mean_ci(costs)
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.every == 0:
+            self._record()
+        return True
+
+    def _on_training_end(self) -> None:
+        if self.num_timesteps != self._last:
+            self._record()
+
+    def _record(self) -> None:
+        self._last = self.num_timesteps
+        mean, half = self.validate()
+        new = not self.curve.exists()
+        with self.curve.open("a", newline="") as fh:
+            writer = csv.writer(fh)
+            if new:
+                writer.writerow(["timesteps", "control_cost", "control_cost_ci95"])
+            writer.writerow([self.num_timesteps, mean, half])
+        self.logger.record("validation/control_cost", mean)
+        if mean < self.best:
+            self.best = mean
+            self.model.save(str(self.out_dir / "best_model.zip"))
+            venv = self.model.get_vec_normalize_env()
+            if venv is not None:
+                venv.save(str(self.out_dir / "best_vecnormalize.pkl"))
+            elif (self.out_dir / "best_vecnormalize.pkl").exists():
+                (self.out_dir / "best_vecnormalize.pkl").unlink()
+
+
+class ActorWarmup(BaseCallback):
+    """Critic warm-up for fine-tuning a cloned policy: the actor's parameters (policy network,
+    action head, log-std) are frozen for the first ``steps`` environment steps, so PPO's first
+    updates fit the value function to the cloned policy instead of moving the policy with an
+    untrained critic's advantages."""
+
+    def __init__(self, steps: int):
+        super().__init__(verbose=0)
+        self.steps = steps
+        self.frozen: list = []
+
+    def _actor_parameters(self):
+        policy = self.model.policy
+        params = list(policy.action_net.parameters()) + list(policy.mlp_extractor.policy_net.parameters())
+        if getattr(policy, "log_std", None) is not None:
+            params.append(policy.log_std)
+        return params
+
+    def _on_training_start(self) -> None:
+        self.frozen = self._actor_parameters()
+        for p in self.frozen:
+            p.requires_grad_(False)
+
+    def _on_step(self) -> bool:
+        if self.frozen and self.num_timesteps >= self.steps:
+            for p in self.frozen:
+                p.requires_grad_(True)
+            self.frozen = []
+        return True
