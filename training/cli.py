@@ -166,7 +166,8 @@ def cmd_train(args) -> int:
                       eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every,
                       init_from=Path(args.init_from) if args.init_from else None, interface=args.interface)
         if args.seeds:
-            result = train_seeds(args.seeds, Path(args.out), workers=args.workers, progress=not args.quiet, **kwargs)
+            result = train_seeds(args.seeds, Path(args.out), workers=args.workers, progress=not args.quiet,
+                                 backend=args.backend, **kwargs)
             print(f"lawn train: {args.algo} on {args.env}, seeds {args.seeds}")
             for run in result["runs"]:
                 print(f"  seed {run['seed']}: best validation cost {run['best_validation_cost']:.6g} "
@@ -242,7 +243,7 @@ def _policy_name(value: str) -> str:
 
     if not is_policy_name(value):
         raise argparse.ArgumentTypeError(
-            f"unknown policy {value!r}; valid: {', '.join(policy_names())}, or sb3:DIR, bc:DIR, marl:DIR")
+            f"unknown policy {value!r}; valid: {', '.join(policy_names())}, or sb3:DIR, bc:DIR, marl:DIR, zoo:NAME")
     return value
 
 
@@ -274,7 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
     workers_default = min(2, os.cpu_count() or 1)
     ev = sub.add_parser("evaluate", help="run a policy on seeded episodes and write one row per episode")
     ev.add_argument("--policy", required=True, type=_policy_name,
-                    help=f"{', '.join(policy_names())}, or sb3:DIR / bc:DIR / marl:DIR for trained agents")
+                    help=f"{', '.join(policy_names())}, or zoo:NAME / sb3:DIR / bc:DIR / marl:DIR for learned agents")
     ev.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
                     help="default: lawn/Joint-v0, or the env a trained agent was trained on")
     ev.add_argument("--episodes", type=int, default=10)
@@ -288,7 +289,9 @@ def build_parser() -> argparse.ArgumentParser:
     ev.set_defaults(func=cmd_evaluate)
 
     bm = sub.add_parser("benchmark", help="the expert and the baselines on the same seeded episodes")
-    bm.add_argument("--policies", nargs="+", default=list(BENCHMARK_POLICIES), choices=policy_names())
+    bm.add_argument("--policies", nargs="+", default=list(BENCHMARK_POLICIES), type=_policy_name,
+                    help=f"{', '.join(policy_names())}, or zoo:NAME / sb3:DIR / bc:DIR / marl:DIR (default: "
+                         f"{' '.join(BENCHMARK_POLICIES)})")
     bm.add_argument("--env", default="lawn/Joint-v0", choices=list(lawn_env.ENV_IDS))
     bm.add_argument("--include", nargs="*", default=[], metavar="DIR",
                     help="trained run directories (lawn train) to add to the comparison")
@@ -310,6 +313,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--seeds", type=int, nargs="+", metavar="SEED",
                     help="train one run per seed into OUT/seed-<s> (process pool, --workers) and summarize across seeds")
     tr.add_argument("--workers", type=int, default=workers_default, help="processes for --seeds (default: %(default)s)")
+    tr.add_argument("--backend", choices=["process", "ray"], default="process",
+                    help="where --seeds runs go: a process pool (default) or Ray, as lawn sweep")
     tr.add_argument("--interface", default=None, choices=["rl", "v0"],
                     help="the RL interface (default: the hyperparameter file's, rl) or the plain v0 interface")
     tr.add_argument("--out", help="run directory")

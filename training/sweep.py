@@ -152,7 +152,7 @@ def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: 
 
     bar = tqdm(total=len(tasks), desc=spec["name"], unit="run", disable=None if progress else True, leave=False)
     try:
-        for row in _execute(tasks, workers, backend):
+        for row in execute(_run, tasks, workers, backend):
             rows.append(row)
             _write_atomic(rows, table)
             bar.update()
@@ -161,8 +161,9 @@ def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: 
     return read_table(table)
 
 
-def _execute(tasks, workers: int, backend: str):
-    """Yield rows as runs finish."""
+def execute(fn, tasks, workers: int, backend: str):
+    """Yield ``fn(task)`` for every task as the runs finish, on a process pool or on Ray
+    (local, or the cluster at ``$RAY_ADDRESS``); ``fn`` must be a module-level function."""
     if backend == "ray":
         try:
             import ray
@@ -173,7 +174,7 @@ def _execute(tasks, workers: int, backend: str):
         if not ray.is_initialized():
             ray.init(address=os.environ.get("RAY_ADDRESS"), num_cpus=None if os.environ.get("RAY_ADDRESS") else workers,
                      include_dashboard=False, log_to_driver=False)
-        remote = ray.remote(_run)
+        remote = ray.remote(fn)
         pending = [remote.remote(t) for t in tasks]
         while pending:
             ready, pending = ray.wait(pending, num_returns=1)
@@ -183,13 +184,13 @@ def _execute(tasks, workers: int, backend: str):
         raise ValueError(f"unknown backend {backend!r}; valid: process, ray")
     if workers <= 1:
         for t in tasks:
-            yield _run(t)
+            yield fn(t)
         return
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
     with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("forkserver")) as pool:
-        pending = {pool.submit(_run, t) for t in tasks}
+        pending = {pool.submit(fn, t) for t in tasks}
         while pending:
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
             for fut in finished:

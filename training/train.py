@@ -47,7 +47,7 @@ import lawn_env
 from lawn_env import ScenarioConfig
 from lawn_env.interface import resolve_interface
 
-__all__ = ["ALGOS", "TRAIN_ENV_IDS", "load_hyperparams", "train", "train_seeds", "resume", "RunSpec",
+__all__ = ["ALGOS", "TRAIN_ENV_IDS", "load_hyperparams", "train", "train_seeds", "train_task", "resume", "RunSpec",
            "TRAIN_SEED_BASE", "VALIDATION_SEED_BASE"]
 
 #: Training environments of seed s start at TRAIN_SEED_BASE + 1000 s (disjoint from test seeds 0-19).
@@ -287,22 +287,24 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
     return summary
 
 
-def _train_seed_task(task) -> dict:
-    kwargs = task
-    return train(**kwargs)
+def train_task(task: dict) -> dict:
+    """``train(**task)``: one run of a pool or Ray task list."""
+    return train(**task)
 
 
-def train_seeds(seeds: list[int], out_dir: Path, workers: int = 1, progress: bool = True, **kwargs) -> dict:
-    """Train one run per seed into ``out_dir/seed-<s>`` (a process pool when ``workers > 1``) and
-    summarize the selected models' validation costs across seeds (mean and 95 % interval)."""
-    from .evaluate import pool_map
+def train_seeds(seeds: list[int], out_dir: Path, workers: int = 1, progress: bool = True, backend: str = "process",
+                **kwargs) -> dict:
+    """Train one run per seed into ``out_dir/seed-<s>`` (a process pool when ``workers > 1``, or
+    Ray with ``backend="ray"``, as ``lawn sweep``) and summarize the selected models' validation
+    costs across seeds (mean and 95 % interval)."""
+    from .sweep import execute
     from .tables import mean_ci
 
     if len(set(seeds)) != len(seeds) or not seeds:
         raise ValueError(f"--seeds {seeds}: give one or more distinct seeds")
     out_dir = Path(out_dir)
     tasks = [dict(kwargs, seed=s, out_dir=out_dir / f"seed-{s}", progress=progress and workers <= 1) for s in seeds]
-    summaries = pool_map(_train_seed_task, tasks, workers, progress, desc="training runs")
+    summaries = sorted(execute(train_task, tasks, workers, backend), key=lambda r: seeds.index(r["seed"]))
     best = [s["best_validation_cost"] for s in summaries]
     mean, half = mean_ci(best)
     result = {"algo": kwargs.get("algo"), "env": kwargs.get("env_id"), "seeds": list(seeds), "runs": summaries,

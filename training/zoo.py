@@ -26,6 +26,7 @@ from lawn_env import ScenarioConfig
 
 from .evaluate import evaluate, pool_map, write_rows
 from .tables import mean_ci
+from .train import train_task
 
 __all__ = ["Recipe", "RECIPES", "train_recipes", "build_zoo", "format_zoo_list"]
 
@@ -67,7 +68,7 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("ppo-marl", "PPO multi-agent, shared weights", "ppo", "lawn/Parallel-v0", 250_000, eval_every=25_000),
     Recipe("sac-comm", "SAC (RL interface)", "sac", "lawn/Comm-v0", 40_000, seeds=(0,), eval_every=10_000),
     Recipe("bc-comm", "BC of rg-mpc (+2 DAgger rounds)", "bc", "lawn/Comm-v0", 6_000),
-    Recipe("ppo-comm-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Comm-v0", 150_000, init_from="bc-comm",
+    Recipe("ppo-comm-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Comm-v0", 100_000, init_from="bc-comm",
            hp={"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2.5, "actor_warmup_steps": 20_000}),
 )
 
@@ -85,12 +86,6 @@ def _finished(run_dir: Path, timesteps: int) -> bool:
         return False
     data = json.loads(run.read_text())
     return int(data.get("num_timesteps", 0)) >= (timesteps if data.get("trainer") != "bc" else 1)
-
-
-def _train_task(task: dict) -> dict:
-    from .train import train
-
-    return train(**task)
 
 
 def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, progress: bool = True) -> list[Path]:
@@ -115,7 +110,7 @@ def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, 
                                   out_dir=out, hp_overrides=dict(r.hp), eval_every=r.eval_every, eval_episodes=10,
                                   progress=False,
                                   init_from=runs / r.init_from / f"seed-{s}" if r.init_from else None))
-        pool_map(_train_task, tasks, workers, progress, desc="training runs")
+        pool_map(train_task, tasks, workers, progress, desc="training runs")
     return done
 
 
