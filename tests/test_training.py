@@ -212,3 +212,32 @@ def test_agents_are_shipped():
     shipped = zoo_agents()
     for name in ("ppo-comm", "ppo-joint", "ppo-marl"):
         assert name in shipped, f"zoo:{name} is not shipped (lawn zoo build exports it)"
+
+
+def test_critic_warmup_keeps_the_cloned_actor(tmp_path):
+    """With actor_warmup_steps beyond the run, PPO's updates move only the value function."""
+    out, _ = _train(tmp_path, "ppo", "lawn/Comm-v0", steps=128, name="base", n_envs=2)
+    tuned, _ = _train(tmp_path, "ppo", "lawn/Comm-v0", steps=256, name="warm", n_envs=2, init_from=out,
+                      hp_overrides={"actor_warmup_steps": 10_000, "init_log_std": -2.5})
+    from stable_baselines3 import PPO
+
+    before, after = PPO.load(str(out / "model.zip")), PPO.load(str(tuned / "model.zip"))
+    b, a = before.policy.state_dict(), after.policy.state_dict()
+    actor = [k for k in b if k.startswith(("mlp_extractor.policy_net", "action_net"))]
+    critic = [k for k in b if k.startswith(("mlp_extractor.value_net", "value_net"))]
+    assert actor and critic
+    for k in actor:
+        assert np.array_equal(b[k].numpy(), a[k].numpy()), k
+    assert any(not np.array_equal(b[k].numpy(), a[k].numpy()) for k in critic)
+    assert float(a["log_std"].mean()) == pytest.approx(-2.5)
+
+
+def test_zoo_command_lists_the_shipped_agents(capsys):
+    from agents.learned import zoo_agents
+
+    assert main(["zoo"]) == 0
+    printed = capsys.readouterr().out
+    for name in zoo_agents():
+        assert f"zoo:{name}" in printed
+    assert main(["zoo", "build", "--runs", "/nonexistent/runs", "--quiet"]) == 2
+    assert "no finished recipe runs" in capsys.readouterr().err

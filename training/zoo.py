@@ -26,7 +26,7 @@ from lawn_env import ScenarioConfig
 
 from .evaluate import evaluate, pool_map, write_rows
 from .tables import mean_ci
-from .train import train_task
+from .train import VALIDATION_SEED_BASE, train_task
 
 __all__ = ["Recipe", "RECIPES", "train_recipes", "build_zoo", "format_zoo_list"]
 
@@ -65,11 +65,12 @@ class Recipe:
 RECIPES: tuple[Recipe, ...] = (
     Recipe("ppo-comm", "PPO (RL interface)", "ppo", "lawn/Comm-v0", 300_000),
     Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v0", 300_000),
-    Recipe("ppo-marl", "PPO multi-agent, shared weights", "ppo", "lawn/Parallel-v0", 250_000, eval_every=25_000),
-    Recipe("sac-comm", "SAC (RL interface)", "sac", "lawn/Comm-v0", 40_000, seeds=(0,), eval_every=10_000),
+    Recipe("ppo-marl", "PPO multi-agent, shared weights", "ppo", "lawn/Parallel-v0", 150_000, eval_every=25_000),
+    Recipe("sac-comm", "SAC (RL interface)", "sac", "lawn/Comm-v0", 20_000, seeds=(0,), eval_every=5_000),
     Recipe("bc-comm", "BC of rg-mpc (+2 DAgger rounds)", "bc", "lawn/Comm-v0", 6_000),
-    Recipe("ppo-comm-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Comm-v0", 100_000, init_from="bc-comm",
-           hp={"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2.5, "actor_warmup_steps": 20_000}),
+    Recipe("ppo-comm-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Comm-v0", 60_000, init_from="bc-comm",
+           hp={"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2.5, "actor_warmup_steps": 10_000},
+           eval_every=10_000),
 )
 
 
@@ -172,10 +173,41 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
                 _export(r, chosen, dirs, specs, ship, across, across_ci, env)
     table = "\n".join(lines)
     out_doc.parent.mkdir(parents=True, exist_ok=True)
+    reference = {env: evaluate([("rg-mpc", env, cfg, VALIDATION_SEED_BASE + i, {}) for i in range(10)], workers=workers,
+                               progress=False) for env in envs}
+    _plot_curves(found, {env: float(np.mean([r["control_cost"] for r in rs])) for env, rs in reference.items()},
+                 out_doc.parent / "learned" / "curves.png")
     out_doc.write_text(_document(table, episodes))
     if readme is not None:
         _replace_block(readme, table)
     return table
+
+
+def _plot_curves(found, reference: dict[str, float], path: Path) -> None:
+    """Validation cost against training steps, every seed of every recipe, with rg-mpc's cost on
+    the same validation seeds."""
+    import csv
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(4.0 * len(found), 3.4), dpi=110)
+    FigureCanvasAgg(fig)
+    for j, (r, dirs) in enumerate(found):
+        ax = fig.add_subplot(1, len(found), j + 1)
+        for d in dirs:
+            rows = list(csv.DictReader((d / "learning_curve.csv").open()))
+            ax.plot([float(x["timesteps"]) for x in rows], [float(x["control_cost"]) for x in rows], "-o", ms=2,
+                    label=d.name)
+        ax.axhline(reference[r.evaluated_on], color="k", ls="--", lw=1, label="rg-mpc")
+        ax.set_yscale("log")
+        ax.set_title(r.name, fontsize=9)
+        ax.set_xlabel("environment steps", fontsize=8)
+        if j == 0:
+            ax.set_ylabel("validation control cost", fontsize=8)
+        ax.legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path)
 
 
 def _best_validation(run_dir: Path) -> float:
@@ -218,6 +250,11 @@ run and gives a 95 % t-interval across training seeds; the last column is the pa
 interval of the shipped run over the test seeds.
 
 {table}
+
+Validation cost during training (every seed of every recipe; dashed: `rg-mpc` on the same
+validation seeds):
+
+![learning curves](learned/curves.png)
 """
 
 
