@@ -233,19 +233,19 @@ class MARLPolicy(Policy):
 # ---------------------------------------------------------------------- shipped agents (zoo)
 _POLICY_CLASSES = {"ppo": "stable_baselines3.common.policies:ActorCriticPolicy",
                    "a2c": "stable_baselines3.common.policies:ActorCriticPolicy",
-                   "sac": "stable_baselines3.sac.policies:SACPolicy",
-                   "td3": "stable_baselines3.td3.policies:TD3Policy"}
+                   "sac": "stable_baselines3.sac.policies:Actor",
+                   "td3": "stable_baselines3.td3.policies:Actor"}
 
 
 def export_agent(run_dir: Path, out_dir: Path, record: dict[str, Any]) -> Path:
-    """Write a run's policy network (weights only, no optimizer or value-function training state
-    beyond the network) and observation statistics as a shipped agent with ``agent.json``."""
+    """Write a run's policy network (weights only: no optimizer state, and for SAC/TD3 the actor
+    alone, without critics) and observation statistics as a shipped agent with ``agent.json``."""
     run_dir, out_dir = Path(run_dir), Path(out_dir)
     run = _read_run(run_dir)
     algo = run.get("target", run["algo"])
     model = _load_model(run_dir, algo)
     out_dir.mkdir(parents=True, exist_ok=True)
-    model.policy.save(str(out_dir / "policy.zip"))
+    (model.actor if algo in ("sac", "td3") else model.policy).save(str(out_dir / "policy.zip"))
     normalizer = ObsNormalizer.load(_selected(run_dir)[1])
     if normalizer is not None:
         normalizer.save(out_dir / "normalizer.npz")

@@ -61,16 +61,21 @@ class Recipe:
         return " ".join(parts)
 
 
+_DAGGER = {"dagger_iterations": 4, "dagger_timesteps": 4800}
+_FINE_TUNE = {"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2.5, "actor_warmup_steps": 10_000}
+
 #: The learned comparators, in training order (a recipe that starts from another comes after it).
 RECIPES: tuple[Recipe, ...] = (
-    Recipe("ppo-comm", "PPO (RL interface)", "ppo", "lawn/Comm-v0", 300_000),
-    Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v0", 300_000),
+    Recipe("ppo-comm", "PPO (RL interface)", "ppo", "lawn/Comm-v0", 200_000),
+    Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v0", 200_000),
     Recipe("ppo-marl", "PPO multi-agent, shared weights", "ppo", "lawn/Parallel-v0", 150_000, eval_every=25_000),
     Recipe("sac-comm", "SAC (RL interface)", "sac", "lawn/Comm-v0", 20_000, seeds=(0,), eval_every=5_000),
-    Recipe("bc-comm", "BC of rg-mpc (+2 DAgger rounds)", "bc", "lawn/Comm-v0", 6_000),
+    Recipe("bc-comm", "BC of rg-mpc (+4 DAgger rounds)", "bc", "lawn/Comm-v0", 12_000, hp=_DAGGER),
     Recipe("ppo-comm-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Comm-v0", 60_000, init_from="bc-comm",
-           hp={"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2.5, "actor_warmup_steps": 10_000},
-           eval_every=10_000),
+           hp=_FINE_TUNE, eval_every=10_000),
+    Recipe("bc-joint", "BC of rg-mpc (+4 DAgger rounds)", "bc", "lawn/Joint-v0", 12_000, hp=_DAGGER),
+    Recipe("ppo-joint-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Joint-v0", 60_000, init_from="bc-joint",
+           hp=_FINE_TUNE, eval_every=10_000),
 )
 
 
@@ -191,10 +196,12 @@ def _plot_curves(found, reference: dict[str, float], path: Path) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(4.0 * len(found), 3.4), dpi=110)
+    cols = min(4, len(found))
+    rows_ = math.ceil(len(found) / cols)
+    fig = Figure(figsize=(4.0 * cols, 3.2 * rows_), dpi=110)
     FigureCanvasAgg(fig)
     for j, (r, dirs) in enumerate(found):
-        ax = fig.add_subplot(1, len(found), j + 1)
+        ax = fig.add_subplot(rows_, cols, j + 1)
         for d in dirs:
             rows = list(csv.DictReader((d / "learning_curve.csv").open()))
             ax.plot([float(x["timesteps"]) for x in rows], [float(x["control_cost"]) for x in rows], "-o", ms=2,
@@ -203,7 +210,7 @@ def _plot_curves(found, reference: dict[str, float], path: Path) -> None:
         ax.set_yscale("log")
         ax.set_title(r.name, fontsize=9)
         ax.set_xlabel("environment steps", fontsize=8)
-        if j == 0:
+        if j % cols == 0:
             ax.set_ylabel("validation control cost", fontsize=8)
         ax.legend(fontsize=6)
     fig.tight_layout()
