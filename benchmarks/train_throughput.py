@@ -3,7 +3,8 @@
 Same algorithm settings for all (SB3's PPO defaults: MlpPolicy 64x64, n_steps 2048, one
 environment, no normalization), one torch thread, the same run; the figure is environment steps
 per second of wall time over ``--timesteps`` steps (best of ``--repeats``), model construction
-excluded. Target (issue #5): lawn/Joint-v0 trains at least half as fast as CartPole-v1.
+excluded. Target (issue #5): lawn/Joint-v0 trains at least half as fast as CartPole-v1. The RL
+interface ids (anchored actions: the MPC runs inside Joint as well) are timed beside them.
 
 Usage: ``python benchmarks/train_throughput.py [--timesteps 10240] [--repeats 2]``
 """
@@ -45,7 +46,7 @@ def main(argv=None) -> int:
     print(f"python {platform.python_version()}, torch {torch.__version__}, stable-baselines3 "
           f"{stable_baselines3.__version__}, one torch thread")
     rates = {env_id: measure(env_id, args.timesteps, args.repeats)
-             for env_id in ("CartPole-v1", "lawn/Joint-v0", "lawn/Comm-v0")}
+             for env_id in ("CartPole-v1", "lawn/Joint-v0", "lawn/Comm-v0", "lawn/JointRL-v0", "lawn/CommRL-v0")}
     base = rates["CartPole-v1"]
     print(f"{'env':<16}{'PPO steps/s':>14}{'vs CartPole':>13}")
     for env_id, rate in rates.items():
