@@ -102,6 +102,15 @@ class ObsNormalizer:
         return np.clip(x, -self.clip, self.clip).astype(np.float32)
 
 
+def _v0_action(policy, action: np.ndarray, obs: np.ndarray) -> np.ndarray:
+    """The v0 action that carries out ``action`` of the policy's training scheme at ``obs``."""
+    if policy.interface.action_scheme == "direct":
+        return action.astype(np.float32)
+    state = policy.layout.decode(obs)
+    args = (state["x_aug"], state["reference"], state["drone_position"])
+    return policy.v0.encode(policy.scheme.decode(action, *args), *args)
+
+
 class SB3Policy(Policy):
     """A trained single-agent network acting on ``lawn/Joint-v0`` or ``lawn/Comm-v0``.
 
@@ -152,12 +161,7 @@ class SB3Policy(Policy):
         if self.normalizer is not None:
             x = self.normalizer.normalize_obs(x)
         action, _ = self.network.predict(x, deterministic=True)
-        action = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
-        if self.interface.action_scheme == "direct":
-            return action.astype(np.float32)
-        state = self.layout.decode(raw)
-        args = (state["x_aug"], state["reference"], state["drone_position"])
-        return self.v0.encode(self.scheme.decode(action, *args), *args)
+        return _v0_action(self, np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0), raw)
 
 
 class MARLPolicy(Policy):
@@ -223,11 +227,7 @@ class MARLPolicy(Policy):
         actions = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
         k = self.config.num_agvs
         central = np.concatenate([actions[1:, :2].reshape(-1), actions[0, : k + 2]])
-        if self.interface.action_scheme == "direct":
-            return central.astype(np.float32)
-        state = self.layout.decode(np.asarray(obs, dtype=np.float32))
-        args = (state["x_aug"], state["reference"], state["drone_position"])
-        return self.v0.encode(self.scheme.decode(central, *args), *args)
+        return _v0_action(self, central, np.asarray(obs, dtype=np.float32))
 
 
 # ---------------------------------------------------------------------- shipped agents (zoo)

@@ -73,7 +73,6 @@ def _algos() -> dict[str, Any]:
 
 #: The algorithm names ``lawn train`` accepts (``bc`` is behaviour cloning, training/bc.py).
 ALGOS = ("ppo", "sac", "td3", "a2c", "bc")
-_OWN_KEYS = ("n_envs", "normalize", "policy", "interface", "actor_warmup_steps", "init_log_std")
 
 
 def load_hyperparams(algo: str, env_id: str, overrides: Mapping[str, Any] | None = None) -> tuple[dict, int]:

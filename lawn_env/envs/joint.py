@@ -81,8 +81,6 @@ class JointEnv(LawnEnvBase):
       ``info["stage_cost"]`` added later.
     """
 
-    role = "joint"
-
     def step(self, action):
         self._check_running()
         increment, power, drone_next = self._decide(check_action(action, self.actions.size))
