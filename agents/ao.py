@@ -14,7 +14,9 @@ the area. The three blocks alternate until the relative decrease of J^ over an i
    the true J^ does not increase (backtracking toward the current point).
 
 Each block keeps its previous value if its result would increase J^, so the objective trace is
-non-increasing by construction (the paper's convergence argument). Power and drone blocks are
+non-increasing by construction (the paper's convergence argument). The AO ends with a control
+block at its final (p, q): the last power or drone block moves psi after the last QP, and the
+increments sent must be the QP optimum for the (p, q) that is sent with them. Power and drone blocks are
 vectorized across AGVs (no per-AGV Python loops); the control block loops over the K solver
 workspaces.
 
@@ -97,6 +99,10 @@ class Plan:
 
     ``objective_trace`` has one row per AO iteration and one column per block (control, power,
     drone): J^ after that block; NaN where a block is not run (baselines fix some blocks).
+    When the control block is optimized together with power or the drone, the solver ends with
+    one more control block at the returned (p, q), so ``increments`` are the exact QP optimum
+    there; ``objective`` is J^ after it (at most the trace's last entry, which is kept in
+    ``info["objective_before_final_qp"]``).
     """
 
     increments: np.ndarray  # (K, N_p, 2), m/s^2; the first row is sent
@@ -360,6 +366,13 @@ class AOSolver:
             trace.append(row)
             if math.isfinite(before) and before - current <= self.settings.tolerance * abs(before):
                 break
+        before_final = current
+        if "control" in blocks and ("power" in blocks or "drone" in blocks):
+            # The last power or drone block moved psi after the last QP: end with the control
+            # block at the returned (p, q), so the increments sent are that QP's exact optimum
+            # (one more QP per AGV; J^ can only fall, the trace stays monotone).
+            dmu, current, sol = self.control_block(prob, p, q, dmu, current)
+            qp_fallbacks += sol.num_fallbacks
         return Plan(
             increments=dmu,
             power_w=p,
@@ -373,6 +386,7 @@ class AOSolver:
                 "pgd_iterations": pgd_iterations,
                 "sca_iterations": sca_iterations,
                 "success_probability": prob.success(p, q),
+                "objective_before_final_qp": before_final,
             },
         )
 

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import lawn_env  # noqa: F401  (registers the environment ids)
+from lawn_env.dynamics import PredictionModel
 
 
 @pytest.fixture
@@ -14,3 +15,35 @@ def rng():
 def pytest_configure(config):
     # Gymnasium's checker warns about the unbounded (normalized, but not clipped) observation box.
     warnings.filterwarnings("ignore", message=".*Box observation space (minimum|maximum) value is.*")
+
+
+def _independent_qp(config, x, ref, psi):
+    """The QP P3 of one AGV written independently of ``lawn_env.mpc``, straight from the paper's
+    cost and MODEL.md's control set, solved by cvxpy/Clarabel at tight tolerances: (value, z)."""
+    cp = pytest.importorskip("cvxpy")
+    model = PredictionModel.from_config(config)
+    ctl = config.control
+    n = ctl.horizon
+    q1, q2 = np.diag(ctl.q1_diag), np.diag(ctl.q2_diag)
+    z = cp.Variable((n, 2))
+    cost = 0
+    state = x
+    cons = [cp.abs(z) <= ctl.accel_increment_max_mps2]
+    u = x[4:6]
+    for i in range(n):
+        e = state - ref[i]
+        cost += cp.quad_form(e, q1) + cp.quad_form(z[i], q2)
+        state = model.a_aug @ state + psi * (model.b_aug @ z[i])
+        u = u + z[i]
+        cons.append(cp.abs(u) <= ctl.accel_max_mps2)
+    e = state - ref[n]
+    cost += cp.quad_form(e, model.q3)
+    prob = cp.Problem(cp.Minimize(cost), cons)
+    prob.solve(solver=cp.CLARABEL, tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12)
+    return prob.value, z.value
+
+
+@pytest.fixture
+def independent_qp():
+    """``independent_qp(config, x_aug_k, reference_k, psi_k) -> (value, z)`` (see above)."""
+    return _independent_qp

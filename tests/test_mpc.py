@@ -19,37 +19,14 @@ def _problems(rng, count, k=4):
         yield x, table[:k, n : n + 11], rng.uniform(0.05, 1.0, k)
 
 
-def _cvxpy_value(x, ref, psi):
-    """The QP P3 written independently, straight from the paper's cost and MODEL.md's control set."""
-    cp = pytest.importorskip("cvxpy")
-    model = PredictionModel.from_config(CFG)
-    n = CFG.control.horizon
-    z = cp.Variable((n, 2))
-    cost = 0
-    state = x
-    cons = [cp.abs(z) <= 1.0]
-    u = x[4:6]
-    for i in range(n):
-        e = state - ref[i]
-        cost += cp.sum_squares(e) + cp.sum_squares(z[i])
-        state = model.a_aug @ state + psi * (model.b_aug @ z[i])
-        u = u + z[i]
-        cons.append(cp.abs(u) <= 2.0)
-    e = state - ref[n]
-    cost += cp.quad_form(e, model.q3)
-    prob = cp.Problem(cp.Minimize(cost), cons)
-    prob.solve(solver=cp.CLARABEL, tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12)
-    return prob.value, z.value
-
-
 @pytest.mark.parametrize("backend", ["daqp", "osqp"])
-def test_qp_solution_matches_independent_solve(backend, rng):
+def test_qp_solution_matches_independent_solve(backend, rng, independent_qp):
     mpc = OutageAwareMPC.from_config(CFG, backend=backend)
     for x, ref, psi in _problems(rng, 4):
         sol = mpc.solve(x, ref, psi)
         assert sol.num_fallbacks == 0
         for k in range(4):
-            value, z = _cvxpy_value(x[k], ref[k], psi[k])
+            value, z = independent_qp(CFG, x[k], ref[k], psi[k])
             assert sol.value[k] == pytest.approx(value, rel=1e-6)
             assert np.allclose(sol.increments[k], z, atol=1e-4)
 
