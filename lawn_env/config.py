@@ -124,6 +124,11 @@ class ReferenceConfig:
     """Families the random set draws from."""
     initial_offset_std_m: Annotated[float, Field(ge=0)] = 3.0
     """Std of the initial AGV position offset from the reference start, per axis, m *(decided)*."""
+    envelope_fraction: Annotated[float, Field(gt=0, le=1)] | None = 0.9
+    """Feasibility *(decided, MODEL.md §1)*: every path is slowed down (uniform time scaling) until
+    |a_ref| <= f a_max and |a_ref[n+1] - a_ref[n]| <= f Delta-a_max per axis at every slot. None
+    keeps the raw paths: the stress variant (preset ``stress-paths``), where the paper-like set
+    demands up to ~4 a_max at its corners."""
 
     @model_validator(mode="after")
     def _check_families(self) -> "ReferenceConfig":
@@ -165,6 +170,11 @@ class DisturbanceConfig:
     control_period_slots: PositiveInt = 1
     """Commands are sent every this many slots (a reduced control rate); in between the AGVs keep
     their last acceleration and nothing is transmitted [2]."""
+    period_aware_planning: bool = True
+    """The planners know ``control_period_slots`` *(decided, MODEL.md §7)*: the MPC (experts,
+    baselines, ``lawn/Comm-v0``'s controller) and the PID/LQR rollouts plan with move blocking, an
+    increment only at the slots where a command goes out, held in between. False is the ablation
+    where they plan as if they commanded every slot."""
 
     @property
     def active(self) -> bool:

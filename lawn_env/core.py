@@ -89,7 +89,9 @@ class Simulation:
         self._packed_t, self._packed_w = packed_step_matrices(self.model.a_aug, self.model.b_aug, self._q1, self._q2)
         self._a_aug_t = np.ascontiguousarray(self.model.a_aug.T)
         self._b_aug_t = np.ascontiguousarray(self.model.b_aug.T)
-        self._paper_paths = references.paper_paths(self.num_agvs, self.area) if config.uses_paper_paths else None
+        self._envelope = references.Envelope.from_config(config, self.num_slots + self.horizon + 1)
+        self._paper_paths = (references.paper_paths(self.num_agvs, self.area, self._envelope)
+                             if config.uses_paper_paths else None)
         self._paper_table = (
             references.reference_table(self._paper_paths, self.num_slots + self.horizon + 1, self.slot_s)
             if self._paper_paths is not None else None
@@ -110,7 +112,8 @@ class Simulation:
             self.reference = self._paper_table
         else:
             self.paths = references.random_paths(
-                rng, k, cfg.reference.families, self.area, duration_s=(steps - 1) * self.slot_s
+                rng, k, cfg.reference.families, self.area, duration_s=(steps - 1) * self.slot_s,
+                envelope=self._envelope,
             )
             self.reference = references.reference_table(self.paths, steps, self.slot_s)
         self._reference_packed = np.concatenate([self.reference, np.zeros(self.reference.shape[:2] + (2,))], axis=2)

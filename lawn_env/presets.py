@@ -6,7 +6,7 @@ Register more with :func:`register` (a duplicate name raises).
 
 from __future__ import annotations
 
-from .config import ChannelConfig, DisturbanceConfig, ScenarioConfig
+from .config import ChannelConfig, DisturbanceConfig, ReferenceConfig, ScenarioConfig
 
 __all__ = ["PRESETS", "get", "names", "register"]
 
@@ -39,6 +39,9 @@ register("default", ScenarioConfig())
 register("paper-nominal", ScenarioConfig(channel=ChannelConfig(rate_threshold_bps_hz=1.0)))
 #: Three AGVs (the paper's first tracking figure), otherwise the defaults.
 register("k3", ScenarioConfig(num_agvs=3))
+#: The stress variant of the reference paths (MODEL.md §1): the raw paper-like set, not slowed into
+#: the AGVs' envelope, whose corners demand up to ~4 a_max; tracking error there is unavoidable.
+register("stress-paths", ScenarioConfig(reference=ReferenceConfig(envelope_fraction=None)))
 #: Thirty-two AGVs on random paths, for scaling studies and benchmarks.
 register("k32", ScenarioConfig(num_agvs=32))
 #: The default scenario with the disturbance mode on (MODEL.md §7: wind 2 m/s x, 2.5 m/s y with

@@ -10,12 +10,19 @@ Families: ``lemniscate`` (figure eight), ``rounded_rectangle`` (straight runs wi
 small-radius corners), ``sinusoid`` (sinusoidal sweep along a line) and ``spline`` (a periodic
 cubic spline through random waypoints). :func:`paper_paths` is the fixed paper-like set for
 K = 3 and K = 4; :func:`random_paths` draws K paths from a seeded generator.
+
+Feasibility (MODEL.md §1, decided): a reference the AGV cannot follow makes tracking error
+unavoidable. :func:`fit_envelope` slows a path down (a uniform time scaling, so the path keeps its
+shape, its sharp turns and its variable speed) until, at every slot, |a_ref| <= f a_max per axis and
+|a_ref[n+1] - a_ref[n]| <= f Delta-a_max per axis (f = ``reference.envelope_fraction``, 0.9).
+Both path sets are fitted by default; ``envelope=None`` keeps the raw paths (the named stress
+variant: the paper-like set then demands up to ~4x a_max at its corners).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -26,6 +33,9 @@ __all__ = [
     "RoundedRectangle",
     "Sinusoid",
     "SplinePath",
+    "Envelope",
+    "envelope_violation",
+    "fit_envelope",
     "paper_paths",
     "random_paths",
     "reference_table",
@@ -42,6 +52,10 @@ class TimeWarp:
     a: float = 0.0
     nu: float = 0.0
     phi: float = 0.0
+
+    def scaled(self, factor: float) -> "TimeWarp":
+        """The warp run ``factor`` times as fast: theta(factor t)."""
+        return TimeWarp(w=self.w * factor, theta0=self.theta0, a=self.a, nu=self.nu * factor, phi=self.phi)
 
     def __call__(self, t: np.ndarray):
         arg = self.nu * t + self.phi
@@ -191,16 +205,70 @@ FAMILIES = {
 }
 
 
+@dataclass(frozen=True)
+class Envelope:
+    """What the AGV can follow, sampled on the slot grid: per-axis bounds on the reference
+    acceleration and on its change over one slot, and the slots ``num_steps`` at ``slot_s``."""
+
+    accel_max: float  # m/s^2, per axis (already multiplied by the envelope fraction)
+    increment_max: float  # m/s^2 per slot, per axis
+    slot_s: float
+    num_steps: int
+
+    @classmethod
+    def from_config(cls, config, num_steps: int) -> "Envelope | None":
+        """The envelope of ``config`` (None when ``reference.envelope_fraction`` is None)."""
+        f = config.reference.envelope_fraction
+        if f is None:
+            return None
+        ctl = config.control
+        return cls(f * ctl.accel_max_mps2, f * ctl.accel_increment_max_mps2, config.slot_s, int(num_steps))
+
+
+def envelope_violation(table: np.ndarray, accel_max: float, increment_max: float) -> float:
+    """max over slots and axes of |a_ref| / accel_max and |a_ref[n+1] - a_ref[n]| / increment_max for a
+    reference table (..., T, 6); <= 1 means the reference is inside the envelope."""
+    acc = np.asarray(table)[..., 4:6]
+    ratio = np.abs(acc).max() / accel_max
+    if acc.shape[-2] > 1:
+        ratio = max(ratio, np.abs(np.diff(acc, axis=-2)).max() / increment_max)
+    return float(ratio)
+
+
+def fit_envelope(path: "_Curve", envelope: Envelope, max_rounds: int = 60):
+    """``path`` slowed down by the largest uniform time scaling in (0, 1] that keeps it inside
+    ``envelope`` at every slot (the path itself when it already is).
+
+    Accelerations scale with the square of the factor and their per-slot changes with its square
+    (jumps at curvature breaks) to cube (smooth paths), so the first guess is the cube root of the
+    worst ratio; the factor is then shrunk by 2 % until every slot passes.
+    """
+    t = np.arange(envelope.num_steps) * envelope.slot_s
+    ratio = envelope_violation(path.evaluate(t), envelope.accel_max, envelope.increment_max)
+    if ratio <= 1.0:
+        return path
+    factor = ratio ** (-1.0 / 2.0)
+    for _ in range(max_rounds):
+        candidate = replace(path, warp=path.warp.scaled(factor))
+        if envelope_violation(candidate.evaluate(t), envelope.accel_max, envelope.increment_max) <= 1.0:
+            return candidate
+        factor *= 0.98
+    raise RuntimeError(  # pragma: no cover - the factor shrinks to 0.3 of the first guess; a guard
+        f"could not fit {type(path).__name__} into the envelope (a_max {envelope.accel_max}, "
+        f"increment {envelope.increment_max})")
+
+
 def _scaled(area_m, x: float, y: float) -> tuple[float, float]:
     """Map a point of the nominal 200 m x 200 m area onto ``area_m``."""
     x0, x1, y0, y1 = area_m
     return (x0 + (x1 - x0) * x / 200.0, y0 + (y1 - y0) * y / 200.0)
 
 
-def paper_paths(num_agvs: int, area_m=(0.0, 200.0, 0.0, 200.0)) -> list[_Curve]:
+def paper_paths(num_agvs: int, area_m=(0.0, 200.0, 0.0, 200.0), envelope: Envelope | None = None) -> list[_Curve]:
     """The fixed paper-like set (MODEL.md §1): K = 4 puts two AGVs with the more complex paths
     (sinusoidal sweep, spline with tight bends) in the lower region, as in the paper's Fig. 6;
-    K = 3 keeps the first three. Defined on the nominal 200 m area and scaled to ``area_m``."""
+    K = 3 keeps the first three. Defined on the nominal 200 m area and scaled to ``area_m``;
+    with ``envelope`` each path is slowed into it (:func:`fit_envelope`)."""
     if num_agvs not in (3, 4):
         raise ValueError(f"num_agvs={num_agvs}: the paper-like path set is defined for 3 or 4 AGVs")
     sx = (area_m[1] - area_m[0]) / 200.0
@@ -210,14 +278,15 @@ def paper_paths(num_agvs: int, area_m=(0.0, 200.0, 0.0, 200.0)) -> list[_Curve]:
         Lemniscate(center=_scaled(area_m, 55, 150), sx=40 * sx, sy=44 * sy,
                    warp=TimeWarp(w=0.1, a=0.25, nu=0.21, phi=0.3)),
         RoundedRectangle(center=_scaled(area_m, 145, 148), half_width=38 * sx, half_height=30 * sy,
-                         radius=4.0 * s, warp=TimeWarp(w=4.0 * s, theta0=10 * s, a=6.0 * s, nu=0.35, phi=1.0)),
+                         radius=9.0 * s, warp=TimeWarp(w=4.0 * s, theta0=10 * s, a=3.0 * s, nu=0.35, phi=1.0)),
         Sinusoid(start=_scaled(area_m, 15, 55), heading=0.08, amplitude=18 * sy, wavenumber=2 * math.pi / (55 * sx),
                  warp=TimeWarp(w=2.7 * sx, a=4.0 * sx, nu=0.3)),
         SplinePath(waypoints=(_scaled(area_m, 120, 20), _scaled(area_m, 185, 30), _scaled(area_m, 170, 85),
                               _scaled(area_m, 140, 60), _scaled(area_m, 115, 95), _scaled(area_m, 105, 50)),
                    warp=TimeWarp(w=4.0 * s, a=5.0 * s, nu=0.4, phi=2.0)),
     ]
-    return paths[:num_agvs]
+    paths = paths[:num_agvs]
+    return paths if envelope is None else [fit_envelope(p, envelope) for p in paths]
 
 
 def _random_path(rng: np.random.Generator, family: str, area_m) -> _Curve:
@@ -239,7 +308,7 @@ def _random_path(rng: np.random.Generator, family: str, area_m) -> _Curve:
         hx, hy = rng.uniform(0.1, 0.2) * width, rng.uniform(0.1, 0.2) * height
         center = (rng.uniform(x0 + hx + 2, x1 - hx - 2), rng.uniform(y0 + hy + 2, y1 - hy - 2))
         sign = rng.choice([-1.0, 1.0])
-        return RoundedRectangle(center=center, half_width=hx, half_height=hy, radius=rng.uniform(3, 8) * s,
+        return RoundedRectangle(center=center, half_width=hx, half_height=hy, radius=rng.uniform(6, 12) * s,
                                 warp=TimeWarp(w=sign * speed, theta0=rng.uniform(0, 100), a=sign * var * speed / nu,
                                               nu=nu, phi=rng.uniform(0, 2 * math.pi)))
     if family == "sinusoid":
@@ -274,15 +343,18 @@ def _inside(table: np.ndarray, area_m, margin: float) -> bool:
 
 
 def random_paths(rng: np.random.Generator, num_agvs: int, families, area_m, duration_s: float,
-                 margin_m: float = 2.0, max_tries: int = 200) -> list[_Curve]:
+                 margin_m: float = 2.0, max_tries: int = 200, envelope: Envelope | None = None) -> list[_Curve]:
     """Draw ``num_agvs`` paths from ``families`` (seeded by ``rng``), each inside the area
-    (with ``margin_m``) over ``[0, duration_s]``; draws that leave the area are redrawn."""
+    (with ``margin_m``) over ``[0, duration_s]``; draws that leave the area are redrawn. With
+    ``envelope`` each draw is slowed into it (:func:`fit_envelope`) before the area check."""
     t = np.linspace(0.0, duration_s, max(2, int(duration_s * 4) + 1))
     paths = []
     for _ in range(num_agvs):
         family = families[int(rng.integers(len(families)))]
         for _ in range(max_tries):
             path = _random_path(rng, family, area_m)
+            if envelope is not None:
+                path = fit_envelope(path, envelope)
             if _inside(path.evaluate(t), area_m, margin_m):
                 break
         else:  # pragma: no cover - the families are sized to fit; this is a guard, not a path

@@ -63,7 +63,7 @@ def test_value_table_interpolates_v():
         mids = (grid[:-1] + grid[1:]) / 2
         errors.append(max(np.max(np.abs(table(np.full(4, m)) / prob.values_at_psi(np.full(4, m))[0] - 1))
                           for m in mids))
-    assert errors[0] < 0.08 and errors[1] < 0.008 and errors[1] < errors[0] / 5
+    assert errors[0] < 0.15 and errors[1] < 0.01 and errors[1] < errors[0] / 5
 
 
 def test_global_value_is_reproduced_by_exact_qps():

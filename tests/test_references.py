@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from lawn_env import references
+from lawn_env import ScenarioConfig, presets, references
 
 
 def _in_area(table, area=(0, 200, 0, 200)):
@@ -16,8 +16,58 @@ def test_paper_paths_inside_area_and_distinct(k):
     speeds = np.linalg.norm(table[..., 2:4], axis=-1)
     assert 0.5 < speeds.min() and speeds.max() < 10.0
     assert len({tuple(np.round(table[i, 0, :2], 3)) for i in range(k)}) == k
-    # sharp turns: some reference accelerations exceed what the AGV can follow (a_max = 2)
+    # the raw (stress) set: its corners demand more than the AGV can follow (a_max = 2)
     assert np.abs(table[..., 4:6]).max() > 2.0
+
+
+CFG = ScenarioConfig()
+ENVELOPE = references.Envelope.from_config(CFG, CFG.num_slots + CFG.control.horizon + 1)
+
+
+def _feasible(table, cfg=CFG):
+    f, ctl = cfg.reference.envelope_fraction, cfg.control
+    acc = table[..., 4:6]
+    return (np.abs(acc).max() <= f * ctl.accel_max_mps2 + 1e-12
+            and np.abs(np.diff(acc, axis=-2)).max() <= f * ctl.accel_increment_max_mps2 + 1e-12)
+
+
+@pytest.mark.parametrize("k", [3, 4])
+def test_paper_paths_respect_the_envelope_and_keep_sharp_turns_and_variable_speed(k):
+    """MODEL.md §1: |a_ref| <= 0.9 a_max and |a_ref[n+1] - a_ref[n]| <= 0.9 Delta-a_max per axis at
+    every slot the env uses (slots 0 .. N + N_p), through the env's own config path."""
+    from lawn_env.core import Simulation
+
+    sim = Simulation(ScenarioConfig(num_agvs=k))
+    sim.reset(np.random.default_rng(0))
+    table = sim.reference
+    assert table.shape == (k, CFG.num_slots + CFG.control.horizon + 1, 6) and _in_area(table)
+    assert _feasible(table)
+    speed = np.linalg.norm(table[..., 2:4], axis=-1)
+    assert (speed.max(axis=1) / speed.min(axis=1)).min() > 1.3  # variable speed on every path
+    rect = references.paper_paths(4, envelope=ENVELOPE)[1]
+    assert rect.radius <= 10.0  # a tight corner, taken slowly enough
+    assert not _feasible(references.reference_table(references.paper_paths(k), table.shape[1], CFG.slot_s))
+
+
+@pytest.mark.parametrize("family", list(references.FAMILIES))
+def test_every_random_family_respects_the_envelope_over_many_seeds(family):
+    steps = CFG.num_slots + CFG.control.horizon + 1
+    for seed in range(60):
+        paths = references.random_paths(np.random.default_rng(seed), 2, (family,), (0, 200, 0, 200),
+                                        (steps - 1) * CFG.slot_s, envelope=ENVELOPE)
+        table = references.reference_table(paths, steps, CFG.slot_s)
+        assert _feasible(table), (family, seed)
+        assert _in_area(table)
+
+
+def test_envelope_follows_the_control_config_and_can_be_switched_off():
+    tight = ScenarioConfig(control={"accel_max_mps2": 1.0, "accel_increment_max_mps2": 0.5})
+    env = references.Envelope.from_config(tight, 131)
+    table = references.reference_table(references.paper_paths(4, envelope=env), 131, 0.5)
+    assert _feasible(table, tight)
+    assert references.Envelope.from_config(presets.get("stress-paths"), 131) is None
+    with pytest.raises(ValueError, match="envelope_fraction"):
+        ScenarioConfig(reference={"envelope_fraction": 1.5})
 
 
 def test_paper_paths_reject_other_k():
