@@ -130,7 +130,7 @@ class SlotProblem:
                 f"({k}, 6) and ({k}, {solver.horizon + 1}, 6) for this config"
             )
         self.agv_xy = self.x_aug[:, 0:2]
-        self.data: SlotData = solver.mpc.prepare(self.x_aug, self.reference)
+        self.data: SlotData = solver.mpc.prepare(self.x_aug, self.reference, snapshot.slot)
 
     # ------------------------------------------------------------------ pieces of J^
     def coefficients(self, dmu: np.ndarray):

@@ -107,7 +107,7 @@ def _v0_action(policy, action: np.ndarray, obs: np.ndarray) -> np.ndarray:
     if policy.interface.action_scheme == "direct":
         return action.astype(np.float32)
     state = policy.layout.decode(obs)
-    args = (state["x_aug"], state["reference"], state["drone_position"])
+    args = (state["x_aug"], state["reference"], state["drone_position"], state["slot"])
     return policy.v0.encode(policy.scheme.decode(action, *args), *args)
 
 

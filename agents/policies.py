@@ -31,6 +31,7 @@ from pydantic.dataclasses import dataclass as pydantic_dataclass
 from lawn_env import ObservationLayout, ScenarioConfig, spaces
 from lawn_env.core import Snapshot
 from lawn_env.drone import move_drone
+from lawn_env.dynamics import command_mask, planning_period
 from lawn_env.envs.base import resolve_config
 
 from .ao import AOSettings, AOSolver, Plan
@@ -129,6 +130,10 @@ class PlannerPolicy(Policy):
     def plan(self, snapshot: Snapshot) -> Plan:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def _commands(self, snapshot: Snapshot) -> np.ndarray:
+        """The horizon slots where a command goes out (move blocking, MODEL.md §7)."""
+        return command_mask(snapshot.slot, self.config.control.horizon, planning_period(self.config))
+
     def act(self, obs) -> np.ndarray:
         snapshot = snapshot_from_observation(self.layout, self.config, obs)
         plan = self.plan(snapshot)
@@ -225,6 +230,7 @@ class PIDPolicy(PlannerPolicy):
         increments, integral = pid_rollout(
             snapshot.x_aug, snapshot.reference, self.integral, self.solver.model, (g.kp, g.ki, g.kd),
             c.control.accel_max_mps2, c.control.accel_increment_max_mps2, g.integral_limit,
+            commands=self._commands(snapshot),
         )
         self.integral = integral  # the integrator advances with the step that is sent
         return self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
@@ -243,7 +249,8 @@ class LQRPolicy(PlannerPolicy):
     def plan(self, snapshot: Snapshot) -> Plan:
         c = self.config
         increments = lqr_rollout(snapshot.x_aug, snapshot.reference, self.solver.model, self.gain,
-                                 c.control.accel_max_mps2, c.control.accel_increment_max_mps2)
+                                 c.control.accel_max_mps2, c.control.accel_increment_max_mps2,
+                                 commands=self._commands(snapshot))
         return self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
 
 

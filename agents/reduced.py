@@ -75,7 +75,7 @@ class ReducedProblem:
         self.reference = np.asarray(snapshot.reference, dtype=float)
         self.q_prev = np.asarray(snapshot.drone_position, dtype=float)
         self.agv_xy = self.x_aug[:, 0:2]
-        self.data = mpc.prepare(self.x_aug, self.reference)
+        self.data = mpc.prepare(self.x_aug, self.reference, snapshot.slot)
         self.budget = config.power_budget_w
         self.radius = config.drone.max_speed_mps * config.slot_s
         self.area = tuple(config.area_m)

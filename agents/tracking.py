@@ -3,7 +3,9 @@
 Both are rolled out over the MPC horizon on the nominal model (every command delivered) to give
 the "predicted inputs over the horizon" that the power and drone blocks then optimize against;
 the first increment is the one sent. Every increment is saturated into the control set:
-``|Delta-u| <= Delta-a_max`` and ``|u| <= a_max`` per axis.
+``|Delta-u| <= Delta-a_max`` and ``|u| <= a_max`` per axis. With a control period (MODEL.md §7),
+``commands`` (:func:`lawn_env.dynamics.command_mask`) marks the horizon slots where a command
+goes out; in between the law is not applied and the AGV holds its acceleration (increment 0).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ def saturate(u_desired: np.ndarray, u_prev: np.ndarray, accel_max: float, accel_
 
 def pid_rollout(x_aug: np.ndarray, reference: np.ndarray, integral: np.ndarray, model: PredictionModel,
                 gains: tuple[float, float, float], accel_max: float, accel_increment_max: float,
-                integral_limit: float) -> tuple[np.ndarray, np.ndarray]:
+                integral_limit: float, commands: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """PID per axis on the position error with velocity and acceleration feed-forward:
     ``u[i] = a_ref[i+1] + k_p e_p + k_i I + k_d e_v`` (``e_v`` is the velocity error, the
     derivative of the position error; ``a_ref[i+1]`` is the reference acceleration the cost
@@ -44,6 +46,8 @@ def pid_rollout(x_aug: np.ndarray, reference: np.ndarray, integral: np.ndarray, 
             first_integral = integ.copy()
         u = reference[:, i + 1, 4:6] + kp * e_pos + ki * integ + kd * (ref[:, 2:4] - x[:, 2:4])
         du = saturate(u, x[:, 4:6], accel_max, accel_increment_max)
+        if commands is not None and not commands[i]:
+            du = np.zeros_like(du)
         out[:, i] = du
         x = step_augmented(x, du, model.a_aug, model.b_aug)
     return out, first_integral
@@ -56,7 +60,7 @@ def lqr_gain(model: PredictionModel) -> np.ndarray:
 
 
 def lqr_rollout(x_aug: np.ndarray, reference: np.ndarray, model: PredictionModel, gain: np.ndarray,
-                accel_max: float, accel_increment_max: float) -> np.ndarray:
+                accel_max: float, accel_increment_max: float, commands: np.ndarray | None = None) -> np.ndarray:
     """``Delta-u[i] = Delta-u_ref[i] - K (x~[i] - x~_ref[i])``, saturated, over the horizon:
     increments (K, N_p, 2). ``Delta-u_ref[i] = a_ref[i+1] - a_ref[i]`` is the reference's own
     increment (feed-forward), so that a reference the AGV sits on is followed exactly."""
@@ -66,6 +70,8 @@ def lqr_rollout(x_aug: np.ndarray, reference: np.ndarray, model: PredictionModel
         feedforward = reference[:, i + 1, 4:6] - reference[:, i, 4:6]
         du_free = feedforward - (x - reference[:, i]) @ gain.T
         du = saturate(x[:, 4:6] + du_free, x[:, 4:6], accel_max, accel_increment_max)
+        if commands is not None and not commands[i]:
+            du = np.zeros_like(du)
         out[:, i] = du
         x = step_augmented(x, du, model.a_aug, model.b_aug)
     return out

@@ -86,6 +86,22 @@ def increment_sum_matrix(horizon: int) -> np.ndarray:
     return np.kron(np.tril(np.ones((horizon, horizon))), np.eye(2))
 
 
+def command_mask(slot: int, horizon: int, period: int) -> np.ndarray:
+    """Which of the horizon's increments can be non-zero (MODEL.md §7, move blocking): with commands
+    sent every ``period`` slots (at slots n with n % period == 0), the increment planned for slot
+    ``slot + i`` is True only at those slots; in between the AGV holds its acceleration. (horizon,) bool."""
+    if period == 1:
+        return np.ones(horizon, dtype=bool)
+    return (slot + np.arange(horizon)) % period == 0
+
+
+def planning_period(config) -> int:
+    """The control period the planners plan with: ``disturbance.control_period_slots`` when
+    ``disturbance.period_aware_planning`` (the default), else 1 (the unaware ablation)."""
+    d = config.disturbance
+    return int(d.control_period_slots) if d.period_aware_planning else 1
+
+
 @dataclass(frozen=True, eq=False)
 class PredictionModel:
     """Everything the outage-aware MPC needs, built once per (slot, horizon, Q1, Q2).

@@ -204,7 +204,7 @@ class ActionLayout:
 
     # ------------------------------------------------------------------ decode
     def decode(self, action: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
-               drone_position: np.ndarray) -> Decision:
+               drone_position: np.ndarray, slot: int | None = None) -> Decision:
         a = action
         k = self.num_agvs
         comm = a[self._inc_size :]
@@ -219,7 +219,7 @@ class ActionLayout:
         power = self._anchored_power(comm[:k], x_aug, drone_next)
         increment = None
         if self._inc_size:
-            increment = self.anchor_increment(x_aug, reference, power, drone_next)
+            increment = self.anchor_increment(x_aug, reference, power, drone_next, slot)
             increment += a[: 2 * k].reshape(k, 2) * (self.interface.residual_scale * self._inc_max)
             np.clip(increment, -self._inc_max, self._inc_max, out=increment)
         return Decision(increment, power, drone_next)
@@ -241,16 +241,17 @@ class ActionLayout:
         return w * (self._pmax / w.sum())
 
     def anchor_increment(self, x_aug: np.ndarray, reference: np.ndarray, power_w: np.ndarray,
-                         drone_next: np.ndarray) -> np.ndarray:
+                         drone_next: np.ndarray, slot: int | None = None) -> np.ndarray:
         """The tracking controller under the residual: the outage-aware MPC's first increment at each
-        link's planned success probability, (K, 2) m/s^2 (a new array; before the residual)."""
+        link's planned success probability, (K, 2) m/s^2 (a new array; before the residual).
+        ``slot`` is needed when the planners know a control period > 1 (:meth:`OutageAwareMPC.prepare`)."""
         d = np.sqrt(self._power_prior(x_aug, drone_next))
         psi = success_probability(power_w, d, **self._link._kwargs)
-        return self.mpc.solve(x_aug, reference, psi).increments[:, 0, :].copy()
+        return self.mpc.solve(x_aug, reference, psi, slot).increments[:, 0, :].copy()
 
     # ------------------------------------------------------------------ encode
     def encode(self, decision: Decision, x_aug: np.ndarray, reference: np.ndarray | None,
-               drone_position: np.ndarray) -> np.ndarray:
+               drone_position: np.ndarray, slot: int | None = None) -> np.ndarray:
         """The action (float32) that decodes to ``decision`` (nearest one, clipped, otherwise)."""
         power = np.asarray(decision.power_w, dtype=float)
         drone_next = np.asarray(decision.drone_next, dtype=float)
@@ -274,7 +275,7 @@ class ActionLayout:
         a_power = np.clip(log_w / self.interface.power_log_range, -1.0, 1.0)
         parts = [a_power, a_drone]
         if self._inc_size:
-            anchor = self.anchor_increment(x_aug, reference, power, drone_next)
+            anchor = self.anchor_increment(x_aug, reference, power, drone_next, slot)
             scale = self.interface.residual_scale * self._inc_max
             parts.insert(0, np.clip((np.asarray(decision.increment, dtype=float) - anchor) / scale, -1, 1).reshape(-1))
         return np.concatenate(parts).astype(np.float32)

@@ -7,7 +7,9 @@ z = Delta-mu_k (2 N_p increments):
     s.t.   |z| <= Delta-a_max                 (increment bound, simple bounds)
            |u[n-1] + T z| <= a_max            (acceleration bound over the horizon)
 
-which is solved as ``min 1/2 z' P z + q' z`` with ``P = 2 G``, ``q = H'``. The optimal value
+which is solved as ``min 1/2 z' P z + q' z`` with ``P = 2 G``, ``q = H'``. With a control period
+P > 1 that the planners know (MODEL.md §7), move blocking fixes the increments of the slots where no
+command goes out to zero (their bounds become [0, 0]), so a command is planned to be held for P slots. The optimal value
 ``V_k = 1/2 z*' P z* + q' z* + M`` is the expected cost J^_k of MODEL.md §3.
 
 Backends are named as in qpsolvers. ``"daqp"`` (default) and ``"osqp"`` keep one persistent
@@ -24,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .dynamics import PredictionModel
+from .dynamics import PredictionModel, command_mask, planning_period
 
 __all__ = ["MPCSolution", "OutageAwareMPC", "SlotData", "BACKENDS"]
 
@@ -176,8 +178,11 @@ class OutageAwareMPC:
     """
 
     def __init__(self, model: PredictionModel, num_agvs: int, accel_max: float, accel_increment_max: float,
-                 backend: str = "daqp"):
+                 backend: str = "daqp", control_period: int = 1):
+        if int(control_period) < 1:
+            raise ValueError(f"control_period={control_period!r}: must be an integer >= 1")
         self.model = model
+        self.control_period = int(control_period)
         self.num_agvs = int(num_agvs)
         self.accel_max = float(accel_max)
         self.accel_increment_max = float(accel_increment_max)
@@ -186,8 +191,12 @@ class OutageAwareMPC:
         self._constraint = model.increment_sum
         self.backend = _make_backend(backend, self.num_agvs, self._constraint)
         self._fallback = None  # built lazily: most runs never need it
-        self._pos_box = np.full((self.num_agvs, n), self.accel_increment_max)
-        self._neg_box = -self._pos_box
+        # increment bounds per slot phase: zero where move blocking holds the acceleration
+        self._boxes = []
+        for phase in range(self.control_period):
+            allowed = np.repeat(command_mask(phase, model.horizon, self.control_period), 2)
+            pos = np.broadcast_to(np.where(allowed, self.accel_increment_max, 0.0), (self.num_agvs, n))
+            self._boxes.append((-pos, pos))
         self._u_index = np.tile([4, 5], model.horizon)
         self._q5_2 = 2.0 * np.asarray(model.q5)
         self._ftq4f_2 = 2.0 * np.asarray(model.ftq4f)
@@ -197,7 +206,7 @@ class OutageAwareMPC:
     def from_config(cls, config, backend: str = "daqp") -> "OutageAwareMPC":
         ctl = config.control
         return cls(PredictionModel.from_config(config), config.num_agvs, ctl.accel_max_mps2,
-                   ctl.accel_increment_max_mps2, backend=backend)
+                   ctl.accel_increment_max_mps2, backend=backend, control_period=planning_period(config))
 
     def reset(self) -> None:
         """Drop the solver workspaces (warm starts): the next solve starts cold, so an episode's
@@ -207,9 +216,19 @@ class OutageAwareMPC:
         self._last_data = None
 
     # ------------------------------------------------------------------ problem data
-    def prepare(self, x_aug: np.ndarray, chi_ref: np.ndarray) -> "SlotData":
-        """The parts of the K QPs that do not depend on psi (one slot's state and reference)."""
+    def prepare(self, x_aug: np.ndarray, chi_ref: np.ndarray, slot: int | None = None) -> "SlotData":
+        """The parts of the K QPs that do not depend on psi (one slot's state and reference).
+
+        ``slot`` (the current slot n) is required when the MPC plans with a control period > 1:
+        increments are then allowed only at the slots n + i where a command goes out
+        (:func:`lawn_env.dynamics.command_mask`)."""
         k = self.num_agvs
+        if self.control_period == 1:
+            neg, pos = self._boxes[0]
+        elif slot is None:
+            raise ValueError(f"this MPC plans with control_period={self.control_period}: pass slot= (the current slot)")
+        else:
+            neg, pos = self._boxes[int(slot) % self.control_period]
         window = self.model.horizon + 1
         if x_aug.shape != (k, 6) or chi_ref.shape != (k, window, 6):
             raise ValueError(f"x_aug has shape {x_aug.shape} and chi_ref {chi_ref.shape}; this MPC (num_agvs={k}, "
@@ -220,8 +239,8 @@ class OutageAwareMPC:
             residual=r,
             linear=r @ self.model.ftq4.T,  # F' Q4 r, so H = 2 psi (F' Q4 r)'
             constant=((r @ self.model.q4) * r).sum(axis=1),
-            lower=np.concatenate([self._neg_box, -self.accel_max - u_prev], axis=1),
-            upper=np.concatenate([self._pos_box, self.accel_max - u_prev], axis=1),
+            lower=np.concatenate([neg, -self.accel_max - u_prev], axis=1),
+            upper=np.concatenate([pos, self.accel_max - u_prev], axis=1),
         )
 
     def _objective(self, data: "SlotData", psi: np.ndarray):
@@ -230,9 +249,9 @@ class OutageAwareMPC:
         return p, q
 
     # ------------------------------------------------------------------ solve
-    def solve(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi) -> MPCSolution:
-        """Solve the K QPs at success probabilities ``psi`` (K,)."""
-        return self.solve_prepared(self.prepare(x_aug, chi_ref), psi)
+    def solve(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi, slot: int | None = None) -> MPCSolution:
+        """Solve the K QPs at success probabilities ``psi`` (K,) (``slot`` as for :meth:`prepare`)."""
+        return self.solve_prepared(self.prepare(x_aug, chi_ref, slot), psi)
 
     def solve_prepared(self, data: "SlotData", psi) -> MPCSolution:
         """Solve the K QPs of a prepared slot at success probabilities ``psi`` (K,): the AO's
@@ -257,6 +276,8 @@ class OutageAwareMPC:
             if x is None:
                 x, its, status[i] = self._fallback_solve(i, p[i], q[i], lower[i], upper[i])
                 f = 0.5 * x @ p[i] @ x + q[i] @ x
+            if self.control_period > 1:  # the blocked increments exactly zero (solvers return ~1e-14)
+                x = np.clip(x, lower[i, : self._n], upper[i, : self._n])
             z[i] = x
             fval[i] = f
             iterations[i] = its

@@ -98,3 +98,53 @@ def test_shape_errors_name_the_shapes(rng):
         mpc.solve(x, ref[:, :10], psi)
     with pytest.raises(ValueError, match="num_agvs=4"):
         mpc.solve(x[:3], ref[:3], psi[:3])
+
+
+@pytest.mark.parametrize("slot", [0, 1, 2])
+def test_move_blocking_holds_the_acceleration_between_commands(slot, rng, independent_qp):
+    """MODEL.md §7: with commands every P = 3 slots the MPC plans increments only at the slots
+    n + i with (n + i) % 3 == 0; the others are exactly zero, and the solution is the optimum of
+    the independent QP with those increments fixed to zero."""
+    cfg = CFG.override(**{"disturbance.control_period_slots": 3})
+    mpc = OutageAwareMPC.from_config(cfg)
+    assert mpc.control_period == 3
+    blocked = (slot + np.arange(CFG.control.horizon)) % 3 != 0
+    for x, ref, psi in _problems(rng, 2):
+        sol = mpc.solve(x, ref, psi, slot=slot)
+        assert sol.num_fallbacks == 0
+        assert np.all(sol.increments[:, blocked] == 0.0)
+        assert np.abs(sol.increments[:, ~blocked]).max() > 0
+        free = OutageAwareMPC.from_config(CFG).solve(x, ref, psi)
+        assert np.all(sol.value >= free.value - 1e-9)  # a restriction of the every-slot QP
+        cp = pytest.importorskip("cvxpy")
+        for k in range(2):
+            value, _ = _blocked_qp(cp, cfg, x[k], ref[k], psi[k], blocked)
+            assert sol.value[k] == pytest.approx(value, rel=1e-6)
+
+
+def _blocked_qp(cp, cfg, x, ref, psi, blocked):
+    model = PredictionModel.from_config(cfg)
+    n = cfg.control.horizon
+    z = cp.Variable((n, 2))
+    cost, state, u = 0, x, x[4:6]
+    cons = [cp.abs(z) <= 1.0] + [z[i] == 0 for i in range(n) if blocked[i]]
+    for i in range(n):
+        cost += cp.sum_squares(state - ref[i]) + cp.sum_squares(z[i])
+        state = model.a_aug @ state + psi * (model.b_aug @ z[i])
+        u = u + z[i]
+        cons.append(cp.abs(u) <= 2.0)
+    cost += cp.quad_form(state - ref[n], model.q3)
+    prob = cp.Problem(cp.Minimize(cost), cons)
+    prob.solve(solver=cp.CLARABEL, tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12)
+    return prob.value, z.value
+
+
+def test_period_needs_the_slot_and_the_unaware_ablation_plans_every_slot(rng):
+    cfg = CFG.override(**{"disturbance.control_period_slots": 2})
+    x, ref, psi = next(_problems(rng, 1))
+    with pytest.raises(ValueError, match="control_period=2: pass slot="):
+        OutageAwareMPC.from_config(cfg).solve(x, ref, psi)
+    unaware = cfg.override(**{"disturbance.period_aware_planning": False})
+    assert OutageAwareMPC.from_config(unaware).control_period == 1
+    assert np.array_equal(OutageAwareMPC.from_config(unaware).solve(x, ref, psi).increments,
+                          OutageAwareMPC.from_config(CFG).solve(x, ref, psi).increments)

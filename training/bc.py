@@ -54,7 +54,7 @@ def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, s
             plan = expert.last_plan
             decision = Decision(plan.increments[:, 0], plan.power_w, plan.drone_position)
             obs_list.append(iface.observe(obs.copy()))
-            act_list.append(scheme.encode(decision, snap.x_aug, snap.reference, snap.drone_position))
+            act_list.append(scheme.encode(decision, snap.x_aug, snap.reference, snap.drone_position, snap.slot))
             action = v0_action if actor is None else actor.act(obs)
             obs, _, terminated, truncated, info = env.step(action)
             done = terminated or truncated

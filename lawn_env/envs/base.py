@@ -56,7 +56,7 @@ class SimulationView:
     def _decide(self, action: np.ndarray):
         """The slot's physical decisions (:class:`~lawn_env.interface.Decision`) for a checked action."""
         sim = self.sim
-        return self.actions.decode(action, sim.x_obs, sim.reference_window(), sim.drone_position)
+        return self.actions.decode(action, sim.x_obs, sim.reference_window(), sim.drone_position, sim.slot)
 
     def _rewards_and_termination(self, costs) -> tuple[list[float], bool]:
         """Rewards for the given stage costs and whether the episode terminates (RL interface),

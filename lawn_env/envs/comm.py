@@ -82,7 +82,7 @@ class CommEnv(LawnEnvBase):
         self._check_running()
         _, power, drone_next = self._decide(check_action(action, self.actions.size))
         psi = self.sim.planning_success(power, drone_next)
-        solution = self.mpc.solve(self.sim.x_aug, self.sim.reference_window(), psi)
+        solution = self.mpc.solve(self.sim.x_aug, self.sim.reference_window(), psi, self.sim.slot)
         record = self.sim.step(solution.increments[:, 0, :], power, drone_next)
         self.last_mpc_solve_time_s = solution.solve_time_s  # not in info: infos must be deterministic
         extra = {
