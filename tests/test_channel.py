@@ -57,8 +57,8 @@ def test_bad_threshold_arguments():
 
 
 def _link(m=2, rho=0.0, rate=None):
-    # CE error caps the SINR at (1 - rho) / rho |h|^2: at R_th = 10 (G_th ~ 1187) any rho above ~1e-3
-    # means certain outage, so CE cases use the paper's R_th = 1 (MODEL.md §8)
+    # CE error caps the SINR at (1 - rho) / rho |h|^2: at R_th = 10 (G_th ~ 1187) rho = 1e-3 already
+    # floors outage at 0.69 whatever the power, so CE cases use the paper's R_th = 1 (MODEL.md §8)
     rate = rate if rate is not None else (1.0 if rho > 0 else 10.0)
     cfg = ScenarioConfig(channel=dict(nakagami_m=m, ce_error_var=rho, rate_threshold_bps_hz=rate))
     return LinkParams.from_config(cfg)
@@ -108,8 +108,11 @@ def test_outage_accurate_for_tiny_values():
     x = float(channel.outage_argument(0.25, 60.0, **params._kwargs))
     # series for m = 2: P = 1 - e^-x (1 + x) = x^2/2 - x^3/3 + ...
     assert p == pytest.approx(x**2 / 2 - x**3 / 3 + x**4 / 8, rel=1e-9)
-    naive = 1 - math.exp(-x) * (1 + x)  # the paper's form loses the digits
-    assert abs(naive - p) / p > 1e-6 or p > 1e-8
+    # the paper's sum form 1 - e^-x (1 + x) cancels ~8 digits at these outages: a relative error
+    # around 1e-9 (5.7e-10 here at P = 6.9e-8; 5e-9 at P = 1e-8), small but far above gammainc's
+    naive = 1 - math.exp(-x) * (1 + x)
+    assert 1e-10 < abs(naive - p) / p < 1e-8
+    assert p == pytest.approx(x**2 / 2 - x**3 / 3 + x**4 / 8 - x**5 / 30, rel=1e-11)
 
 
 def test_zero_power_means_outage_and_no_nan():
@@ -167,3 +170,27 @@ def test_regimes_of_model_md_section_8():
     d = np.sqrt(channel.distance_sq(drone, grid, 50.0))
     p = channel.outage_probability(equal, d, **default._kwargs)
     assert p.min() < 0.05 and p.max() > 0.5  # outage matters at the default point: 0.024 .. 0.63
+
+
+def test_ce_floor_makes_outage_power_independent_at_0_dbw():
+    """MODEL.md §8: at R_th = 1 and 0 dBW the CE error's floor dominates (rho = 0.1: outage 3.4-4.2 %
+    whatever the power from P/16 to P and the distance from 50 to 287 m), while at -30 dBW power
+    and distance move the outage by more than a factor of 2 (the CE figure's regime)."""
+    d = np.linspace(50.0, 287.0, 12)
+    for budget, spread in ((0.0, "floor"), (-30.0, "visible")):
+        cfg = presets.get("paper-nominal").override(power_budget_dbw=budget, **{"channel.ce_error_var": 0.1})
+        link = LinkParams.from_config(cfg)
+        p_max = cfg.power_budget_w
+        out = np.array([channel.outage_probability(p, d, **link._kwargs) for p in (p_max / 16, p_max / 4, p_max)])
+        if spread == "floor":
+            assert 0.033 < out.min() and out.max() < 0.043
+        else:
+            assert out.max() > 2 * out.min()
+
+
+def test_ce_error_floor_at_the_default_rate_threshold():
+    """At R_th = 10 the CE error floors the outage at gammainc(m, m G_th rho / (1 - rho)): 0.69 at
+    rho = 1e-3 even at full power straight above the AGV, practically 1 at rho = 1e-2."""
+    for rho, low, high in ((1e-3, 0.68, 0.70), (1e-2, 1 - 1e-8, 1.0)):
+        link = LinkParams.from_config(presets.get("default").override(**{"channel.ce_error_var": rho}))
+        assert low <= channel.outage_probability(1.0, 50.0, **link._kwargs) <= high

@@ -75,9 +75,10 @@ def test_ray_backend_runs_a_tiny_sweep(tmp_path):
 def test_quick_figures_are_built_from_their_tables(tmp_path):
     timings = make_figures([], tmp_path, quick=True, workers=2, progress=False)
     assert set(timings) == set(EXPERIMENTS)
-    for name in EXPERIMENTS:
+    for name, exp in EXPERIMENTS.items():
         assert (tmp_path / f"{name}.png").stat().st_size > 5000 and (tmp_path / f"{name}.pdf").exists()
-        assert (tmp_path / "data" / f"{name}.csv").exists()
+        for table in exp.table_names(quick=True):
+            assert (tmp_path / "data" / f"{table}.csv").exists()
     tables = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "data").glob("*.csv")}
     for name in EXPERIMENTS:
         (tmp_path / f"{name}.png").unlink()
@@ -86,12 +87,36 @@ def test_quick_figures_are_built_from_their_tables(tmp_path):
     assert all((tmp_path / f"{name}.png").exists() for name in EXPERIMENTS)
     with pytest.raises(ValueError, match="unknown figures"):
         make_figures(["fig9"], tmp_path)
-    from training.figures import format_checks, trend_checks
+    from training.figures import check_claims, format_claims, write_reproduction
 
-    checks = trend_checks(tmp_path)
-    assert {c["figure"] for c in checks} == {"convergence", "ce", "cdf", "rate", "blocklength", "disturbance"}
-    assert all(isinstance(c["holds"], bool) and c["evidence"] for c in checks)
-    assert format_checks(checks).count("\n") == len(checks) + 1
+    claims = check_claims(tmp_path)
+    assert {c.figure for c in claims} == set(EXPERIMENTS)
+    assert all(c.verdict in ("holds", "differs", "not significant") and c.value for c in claims)
+    assert len({c.key for c in claims}) == len(claims)
+    assert format_claims(claims).count("\n") == len(claims) + 1
+    doc = write_reproduction(tmp_path, tmp_path / "docs", explanations={"ce.": "a tested reason"}).read_text()
+    assert "commit" in doc and "lawn " in doc  # provenance
+    assert "a tested reason" in doc or all(c.verdict == "holds" for c in claims if c.key.startswith("ce."))
+    unexplained = [c.key for c in claims if c.verdict != "holds" and not c.key.startswith("ce.")]
+    assert all(key in doc for key in unexplained)  # listed as not yet explained
+    assert (tmp_path / "docs" / "figures" / "reproduction" / "ce.png").exists()
+
+
+def test_paired_claims_use_the_same_seeds_and_their_intervals():
+    from training.figures import _claim
+    from training.tables import paired_difference, verdict
+
+    a = {0: 90.0, 1: 180.0, 2: 95.0, 3: 9.0}
+    b = {0: 100.0, 1: 200.0, 2: 100.0, 4: 1.0}  # seed 3 and 4 unpaired: ignored
+    mean, half, n = paired_difference(a, b)
+    assert n == 3 and mean == pytest.approx(np.mean([-0.1, -0.1, -0.05]))
+    assert verdict(mean, half, "negative") == "holds" and verdict(mean, half, "positive") == "differs"
+    assert verdict(0.1, 0.2, "negative") == "not significant"
+    assert verdict(mean, float("nan"), "negative") == "n/a"
+    assert verdict(0.001, 0.002, "tie") == "holds" and verdict(0.05, 0.01, "tie") == "differs"
+    assert verdict(0.0, 0.05, "tie") == "not significant"
+    c = _claim("f", "k", "a beats b", "cost", a, b, "negative")
+    assert c.verdict == "holds" and c.seeds == 3 and c.value.startswith("-8.3 %")
 
 
 def test_disturbance_mode():

@@ -230,11 +230,15 @@ def cmd_figures(args) -> int:
         print(f"  {name:<12}{seconds:8.1f} s   {args.out}/{name}.png, .pdf, data/{name}.csv")
     print(f"lawn figures: {len(timings)} figures in {time.perf_counter() - start:.1f} s"
           + (" (--quick)" if args.quick else ""))
-    from .figures import format_checks, trend_checks
+    from .figures import check_claims, format_claims, write_reproduction
 
-    table = format_checks(trend_checks(Path(args.out)))
-    (Path(args.out) / "trends.md").write_text(table + "\n")
+    table = format_claims(check_claims(Path(args.out), args.names))
+    (Path(args.out) / "claims.md").write_text(table + "\n")
     print(table)
+    if args.docs:
+        if args.quick:
+            raise SystemExit("lawn figures: --docs writes the published reproduction; it takes the full set, not --quick")
+        print(f"wrote {write_reproduction(Path(args.out), Path(args.docs))}")
     return 0
 
 
@@ -358,6 +362,8 @@ def build_parser() -> argparse.ArgumentParser:
     fg.add_argument("--out", default="runs/figures")
     fg.add_argument("--quick", action="store_true", help="reduced seeds, grids and episode length (tests)")
     fg.add_argument("--workers", type=int, default=workers_default)
+    fg.add_argument("--docs", default=None, metavar="DIR",
+                    help="also write DIR/REPRODUCTION.md and copy the figures to DIR/figures/reproduction/")
     fg.add_argument("--quiet", action="store_true")
     fg.set_defaults(func=cmd_figures)
 

@@ -45,7 +45,7 @@ def rollout(policy, env_id: str, config: ScenarioConfig, seed: int) -> dict:
     env = gym.make(env_id, config=config)
     obs, _ = env.reset(seed=seed)
     policy.reset(seed)
-    decision_s, ao_iterations, fallbacks = [], [], 0
+    decision_s, ao_iterations, fallbacks, stage_costs = [], [], 0, []
     done = False
     info: dict = {}
     while not done:
@@ -58,6 +58,7 @@ def rollout(policy, env_id: str, config: ScenarioConfig, seed: int) -> dict:
             fallbacks += plan.info.get("qp_fallbacks", 0)
         obs, _, terminated, truncated, info = env.step(action)
         fallbacks += info.get("mpc_fallbacks", 0)
+        stage_costs.append(float(info["stage_cost"]))
         done = terminated or truncated
     env.close()
     m = info["episode_metrics"]
@@ -68,6 +69,7 @@ def rollout(policy, env_id: str, config: ScenarioConfig, seed: int) -> dict:
     row["decision_time_p95_s"] = float(np.percentile(decision_s, 95))
     row["ao_iterations_mean"] = float(np.mean(ao_iterations)) if ao_iterations else math.nan
     row["qp_fallbacks"] = fallbacks
+    row["stage_costs"] = json.dumps(stage_costs)  # realized stage cost per slot (the per-slot figures read it)
     return row
 
 

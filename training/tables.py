@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from typing import Iterable, Mapping
 
 import numpy as np
 from scipy import stats
 
-__all__ = ["mean_ci"]
+__all__ = ["mean_ci", "paired_difference", "verdict"]
 
 
 def mean_ci(values: Iterable[float]) -> tuple[float, float]:
@@ -19,3 +19,35 @@ def mean_ci(values: Iterable[float]) -> tuple[float, float]:
     if x.size < 2:
         return float(x.mean()), math.nan
     return float(x.mean()), float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
+
+
+def paired_difference(a: Mapping, b: Mapping, relative: bool = True) -> tuple[float, float, int]:
+    """Mean, 95 % t-interval half-width and count of the per-key difference ``a[k] - b[k]`` over the
+    keys (seeds) both hold; ``relative`` divides each difference by ``b[k]`` (a paired comparison)."""
+    keys = [k for k in a if k in b]
+    diffs = [(float(a[k]) - float(b[k])) / (abs(float(b[k])) if relative else 1.0) for k in keys]
+    mean, half = mean_ci(diffs)
+    return mean, half, len(diffs)
+
+
+def verdict(mean: float, half: float, expect: str, tie_tolerance: float = 0.01) -> str:
+    """"holds" when the 95 % interval lies on the ``expect``ed side of zero ("negative" or
+    "positive"), "differs" when it lies on the other side, else "not significant". With
+    ``expect="tie"`` it holds when the whole interval lies within ``±tie_tolerance`` and differs when
+    it lies entirely outside."""
+    if expect not in ("negative", "positive", "tie"):
+        raise ValueError(f"expect={expect!r}: must be 'negative', 'positive' or 'tie'")
+    if not (math.isfinite(mean) and math.isfinite(half)):
+        return "n/a"
+    lo, hi = mean - half, mean + half
+    if expect == "tie":
+        if -tie_tolerance <= lo and hi <= tie_tolerance:
+            return "holds"
+        return "differs" if lo > tie_tolerance or hi < -tie_tolerance else "not significant"
+    if expect == "positive":
+        lo, hi = -hi, -lo
+    if hi < 0:
+        return "holds"
+    if lo > 0:
+        return "differs"
+    return "not significant"
