@@ -54,6 +54,7 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--json", help="also write the figures to this JSON file")
+    parser.add_argument("--markdown", help="also write the README's table of this run to this file")
     args = parser.parse_args(argv)
 
     rows = []
@@ -79,6 +80,14 @@ def main(argv=None) -> int:
     ]
     for name, ok in checks:
         print(f"[{'PASS' if ok else 'FAIL'}] {name}")
+    if args.markdown:
+        lines = [f"python {platform.python_version()}, numpy {np.__version__}, gymnasium {gym.__version__}, "
+                 f"{os.cpu_count()} cores, {platform.machine()}:", "",
+                 "| env | K | steps/s | µs/step | × CartPole step time |", "|---|---|---|---|---|"]
+        lines += [f"| {e} | {'–' if k == '-' else k} | {r:,.0f} | {1e6 / r:.1f} | {cartpole / r:.1f} |" for e, k, r in rows]
+        lines += [""] + [f"* [{'PASS' if ok else 'FAIL'}] {name}" for name, ok in checks]
+        with open(args.markdown, "w") as fh:
+            fh.write("\n".join(lines) + "\n")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"rows": [{"env": e, "K": k, "steps_per_s": r} for e, k, r in rows],

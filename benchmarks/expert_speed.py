@@ -115,13 +115,14 @@ def qp_block_comparison(config: ScenarioConfig, pairs, samples: int):
     return np.array(ours), np.array(theirs), np.array(rel)
 
 
-def tolerance_sweep(pairs) -> None:
+def tolerance_sweep(pairs) -> list[tuple]:
     snaps = [s for s, _ in pairs]
     config = snaps[0].config
     long = AOSolver(config, AOSettings(max_iterations=60, tolerance=0.0))
     reference = np.array([long.solve(s).objective for s in snaps])
     print("\nAO stopping tolerance (K = 4 slots of the closed loop above); J^ relative to a 60-iteration AO run")
     print(f"{'tolerance':>10} {'median ms':>10} {'p95 ms':>8} {'iterations':>11} {'median excess':>14} {'max excess':>11}")
+    out = []
     for tol in (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 1e-4):
         solver = AOSolver(config, AOSettings(tolerance=tol))
         t, v, it = [], [], []
@@ -134,6 +135,28 @@ def tolerance_sweep(pairs) -> None:
         excess = (np.array(v) - reference) / reference
         print(f"{tol:>10.0e} {np.median(t) * 1e3:>10.2f} {np.percentile(t, 95) * 1e3:>8.2f} {np.mean(it):>11.1f} "
               f"{np.median(excess) * 100:>13.2f}% {excess.max() * 100:>10.2f}%")
+        out.append((tol, np.median(t), np.mean(it), np.median(excess), excess.max()))
+    return out
+
+
+def markdown(results, sweep, checks) -> str:
+    """The README's tables of this run (decision times, QP block; tolerance sweep; checks)."""
+    lines = ["| K | ao-mpc median (p95) | AO iterations | rg-mpc median (p95) | QP block: ours | CVXPY | speed-up | "
+             "objective diff |", "|---|---|---|---|---|---|---|---|"]
+    for k, (times, ours, theirs, rel, rg_times, iterations) in results.items():
+        lines.append(f"| {k} | {np.median(times) * 1e3:.2f} ms ({np.percentile(times, 95) * 1e3:.2f} ms) | {iterations:.1f} | "
+                     f"{np.median(rg_times) * 1e3:.2f} ms ({np.percentile(rg_times, 95) * 1e3:.2f} ms) | "
+                     f"{np.median(ours) * 1e3:.3f} ms | {np.median(theirs) * 1e3:.2f} ms | "
+                     f"{np.median(theirs) / np.median(ours):.0f}× | {rel.max():.1e} |")
+    if sweep:
+        lines += ["", "AO stopping tolerance (the K = 4 slots above; J^ relative to a 60-iteration AO run):", "",
+                  "| tolerance | median ms | iterations | median excess J^ | max excess J^ |", "|---|---|---|---|---|"]
+        default = AOSettings().tolerance
+        for tol, t, it, med, mx in sweep:
+            name = f"**{tol:.0e} (default)**" if tol == default else f"{tol:.0e}"
+            lines.append(f"| {name} | {t * 1e3:.2f} | {it:.1f} | {med * 100:.1f} % | {mx * 100:.0f} % |")
+    lines += [""] + [f"* [{'PASS' if ok else 'FAIL'}] {name}" for name, ok in checks]
+    return "\n".join(lines) + "\n"
 
 
 def main(argv=None) -> int:
@@ -141,16 +164,17 @@ def main(argv=None) -> int:
     parser.add_argument("--episodes", type=int, default=2, help="K = 4 episodes (K = 32 runs one)")
     parser.add_argument("--samples", type=int, default=40, help="slots for the CVXPY comparison")
     parser.add_argument("--tolerance-sweep", action="store_true")
+    parser.add_argument("--markdown", help="also write the README's tables of this run to this file")
     args = parser.parse_args(argv)
 
     print(f"python {platform.python_version()}, numpy {np.__version__}, {platform.machine()}, one process")
-    results = {}
+    results, sweep = {}, []
     for k, config, episodes in ((4, ScenarioConfig(), args.episodes), (32, ScenarioConfig(num_agvs=32), 1)):
         times, pairs = closed_loop(config, episodes)
         ours, theirs, rel = qp_block_comparison(config, pairs, args.samples)
         iterations = np.mean([p.iterations for _, p in pairs])
         rg_times, _ = closed_loop(config, episodes, policy_name="rg-mpc")
-        results[k] = (times, ours, theirs, rel, rg_times)
+        results[k] = (times, ours, theirs, rel, rg_times, iterations)
         print(f"\nK = {k}: {len(times)} slots, AO iterations per slot {iterations:.1f}")
         print(f"  ao-mpc decision time   median {np.median(times) * 1e3:8.2f} ms   p95 {np.percentile(times, 95) * 1e3:8.2f} ms")
         print(f"  rg-mpc decision time   median {np.median(rg_times) * 1e3:8.2f} ms   p95 {np.percentile(rg_times, 95) * 1e3:8.2f} ms")
@@ -158,7 +182,7 @@ def main(argv=None) -> int:
               f"   speed-up {np.median(theirs) / np.median(ours):6.0f}x   max |rel. objective diff| {rel.max():.1e}")
         print(f"  expert's whole decision vs one CVXPY QP block: {np.median(theirs) / np.median(times):.1f}x faster")
         if k == 4 and args.tolerance_sweep:
-            tolerance_sweep(pairs)
+            sweep = tolerance_sweep(pairs)
     checks = [
         ("ao-mpc median <= 2 ms at K = 4", np.median(results[4][0]) <= 2e-3),
         ("ao-mpc median <= 30 ms at K = 32", np.median(results[32][0]) <= 30e-3),
@@ -171,6 +195,9 @@ def main(argv=None) -> int:
     print()
     for name, ok in checks:
         print(f"[{'PASS' if ok else 'FAIL'}] {name}")
+    if args.markdown:
+        with open(args.markdown, "w") as fh:
+            fh.write(markdown(results, sweep, checks))
     return 0 if all(ok for _, ok in checks) else 1
 
 

@@ -39,6 +39,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--timesteps", type=int, default=10240)
     parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--markdown", help="also write the README's table of this run to this file")
     args = parser.parse_args(argv)
     import stable_baselines3
     import torch
@@ -53,6 +54,14 @@ def main(argv=None) -> int:
         print(f"{env_id:<16}{rate:>14,.0f}{rate / base:>12.2f}x")
     ok = rates["lawn/Joint-v0"] >= 0.5 * base
     print(f"[{'PASS' if ok else 'FAIL'}] lawn/Joint-v0 PPO throughput >= half of CartPole-v1's")
+    if args.markdown:
+        lines = [f"python {platform.python_version()}, torch {torch.__version__}, stable-baselines3 "
+                 f"{stable_baselines3.__version__}, one torch thread:", "",
+                 "| env | PPO steps/s | vs CartPole |", "|---|---|---|"]
+        lines += [f"| {e} | {r:,.0f} | {r / base:.2f}× |" for e, r in rates.items()]
+        lines += ["", f"* [{'PASS' if ok else 'FAIL'}] lawn/Joint-v0 PPO throughput >= half of CartPole-v1's"]
+        with open(args.markdown, "w") as fh:
+            fh.write("\n".join(lines) + "\n")
     return 0 if ok else 1
 
 

@@ -379,5 +379,8 @@ def _versions() -> dict:
     import stable_baselines3
     import torch
 
+    from .provenance import provenance
+
     return {"lawn": lawn_env.__version__, "stable_baselines3": stable_baselines3.__version__,
-            "torch": torch.__version__, "gymnasium": gymnasium.__version__, "python": platform.python_version()}
+            "torch": torch.__version__, "gymnasium": gymnasium.__version__, "python": platform.python_version(),
+            "source": provenance()}

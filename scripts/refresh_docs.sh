@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# Regenerate every figure and table of the README and docs/ from the current code, each stamped with
+# the package version and git commit it came from (training/provenance.py):
+#   docs/REPRODUCTION.md, docs/figures/reproduction/   lawn figures (the paper's experiments)
+#   README blocks benchmark, benchmark-nominal          lawn benchmark (+ docs/figures/benchmark.png)
+#   README block gap                                    lawn gap (+ docs/figures/gap.png, convergence.png)
+#   README blocks expert-speed, env-throughput, train-throughput   benchmarks/*.py --markdown
+#   README block learned-agents, docs/LEARNED.md        lawn zoo build (needs the training runs in
+#                                                       runs/agents: with --train, scripts/train_agents.sh
+#                                                       trains them first, hours on 2 cores)
+#   bash scripts/refresh_docs.sh [--train] [--only NAME ...]
+# Generated data goes to runs/ (not committed). Timed benchmarks are run one at a time.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh full
+train=0
+only=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --train) train=1 ;;
+    --only) shift; while [ $# -gt 0 ] && [[ "$1" != --* ]]; do only+=("$1"); shift; done; continue ;;
+    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|learned ...]" >&2; exit 2 ;;
+  esac
+  shift
+done
+want() { [ ${#only[@]} -eq 0 ] || [[ " ${only[*]} " == *" $1 "* ]]; }
+lawn=.venv/bin/lawn
+py=.venv/bin/python
+splice() { "$py" -m training.readme "$1" "$2" --source "$3"; }
+mkdir -p runs/gap docs/figures
+
+if want figures; then
+  "$lawn" figures --out runs/figures --docs docs --workers 2 --quiet
+fi
+if want benchmark; then
+  "$lawn" benchmark --episodes 20 --seed 0 --out runs/benchmark --quiet
+  splice benchmark runs/benchmark/summary.md "lawn benchmark --episodes 20 --seed 0"
+  cp runs/benchmark/benchmark.png docs/figures/benchmark.png
+  "$lawn" benchmark --preset paper-nominal --episodes 5 --policies ao-mpc epa sf pid lqr --out runs/benchmark-nominal --quiet
+  splice benchmark-nominal runs/benchmark-nominal/summary.md \
+    "lawn benchmark --preset paper-nominal --episodes 5 --policies ao-mpc epa sf pid lqr"
+fi
+if want gap; then
+  "$lawn" gap --policies ao-mpc rg-mpc --driver ao-mpc --episodes 5 --every 3 --seed 0 --out runs/gap --quiet \
+    | tee runs/gap/stdout.txt
+  splice gap runs/gap/gap_summary.md "lawn gap --policies ao-mpc rg-mpc --driver ao-mpc --episodes 5 --every 3 --seed 0"
+  cp runs/gap/gap.png docs/figures/gap.png
+  cp runs/gap/convergence.png docs/figures/convergence.png
+fi
+if want speed; then
+  "$py" benchmarks/expert_speed.py --tolerance-sweep --markdown runs/expert_speed.md || true  # a FAIL is reported in the table
+  splice expert-speed runs/expert_speed.md "python benchmarks/expert_speed.py --tolerance-sweep"
+fi
+if want throughput; then
+  "$py" benchmarks/env_throughput.py --markdown runs/env_throughput.md || true
+  splice env-throughput runs/env_throughput.md "python benchmarks/env_throughput.py"
+  "$py" benchmarks/train_throughput.py --markdown runs/train_throughput.md || true
+  splice train-throughput runs/train_throughput.md "python benchmarks/train_throughput.py"
+fi
+if want learned; then
+  if [ "$train" = 1 ]; then
+    bash scripts/train_agents.sh runs/agents
+  elif [ -d runs/agents ]; then
+    "$lawn" zoo build --runs runs/agents --quiet
+  else
+    echo "refresh_docs: no runs/agents: the learned-agents table needs the training runs (rerun with --train)" >&2
+    exit 3
+  fi
+fi
+echo "refresh_docs: done; review with git diff README.md docs/"
