@@ -13,12 +13,14 @@ linear quantities are exposed as properties (``power_budget_w``, ``alpha0``, ``n
 from __future__ import annotations
 
 import dataclasses
+import typing
 from typing import Annotated, Any, Literal, Mapping
 
 from pydantic import ConfigDict, Field, model_validator
 from pydantic.dataclasses import dataclass
 
 __all__ = [
+    "UnknownConfigKeyError",
     "ChannelConfig",
     "ControlConfig",
     "DroneConfig",
@@ -29,6 +31,13 @@ __all__ = [
 ]
 
 _PYDANTIC = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
+
+class UnknownConfigKeyError(TypeError, ValueError):
+    """A configuration key (a keyword of ``gym.make``, a dotted override, a dict key) that the
+    scenario does not have. A ``TypeError``, as Python raises for an unexpected keyword argument
+    (libraries such as TorchRL retry without keywords an env rejects that way), and a
+    ``ValueError`` like every other invalid configuration."""
+
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 Probability = Annotated[float, Field(gt=0, lt=1)]
@@ -257,9 +266,10 @@ class ScenarioConfig:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "ScenarioConfig":
-        """Build from a nested dict; unknown keys raise ``ValueError`` naming them."""
+        """Build from a nested dict; unknown keys raise :class:`UnknownConfigKeyError` naming them."""
         if not isinstance(data, Mapping):
             raise TypeError(f"config must be a mapping, got {type(data).__name__}")
+        _check_keys(cls, data, "")
         return cls(**dict(data))
 
     def override(self, overrides: Mapping[str, Any] | None = None, **kwargs: Any) -> "ScenarioConfig":
@@ -278,12 +288,12 @@ class ScenarioConfig:
             for depth, part in enumerate(parts):
                 if not isinstance(node, dict) or part not in node:
                     where = ".".join(parts[: depth + 1])
-                    raise ValueError(f"unknown config key {where!r}; valid keys: {_valid_keys(self)}")
+                    raise UnknownConfigKeyError(f"unknown config key {where!r}; valid keys: {_valid_keys(self)}")
                 if depth == len(parts) - 1:
                     if isinstance(node[part], dict) and isinstance(value, Mapping):
                         for sub in value:
                             if sub not in node[part]:
-                                raise ValueError(
+                                raise UnknownConfigKeyError(
                                     f"unknown config key '{key}.{sub}'; valid keys: {_valid_keys(self)}"
                                 )
                         node[part] = {**node[part], **dict(value)}
@@ -300,6 +310,18 @@ def _to_plain(value: Any) -> Any:
     if isinstance(value, (list, tuple)):
         return [_to_plain(v) for v in value]
     return value
+
+
+def _check_keys(cls, data: Mapping[str, Any], prefix: str) -> None:
+    """Unknown keys of a (nested) config dict, named with their dotted path."""
+    fields = {f.name for f in dataclasses.fields(cls)}
+    hints = typing.get_type_hints(cls)
+    for key, value in data.items():
+        if key not in fields:
+            raise UnknownConfigKeyError(f"unknown config key {prefix + str(key)!r}; valid keys: {_valid_keys(ScenarioConfig())}")
+        sub = hints.get(key)
+        if isinstance(value, Mapping) and isinstance(sub, type) and dataclasses.is_dataclass(sub):
+            _check_keys(sub, value, f"{prefix}{key}.")
 
 
 def _valid_keys(cfg: ScenarioConfig) -> str:

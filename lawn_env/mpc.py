@@ -202,6 +202,19 @@ class OutageAwareMPC:
         self._ftq4f_2 = 2.0 * np.asarray(model.ftq4f)
         self._last_data = None
 
+    def __getstate__(self) -> dict:
+        """Copies and pickles carry the problem, not the solver workspaces (C objects and modules):
+        the copy starts its next solve cold, which changes iteration counts, not solutions."""
+        state = self.__dict__.copy()
+        state["backend"] = self.backend.name
+        state["_fallback"] = None
+        state["_last_data"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.backend = _make_backend(state["backend"], self.num_agvs, self._constraint)
+
     @classmethod
     def from_config(cls, config, backend: str = "daqp") -> "OutageAwareMPC":
         ctl = config.control

@@ -152,10 +152,16 @@ class ObservationLayout:
         self._ref_source = None
         self._windows = None
         self._buffer = np.zeros(self.size)
+        self._views = self._make_views()
+
+    def _make_views(self) -> tuple:
+        """Views into ``_buffer`` that :meth:`encode` fills (rebuilt after a copy or unpickling:
+        a copied view would no longer write into the copied buffer)."""
         k = self.num_agvs
         g0 = k * self.agv_features
+        w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
         blocks = self._buffer[:g0].reshape(k, self.agv_features)
-        self._views = (
+        return (
             blocks[:, 0:6],  # state
             blocks[:, 6:12],  # tracking error
             blocks[:, w0:w1],  # reference window
@@ -165,6 +171,15 @@ class ObservationLayout:
             blocks[:, w1 + 4],  # power
             self._buffer[g0 : g0 + 2],  # drone position
         )
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        del state["_views"]
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._views = self._make_views()
 
     def feature_names(self) -> list[str]:
         """Human-readable names of the per-AGV block, then of the globals."""
