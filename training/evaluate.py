@@ -57,7 +57,7 @@ def rollout(policy, env_id: str, config: ScenarioConfig, seed: int) -> dict:
             ao_iterations.append(plan.iterations)
             fallbacks += plan.info.get("qp_fallbacks", 0)
         obs, _, terminated, truncated, info = env.step(action)
-        fallbacks += info.get("mpc_fallbacks", 0)
+        fallbacks += int(info.get("mpc_fallbacks", 0))
         stage_costs.append(float(info["stage_cost"]))
         done = terminated or truncated
     env.close()

@@ -2,6 +2,6 @@
 
 from .comm import CommEnv
 from .joint import JointEnv
-from .parallel import LawnParallelEnv, parallel_env
+from .parallel import LawnParallelEnv, env, parallel_env, raw_env
 
-__all__ = ["JointEnv", "CommEnv", "LawnParallelEnv", "parallel_env"]
+__all__ = ["JointEnv", "CommEnv", "LawnParallelEnv", "parallel_env", "raw_env", "env"]

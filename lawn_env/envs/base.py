@@ -13,7 +13,7 @@ from ..core import Simulation, Snapshot
 from ..interface import V0_INTERFACE, ActionLayout, RLInterface, resolve_interface
 from ..spaces import ObservationLayout
 
-__all__ = ["resolve_config", "SimulationView", "LawnEnvBase"]
+__all__ = ["resolve_config", "SimulationView", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS", "slot_info"]
 
 
 def resolve_config(config: ScenarioConfig | Mapping | str | None = None, **overrides: Any) -> ScenarioConfig:
@@ -33,6 +33,35 @@ def resolve_config(config: ScenarioConfig | Mapping | str | None = None, **overr
             f"got {type(config).__name__}"
         )
     return cfg.override(overrides) if overrides else cfg
+
+
+#: The info keys every step and reset of the central environments (and the parallel env's "drone")
+#: carry, with fixed shapes and numpy dtypes; ``lawn/Comm-v0`` adds its MPC's keys
+#: (``COMM_INFO_KEYS``); the last step alone adds ``episode_metrics`` (a dict of MODEL.md §6).
+INFO_KEYS = ("slot", "stage_cost", "reward_tracking", "reward_effort", "reward_terms", "delivered",
+             "outage_probability", "power_w", "drone_position", "applied_increment")
+COMM_INFO_KEYS = ("mpc_iterations", "mpc_fallbacks", "success_probability_planned")
+
+
+def slot_info(slot, cost_tracking, cost_effort, delivered, outage_probability, power_w, drone_position,
+              applied_increment) -> dict:
+    """One slot's info dict (``INFO_KEYS``): ``slot`` int64, costs and reward terms float64 (the
+    rewards' split of the raw cost; ``reward_terms`` nests the same two), ``delivered`` (K,) bool,
+    ``outage_probability`` and ``power_w`` (K,) float64, ``drone_position`` (2,), ``applied_increment``
+    (K, 2) float64."""
+    tracking, effort = -float(cost_tracking), -float(cost_effort)
+    return {
+        "slot": np.int64(slot),
+        "stage_cost": np.float64(float(cost_tracking) + float(cost_effort)),
+        "reward_tracking": np.float64(tracking),
+        "reward_effort": np.float64(effort),
+        "reward_terms": {"tracking": np.float64(tracking), "effort": np.float64(effort)},
+        "delivered": np.asarray(delivered, dtype=bool),
+        "outage_probability": np.asarray(outage_probability, dtype=np.float64),
+        "power_w": np.asarray(power_w, dtype=np.float64),
+        "drone_position": np.asarray(drone_position, dtype=np.float64),
+        "applied_increment": np.asarray(applied_increment, dtype=np.float64),
+    }
 
 
 class SimulationView:
@@ -116,7 +145,16 @@ class LawnEnvBase(SimulationView, gym.Env):
         self._on_reset()
         if self.render_mode == "human":
             self.render()
-        return self.interface.observe(self.layout.encode(self.sim)), {"slot": 0}
+        sim = self.sim
+        k = sim.num_agvs
+        info = slot_info(sim.slot, 0.0, 0.0, sim.last_delivered, sim.last_outage_probability, sim.last_power_w,
+                         sim.drone_position, np.zeros((k, 2)))
+        info.update(self._extra_reset_info())
+        return self.interface.observe(self.layout.encode(sim)), info
+
+    def _extra_reset_info(self) -> dict:
+        """The env-specific info keys at reset, with the shapes and dtypes ``step`` gives them."""
+        return {}
 
     def _on_reset(self) -> None:
         """Hook for subclasses (e.g. solver workspaces)."""
@@ -129,16 +167,8 @@ class LawnEnvBase(SimulationView, gym.Env):
         cost_tracking = sum(record.tracking_cost.tolist())  # tolist + sum: cheaper than ndarray.sum for small K
         cost_effort = sum(record.effort_cost.tolist())
         cost = cost_tracking + cost_effort
-        info = {
-            "slot": self.sim.slot,
-            "stage_cost": cost,
-            "reward_terms": {"tracking": -cost_tracking, "effort": -cost_effort},
-            "delivered": record.delivered,
-            "outage_probability": record.outage_probability,
-            "power_w": record.power_w,
-            "drone_position": record.drone_position,
-            "applied_increment": record.applied_increment,
-        }
+        info = slot_info(self.sim.slot, cost_tracking, cost_effort, record.delivered, record.outage_probability,
+                         record.power_w, record.drone_position, record.applied_increment)
         if extra:
             info.update(extra)
         sim = self.sim

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
+import numpy as np
+
 from ..config import ScenarioConfig
 from ..interface import RLInterface
 from ..mpc import OutageAwareMPC
@@ -75,6 +77,11 @@ class CommEnv(LawnEnvBase):
         self.mpc = OutageAwareMPC.from_config(self.config, backend=qp_backend)
         self.last_mpc_solve_time_s = float("nan")
 
+    def _extra_reset_info(self) -> dict:
+        sim = self.sim
+        return {"mpc_iterations": np.zeros(sim.num_agvs, dtype=np.int64), "mpc_fallbacks": np.int64(0),
+                "success_probability_planned": sim.planning_success(sim.last_power_w, sim.drone_position)}
+
     def _on_reset(self) -> None:
         self.mpc.reset()  # episodes are independent of one another, warm starts included
 
@@ -86,8 +93,8 @@ class CommEnv(LawnEnvBase):
         record = self.sim.step(solution.increments[:, 0, :], power, drone_next)
         self.last_mpc_solve_time_s = solution.solve_time_s  # not in info: infos must be deterministic
         extra = {
-            "mpc_iterations": solution.iterations,
-            "mpc_fallbacks": solution.num_fallbacks,
-            "success_probability_planned": psi,
+            "mpc_iterations": solution.iterations.astype(np.int64),
+            "mpc_fallbacks": np.int64(solution.num_fallbacks),
+            "success_probability_planned": np.asarray(psi, dtype=np.float64),
         }
         return self._finish_step(record, extra)

@@ -7,14 +7,15 @@ from typing import Any, Mapping
 import gymnasium as gym
 import numpy as np
 from gymnasium.utils import seeding
-from pettingzoo import ParallelEnv
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec
 
 from ..config import ScenarioConfig
 from ..interface import RLInterface
 from ..spaces import check_action
-from .base import SimulationView
+from .base import SimulationView, slot_info
 
-__all__ = ["LawnParallelEnv", "parallel_env"]
+__all__ = ["LawnParallelEnv", "parallel_env", "raw_env", "env"]
 
 
 class LawnParallelEnv(SimulationView, ParallelEnv):
@@ -55,15 +56,25 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
 
     ## Arguments
 
-    ``lawn_env.parallel_env(config=None, render_mode=None, interface=None, **overrides)`` as for
-    ``gym.make``.
+    ``lawn_env.parallel_env(config=None, render_mode=None, interface=None, max_cycles=None,
+    **overrides)`` as for ``gym.make``; ``max_cycles`` is PettingZoo's name for ``num_slots``. The
+    AEC form: ``lawn_env.env(...)`` / ``lawn_env.raw_env(...)``. ``state()`` is the central
+    observation, in ``state_space``. Infos have the same keys, shapes and dtypes at reset and at
+    every step (``lawn_env.envs.base.INFO_KEYS``); the drone's last one adds ``episode_metrics``.
     """
 
     metadata = {"name": "lawn_v0", "render_modes": ["human", "rgb_array"], "render_fps": 4, "is_parallelizable": True}
 
     def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-                 interface: RLInterface | Mapping | str | None = None, **overrides: Any):
+                 interface: RLInterface | Mapping | str | None = None, max_cycles: int | None = None,
+                 **overrides: Any):
+        if max_cycles is not None:  # PettingZoo's name for the episode length
+            if "num_slots" in overrides and overrides["num_slots"] != max_cycles:
+                raise ValueError(f"max_cycles={max_cycles!r} and num_slots={overrides['num_slots']!r} disagree; "
+                                 "give one of them (max_cycles is PettingZoo's name for num_slots)")
+            overrides = {**overrides, "num_slots": max_cycles}
         self._setup_view(config, render_mode, overrides, interface, "joint")
+        self.max_cycles = self.config.num_slots
         k = self.config.num_agvs
         self.possible_agents = ["drone"] + [f"agv_{i}" for i in range(k)]
         self.agents: list[str] = []
@@ -77,6 +88,7 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
             "drone": gym.spaces.Box(-1.0, 1.0, shape=(k + 2,), dtype=np.float32),
             **{a: gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for a in self._agv_index},
         }
+        self.state_space = self._observation_spaces["drone"]
         self._np_random, _ = seeding.np_random()
 
     def observation_space(self, agent: str) -> gym.spaces.Box:
@@ -102,7 +114,24 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         observations = self._observations()
         if self.render_mode == "human":
             self.render()
-        return observations, {a: {} for a in self.agents}
+        sim = self.sim
+        k = sim.num_agvs
+        zero = np.zeros(k)
+        return observations, self._infos(zero, zero, sim.last_delivered, sim.last_outage_probability,
+                                         sim.last_power_w, np.zeros((k, 2)))
+
+    def _infos(self, tracking, effort, delivered, outage, power, applied) -> dict:
+        """Per-agent infos with the same keys, shapes and dtypes at reset and at every step: the
+        drone's are the central environments' (``INFO_KEYS``); each AGV's the same keys for its own
+        link, as scalars (``applied_increment`` (2,))."""
+        slot = self.sim.slot
+        infos = {"drone": slot_info(slot, tracking.sum(), effort.sum(), delivered, outage, power,
+                                    self.sim.drone_position, applied)}
+        for agent, i in self._agv_index.items():
+            info = slot_info(slot, tracking[i], effort[i], delivered[i], outage[i], power[i], self.sim.drone_position,
+                             applied[i])
+            infos[agent] = info
+        return infos
 
     def step(self, actions: dict):
         if not self.agents:
@@ -122,18 +151,10 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         per_agv = record.tracking_cost + record.effort_cost
         agent_rewards, terminated = self._rewards_and_termination([float(per_agv.sum())] + per_agv.tolist())
         rewards = {"drone": agent_rewards[0]}
-        infos = {"drone": {
-            "reward_terms": {"tracking": -float(record.tracking_cost.sum()), "effort": -float(record.effort_cost.sum())},
-            "delivered": record.delivered, "outage_probability": record.outage_probability, "power_w": power,
-            "drone_position": self.sim.drone_position,
-        }}
         for agent, i in self._agv_index.items():
             rewards[agent] = agent_rewards[i + 1]
-            infos[agent] = {
-                "reward_terms": {"tracking": -float(record.tracking_cost[i]), "effort": -float(record.effort_cost[i])},
-                "delivered": bool(record.delivered[i]),
-            }
-        infos["drone"]["stage_cost"] = float(per_agv.sum())
+        infos = self._infos(record.tracking_cost, record.effort_cost, record.delivered, record.outage_probability,
+                            record.power_w, record.applied_increment)
         observations = self._observations()
         truncated = self.sim.done and not terminated
         if truncated or terminated:
@@ -157,13 +178,36 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
 
     # ------------------------------------------------------------------ extras
     def state(self) -> np.ndarray:
-        """Global state: the central observation."""
+        """Global state: the central observation (an element of ``state_space``)."""
         if self.sim.x_aug is None:
             raise RuntimeError("call reset() before state()")
         return self.interface.observe(self.layout.encode(self.sim))
 
+    def render(self, *args, **kwargs):
+        """As the central environments' ``render()``; extra arguments (RLlib's
+        ``ParallelPettingZooEnv.render()`` passes a mode) are ignored: ``render_mode`` decides."""
+        return super().render()
+
 
 def parallel_env(config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-                 interface: RLInterface | Mapping | str | None = None, **overrides: Any) -> LawnParallelEnv:
-    """Create the PettingZoo parallel environment (see :class:`LawnParallelEnv`)."""
-    return LawnParallelEnv(config, render_mode=render_mode, interface=interface, **overrides)
+                 interface: RLInterface | Mapping | str | None = None, max_cycles: int | None = None,
+                 **overrides: Any) -> LawnParallelEnv:
+    """Create the PettingZoo parallel environment (see :class:`LawnParallelEnv`); ``max_cycles``
+    is PettingZoo's name for ``num_slots``."""
+    return LawnParallelEnv(config, render_mode=render_mode, interface=interface, max_cycles=max_cycles, **overrides)
+
+
+def raw_env(config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
+            interface: RLInterface | Mapping | str | None = None, max_cycles: int | None = None,
+            **overrides: Any) -> AECEnv:
+    """The same environment through PettingZoo's AEC API (agents act in turn, ``"drone"`` first;
+    the slot advances once every agent has acted): ``parallel_to_aec`` of :func:`parallel_env`."""
+    return parallel_to_aec(parallel_env(config, render_mode, interface, max_cycles, **overrides))
+
+
+def env(config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
+        interface: RLInterface | Mapping | str | None = None, max_cycles: int | None = None,
+        **overrides: Any) -> AECEnv:
+    """PettingZoo's conventional AEC constructor: :func:`raw_env` (already order-enforcing; actions
+    out of their box raise ``ValueError``, so no clipping wrapper is added)."""
+    return raw_env(config, render_mode, interface, max_cycles, **overrides)
