@@ -6,12 +6,12 @@ builds the PettingZoo environment. The physics lives in :mod:`lawn_env.channel`,
 :mod:`lawn_env.dynamics`, :mod:`lawn_env.drone` and :mod:`lawn_env.references`.
 """
 
-from gymnasium.envs.registration import register, registry
+from gymnasium.envs.registration import WrapperSpec, register, registry
 
 from . import channel, dynamics, drone, presets, references
 from .config import ChannelConfig, ControlConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 from .core import Simulation, Snapshot
-from .envs import CommEnv, JointEnv, LawnParallelEnv, parallel_env
+from .envs import CommEnv, JointEnv, LawnParallelEnv, env, parallel_env, raw_env
 from .interface import RL_INTERFACE, ActionLayout, RLInterface
 from .spaces import ObservationLayout
 
@@ -30,12 +30,17 @@ RL_ENV_IDS = {
     "lawn/CommRL-v0": "lawn/Comm-v0",
 }
 
+#: Every id's episode length in its spec (``max_episode_steps``): the default ``num_slots``; the
+#: outermost wrapper :class:`lawn_env.wrappers.EpisodeLength` keeps the time limit and ``num_slots``
+#: in agreement for any other length.
+_EPISODE = dict(max_episode_steps=ScenarioConfig().num_slots, disable_env_checker=False,
+                additional_wrappers=(WrapperSpec("EpisodeLength", "lawn_env.wrappers:EpisodeLength", {}),))
 for _env_id, _entry_point in ENV_IDS.items():
     if _env_id not in registry:
-        register(id=_env_id, entry_point=_entry_point, disable_env_checker=False)
+        register(id=_env_id, entry_point=_entry_point, **_EPISODE)
 for _env_id, _base in RL_ENV_IDS.items():
     if _env_id not in registry:
-        register(id=_env_id, entry_point=ENV_IDS[_base], kwargs={"interface": "rl"}, disable_env_checker=False)
+        register(id=_env_id, entry_point=ENV_IDS[_base], kwargs={"interface": "rl"}, **_EPISODE)
 
 __all__ = [
     "ENV_IDS",
@@ -56,6 +61,8 @@ __all__ = [
     "CommEnv",
     "LawnParallelEnv",
     "parallel_env",
+    "raw_env",
+    "env",
     "channel",
     "dynamics",
     "drone",
