@@ -1,0 +1,70 @@
+"""Outside clients run the environments for a few hundred steps (issue #11), each as its users
+call it. Slow (``pytest -m slow``); a client that is not installed is skipped with the reason
+(``pip install -e ".[compat]"`` installs TorchRL and Tianshou at versions that work with the
+CPU build of torch 2.13.0). Every env is named in the ``lawn_env:lawn/...`` form, which registers
+the ids in worker processes that never imported ``lawn_env``."""
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.slow
+
+
+def test_cleanrl_style_async_vector_loop():
+    """CleanRL's PPO builds ``gym.vector.SyncVectorEnv``/``AsyncVectorEnv`` of ``gym.make`` thunks
+    and steps them with autoreset; async workers import nothing but what the id names."""
+    import gymnasium as gym
+
+    envs = gym.vector.AsyncVectorEnv([lambda: gym.make("lawn_env:lawn/CommRL-v0") for _ in range(2)],
+                                     context="spawn")
+    obs, infos = envs.reset(seed=0)
+    assert obs.shape == (2, envs.single_observation_space.shape[0])
+    finished = 0
+    for _ in range(300):
+        obs, rewards, terminated, truncated, infos = envs.step(envs.action_space.sample())
+        assert np.all(np.isfinite(obs)) and np.all(np.isfinite(rewards))
+        finished += int(np.sum(terminated | truncated))
+    envs.close()
+    assert finished >= 2  # episodes ended and were reset automatically
+
+
+def test_torchrl_gym_env_specs_and_infos():
+    pytest.importorskip("torchrl", reason="TorchRL not installed (pip install -e '.[compat]')")
+    from torchrl.envs.libs.gym import GymEnv
+    from torchrl.envs.utils import check_env_specs
+
+    env = GymEnv("lawn_env:lawn/Comm-v0", num_slots=20)  # TorchRL passes frameskip= first: a TypeError
+    env.set_info_dict_reader()  # every info key, read with the reset info's shapes and dtypes
+    check_env_specs(env)
+    data = env.rollout(200, break_when_any_done=False)
+    assert data.batch_size[0] == 200
+    assert data["next", "stage_cost"].shape[0] == 200 and data["next", "delivered"].shape[-1] == 4
+
+
+def test_torchrl_pettingzoo_wrapper_keeps_infos():
+    pytest.importorskip("torchrl", reason="TorchRL not installed (pip install -e '.[compat]')")
+    from torchrl.envs.libs.pettingzoo import PettingZooWrapper
+
+    import lawn_env
+
+    env = PettingZooWrapper(lawn_env.parallel_env(num_agvs=2, num_slots=20), use_mask=False)
+    data = env.rollout(60, break_when_any_done=False)
+    assert data.batch_size[0] == 60
+
+
+def test_tianshou_vector_env():
+    pytest.importorskip("tianshou", reason="Tianshou not installed (pip install -e '.[compat]')")
+    import gymnasium as gym
+    from tianshou.env import DummyVectorEnv
+
+    envs = DummyVectorEnv([lambda: gym.make("lawn_env:lawn/JointRL-v0") for _ in range(2)])
+    obs, info = envs.reset()
+    steps = 0
+    for _ in range(200):
+        actions = np.stack([envs.action_space[i].sample() for i in range(2)])
+        obs, rewards, terminated, truncated, info = envs.step(actions)
+        done = np.flatnonzero(terminated | truncated)
+        if done.size:
+            envs.reset(done)
+        steps += 2
+    assert steps == 400 and np.all(np.isfinite(obs))
