@@ -288,7 +288,8 @@ class ScenarioConfig:
             for depth, part in enumerate(parts):
                 if not isinstance(node, dict) or part not in node:
                     where = ".".join(parts[: depth + 1])
-                    raise UnknownConfigKeyError(f"unknown config key {where!r}; valid keys: {_valid_keys(self)}")
+                    raise UnknownConfigKeyError(f"unknown config key {where!r} (unexpected keyword argument {where!r}); "
+                                                f"valid keys: {_valid_keys(self)}")
                 if depth == len(parts) - 1:
                     if isinstance(node[part], dict) and isinstance(value, Mapping):
                         for sub in value:

@@ -114,9 +114,9 @@ def test_episode_accounting_and_metrics():
     while not trunc:
         _, r, _, trunc, info = env.step(env.action_space.sample())
         total += r
-        tracking += info["reward_terms"]["tracking"]
-        effort += info["reward_terms"]["effort"]
-        assert r == pytest.approx(info["reward_terms"]["tracking"] + info["reward_terms"]["effort"])
+        tracking += info["reward_tracking"]
+        effort += info["reward_effort"]
+        assert r == pytest.approx(info["reward_tracking"] + info["reward_effort"])
         assert info["power_w"].sum() <= env.unwrapped.config.power_budget_w * (1 + 1e-12)
         assert np.all(info["power_w"] >= 0)
         steps += 1

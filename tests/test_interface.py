@@ -45,7 +45,7 @@ def test_reward_is_the_scaled_clipped_cost(env_id):
     for _ in range(30):
         _, reward, terminated, truncated, info = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
         cost = info["stage_cost"]
-        assert cost == pytest.approx(-(info["reward_terms"]["tracking"] + info["reward_terms"]["effort"]))
+        assert cost == pytest.approx(-(info["reward_tracking"] + info["reward_effort"]))
         assert reward == pytest.approx(-min(cost, 30.0) / 7.0)
         assert -30.0 / 7.0 <= reward <= 0.0
         clipped += cost > 30.0

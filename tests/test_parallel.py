@@ -45,7 +45,7 @@ def test_lockstep_with_joint_env():
             assert np.array_equal(obs[f"agv_{i}"][: blocks.shape[1]], blocks[i])
         assert all(truncs.values()) == jtrunc
     assert par.agents == []
-    assert infos["drone"]["episode_metrics"] == jinfo["episode_metrics"]
+    assert par.episode_metrics() == jinfo["episode_metrics"]
 
 
 def test_missing_and_bad_actions():

@@ -38,15 +38,16 @@ def resolve_config(config: ScenarioConfig | Mapping | str | None = None, **overr
 #: The info keys every step and reset of the central environments (and the parallel env's "drone")
 #: carry, with fixed shapes and numpy dtypes; ``lawn/Comm-v0`` adds its MPC's keys
 #: (``COMM_INFO_KEYS``); the last step alone adds ``episode_metrics`` (a dict of MODEL.md §6).
-INFO_KEYS = ("slot", "stage_cost", "reward_tracking", "reward_effort", "reward_terms", "delivered",
+INFO_KEYS = ("slot", "stage_cost", "reward_tracking", "reward_effort", "delivered",
              "outage_probability", "power_w", "drone_position", "applied_increment")
 COMM_INFO_KEYS = ("mpc_iterations", "mpc_fallbacks", "success_probability_planned")
 
 
 def slot_info(slot, cost_tracking, cost_effort, delivered, outage_probability, power_w, drone_position,
               applied_increment) -> dict:
-    """One slot's info dict (``INFO_KEYS``): ``slot`` int64, costs and reward terms float64 (the
-    rewards' split of the raw cost; ``reward_terms`` nests the same two), ``delivered`` (K,) bool,
+    """One slot's info dict (``INFO_KEYS``, flat: TorchRL's readers turn every value into a tensor):
+    ``slot`` int64, ``stage_cost`` and its split ``reward_tracking`` + ``reward_effort`` (negated)
+    float64, ``delivered`` (K,) bool,
     ``outage_probability`` and ``power_w`` (K,) float64, ``drone_position`` (2,), ``applied_increment``
     (K, 2) float64."""
     tracking, effort = -float(cost_tracking), -float(cost_effort)
@@ -55,7 +56,6 @@ def slot_info(slot, cost_tracking, cost_effort, delivered, outage_probability, p
         "stage_cost": np.float64(float(cost_tracking) + float(cost_effort)),
         "reward_tracking": np.float64(tracking),
         "reward_effort": np.float64(effort),
-        "reward_terms": {"tracking": np.float64(tracking), "effort": np.float64(effort)},
         "delivered": np.asarray(delivered, dtype=bool),
         "outage_probability": np.asarray(outage_probability, dtype=np.float64),
         "power_w": np.asarray(power_w, dtype=np.float64),

@@ -43,7 +43,7 @@ class CommEnv(LawnEnvBase):
     ## Rewards
 
     As ``lawn/Joint-v0``: minus the realized stage cost (``info["stage_cost"]``), terms in
-    ``info["reward_terms"]``; with ``interface="rl"`` bounded and scaled as there.
+    ``info["reward_tracking"]`` and ``info["reward_effort"]``; with ``interface="rl"`` bounded and scaled as there.
     ``info`` also reports the MPC's iterations, fallbacks and the planned psi; the wall-clock
     solve time of the last step is ``env.unwrapped.last_mpc_solve_time_s``.
 
@@ -67,6 +67,9 @@ class CommEnv(LawnEnvBase):
     ## Version History
 
     * v0: initial version; the ``interface`` keyword (opt-in) and ``info["stage_cost"]`` added later.
+    * v0 (later): reset and step infos share one flat schema (``lawn_env.envs.base.INFO_KEYS``;
+      ``reward_tracking``/``reward_effort`` replace the nested ``reward_terms``); the spec carries
+      ``max_episode_steps``; the dynamics and rewards are unchanged.
     """
 
     role = "comm"

@@ -50,7 +50,7 @@ class JointEnv(LawnEnvBase):
     Minus the realized stage cost of the slot, summed over AGVs:
     ``e' Q1 e + Delta-u' Q2 Delta-u`` with ``e`` the augmented tracking error at slot n+1 and
     ``Delta-u`` the delivered increment (0 when lost). ``info["stage_cost"]`` is that cost and
-    ``info["reward_terms"]`` splits it (negated) into ``tracking`` and ``effort``, whatever the
+    ``info["reward_tracking"]`` and ``info["reward_effort"]`` split it (negated), whatever the
     interface. With ``interface="rl"`` the reward is ``-min(cost, 100) / 10``, in [-10, 0].
 
     ## Starting State
@@ -79,6 +79,9 @@ class JointEnv(LawnEnvBase):
 
     * v0: initial version; the ``interface`` keyword (opt-in, the default is unchanged) and
       ``info["stage_cost"]`` added later.
+    * v0 (later): reset and step infos share one flat schema (``lawn_env.envs.base.INFO_KEYS``;
+      ``reward_tracking``/``reward_effort`` replace the nested ``reward_terms``); the spec carries
+      ``max_episode_steps``; the dynamics and rewards are unchanged.
     """
 
     def step(self, action):

@@ -43,7 +43,7 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
     ## Rewards
 
     ``"agv_k"``: minus its own realized stage cost; ``"drone"``: minus the total (the central
-    environments' reward). ``infos[agent]["reward_terms"]`` splits each. With
+    environments' reward). ``infos[agent]["reward_tracking"]`` and ``["reward_effort"]`` split each. With
     ``interface="rl"`` each reward is bounded and scaled (``-min(cost, 100) / 10``), the AGVs'
     actions are residuals on the outage-aware MPC and the drone's are anchored as in
     ``lawn/Comm-v0`` (:mod:`lawn_env.interface`).
@@ -60,7 +60,8 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
     **overrides)`` as for ``gym.make``; ``max_cycles`` is PettingZoo's name for ``num_slots``. The
     AEC form: ``lawn_env.env(...)`` / ``lawn_env.raw_env(...)``. ``state()`` is the central
     observation, in ``state_space``. Infos have the same keys, shapes and dtypes at reset and at
-    every step (``lawn_env.envs.base.INFO_KEYS``); the drone's last one adds ``episode_metrics``.
+    every step (``lawn_env.envs.base.INFO_KEYS``, flat, as TorchRL's PettingZoo wrapper needs);
+    ``episode_metrics()`` gives MODEL.md §6's metrics of the episode so far.
     """
 
     metadata = {"name": "lawn_v0", "render_modes": ["human", "rgb_array"], "render_fps": 4, "is_parallelizable": True}
@@ -157,8 +158,6 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
                             record.power_w, record.applied_increment)
         observations = self._observations()
         truncated = self.sim.done and not terminated
-        if truncated or terminated:
-            infos["drone"]["episode_metrics"] = self.sim.episode_metrics()
         terminations = {a: terminated for a in self.agents}
         truncations = {a: truncated for a in self.agents}
         if truncated or terminated:
@@ -182,6 +181,10 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         if self.sim.x_aug is None:
             raise RuntimeError("call reset() before state()")
         return self.interface.observe(self.layout.encode(self.sim))
+
+    def episode_metrics(self) -> dict:
+        """MODEL.md §6's metrics of the episode so far (the central envs put them in the last info)."""
+        return self.sim.episode_metrics()
 
     def render(self, *args, **kwargs):
         """As the central environments' ``render()``; extra arguments (RLlib's
