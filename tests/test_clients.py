@@ -1,7 +1,8 @@
 """Outside clients run the environments for a few hundred steps (issue #11), each as its users
 call it. Slow (``pytest -m slow``); a client that is not installed is skipped with the reason
 (``pip install -e ".[compat]"`` installs TorchRL and Tianshou at versions that work with the
-CPU build of torch 2.13.0). Every env is named in the ``lawn_env:lawn/...`` form, which registers
+CPU build of torch 2.13.0; ``".[rllib]"`` installs RLlib, which pins Gymnasium 1.2.2, so in an
+environment of its own). Every env is named in the ``lawn_env:lawn/...`` form, which registers
 the ids in worker processes that never imported ``lawn_env``."""
 
 import numpy as np
@@ -68,3 +69,37 @@ def test_tianshou_vector_env():
             envs.reset(done)
         steps += 2
     assert steps == 400 and np.all(np.isfinite(obs))
+
+
+def _lawn_parallel(config):
+    import lawn_env  # inside the creator: RLlib's workers are fresh processes
+    from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
+
+    return ParallelPettingZooEnv(lawn_env.parallel_env(**config))
+
+
+def test_rllib_multi_agent_ppo_one_iteration():
+    """RLlib's multi-agent PPO, a drone policy and a shared AGV policy, one training iteration
+    (``ray[rllib]`` pins its own Gymnasium, so it is not part of the ``compat`` extra)."""
+    pytest.importorskip("ray.rllib", reason="RLlib not installed (pip install 'ray[rllib]'; it pins Gymnasium 1.2)")
+    import ray
+    from ray.rllib.algorithms.ppo import PPOConfig
+    from ray.tune.registry import register_env
+
+    register_env("lawn_parallel", _lawn_parallel)
+    config = (
+        PPOConfig()
+        .environment("lawn_parallel", env_config={"num_agvs": 2, "num_slots": 20, "interface": "rl"})
+        .multi_agent(policies={"drone", "agv"},
+                     policy_mapping_fn=lambda agent_id, episode, **kw: "drone" if agent_id == "drone" else "agv")
+        .env_runners(num_env_runners=0)
+        .training(train_batch_size=120, minibatch_size=60, num_epochs=1)
+    )
+    ray.init(num_cpus=2, include_dashboard=False, ignore_reinit_error=True)
+    try:
+        algo = config.build_algo()
+        result = algo.train()
+        algo.stop()
+    finally:
+        ray.shutdown()
+    assert result["env_runners"]["num_env_steps_sampled_lifetime"] >= 120
