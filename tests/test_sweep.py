@@ -11,7 +11,7 @@ import pytest
 
 from lawn_env import DisturbanceConfig, ScenarioConfig
 from training.figures import EXPERIMENTS, make_figures
-from training.sweep import load_spec, read_table, run_sweep
+from training.sweep import SweepTableError, load_spec, read_rows, read_table, run_sweep
 
 SPEC = {"name": "t", "env": "lawn/Joint-v0", "preset": "default", "set": {"num_slots": 8},
         "grid": {"channel.blocklength": [256, 1024]}, "policies": ["epa", "pid"], "seeds": 3}
@@ -53,6 +53,42 @@ def test_sweep_survives_being_killed(tmp_path):
     rows = read_table(table)
     assert len(rows) == 24 and len(set(_keys(rows))) == 24
     assert [r for r in rows[: len(killed)]] == killed  # finished rows kept as they were
+
+
+def test_sweep_resume_is_keyed_by_the_resolved_config_and_refuses_foreign_tables(tmp_path):
+    """Issue #12: a changed ``set`` reruns instead of reusing rows; a table written by another
+    spec is refused with a clear message unless extended."""
+    small = dict(SPEC, grid={"channel.blocklength": [256]}, policies=["epa"], seeds=2)
+    table = tmp_path / "t.csv"
+    first = run_sweep(small, table, progress=False)
+    assert len(first) == 2 and len({r["config_hash"] for r in first}) == 1
+    changed = dict(small, set={"num_slots": 9})
+    with pytest.raises(SweepTableError, match="holds 2 rows that sweep 't' would not produce.*--extend"):
+        run_sweep(changed, table, progress=False)
+    extended = run_sweep(changed, table, progress=False, extend=True)
+    assert len(extended) == 4 and {json.loads(r["config"])["num_slots"] for r in extended} == {8, 9}
+    assert len({r["config_hash"] for r in extended}) == 2
+    other = tmp_path / "other.csv"
+    run_sweep(dict(small, grid={"power_budget_dbw": [0.0]}, name="o"), other, progress=False)
+    with pytest.raises(SweepTableError):
+        run_sweep(small, other, progress=False)
+
+
+def test_sweep_drops_truncated_and_duplicated_rows_and_reruns_them(tmp_path):
+    small = dict(SPEC, grid={"channel.blocklength": [256]}, policies=["epa"], seeds=3)
+    table = tmp_path / "t.csv"
+    rows = run_sweep(small, table, progress=False)
+    lines = table.read_text().splitlines()
+    header, body = lines[0], lines[1:]
+    # a duplicate of the first row, and the last row cut inside its metrics (a killed write)
+    table.write_text("\n".join([header, body[0], body[0], body[1], body[2][: len(body[2]) // 3]]) + "\n")
+    with pytest.warns(UserWarning, match="dropped 2 unusable rows.*line 3: a duplicate.*line 5: its config is not complete JSON"):
+        again = run_sweep(small, table, progress=False)
+    assert len(again) == 3 and sorted(int(r["seed"]) for r in again) == [0, 1, 2]
+    by_seed = {r["seed"]: r["control_cost"] for r in rows}
+    assert all(by_seed[r["seed"]] == r["control_cost"] for r in again)  # the rerun row is the same episode
+    read, dropped = read_rows(table)
+    assert len(read) == 3 and not dropped
 
 
 def test_sweep_spec_errors(tmp_path):

@@ -215,7 +215,8 @@ def cmd_sweep(args) -> int:
     from .sweep import load_spec, run_sweep, summarize_sweep
 
     spec = load_spec(args.spec)
-    rows = run_sweep(spec, Path(args.out), workers=args.workers, backend=args.backend, progress=not args.quiet)
+    rows = run_sweep(spec, Path(args.out), workers=args.workers, backend=args.backend, progress=not args.quiet,
+                     extend=args.extend)
     print(f"lawn sweep {spec['name']}: {len(rows)} rows in {args.out}; mean ± 95 % interval")
     print(summarize_sweep(rows, list(spec["grid"])))
     return 0
@@ -351,6 +352,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--workers", type=int, default=workers_default)
     sw.add_argument("--backend", choices=["process", "ray"], default="process",
                     help="process pool (default) or Ray (local, or the cluster at $RAY_ADDRESS)")
+    sw.add_argument("--extend", action="store_true",
+                    help="keep rows of the table that this spec would not produce (another spec or version)")
     sw.add_argument("--quiet", action="store_true")
     sw.set_defaults(func=cmd_sweep)
 

@@ -619,14 +619,18 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in [
 # ---------------------------------------------------------------------- running
 def _tables(exp: Experiment, out: Path, quick: bool, workers: int, progress: bool, run: bool = True) -> dict:
     from .evaluate import write_rows
-    from .sweep import read_table, run_sweep
+    from .sweep import SweepTableError, read_rows, read_table, run_sweep
 
     tables = {}
     for name, spec in exp.sweeps(quick).items():
         path = out / "data" / f"{name}.csv"
         if run:
-            run_sweep(spec, path, workers=workers, progress=progress)
-        tables[name] = read_table(path)
+            try:
+                run_sweep(spec, path, workers=workers, progress=progress)
+            except SweepTableError as exc:
+                raise SweepTableError(f"{exc}. For `lawn figures`: delete {path} or choose another --out "
+                                      "(the figure's table was written by another spec or version)") from None
+        tables[name] = read_rows(path)[0]
     for name, build in exp.builders.items():
         path = out / "data" / f"{name}.csv"
         if run and not path.exists():

@@ -12,15 +12,22 @@ A spec (YAML or JSON, or a dict) names the grid::
     seeds: 10                           # or an explicit list
 
 Every combination is one episode; its row holds the grid values, the policy, the seed, the
-episode metrics and the software version. Rows are keyed by (grid values, policy, seed, env):
-rerunning a sweep skips finished rows, so a killed sweep resumes without losing or duplicating
-rows. The table (CSV) is rewritten atomically (temporary file + rename) after every finished
-run. Runs go to a local process pool, or to Ray with ``backend="ray"`` (optional extra).
+episode metrics, the full resolved config, its stable hash and the software version. Rows are keyed
+by (config hash, policy, policy arguments, seed, env, version): rerunning a sweep skips exactly the
+rows it would produce again, so a killed sweep resumes without losing or duplicating rows, while a
+changed ``preset``/``set``/grid or a new lawn version reruns. Rows are validated on read: a row
+with a missing or unparseable field (a truncated write) or a duplicate is dropped and rerun. A
+table that holds rows this spec would not produce (another sweep's, another version's, an older
+lawn's without hashes) is refused with a clear message unless ``extend=True`` (``--extend``) keeps
+them beside the new ones. The table (CSV) is rewritten atomically (temporary file + rename) after
+every finished run. Runs go to a local process pool, or to Ray with ``backend="ray"`` (optional
+extra).
 """
 
 from __future__ import annotations
 
 import csv
+import hashlib
 import itertools
 import json
 import os
@@ -30,7 +37,8 @@ from typing import Any, Mapping
 import lawn_env
 from lawn_env import presets
 
-__all__ = ["SweepSpec", "load_spec", "expand", "run_sweep", "read_table", "summarize_sweep"]
+__all__ = ["SweepSpec", "SweepTableError", "load_spec", "expand", "run_sweep", "read_table", "read_rows",
+           "config_hash", "summarize_sweep"]
 
 
 class SweepSpec(dict):
@@ -84,8 +92,60 @@ def expand(spec: Mapping[str, Any]) -> list[dict]:
     return [dict(zip(keys, values)) for values in itertools.product(*(spec["grid"][k] for k in keys))] or [{}]
 
 
-def _key(row: Mapping[str, Any], grid_keys) -> tuple:
-    return tuple(str(row[k]) for k in grid_keys) + (str(row["policy"]), str(int(row["seed"])), str(row["env"]))
+class SweepTableError(ValueError):
+    """The table given to a sweep holds rows this spec would not produce."""
+
+
+#: Fields every sweep row must hold, parsed to check a row is complete (a truncated write is not).
+_REQUIRED = {"policy": str, "seed": int, "env": str, "lawn_version": str, "config_hash": str, "policy_args": str,
+             "slots": int, "control_cost": float, "rmse_m": float, "outage_rate": float}
+
+
+def config_hash(config_dict: Mapping[str, Any], policy_args: Mapping[str, Any] | None = None) -> str:
+    """A stable hash (16 hex digits) of a resolved config (``ScenarioConfig.to_dict()``) and, when
+    given, a policy's arguments: equal inputs give equal hashes in any process."""
+    payload = json.dumps({"config": config_dict, "policy_args": dict(policy_args or {})}, sort_keys=True)
+    return hashlib.sha256(payload.encode()).hexdigest()[:16]
+
+
+def _key(row: Mapping[str, Any]) -> tuple:
+    return (str(row["config_hash"]), str(row["policy"]), str(row["policy_args"]), int(row["seed"]), str(row["env"]),
+            str(row["lawn_version"]))
+
+
+def _problem(row: Mapping[str, Any]) -> str | None:
+    """Why a row read back from a table is unusable, or None."""
+    for field_, kind in _REQUIRED.items():
+        value = row.get(field_)
+        if value is None or value == "":
+            return f"missing {field_!r}"
+        try:
+            kind(value)
+        except (TypeError, ValueError):
+            return f"{field_}={value!r} is not {kind.__name__}"
+    if None in row or any(v is None for v in row.values()):
+        return "a truncated or malformed line"
+    try:  # the last column: a cut line ends inside it, and its hash is the row's key
+        if config_hash(json.loads(row.get("config") or "")) != row["config_hash"]:
+            return "its config does not match its config_hash"
+    except (TypeError, ValueError):
+        return "its config is not complete JSON (a truncated line)"
+    return None
+
+
+def read_rows(path: Path) -> tuple[list[dict], list[str]]:
+    """The usable rows of a sweep table and a message per dropped row (incomplete or duplicate)."""
+    rows, dropped, seen = [], [], set()
+    for i, row in enumerate(read_table(path), start=2):  # line 1 is the header
+        why = _problem(row)
+        if why is None and _key(row) in seen:
+            why = "a duplicate of an earlier row"
+        if why is not None:
+            dropped.append(f"{Path(path).name} line {i}: {why}")
+            continue
+        seen.add(_key(row))
+        rows.append(row)
+    return rows, dropped
 
 
 def read_table(path: Path) -> list[dict]:
@@ -119,34 +179,54 @@ def _run(task) -> dict:
     out = {"sweep": sweep_name, **{k: v for k, v in point.items()}}
     out.update(row)
     out["lawn_version"] = lawn_env.__version__
+    out["config_hash"] = config_hash(cfg_dict)
+    out["policy_args"] = json.dumps(dict(policy_kwargs), sort_keys=True)
     out["config"] = json.dumps(cfg.to_dict(), sort_keys=True)
     return out
 
 
 def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: int = 1, backend: str = "process",
-              progress: bool = True, max_runs: int | None = None) -> list[dict]:
+              progress: bool = True, max_runs: int | None = None, extend: bool = False) -> list[dict]:
     """Run the missing rows of ``spec`` into ``table`` (CSV); returns all rows of the table.
 
-    ``max_runs`` stops after that many new runs (for tests of resumption).
+    Rows are keyed by config hash, policy, policy arguments, seed, env and version (module
+    docstring); unusable rows are dropped and rerun, with a warning. A table holding rows this spec
+    would not produce raises :class:`SweepTableError` unless ``extend``. ``max_runs`` stops after
+    that many new runs (for tests of resumption).
     """
+    import warnings
+
     spec = load_spec(spec)
     table = Path(table)
     table.parent.mkdir(parents=True, exist_ok=True)
-    grid_keys = list(spec["grid"])
-    rows = read_table(table)
-    done = {_key(r, grid_keys) for r in rows}
-    tasks = []
+    wanted: dict[tuple, tuple] = {}
     for point in expand(spec):
         cfg_dict = point_config(spec, point).to_dict()
+        chash = config_hash(cfg_dict)
         for policy in spec["policies"]:
+            policy_kwargs = spec["policy_args"].get(policy, {})
+            args = json.dumps(dict(policy_kwargs), sort_keys=True)
             for seed in spec["seeds"]:
-                probe = {**{k: v for k, v in point.items()}, "policy": policy, "seed": seed, "env": spec["env"]}
-                if _key(probe, grid_keys) not in done:
-                    tasks.append((point, policy, seed, spec["env"], cfg_dict, spec["policy_args"].get(policy, {}),
-                                  spec["name"]))
+                key = (chash, policy, args, int(seed), spec["env"], lawn_env.__version__)
+                wanted[key] = (point, policy, seed, spec["env"], cfg_dict, policy_kwargs, spec["name"])
+    rows, dropped = read_rows(table)
+    if dropped:
+        warnings.warn(f"{table}: dropped {len(dropped)} unusable rows, to be rerun: " + "; ".join(dropped[:5])
+                      + (" ..." if len(dropped) > 5 else ""), stacklevel=2)
+    foreign = [r for r in rows if _key(r) not in wanted]
+    if foreign and not extend:
+        raise SweepTableError(
+            f"{table} holds {len(foreign)} rows that sweep {spec['name']!r} would not produce (another spec, preset, "
+            f"set, grid or policy arguments, another lawn version than {lawn_env.__version__}, or a table written "
+            "before rows carried config hashes); write to a new table, or pass --extend (extend=True) to keep them "
+            "beside this sweep's rows")
+    done = {_key(r) for r in rows}
+    tasks = [task for key, task in wanted.items() if key not in done]
     if max_runs is not None:
         tasks = tasks[:max_runs]
     if not tasks:
+        if dropped:
+            _write_atomic(rows, table)
         return rows
     from tqdm.auto import tqdm
 
@@ -158,7 +238,7 @@ def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: 
             bar.update()
     finally:
         bar.close()
-    return read_table(table)
+    return read_rows(table)[0]
 
 
 def execute(fn, tasks, workers: int, backend: str):
