@@ -30,6 +30,7 @@ splice() { "$py" -m training.readme "$1" "$2" --source "$3"; }
 mkdir -p runs/gap docs/figures
 
 if want figures; then
+  rm -rf runs/figures  # from scratch: every row from the current code, and the build time recorded
   "$lawn" figures --out runs/figures --docs docs --workers 2 --quiet
 fi
 if want benchmark; then

@@ -179,3 +179,44 @@ def test_disturbance_mode():
         oa, ra, *_ = a_env.step(act)
         ob, rb, *_ = b_env.step(act)
         assert np.array_equal(oa, ob) and ra == rb
+
+
+def _session_processes(sid: int) -> list[int]:
+    """PIDs of live processes in session ``sid`` (read from /proc: field 6 of /proc/PID/stat)."""
+    out = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as fh:
+                fields = fh.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[3]) == sid and fields[0] != "Z":
+            out.append(int(entry))
+    return out
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_killed_sweep_leaves_no_worker_processes(tmp_path, sig):
+    """Issue #12: killing `lawn sweep --workers 2` (SIGKILL or SIGTERM) leaves no process behind,
+    and the rows it finished are kept."""
+    spec = dict(SPEC, seeds=6, set={"num_slots": 30})
+    spec_file = tmp_path / "spec.json"
+    spec_file.write_text(json.dumps(spec))
+    table = tmp_path / "k.csv"
+    cmd = [sys.executable, "-m", "training.cli", "sweep", str(spec_file), "--out", str(table), "--workers", "2",
+           "--quiet"]
+    proc = subprocess.Popen(cmd, cwd=os.getcwd(), start_new_session=True)
+    deadline = time.time() + 90
+    while time.time() < deadline and len(read_table(table)) < 2:
+        time.sleep(0.05)
+    assert len(_session_processes(proc.pid)) >= 3  # the command and its two workers
+    proc.send_signal(sig)
+    proc.wait()
+    deadline = time.time() + 10
+    while time.time() < deadline and _session_processes(proc.pid):
+        time.sleep(0.1)
+    assert _session_processes(proc.pid) == []
+    assert len(read_rows(table)[0]) >= 2

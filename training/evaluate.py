@@ -26,7 +26,7 @@ import lawn_env
 from agents import make_policy
 from lawn_env import ScenarioConfig
 
-__all__ = ["rollout", "run_episode", "pool_map", "evaluate", "summarize", "write_rows", "SUMMARY_METRICS"]
+__all__ = ["rollout", "run_episode", "pool_map", "worker_pool", "evaluate", "summarize", "write_rows", "SUMMARY_METRICS"]
 
 #: Metrics summarized with a mean and a 95 % interval (name, label).
 SUMMARY_METRICS = (
@@ -91,6 +91,29 @@ def evaluate(tasks: Iterable[tuple], workers: int = 1, progress: bool = True, de
     return pool_map(_run_task, list(tasks), workers, progress, desc)
 
 
+def _die_with_parent(parent_pid: int) -> None:
+    """Worker initializer: the worker gets SIGKILL when the process that made the pool dies (Linux
+    ``PR_SET_PDEATHSIG``), so a killed ``lawn sweep``/``evaluate`` leaves no workers behind."""
+    import ctypes
+    import os
+    import signal
+    import sys
+
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+    if os.getppid() != parent_pid:  # the parent died before the line above took effect
+        os._exit(1)
+
+
+def worker_pool(workers: int) -> ProcessPoolExecutor:
+    """The process pool of every parallel command: ``spawn`` workers (fresh interpreters, safe with
+    torch and OpenMP thread pools, children of this process) that die with it."""
+    import os
+
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_die_with_parent, initargs=(os.getpid(),))
+
+
 def pool_map(fn, tasks: list, workers: int, progress: bool, desc: str) -> list:
     """``[fn(t) for t in tasks]`` in a process pool when ``workers > 1``, with a progress bar;
     results in task order whatever the scheduling."""
@@ -102,9 +125,7 @@ def pool_map(fn, tasks: list, workers: int, progress: bool, desc: str) -> list:
                 out.append(fn(task))
                 bar.update()
             return out
-        # forkserver: workers fork from a clean server process, never from a parent that has loaded
-        # torch (forking a process with live torch/OpenMP thread pools can deadlock the children)
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("forkserver")) as pool:
+        with worker_pool(workers) as pool:
             futures = [pool.submit(fn, task) for task in tasks]
             for fut in futures:
                 fut.add_done_callback(lambda _: bar.update())

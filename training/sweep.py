@@ -266,10 +266,11 @@ def execute(fn, tasks, workers: int, backend: str):
         for t in tasks:
             yield fn(t)
         return
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures import FIRST_COMPLETED, wait
 
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("forkserver")) as pool:
+    from .evaluate import worker_pool
+
+    with worker_pool(workers) as pool:
         pending = {pool.submit(fn, t) for t in tasks}
         while pending:
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
