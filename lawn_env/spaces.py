@@ -39,16 +39,20 @@ VELOCITY_SCALE_MPS = 5.0
 
 
 def check_action(action, size: int, name: str = "action") -> np.ndarray:
-    """Validate a normalized action: shape ``(size,)``, finite, inside [-1, 1]. Returns float64."""
+    """Validate a normalized action as Gymnasium's ``Box.contains`` would: real numbers (a float or
+    integer array, or a flat list of numbers) of shape exactly ``(size,)``, finite, inside [-1, 1].
+    Complex, boolean, string and object inputs and other shapes raise ``ValueError`` naming
+    ``name``, the expected shape and dtype. Returns float64."""
     try:
-        a = np.asarray(action, dtype=np.float64)
+        a = np.asarray(action)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a numeric array of shape ({size},): {exc}") from None
+        raise ValueError(f"{name} must be a real array of shape ({size},), float32: {exc}") from None
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"{name} has dtype {a.dtype} ({type(action).__name__}); expected real numbers of shape "
+                         f"({size},), float32 (complex, boolean and string actions are not accepted)")
     if a.shape != (size,):
-        if a.size == size:
-            a = a.reshape(size)
-        else:
-            raise ValueError(f"{name} has shape {a.shape}; expected ({size},) with entries in [-1, 1]")
+        raise ValueError(f"{name} has shape {a.shape}; expected ({size},), float32, with entries in [-1, 1]")
+    a = a.astype(np.float64, copy=False)
     values = a.tolist()  # Python min/max/sum beat numpy reductions on a few dozen floats
     total = sum(values)
     if total != total or max(values) > 1.0 or min(values) < -1.0:  # total is NaN if any entry is

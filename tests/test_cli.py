@@ -99,3 +99,27 @@ def test_gap_command_writes_tables_and_figures(tmp_path, capsys):
     assert "slot 2: after iteration 1" in printed
     assert main(args[:-2] + ["--global-arg", "bogus=1"]) == 2
     assert "bogus" in capsys.readouterr().err
+
+
+def test_bad_counts_seeds_and_specs_are_one_line_errors(tmp_path, capsys):
+    """Issue #12: bad numbers fail at parse time (exit 2, naming the argument); bad sweep specs are
+    one line naming the file and what is wrong, never a traceback or a silent exit 0."""
+    import pytest
+
+    for argv, needle in ((["evaluate", "--policy", "epa", "--episodes", "0", "--out", "x.csv"], "--episodes: 0 must be >= 1"),
+                         (["benchmark", "--episodes", "-3"], "--episodes: -3 must be >= 1"),
+                         (["gap", "--every", "0"], "--every: 0 must be >= 1"),
+                         (["gap", "--every", "-1"], "--every: -1 must be >= 1"),
+                         (["evaluate", "--policy", "epa", "--seed", "-1", "--out", "x.csv"], "--seed: -1 must be >= 0")):
+        with pytest.raises(SystemExit) as exit_:
+            main(argv)
+        assert exit_.value.code == 2 and needle in capsys.readouterr().err
+    specs = {"bad.yml": ("grid: [\n  x", "not valid YAML (line 2"), "empty.yml": ("", "an empty document"),
+             "list.yml": ("- 1\n", "got list"), "scalar.yml": ("grid: {channel.blocklength: 256}", "non-empty list"),
+             "none.yml": ("policies: []", "policies must be a non-empty list"), "neg.yml": ("seeds: -3", "seeds=-3"),
+             "bad.json": ("{", "not valid JSON")}
+    for name, (text, needle) in specs.items():
+        (tmp_path / name).write_text(text)
+        assert main(["sweep", str(tmp_path / name), "--out", str(tmp_path / "t.csv"), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert needle in err and name in err and "Traceback" not in err and err.count("\n") == 1, err

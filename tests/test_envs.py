@@ -1,3 +1,4 @@
+import re
 import subprocess
 import sys
 
@@ -77,8 +78,18 @@ def test_bad_actions_raise_clear_errors(env_id):
         env.step(np.full(n, 1.5))
     with pytest.raises(ValueError, match="shape"):
         env.step(np.zeros(n + 1))
-    with pytest.raises(ValueError, match="numeric"):
+    with pytest.raises(ValueError, match=f"dtype <U1.*expected real numbers of shape \\({n},\\), float32"):
         env.step(["a"] * n)
+    # what Gymnasium's Box.contains rejects is rejected, never reshaped or converted (issue #12)
+    for bad, what in ((np.zeros(n, dtype=complex), "complex128"), (np.zeros(n, dtype=bool), "bool"),
+                      (np.full(n, "0.5"), "<U3"), (np.array([None] * n), "object")):
+        with pytest.raises(ValueError, match=f"dtype {what}"):
+            env.step(bad)
+    for shape in ((1, n), (n, 1)):
+        with pytest.raises(ValueError, match=re.escape(f"shape {shape}; expected ({n},)")):
+            env.step(np.zeros(shape))
+    env.step([0.0] * n)  # a flat list of numbers is what Gymnasium accepts too
+    env.step(np.zeros(n, dtype=np.int64))
 
 
 def test_step_before_reset_and_after_end():

@@ -71,3 +71,15 @@ def test_state_and_render():
     frame = env.render()
     assert frame.shape[2] == 3
     env.close()
+
+
+def test_parallel_step_rejects_what_is_not_a_dict_of_actions():
+    par = lawn_env.parallel_env(num_agvs=2)
+    par.reset(seed=0)
+    for bad in (None, [par.action_space(a).sample() for a in par.agents]):
+        with pytest.raises(TypeError, match="actions must be a dict from agent name to action"):
+            par.step(bad)
+    actions = {a: par.action_space(a).sample() for a in par.agents}
+    actions["agv_1"] = np.zeros((1, 2))
+    with pytest.raises(ValueError, match=r"actions\['agv_1'\] has shape \(1, 2\); expected \(2,\)"):
+        par.step(actions)

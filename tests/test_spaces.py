@@ -41,4 +41,5 @@ def test_check_action_messages():
         spaces.check_action([0.0, 2.0, 0.0], 3)
     with pytest.raises(ValueError, match="shape"):
         spaces.check_action(np.zeros((2, 2)), 3)
-    assert spaces.check_action(np.zeros((1, 3)), 3).shape == (3,)
+    with pytest.raises(ValueError, match=r"shape \(1, 3\); expected \(3,\)"):
+        spaces.check_action(np.zeros((1, 3)), 3)  # no silent reshape

@@ -243,6 +243,25 @@ def cmd_figures(args) -> int:
     return 0
 
 
+def _int_at_least(low: int):
+    """argparse type: an integer >= ``low``, with the bound in the message."""
+
+    def parse(value: str) -> int:
+        try:
+            number = int(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{value!r} is not an integer") from None
+        if number < low:
+            raise argparse.ArgumentTypeError(f"{number} must be >= {low}")
+        return number
+
+    parse.__name__ = f"integer >= {low}"
+    return parse
+
+
+_COUNT, _SEED = _int_at_least(1), _int_at_least(0)
+
+
 def _policy_name(value: str) -> str:
     from agents.policies import is_policy_name, policy_names
 
@@ -270,7 +289,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"lawn {lawn_env.__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="one seeded episode of lawn/Joint-v0 under a scripted policy")
-    demo.add_argument("--seed", type=int, default=0)
+    demo.add_argument("--seed", type=_SEED, default=0)
     demo.add_argument("--out", default="runs/demo", help="output directory (default: %(default)s)")
     _add_config_args(demo)
     demo.set_defaults(func=cmd_demo)
@@ -283,12 +302,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"{', '.join(policy_names())}, or zoo:NAME / sb3:DIR / bc:DIR / marl:DIR for learned agents")
     ev.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
                     help="default: lawn/Joint-v0, or the env a trained agent was trained on")
-    ev.add_argument("--episodes", type=int, default=10)
-    ev.add_argument("--seed", type=int, default=0, help="first seed; episode i uses seed + i")
+    ev.add_argument("--episodes", type=_COUNT, default=10)
+    ev.add_argument("--seed", type=_SEED, default=0, help="first seed; episode i uses seed + i")
     ev.add_argument("--out", required=True, help="rows file, .csv or .json")
     ev.add_argument("--policy-arg", action="append", default=[], metavar="KEY=VALUE",
                     help="policy setting, e.g. --policy-arg tolerance=1e-3 (repeatable)")
-    ev.add_argument("--workers", type=int, default=workers_default, help="processes (default: %(default)s)")
+    ev.add_argument("--workers", type=_COUNT, default=workers_default, help="processes (default: %(default)s)")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_config_args(ev)
     ev.set_defaults(func=cmd_evaluate)
@@ -300,10 +319,10 @@ def build_parser() -> argparse.ArgumentParser:
     bm.add_argument("--env", default="lawn/Joint-v0", choices=list(lawn_env.ENV_IDS))
     bm.add_argument("--include", nargs="*", default=[], metavar="DIR",
                     help="trained run directories (lawn train) to add to the comparison")
-    bm.add_argument("--episodes", type=int, default=20)
-    bm.add_argument("--seed", type=int, default=0)
+    bm.add_argument("--episodes", type=_COUNT, default=20)
+    bm.add_argument("--seed", type=_SEED, default=0)
     bm.add_argument("--out", default="runs/benchmark", help="output directory (default: %(default)s)")
-    bm.add_argument("--workers", type=int, default=workers_default, help="processes (default: %(default)s)")
+    bm.add_argument("--workers", type=_COUNT, default=workers_default, help="processes (default: %(default)s)")
     bm.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_config_args(bm)
     bm.set_defaults(func=cmd_benchmark)
@@ -313,23 +332,23 @@ def build_parser() -> argparse.ArgumentParser:
     tr = sub.add_parser("train", help="train a Stable-Baselines3 agent (or behaviour cloning) on a lawn env")
     tr.add_argument("--algo", choices=ALGOS)
     tr.add_argument("--env", choices=TRAIN_ENV_IDS, help="lawn/Parallel-v0 is the multi-agent PettingZoo env")
-    tr.add_argument("--timesteps", type=int, help="environment steps (for bc: expert transitions)")
-    tr.add_argument("--seed", type=int, default=0)
-    tr.add_argument("--seeds", type=int, nargs="+", metavar="SEED",
+    tr.add_argument("--timesteps", type=_COUNT, help="environment steps (for bc: expert transitions)")
+    tr.add_argument("--seed", type=_SEED, default=0)
+    tr.add_argument("--seeds", type=_SEED, nargs="+", metavar="SEED",
                     help="train one run per seed into OUT/seed-<s> (process pool, --workers) and summarize across seeds")
-    tr.add_argument("--workers", type=int, default=workers_default, help="processes for --seeds (default: %(default)s)")
+    tr.add_argument("--workers", type=_COUNT, default=workers_default, help="processes for --seeds (default: %(default)s)")
     tr.add_argument("--backend", choices=["process", "ray"], default="process",
                     help="where --seeds runs go: a process pool (default) or Ray, as lawn sweep")
     tr.add_argument("--interface", default=None, choices=["rl", "v0"],
                     help="the RL interface (default: the hyperparameter file's, rl) or the plain v0 interface")
     tr.add_argument("--out", help="run directory")
-    tr.add_argument("--n-envs", type=int, default=None, help="parallel environments (default: the hyperparameter file)")
+    tr.add_argument("--n-envs", type=_COUNT, default=None, help="parallel environments (default: the hyperparameter file)")
     tr.add_argument("--hp", action="append", default=[], metavar="KEY=VALUE",
                     help="hyperparameter override, e.g. --hp learning_rate=1e-4 (repeatable)")
-    tr.add_argument("--eval-every", type=int, default=10000,
+    tr.add_argument("--eval-every", type=_COUNT, default=10000,
                     help="steps between validations (full unmodified episodes, realized control cost)")
-    tr.add_argument("--eval-episodes", type=int, default=5, help="validation episodes (seeds 500000 + i)")
-    tr.add_argument("--checkpoint-every", type=int, default=10000, help="steps between checkpoints")
+    tr.add_argument("--eval-episodes", type=_COUNT, default=5, help="validation episodes (seeds 500000 + i)")
+    tr.add_argument("--checkpoint-every", type=_COUNT, default=10000, help="steps between checkpoints")
     tr.add_argument("--init-from", metavar="DIR", help="start from a behaviour-cloned run of the same algorithm")
     tr.add_argument("--resume", metavar="DIR", help="continue an interrupted run from its last checkpoint")
     tr.add_argument("--quiet", action="store_true")
@@ -342,14 +361,14 @@ def build_parser() -> argparse.ArgumentParser:
     zo.add_argument("--only", nargs="+", metavar="NAME", help="train only these recipes")
     zo.add_argument("--doc", default="docs/LEARNED.md", help="build: the table's document (default: %(default)s)")
     zo.add_argument("--readme", default="README.md", help="build: README whose learned-agents block is replaced")
-    zo.add_argument("--workers", type=int, default=workers_default)
+    zo.add_argument("--workers", type=_COUNT, default=workers_default)
     zo.add_argument("--quiet", action="store_true")
     zo.set_defaults(func=cmd_zoo)
 
     sw = sub.add_parser("sweep", help="run a grid of config fields x policies x seeds into a tidy table")
     sw.add_argument("spec", help="sweep spec (YAML or JSON)")
     sw.add_argument("--out", required=True, help="table (CSV); finished rows are skipped on rerun")
-    sw.add_argument("--workers", type=int, default=workers_default)
+    sw.add_argument("--workers", type=_COUNT, default=workers_default)
     sw.add_argument("--backend", choices=["process", "ray"], default="process",
                     help="process pool (default) or Ray (local, or the cluster at $RAY_ADDRESS)")
     sw.add_argument("--extend", action="store_true",
@@ -364,7 +383,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"figures to make (default: all): {', '.join(EXPERIMENTS)}")
     fg.add_argument("--out", default="runs/figures")
     fg.add_argument("--quick", action="store_true", help="reduced seeds, grids and episode length (tests)")
-    fg.add_argument("--workers", type=int, default=workers_default)
+    fg.add_argument("--workers", type=_COUNT, default=workers_default)
     fg.add_argument("--docs", default=None, metavar="DIR",
                     help="also write DIR/REPRODUCTION.md and copy the figures to DIR/figures/reproduction/")
     fg.add_argument("--quiet", action="store_true")
@@ -373,15 +392,15 @@ def build_parser() -> argparse.ArgumentParser:
     gp = sub.add_parser("gap", help="per-slot optimality gap of planners against the global reference")
     gp.add_argument("--policies", nargs="+", default=["ao-mpc", "rg-mpc"], choices=policy_names())
     gp.add_argument("--driver", default="ao-mpc", choices=policy_names(), help="policy that runs the episodes")
-    gp.add_argument("--episodes", type=int, default=5)
-    gp.add_argument("--seed", type=int, default=0)
-    gp.add_argument("--every", type=int, default=3, help="compare at every n-th slot (default: %(default)s)")
+    gp.add_argument("--episodes", type=_COUNT, default=5)
+    gp.add_argument("--seed", type=_SEED, default=0)
+    gp.add_argument("--every", type=_COUNT, default=3, help="compare at every n-th slot (default: %(default)s)")
     gp.add_argument("--convergence-slots", type=int, nargs="*", default=[11, 19, 28, 41],
                     help="slots of the first episode for the AO convergence figure (none to skip)")
     gp.add_argument("--global-arg", action="append", default=[], metavar="KEY=VALUE",
                     help="resolution of the global reference, e.g. --global-arg drone_spacing_m=0.25")
     gp.add_argument("--out", default="runs/gap")
-    gp.add_argument("--workers", type=int, default=workers_default)
+    gp.add_argument("--workers", type=_COUNT, default=workers_default)
     gp.add_argument("--quiet", action="store_true")
     _add_config_args(gp)
     gp.set_defaults(func=cmd_gap)

@@ -49,26 +49,58 @@ _SPEC_KEYS = {"name", "env", "preset", "set", "grid", "policies", "seeds", "poli
 
 
 def load_spec(spec: str | Path | Mapping[str, Any]) -> SweepSpec:
+    source = "the sweep spec"
+    if not isinstance(spec, (Mapping, str, os.PathLike)):
+        raise TypeError(f"spec must be a mapping or the path of a YAML/JSON file; got {type(spec).__name__}")
     if not isinstance(spec, Mapping):
         path = Path(spec)
+        source = f"sweep spec {str(path)!r}"
         if not path.exists():
-            raise ValueError(f"sweep spec {str(path)!r} does not exist")
+            raise ValueError(f"{source} does not exist")
         text = path.read_text()
-        if path.suffix.lower() == ".json":
-            spec = json.loads(text)
-        else:
-            import yaml
+        try:
+            if path.suffix.lower() == ".json":
+                spec = json.loads(text)
+            else:
+                import yaml
 
-            spec = yaml.safe_load(text)
+                spec = yaml.safe_load(text)
+        except ValueError as exc:  # json.JSONDecodeError
+            raise ValueError(f"{source} is not valid JSON: {exc}") from None
+        except Exception as exc:  # yaml.YAMLError and its subclasses
+            mark = getattr(exc, "problem_mark", None)
+            where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+            raise ValueError(f"{source} is not valid YAML{where}: {getattr(exc, 'problem', None) or exc}") from None
+    if not isinstance(spec, Mapping):
+        raise ValueError(f"{source} must be a mapping of {', '.join(sorted(_SPEC_KEYS))}; got "
+                         f"{type(spec).__name__ if spec is not None else 'an empty document'}")
     unknown = set(spec) - _SPEC_KEYS
     if unknown:
         raise ValueError(f"unknown sweep spec keys {sorted(unknown)}; valid: {', '.join(sorted(_SPEC_KEYS))}")
+    grid = spec.get("grid", {})
+    if not isinstance(grid, Mapping):
+        raise ValueError(f"{source}: grid must map config keys to lists of values; got {grid!r}")
+    for key, values in grid.items():
+        if not isinstance(values, (list, tuple)) or not values:
+            raise ValueError(f"{source}: grid key {key!r} must map to a non-empty list of values; got {values!r}")
+    policies = spec.get("policies", ["rg-mpc"])
+    if not isinstance(policies, (list, tuple)) or not policies or not all(isinstance(p, str) for p in policies):
+        raise ValueError(f"{source}: policies must be a non-empty list of policy names; got {policies!r}")
     out = SweepSpec(name=spec.get("name", "sweep"), env=spec.get("env", "lawn/Joint-v0"),
                     preset=spec.get("preset", "default"), set=dict(spec.get("set", {})),
                     grid={k: list(v) for k, v in dict(spec.get("grid", {})).items()},
                     policies=list(spec.get("policies", ["rg-mpc"])), policy_args=dict(spec.get("policy_args", {})))
     seeds = spec.get("seeds", 5)
-    out["seeds"] = list(range(seeds)) if isinstance(seeds, int) else [int(s) for s in seeds]
+    if isinstance(seeds, bool) or not (isinstance(seeds, int) or isinstance(seeds, (list, tuple))):
+        raise ValueError(f"{source}: seeds must be a count >= 1 or a non-empty list of seeds >= 0; got {seeds!r}")
+    if isinstance(seeds, int):
+        if seeds < 1:
+            raise ValueError(f"{source}: seeds={seeds} must be >= 1 (a count) or a non-empty list of seeds >= 0")
+        out["seeds"] = list(range(seeds))
+    else:
+        if not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
+            raise ValueError(f"{source}: seeds={seeds!r} must be a non-empty list of integers >= 0")
+        out["seeds"] = [int(s) for s in seeds]
     if out["env"] not in lawn_env.ENV_IDS:
         raise ValueError(f"sweep env {out['env']!r}; valid: {', '.join(lawn_env.ENV_IDS)}")
     from agents import make_policy

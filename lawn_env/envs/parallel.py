@@ -137,6 +137,9 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
     def step(self, actions: dict):
         if not self.agents:
             raise RuntimeError("the episode has ended (or reset() was never called); call reset() before step()")
+        if not isinstance(actions, Mapping):
+            raise TypeError(f"actions must be a dict from agent name to action (agents: {self.agents}); "
+                            f"got {type(actions).__name__}")
         missing = [a for a in self.agents if a not in actions]
         unknown = [a for a in actions if a not in self._action_spaces]
         if missing or unknown:
