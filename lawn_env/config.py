@@ -59,11 +59,12 @@ class ChannelConfig:
     """Receiver noise power sigma^2, dBm (paper)."""
     bandwidth_hz: PositiveFloat = 1e6
     """Sub-channel bandwidth B, Hz; rates are in bit/s/Hz, B only converts them to bit/s (paper)."""
-    bler: Probability = 1e-6
-    """Block error rate epsilon, in (0, 1) (paper)."""
+    bler: Annotated[float, Field(gt=0, lt=0.5)] = 1e-6
+    """Block error rate epsilon, in (0, 0.5) (paper: 1e-6): at 0.5 and above Q^-1(epsilon) <= 0 and the
+    FBL "penalty" would raise the rate above Shannon's."""
     blocklength: PositiveInt = 1024
     """Blocklength l, channel uses (paper)."""
-    rate_threshold_bps_hz: PositiveFloat = 10.0
+    rate_threshold_bps_hz: Annotated[float, Field(gt=0, le=100)] = 10.0
     """Rate threshold R_th, bit/s/Hz *(decided, MODEL.md §8)*: 10 sits in the regime where outage
     matters (1e-3 .. 0.7 at 0 dBW). It is not the paper's stated parameter: the paper's typeset figures
     use 1 Mbit/s over 1 MHz (R_th = 1, the ``paper-nominal`` preset, where outage is 1e-8 .. 1e-5 and
@@ -111,9 +112,10 @@ class ControlConfig:
     horizon: PositiveInt = 10
     """Prediction horizon N_p, slots (paper)."""
     q1_diag: tuple[float, float, float, float, float, float] = (1.0,) * 6
-    """Diagonal of the state-error weight Q1 (6 entries, >= 0) (paper: I6)."""
+    """Diagonal of the state-error weight Q1 (6 entries in [0, 1e6]; the two position weights > 0: the
+    terminal weight Q3 solves a DARE that needs the position error in the cost) (paper: I6)."""
     q2_diag: tuple[float, float] = (1.0, 1.0)
-    """Diagonal of the increment weight Q2 (2 entries, > 0) (paper: I2)."""
+    """Diagonal of the increment weight Q2 (2 entries in (0, 1e6], Q2 positive definite) (paper: I2)."""
     accel_max_mps2: PositiveFloat = 2.0
     """Acceleration bound a_max per axis, m/s^2 *(decided)*."""
     accel_increment_max_mps2: PositiveFloat = 1.0
@@ -121,10 +123,13 @@ class ControlConfig:
 
     @model_validator(mode="after")
     def _check_weights(self) -> "ControlConfig":
-        if any(w < 0 for w in self.q1_diag):
-            raise ValueError(f"control.q1_diag={self.q1_diag}: every entry must be >= 0")
-        if any(w <= 0 for w in self.q2_diag):
-            raise ValueError(f"control.q2_diag={self.q2_diag}: every entry must be > 0 (Q2 positive definite)")
+        if any(w < 0 or w > 1e6 for w in self.q1_diag) or min(self.q1_diag[:2]) <= 0:
+            raise ValueError(f"control.q1_diag={self.q1_diag}: entries must lie in [0, 1e6] and the two position "
+                             "weights be > 0 (the DARE of the terminal weight needs the position error in the cost; "
+                             "weights beyond 1e6 make it numerically singular)")
+        if any(w <= 0 or w > 1e6 for w in self.q2_diag):
+            raise ValueError(f"control.q2_diag={self.q2_diag}: every entry must lie in (0, 1e6] (Q2 positive "
+                             "definite; larger weights make the DARE numerically singular)")
         return self
 
 
@@ -174,13 +179,13 @@ class DisturbanceConfig:
     """Std of the per-slot gust added to the wind, m/s per axis [1.0]."""
     actuator_lag_s: NonNegative = 0.0
     """Time constant of a first-order lag between the commanded and the applied AGV acceleration, s [0.3]."""
-    process_noise_position_m: NonNegative = 0.0
+    process_noise_position_m: Annotated[float, Field(ge=0, le=1e3)] = 0.0
     """Std of the per-slot AGV position noise, m per axis [0.05]."""
-    process_noise_velocity_mps: NonNegative = 0.0
+    process_noise_velocity_mps: Annotated[float, Field(ge=0, le=1e3)] = 0.0
     """Std of the per-slot AGV velocity noise, m/s per axis [0.05]."""
-    measurement_noise_position_m: NonNegative = 0.0
+    measurement_noise_position_m: Annotated[float, Field(ge=0, le=1e3)] = 0.0
     """Std of the noise on the AGV positions the policies observe, m per axis [0.2]."""
-    measurement_noise_velocity_mps: NonNegative = 0.0
+    measurement_noise_velocity_mps: Annotated[float, Field(ge=0, le=1e3)] = 0.0
     """Std of the noise on the AGV velocities the policies observe, m/s per axis [0.1]."""
     control_period_slots: PositiveInt = 1
     """Commands are sent every this many slots (a reduced control rate); in between the AGVs keep
@@ -216,7 +221,7 @@ class ScenarioConfig:
     """Slot duration Delta-tau, s (paper)."""
     area_m: tuple[float, float, float, float] = (0.0, 200.0, 0.0, 200.0)
     """Area D as (x_min, x_max, y_min, y_max), m (paper)."""
-    power_budget_dbw: float = 0.0
+    power_budget_dbw: Annotated[float, Field(ge=-100, le=60)] = 0.0
     """Total transmit power budget P_max, dBW (paper: 0 dBW)."""
     channel: ChannelConfig = dataclasses.field(default_factory=ChannelConfig)
     drone: DroneConfig = dataclasses.field(default_factory=DroneConfig)
@@ -237,6 +242,17 @@ class ScenarioConfig:
                 f"reference.path_set='paper' is defined for num_agvs 3 or 4, got num_agvs={self.num_agvs}; "
                 "use path_set='random' or 'auto'"
             )
+        from . import channel  # the link's SNR threshold must exist for these rate, blocklength and BLER
+
+        ch = self.channel
+        if not ch.infinite_blocklength:
+            try:
+                channel.snr_threshold(ch.rate_threshold_bps_hz, ch.blocklength, ch.bler, ch.paper_rate_form)
+            except (ValueError, RuntimeError, OverflowError, ZeroDivisionError) as exc:
+                raise ValueError(
+                    f"channel.rate_threshold_bps_hz={ch.rate_threshold_bps_hz}, channel.blocklength={ch.blocklength}, "
+                    f"channel.bler={ch.bler}: no SNR threshold reaches this rate at this blocklength ({exc})"
+                ) from None
         if self.control.accel_increment_max_mps2 > 2 * self.control.accel_max_mps2:
             raise ValueError(
                 f"control.accel_increment_max_mps2={self.control.accel_increment_max_mps2} exceeds "

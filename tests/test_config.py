@@ -97,3 +97,39 @@ def test_presets():
 def test_channel_config_linear_values():
     ch = ChannelConfig(alpha0_db=-60.0, noise_power_dbm=-90.0)
     assert math.isclose(ch.alpha0, 1e-6) and math.isclose(ch.noise_power_w, 1e-12)
+
+
+@pytest.mark.parametrize("overrides, field", [
+    ({"control": {"q1_diag": (0, 0, 1, 1, 1, 1)}}, "control.q1_diag"),
+    ({"control": {"q2_diag": (1e20, 1.0)}}, "control.q2_diag"),
+    ({"channel": {"bler": 0.6, "blocklength": 1, "rate_threshold_bps_hz": 0.1}}, "channel.bler"),
+    ({"channel": {"rate_threshold_bps_hz": 2000}}, "channel.rate_threshold_bps_hz"),
+    ({"power_budget_dbw": 5000}, "power_budget_dbw"),
+    ({"power_budget_dbw": -3300}, "power_budget_dbw"),
+    ({"disturbance": {"measurement_noise_position_m": 1e40}}, "disturbance.measurement_noise_position_m"),
+])
+def test_configs_the_code_cannot_run_are_rejected_naming_the_field(overrides, field):
+    """Issue #12: each of these validated before and crashed later (Riccati, root finding, overflow,
+    inf observations); now the config names the field and the allowed range."""
+    with pytest.raises(ValueError) as err:
+        ScenarioConfig(**overrides)
+    text = str(err.value).replace("\n", " ")
+    assert field.split(".")[-1] in text and (field.split(".")[0] in text or "." not in field)
+
+
+def test_accepted_edge_configs_run():
+    """The bounds are not too tight: the extremes they allow still run reset and a few steps."""
+    import gymnasium as gym
+    import numpy as np
+
+    from lawn_env.dynamics import PredictionModel
+
+    for cfg in (ScenarioConfig(channel={"blocklength": 1, "rate_threshold_bps_hz": 0.1}, num_slots=5),
+                ScenarioConfig(power_budget_dbw=-100, num_slots=5), ScenarioConfig(power_budget_dbw=60, num_slots=5),
+                ScenarioConfig(control={"q1_diag": (1, 1, 0, 0, 0, 0), "q2_diag": (1e6, 1e6)}, num_slots=5)):
+        PredictionModel.from_config(cfg)
+        env = gym.make("lawn/Joint-v0", config=cfg)
+        obs, _ = env.reset(seed=0)
+        for _ in range(5):
+            obs, reward, *_ = env.step(env.action_space.sample())
+        assert np.all(np.isfinite(obs)) and np.isfinite(reward)
