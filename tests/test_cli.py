@@ -123,3 +123,23 @@ def test_bad_counts_seeds_and_specs_are_one_line_errors(tmp_path, capsys):
         assert main(["sweep", str(tmp_path / name), "--out", str(tmp_path / "t.csv"), "--quiet"]) == 2
         err = capsys.readouterr().err
         assert needle in err and name in err and "Traceback" not in err and err.count("\n") == 1, err
+
+
+def test_an_unwritable_out_fails_before_any_episode(tmp_path, capsys, monkeypatch):
+    """Issue #12: the output location is checked before computing (a file where a folder is needed,
+    a folder where a file is needed), with one line naming --out."""
+    import training.evaluate
+    import training.sweep
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("episodes ran before --out was checked")
+
+    monkeypatch.setattr(training.evaluate, "pool_map", no_work)
+    monkeypatch.setattr(training.sweep, "execute", no_work)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    assert main(["evaluate", "--policy", "rg-mpc", "--episodes", "50", "--out", str(blocker / "r.csv"), "--quiet"]) == 2
+    assert main(["benchmark", "--episodes", "50", "--out", str(blocker / "bm"), "--quiet"]) == 2
+    assert main(["sweep", "docs/sweeps/control-period.yml", "--out", str(tmp_path), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("--out") == 3 and "cannot write to" in err and "is a directory; give a file" in err

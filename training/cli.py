@@ -407,9 +407,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Commands whose --out is a file (its folder must be writable) or a folder, checked before any work.
+_FILE_OUT = ("evaluate", "sweep")
+_DIR_OUT = ("demo", "benchmark", "gap", "figures")
+
+
+def _check_out(command: str, out) -> None:
+    """``--out`` must be writable before hours are spent computing what goes there."""
+    if out is None or command not in _FILE_OUT + _DIR_OUT:
+        return
+    path = Path(out)
+    folder = path.parent if command in _FILE_OUT else path
+    if command in _FILE_OUT and path.is_dir():
+        raise ValueError(f"--out {str(path)!r} is a directory; give a file")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".lawn-write-test-{os.getpid()}"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise ValueError(f"--out {str(path)!r}: cannot write to {str(folder)!r} ({exc.strerror or exc})") from None
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        _check_out(args.command, getattr(args, "out", None))
         return args.func(args)
     except ValueError as exc:  # bad config values or names: one clear line, no traceback
         print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
