@@ -17,9 +17,10 @@ def pytest_configure(config):
     warnings.filterwarnings("ignore", message=".*Box observation space (minimum|maximum) value is.*")
 
 
-def _independent_qp(config, x, ref, psi):
+def _independent_qp(config, x, ref, psi, blocked=None):
     """The QP P3 of one AGV written independently of ``lawn_env.mpc``, straight from the paper's
-    cost and MODEL.md's control set, solved by cvxpy/Clarabel at tight tolerances: (value, z)."""
+    cost and MODEL.md's control set, solved by cvxpy/Clarabel at tight tolerances: (value, z).
+    ``blocked`` (N_p,) bool fixes those increments to zero (move blocking, MODEL.md §7)."""
     cp = pytest.importorskip("cvxpy")
     model = PredictionModel.from_config(config)
     ctl = config.control
@@ -29,6 +30,7 @@ def _independent_qp(config, x, ref, psi):
     cost = 0
     state = x
     cons = [cp.abs(z) <= ctl.accel_increment_max_mps2]
+    cons += [z[i] == 0 for i in range(n) if blocked is not None and blocked[i]]
     u = x[4:6]
     for i in range(n):
         e = state - ref[i]
@@ -45,5 +47,5 @@ def _independent_qp(config, x, ref, psi):
 
 @pytest.fixture
 def independent_qp():
-    """``independent_qp(config, x_aug_k, reference_k, psi_k) -> (value, z)`` (see above)."""
+    """``independent_qp(config, x_aug_k, reference_k, psi_k, blocked=None) -> (value, z)`` (see above)."""
     return _independent_qp

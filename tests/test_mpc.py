@@ -2,7 +2,6 @@ import numpy as np
 import pytest
 
 from lawn_env import ScenarioConfig, references
-from lawn_env.dynamics import PredictionModel
 from lawn_env.mpc import OutageAwareMPC
 
 CFG = ScenarioConfig()
@@ -116,27 +115,9 @@ def test_move_blocking_holds_the_acceleration_between_commands(slot, rng, indepe
         assert np.abs(sol.increments[:, ~blocked]).max() > 0
         free = OutageAwareMPC.from_config(CFG).solve(x, ref, psi)
         assert np.all(sol.value >= free.value - 1e-9)  # a restriction of the every-slot QP
-        cp = pytest.importorskip("cvxpy")
         for k in range(2):
-            value, _ = _blocked_qp(cp, cfg, x[k], ref[k], psi[k], blocked)
+            value, _ = independent_qp(cfg, x[k], ref[k], psi[k], blocked=blocked)
             assert sol.value[k] == pytest.approx(value, rel=1e-6)
-
-
-def _blocked_qp(cp, cfg, x, ref, psi, blocked):
-    model = PredictionModel.from_config(cfg)
-    n = cfg.control.horizon
-    z = cp.Variable((n, 2))
-    cost, state, u = 0, x, x[4:6]
-    cons = [cp.abs(z) <= 1.0] + [z[i] == 0 for i in range(n) if blocked[i]]
-    for i in range(n):
-        cost += cp.sum_squares(state - ref[i]) + cp.sum_squares(z[i])
-        state = model.a_aug @ state + psi * (model.b_aug @ z[i])
-        u = u + z[i]
-        cons.append(cp.abs(u) <= 2.0)
-    cost += cp.quad_form(state - ref[n], model.q3)
-    prob = cp.Problem(cp.Minimize(cost), cons)
-    prob.solve(solver=cp.CLARABEL, tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12)
-    return prob.value, z.value
 
 
 def test_period_needs_the_slot_and_the_unaware_ablation_plans_every_slot(rng):

@@ -154,15 +154,16 @@ def summarize(rows: list[dict], metrics=SUMMARY_METRICS, by: str = "policy") -> 
 
 def paired_cost_difference(rows: list[dict], reference: str, metric: str = "control_cost") -> dict[str, tuple[float, float]]:
     """Per policy: mean and 95 % t-interval half-width of the per-seed relative difference
-    ``(x - x_ref) / x_ref`` against ``reference`` on the seeds both ran (a paired comparison)."""
+    ``(x - x_ref) / x_ref`` against ``reference`` on the seeds both ran (a paired comparison,
+    :func:`training.tables.paired_difference`)."""
+    from .tables import paired_difference
+
     ref = {r["seed"]: float(r[metric]) for r in rows if r["policy"] == reference}
     out = {}
     for name in dict.fromkeys(r["policy"] for r in rows):
-        diffs = np.array([(float(r[metric]) - ref[r["seed"]]) / ref[r["seed"]]
-                          for r in rows if r["policy"] == name and r["seed"] in ref])
-        if diffs.size > 1:
-            half = float(stats.t.ppf(0.975, diffs.size - 1) * diffs.std(ddof=1) / math.sqrt(diffs.size))
-            out[name] = (float(diffs.mean()), half)
+        mean, half, n = paired_difference({r["seed"]: float(r[metric]) for r in rows if r["policy"] == name}, ref)
+        if n > 1:
+            out[name] = (mean, half)
     return out
 
 
