@@ -1,5 +1,6 @@
 """Training round trips with tiny budgets (seconds each); skipped without the rl extra."""
 
+import csv
 import json
 
 import gymnasium as gym
@@ -12,6 +13,9 @@ pytest.importorskip("supersuit")
 from agents import make_policy  # noqa: E402
 from lawn_env import ScenarioConfig  # noqa: E402
 from training.cli import main  # noqa: E402
+from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
+
+from training.checkpoints import latest_checkpoint  # noqa: E402
 from training.train import load_hyperparams, resume, train  # noqa: E402
 
 SMALL = ScenarioConfig(num_slots=12)
@@ -48,7 +52,7 @@ def test_train_save_load_evaluate(tmp_path, algo):
     for name in ("model.zip", "vecnormalize.pkl", "best_model.zip", "best_vecnormalize.pkl", "run.json", "config.json",
                  "hyperparams.json", "learning_curve.csv", "learning_curve.png", "summary.md"):
         assert (out / name).exists(), name
-    assert (out / "tb").is_dir() and any((out / "checkpoints").glob("model_*_steps.zip"))
+    assert (out / "tb").is_dir() and (out / "checkpoints" / str(run_steps(out)) / "model.zip").exists()
     run = json.loads((out / "run.json").read_text())
     assert run["num_timesteps"] >= 256 and run["hyperparams_version"] >= 2 and "torch" in run["versions"]
     assert run["interface"]["action_scheme"] == "anchored"  # the RL interface is the default
@@ -67,13 +71,79 @@ def test_same_seed_same_agent(tmp_path):
     assert np.array_equal(pa.act(obs), pb.act(obs))
 
 
-def test_resume_continues_the_step_count(tmp_path):
-    out, _ = _train(tmp_path, "ppo", steps=256)
-    summary = resume(out, timesteps=512, progress=False)
+def run_steps(out):
+    return json.loads((out / "run.json").read_text())["num_timesteps"]
+
+
+class _Kill(BaseCallback):
+    """Stops training abruptly at ``at`` steps, as a SIGKILL would (nothing after it runs)."""
+
+    def __init__(self, at):
+        super().__init__()
+        self.at = at
+
+    def _on_step(self):
+        if self.num_timesteps >= self.at:
+            raise KeyboardInterrupt
+        return True
+
+
+def _history(out):
     run = json.loads((out / "run.json").read_text())
-    assert run["num_timesteps"] == 512 and summary["timesteps"] == 512
+    curve = [int(r["timesteps"]) for r in csv.DictReader((out / "learning_curve.csv").open())]
+    episodes = {p.name: len(p.read_text().splitlines()) - 2 for p in sorted((out / "monitor").glob("*.csv"))}
+    return run["num_timesteps"], run["updates"], curve, episodes
+
+
+@pytest.mark.parametrize("algo, env_id, kill_at", [("ppo", "lawn/Joint-v0", 450), ("sac", "lawn/Comm-v0", 300)])
+def test_a_killed_and_resumed_run_equals_an_uninterrupted_one(tmp_path, algo, env_id, kill_at):
+    whole, _ = _train(tmp_path, algo, env_id, steps=640, name="whole")
+    with pytest.raises(KeyboardInterrupt):
+        _train(tmp_path, algo, env_id, steps=640, name="killed", callbacks=[_Kill(kill_at)])
+    out = tmp_path / "killed"
+    assert not (out / "model.zip").exists() and latest_checkpoint(out).steps < kill_at
+    summary = resume(out, progress=False)
+    assert summary["resumed_from"] == kill_at // 128 * 128  # the last checkpoint (every 128 steps) before the kill
+    steps, updates, curve, episodes = _history(out)
+    assert (steps, updates, curve) == _history(whole)[:3] and steps == 640 and updates > 0
+    # the monitor kept the episodes before the checkpoint and appended the rest (12-slot episodes;
+    # the checkpoints fall on episode boundaries of every copy here, so the counts match too)
+    assert episodes == _history(whole)[3] and set(episodes.values()) == {640 // len(episodes) // 12}
+    if algo == "sac":  # the replay buffer came back: as full as the uninterrupted run's
+        import pickle
+
+        buffers = [pickle.load(open(latest_checkpoint(d).replay_buffer, "rb")) for d in (whole, out)]
+        assert buffers[0].pos == buffers[1].pos == 640 and buffers[1].observations[:300].any()
+
+
+def test_resume_extends_finished_runs_only_when_asked_and_restarts_runs_without_a_checkpoint(tmp_path, capsys):
+    out, _ = _train(tmp_path, "ppo", steps=256)
+    model = (out / "model.zip").read_bytes()
+    with pytest.raises(ValueError, match="the run is finished \\(256 steps, target 256\\)"):
+        resume(out)
+    assert (out / "model.zip").read_bytes() == model  # untouched
+    summary = resume(out, timesteps=512, progress=False)
+    assert run_steps(out) == 512 and summary["timesteps"] == 512 and summary["resumed_from"] == 256
+    with pytest.raises(ValueError, match="finished \\(512 steps, target 128\\); pass --timesteps above 512"):
+        resume(out, timesteps=128)
     with pytest.raises(ValueError, match="no run.json"):
         resume(tmp_path / "nowhere")
+    # killed before its first checkpoint: neither resumable nor restartable before; now it restarts
+    with pytest.raises(KeyboardInterrupt):
+        _train(tmp_path, "ppo", steps=256, name="early", callbacks=[_Kill(64)])
+    early = tmp_path / "early"
+    assert latest_checkpoint(early) is None
+    summary = resume(early, progress=False)
+    assert summary["resumed_from"] is None and run_steps(early) == 256
+    assert _history(early)[:3] == (256, 2 * 2, [128, 256])  # 2 rollouts of 2 x 64 steps, 2 epochs each
+    # a damaged run directory names the file
+    (early / "hyperparams.json").unlink()
+    (early / "run.json").write_text(json.dumps({**json.loads((early / "run.json").read_text()), "num_timesteps": 0}))
+    with pytest.raises(ValueError, match="no hyperparams.json in .*the run directory is incomplete"):
+        resume(early)
+    (early / "run.json").write_text("{not json")
+    assert main(["train", "--resume", str(early), "--quiet"]) == 2
+    assert "run.json is not valid JSON (line 1, column 2" in capsys.readouterr().err
 
 
 def test_behaviour_cloning_reduces_loss_and_warm_starts_ppo(tmp_path):

@@ -1,4 +1,5 @@
-"""Stable-Baselines3 callbacks of ``lawn train``: validation on the real objective, actor warm-up."""
+"""Stable-Baselines3 callbacks of ``lawn train``: validation on the real objective, checkpoints at
+rollout boundaries, actor warm-up."""
 
 from __future__ import annotations
 
@@ -10,14 +11,21 @@ from stable_baselines3.common.callbacks import BaseCallback
 from agents.learned import MARLPolicy, ObsNormalizer, SB3Policy
 from lawn_env import ScenarioConfig
 
+from .checkpoints import write_checkpoint
 from .evaluate import rollout
 from .tables import mean_ci
 
-__all__ = ["ControlCostValidation", "ActorWarmup"]
+__all__ = ["ControlCostValidation", "RunCheckpoint", "ActorWarmup"]
+
+
+def _next_mark(steps: int, every: int) -> int:
+    """The first multiple of ``every`` above ``steps``: schedules on the step count, not on calls,
+    so a resumed run keeps the uninterrupted run's schedule."""
+    return (steps // every + 1) * every
 
 
 class ControlCostValidation(BaseCallback):
-    """Every ``every`` calls, run the current policy (deterministic, through the same wrapper as
+    """Every ``every`` environment steps, run the current policy (deterministic, through the same wrapper as
     ``sb3:DIR``) on ``episodes`` full episodes of the unmodified scenario with the validation
     seeds ``seed_base + i``; append the mean realized control cost to ``learning_curve.csv`` and
     keep the model with the lowest one as ``best_model.zip`` (+ ``best_vecnormalize.pkl``)."""
@@ -30,9 +38,14 @@ class ControlCostValidation(BaseCallback):
         self.curve = self.out_dir / "learning_curve.csv"
         self.best = float("inf")
         self._last = -1
+        self._next = every
         if self.curve.exists():  # a resumed run: keep its history and its best
             rows = list(csv.DictReader(self.curve.open()))
             self.best = min((float(r["control_cost"]) for r in rows), default=float("inf"))
+            self._last = max((int(float(r["timesteps"])) for r in rows), default=-1)
+
+    def _on_training_start(self) -> None:
+        self._next = _next_mark(self.num_timesteps, self.every)
 
     def _policy(self):
         normalizer = ObsNormalizer.from_vecnormalize(self.model.get_vec_normalize_env())
@@ -48,8 +61,9 @@ class ControlCostValidation(BaseCallback):
         return mean_ci(costs)
 
     def _on_step(self) -> bool:
-        if self.n_calls % self.every == 0:
+        if self.num_timesteps >= self._next:
             self._record()
+            self._next = _next_mark(self.num_timesteps, self.every)
         return True
 
     def _on_training_end(self) -> None:
@@ -76,6 +90,41 @@ class ControlCostValidation(BaseCallback):
                 (self.out_dir / "best_vecnormalize.pkl").unlink()
 
 
+class RunCheckpoint(BaseCallback):
+    """A checkpoint (:mod:`training.checkpoints`) at the first rollout boundary at least ``every``
+    steps after the previous one, and one at the end of training. ``state`` goes into each
+    checkpoint's ``state.json``; its ``wall_time_s`` is the run's wall time so far."""
+
+    def __init__(self, out_dir: Path, every: int, wall_time_before: float = 0.0):
+        super().__init__(verbose=0)
+        self.out_dir, self.every, self.wall_time_before = Path(out_dir), every, wall_time_before
+        self._next = every
+        self._start = 0.0
+
+    def _on_training_start(self) -> None:
+        import time
+
+        self._start = time.perf_counter()
+        self._next = _next_mark(self.num_timesteps, self.every)
+
+    def _save(self) -> None:
+        import time
+
+        write_checkpoint(self.out_dir, self.model,
+                         {"wall_time_s": self.wall_time_before + time.perf_counter() - self._start})
+        self._next = _next_mark(self.num_timesteps, self.every)
+
+    def _on_rollout_start(self) -> None:  # after train(): every collected step has been learned from
+        if self.num_timesteps >= self._next:
+            self._save()
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_training_end(self) -> None:
+        self._save()
+
+
 class ActorWarmup(BaseCallback):
     """Critic warm-up for fine-tuning a cloned policy: the actor's parameters (policy network,
     action head, log-std) are frozen for the first ``steps`` environment steps, so PPO's first
@@ -95,6 +144,8 @@ class ActorWarmup(BaseCallback):
         return params
 
     def _on_training_start(self) -> None:
+        if self.num_timesteps >= self.steps:  # a resumed run past its warm-up
+            return
         self.frozen = self._actor_parameters()
         for p in self.frozen:
             p.requires_grad_(False)

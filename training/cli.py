@@ -155,6 +155,9 @@ def cmd_train(args) -> int:
     if args.resume:
         summary = resume(Path(args.resume), timesteps=args.timesteps, progress=not args.quiet)
         out = args.resume
+        start = summary["resumed_from"]
+        print(f"lawn train: resumed {out} from its checkpoint at {start} steps" if start is not None else
+              f"lawn train: {out} had no checkpoint; trained it again from the start")
     else:
         missing = [flag for flag, value in (("--algo", args.algo), ("--env", args.env), ("--out", args.out)) if not value]
         if missing:

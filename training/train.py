@@ -36,7 +36,6 @@ import inspect
 import json
 import pickle
 import platform
-import re
 import time
 from pathlib import Path
 from typing import Any, Mapping
@@ -44,8 +43,11 @@ from typing import Any, Mapping
 import numpy as np
 
 import lawn_env
+from agents.runs import read_json
 from lawn_env import ScenarioConfig
 from lawn_env.interface import resolve_interface
+
+from .checkpoints import Checkpoint, clear_history, latest_checkpoint, restore_history
 
 __all__ = ["ALGOS", "TRAIN_ENV_IDS", "load_hyperparams", "train", "train_seeds", "train_task", "resume", "RunSpec",
            "TRAIN_SEED_BASE", "VALIDATION_SEED_BASE"]
@@ -100,8 +102,10 @@ def _check_algo_kwargs(cls, kwargs: Mapping[str, Any]) -> None:
 
 
 def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, normalize, monitor_dir: Path | None,
-                   vecnormalize_path: Path | None = None, training: bool = True, interface=None):
-    """A seeded SB3 VecEnv (Monitor-wrapped) with optional VecNormalize, on the given interface."""
+                   vecnormalize_path: Path | None = None, training: bool = True, interface=None,
+                   append_monitor: bool = False):
+    """A seeded SB3 VecEnv (Monitor-wrapped) with optional VecNormalize, on the given interface;
+    ``append_monitor`` continues existing monitor logs (a resumed run) instead of replacing them."""
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -112,7 +116,8 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
     else:
         kwargs = {} if env_id == "CartPole-v1" else {"config": config, "interface": interface}
         venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=kwargs,
-                            monitor_dir=str(monitor_dir) if monitor_dir else None)
+                            monitor_dir=str(monitor_dir) if monitor_dir else None,
+                            monitor_kwargs={"override_existing": not append_monitor})
     if vecnormalize_path is not None:
         venv = VecNormalize.load(str(vecnormalize_path), venv)
         venv.training = training
@@ -133,9 +138,10 @@ class RunSpec(dict):
 def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: int, out_dir: Path,
           hp_overrides: Mapping[str, Any] | None = None, n_envs: int | None = None, eval_every: int = 5000,
           eval_episodes: int = 5, checkpoint_every: int = 10000, progress: bool = True,
-          init_from: Path | None = None, interface: str | Mapping | None = None) -> dict:
+          init_from: Path | None = None, interface: str | Mapping | None = None, callbacks: list | None = None) -> dict:
     """Train an agent from scratch; returns the run summary (also written to ``out_dir``).
 
+    ``callbacks`` are extra SB3 callbacks, run after the run's own (validation, checkpoints).
     ``interface`` (``"rl"``, ``"v0"`` or a dict of :class:`lawn_env.RLInterface` fields) replaces
     the hyperparameter file's choice."""
     if timesteps < 1:
@@ -155,9 +161,7 @@ def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: 
 
         return train_bc_run(env_id, config, timesteps, seed, out_dir, params, version, progress=progress)
     if init_from is not None:
-        source = json.loads((Path(init_from) / "run.json").read_text()) if (Path(init_from) / "run.json").exists() else None
-        if source is None:
-            raise ValueError(f"--init-from {init_from}: no run.json there (not a lawn train run directory)")
+        source = read_json(Path(init_from) / "run.json", "--init-from", "not a lawn train run directory")
         if source.get("interface") != params.get("interface"):
             raise ValueError(f"--init-from {init_from}: it was trained with interface {source.get('interface')}, "
                              f"this run uses {params.get('interface')}; pass the same --interface")
@@ -169,39 +173,46 @@ def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: 
     (out_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
     (out_dir / "hyperparams.json").write_text(json.dumps(params, indent=2))
     (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
-    return _learn(spec, params, config, out_dir, start_model=None, progress=progress)
+    return _learn(spec, params, config, out_dir, start=None, progress=progress, callbacks=callbacks)
 
 
 def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -> dict:
-    """Continue an interrupted run from its last checkpoint up to its (or a new) timestep target."""
+    """Continue an interrupted run from its last checkpoint up to its (or a new) timestep target.
+
+    The resumed run reaches the target with the update count of an uninterrupted run, its history
+    (learning curve, monitor logs) appended to what the checkpoint had, and the replay buffer of
+    an off-policy algorithm restored (:mod:`training.checkpoints`). A run killed before its first
+    checkpoint restarts from scratch; a finished run is left alone unless ``timesteps`` extends it."""
     out_dir = Path(out_dir)
-    if not (out_dir / "run.json").exists():
-        raise ValueError(f"--resume {out_dir}: no run.json there (not a lawn train run directory)")
-    spec = RunSpec(json.loads((out_dir / "run.json").read_text()))
+    spec = RunSpec(read_json(out_dir / "run.json", "--resume", "not a lawn train run directory"))
+    for key in ("algo", "env", "seed", "timesteps", "checkpoint_every", "eval_every", "eval_episodes"):
+        if key not in spec:
+            raise ValueError(f"--resume {out_dir}: run.json has no {key!r} (not written by lawn train)")
     if spec["algo"] == "bc":
         raise ValueError("behaviour cloning runs are not resumable; rerun lawn train --algo bc")
-    if timesteps is not None:
-        spec["timesteps"] = timesteps
-        (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
-    params = json.loads((out_dir / "hyperparams.json").read_text())
-    config = ScenarioConfig.from_dict(json.loads((out_dir / "config.json").read_text()))
+    params = read_json(out_dir / "hyperparams.json", "--resume", "the run directory is incomplete")
+    config = ScenarioConfig.from_dict(read_json(out_dir / "config.json", "--resume", "the run directory is incomplete"))
+    target = int(spec["timesteps"]) if timesteps is None else int(timesteps)
     checkpoint = latest_checkpoint(out_dir)
-    if checkpoint is None:
-        raise ValueError(f"--resume {out_dir}: no checkpoint in {out_dir / 'checkpoints'}")
-    return _learn(spec, params, config, out_dir, start_model=checkpoint, progress=progress)
-
-
-def latest_checkpoint(out_dir: Path) -> tuple[Path, Path | None, int] | None:
-    found = []
-    for path in (Path(out_dir) / "checkpoints").glob("model_*_steps.zip"):
-        m = re.fullmatch(r"model_(\d+)_steps\.zip", path.name)
-        if m:
-            found.append((int(m.group(1)), path))
-    if not found:
-        return None
-    steps, path = max(found)
-    norm = path.parent / f"model_vecnormalize_{steps}_steps.pkl"
-    return path, (norm if norm.exists() else None), steps
+    done = int(spec.get("num_timesteps") or 0)
+    if done >= target and (out_dir / "model.zip").exists():
+        raise ValueError(f"--resume {out_dir}: the run is finished ({done} steps, target {target}); "
+                         f"pass --timesteps above {done} to train it further")
+    if checkpoint is not None and checkpoint.steps >= target:
+        raise ValueError(f"--resume {out_dir}: --timesteps {target} is not above the last checkpoint's "
+                         f"{checkpoint.steps} steps")
+    spec["timesteps"] = target
+    spec.pop("num_timesteps", None)
+    if checkpoint is None:  # killed before its first checkpoint: start over, cleanly
+        clear_history(out_dir)
+        spec["wall_time_s"] = 0.0
+    else:
+        restore_history(out_dir, checkpoint)
+        spec["wall_time_s"] = float(checkpoint.state.get("wall_time_s", 0.0))
+    (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
+    summary = _learn(spec, params, config, out_dir, start=checkpoint, progress=progress)
+    summary["resumed_from"] = checkpoint.steps if checkpoint is not None else None
+    return summary
 
 
 def limit_torch_threads() -> None:
@@ -220,11 +231,11 @@ def _lr_schedule(value):
     return value
 
 
-def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, start_model, progress: bool) -> dict:
-    from stable_baselines3.common.callbacks import CheckpointCallback
+def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, start: Checkpoint | None,
+           progress: bool, callbacks: list | None = None) -> dict:
     from stable_baselines3.common.utils import set_random_seed
 
-    from .callbacks import ActorWarmup, ControlCostValidation
+    from .callbacks import ActorWarmup, ControlCostValidation, RunCheckpoint
 
     limit_torch_threads()
     algos = _algos()
@@ -241,13 +252,16 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
             params[key] = _lr_schedule(params[key])
     _check_algo_kwargs(cls, params)
     seed = int(spec["seed"])
-    done_steps = start_model[2] if start_model else 0
+    done_steps = start.steps if start else 0
     env_seed = TRAIN_SEED_BASE + 1000 * seed + done_steps  # a resumed run continues with fresh, still seeded, episodes
     set_random_seed(env_seed)
     env = make_train_env(spec["env"], config, n_envs, env_seed, normalize, out_dir / "monitor",
-                         vecnormalize_path=start_model[1] if start_model else None, interface=interface)
-    if start_model:
-        model = cls.load(str(start_model[0]), env=env, tensorboard_log=str(out_dir / "tb"))
+                         vecnormalize_path=start.vecnormalize if start else None, interface=interface,
+                         append_monitor=start is not None)
+    if start:
+        model = cls.load(str(start.model), env=env, tensorboard_log=str(out_dir / "tb"))
+        if start.replay_buffer is not None:
+            model.load_replay_buffer(str(start.replay_buffer))
     else:
         model = cls(policy, env, seed=seed if spec["env"] != "lawn/Parallel-v0" else None, verbose=0,
                     tensorboard_log=str(out_dir / "tb"), **params)
@@ -259,19 +273,21 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
             with torch.no_grad():
                 model.policy.log_std.fill_(float(init_log_std))
     remaining = int(spec["timesteps"]) - model.num_timesteps
-    callbacks = [CheckpointCallback(save_freq=max(int(spec["checkpoint_every"]) // n_envs, 1),
-                                    save_path=str(out_dir / "checkpoints"), name_prefix="model", save_vecnormalize=True)]
+    wall_before = float(spec.get("wall_time_s", 0.0))
+    hooks = []
     if spec["env"] != "CartPole-v1":
-        callbacks.insert(0, ControlCostValidation(
+        hooks.append(ControlCostValidation(
             spec["env"], config, interface, episodes=int(spec["eval_episodes"]),
-            every=max(int(spec["eval_every"]) // n_envs, 1), out_dir=out_dir, seed_base=VALIDATION_SEED_BASE))
-    if warmup > 0 and not start_model:
-        callbacks.append(ActorWarmup(warmup))
-    start = time.perf_counter()
+            every=max(int(spec["eval_every"]), 1), out_dir=out_dir, seed_base=VALIDATION_SEED_BASE))
+    hooks.append(RunCheckpoint(out_dir, max(int(spec["checkpoint_every"]), 1), wall_time_before=wall_before))
+    if warmup > 0:
+        hooks.append(ActorWarmup(warmup))
+    hooks += list(callbacks or [])
+    began = time.perf_counter()
     if remaining > 0:
-        model.learn(total_timesteps=remaining, callback=callbacks, reset_num_timesteps=start_model is None,
+        model.learn(total_timesteps=remaining, callback=hooks, reset_num_timesteps=start is None,
                     progress_bar=progress, tb_log_name="run")
-    elapsed = time.perf_counter() - start
+    elapsed = time.perf_counter() - began
     model.save(str(out_dir / "model.zip"))
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -279,7 +295,8 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
         env.save(str(out_dir / "vecnormalize.pkl"))
     spec_out = dict(spec)
     spec_out["num_timesteps"] = int(model.num_timesteps)
-    spec_out["wall_time_s"] = float(elapsed + spec.get("wall_time_s", 0.0))
+    spec_out["updates"] = int(getattr(model, "_n_updates", 0))
+    spec_out["wall_time_s"] = float(elapsed + wall_before)
     (out_dir / "run.json").write_text(json.dumps(spec_out, indent=2))
     summary = write_learning_curve(out_dir, spec_out)
     env.close()
