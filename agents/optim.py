@@ -96,6 +96,8 @@ def project_disc_box(point: np.ndarray, center: np.ndarray, radius: float,
     px, py = float(point[0]), float(point[1])
     cx, cy = float(center[0]), float(center[1])
     x0, x1, y0, y1 = area_m
+    if not (math.isfinite(px) and math.isfinite(py)):
+        raise ValueError(f"project_disc_box: point {point!r} is not finite")
     dx, dy = px - cx, py - cy
     dist = math.hypot(dx, dy)
     inside_box = x0 <= px <= x1 and y0 <= py <= y1
@@ -123,22 +125,41 @@ def project_disc_box(point: np.ndarray, center: np.ndarray, radius: float,
             lo, hi = max(x0, cx - h), min(x1, cx + h)
             if lo <= hi:
                 candidates.append((min(max(px, lo), hi), ye))
+    if not candidates:  # rounding at coordinates far above the radius: the center is always feasible
+        candidates.append((min(max(cx, x0), x1), min(max(cy, y0), y1)))
     best = min(candidates, key=lambda c: (c[0] - px) ** 2 + (c[1] - py) ** 2)
     return np.array(best)
 
 
 def disc_box_grid(center: np.ndarray, radius: float, area_m: tuple[float, float, float, float],
-                  spacing: float) -> np.ndarray:
+                  spacing: float, max_points: int = 10_000) -> np.ndarray:
     """Points of a square grid of ``spacing`` (m) centred on ``center`` that lie in the disc and
-    the box, plus the center itself: (n, 2)."""
-    half = int(math.floor(radius / spacing))
-    offsets = np.arange(-half, half + 1) * spacing
-    gx, gy = np.meshgrid(offsets, offsets, indexing="ij")
-    pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
-    pts = pts[(pts**2).sum(axis=1) <= radius * radius + 1e-9] + np.asarray(center, dtype=float)
+    the box, plus the center itself: (n, 2).
+
+    The grid is laid over the disc's bounding square clipped to the box, so its cost follows the
+    reachable area, not the disc; when that would still exceed ``max_points`` points (a long slot
+    or a fast drone: the disc grows with (V_max Δτ)²) the spacing is widened until it does not.
+    """
+    cx, cy = float(center[0]), float(center[1])
     x0, x1, y0, y1 = area_m
+    radius = max(float(radius), 0.0)
+    spacing = float(spacing)
+    lo = np.array([max(x0, cx - radius) - cx, max(y0, cy - radius) - cy])
+    hi = np.array([min(x1, cx + radius) - cx, min(y1, cy + radius) - cy])
+    extent = np.maximum(hi - lo, 0.0)
+    cells = float(np.prod(extent / spacing + 1.0))
+    if cells > max_points:
+        spacing *= math.sqrt(cells / max_points) * 1.01
+    axes = [np.arange(math.ceil(lo[i] / spacing - 1e-9), math.floor(hi[i] / spacing + 1e-9) + 1) * spacing
+            for i in range(2)]
+    gx, gy = np.meshgrid(axes[0], axes[1], indexing="ij")
+    pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    pts = pts[(pts**2).sum(axis=1) <= radius * radius + 1e-9] + np.array([cx, cy])
     keep = (pts[:, 0] >= x0) & (pts[:, 0] <= x1) & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)
-    return pts[keep]
+    pts = pts[keep]
+    if not (pts == [cx, cy]).all(axis=1).any():
+        pts = np.vstack([pts, [cx, cy]])
+    return pts
 
 
 def min_plus_allocation(costs: np.ndarray, chunk: int = 64) -> tuple[np.ndarray, np.ndarray]:

@@ -121,9 +121,11 @@ class ReducedProblem:
                 g = grad_p if block == "p" else grad_q
                 x = ev.power_w if block == "p" else ev.drone_position
                 gnorm = math.sqrt(float(g @ g))
-                if gnorm == 0.0:
+                if gnorm == 0.0 or not math.isfinite(gnorm):  # flat, or under/overflowed at extreme configs
                     continue
                 alpha = steps[block] or 0.5 * (self.budget if block == "p" else self.radius) / gnorm
+                if not (math.isfinite(alpha) and alpha > 0.0):
+                    continue
                 accepted = None
                 for _ in range(max_backtracks):
                     if block == "p":
@@ -131,7 +133,7 @@ class ReducedProblem:
                     else:
                         x_new = project_disc_box(x - alpha * g, self.q_prev, self.radius, self.area)
                     delta = x_new - x
-                    if float(delta @ delta) == 0.0:
+                    if not np.all(np.isfinite(delta)) or float(delta @ delta) == 0.0:
                         break
                     cand = self.evaluate(x_new, ev.drone_position) if block == "p" else self.evaluate(ev.power_w, x_new)
                     if cand.phi <= ev.phi + armijo * float(g @ delta):
@@ -219,6 +221,9 @@ class ReducedSettings:
     """psi grid points (uniform on [0, 1]) of the tabulated V_k used to pick the starting point."""
     drone_spacing_m: Annotated[float, Field(gt=0)] = 1.5
     """Spacing of the drone grid over the disc ∩ area for the starting point."""
+    max_drone_points: Annotated[int, Field(ge=1)] = 10_000
+    """Cap on the drone grid: a larger reach (V_max Δτ) widens the spacing instead (bounded time
+    and memory whatever the config; the default reach of 7.5 m needs 81 points)."""
     coarse_power_levels: Annotated[int, Field(ge=2)] = 12
     """Every grid position is scored with power in units of P_max / coarse_power_levels ..."""
     keep_positions: Annotated[int, Field(ge=1)] = 4
@@ -237,6 +242,7 @@ class GlobalSettings:
 
     psi_points: Annotated[int, Field(ge=2)] = 401
     drone_spacing_m: Annotated[float, Field(gt=0)] = 0.5
+    max_drone_points: Annotated[int, Field(ge=1)] = 20_000
     power_levels: Annotated[int, Field(ge=2)] = 200
     refine_iterations: Annotated[int, Field(ge=0)] = 60
     qp_backend: str = "daqp"
@@ -266,7 +272,7 @@ class _ReducedPlannerBase:
     def _search(self, problem: ReducedProblem) -> Evaluation:
         s = self.settings
         table = problem.table(self.psi_grid)
-        positions = disc_box_grid(problem.q_prev, problem.radius, problem.area, s.drone_spacing_m)
+        positions = disc_box_grid(problem.q_prev, problem.radius, problem.area, s.drone_spacing_m, s.max_drone_points)
         _, p, q = problem.grid_search(table, positions, s.power_levels, s.coarse_power_levels, s.keep_positions)
         return problem.evaluate(p, q)
 
@@ -312,7 +318,7 @@ class GlobalPlanner(_ReducedPlannerBase):
         problem = ReducedProblem(self.mpc, self.link, snapshot, self.config)
         s = self.settings
         table = problem.table(self.psi_grid)
-        positions = disc_box_grid(problem.q_prev, problem.radius, problem.area, s.drone_spacing_m)
+        positions = disc_box_grid(problem.q_prev, problem.radius, problem.area, s.drone_spacing_m, s.max_drone_points)
         grid_value, p, q = problem.grid_search(table, positions, s.power_levels)
         found = problem.evaluate(p, q)
         best = problem.refine(found, s.refine_iterations)

@@ -53,10 +53,10 @@ class ChannelConfig:
 
     nakagami_m: PositiveInt = 2
     """Nakagami shape m (a positive integer, paper)."""
-    alpha0_db: float = -50.0
-    """Reference channel gain at 1 m, dB (paper)."""
-    noise_power_dbm: float = -100.0
-    """Receiver noise power sigma^2, dBm (paper)."""
+    alpha0_db: Annotated[float, Field(ge=-200, le=0)] = -50.0
+    """Reference channel gain at 1 m, dB, in [-200, 0] (a passive channel does not amplify) (paper)."""
+    noise_power_dbm: Annotated[float, Field(ge=-250, le=100)] = -100.0
+    """Receiver noise power sigma^2, dBm, in [-250, 100] (paper: -100)."""
     bandwidth_hz: PositiveFloat = 1e6
     """Sub-channel bandwidth B, Hz; rates are in bit/s/Hz, B only converts them to bit/s (paper)."""
     bler: Annotated[float, Field(gt=0, lt=0.5)] = 1e-6
@@ -97,27 +97,29 @@ class ChannelConfig:
 class DroneConfig:
     """Drone kinematics (MODEL.md §1)."""
 
-    altitude_m: PositiveFloat = 50.0
-    """Fixed flight altitude H, m (paper)."""
+    altitude_m: Annotated[float, Field(gt=0, le=10_000)] = 50.0
+    """Fixed flight altitude H, m, in (0, 10 km] (a low-altitude network) (paper)."""
     start_m: tuple[float, float] = (0.0, 100.0)
     """Initial horizontal position q[1], m (paper)."""
-    max_speed_mps: PositiveFloat = 15.0
-    """Maximum horizontal speed V_max, m/s *(decided)*."""
+    max_speed_mps: Annotated[float, Field(ge=0.01, le=300)] = 15.0
+    """Maximum horizontal speed V_max, m/s, in [0.01, 300] (a drone's reach V_max Δτ must be
+    resolvable in metres by the planners' drone grids) *(decided)*."""
 
 
 @dataclass(frozen=True, config=_PYDANTIC)
 class ControlConfig:
     """Outage-aware MPC of each AGV (MODEL.md §3)."""
 
-    horizon: PositiveInt = 10
-    """Prediction horizon N_p, slots (paper)."""
+    horizon: Annotated[int, Field(ge=1, le=100, strict=True)] = 10
+    """Prediction horizon N_p, slots, in [1, 100] (paper: 10; the MPC's QPs are dense in 2 N_p
+    variables and ``rg-mpc`` tabulates them per plan: at 100 a plan already takes about a second)."""
     q1_diag: tuple[float, float, float, float, float, float] = (1.0,) * 6
     """Diagonal of the state-error weight Q1 (6 entries in [0, 1e6]; the two position weights > 0: the
     terminal weight Q3 solves a DARE that needs the position error in the cost) (paper: I6)."""
     q2_diag: tuple[float, float] = (1.0, 1.0)
     """Diagonal of the increment weight Q2 (2 entries in (0, 1e6], Q2 positive definite) (paper: I2)."""
-    accel_max_mps2: PositiveFloat = 2.0
-    """Acceleration bound a_max per axis, m/s^2 *(decided)*."""
+    accel_max_mps2: Annotated[float, Field(gt=0, le=100)] = 2.0
+    """Acceleration bound a_max per axis, m/s^2, in (0, 100] (10 g) *(decided)*."""
     accel_increment_max_mps2: PositiveFloat = 1.0
     """Increment bound per axis per slot, m/s^2 *(decided)*."""
 
@@ -213,14 +215,18 @@ class ScenarioConfig:
     derive one with :meth:`override` (dotted keys such as ``"channel.blocklength"``).
     """
 
-    num_agvs: PositiveInt = 4
-    """Number of AGVs K (paper)."""
-    num_slots: PositiveInt = 120
-    """Episode length N in slots (paper: 120 slots = 60 s)."""
-    slot_s: PositiveFloat = 0.5
-    """Slot duration Delta-tau, s (paper)."""
+    num_agvs: Annotated[int, Field(ge=1, le=256, strict=True)] = 4
+    """Number of AGVs K, in [1, 256] (paper: 3, 4; the planners' cost grows with K)."""
+    num_slots: Annotated[int, Field(ge=1, le=100_000, strict=True)] = 120
+    """Episode length N in slots, in [1, 100000] (paper: 120 slots = 60 s; the reference table of
+    an episode is precomputed)."""
+    slot_s: Annotated[float, Field(ge=1e-3, le=10)] = 0.5
+    """Slot duration Delta-tau, s, in [1 ms, 10 s] (paper: 0.5; one command per slot, a discrete
+    double integrator between commands; the terminal weight's Riccati equation degenerates as the
+    slot goes to zero)."""
     area_m: tuple[float, float, float, float] = (0.0, 200.0, 0.0, 200.0)
-    """Area D as (x_min, x_max, y_min, y_max), m (paper)."""
+    """Area D as (x_min, x_max, y_min, y_max), m (paper: 200 m square); each side in [1 m, 100 km],
+    coordinates within ±1,000 km."""
     power_budget_dbw: Annotated[float, Field(ge=-100, le=60)] = 0.0
     """Total transmit power budget P_max, dBW (paper: 0 dBW)."""
     channel: ChannelConfig = dataclasses.field(default_factory=ChannelConfig)
@@ -234,9 +240,15 @@ class ScenarioConfig:
         x0, x1, y0, y1 = self.area_m
         if not (x1 > x0 and y1 > y0):
             raise ValueError(f"area_m={self.area_m}: need x_min < x_max and y_min < y_max")
+        if not (1.0 <= x1 - x0 <= 1e5 and 1.0 <= y1 - y0 <= 1e5) or max(map(abs, self.area_m)) > 1e6:
+            raise ValueError(f"area_m={self.area_m}: each side must lie in [1 m, 100 km] and every coordinate "
+                             "within ±1e6 m (float32 observations resolve positions to a decimetre there)")
         qx, qy = self.drone.start_m
         if not (x0 <= qx <= x1 and y0 <= qy <= y1):
             raise ValueError(f"drone.start_m={self.drone.start_m} must lie inside area_m={self.area_m}")
+        if self.num_agvs * self.num_slots > 2_000_000:
+            raise ValueError(f"num_agvs={self.num_agvs} x num_slots={self.num_slots} exceeds 2,000,000: an episode's "
+                             "reference table is precomputed (K x N <= 2e6 keeps it under 100 MB)")
         if self.reference.path_set == "paper" and self.num_agvs not in (3, 4):
             raise ValueError(
                 f"reference.path_set='paper' is defined for num_agvs 3 or 4, got num_agvs={self.num_agvs}; "

@@ -29,7 +29,9 @@ accelerating; single slots cost up to 1e7), so every environment also takes
   of the remaining slots at its floor added as a penalty, so that ending early is never better
   than continuing (every remaining slot would have earned at least that floor).
 * **Observation clipping** to ``[-obs_clip, obs_clip]`` (the features are normalized to order
-  one; drift can otherwise blow them up).
+  one; drift can otherwise blow them up). Without it (the v0 interface) features still saturate
+  at ``±OBS_LIMIT`` (1e6: an AGV a million half-areas away), so observations stay finite and
+  inside the declared space in episodes of any length.
 
 Evaluation never uses the interface: learned policies are wrapped to act on the v0
 environments (:class:`agents.learned.SB3Policy`), and every comparison reports the realized
@@ -51,7 +53,7 @@ from .channel import LinkParams, success_probability
 from .drone import move_drone
 from .mpc import OutageAwareMPC
 
-__all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "resolve_interface", "ActionLayout", "Decision",
+__all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "resolve_interface", "ActionLayout", "Decision",
            "ROLES"]
 
 PositiveFloat = Annotated[float, Field(gt=0)]
@@ -111,19 +113,26 @@ class RLInterface:
         d2 = (np.asarray(position_error_m) ** 2).sum(axis=-1)
         return bool(d2.max() > self.termination_distance_m**2)
 
+    @property
+    def obs_bound(self) -> float:
+        """Every observation feature lies in ``[-obs_bound, obs_bound]``."""
+        return OBS_LIMIT if self.obs_clip is None else min(self.obs_clip, OBS_LIMIT)
+
     def observation_space(self, size: int) -> gym.spaces.Box:
-        bound = np.inf if self.obs_clip is None else self.obs_clip
-        return gym.spaces.Box(-bound, bound, shape=(size,), dtype=np.float32)
+        return gym.spaces.Box(-self.obs_bound, self.obs_bound, shape=(size,), dtype=np.float32)
 
     def observe(self, obs: np.ndarray) -> np.ndarray:
-        """The observation as the agent sees it (clipped in place when ``obs_clip`` is set)."""
-        if self.obs_clip is not None:
-            np.clip(obs, -self.obs_clip, self.obs_clip, out=obs)
+        """The observation as the agent sees it (clipped in place to ``obs_bound``)."""
+        bound = self.obs_bound
+        np.clip(obs, -bound, bound, out=obs)
         return obs
 
     def to_dict(self) -> dict[str, Any]:
         return {f: getattr(self, f) for f in self.__dataclass_fields__}
 
+
+#: Saturation of observation features without ``obs_clip`` (normalized units).
+OBS_LIMIT = 1e6
 
 #: The paper's benchmark interface (what ``lawn/Joint-v0`` and ``lawn/Comm-v0`` use by default).
 V0_INTERFACE = RLInterface()

@@ -38,6 +38,7 @@ __all__ = [
     "fit_envelope",
     "paper_paths",
     "random_paths",
+    "slowed_until",
     "reference_table",
     "FAMILIES",
 ]
@@ -241,21 +242,49 @@ def fit_envelope(path: "_Curve", envelope: Envelope, max_rounds: int = 60):
 
     Accelerations scale with the square of the factor and their per-slot changes with its square
     (jumps at curvature breaks) to cube (smooth paths), so the first guess is the cube root of the
-    worst ratio; the factor is then shrunk by 2 % until every slot passes.
+    worst ratio; the factor is then shrunk by 2 % until every slot passes. Extreme configs (an
+    envelope many orders of magnitude below the path's demand) fall back to halving the factor,
+    which always ends: a standing path demands nothing.
     """
     t = np.arange(envelope.num_steps) * envelope.slot_s
-    ratio = envelope_violation(path.evaluate(t), envelope.accel_max, envelope.increment_max)
-    if ratio <= 1.0:
+
+    def fits(candidate) -> bool:
+        return envelope_violation(candidate.evaluate(t), envelope.accel_max, envelope.increment_max) <= 1.0
+
+    if fits(path):
         return path
-    factor = ratio ** (-1.0 / 2.0)
+    factor = envelope_violation(path.evaluate(t), envelope.accel_max, envelope.increment_max) ** (-1.0 / 2.0)
     for _ in range(max_rounds):
         candidate = replace(path, warp=path.warp.scaled(factor))
-        if envelope_violation(candidate.evaluate(t), envelope.accel_max, envelope.increment_max) <= 1.0:
+        if fits(candidate):
             return candidate
         factor *= 0.98
-    raise RuntimeError(  # pragma: no cover - the factor shrinks to 0.3 of the first guess; a guard
-        f"could not fit {type(path).__name__} into the envelope (a_max {envelope.accel_max}, "
-        f"increment {envelope.increment_max})")
+    return slowed_until(path, fits, factor)
+
+
+def slowed_until(path: "_Curve", accept, first: float = 1.0, refine: int = 30):
+    """``path`` slowed by a uniform time scaling in (0, ``first``] that ``accept`` takes: halvings
+    until one is accepted (a path slowed to a standstill demands nothing and stays where it
+    starts), then ``refine`` bisection steps back up towards the largest accepted factor."""
+    low, high = first, first
+    candidate = replace(path, warp=path.warp.scaled(low))
+    for _ in range(2000):
+        if accept(candidate):
+            break
+        high, low = low, low / 2.0
+        candidate = replace(path, warp=path.warp.scaled(low))
+    else:  # pragma: no cover - 2000 halvings pass 1e-600: below any float
+        raise RuntimeError(f"no time scaling of {type(path).__name__} is accepted")
+    if high == low:
+        return candidate
+    for _ in range(refine):
+        mid = 0.5 * (low + high)
+        trial = replace(path, warp=path.warp.scaled(mid))
+        if accept(trial):
+            low, candidate = mid, trial
+        else:
+            high = mid
+    return candidate
 
 
 def _scaled(area_m, x: float, y: float) -> tuple[float, float]:
@@ -289,7 +318,7 @@ def paper_paths(num_agvs: int, area_m=(0.0, 200.0, 0.0, 200.0), envelope: Envelo
     return paths if envelope is None else [fit_envelope(p, envelope) for p in paths]
 
 
-def _random_path(rng: np.random.Generator, family: str, area_m) -> _Curve:
+def _random_path(rng: np.random.Generator, family: str, area_m, margin: float = 2.0) -> _Curve:
     x0, x1, y0, y1 = area_m
     width, height = x1 - x0, y1 - y0
     s = min(width, height) / 200.0
@@ -306,7 +335,7 @@ def _random_path(rng: np.random.Generator, family: str, area_m) -> _Curve:
                                         phi=rng.uniform(0, 2 * math.pi)))
     if family == "rounded_rectangle":
         hx, hy = rng.uniform(0.1, 0.2) * width, rng.uniform(0.1, 0.2) * height
-        center = (rng.uniform(x0 + hx + 2, x1 - hx - 2), rng.uniform(y0 + hy + 2, y1 - hy - 2))
+        center = (rng.uniform(x0 + hx + margin, x1 - hx - margin), rng.uniform(y0 + hy + margin, y1 - hy - margin))
         sign = rng.choice([-1.0, 1.0])
         return RoundedRectangle(center=center, half_width=hx, half_height=hy, radius=rng.uniform(6, 12) * s,
                                 warp=TimeWarp(w=sign * speed, theta0=rng.uniform(0, 100), a=sign * var * speed / nu,
@@ -343,22 +372,26 @@ def _inside(table: np.ndarray, area_m, margin: float) -> bool:
 
 
 def random_paths(rng: np.random.Generator, num_agvs: int, families, area_m, duration_s: float,
-                 margin_m: float = 2.0, max_tries: int = 200, envelope: Envelope | None = None) -> list[_Curve]:
+                 margin_m: float = 2.0, max_tries: int = 20, envelope: Envelope | None = None) -> list[_Curve]:
     """Draw ``num_agvs`` paths from ``families`` (seeded by ``rng``), each inside the area
-    (with ``margin_m``) over ``[0, duration_s]``; draws that leave the area are redrawn. With
-    ``envelope`` each draw is slowed into it (:func:`fit_envelope`) before the area check."""
-    t = np.linspace(0.0, duration_s, max(2, int(duration_s * 4) + 1))
+    (with ``margin_m``, at most 5 % of the shorter side) over ``[0, duration_s]``; draws that leave
+    the area are redrawn. With ``envelope`` each draw is slowed into it (:func:`fit_envelope`)
+    before the area check. The families are sized to fit a 60 s episode (a draw needs at most one
+    retry there); when ``max_tries`` draws all leave the area (long episodes, where an open
+    sinusoid walks out), the last draw is slowed down until it stays inside."""
+    t = np.linspace(0.0, duration_s, max(2, int(min(duration_s, 1e5) * 4) + 1))
+    margin = min(margin_m, 0.05 * min(area_m[1] - area_m[0], area_m[3] - area_m[2]))
     paths = []
     for _ in range(num_agvs):
         family = families[int(rng.integers(len(families)))]
         for _ in range(max_tries):
-            path = _random_path(rng, family, area_m)
+            path = _random_path(rng, family, area_m, margin)
             if envelope is not None:
                 path = fit_envelope(path, envelope)
-            if _inside(path.evaluate(t), area_m, margin_m):
+            if _inside(path.evaluate(t), area_m, margin):
                 break
-        else:  # pragma: no cover - the families are sized to fit; this is a guard, not a path
-            raise RuntimeError(f"could not draw a {family!r} path inside area_m={area_m} in {max_tries} tries")
+        else:
+            path = slowed_until(path, lambda p: _inside(p.evaluate(t), area_m, margin))
         paths.append(path)
     return paths
 

@@ -155,6 +155,7 @@ class ObservationLayout:
         }
         self._ref_source = None
         self._windows = None
+        self._chunk_start = 0
         self._buffer = np.zeros(self.size)
         self._views = self._make_views()
 
@@ -193,30 +194,38 @@ class ObservationLayout:
         names += ["rel_drone_x", "rel_drone_y", "outage_prob", "delivered", "power_frac"]
         return names + ["drone_x", "drone_y", "time_frac"]
 
-    def reference_windows(self, reference: np.ndarray) -> np.ndarray:
-        """Scaled windows for every slot: (K, slots, 6 (N_p+1)), positions relative to slot n's."""
+    #: Reference windows are precomputed for this many slots at a time (memory K x 256 x 6 (N_p+1)
+    #: floats, whatever the episode length).
+    window_chunk = 256
+
+    def reference_windows(self, reference: np.ndarray, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Scaled windows for slots ``start:stop`` (default: every slot): (K, slots, 6 (N_p+1)),
+        positions relative to slot n's."""
         k, steps, _ = reference.shape
-        slots = steps - self.window + 1
-        idx = np.arange(slots)[:, None] + np.arange(self.window)[None, :]
+        last = steps - self.window + 1
+        stop = last if stop is None else min(stop, last)
+        idx = np.arange(start, stop)[:, None] + np.arange(self.window)[None, :]
         win = reference[:, idx].copy()  # (K, slots, W, 6)
-        win[..., 0:2] -= reference[:, :slots, None, 0:2]
-        return (win * self._ref_scale).reshape(k, slots, -1)
+        win[..., 0:2] -= reference[:, start:stop, None, 0:2]
+        return (win * self._ref_scale).reshape(k, stop - start, -1)
 
     def encode(self, sim) -> np.ndarray:
         """Observation of a :class:`~lawn_env.core.Simulation` at its current slot (a new array).
 
         Filled into a persistent float64 buffer through fixed views, then cast once: this runs
-        every env step, so the reference windows are precomputed per episode.
+        every env step, so the reference windows are precomputed, ``window_chunk`` slots at a time.
         """
-        if sim.reference is not self._ref_source:
+        n = sim.slot
+        if sim.reference is not self._ref_source or not self._chunk_start <= n < self._chunk_start + self._windows.shape[1]:
             self._ref_source = sim.reference
-            self._windows = self.reference_windows(sim.reference)
+            self._chunk_start = n
+            self._windows = self.reference_windows(sim.reference, n, n + self.window_chunk)
         v_state, v_err, v_ref, v_rel, v_out, v_del, v_pow, v_drone = self._views
         q = sim.drone_position
         np.multiply(sim.x_obs, self._state_scale, out=v_state)
         v_state -= self._state_shift_scaled
         np.multiply(sim.error_obs, self._ref_scale, out=v_err)
-        v_ref[:] = self._windows[:, sim.slot]
+        v_ref[:] = self._windows[:, n - self._chunk_start]
         np.subtract(q, self.center, out=v_drone)
         v_drone *= self._inv_half
         np.subtract(v_state[:, 0:2], v_drone, out=v_rel)  # (pos - q) / half-extent

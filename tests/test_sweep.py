@@ -1,3 +1,4 @@
+import csv
 import json
 import os
 import signal
@@ -220,3 +221,38 @@ def test_killed_sweep_leaves_no_worker_processes(tmp_path, sig):
         time.sleep(0.1)
     assert _session_processes(proc.pid) == []
     assert len(read_rows(table)[0]) >= 2
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_sweep_killed_twenty_times_then_resumed_equals_the_clean_table(tmp_path):
+    """Issue #12: `lawn sweep --workers 2` killed at 20 random moments (SIGKILL or SIGTERM), resumed
+    each time, then finished, writes the same file as an uninterrupted sweep, byte for byte apart
+    from the decision-time columns; no process outlives a kill."""
+    spec = dict(SPEC, seeds=8, set={"num_slots": 30}, policies=["epa", "pid", "lqr"])
+    spec_file = tmp_path / "spec.json"
+    spec_file.write_text(json.dumps(spec))
+    clean, table = tmp_path / "clean.csv", tmp_path / "killed.csv"
+    base = [sys.executable, "-m", "training.cli", "sweep", str(spec_file), "--workers", "2", "--quiet", "--out"]
+    subprocess.run(base + [str(clean)], cwd=os.getcwd(), check=True)
+    rng = np.random.default_rng(12)
+    for _ in range(20):
+        proc = subprocess.Popen(base + [str(table)], cwd=os.getcwd(), start_new_session=True,
+                                stderr=subprocess.DEVNULL)
+        time.sleep(float(rng.uniform(1.0, 4.0)))
+        proc.send_signal(signal.SIGKILL if rng.random() < 0.5 else signal.SIGTERM)
+        proc.wait()
+        deadline = time.time() + 10
+        while time.time() < deadline and _session_processes(proc.pid):
+            time.sleep(0.1)
+        assert _session_processes(proc.pid) == []
+    assert len(read_table(table)) < 48, "the kills should interrupt the sweep"
+    subprocess.run(base + [str(table)], cwd=os.getcwd(), check=True)
+
+    def without_timing(path):
+        lines = path.read_text().splitlines()
+        header = lines[0].split(",")
+        timing = {i for i, name in enumerate(header) if name.startswith("decision_time")}
+        return [[v for i, v in enumerate(row) if i not in timing] for row in csv.reader(lines)]
+
+    assert without_timing(table) == without_timing(clean)

@@ -22,16 +22,17 @@ from pathlib import Path
 
 import lawn_env
 from agents.errors import MissingExtra
+from agents.runs import read_json
 from lawn_env import presets
 
 
-def _parse_overrides(items: list[str]) -> dict:
+def _parse_overrides(items: list[str], flag: str = "--set") -> dict:
     """``key=value`` pairs with dotted keys; values parsed as JSON when possible."""
     out = {}
     for item in items:
-        if "=" not in item:
-            raise SystemExit(f"--set expects key=value (e.g. channel.blocklength=256), got {item!r}")
-        key, raw = item.split("=", 1)
+        key, _, raw = item.partition("=")
+        if not _ or not key.strip():
+            raise ValueError(f"{flag} expects KEY=VALUE (e.g. channel.blocklength=256), got {item!r}")
         try:
             out[key] = json.loads(raw)
         except json.JSONDecodeError:
@@ -66,7 +67,7 @@ def cmd_demo(args) -> int:
 
 
 def _policy_kwargs(items: list[str]) -> dict:
-    return _parse_overrides(items)
+    return _parse_overrides(items, "--policy-arg")
 
 
 def cmd_evaluate(args) -> int:
@@ -114,7 +115,10 @@ def cmd_gap(args) -> int:
     from .gap import convergence, format_gap_table, global_power_shares, run_gap, summarize_gaps, write_gap_outputs
 
     cfg = _config(args)
-    global_settings = _parse_overrides(args.global_arg)
+    bad = [s for s in args.convergence_slots if not 0 <= s < cfg.num_slots]
+    if bad:
+        raise ValueError(f"--convergence-slots {bad}: slots must lie in [0, {cfg.num_slots - 1}] (the episode's slots)")
+    global_settings = _parse_overrides(args.global_arg, "--global-arg")
     for name in args.policies + [args.driver]:
         make_policy(name, cfg)  # fail fast
     make_policy("global-mpc", cfg, **global_settings)
@@ -165,7 +169,7 @@ def cmd_train(args) -> int:
         if args.timesteps is None:
             raise ValueError("lawn train needs --timesteps")
         kwargs = dict(algo=args.algo, env_id=args.env, config=_config(args), timesteps=args.timesteps,
-                      hp_overrides=_parse_overrides(args.hp), n_envs=args.n_envs, eval_every=args.eval_every,
+                      hp_overrides=_parse_overrides(args.hp, "--hp"), n_envs=args.n_envs, eval_every=args.eval_every,
                       eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every,
                       init_from=Path(args.init_from) if args.init_from else None, interface=args.interface)
         if args.seeds:
@@ -228,6 +232,8 @@ def cmd_sweep(args) -> int:
 def cmd_figures(args) -> int:
     from .figures import make_figures
 
+    if args.docs and args.quick:
+        raise ValueError("--docs writes the published reproduction; it takes the full set, not --quick")
     start = time.perf_counter()
     timings = make_figures(args.names, Path(args.out), quick=args.quick, workers=args.workers, progress=not args.quiet)
     for name, seconds in timings.items():
@@ -240,8 +246,6 @@ def cmd_figures(args) -> int:
     (Path(args.out) / "claims.md").write_text(table + "\n")
     print(table)
     if args.docs:
-        if args.quick:
-            raise SystemExit("lawn figures: --docs writes the published reproduction; it takes the full set, not --quick")
         print(f"wrote {write_reproduction(Path(args.out), Path(args.docs))}")
     return 0
 
@@ -278,10 +282,7 @@ def _included(paths: list[str]) -> list[str]:
     """Policy names for trained run directories: marl:, bc: or sb3: by what run.json says."""
     names = []
     for path in paths:
-        run_file = Path(path) / "run.json"
-        if not run_file.exists():
-            raise ValueError(f"--include {path}: no run.json there (not a lawn train run directory)")
-        run = json.loads(run_file.read_text())
+        run = read_json(Path(path) / "run.json", "--include", "not a lawn train run directory")
         prefix = "marl" if run.get("env") == "lawn/Parallel-v0" else "bc" if run.get("trainer") == "bc" else "sb3"
         names.append(f"{prefix}:{path}")
     return names
@@ -290,8 +291,15 @@ def _included(paths: list[str]) -> list[str]:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="lawn", description="Wireless predictive control over low-altitude networks.")
     parser.add_argument("--version", action="version", version=f"lawn {lawn_env.__version__}")
+    parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
+    debug = argparse.ArgumentParser(add_help=False)  # --debug also after the subcommand
+    debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="on an error, show the traceback")
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="one seeded episode of lawn/Joint-v0 under a scripted policy")
+
+    def command(name: str, **kwargs) -> argparse.ArgumentParser:
+        return sub.add_parser(name, parents=[debug], **kwargs)
+
+    demo = command("demo", help="one seeded episode of lawn/Joint-v0 under a scripted policy")
     demo.add_argument("--seed", type=_SEED, default=0)
     demo.add_argument("--out", default="runs/demo", help="output directory (default: %(default)s)")
     _add_config_args(demo)
@@ -300,7 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
     from agents import BENCHMARK_POLICIES, policy_names
 
     workers_default = min(2, os.cpu_count() or 1)
-    ev = sub.add_parser("evaluate", help="run a policy on seeded episodes and write one row per episode")
+    ev = command("evaluate", help="run a policy on seeded episodes and write one row per episode")
     ev.add_argument("--policy", required=True, type=_policy_name,
                     help=f"{', '.join(policy_names())}, or zoo:NAME / sb3:DIR / bc:DIR / marl:DIR for learned agents")
     ev.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
@@ -315,7 +323,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_args(ev)
     ev.set_defaults(func=cmd_evaluate)
 
-    bm = sub.add_parser("benchmark", help="the expert and the baselines on the same seeded episodes")
+    bm = command("benchmark", help="the expert and the baselines on the same seeded episodes")
     bm.add_argument("--policies", nargs="+", default=list(BENCHMARK_POLICIES), type=_policy_name,
                     help=f"{', '.join(policy_names())}, or zoo:NAME / sb3:DIR / bc:DIR / marl:DIR (default: "
                          f"{' '.join(BENCHMARK_POLICIES)})")
@@ -332,7 +340,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .train import ALGOS, TRAIN_ENV_IDS
 
-    tr = sub.add_parser("train", help="train a Stable-Baselines3 agent (or behaviour cloning) on a lawn env")
+    tr = command("train", help="train a Stable-Baselines3 agent (or behaviour cloning) on a lawn env")
     tr.add_argument("--algo", choices=ALGOS)
     tr.add_argument("--env", choices=TRAIN_ENV_IDS, help="lawn/Parallel-v0 is the multi-agent PettingZoo env")
     tr.add_argument("--timesteps", type=_COUNT, help="environment steps (for bc: expert transitions)")
@@ -358,7 +366,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_args(tr)
     tr.set_defaults(func=cmd_train)
 
-    zo = sub.add_parser("zoo", help="shipped learned agents: list them, train their recipes, benchmark and export")
+    zo = command("zoo", help="shipped learned agents: list them, train their recipes, benchmark and export")
     zo.add_argument("action", nargs="?", default="list", choices=["list", "train", "build"])
     zo.add_argument("--runs", default="runs/agents", help="training runs, one folder per recipe (default: %(default)s)")
     zo.add_argument("--only", nargs="+", metavar="NAME", help="train only these recipes")
@@ -368,7 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
     zo.add_argument("--quiet", action="store_true")
     zo.set_defaults(func=cmd_zoo)
 
-    sw = sub.add_parser("sweep", help="run a grid of config fields x policies x seeds into a tidy table")
+    sw = command("sweep", help="run a grid of config fields x policies x seeds into a tidy table")
     sw.add_argument("spec", help="sweep spec (YAML or JSON)")
     sw.add_argument("--out", required=True, help="table (CSV); finished rows are skipped on rerun")
     sw.add_argument("--workers", type=_COUNT, default=workers_default)
@@ -381,7 +389,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .figures import EXPERIMENTS
 
-    fg = sub.add_parser("figures", help="the paper's experiments from tidy tables (running missing sweeps)")
+    fg = command("figures", help="the paper's experiments from tidy tables (running missing sweeps)")
     fg.add_argument("names", nargs="*", choices=[[]] + list(EXPERIMENTS), metavar="NAME",
                     help=f"figures to make (default: all): {', '.join(EXPERIMENTS)}")
     fg.add_argument("--out", default="runs/figures")
@@ -392,7 +400,7 @@ def build_parser() -> argparse.ArgumentParser:
     fg.add_argument("--quiet", action="store_true")
     fg.set_defaults(func=cmd_figures)
 
-    gp = sub.add_parser("gap", help="per-slot optimality gap of planners against the global reference")
+    gp = command("gap", help="per-slot optimality gap of planners against the global reference")
     gp.add_argument("--policies", nargs="+", default=["ao-mpc", "rg-mpc"], choices=policy_names())
     gp.add_argument("--driver", default="ao-mpc", choices=policy_names(), help="policy that runs the episodes")
     gp.add_argument("--episodes", type=_COUNT, default=5)
@@ -432,17 +440,43 @@ def _check_out(command: str, out) -> None:
         raise ValueError(f"--out {str(path)!r}: cannot write to {str(folder)!r} ({exc.strerror or exc})") from None
 
 
+def _one_line(exc: BaseException) -> str:
+    """A config validation error as ``field: message (got value)``, several joined by ``; ``."""
+    from pydantic import ValidationError
+
+    if isinstance(exc, ValidationError):
+        parts = []
+        for err in exc.errors():
+            field = ".".join(str(p) for p in err["loc"]) or exc.title
+            parts.append(f"{field}: {err['msg']} (got {err['input']!r})" if "input" in err else f"{field}: {err['msg']}")
+        return f"invalid {exc.title}: " + "; ".join(parts)
+    return " ".join(str(exc).split("\n")) if str(exc) else type(exc).__name__
+
+
 def main(argv: list[str] | None = None) -> int:
+    """The ``lawn`` command. Errors print one line and exit non-zero (2: bad input, 3: a missing
+    extra, 130: interrupted, 1: anything else, which is a bug); ``--debug`` shows the traceback."""
     args = build_parser().parse_args(argv)
     try:
         _check_out(args.command, getattr(args, "out", None))
         return args.func(args)
-    except ValueError as exc:  # bad config values or names: one clear line, no traceback
-        print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except MissingExtra as exc:
-        print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
-        return 3
+    except BaseException as exc:
+        if args.debug or isinstance(exc, SystemExit):
+            raise
+        if isinstance(exc, KeyboardInterrupt):
+            print(f"lawn {args.command}: interrupted", file=sys.stderr)
+            return 130
+        if isinstance(exc, MissingExtra):
+            print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
+            return 3
+        if isinstance(exc, (ValueError, TypeError, OSError)):  # bad values, names, files: one clear line
+            print(f"lawn {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+            return 2
+        if isinstance(exc, Exception):
+            print(f"lawn {args.command}: internal error: {type(exc).__name__}: {exc} "
+                  "(rerun with --debug for the traceback, and please report it)", file=sys.stderr)
+            return 1
+        raise
 
 
 if __name__ == "__main__":

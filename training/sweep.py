@@ -257,9 +257,10 @@ def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: 
     if max_runs is not None:
         tasks = tasks[:max_runs]
     if not tasks:
-        if dropped:
-            _write_atomic(rows, table)
-        return rows
+        ordered = _canonical(rows, wanted)
+        if dropped or ordered != rows:
+            _write_atomic(ordered, table)
+        return ordered
     from tqdm.auto import tqdm
 
     bar = tqdm(total=len(tasks), desc=spec["name"], unit="run", disable=None if progress else True, leave=False)
@@ -270,7 +271,19 @@ def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: 
             bar.update()
     finally:
         bar.close()
-    return read_rows(table)[0]
+    rows = read_rows(table)[0]
+    if all(k in {_key(r) for r in rows} for k in wanted):  # complete: one order, however it was interrupted
+        _write_atomic(_canonical(rows, wanted), table)
+        rows = read_rows(table)[0]
+    return rows
+
+
+def _canonical(rows: list[dict], wanted: Mapping[tuple, Any]) -> list[dict]:
+    """Rows in the spec's order (grid point, policy, seed), rows of other specs (``extend``) first
+    as they were: a finished table is the same file whatever order its runs finished in."""
+    rank = {key: i for i, key in enumerate(wanted)}
+    foreign = [r for r in rows if _key(r) not in rank]
+    return foreign + sorted((r for r in rows if _key(r) in rank), key=lambda r: rank[_key(r)])
 
 
 def execute(fn, tasks, workers: int, backend: str):
