@@ -312,3 +312,34 @@ def test_zoo_command_lists_the_shipped_agents(capsys):
         assert f"zoo:{name}" in printed
     assert main(["zoo", "build", "--runs", "/nonexistent/runs", "--quiet"]) == 2
     assert "no finished recipe runs" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_sigkilled_lawn_train_resumes_to_the_uninterrupted_counts(tmp_path):
+    """The same as the in-process kill, with a real SIGKILL of the command line mid-run."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from training.checkpoints import latest_checkpoint
+
+    def cmd(out):
+        return [sys.executable, "-m", "training.cli", "train", "--algo", "ppo", "--env", "lawn/Joint-v0",
+                "--timesteps", "2048", "--seed", "3", "--out", str(out), "--n-envs", "2", "--eval-every", "256",
+                "--eval-episodes", "1", "--checkpoint-every", "256", "--quiet", "--set", "num_slots=12",
+                "--hp", "n_steps=64", "--hp", "batch_size=64", "--hp", "n_epochs=2"]
+
+    subprocess.run(cmd(tmp_path / "whole"), check=True, cwd=os.getcwd())
+    proc = subprocess.Popen(cmd(tmp_path / "killed"), cwd=os.getcwd())
+    deadline = time.time() + 120
+    while time.time() < deadline and (latest_checkpoint(tmp_path / "killed") is None
+                                      or latest_checkpoint(tmp_path / "killed").steps < 768):
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not (tmp_path / "killed" / "model.zip").exists(), "kill it before the end"
+    subprocess.run([sys.executable, "-m", "training.cli", "train", "--resume", str(tmp_path / "killed"), "--quiet"],
+                   check=True, cwd=os.getcwd())
+    assert _history(tmp_path / "killed")[:3] == _history(tmp_path / "whole")[:3]

@@ -203,6 +203,9 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
                          f"{checkpoint.steps} steps")
     spec["timesteps"] = target
     spec.pop("num_timesteps", None)
+    if checkpoint is None and any((out_dir / "checkpoints").glob("model_*_steps.zip")):
+        raise ValueError(f"--resume {out_dir}: its checkpoints (checkpoints/model_<N>_steps.zip) were written by an "
+                         "older lawn, which checkpointed before the update; retrain the run")
     if checkpoint is None:  # killed before its first checkpoint: start over, cleanly
         clear_history(out_dir)
         spec["wall_time_s"] = 0.0
