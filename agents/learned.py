@@ -23,6 +23,7 @@ from lawn_env.interface import ActionLayout, RLInterface, resolve_interface
 
 from .errors import MissingExtra
 from .policies import COMM, JOINT, Policy
+from .runs import read_json
 
 __all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "LOADERS", "ZOO_DIR", "zoo_agents", "export_agent"]
 
@@ -35,7 +36,7 @@ def _read_run(path: Path) -> dict:
     path = Path(path)
     if not (path / "run.json").exists() or not (path / "model.zip").exists():
         raise ValueError(f"{path} is not a lawn train run directory (needs run.json and model.zip)")
-    return json.loads((path / "run.json").read_text())
+    return read_json(path / "run.json")
 
 
 def _sb3():
@@ -147,7 +148,7 @@ class SB3Policy(Policy):
             raise ValueError(f"{path} was trained on {trained_env}; use marl:{path} for multi-agent runs")
         if env_id not in (None, trained_env):
             raise ValueError(f"{path} was trained on {trained_env}, not {env_id}")
-        trained_config = ScenarioConfig.from_dict(json.loads((path / "config.json").read_text()))
+        trained_config = ScenarioConfig.from_dict(read_json(path / "config.json"))
         model = _load_model(path, run.get("target", run["algo"]))
         return cls(model, config if config is not None else trained_config, trained_env, run.get("interface"),
                    ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}")
@@ -198,7 +199,7 @@ class MARLPolicy(Policy):
             raise ValueError(f"{path} was trained on {run['env']}, not the multi-agent env; use sb3:{path}")
         if env_id not in (None, JOINT):
             raise ValueError(f"{path} is a multi-agent policy; it drives {JOINT}, not {env_id}")
-        trained_config = ScenarioConfig.from_dict(json.loads((path / "config.json").read_text()))
+        trained_config = ScenarioConfig.from_dict(read_json(path / "config.json"))
         return cls(_load_model(path, run["algo"]), config if config is not None else trained_config,
                    run.get("interface"), ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}")
 
@@ -250,7 +251,7 @@ def export_agent(run_dir: Path, out_dir: Path, record: dict[str, Any]) -> Path:
     if normalizer is not None:
         normalizer.save(out_dir / "normalizer.npz")
     agent = {"algo": algo, "env": run["env"], "interface": run.get("interface"),
-             "config": json.loads((run_dir / "config.json").read_text()), **record}
+             "config": read_json(run_dir / "config.json"), **record}
     (out_dir / "agent.json").write_text(json.dumps(agent, indent=2) + "\n")
     return out_dir
 

@@ -134,7 +134,7 @@ def check_config(ov: dict) -> str:
                 policy.reset(0)
                 action = policy.act(obs)
                 assert env.action_space.contains(action), name
-                env.step(action)
+            assert _finite(env.step(action)[0])
         _, peak = tracemalloc.get_traced_memory()
         assert peak < 2 << 30, f"{peak / 2**30:.1f} GiB: unbounded memory"
     finally:

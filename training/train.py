@@ -14,7 +14,8 @@ One run directory holds everything needed to reload, evaluate, resume or audit t
                        episodes of the unmodified scenario on the validation seeds
 ``learning_curve.png`` the same, plotted
 ``summary.md``         a short human-readable summary
-``checkpoints/``       periodic checkpoints (model and normalization), used by ``--resume``
+``checkpoints/<N>/``   the newest checkpoint (model, normalization, replay buffer, selected model,
+                       history lengths; :mod:`training.checkpoints`), used by ``--resume``
 ``tb/``                TensorBoard logs
 =====================  ==========================================================
 
