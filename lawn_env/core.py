@@ -18,7 +18,7 @@ from scipy import special
 
 from . import channel, drone, references
 from .config import ScenarioConfig
-from .dynamics import PredictionModel, packed_step_matrices, stage_cost
+from .dynamics import PredictionModel, packed_step_matrices
 
 __all__ = ["Simulation", "Snapshot", "SlotRecord"]
 
@@ -88,6 +88,8 @@ class Simulation:
         self._q2 = np.asarray(config.control.q2_diag, dtype=float)
         self._packed_t, self._packed_w = packed_step_matrices(self.model.a_aug, self.model.b_aug, self._q1, self._q2)
         self._a_aug_t = np.ascontiguousarray(self.model.a_aug.T)
+        # effect of a slot's acceleration on [position, velocity]: A~'s u[n-1] columns (the lag's correction)
+        self._accel_effect_t = np.ascontiguousarray(self.model.a_aug[0:4, 4:6].T)
         self._b_aug_t = np.ascontiguousarray(self.model.b_aug.T)
         self._envelope = references.Envelope.from_config(config, self.num_slots + self.horizon + 1)
         self._paper_paths = (references.paper_paths(self.num_agvs, self.area, self._envelope)
@@ -185,20 +187,36 @@ class Simulation:
         feasible next drone position (use :meth:`drone_target`); the simulator keeps references to
         ``power_w`` and ``drone_next``, so pass fresh arrays. Commands are sent from q[n]
         to the AGVs at their slot-n positions and arrive with the sampled fading.
+
+        One path for the nominal model and the disturbance mode (MODEL.md §7): when it is on, wind
+        moves the drone after its planned move, commands go out only every
+        ``control_period_slots``, the applied AGV acceleration lags the commanded one, the AGV
+        state takes process noise and what the policies observe takes measurement noise; the
+        channel, the transition and the costs are the same equations either way.
         """
-        if self._disturbed:
-            return self._step_disturbed(increment, power_w, drone_next)
+        disturbed = self._disturbed
+        d = self.config.disturbance
+        rng = self.rng
+        if disturbed:
+            wind = np.asarray(d.wind_mps, dtype=float)
+            if d.wind_gust_std_mps > 0:
+                wind = wind + rng.normal(0.0, d.wind_gust_std_mps, 2)
+            drone_next = np.clip(np.asarray(drone_next, dtype=float) + wind * self.slot_s, self._area_lo, self._area_hi)
         x_aug = self.x_aug
         du = self.saturate_increment(increment)
+        if disturbed and self.slot % d.control_period_slots:
+            du[:] = 0.0  # no command this slot (reduced control rate): nothing is sent
         link = self.link
         diff = x_aug[:, 0:2] - drone_next
         d2 = (diff * diff) @ self._ones2 + self._altitude_sq  # channel.distance_sq, inlined (hot)
         x = link.outage_argument_sq(power_w, d2)
         outage_p = special.gammainc(link.m, x)
-        delivered = channel.delivered_from_fading(channel.sample_normalized_fading(self.rng, link.m, self.num_agvs), x)
+        delivered = channel.delivered_from_fading(channel.sample_normalized_fading(rng, link.m, self.num_agvs), x)
         du *= delivered[:, None]
         # step_augmented and stage_cost in one pass on packed rows [x~, du] (dynamics.packed_step_matrices)
         packed = np.concatenate((x_aug, du), axis=1) @ self._packed_t  # [x~[n+1], du]
+        if disturbed:
+            self._disturb(packed, x_aug[:, 4:6] + du)
         self.slot += 1
         err = packed - self._reference_packed[:, self.slot]  # [x~[n+1] - x~_ref[n+1], du]
         terms = (err * err) @ self._packed_w
@@ -206,57 +224,33 @@ class Simulation:
         x_next = packed[:, 0:6]
         self.x_aug = self.x_obs = x_next
         self.tracking_error = self.error_obs = err[:, 0:6]
+        if disturbed:
+            self._observe()
         return self._record(SlotRecord(tracking, effort, delivered, outage_p, du, power_w, drone_next, x_next[:, 0:2]))
 
+    def _disturb(self, packed: np.ndarray, commanded: np.ndarray) -> None:
+        """The disturbance mode's changes to the transition, in place on the packed rows: the
+        actuator lag moves the AGV with the applied acceleration instead of the commanded u[n]
+        (the difference enters through A~'s acceleration column, the same model), and process
+        noise perturbs position and velocity."""
+        d = self.config.disturbance
+        if d.actuator_lag_s > 0:
+            applied = self._lag_alpha * self._applied + (1.0 - self._lag_alpha) * commanded
+            packed[:, 0:4] += (applied - commanded) @ self._accel_effect_t
+            self._applied = applied
+        if d.process_noise_position_m > 0:
+            packed[:, 0:2] += self.rng.normal(0.0, d.process_noise_position_m, (self.num_agvs, 2))
+        if d.process_noise_velocity_mps > 0:
+            packed[:, 2:4] += self.rng.normal(0.0, d.process_noise_velocity_mps, (self.num_agvs, 2))
+
     def _record(self, record: SlotRecord) -> SlotRecord:
-        """The slot's bookkeeping shared by both step paths (the AGV state is already updated)."""
+        """The slot's bookkeeping (the AGV state is already updated)."""
         self.drone_position = record.drone_position
         self.last_power_w = record.power_w
         self.last_delivered = record.delivered
         self.last_outage_probability = record.outage_probability
         self.history.append(record)
         return record
-
-    def _step_disturbed(self, increment, power_w, drone_next) -> SlotRecord:
-        """The slot with the disturbance mode on (MODEL.md §7): wind moves the drone after its
-        planned move, commands go out only every ``control_period_slots``, the applied AGV
-        acceleration lags the commanded one, the AGV state takes process noise, and what the
-        policies observe takes measurement noise. Same equations otherwise (channel, costs)."""
-        d = self.config.disturbance
-        rng = self.rng
-        wind = np.asarray(d.wind_mps, dtype=float)
-        if d.wind_gust_std_mps > 0:
-            wind = wind + rng.normal(0.0, d.wind_gust_std_mps, 2)
-        drone_next = np.clip(np.asarray(drone_next, dtype=float) + wind * self.slot_s, self._area_lo, self._area_hi)
-        x_aug = self.x_aug
-        du = self.saturate_increment(increment)
-        if self.slot % d.control_period_slots:
-            du[:] = 0.0  # no command this slot (reduced control rate): nothing is sent
-        d2 = channel.distance_sq(drone_next, x_aug[:, 0:2], self.link.altitude_m)
-        x = self.link.outage_argument_sq(power_w, d2)
-        outage_p = special.gammainc(self.link.m, x)
-        delivered = channel.delivered_from_fading(channel.sample_normalized_fading(rng, self.link.m, self.num_agvs), x)
-        du *= delivered[:, None]
-        commanded = x_aug[:, 4:6] + du  # u[n], what the AGV's controller is told
-        applied = commanded if d.actuator_lag_s <= 0 else (
-            self._lag_alpha * self._applied + (1.0 - self._lag_alpha) * commanded)
-        self._applied = applied
-        dt = self.slot_s
-        x_next = np.empty_like(x_aug)
-        x_next[:, 0:2] = x_aug[:, 0:2] + x_aug[:, 2:4] * dt + 0.5 * applied * dt * dt
-        x_next[:, 2:4] = x_aug[:, 2:4] + applied * dt
-        x_next[:, 4:6] = commanded
-        if d.process_noise_position_m > 0:
-            x_next[:, 0:2] += rng.normal(0.0, d.process_noise_position_m, (self.num_agvs, 2))
-        if d.process_noise_velocity_mps > 0:
-            x_next[:, 2:4] += rng.normal(0.0, d.process_noise_velocity_mps, (self.num_agvs, 2))
-        self.slot += 1
-        err = x_next - self.reference[:, self.slot]
-        tracking, effort = stage_cost(err, du, self._q1, self._q2)
-        self.x_aug = x_next
-        self.tracking_error = err
-        self._observe()
-        return self._record(SlotRecord(tracking, effort, delivered, outage_p, du, power_w, drone_next, x_next[:, 0:2]))
 
     def _observe(self) -> None:
         """What the policies see: the state with measurement noise (the true state without it)."""
