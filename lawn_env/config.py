@@ -118,10 +118,12 @@ class ControlConfig:
     terminal weight Q3 solves a DARE that needs the position error in the cost) (paper: I6)."""
     q2_diag: tuple[float, float] = (1.0, 1.0)
     """Diagonal of the increment weight Q2 (2 entries in (0, 1e6], Q2 positive definite) (paper: I2)."""
-    accel_max_mps2: Annotated[float, Field(gt=0, le=100)] = 2.0
-    """Acceleration bound a_max per axis, m/s^2, in (0, 100] (10 g) *(decided)*."""
-    accel_increment_max_mps2: PositiveFloat = 1.0
-    """Increment bound per axis per slot, m/s^2 *(decided)*."""
+    accel_max_mps2: Annotated[float, Field(ge=0.01, le=100)] = 2.0
+    """Acceleration bound a_max per axis, m/s^2, in [0.01, 100] (10 g; observations are scaled by
+    it) *(decided)*."""
+    accel_increment_max_mps2: Annotated[float, Field(ge=0.001)] = 1.0
+    """Increment bound per axis per slot, m/s^2, at least 0.001 and at most 2 a_max (actions are
+    scaled by it) *(decided)*."""
 
     @model_validator(mode="after")
     def _check_weights(self) -> "ControlConfig":
