@@ -2,7 +2,8 @@
 
 Unwrapped environments, pre-sampled actions, one core; each figure is the best of
 ``--repeats`` timed runs of ``--steps`` steps (resets between episodes are excluded from the
-timing). Prints a table and checks the targets of issue #2:
+timing). Then the native vector envs at N = 1024 (``--num-envs``) beside Gymnasium's
+CartPoleVectorEnv, resets included. Prints the tables and checks the targets of issues #2 and #13:
 
 * ``lawn/Joint-v0`` at K = 4: at least 30,000 steps/s and within 7x of CartPole's step time;
 * ``lawn/Comm-v0`` at K = 4: at least 3,000 steps/s.
@@ -49,12 +50,31 @@ def measure(env_id: str, steps: int, repeats: int, seed: int = 0, **kwargs) -> f
     return steps / best
 
 
+def measure_vector(env_id: str, num_envs: int, steps: int, repeats: int, seed: int = 0, **kwargs) -> float:
+    """Env-steps per second of a native vector env (``vector_entry_point``): ``steps`` batched
+    steps of ``num_envs`` envs, autoresets included, best of ``repeats``."""
+    envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
+    envs.action_space.seed(seed)
+    actions = [envs.action_space.sample() for _ in range(16)]
+    best = float("inf")
+    for _ in range(repeats):
+        envs.reset(seed=seed)
+        start = time.perf_counter()
+        for i in range(steps):
+            envs.step(actions[i % 16])
+        best = min(best, time.perf_counter() - start)
+    envs.close()
+    return steps * num_envs / best
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--json", help="also write the figures to this JSON file")
     parser.add_argument("--markdown", help="also write the README's table of this run to this file")
+    parser.add_argument("--num-envs", type=int, default=1024, help="envs of the native vector envs (default: 1024)")
+    parser.add_argument("--vector-steps", type=int, default=300, help="batched steps per timed vector run")
     args = parser.parse_args(argv)
 
     rows = []
@@ -71,12 +91,22 @@ def main(argv=None) -> int:
     for env_id, k, rate in rows:
         print(f"{env_id:<16}{k!s:>4}{rate:>12,.0f}{1e6 / rate:>10.1f}{cartpole / rate:>17.1f}")
 
+    n = args.num_envs
+    vrows = [("CartPoleVectorEnv", "-", measure_vector("CartPole-v1", n, args.vector_steps, args.repeats))]
+    for k in (4, 32):
+        vrows.append(("lawn/Joint-v0", k, measure_vector("lawn/Joint-v0", n, args.vector_steps, args.repeats, num_agvs=k)))
+    print(f"native vector envs, N = {n} (env-steps/s, resets included)")
+    for env_id, k, rate in vrows:
+        print(f"{env_id:<18}{k!s:>4}{rate:>14,.0f}{vrows[0][2] / rate:>10.1f}x CartPoleVectorEnv time")
+
     joint4 = next(r for e, k, r in rows if e == "lawn/Joint-v0" and k == 4)
     comm4 = next(r for e, k, r in rows if e == "lawn/Comm-v0" and k == 4)
     checks = [
         ("Joint-v0 K=4 >= 30,000 steps/s", joint4 >= 30000),
         ("Joint-v0 K=4 within 7x of CartPole step time", cartpole / joint4 <= 7.0),
         ("Comm-v0 K=4 >= 3,000 steps/s", comm4 >= 3000),
+        (f"vector Joint-v0 K=4, N={n} >= 1,000,000 env-steps/s", vrows[1][2] >= 1e6),
+        (f"vector Joint-v0 K=32, N={n} >= 150,000 env-steps/s", vrows[2][2] >= 1.5e5),
     ]
     for name, ok in checks:
         print(f"[{'PASS' if ok else 'FAIL'}] {name}")
@@ -85,12 +115,17 @@ def main(argv=None) -> int:
                  f"{os.cpu_count()} cores, {platform.machine()}:", "",
                  "| env | K | steps/s | µs/step | × CartPole step time |", "|---|---|---|---|---|"]
         lines += [f"| {e} | {'–' if k == '-' else k} | {r:,.0f} | {1e6 / r:.1f} | {cartpole / r:.1f} |" for e, k, r in rows]
+        lines += ["", f"Native vector envs (`gym.make_vec(..., vectorization_mode=\"vector_entry_point\")`), "
+                  f"N = {n}, resets included:", "",
+                  "| env | K | env-steps/s | × CartPoleVectorEnv step time |", "|---|---|---|---|"]
+        lines += [f"| {e} | {'–' if k == '-' else k} | {r:,.0f} | {vrows[0][2] / r:.1f} |" for e, k, r in vrows]
         lines += [""] + [f"* [{'PASS' if ok else 'FAIL'}] {name}" for name, ok in checks]
         with open(args.markdown, "w") as fh:
             fh.write("\n".join(lines) + "\n")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"rows": [{"env": e, "K": k, "steps_per_s": r} for e, k, r in rows],
+                       "vector_rows": [{"env": e, "K": k, "num_envs": n, "env_steps_per_s": r} for e, k, r in vrows],
                        "checks": {n: ok for n, ok in checks}}, fh, indent=2)
     return 0 if all(ok for _, ok in checks) else 1
 

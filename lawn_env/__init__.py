@@ -6,7 +6,7 @@ builds the PettingZoo environment. The physics lives in :mod:`lawn_env.channel`,
 :mod:`lawn_env.dynamics`, :mod:`lawn_env.drone` and :mod:`lawn_env.references`.
 """
 
-from gymnasium.envs.registration import WrapperSpec, register, registry
+from gymnasium.envs.registration import register, registry
 
 from . import channel, dynamics, drone, presets, references
 from .config import ChannelConfig, ControlConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
@@ -30,14 +30,17 @@ RL_ENV_IDS = {
     "lawn/CommRL-v0": "lawn/Comm-v0",
 }
 
-#: Every id's episode length in its spec (``max_episode_steps``): the default ``num_slots``; the
-#: outermost wrapper :class:`lawn_env.wrappers.EpisodeLength` keeps the time limit and ``num_slots``
-#: in agreement for any other length.
-_EPISODE = dict(max_episode_steps=ScenarioConfig().num_slots, disable_env_checker=False,
-                additional_wrappers=(WrapperSpec("EpisodeLength", "lawn_env.wrappers:EpisodeLength", {}),))
+#: No registered time limit: the envs end their episodes themselves at ``num_slots`` (truncation),
+#: and a made env's ``spec.max_episode_steps`` reports that length (``LawnEnvBase.spec``). A
+#: registered limit could only disagree with a caller's ``num_slots``, and Gymnasium's native
+#: vector entry points admit no extra registered wrappers to reconcile the two.
+_EPISODE = dict(disable_env_checker=False)
+#: Native vector envs (``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")``).
+VECTOR_ENTRY_POINTS = {"lawn/Joint-v0": "lawn_env.envs.vector:JointVectorEnv"}
 for _env_id, _entry_point in ENV_IDS.items():
     if _env_id not in registry:
-        register(id=_env_id, entry_point=_entry_point, **_EPISODE)
+        register(id=_env_id, entry_point=_entry_point, vector_entry_point=VECTOR_ENTRY_POINTS.get(_env_id),
+                 **_EPISODE)
 for _env_id, _base in RL_ENV_IDS.items():
     if _env_id not in registry:
         register(id=_env_id, entry_point=ENV_IDS[_base], kwargs={"interface": "rl"}, **_EPISODE)

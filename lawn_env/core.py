@@ -20,7 +20,56 @@ from . import channel, drone, references
 from .config import ScenarioConfig
 from .dynamics import PredictionModel, packed_step_matrices
 
-__all__ = ["Simulation", "Snapshot", "SlotRecord"]
+__all__ = ["Simulation", "Snapshot", "SlotRecord", "initial_state", "saturate_increment", "transmit", "stage_terms"]
+
+
+# ---------------------------------------------------------------------- the slot's equations
+# Shape-generic over leading axes: (K, ...) for one scenario, (B, K, ...) for a batch of them
+# (lawn_env.batch). Every view of the simulation calls these.
+def initial_state(reference_start: np.ndarray, offsets: np.ndarray, area_lo: np.ndarray,
+                  area_hi: np.ndarray) -> np.ndarray:
+    """Augmented AGV states at slot 0: the reference start position plus ``offsets`` (kept in
+    the area), the reference velocity, zero previous acceleration. (..., K, 6) from the
+    reference's first slot (..., K, 6) and offsets (..., K, 2)."""
+    x_aug = np.zeros(reference_start.shape)
+    x_aug[..., 0:2] = np.clip(reference_start[..., 0:2] + offsets, area_lo, area_hi)
+    x_aug[..., 2:4] = reference_start[..., 2:4]
+    return x_aug
+
+
+def saturate_increment(u_prev: np.ndarray, du: np.ndarray, accel_max: float) -> np.ndarray:
+    """Increments clipped so that |u[n-1] + du| <= a_max per axis (the control set, by
+    saturation): a new array."""
+    u = u_prev + du
+    np.maximum(u, -accel_max, out=u)
+    np.minimum(u, accel_max, out=u)
+    u -= u_prev
+    return u
+
+
+def transmit(x_aug: np.ndarray, du: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray,
+             normalized_fading: np.ndarray, link: channel.LinkParams, altitude_sq: float, packed_t: np.ndarray):
+    """One slot's links and transition: the commands go from the drone at ``drone_next`` (..., 2)
+    to the AGVs (x_aug (..., K, 6)) with powers (..., K); those whose fading m|h|^2 reaches the
+    outage argument arrive. Returns the packed rows [x~[n+1], du] (..., K, 8) of the delivered
+    increments (dynamics.packed_step_matrices), ``delivered`` and the outage probabilities."""
+    diff = x_aug[..., 0:2] - drone_next[..., None, :]
+    d2 = (diff * diff) @ _ONES2 + altitude_sq  # channel.distance_sq, on squared distances
+    x = link.outage_argument_sq(power_w, d2)
+    outage_p = special.gammainc(link.m, x)
+    delivered = channel.delivered_from_fading(normalized_fading, x)
+    du = du * delivered[..., None]
+    return np.concatenate((x_aug, du), axis=-1) @ packed_t, delivered, outage_p
+
+
+def stage_terms(packed: np.ndarray, reference_packed: np.ndarray, packed_w: np.ndarray):
+    """The packed error [x~[n+1] - x~_ref[n+1], du] and the stage cost's two terms per AGV
+    (e' Q1 e, du' Q2 du): (..., K, 8) and (..., K, 2)."""
+    err = packed - reference_packed
+    return err, (err * err) @ packed_w
+
+
+_ONES2 = np.ones(2)
 
 
 @dataclass(frozen=True)
@@ -73,7 +122,6 @@ class Simulation:
         self.link = channel.LinkParams.from_config(config)
         self.planning_link = channel.LinkParams.from_config(config, planning=True)
         self._link_kwargs = self.link._kwargs
-        self._ones2 = np.ones(2)
         self._disturbed = config.disturbance.active
         lag = config.disturbance.actuator_lag_s
         self._lag_alpha = float(np.exp(-config.slot_s / lag)) if lag > 0 else 0.0
@@ -121,9 +169,7 @@ class Simulation:
         self._reference_packed = np.concatenate([self.reference, np.zeros(self.reference.shape[:2] + (2,))], axis=2)
         self.rng = rng
         offsets = rng.normal(0.0, cfg.reference.initial_offset_std_m, size=(k, 2))
-        x_aug = np.zeros((k, 6))
-        x_aug[:, 0:2] = np.clip(self.reference[:, 0, 0:2] + offsets, self._area_lo, self._area_hi)
-        x_aug[:, 2:4] = self.reference[:, 0, 2:4]
+        x_aug = initial_state(self.reference[:, 0], offsets, self._area_lo, self._area_hi)
         self.x_aug = x_aug
         self.tracking_error = x_aug - self.reference[:, 0]
         self._applied = x_aug[:, 4:6].copy()
@@ -160,13 +206,7 @@ class Simulation:
 
     def saturate_increment(self, du: np.ndarray) -> np.ndarray:
         """Clip increments so that |u[n-1] + du| <= a_max per axis (the control set, by saturation)."""
-        u_prev = self.x_aug[:, 4:6]
-        u = u_prev + du
-        amax = self.accel_max
-        np.maximum(u, -amax, out=u)
-        np.minimum(u, amax, out=u)
-        u -= u_prev
-        return u
+        return saturate_increment(self.x_aug[:, 4:6], du, self.accel_max)
 
     def snapshot(self) -> Snapshot:
         return Snapshot(
@@ -203,23 +243,17 @@ class Simulation:
                 wind = wind + rng.normal(0.0, d.wind_gust_std_mps, 2)
             drone_next = np.clip(np.asarray(drone_next, dtype=float) + wind * self.slot_s, self._area_lo, self._area_hi)
         x_aug = self.x_aug
-        du = self.saturate_increment(increment)
+        du = saturate_increment(x_aug[:, 4:6], increment, self.accel_max)
         if disturbed and self.slot % d.control_period_slots:
             du[:] = 0.0  # no command this slot (reduced control rate): nothing is sent
-        link = self.link
-        diff = x_aug[:, 0:2] - drone_next
-        d2 = (diff * diff) @ self._ones2 + self._altitude_sq  # channel.distance_sq, inlined (hot)
-        x = link.outage_argument_sq(power_w, d2)
-        outage_p = special.gammainc(link.m, x)
-        delivered = channel.delivered_from_fading(channel.sample_normalized_fading(rng, link.m, self.num_agvs), x)
-        du *= delivered[:, None]
-        # step_augmented and stage_cost in one pass on packed rows [x~, du] (dynamics.packed_step_matrices)
-        packed = np.concatenate((x_aug, du), axis=1) @ self._packed_t  # [x~[n+1], du]
+        fading = channel.sample_normalized_fading(rng, self.link.m, self.num_agvs)
+        packed, delivered, outage_p = transmit(x_aug, du, power_w, drone_next, fading, self.link, self._altitude_sq,
+                                               self._packed_t)
+        du = packed[:, 6:8]
         if disturbed:
             self._disturb(packed, x_aug[:, 4:6] + du)
         self.slot += 1
-        err = packed - self._reference_packed[:, self.slot]  # [x~[n+1] - x~_ref[n+1], du]
-        terms = (err * err) @ self._packed_w
+        err, terms = stage_terms(packed, self._reference_packed[:, self.slot], self._packed_w)
         tracking, effort = terms[:, 0], terms[:, 1]
         x_next = packed[:, 0:6]
         self.x_aug = self.x_obs = x_next

@@ -74,9 +74,14 @@ def encode_increments(du: np.ndarray, accel_increment_max: float) -> np.ndarray:
 
 
 def decode_power(a: np.ndarray, power_budget_w: float) -> np.ndarray:
-    """(K,) normalized -> powers in W with sum <= P_max."""
-    total = 0.5 * (sum(a.tolist()) + a.shape[0])  # sum of w = (a + 1) / 2
-    return (a + 1.0) * (0.5 * power_budget_w / max(total, 1.0))
+    """(..., K) normalized -> powers in W with sum <= P_max: ``w = (a + 1) / 2``,
+    ``p = P_max w / max(1, sum w)``."""
+    k = a.shape[-1]
+    if a.ndim == 1:  # one scenario: Python sums beat numpy reductions on a few floats (hot path)
+        total = 0.5 * (sum(a.tolist()) + k)
+        return (a + 1.0) * (0.5 * power_budget_w / max(total, 1.0))
+    total = 0.5 * (a.sum(axis=-1, keepdims=True) + k)
+    return (a + 1.0) * (0.5 * power_budget_w / np.maximum(total, 1.0))
 
 
 def encode_power(power_w: np.ndarray, power_budget_w: float) -> np.ndarray:
@@ -234,6 +239,37 @@ class ObservationLayout:
         np.multiply(sim.last_power_w, self._inv_power, out=v_pow)
         self._buffer[-1] = sim.slot / self.num_slots
         return self._buffer.astype(np.float32)
+
+    def encode_batch(self, bsim) -> np.ndarray:
+        """Observations of a :class:`~lawn_env.batch.BatchSimulation`: (B, size) float32, row i
+        equal to :meth:`encode` of scenario i (the same features and scalings, batched). A fixed
+        path set shares one precomputed window table (as :meth:`encode` uses per episode)."""
+        b, k, f = bsim.num_envs, self.num_agvs, self.agv_features
+        out = np.empty((b, self.size), dtype=np.float32)
+        blocks = out[:, : k * f].reshape(b, k, f)
+        w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
+        drone = (bsim.drone_position - self.center) * self._inv_half
+        state = bsim.x_aug * self._state_scale
+        state -= self._state_shift_scaled
+        blocks[..., 0:6] = state
+        blocks[..., 6:12] = bsim.tracking_error * self._ref_scale
+        if bsim.shared_reference is not None:
+            if self._ref_source is not bsim.shared_reference:
+                self._ref_source = bsim.shared_reference
+                self._batch_windows = self.reference_windows(bsim.shared_reference)
+            blocks[..., w0:w1] = self._batch_windows[:, bsim.slot].transpose(1, 0, 2)
+        else:
+            win = bsim.reference_windows().copy()  # (B, K, W, 6)
+            win[..., 0:2] -= win[:, :, 0:1, 0:2]
+            win *= self._ref_scale
+            blocks[..., w0:w1] = win.reshape(b, k, -1)
+        blocks[..., w1 : w1 + 2] = state[..., 0:2] - drone[:, None, :]
+        blocks[..., w1 + 2] = bsim.last_outage_probability
+        blocks[..., w1 + 3] = bsim.last_delivered
+        blocks[..., w1 + 4] = bsim.last_power_w * self._inv_power
+        out[:, -3:-1] = drone
+        out[:, -1] = bsim.slot / self.num_slots
+        return out
 
     def agv_blocks(self, obs: np.ndarray) -> np.ndarray:
         """(K, agv_features) view of the per-AGV part."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, Mapping
 
 import gymnasium as gym
@@ -136,6 +137,18 @@ class LawnEnvBase(SimulationView, gym.Env):
         self._done = True
 
     # ------------------------------------------------------------------ gym API
+    @property
+    def spec(self):
+        """The ``EnvSpec`` ``gym.make`` gave this env, with ``max_episode_steps`` = ``num_slots``:
+        the episode length, which the env enforces itself (truncation at ``num_slots``)."""
+        return self.__dict__.get("_spec")
+
+    @spec.setter
+    def spec(self, value) -> None:
+        if value is not None and value.max_episode_steps is None:
+            value = dataclasses.replace(value, max_episode_steps=self.config.num_slots)
+        self.__dict__["_spec"] = value
+
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.

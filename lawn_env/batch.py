@@ -1,0 +1,117 @@
+"""The simulation over a batch of B scenarios at once (leading batch axis), for vector envs.
+
+:class:`BatchSimulation` holds the state of B independent scenarios of one config as arrays
+with a leading batch axis and advances them all with one call, through the same slot
+functions as :class:`lawn_env.core.Simulation` (:func:`~lawn_env.core.saturate_increment`,
+:func:`~lawn_env.core.transmit`, :func:`~lawn_env.core.stage_terms`, :func:`initial_state`).
+Scenario ``i`` draws its references and initial offsets from its own generator, exactly as a
+single :class:`~lawn_env.core.Simulation` reset with that generator does; the fading of all
+scenarios comes from one batched generator, so a step costs a handful of numpy calls whatever
+B is. The disturbance mode is not batched yet: configs with it are refused.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import special
+
+from . import references
+from .config import ScenarioConfig
+from .core import Simulation, initial_state, saturate_increment, stage_terms, transmit
+
+__all__ = ["BatchSimulation"]
+
+
+class BatchSimulation:
+    """B scenarios of ``config``: ``x_aug`` (B, K, 6), ``drone_position`` (B, 2), ``slot`` (B,),
+    ``reference`` (B, K, T, 6) (a broadcast view when the path set is fixed), and the last
+    slot's ``last_power_w``, ``last_delivered``, ``last_outage_probability`` (B, K)."""
+
+    def __init__(self, config: ScenarioConfig, num_envs: int):
+        if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
+            raise ValueError(f"num_envs={num_envs!r}: must be an integer >= 1")
+        if config.disturbance.active:
+            raise ValueError("the batched simulation does not implement the disturbance mode yet "
+                             "(config.disturbance is active); use gym.make_vec with vectorization_mode='sync'")
+        self.config = config
+        self.num_envs = int(num_envs)
+        self.single = Simulation(config)  # parameters, matrices and the fixed path set, shared
+        s = self.single
+        self.num_agvs, self.num_slots, self.horizon = s.num_agvs, s.num_slots, s.horizon
+        self.steps = self.num_slots + self.horizon + 1
+        self.reference = None
+        self.shared_reference = None  # (K, T, 6) when every scenario has the same (fixed) path set
+        self.reference_packed = None
+        self.x_aug = self.tracking_error = None
+        self.drone_position = None
+        self.slot = np.zeros(self.num_envs, dtype=np.int64)
+        self._rows = np.arange(self.num_envs)
+
+    # ------------------------------------------------------------------ episodes
+    def reset(self, rngs: list[np.random.Generator], which: np.ndarray | None = None) -> None:
+        """Start new episodes for the scenarios ``which`` (all when None), scenario i drawing from
+        ``rngs[i]`` as :meth:`Simulation.reset` would."""
+        s, b, k = self.single, self.num_envs, self.num_agvs
+        idx = self._rows if which is None else np.flatnonzero(which)
+        if self.x_aug is None:
+            if idx.size != b:
+                raise RuntimeError("the first reset must start every scenario")
+            self.x_aug = np.zeros((b, k, 6))
+            self.drone_position = np.zeros((b, 2))
+            self.last_power_w = np.zeros((b, k))
+            self.last_delivered = np.ones((b, k), dtype=bool)
+            self.last_outage_probability = np.zeros((b, k))
+            if s._paper_table is not None:
+                self.shared_reference = s._paper_table
+                self.reference = np.broadcast_to(s._paper_table, (b,) + s._paper_table.shape)
+            else:
+                self.reference = np.zeros((b, k, self.steps, 6))
+            self.reference_packed = np.concatenate(
+                [self.reference, np.zeros(self.reference.shape[:3] + (2,))], axis=3)
+            self.tracking_error = np.zeros((b, k, 6))
+        cfg = self.config
+        offsets = np.empty((idx.size, k, 2))
+        for j, i in enumerate(idx.tolist()):
+            rng = rngs[i]
+            if s._paper_table is None:
+                paths = references.random_paths(rng, k, cfg.reference.families, s.area,
+                                                duration_s=(self.steps - 1) * s.slot_s, envelope=s._envelope)
+                self.reference[i] = references.reference_table(paths, self.steps, s.slot_s)
+                self.reference_packed[i, :, :, 0:6] = self.reference[i]
+            offsets[j] = rng.normal(0.0, cfg.reference.initial_offset_std_m, size=(k, 2))
+        start = self.reference[idx, :, 0]
+        self.x_aug[idx] = initial_state(start, offsets, s._area_lo, s._area_hi)
+        self.tracking_error[idx] = self.x_aug[idx] - start
+        self.drone_position[idx] = np.asarray(cfg.drone.start_m, dtype=float)
+        self.slot[idx] = 0
+        self.last_power_w[idx] = s.power_budget_w / k
+        self.last_delivered[idx] = True
+        diff = self.x_aug[idx, :, 0:2] - self.drone_position[idx, None, :]
+        d2 = (diff * diff).sum(axis=-1) + s._altitude_sq
+        self.last_outage_probability[idx] = special.gammainc(s.link.m, s.link.outage_argument_sq(self.last_power_w[idx], d2))
+
+    # ------------------------------------------------------------------ one slot
+    def step(self, increment: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray,
+             normalized_fading: np.ndarray) -> dict:
+        """Advance every scenario one slot: increments (B, K, 2), powers (B, K), next drone
+        positions (B, 2), fading m|h|^2 (B, K). Returns the slot's arrays: ``tracking_cost`` and
+        ``effort_cost`` (B, K), ``delivered``, ``outage_probability``, ``applied_increment``."""
+        s = self.single
+        du = saturate_increment(self.x_aug[..., 4:6], increment, s.accel_max)
+        packed, delivered, outage_p = transmit(self.x_aug, du, power_w, drone_next, normalized_fading, s.link,
+                                               s._altitude_sq, s._packed_t)
+        self.slot += 1
+        err, terms = stage_terms(packed, self.reference_packed[self._rows, :, self.slot], s._packed_w)
+        self.x_aug = packed[..., 0:6]
+        self.tracking_error = err[..., 0:6]
+        self.drone_position = drone_next
+        self.last_power_w = power_w
+        self.last_delivered = delivered
+        self.last_outage_probability = outage_p
+        return {"tracking_cost": terms[..., 0], "effort_cost": terms[..., 1], "delivered": delivered,
+                "outage_probability": outage_p, "applied_increment": packed[..., 6:8]}
+
+    def reference_windows(self) -> np.ndarray:
+        """Reference augmented states at slots n..n+N_p of every scenario: (B, K, N_p+1, 6)."""
+        idx = self.slot[:, None] + np.arange(self.horizon + 1)[None, :]
+        return self.reference[self._rows[:, None], :, idx].transpose(0, 2, 1, 3)

@@ -1,0 +1,165 @@
+"""Native vector environments: ``gym.make_vec("lawn/Joint-v0", num_envs=N,
+vectorization_mode="vector_entry_point")``.
+
+One :class:`~lawn_env.batch.BatchSimulation` advances all N scenarios per call, through the
+slot functions every lawn env shares, instead of N Python-level env copies. Conventions are
+Gymnasium's vector ones (as ``CartPoleVectorEnv``):
+
+* batched spaces (``single_observation_space``, ``single_action_space`` are the single env's);
+* next-step autoreset: the step after an episode ends resets that scenario and returns its
+  first observation with reward 0 and both flags False (its action is ignored);
+* ``reset(seed=s)`` seeds scenario i from ``s + i`` (as ``SyncVectorEnv`` seeds its copies), so
+  its references and initial state equal ``gym.make(...).reset(seed=s + i)``'s; a list of N
+  seeds sets them one by one. The fading of all scenarios comes from one batched generator,
+  seeded from ``s``;
+* ``info`` holds arrays with a leading N axis for every key of the single env's info
+  (``lawn_env.envs.base.INFO_KEYS``), and ``episode_control_cost`` with its mask
+  ``_episode_control_cost`` on the step an episode ends.
+
+Only the paper's benchmark interface (v0) is batched so far, and not the disturbance mode;
+other settings raise a ``ValueError`` saying so (``vectorization_mode="sync"`` runs them).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from ..batch import BatchSimulation
+from ..config import ScenarioConfig
+from ..drone import move_drones
+from ..interface import V0_INTERFACE, resolve_interface
+from ..spaces import ObservationLayout, decode_power
+from .base import resolve_config
+
+__all__ = ["JointVectorEnv", "check_actions"]
+
+
+def check_actions(actions, num_envs: int, size: int) -> np.ndarray:
+    """Validate a batch of normalized actions: real numbers of shape exactly (num_envs, size),
+    finite, inside [-1, 1]; a ``ValueError`` names the first bad env index. Returns float64."""
+    try:
+        a = np.asarray(actions)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"actions must be a real array of shape ({num_envs}, {size}), float32: {exc}") from None
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"actions have dtype {a.dtype}; expected real numbers of shape ({num_envs}, {size}), float32")
+    if a.shape != (num_envs, size):
+        raise ValueError(f"actions have shape {a.shape}; expected ({num_envs}, {size}), float32, entries in [-1, 1]")
+    a = a.astype(np.float64, copy=False)
+    ok = (a >= -1.0) & (a <= 1.0)  # False for NaN
+    if not ok.all():
+        env, entry = np.argwhere(~ok)[0].tolist()
+        raise ValueError(f"env {env}: action entry {entry} = {a[env, entry]!r} is outside [-1, 1] or not finite; "
+                         "actions are normalized (see the environment's Action Space)")
+    return a
+
+
+class JointVectorEnv(VectorEnv):
+    """N copies of ``lawn/Joint-v0`` (v0 interface) in one batched simulation."""
+
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+
+    def __init__(self, num_envs: int, config: ScenarioConfig | Mapping | str | None = None,
+                 render_mode: str | None = None, interface: Any = None, **overrides: Any):
+        if render_mode is not None:
+            raise ValueError(f"render_mode={render_mode!r}: the native vector env does not render yet; "
+                             "render a single env (gym.make) instead")
+        if resolve_interface(interface) != V0_INTERFACE:
+            raise ValueError(f"interface={interface!r}: the native vector env implements the v0 interface only so far; "
+                             "use gym.make_vec(..., vectorization_mode='sync') for the RL interface")
+        self.config = resolve_config(config, **overrides)
+        self.sim = BatchSimulation(self.config, num_envs)
+        self.num_envs = self.sim.num_envs
+        self.render_mode = None
+        self.layout = ObservationLayout(self.config)
+        k = self.config.num_agvs
+        self.num_agvs = k
+        self.single_observation_space = V0_INTERFACE.observation_space(self.layout.size)
+        self.single_action_space = gym.spaces.Box(-1.0, 1.0, shape=(3 * k + 2,), dtype=np.float32)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._rngs: list[np.random.Generator] = []
+        self._done = np.zeros(self.num_envs, dtype=bool)
+        self._cost = np.zeros(self.num_envs)
+        self._started = False
+
+    # ------------------------------------------------------------------ fading (tests inject draws here)
+    def _draw_fading(self) -> np.ndarray:
+        """m|h|^2 of every link of every scenario for this slot, (N, K), from the batched generator."""
+        return self.np_random.standard_gamma(self.sim.single.link.m, (self.num_envs, self.num_agvs))
+
+    # ------------------------------------------------------------------ API
+    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
+        if isinstance(seed, (list, tuple)):
+            if len(seed) != self.num_envs:
+                raise ValueError(f"seed: a list of {len(seed)} seeds for {self.num_envs} envs")
+            seeds = [int(s) for s in seed]
+            super().reset(seed=seeds[0])
+        else:
+            super().reset(seed=seed)
+            base = seed if seed is not None else int(self.np_random.integers(2**62))
+            seeds = [base + i for i in range(self.num_envs)]
+        self._rngs = [np.random.default_rng(s) for s in seeds]  # = gymnasium's seeding.np_random(s)
+        self.sim.reset(self._rngs)
+        self._done[:] = False
+        self._cost[:] = 0.0
+        self._started = True
+        return self.layout.encode_batch(self.sim), self._info()
+
+    def step(self, actions):
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        a = check_actions(actions, self.num_envs, self.single_action_space.shape[0])
+        sim, k = self.sim, self.num_agvs
+        cfg = self.config
+        increment = a[:, : 2 * k].reshape(-1, k, 2) * cfg.control.accel_increment_max_mps2
+        power = decode_power(a[:, 2 * k : 3 * k], cfg.power_budget_w)
+        drone_next = move_drones(sim.drone_position, a[:, 3 * k :] * cfg.drone.max_speed_mps,
+                                 cfg.drone.max_speed_mps, cfg.slot_s, tuple(cfg.area_m))
+        restart = self._done.copy()
+        record = sim.step(increment, power, drone_next, self._draw_fading())
+        cost_tracking = record["tracking_cost"].sum(axis=1)
+        cost_effort = record["effort_cost"].sum(axis=1)
+        cost = cost_tracking + cost_effort
+        self._cost += cost
+        truncated = sim.slot >= sim.num_slots
+        terminated = np.zeros(self.num_envs, dtype=bool)
+        info = self._info(cost_tracking, cost_effort, record["applied_increment"])
+        info["episode_control_cost"] = np.where(truncated, self._cost, 0.0)
+        info["_episode_control_cost"] = truncated & ~restart
+        if restart.any():  # next-step autoreset: these scenarios start over; their action was ignored
+            sim.reset(self._rngs, restart)
+            self._cost[restart] = 0.0
+            truncated[restart] = False
+            cost[restart] = 0.0
+            for key in ("stage_cost", "reward_tracking", "reward_effort"):
+                info[key][restart] = 0.0
+            info["applied_increment"][restart] = 0.0
+            for key, value in self._info().items():
+                if key not in ("stage_cost", "reward_tracking", "reward_effort", "applied_increment"):
+                    info[key][restart] = value[restart]
+        self._cost[truncated] = 0.0
+        self._done = truncated | terminated
+        return self.layout.encode_batch(sim), -cost, terminated, truncated, info
+
+    def _info(self, cost_tracking=None, cost_effort=None, applied=None) -> dict:
+        sim, b = self.sim, self.num_envs
+        zeros = np.zeros(b)
+        tracking = zeros if cost_tracking is None else cost_tracking
+        effort = zeros if cost_effort is None else cost_effort
+        return {
+            "slot": sim.slot.copy(),
+            "stage_cost": tracking + effort,
+            "reward_tracking": -tracking,
+            "reward_effort": -effort,
+            "delivered": sim.last_delivered.copy(),
+            "outage_probability": np.array(sim.last_outage_probability, dtype=np.float64),
+            "power_w": np.array(sim.last_power_w, dtype=np.float64),
+            "drone_position": np.array(sim.drone_position, dtype=np.float64),
+            "applied_increment": np.zeros((b, self.num_agvs, 2)) if applied is None else np.array(applied),
+        }

@@ -1,0 +1,125 @@
+"""The native vector env (issue #13): lockstep with the single env, Gymnasium's vector
+conventions, spaces, errors."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import lawn_env
+from lawn_env import ScenarioConfig, channel
+from lawn_env.drone import move_drone, move_drones
+
+N = 4
+
+
+def _make(num_envs=N, **kwargs):
+    return gym.make_vec("lawn/Joint-v0", num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
+
+
+def _single_episode(config, seed, actions, monkeypatch):
+    """Run the single env on ``actions`` and record its fading draws and its states."""
+    draws, real = [], channel.sample_normalized_fading
+
+    def recording(rng, m, size):
+        out = real(rng, m, size)
+        draws.append(out.copy())
+        return out
+
+    monkeypatch.setattr(channel, "sample_normalized_fading", recording)
+    env = gym.make("lawn/Joint-v0", config=config)
+    obs, _ = env.reset(seed=seed)
+    states, rewards, observations = [], [], [obs]
+    for a in actions:
+        obs, reward, terminated, truncated, _ = env.step(a)
+        states.append(env.unwrapped.sim.x_aug.copy())
+        rewards.append(reward)
+        observations.append(obs)
+    monkeypatch.setattr(channel, "sample_normalized_fading", real)
+    return np.array(draws), np.array(states), np.array(rewards), np.array(observations), truncated
+
+
+@pytest.mark.parametrize("config", [ScenarioConfig(num_slots=30), ScenarioConfig(num_agvs=5, num_slots=30)],
+                         ids=["paper-paths", "random-paths"])
+def test_lockstep_with_the_single_env_on_the_same_fading(config, monkeypatch):
+    """Env i of the vector env reset with seed s equals the single env reset with s + i for a
+    whole episode, to 1e-12, when both see the same fading draws."""
+    rng = np.random.default_rng(0)
+    size = 3 * config.num_agvs + 2
+    actions = rng.uniform(-1, 1, (config.num_slots, N, size)).astype(np.float32)
+    singles = [_single_episode(config, 10 + i, actions[:, i], monkeypatch) for i in range(N)]
+    fading = np.stack([s[0] for s in singles], axis=1)  # (T, N, K)
+    envs = _make(config=config)
+    it = iter(fading)
+    monkeypatch.setattr(envs.unwrapped, "_draw_fading", lambda: next(it))
+    obs, _ = envs.reset(seed=10)
+    for i in range(N):
+        np.testing.assert_array_equal(obs[i], singles[i][3][0])
+    for t in range(config.num_slots):
+        obs, reward, terminated, truncated, info = envs.step(actions[t])
+        for i in range(N):
+            np.testing.assert_allclose(envs.unwrapped.sim.x_aug[i], singles[i][1][t], rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(reward[i], singles[i][2][t], rtol=1e-12)
+            np.testing.assert_allclose(obs[i], singles[i][3][t + 1], rtol=1e-6, atol=1e-6)
+    assert truncated.all() and not terminated.any() and all(s[4] for s in singles)
+    assert info["_episode_control_cost"].all()
+    np.testing.assert_allclose(info["episode_control_cost"], [-s[2].sum() for s in singles], rtol=1e-12)
+
+
+def test_next_step_autoreset_truncation_and_seeding():
+    envs = _make(config=ScenarioConfig(num_slots=5))
+    assert envs.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
+    obs, info = envs.reset(seed=3)
+    assert obs.shape == (N, envs.single_observation_space.shape[0]) and obs.dtype == np.float32
+    assert envs.observation_space.contains(obs) and set(info) >= set(lawn_env.envs.base.INFO_KEYS)
+    zero = np.zeros(envs.action_space.shape, dtype=np.float32)
+    for _ in range(4):
+        _, reward, terminated, truncated, _ = envs.step(zero)
+        assert not truncated.any() and (reward < 0).all()
+    _, _, _, truncated, info = envs.step(zero)
+    assert truncated.all() and (info["slot"] == 5).all()
+    obs, reward, terminated, truncated, info = envs.step(zero)  # the autoreset step
+    assert (reward == 0).all() and not truncated.any() and not terminated.any() and (info["slot"] == 0).all()
+    # the reset scenarios start where a fresh reset with the same per-env generators would
+    again = _make(config=ScenarioConfig(num_slots=5))
+    first, _ = again.reset(seed=3)
+    assert not np.array_equal(obs, first)  # a new episode, not a replay of the first one
+    # the same seed gives the same numbers; a list of seeds sets each env
+    a, _ = _make().reset(seed=7)
+    b, _ = _make().reset(seed=[7, 8, 9, 10])
+    np.testing.assert_array_equal(a, b)
+
+
+def test_bad_actions_name_the_env_index_and_the_expected_shape():
+    envs = _make()
+    envs.reset(seed=0)
+    good = np.zeros(envs.action_space.shape, dtype=np.float32)
+    bad = good.copy()
+    bad[2, 5] = np.nan
+    with pytest.raises(ValueError, match="env 2: action entry 5"):
+        envs.step(bad)
+    bad = good.copy()
+    bad[3, 0] = 1.5
+    with pytest.raises(ValueError, match="env 3"):
+        envs.step(bad)
+    with pytest.raises(ValueError, match=f"expected \\({N}, {good.shape[1]}\\)"):
+        envs.step(good[:, :-1])
+    with pytest.raises(ValueError, match="dtype"):
+        envs.step(good.astype(complex))
+
+
+def test_unsupported_settings_are_refused_not_ignored():
+    with pytest.raises(ValueError, match="v0 interface only"):
+        _make(interface="rl")
+    with pytest.raises(ValueError, match="disturbance mode"):
+        _make(config="disturbed")
+    with pytest.raises(ValueError, match="num_envs"):
+        _make(num_envs=0)
+
+
+def test_batched_drone_moves_equal_the_single_rule():
+    rng = np.random.default_rng(1)
+    pos = rng.uniform(-20, 220, (500, 2)).clip(0, 200)
+    vel = rng.uniform(-40, 40, (500, 2))
+    batched = move_drones(pos, vel, 15.0, 0.5, (0.0, 200.0, 0.0, 200.0))
+    single = np.array([move_drone(p, v, 15.0, 0.5, (0.0, 200.0, 0.0, 200.0)) for p, v in zip(pos, vel)])
+    np.testing.assert_allclose(batched, single, rtol=1e-14, atol=1e-12)
