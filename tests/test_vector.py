@@ -123,3 +123,41 @@ def test_batched_drone_moves_equal_the_single_rule():
     batched = move_drones(pos, vel, 15.0, 0.5, (0.0, 200.0, 0.0, 200.0))
     single = np.array([move_drone(p, v, 15.0, 0.5, (0.0, 200.0, 0.0, 200.0)) for p, v in zip(pos, vel)])
     np.testing.assert_allclose(batched, single, rtol=1e-14, atol=1e-12)
+
+
+def test_same_step_autoreset_puts_the_final_observation_in_info():
+    from lawn_env.envs.vector import JointVectorEnv
+
+    envs = JointVectorEnv(N, config=ScenarioConfig(num_slots=3), autoreset_mode="SameStep")
+    assert envs.metadata["autoreset_mode"] == gym.vector.AutoresetMode.SAME_STEP
+    first, _ = envs.reset(seed=1)
+    zero = np.zeros(envs.action_space.shape, dtype=np.float32)
+    envs.step(zero), envs.step(zero)
+    obs, reward, terminated, truncated, info = envs.step(zero)
+    assert truncated.all() and info["_final_obs"].all() and (reward < 0).all()
+    assert (info["final_obs"][:, -1] == 1.0).all() and (obs[:, -1] == 0.0).all()  # time n/N: 1 at the end, 0 anew
+    with pytest.raises(ValueError, match="autoreset_mode"):
+        JointVectorEnv(N, autoreset_mode="Disabled")
+
+
+def test_sb3_trains_on_the_native_vector_env(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from training.train import train
+    from training.vec import NativeVecEnv
+
+    venv = VecMonitor(NativeVecEnv(ScenarioConfig(num_slots=4), 2))
+    venv.seed(0)
+    venv.reset()
+    for _ in range(4):
+        obs, reward, done, infos = venv.step(np.zeros((2, venv.action_space.shape[0]), dtype=np.float32))
+    assert done.all() and infos[0]["TimeLimit.truncated"] and "episode" in infos[0]
+    assert infos[0]["terminal_observation"].shape == obs[0].shape and obs[0][-1] == 0.0
+    summary = train("ppo", "lawn/Joint-v0", ScenarioConfig(num_slots=12), 256, 0, tmp_path / "run", n_envs=4,
+                    hp_overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, eval_every=128, eval_episodes=1,
+                    checkpoint_every=128, progress=False, interface="v0", vec="native")
+    assert summary["timesteps"] == 256 and summary["best_validation_cost"] > 0
+    with pytest.raises(ValueError, match="--vec native runs lawn/Joint-v0 on the v0 interface"):
+        train("ppo", "lawn/Joint-v0", ScenarioConfig(num_slots=12), 64, 0, tmp_path / "rl", n_envs=2,
+              progress=False, vec="native")

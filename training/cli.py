@@ -171,7 +171,8 @@ def cmd_train(args) -> int:
         kwargs = dict(algo=args.algo, env_id=args.env, config=_config(args), timesteps=args.timesteps,
                       hp_overrides=_parse_overrides(args.hp, "--hp"), n_envs=args.n_envs, eval_every=args.eval_every,
                       eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every,
-                      init_from=Path(args.init_from) if args.init_from else None, interface=args.interface)
+                      init_from=Path(args.init_from) if args.init_from else None, interface=args.interface,
+                      vec=args.vec)
         if args.seeds:
             result = train_seeds(args.seeds, Path(args.out), workers=args.workers, progress=not args.quiet,
                                  backend=args.backend, **kwargs)
@@ -362,6 +363,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--checkpoint-every", type=_COUNT, default=10000, help="steps between checkpoints")
     tr.add_argument("--init-from", metavar="DIR", help="start from a behaviour-cloned run of the same algorithm")
     tr.add_argument("--resume", metavar="DIR", help="continue an interrupted run from its last checkpoint")
+    tr.add_argument("--vec", choices=["dummy", "native"], default="dummy",
+                    help="SB3 DummyVecEnv of single envs (default) or lawn's batched vector env (lawn/Joint-v0, "
+                         "--interface v0)")
     tr.add_argument("--quiet", action="store_true")
     _add_config_args(tr)
     tr.set_defaults(func=cmd_train)

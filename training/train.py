@@ -104,13 +104,26 @@ def _check_algo_kwargs(cls, kwargs: Mapping[str, Any]) -> None:
 
 def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, normalize, monitor_dir: Path | None,
                    vecnormalize_path: Path | None = None, training: bool = True, interface=None,
-                   append_monitor: bool = False):
+                   append_monitor: bool = False, vec: str = "dummy"):
     """A seeded SB3 VecEnv (Monitor-wrapped) with optional VecNormalize, on the given interface;
-    ``append_monitor`` continues existing monitor logs (a resumed run) instead of replacing them."""
+    ``append_monitor`` continues existing monitor logs (a resumed run) instead of replacing them.
+    ``vec="native"`` runs the copies in lawn's batched vector env (:mod:`training.vec`; episode
+    statistics through ``VecMonitor``, no monitor files) instead of one SB3 ``DummyVecEnv`` of
+    single envs."""
     from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import VecNormalize
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    if env_id == "lawn/Parallel-v0":
+    if vec not in ("dummy", "native"):
+        raise ValueError(f"--vec {vec!r}; valid: dummy, native")
+    if vec == "native":
+        if env_id != "lawn/Joint-v0" or resolve_interface(interface).to_dict() != resolve_interface("v0").to_dict():
+            raise ValueError(f"--vec native runs lawn/Joint-v0 on the v0 interface so far (got {env_id}, interface "
+                             f"{resolve_interface(interface).action_scheme}); pass --interface v0, or --vec dummy")
+        from .vec import NativeVecEnv
+
+        venv = VecMonitor(NativeVecEnv(config, n_envs))
+        venv.seed(seed)
+    elif env_id == "lawn/Parallel-v0":
         from .marl import make_marl_vec_env
 
         venv = make_marl_vec_env(config, n_envs, seed, interface=interface)
@@ -139,10 +152,12 @@ class RunSpec(dict):
 def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: int, out_dir: Path,
           hp_overrides: Mapping[str, Any] | None = None, n_envs: int | None = None, eval_every: int = 5000,
           eval_episodes: int = 5, checkpoint_every: int = 10000, progress: bool = True,
-          init_from: Path | None = None, interface: str | Mapping | None = None, callbacks: list | None = None) -> dict:
+          init_from: Path | None = None, interface: str | Mapping | None = None, callbacks: list | None = None,
+          vec: str = "dummy") -> dict:
     """Train an agent from scratch; returns the run summary (also written to ``out_dir``).
 
-    ``callbacks`` are extra SB3 callbacks, run after the run's own (validation, checkpoints).
+    ``callbacks`` are extra SB3 callbacks, run after the run's own (validation, checkpoints);
+    ``vec="native"`` trains on lawn's batched vector env (:func:`make_train_env`).
     ``interface`` (``"rl"``, ``"v0"`` or a dict of :class:`lawn_env.RLInterface` fields) replaces
     the hyperparameter file's choice."""
     if timesteps < 1:
@@ -169,7 +184,7 @@ def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: 
     spec = RunSpec(algo=algo, env=env_id, seed=seed, timesteps=timesteps, hyperparams_version=version,
                    interface=params.get("interface"),
                    eval_every=eval_every, eval_episodes=eval_episodes, checkpoint_every=checkpoint_every,
-                   init_from=str(init_from) if init_from else None, versions=_versions())
+                   init_from=str(init_from) if init_from else None, vec=vec, versions=_versions())
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
     (out_dir / "hyperparams.json").write_text(json.dumps(params, indent=2))
@@ -261,7 +276,7 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
     set_random_seed(env_seed)
     env = make_train_env(spec["env"], config, n_envs, env_seed, normalize, out_dir / "monitor",
                          vecnormalize_path=start.vecnormalize if start else None, interface=interface,
-                         append_monitor=start is not None)
+                         append_monitor=start is not None, vec=spec.get("vec", "dummy"))
     if start:
         model = cls.load(str(start.model), env=env, tensorboard_log=str(out_dir / "tb"))
         if start.replay_buffer is not None:

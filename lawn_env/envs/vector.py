@@ -6,8 +6,10 @@ slot functions every lawn env shares, instead of N Python-level env copies. Conv
 Gymnasium's vector ones (as ``CartPoleVectorEnv``):
 
 * batched spaces (``single_observation_space``, ``single_action_space`` are the single env's);
-* next-step autoreset: the step after an episode ends resets that scenario and returns its
-  first observation with reward 0 and both flags False (its action is ignored);
+* next-step autoreset (the default): the step after an episode ends resets that scenario and
+  returns its first observation with reward 0 and both flags False (its action is ignored);
+  ``autoreset_mode="SameStep"`` resets it within the step that ends it instead, returning the
+  new first observation and the final one in ``info["final_obs"]`` (mask ``_final_obs``);
 * ``reset(seed=s)`` seeds scenario i from ``s + i`` (as ``SyncVectorEnv`` seeds its copies), so
   its references and initial state equal ``gym.make(...).reset(seed=s + i)``'s; a list of N
   seeds sets them one by one. The fading of all scenarios comes from one batched generator,
@@ -65,13 +67,19 @@ class JointVectorEnv(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
     def __init__(self, num_envs: int, config: ScenarioConfig | Mapping | str | None = None,
-                 render_mode: str | None = None, interface: Any = None, **overrides: Any):
+                 render_mode: str | None = None, interface: Any = None,
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **overrides: Any):
         if render_mode is not None:
             raise ValueError(f"render_mode={render_mode!r}: the native vector env does not render yet; "
                              "render a single env (gym.make) instead")
         if resolve_interface(interface) != V0_INTERFACE:
             raise ValueError(f"interface={interface!r}: the native vector env implements the v0 interface only so far; "
                              "use gym.make_vec(..., vectorization_mode='sync') for the RL interface")
+        modes = {m.value: m for m in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)}
+        mode = modes.get(autoreset_mode.value if isinstance(autoreset_mode, AutoresetMode) else autoreset_mode)
+        if mode is None:
+            raise ValueError(f"autoreset_mode={autoreset_mode!r}; valid: {', '.join(modes)}")
+        self.metadata = dict(self.metadata, autoreset_mode=mode)
         self.config = resolve_config(config, **overrides)
         self.sim = BatchSimulation(self.config, num_envs)
         self.num_envs = self.sim.num_envs
@@ -121,7 +129,8 @@ class JointVectorEnv(VectorEnv):
         power = decode_power(a[:, 2 * k : 3 * k], cfg.power_budget_w)
         drone_next = move_drones(sim.drone_position, a[:, 3 * k :] * cfg.drone.max_speed_mps,
                                  cfg.drone.max_speed_mps, cfg.slot_s, tuple(cfg.area_m))
-        restart = self._done.copy()
+        same_step = self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
+        restart = np.zeros(self.num_envs, dtype=bool) if same_step else self._done.copy()
         record = sim.step(increment, power, drone_next, self._draw_fading())
         cost_tracking = record["tracking_cost"].sum(axis=1)
         cost_effort = record["effort_cost"].sum(axis=1)
@@ -145,7 +154,15 @@ class JointVectorEnv(VectorEnv):
                     info[key][restart] = value[restart]
         self._cost[truncated] = 0.0
         self._done = truncated | terminated
-        return self.layout.encode_batch(sim), -cost, terminated, truncated, info
+        obs = self.layout.encode_batch(sim)
+        if same_step and self._done.any():  # same-step autoreset: the final observation goes to info
+            ended = self._done
+            info["final_obs"] = obs.copy()
+            info["_final_obs"] = ended.copy()
+            sim.reset(self._rngs, ended)  # info keeps describing the step that ended them
+            obs = self.layout.encode_batch(sim)
+            self._done = np.zeros(self.num_envs, dtype=bool)
+        return obs, -cost, terminated, truncated, info
 
     def _info(self, cost_tracking=None, cost_effort=None, applied=None) -> dict:
         sim, b = self.sim, self.num_envs

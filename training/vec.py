@@ -1,0 +1,69 @@
+"""Stable-Baselines3 on lawn's native vector env (``lawn train --vec native``).
+
+:class:`NativeVecEnv` is an SB3 ``VecEnv`` over :class:`lawn_env.envs.vector.JointVectorEnv`
+run with same-step autoreset, which is SB3's convention: the step that ends an episode returns
+the next episode's first observation, the final one in ``infos[i]["terminal_observation"]``
+and ``infos[i]["TimeLimit.truncated"]`` for truncations. ``VecMonitor`` (episode returns and
+lengths) and ``VecNormalize`` go on top as on any SB3 VecEnv.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv
+
+from lawn_env import ScenarioConfig
+from lawn_env.envs.vector import JointVectorEnv
+
+__all__ = ["NativeVecEnv"]
+
+
+class NativeVecEnv(VecEnv):
+    """``n_envs`` scenarios of ``lawn/Joint-v0`` (v0 interface) in one batched simulation."""
+
+    def __init__(self, config: ScenarioConfig, n_envs: int):
+        self.venv = JointVectorEnv(n_envs, config=config, autoreset_mode="SameStep")
+        super().__init__(n_envs, self.venv.single_observation_space, self.venv.single_action_space)
+        self._seed: int | None = None
+        self._actions: np.ndarray | None = None
+        self.render_mode = None
+
+    def reset(self):
+        obs, _ = self.venv.reset(seed=self._seed)
+        self._seed = None
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.clip(actions, -1.0, 1.0)  # SB3 clips to the Box as its own VecEnvs do
+
+    def step_wait(self):
+        obs, reward, terminated, truncated, info = self.venv.step(self._actions)
+        done = terminated | truncated
+        infos: list[dict[str, Any]] = [{"stage_cost": float(c)} for c in info["stage_cost"]]
+        if done.any():
+            for i in np.flatnonzero(done).tolist():
+                infos[i]["terminal_observation"] = info["final_obs"][i]
+                infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+        return obs, reward.astype(np.float32), done, infos
+
+    def seed(self, seed: int | None = None):
+        self._seed = seed
+        return [None if seed is None else seed + i for i in range(self.num_envs)]
+
+    def close(self) -> None:
+        self.venv.close()
+
+    # attribute access as SB3's VecEnvs offer it (one batched env: the same answer for every index)
+    def get_attr(self, attr_name: str, indices=None) -> list:
+        return [getattr(self.venv, attr_name)] * len(self._get_indices(indices))
+
+    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
+        setattr(self.venv, attr_name, value)
+
+    def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list:
+        raise NotImplementedError(f"env_method({method_name!r}): the native vector env has no per-env objects")
+
+    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
+        return [False] * len(self._get_indices(indices))
