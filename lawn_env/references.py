@@ -21,6 +21,7 @@ variant: the paper-like set then demands up to ~4x a_max at its corners).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
@@ -180,6 +181,15 @@ class Sinusoid(_Curve):
         return c, d1, d2
 
 
+@functools.lru_cache(maxsize=4096)
+def _periodic_spline(waypoints: tuple[tuple[float, float], ...]) -> tuple[CubicSpline, float]:
+    """The periodic cubic spline through ``waypoints`` by chord length, and its period (cached:
+    a path is evaluated many times while it is fitted, and time scaling keeps its waypoints)."""
+    pts = np.asarray(waypoints + (waypoints[0],), dtype=float)
+    chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    return CubicSpline(chord, pts, bc_type="periodic"), chord[-1]
+
+
 @dataclass(frozen=True)
 class SplinePath(_Curve):
     """Periodic cubic spline through ``waypoints`` (M, 2), parametrized by cumulative chord length (m)."""
@@ -188,9 +198,7 @@ class SplinePath(_Curve):
     warp: TimeWarp
 
     def _spline(self) -> tuple[CubicSpline, float]:
-        pts = np.asarray(self.waypoints + (self.waypoints[0],), dtype=float)
-        chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
-        return CubicSpline(chord, pts, bc_type="periodic"), chord[-1]
+        return _periodic_spline(self.waypoints)
 
     def curve(self, theta):
         spline, period = self._spline()
