@@ -107,6 +107,25 @@ def test_bad_actions_name_the_env_index_and_the_expected_shape():
         envs.step(good.astype(complex))
 
 
+def test_renders_the_chosen_env_with_its_trails():
+    envs = _make(config=ScenarioConfig(num_slots=4), render_mode="rgb_array", render_env=2)
+    envs.reset(seed=0)
+    zero = np.zeros(envs.action_space.shape, dtype=np.float32)
+    for _ in range(3):
+        envs.step(zero)
+    frame = envs.render()
+    assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
+    view = envs.unwrapped._view
+    assert len(view.trajectories()["agv_position"]) == 4 and view.slot == 3
+    np.testing.assert_array_equal(view.x_aug, envs.unwrapped.sim.x_aug[2])
+    envs.step(zero), envs.step(zero)  # the end, then the autoreset: the trails start over
+    assert len(view.trajectories()["drone_position"]) == 1
+    with pytest.raises(ValueError, match="render_env=9"):
+        _make(render_mode="rgb_array", render_env=9)
+    with pytest.raises(ValueError, match="render_mode='human'"):
+        _make(render_mode="human")
+
+
 def test_unsupported_settings_are_refused_not_ignored():
     with pytest.raises(ValueError, match="v0 interface only"):
         _make(interface="rl")

@@ -18,6 +18,7 @@ Gymnasium's vector ones (as ``CartPoleVectorEnv``):
   (``lawn_env.envs.base.INFO_KEYS``), and ``episode_control_cost`` with its mask
   ``_episode_control_cost`` on the step an episode ends.
 
+``render_mode="rgb_array"`` draws env ``render_env`` (default 0) as the single env draws itself.
 Only the paper's benchmark interface (v0) is batched so far, and not the disturbance mode;
 other settings raise a ``ValueError`` saying so (``vectorization_mode="sync"`` runs them).
 """
@@ -64,14 +65,14 @@ def check_actions(actions, num_envs: int, size: int) -> np.ndarray:
 class JointVectorEnv(VectorEnv):
     """N copies of ``lawn/Joint-v0`` (v0 interface) in one batched simulation."""
 
-    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 4}
 
     def __init__(self, num_envs: int, config: ScenarioConfig | Mapping | str | None = None,
                  render_mode: str | None = None, interface: Any = None,
-                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **overrides: Any):
-        if render_mode is not None:
-            raise ValueError(f"render_mode={render_mode!r}: the native vector env does not render yet; "
-                             "render a single env (gym.make) instead")
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_env: int = 0,
+                 **overrides: Any):
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode={render_mode!r}; valid: 'rgb_array' (one env, render_env) or None")
         if resolve_interface(interface) != V0_INTERFACE:
             raise ValueError(f"interface={interface!r}: the native vector env implements the v0 interface only so far; "
                              "use gym.make_vec(..., vectorization_mode='sync') for the RL interface")
@@ -83,7 +84,12 @@ class JointVectorEnv(VectorEnv):
         self.config = resolve_config(config, **overrides)
         self.sim = BatchSimulation(self.config, num_envs)
         self.num_envs = self.sim.num_envs
-        self.render_mode = None
+        if not (isinstance(render_env, (int, np.integer)) and 0 <= render_env < self.num_envs):
+            raise ValueError(f"render_env={render_env!r}: the index of the env to render, in [0, {self.num_envs - 1}]")
+        self.render_mode = render_mode
+        self.render_env = int(render_env)
+        self._view = _EnvView(self.sim, self.render_env) if render_mode else None
+        self._renderer = None
         self.layout = ObservationLayout(self.config)
         k = self.config.num_agvs
         self.num_agvs = k
@@ -114,6 +120,8 @@ class JointVectorEnv(VectorEnv):
             seeds = [base + i for i in range(self.num_envs)]
         self._rngs = [np.random.default_rng(s) for s in seeds]  # = gymnasium's seeding.np_random(s)
         self.sim.reset(self._rngs)
+        if self._view is not None:
+            self._view.restart()
         self._done[:] = False
         self._cost[:] = 0.0
         self._started = True
@@ -141,8 +149,12 @@ class JointVectorEnv(VectorEnv):
         info = self._info(cost_tracking, cost_effort, record["applied_increment"])
         info["episode_control_cost"] = np.where(truncated, self._cost, 0.0)
         info["_episode_control_cost"] = truncated & ~restart
+        if self._view is not None:
+            self._view.record()
         if restart.any():  # next-step autoreset: these scenarios start over; their action was ignored
             sim.reset(self._rngs, restart)
+            if self._view is not None and restart[self.render_env]:
+                self._view.restart()
             self._cost[restart] = 0.0
             truncated[restart] = False
             cost[restart] = 0.0
@@ -160,9 +172,30 @@ class JointVectorEnv(VectorEnv):
             info["final_obs"] = obs.copy()
             info["_final_obs"] = ended.copy()
             sim.reset(self._rngs, ended)  # info keeps describing the step that ended them
+            if self._view is not None and ended[self.render_env]:
+                self._view.restart()
             obs = self.layout.encode_batch(sim)
             self._done = np.zeros(self.num_envs, dtype=bool)
         return obs, -cost, terminated, truncated, info
+
+    def render(self):
+        """An RGB frame (H, W, 3) of env ``render_env``: area, references, trails, links colored by
+        outage probability, as the single env draws it."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
+            return None
+        if not self._started:
+            raise RuntimeError("call reset() before render()")
+        if self._renderer is None:
+            from ..render import Renderer
+
+            self._renderer = Renderer(self.config)
+        return self._renderer.draw(self._view)
+
+    def close_extras(self, **kwargs) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
 
     def _info(self, cost_tracking=None, cost_effort=None, applied=None) -> dict:
         sim, b = self.sim, self.num_envs
@@ -180,3 +213,46 @@ class JointVectorEnv(VectorEnv):
             "drone_position": np.array(sim.drone_position, dtype=np.float64),
             "applied_increment": np.zeros((b, self.num_agvs, 2)) if applied is None else np.array(applied),
         }
+
+
+class _EnvView:
+    """One env of a batch as :mod:`lawn_env.render` reads a ``Simulation``: its state, references
+    and the trails of its current episode (recorded only for this env)."""
+
+    def __init__(self, bsim: BatchSimulation, index: int):
+        self.bsim, self.i = bsim, index
+        s = bsim.single
+        self.area, self.num_agvs, self.num_slots = s.area, s.num_agvs, s.num_slots
+        self._drone: list[np.ndarray] = []
+        self._agv: list[np.ndarray] = []
+
+    def restart(self) -> None:
+        self._drone = [self.drone_position.copy()]
+        self._agv = [self.x_aug[:, 0:2].copy()]
+
+    def record(self) -> None:
+        self._drone.append(self.drone_position.copy())
+        self._agv.append(self.x_aug[:, 0:2].copy())
+
+    @property
+    def reference(self) -> np.ndarray:
+        return self.bsim.reference[self.i]
+
+    @property
+    def x_aug(self) -> np.ndarray:
+        return self.bsim.x_aug[self.i]
+
+    @property
+    def drone_position(self) -> np.ndarray:
+        return self.bsim.drone_position[self.i]
+
+    @property
+    def last_outage_probability(self) -> np.ndarray:
+        return self.bsim.last_outage_probability[self.i]
+
+    @property
+    def slot(self) -> int:
+        return int(self.bsim.slot[self.i])
+
+    def trajectories(self) -> dict:
+        return {"drone_position": np.array(self._drone), "agv_position": np.array(self._agv)}
