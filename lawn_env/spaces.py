@@ -160,7 +160,7 @@ class ObservationLayout:
         }
         self._ref_source = None
         self._windows = None
-        self._chunk_start = 0
+        self._chunk_start = self._chunk_end = 0
         self._buffer = np.zeros(self.size)
         self._views = self._make_views()
 
@@ -221,10 +221,11 @@ class ObservationLayout:
         every env step, so the reference windows are precomputed, ``window_chunk`` slots at a time.
         """
         n = sim.slot
-        if sim.reference is not self._ref_source or not self._chunk_start <= n < self._chunk_start + self._windows.shape[1]:
+        if sim.reference is not self._ref_source or not self._chunk_start <= n < self._chunk_end:
             self._ref_source = sim.reference
             self._chunk_start = n
             self._windows = self.reference_windows(sim.reference, n, n + self.window_chunk)
+            self._chunk_end = n + self._windows.shape[1]
         v_state, v_err, v_ref, v_rel, v_out, v_del, v_pow, v_drone = self._views
         q = sim.drone_position
         np.multiply(sim.x_obs, self._state_scale, out=v_state)
