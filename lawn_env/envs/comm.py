@@ -68,8 +68,10 @@ class CommEnv(LawnEnvBase):
 
     * v0: initial version; the ``interface`` keyword (opt-in) and ``info["stage_cost"]`` added later.
     * v0 (later): reset and step infos share one flat schema (``lawn_env.envs.base.INFO_KEYS``;
-      ``reward_tracking``/``reward_effort`` replace the nested ``reward_terms``); the spec carries
-      ``max_episode_steps``; the dynamics and rewards are unchanged.
+      ``reward_tracking``/``reward_effort`` replace the nested ``reward_terms``); a made env's spec
+      carries ``max_episode_steps`` (= ``num_slots``; the registry entry has no time limit, the
+      env truncates itself); v0 observations saturate at ±1e6 (``OBS_LIMIT``, the space's
+      bound); the dynamics and rewards are unchanged.
     """
 
     role = "comm"

@@ -38,8 +38,9 @@ class JointEnv(LawnEnvBase):
 
     ## Observation Space
 
-    ``Box(-inf, inf, (K (17 + 6 (N_p+1)) + 3,), float32)``, normalized to order one: per AGV its
-    position, velocity and previous acceleration, its tracking error, the reference window of N_p + 1 slots
+    ``Box(-1e6, 1e6, (K (17 + 6 (N_p+1)) + 3,), float32)``, normalized to order one (features
+    saturate at the bound; with ``interface="rl"`` at ±10): per AGV its position, velocity and
+    previous acceleration, its tracking error, the reference window of N_p + 1 slots
     (relative position, velocity, acceleration), its position relative to the drone, the last
     outage probability, whether the last command arrived and the last power; then the drone
     position and the time. The table with scalings is :class:`lawn_env.spaces.ObservationLayout`;
@@ -80,8 +81,11 @@ class JointEnv(LawnEnvBase):
     * v0: initial version; the ``interface`` keyword (opt-in, the default is unchanged) and
       ``info["stage_cost"]`` added later.
     * v0 (later): reset and step infos share one flat schema (``lawn_env.envs.base.INFO_KEYS``;
-      ``reward_tracking``/``reward_effort`` replace the nested ``reward_terms``); the spec carries
-      ``max_episode_steps``; the dynamics and rewards are unchanged.
+      ``reward_tracking``/``reward_effort`` replace the nested ``reward_terms``); a made env's spec
+      carries ``max_episode_steps`` (= ``num_slots``; the registry entry has no time limit, the
+      env truncates itself); v0 observations saturate at ±1e6 (``OBS_LIMIT``, the space's
+      bound); ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` gives the native
+      vector env (:mod:`lawn_env.envs.vector`); the dynamics and rewards are unchanged.
     """
 
     def step(self, action):
