@@ -13,11 +13,10 @@ B is. The disturbance mode is not batched yet: configs with it are refused.
 from __future__ import annotations
 
 import numpy as np
-from scipy import special
 
 from . import references
 from .config import ScenarioConfig
-from .core import Simulation, initial_state, saturate_increment, stage_terms, transmit
+from .core import Simulation, initial_state, link_outage, saturate_increment, stage_terms, transmit
 
 __all__ = ["BatchSimulation"]
 
@@ -86,9 +85,8 @@ class BatchSimulation:
         self.slot[idx] = 0
         self.last_power_w[idx] = s.power_budget_w / k
         self.last_delivered[idx] = True
-        diff = self.x_aug[idx, :, 0:2] - self.drone_position[idx, None, :]
-        d2 = (diff * diff).sum(axis=-1) + s._altitude_sq
-        self.last_outage_probability[idx] = special.gammainc(s.link.m, s.link.outage_argument_sq(self.last_power_w[idx], d2))
+        self.last_outage_probability[idx] = link_outage(self.x_aug[idx], self.drone_position[idx], self.last_power_w[idx],
+                                                        s.link, s._altitude_sq)[1]
 
     # ------------------------------------------------------------------ one slot
     def step(self, increment: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray,

@@ -20,7 +20,8 @@ from . import channel, drone, references
 from .config import ScenarioConfig
 from .dynamics import PredictionModel, packed_step_matrices
 
-__all__ = ["Simulation", "Snapshot", "SlotRecord", "initial_state", "saturate_increment", "transmit", "stage_terms"]
+__all__ = ["Simulation", "Snapshot", "SlotRecord", "initial_state", "saturate_increment", "link_outage", "transmit",
+           "stage_terms"]
 
 
 # ---------------------------------------------------------------------- the slot's equations
@@ -47,16 +48,23 @@ def saturate_increment(u_prev: np.ndarray, du: np.ndarray, accel_max: float) -> 
     return u
 
 
+def link_outage(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray, link: channel.LinkParams,
+                altitude_sq: float) -> tuple[np.ndarray, np.ndarray]:
+    """The outage argument x (Prop. 1) and the closed-form outage probability gammainc(m, x) of
+    the links from the drone at ``drone_xy`` (..., 2) to the AGVs (x_aug (..., K, 6)) with powers
+    (..., K), on squared distances (channel.distance_sq)."""
+    diff = x_aug[..., 0:2] - drone_xy[..., None, :]
+    x = link.outage_argument_sq(power_w, (diff * diff) @ _ONES2 + altitude_sq)
+    return x, special.gammainc(link.m, x)
+
+
 def transmit(x_aug: np.ndarray, du: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray,
              normalized_fading: np.ndarray, link: channel.LinkParams, altitude_sq: float, packed_t: np.ndarray):
     """One slot's links and transition: the commands go from the drone at ``drone_next`` (..., 2)
     to the AGVs (x_aug (..., K, 6)) with powers (..., K); those whose fading m|h|^2 reaches the
     outage argument arrive. Returns the packed rows [x~[n+1], du] (..., K, 8) of the delivered
     increments (dynamics.packed_step_matrices), ``delivered`` and the outage probabilities."""
-    diff = x_aug[..., 0:2] - drone_next[..., None, :]
-    d2 = (diff * diff) @ _ONES2 + altitude_sq  # channel.distance_sq, on squared distances
-    x = link.outage_argument_sq(power_w, d2)
-    outage_p = special.gammainc(link.m, x)
+    x, outage_p = link_outage(x_aug, drone_next, power_w, link, altitude_sq)
     delivered = channel.delivered_from_fading(normalized_fading, x)
     du = du * delivered[..., None]
     return np.concatenate((x_aug, du), axis=-1) @ packed_t, delivered, outage_p
@@ -121,7 +129,6 @@ class Simulation:
         self.model = PredictionModel.from_config(config)
         self.link = channel.LinkParams.from_config(config)
         self.planning_link = channel.LinkParams.from_config(config, planning=True)
-        self._link_kwargs = self.link._kwargs
         self._disturbed = config.disturbance.active
         lag = config.disturbance.actuator_lag_s
         self._lag_alpha = float(np.exp(-config.slot_s / lag)) if lag > 0 else 0.0
@@ -188,8 +195,7 @@ class Simulation:
     # ------------------------------------------------------------------ channel helpers
     def outage_probability(self, power_w: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
         """Closed-form outage of the true link at the current AGV positions."""
-        dist = np.sqrt(channel.distance_sq(drone_position, self.x_aug[:, 0:2], self.link.altitude_m))
-        return channel.outage_probability(power_w, dist, **self.link._kwargs)
+        return link_outage(self.x_aug, np.asarray(drone_position, dtype=float), power_w, self.link, self._altitude_sq)[1]
 
     def planning_success(self, power_w: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
         """psi of the planners' link model (CSI-aware or not, see ChannelConfig)."""

@@ -161,6 +161,7 @@ class ObservationLayout:
         self._ref_source = None
         self._windows = None
         self._chunk_start = self._chunk_end = 0
+        self._batch_ref_source = self._batch_windows = None
         self._buffer = np.zeros(self.size)
         self._views = self._make_views()
 
@@ -202,6 +203,9 @@ class ObservationLayout:
     #: Reference windows are precomputed for this many slots at a time (memory K x 256 x 6 (N_p+1)
     #: floats, whatever the episode length).
     window_chunk = 256
+    #: :meth:`encode_batch` precomputes a fixed path set's windows for the whole episode up to this
+    #: size, and gathers them per step beyond it.
+    batch_window_table_bytes = 64 << 20
 
     def reference_windows(self, reference: np.ndarray, start: int = 0, stop: int | None = None) -> np.ndarray:
         """Scaled windows for slots ``start:stop`` (default: every slot): (K, slots, 6 (N_p+1)),
@@ -210,9 +214,15 @@ class ObservationLayout:
         last = steps - self.window + 1
         stop = last if stop is None else min(stop, last)
         idx = np.arange(start, stop)[:, None] + np.arange(self.window)[None, :]
-        win = reference[:, idx].copy()  # (K, slots, W, 6)
-        win[..., 0:2] -= reference[:, start:stop, None, 0:2]
-        return (win * self._ref_scale).reshape(k, stop - start, -1)
+        return self.scaled_windows(reference[:, idx])
+
+    def scaled_windows(self, windows: np.ndarray) -> np.ndarray:
+        """Raw reference windows (..., W, 6), slots n..n+N_p, as observation features
+        (..., 6W): positions relative to slot n's, every entry scaled (a new array)."""
+        win = windows.copy()
+        win[..., 0:2] -= windows[..., 0:1, 0:2]
+        win *= self._ref_scale
+        return win.reshape(win.shape[:-2] + (-1,))
 
     def encode(self, sim) -> np.ndarray:
         """Observation of a :class:`~lawn_env.core.Simulation` at its current slot (a new array).
@@ -244,7 +254,8 @@ class ObservationLayout:
     def encode_batch(self, bsim) -> np.ndarray:
         """Observations of a :class:`~lawn_env.batch.BatchSimulation`: (B, size) float32, row i
         equal to :meth:`encode` of scenario i (the same features and scalings, batched). A fixed
-        path set shares one precomputed window table (as :meth:`encode` uses per episode)."""
+        path set shares one precomputed window table while it stays under
+        ``batch_window_table_bytes``."""
         b, k, f = bsim.num_envs, self.num_agvs, self.agv_features
         out = np.empty((b, self.size), dtype=np.float32)
         blocks = out[:, : k * f].reshape(b, k, f)
@@ -254,16 +265,14 @@ class ObservationLayout:
         state -= self._state_shift_scaled
         blocks[..., 0:6] = state
         blocks[..., 6:12] = bsim.tracking_error * self._ref_scale
-        if bsim.shared_reference is not None:
-            if self._ref_source is not bsim.shared_reference:
-                self._ref_source = bsim.shared_reference
-                self._batch_windows = self.reference_windows(bsim.shared_reference)
+        shared = bsim.shared_reference
+        if shared is not None and shared.nbytes * self.window <= self.batch_window_table_bytes:
+            if self._batch_ref_source is not shared:
+                self._batch_ref_source = shared
+                self._batch_windows = self.reference_windows(shared)
             blocks[..., w0:w1] = self._batch_windows[:, bsim.slot].transpose(1, 0, 2)
         else:
-            win = bsim.reference_windows().copy()  # (B, K, W, 6)
-            win[..., 0:2] -= win[:, :, 0:1, 0:2]
-            win *= self._ref_scale
-            blocks[..., w0:w1] = win.reshape(b, k, -1)
+            blocks[..., w0:w1] = self.scaled_windows(bsim.reference_windows())
         blocks[..., w1 : w1 + 2] = state[..., 0:2] - drone[:, None, :]
         blocks[..., w1 + 2] = bsim.last_outage_probability
         blocks[..., w1 + 3] = bsim.last_delivered

@@ -256,7 +256,7 @@ def test_random_actions_are_taken_or_refused_naming_shape_and_dtype(env_id, inte
             obs, reward, terminated, truncated, _ = env.step(action)
         except (ValueError, TypeError) as exc:
             assert not valid, f"a valid action was refused: {exc}"
-            assert "action" in str(exc) and f"({size},)" in str(exc) or "[-1, 1]" in str(exc), str(exc)
+            assert "action" in str(exc) and (f"({size},)" in str(exc) or "[-1, 1]" in str(exc)), str(exc)
             outcomes["refused"] += 1
             return
         assert valid, f"an invalid action was taken: {action!r}"

@@ -79,10 +79,14 @@ def test_next_step_autoreset_truncation_and_seeding():
     assert truncated.all() and (info["slot"] == 5).all()
     obs, reward, terminated, truncated, info = envs.step(zero)  # the autoreset step
     assert (reward == 0).all() and not truncated.any() and not terminated.any() and (info["slot"] == 0).all()
-    # the reset scenarios start where a fresh reset with the same per-env generators would
-    again = _make(config=ScenarioConfig(num_slots=5))
-    first, _ = again.reset(seed=3)
-    assert not np.array_equal(obs, first)  # a new episode, not a replay of the first one
+    # each restarted env drew its second episode's initial offsets from its own generator (seed 3 + i),
+    # right after the first episode's: the next N(0, 3 m) draws, around the fixed paths' start
+    sim = envs.unwrapped.sim
+    for i in range(N):
+        rng = np.random.default_rng(3 + i)
+        rng.normal(0.0, 3.0, (4, 2))  # the first episode's offsets
+        offsets = rng.normal(0.0, 3.0, (4, 2))
+        np.testing.assert_array_equal(sim.x_aug[i, :, 0:2], np.clip(sim.shared_reference[:, 0, 0:2] + offsets, 0, 200))
     # the same seed gives the same numbers; a list of seeds sets each env
     a, _ = _make().reset(seed=7)
     b, _ = _make().reset(seed=[7, 8, 9, 10])

@@ -4,6 +4,7 @@ rollout boundaries, actor warm-up."""
 from __future__ import annotations
 
 import csv
+import time
 from pathlib import Path
 
 from stable_baselines3.common.callbacks import BaseCallback
@@ -102,14 +103,10 @@ class RunCheckpoint(BaseCallback):
         self._start = 0.0
 
     def _on_training_start(self) -> None:
-        import time
-
         self._start = time.perf_counter()
         self._next = _next_mark(self.num_timesteps, self.every)
 
     def _save(self) -> None:
-        import time
-
         write_checkpoint(self.out_dir, self.model,
                          {"wall_time_s": self.wall_time_before + time.perf_counter() - self._start})
         self._next = _next_mark(self.num_timesteps, self.every)

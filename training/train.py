@@ -46,7 +46,7 @@ import numpy as np
 import lawn_env
 from agents.runs import read_json
 from lawn_env import ScenarioConfig
-from lawn_env.interface import resolve_interface
+from lawn_env.interface import V0_INTERFACE, resolve_interface
 
 from .checkpoints import Checkpoint, clear_history, latest_checkpoint, restore_history
 
@@ -116,7 +116,7 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
     if vec not in ("dummy", "native"):
         raise ValueError(f"--vec {vec!r}; valid: dummy, native")
     if vec == "native":
-        if env_id != "lawn/Joint-v0" or resolve_interface(interface).to_dict() != resolve_interface("v0").to_dict():
+        if env_id != "lawn/Joint-v0" or resolve_interface(interface) != V0_INTERFACE:
             raise ValueError(f"--vec native runs lawn/Joint-v0 on the v0 interface so far (got {env_id}, interface "
                              f"{resolve_interface(interface).action_scheme}); pass --interface v0, or --vec dummy")
         from .vec import NativeVecEnv

@@ -36,7 +36,7 @@ class NativeVecEnv(VecEnv):
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
-        self._actions = np.clip(actions, -1.0, 1.0)  # SB3 clips to the Box as its own VecEnvs do
+        self._actions = actions  # SB3 clips Box actions before stepping; the env rejects what it cannot take
 
     def step_wait(self):
         obs, reward, terminated, truncated, info = self.venv.step(self._actions)

@@ -142,41 +142,37 @@ class JointVectorEnv(VectorEnv):
         record = sim.step(increment, power, drone_next, self._draw_fading())
         cost_tracking = record["tracking_cost"].sum(axis=1)
         cost_effort = record["effort_cost"].sum(axis=1)
+        applied = record["applied_increment"].copy()
+        if self._view is not None:
+            self._view.record()
+        if restart.any():  # next-step autoreset: these scenarios start over; their action was ignored
+            self._restart(restart)
+            cost_tracking[restart] = cost_effort[restart] = 0.0
+            applied[restart] = 0.0
         cost = cost_tracking + cost_effort
         self._cost += cost
         truncated = sim.slot >= sim.num_slots
         terminated = np.zeros(self.num_envs, dtype=bool)
-        info = self._info(cost_tracking, cost_effort, record["applied_increment"])
+        info = self._info(cost_tracking, cost_effort, applied)  # restarted rows describe their new episode
         info["episode_control_cost"] = np.where(truncated, self._cost, 0.0)
-        info["_episode_control_cost"] = truncated & ~restart
-        if self._view is not None:
-            self._view.record()
-        if restart.any():  # next-step autoreset: these scenarios start over; their action was ignored
-            sim.reset(self._rngs, restart)
-            if self._view is not None and restart[self.render_env]:
-                self._view.restart()
-            self._cost[restart] = 0.0
-            truncated[restart] = False
-            cost[restart] = 0.0
-            for key in ("stage_cost", "reward_tracking", "reward_effort"):
-                info[key][restart] = 0.0
-            info["applied_increment"][restart] = 0.0
-            for key, value in self._info().items():
-                if key not in ("stage_cost", "reward_tracking", "reward_effort", "applied_increment"):
-                    info[key][restart] = value[restart]
+        info["_episode_control_cost"] = truncated.copy()
         self._cost[truncated] = 0.0
         self._done = truncated | terminated
         obs = self.layout.encode_batch(sim)
         if same_step and self._done.any():  # same-step autoreset: the final observation goes to info
             ended = self._done
-            info["final_obs"] = obs.copy()
-            info["_final_obs"] = ended.copy()
-            sim.reset(self._rngs, ended)  # info keeps describing the step that ended them
-            if self._view is not None and ended[self.render_env]:
-                self._view.restart()
+            info["final_obs"] = obs
+            info["_final_obs"] = ended
+            self._restart(ended)  # info keeps describing the step that ended them
             obs = self.layout.encode_batch(sim)
             self._done = np.zeros(self.num_envs, dtype=bool)
         return obs, -cost, terminated, truncated, info
+
+    def _restart(self, which: np.ndarray) -> None:
+        """New episodes for the envs ``which`` (autoreset), each from its own generator."""
+        self.sim.reset(self._rngs, which)
+        if self._view is not None and which[self.render_env]:
+            self._view.restart()
 
     def render(self):
         """An RGB frame (H, W, 3) of env ``render_env``: area, references, trails, links colored by
@@ -198,10 +194,11 @@ class JointVectorEnv(VectorEnv):
             self._renderer = None
 
     def _info(self, cost_tracking=None, cost_effort=None, applied=None) -> dict:
+        """The single env's info keys (``INFO_KEYS``) with a leading env axis; zero costs and
+        increments at reset."""
         sim, b = self.sim, self.num_envs
-        zeros = np.zeros(b)
-        tracking = zeros if cost_tracking is None else cost_tracking
-        effort = zeros if cost_effort is None else cost_effort
+        tracking = np.zeros(b) if cost_tracking is None else cost_tracking
+        effort = np.zeros(b) if cost_effort is None else cost_effort
         return {
             "slot": sim.slot.copy(),
             "stage_cost": tracking + effort,
@@ -227,28 +224,19 @@ class _EnvView:
         self._agv: list[np.ndarray] = []
 
     def restart(self) -> None:
-        self._drone = [self.drone_position.copy()]
-        self._agv = [self.x_aug[:, 0:2].copy()]
+        self._drone, self._agv = [], []
+        self.record()
 
     def record(self) -> None:
         self._drone.append(self.drone_position.copy())
         self._agv.append(self.x_aug[:, 0:2].copy())
 
-    @property
-    def reference(self) -> np.ndarray:
-        return self.bsim.reference[self.i]
+    _ROWS = ("reference", "x_aug", "drone_position", "last_outage_probability")
 
-    @property
-    def x_aug(self) -> np.ndarray:
-        return self.bsim.x_aug[self.i]
-
-    @property
-    def drone_position(self) -> np.ndarray:
-        return self.bsim.drone_position[self.i]
-
-    @property
-    def last_outage_probability(self) -> np.ndarray:
-        return self.bsim.last_outage_probability[self.i]
+    def __getattr__(self, name: str):  # the batch's arrays, row i
+        if name in _EnvView._ROWS:
+            return getattr(self.bsim, name)[self.i]
+        raise AttributeError(name)
 
     @property
     def slot(self) -> int:
