@@ -36,7 +36,8 @@ RL_ENV_IDS = {
 #: vector entry points admit no extra registered wrappers to reconcile the two.
 _EPISODE = dict(disable_env_checker=False)
 #: Native vector envs (``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")``).
-VECTOR_ENTRY_POINTS = {"lawn/Joint-v0": "lawn_env.envs.vector:JointVectorEnv"}
+VECTOR_ENTRY_POINTS = {"lawn/Joint-v0": "lawn_env.envs.vector:JointVectorEnv",
+                       "lawn/Comm-v0": "lawn_env.envs.vector:CommVectorEnv"}
 for _env_id, _entry_point in ENV_IDS.items():
     if _env_id not in registry:
         register(id=_env_id, entry_point=_entry_point, vector_entry_point=VECTOR_ENTRY_POINTS.get(_env_id),

@@ -20,7 +20,7 @@ from . import channel, drone, references
 from .config import ScenarioConfig
 from .dynamics import PredictionModel, packed_step_matrices
 
-__all__ = ["Simulation", "Snapshot", "SlotRecord", "initial_state", "saturate_increment", "link_outage", "transmit",
+__all__ = ["Simulation", "Snapshot", "SlotRecord", "initial_state", "saturate_increment", "link_outage", "link_success", "transmit",
            "stage_terms"]
 
 
@@ -56,6 +56,15 @@ def link_outage(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray, li
     diff = x_aug[..., 0:2] - drone_xy[..., None, :]
     x = link.outage_argument_sq(power_w, (diff * diff) @ _ONES2 + altitude_sq)
     return x, special.gammainc(link.m, x)
+
+
+def link_success(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray, link: channel.LinkParams,
+                 altitude_sq: float) -> np.ndarray:
+    """The success probability psi = gammaincc(m, x) of the links from the drone at ``drone_xy``
+    (..., 2) to the AGVs (x_aug (..., K, 6)) with powers (..., K): the planners' psi when
+    ``link`` is their link model (``LinkParams.from_config(config, planning=True)``)."""
+    diff = x_aug[..., 0:2] - drone_xy[..., None, :]
+    return special.gammaincc(link.m, link.outage_argument_sq(power_w, (diff * diff) @ _ONES2 + altitude_sq))
 
 
 def transmit(x_aug: np.ndarray, du: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray,
@@ -199,8 +208,8 @@ class Simulation:
 
     def planning_success(self, power_w: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
         """psi of the planners' link model (CSI-aware or not, see ChannelConfig)."""
-        dist = np.sqrt(channel.distance_sq(drone_position, self.x_aug[:, 0:2], self.link.altitude_m))
-        return channel.success_probability(power_w, dist, **self.planning_link._kwargs)
+        return link_success(self.x_aug, np.asarray(drone_position, dtype=float), power_w, self.planning_link,
+                            self._altitude_sq)
 
     def drone_target(self, velocity_mps: np.ndarray) -> np.ndarray:
         """Next drone position for a commanded velocity (speed-limited, kept in the area)."""

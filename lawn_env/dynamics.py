@@ -135,9 +135,8 @@ class PredictionModel:
         return 2 * self.horizon
 
     def residual(self, x_aug: np.ndarray, chi_ref: np.ndarray) -> np.ndarray:
-        """r = C x~ - chi_ref per AGV: (K, 6) and (K, N_p+1, 6) -> (K, 6(N_p+1))."""
-        k = x_aug.shape[0]
-        return x_aug @ self.c.T - chi_ref.reshape(k, -1)
+        """r = C x~ - chi_ref per AGV: (..., K, 6) and (..., K, N_p+1, 6) -> (..., K, 6(N_p+1))."""
+        return x_aug @ self.c.T - chi_ref.reshape(x_aug.shape[:-1] + (-1,))
 
     def predict(self, x_aug: np.ndarray, dmu: np.ndarray, psi) -> np.ndarray:
         """Expected predicted states chi = C x~ + psi F Delta-mu, (K, N_p+1, 6)."""

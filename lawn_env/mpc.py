@@ -14,7 +14,11 @@ command goes out to zero (their bounds become [0, 0]), so a command is planned t
 
 Backends are named as in qpsolvers. ``"daqp"`` (default) and ``"osqp"`` keep one persistent
 solver workspace per AGV, updated in place and warm-started from the previous solve;
-``"qpsolvers:<name>"`` calls any other qpsolvers backend (stateless). A failed or inaccurate
+``"qpsolvers:<name>"`` calls any other qpsolvers backend (stateless). ``"batched"`` solves every
+QP of a call at once, also over a leading batch axis of scenarios (``x_aug`` (B, K, 6)): the
+batched active-set steps of :class:`lawn_env.qp.PencilQP` settle the problems whose active set
+is empty or unchanged since the previous solve, exactly; DAQP solves the rest one by one (the
+native ``lawn/Comm-v0`` vector env uses it). A failed or inaccurate
 solve falls back to a cold OSQP solve at high accuracy, then to the always-feasible zero
 sequence; fallbacks are counted in the returned :class:`MPCSolution`, never raised.
 """
@@ -37,7 +41,7 @@ class MPCSolution:
 
     increments: np.ndarray  # (K, N_p, 2) Delta-mu_k, m/s^2
     value: np.ndarray  # (K,) V_k = optimal J^_k
-    status: np.ndarray  # (K,) 0 primary backend, 1 fallback OSQP, 2 fallback zero sequence
+    status: np.ndarray  # (K,) 0 primary backend, 1 fallback OSQP, 2 fallback zero sequence (leading axes: batched)
     iterations: np.ndarray  # (K,) solver iterations of the accepted solve
     solve_time_s: float
 
@@ -159,10 +163,84 @@ class _QpsolversBackend:
         return x, 0, float(0.5 * x @ p @ x + q @ x)
 
 
-BACKENDS = {"daqp": _DaqpBackend, "osqp": _OsqpBackend}
+class _BatchedBackend:
+    """Every problem of a solve at once: :class:`lawn_env.qp.PencilQP` (a primal-dual active-set
+    method over the whole stack, ADMM where an active set does not settle, warm-started from the
+    previous solve's active sets), exact where its KKT check passes; the others by DAQP one by
+    one (warm-started workspaces per problem; ``last_settled_share`` is the batched share).
+
+    The increment bounds are tightened by a relative ``TIGHTEN`` (1e-9) inside the batched solve:
+    with a_max an integer multiple of Delta-a_max (the default, 2 and 1 m/s^2), a saturating
+    sequence of increments meets the acceleration bound exactly and makes the active set
+    degenerate, where an active-set step cannot settle. The answers stay feasible for the
+    original bounds and their values move by about 1e-9 relative."""
+
+    name = "batched"
+    TIGHTEN = 1e-9
+
+    def __init__(self, num_agvs: int, constraint_matrix: np.ndarray, hessians: tuple[np.ndarray, np.ndarray]):
+        from .qp import PencilQP
+
+        n = constraint_matrix.shape[1]
+        self._n = n
+        self.qp = PencilQP(hessians[0], hessians[1], np.vstack([np.eye(n), constraint_matrix]))
+        self._a = np.array(constraint_matrix, dtype=float, order="C")
+        self._active = None  # (M, 2n) active sets of the previous solve
+        self._daqp, self._daqp_size = None, 0  # DAQP workspaces of the problems the batched steps leave
+        self.last_settled_share = float("nan")  # of the last solve's problems, settled by the batched steps
+
+    def forget(self, rows: np.ndarray) -> None:
+        """Drop the warm starts of the problems ``rows`` (flat indices)."""
+        if self._active is not None:
+            self._active[rows] = 0
+        if self._daqp is not None:
+            for i in rows.tolist():
+                self._daqp._models[i] = None
+
+    def solve_all(self, s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray):
+        """The M problems at Hessian scalars ``s`` = psi^2: minimizers (M, n), objectives (M,),
+        status (M,) int8 and iterations (M,)."""
+        n, mm = self._n, s.shape[0]
+        lo, up = lower.copy(), upper.copy()
+        lo[:, :n] *= 1.0 - self.TIGHTEN
+        up[:, :n] *= 1.0 - self.TIGHTEN
+        warm = self._active if self._active is not None and self._active.shape[0] == mm else None
+        sol = self.qp.solve(s, q, lo, up, active=warm)
+        self._active = sol.active
+        z, fval = sol.z, sol.objective
+        status = np.zeros(mm, dtype=np.int8)
+        iterations = sol.iterations.copy()
+        unsettled = np.flatnonzero(~sol.converged)
+        self.last_settled_share = 1.0 - unsettled.size / max(mm, 1)
+        if unsettled.size:
+            if self._daqp is None or self._daqp_size != mm:
+                self._daqp, self._daqp_size = _DaqpBackend(mm, self._a), mm
+            p_all = s[unsettled, None, None] * self.qp.p1 + self.qp.p0
+        for j, i in enumerate(unsettled.tolist()):
+            p = p_all[j]
+            x, its, _ = self._daqp.solve(i, p, q[i], lower[i], upper[i])
+            if x is None:  # DAQP failed: a cold OSQP solve, then the zero sequence (counted, status 1 and 2)
+                x, its, status[i] = self._fallback(p, q[i], lower[i], upper[i])
+            z[i], iterations[i] = x, its
+        if unsettled.size:
+            zu = z[unsettled]
+            fval[unsettled] = 0.5 * np.einsum("ij,ijk,ik->i", zu, p_all, zu) + (q[unsettled] * zu).sum(axis=1)
+            self._active[unsettled] = 0  # (DAQP's own active sets as guesses measured slower: weakly active rows)
+        return z, fval, status, iterations
+
+    def _fallback(self, p, q, lower, upper):
+        x, its, _ = _OsqpBackend(1, self._a).solve(0, p, q, lower, upper)
+        if x is not None:
+            return x, its, 1
+        return np.zeros(self._n), 0, 2
 
 
-def _make_backend(name: str, num_agvs: int, constraint_matrix: np.ndarray):
+BACKENDS = {"daqp": _DaqpBackend, "osqp": _OsqpBackend, "batched": _BatchedBackend}
+
+
+def _make_backend(name: str, num_agvs: int, constraint_matrix: np.ndarray, hessians: tuple[np.ndarray, np.ndarray]):
+    if name == "batched":
+        return _BatchedBackend(num_agvs, constraint_matrix, hessians)
     if name in BACKENDS:
         return BACKENDS[name](num_agvs, constraint_matrix)
     if name.startswith("qpsolvers:"):
@@ -189,7 +267,9 @@ class OutageAwareMPC:
         n = model.num_inputs
         self._n = n
         self._constraint = model.increment_sum
-        self.backend = _make_backend(backend, self.num_agvs, self._constraint)
+        self._q5_2 = 2.0 * np.asarray(model.q5)
+        self._ftq4f_2 = 2.0 * np.asarray(model.ftq4f)
+        self.backend = _make_backend(backend, self.num_agvs, self._constraint, self._hessians)
         self._fallback = None  # built lazily: most runs never need it
         # increment bounds per slot phase: zero where move blocking holds the acceleration
         self._boxes = []
@@ -198,9 +278,12 @@ class OutageAwareMPC:
             pos = np.broadcast_to(np.where(allowed, self.accel_increment_max, 0.0), (self.num_agvs, n))
             self._boxes.append((-pos, pos))
         self._u_index = np.tile([4, 5], model.horizon)
-        self._q5_2 = 2.0 * np.asarray(model.q5)
-        self._ftq4f_2 = 2.0 * np.asarray(model.ftq4f)
         self._last_data = None
+
+    @property
+    def _hessians(self) -> tuple[np.ndarray, np.ndarray]:
+        """(P0, P1) with P = P0 + psi^2 P1: 2 Q5 and 2 F'Q4F."""
+        return self._q5_2, self._ftq4f_2
 
     def __getstate__(self) -> dict:
         """Copies and pickles carry the problem, not the solver workspaces (C objects and modules):
@@ -213,7 +296,7 @@ class OutageAwareMPC:
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
-        self.backend = _make_backend(state["backend"], self.num_agvs, self._constraint)
+        self.backend = _make_backend(state["backend"], self.num_agvs, self._constraint, self._hessians)
 
     @classmethod
     def from_config(cls, config, backend: str = "daqp") -> "OutageAwareMPC":
@@ -221,10 +304,16 @@ class OutageAwareMPC:
         return cls(PredictionModel.from_config(config), config.num_agvs, ctl.accel_max_mps2,
                    ctl.accel_increment_max_mps2, backend=backend, control_period=planning_period(config))
 
-    def reset(self) -> None:
+    def reset(self, which: np.ndarray | None = None) -> None:
         """Drop the solver workspaces (warm starts): the next solve starts cold, so an episode's
-        solutions do not depend on the episodes before it."""
-        self.backend = _make_backend(self.backend.name, self.num_agvs, self._constraint)
+        solutions do not depend on the episodes before it. With the ``"batched"`` backend,
+        ``which`` (a boolean mask over the leading batch axis of the last solve) drops only those
+        scenarios' warm starts."""
+        if which is not None and self.backend.name == "batched":
+            rows = np.flatnonzero(np.repeat(np.asarray(which, dtype=bool), self.num_agvs))
+            self.backend.forget(rows)
+            return
+        self.backend = _make_backend(self.backend.name, self.num_agvs, self._constraint, self._hessians)
         self._fallback = None
         self._last_data = None
 
@@ -243,17 +332,20 @@ class OutageAwareMPC:
         else:
             neg, pos = self._boxes[int(slot) % self.control_period]
         window = self.model.horizon + 1
-        if x_aug.shape != (k, 6) or chi_ref.shape != (k, window, 6):
+        lead = x_aug.shape[:-2]
+        if x_aug.shape[-2:] != (k, 6) or chi_ref.shape != lead + (k, window, 6) or (lead and self.backend.name != "batched"):
             raise ValueError(f"x_aug has shape {x_aug.shape} and chi_ref {chi_ref.shape}; this MPC (num_agvs={k}, "
-                             f"horizon={self.model.horizon}) needs ({k}, 6) and ({k}, {window}, 6)")
+                             f"horizon={self.model.horizon}) needs ({k}, 6) and ({k}, {window}, 6), with a leading "
+                             "batch axis (B, ...) only for the 'batched' backend")
         r = self.model.residual(x_aug, chi_ref)
-        u_prev = x_aug[:, self._u_index]  # u[n-1] repeated over the horizon, (K, 2 N_p)
+        u_prev = x_aug[..., self._u_index]  # u[n-1] repeated over the horizon, (..., K, 2 N_p)
+        shape = u_prev.shape
         return SlotData(
             residual=r,
             linear=r @ self.model.ftq4.T,  # F' Q4 r, so H = 2 psi (F' Q4 r)'
-            constant=((r @ self.model.q4) * r).sum(axis=1),
-            lower=np.concatenate([neg, -self.accel_max - u_prev], axis=1),
-            upper=np.concatenate([pos, self.accel_max - u_prev], axis=1),
+            constant=((r @ self.model.q4) * r).sum(axis=-1),
+            lower=np.concatenate([np.broadcast_to(neg, shape), -self.accel_max - u_prev], axis=-1),
+            upper=np.concatenate([np.broadcast_to(pos, shape), self.accel_max - u_prev], axis=-1),
         )
 
     def _objective(self, data: "SlotData", psi: np.ndarray):
@@ -273,6 +365,8 @@ class OutageAwareMPC:
         start = time.perf_counter()
         k = self.num_agvs
         psi = np.asarray(psi, dtype=float)
+        if self.backend.name == "batched":
+            return self._solve_stack(data, psi, start)
         if psi.shape != (k,):
             psi = np.broadcast_to(psi, (k,))
         p, q = self._objective(data, psi)
@@ -299,6 +393,24 @@ class OutageAwareMPC:
             value=fval + data.constant,
             status=status,
             iterations=iterations,
+            solve_time_s=time.perf_counter() - start,
+        )
+
+    def _solve_stack(self, data: "SlotData", psi: np.ndarray, start: float) -> MPCSolution:
+        """Every QP of the slot (any leading batch axes) in one batched solve."""
+        lead = data.constant.shape
+        psi = np.broadcast_to(psi, lead)
+        n = self._n
+        q = (2.0 * psi)[..., None] * data.linear
+        z, fval, status, iterations = self.backend.solve_all(
+            (psi * psi).reshape(-1), q.reshape(-1, n), data.lower.reshape(-1, 2 * n), data.upper.reshape(-1, 2 * n))
+        if self.control_period > 1:  # the blocked increments exactly zero
+            z = np.clip(z, data.lower.reshape(-1, 2 * n)[:, :n], data.upper.reshape(-1, 2 * n)[:, :n])
+        return MPCSolution(
+            increments=z.reshape(lead + (self.model.horizon, 2)),
+            value=fval.reshape(lead) + data.constant,
+            status=status.reshape(lead),
+            iterations=iterations.reshape(lead),
             solve_time_s=time.perf_counter() - start,
         )
 

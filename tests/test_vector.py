@@ -12,11 +12,11 @@ from lawn_env.drone import move_drone, move_drones
 N = 4
 
 
-def _make(num_envs=N, **kwargs):
-    return gym.make_vec("lawn/Joint-v0", num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
+def _make(num_envs=N, env_id="lawn/Joint-v0", **kwargs):
+    return gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
 
 
-def _single_episode(config, seed, actions, monkeypatch):
+def _single_episode(config, seed, actions, monkeypatch, env_id="lawn/Joint-v0", **kwargs):
     """Run the single env on ``actions`` and record its fading draws and its states."""
     draws, real = [], channel.sample_normalized_fading
 
@@ -26,7 +26,7 @@ def _single_episode(config, seed, actions, monkeypatch):
         return out
 
     monkeypatch.setattr(channel, "sample_normalized_fading", recording)
-    env = gym.make("lawn/Joint-v0", config=config)
+    env = gym.make(env_id, config=config, **kwargs)
     obs, _ = env.reset(seed=seed)
     states, rewards, observations = [], [], [obs]
     for a in actions:
@@ -38,17 +38,21 @@ def _single_episode(config, seed, actions, monkeypatch):
     return np.array(draws), np.array(states), np.array(rewards), np.array(observations), truncated
 
 
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
 @pytest.mark.parametrize("config", [ScenarioConfig(num_slots=30), ScenarioConfig(num_agvs=5, num_slots=30)],
                          ids=["paper-paths", "random-paths"])
-def test_lockstep_with_the_single_env_on_the_same_fading(config, monkeypatch):
+def test_lockstep_with_the_single_env_on_the_same_fading(config, env_id, monkeypatch):
     """Env i of the vector env reset with seed s equals the single env reset with s + i for a
-    whole episode, to 1e-12, when both see the same fading draws."""
+    whole episode, to 1e-12, when both see the same fading draws (Comm-v0: both with the
+    batched QP solver, whose answers depend only on each problem's own data and warm start)."""
     rng = np.random.default_rng(0)
-    size = 3 * config.num_agvs + 2
+    comm = env_id == "lawn/Comm-v0"
+    size = (1 if comm else 3) * config.num_agvs + 2
+    extra = {"qp_backend": "batched"} if comm else {}
     actions = rng.uniform(-1, 1, (config.num_slots, N, size)).astype(np.float32)
-    singles = [_single_episode(config, 10 + i, actions[:, i], monkeypatch) for i in range(N)]
+    singles = [_single_episode(config, 10 + i, actions[:, i], monkeypatch, env_id, **extra) for i in range(N)]
     fading = np.stack([s[0] for s in singles], axis=1)  # (T, N, K)
-    envs = _make(config=config)
+    envs = _make(env_id=env_id, config=config, **extra)
     it = iter(fading)
     monkeypatch.setattr(envs.unwrapped, "_draw_fading", lambda: next(it))
     obs, _ = envs.reset(seed=10)
@@ -65,8 +69,9 @@ def test_lockstep_with_the_single_env_on_the_same_fading(config, monkeypatch):
     np.testing.assert_allclose(info["episode_control_cost"], [-s[2].sum() for s in singles], rtol=1e-12)
 
 
-def test_next_step_autoreset_truncation_and_seeding():
-    envs = _make(config=ScenarioConfig(num_slots=5))
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+def test_next_step_autoreset_truncation_and_seeding(env_id):
+    envs = _make(env_id=env_id, config=ScenarioConfig(num_slots=5))
     assert envs.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
     obs, info = envs.reset(seed=3)
     assert obs.shape == (N, envs.single_observation_space.shape[0]) and obs.dtype == np.float32
@@ -88,13 +93,40 @@ def test_next_step_autoreset_truncation_and_seeding():
         offsets = rng.normal(0.0, 3.0, (4, 2))
         np.testing.assert_array_equal(sim.x_aug[i, :, 0:2], np.clip(sim.shared_reference[:, 0, 0:2] + offsets, 0, 200))
     # the same seed gives the same numbers; a list of seeds sets each env
-    a, _ = _make().reset(seed=7)
-    b, _ = _make().reset(seed=[7, 8, 9, 10])
+    a, _ = _make(env_id=env_id).reset(seed=7)
+    b, _ = _make(env_id=env_id).reset(seed=[7, 8, 9, 10])
     np.testing.assert_array_equal(a, b)
 
 
-def test_bad_actions_name_the_env_index_and_the_expected_shape():
-    envs = _make()
+def test_comm_vector_env_reports_its_qps_and_matches_the_one_by_one_solver():
+    """Comm-v0's vector env: per-env MPC info with a leading env axis, the same keys as the
+    single env's, and the batched solver's episode equal to DAQP's (one QP at a time) to 1e-6."""
+    config = ScenarioConfig(num_slots=12)
+    single = gym.make("lawn/Comm-v0", config=config)
+    _, single_info = single.reset(seed=0)
+    runs = {}
+    for backend in ("batched", "daqp"):
+        envs = _make(env_id="lawn/Comm-v0", config=config, qp_backend=backend)
+        assert envs.single_action_space == single.action_space
+        assert envs.single_observation_space == single.observation_space
+        _, info = envs.reset(seed=0)
+        assert set(info) >= set(single_info)
+        rewards = []
+        for t in range(12):
+            action = np.tile(np.linspace(-0.5, 0.5, 6, dtype=np.float32), (N, 1))
+            _, reward, _, _, info = envs.step(action)
+            rewards.append(reward)
+            assert info["mpc_iterations"].shape == (N, 4) and info["mpc_fallbacks"].shape == (N,)
+            assert info["success_probability_planned"].shape == (N, 4) and not info["mpc_fallbacks"].any()
+        runs[backend] = np.array(rewards)
+    np.testing.assert_allclose(runs["batched"], runs["daqp"], rtol=1e-6)
+    with pytest.raises(ValueError, match="qp_backend='osqp'"):
+        _make(env_id="lawn/Comm-v0", qp_backend="osqp")
+
+
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+def test_bad_actions_name_the_env_index_and_the_expected_shape(env_id):
+    envs = _make(env_id=env_id)
     envs.reset(seed=0)
     good = np.zeros(envs.action_space.shape, dtype=np.float32)
     bad = good.copy()

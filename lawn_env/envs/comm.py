@@ -59,8 +59,8 @@ class CommEnv(LawnEnvBase):
     ## Arguments
 
     ``gym.make("lawn/Comm-v0", config=None, render_mode=None, qp_backend="daqp", interface=None,
-    **overrides)``; ``qp_backend`` is ``"daqp"``, ``"osqp"`` or ``"qpsolvers:<name>"``
-    (:mod:`lawn_env.mpc`); ``interface`` as for ``lawn/Joint-v0`` (``lawn/CommRL-v0`` is this env
+    **overrides)``; ``qp_backend`` is ``"daqp"``, ``"osqp"``, ``"batched"`` (the native vector
+    env's solver, :mod:`lawn_env.qp`) or ``"qpsolvers:<name>"`` (:mod:`lawn_env.mpc`); ``interface`` as for ``lawn/Joint-v0`` (``lawn/CommRL-v0`` is this env
     with ``interface="rl"``: power ``p_k ∝ d_k^2 exp(2 a_k)`` spending the budget, drone toward
     the AGVs' centroid ``+ a * 50 m``).
 

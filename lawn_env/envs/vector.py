@@ -1,5 +1,5 @@
 """Native vector environments: ``gym.make_vec("lawn/Joint-v0", num_envs=N,
-vectorization_mode="vector_entry_point")``.
+vectorization_mode="vector_entry_point")`` and the same for ``lawn/Comm-v0``.
 
 One :class:`~lawn_env.batch.BatchSimulation` advances all N scenarios per call, through the
 slot functions every lawn env shares, instead of N Python-level env copies. Conventions are
@@ -18,6 +18,10 @@ Gymnasium's vector ones (as ``CartPoleVectorEnv``):
   (``lawn_env.envs.base.INFO_KEYS``), and ``episode_control_cost`` with its mask
   ``_episode_control_cost`` on the step an episode ends.
 
+``lawn/Comm-v0``'s N x K outage-aware MPC QPs of a step are solved together
+(:class:`CommVectorEnv`, ``qp_backend="batched"``); its info adds ``mpc_iterations`` (N, K),
+``mpc_fallbacks`` (N,) and ``success_probability_planned`` (N, K) as the single env's does.
+
 ``render_mode="rgb_array"`` draws env ``render_env`` (default 0) as the single env draws itself.
 Only the paper's benchmark interface (v0) is batched so far, and not the disturbance mode;
 other settings raise a ``ValueError`` saying so (``vectorization_mode="sync"`` runs them).
@@ -33,13 +37,16 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..batch import BatchSimulation
+from ..channel import LinkParams
+from ..core import link_success
 from ..config import ScenarioConfig
 from ..drone import move_drones
 from ..interface import V0_INTERFACE, resolve_interface
+from ..mpc import OutageAwareMPC
 from ..spaces import ObservationLayout, decode_power
 from .base import resolve_config
 
-__all__ = ["JointVectorEnv", "check_actions"]
+__all__ = ["CommVectorEnv", "JointVectorEnv", "check_actions"]
 
 
 def check_actions(actions, num_envs: int, size: int) -> np.ndarray:
@@ -66,6 +73,7 @@ class JointVectorEnv(VectorEnv):
     """N copies of ``lawn/Joint-v0`` (v0 interface) in one batched simulation."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 4}
+    role = "joint"
 
     def __init__(self, num_envs: int, config: ScenarioConfig | Mapping | str | None = None,
                  render_mode: str | None = None, interface: Any = None,
@@ -94,7 +102,8 @@ class JointVectorEnv(VectorEnv):
         k = self.config.num_agvs
         self.num_agvs = k
         self.single_observation_space = V0_INTERFACE.observation_space(self.layout.size)
-        self.single_action_space = gym.spaces.Box(-1.0, 1.0, shape=(3 * k + 2,), dtype=np.float32)
+        size = 3 * k + 2 if self.role == "joint" else k + 2
+        self.single_action_space = gym.spaces.Box(-1.0, 1.0, shape=(size,), dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._rngs: list[np.random.Generator] = []
@@ -120,23 +129,23 @@ class JointVectorEnv(VectorEnv):
             seeds = [base + i for i in range(self.num_envs)]
         self._rngs = [np.random.default_rng(s) for s in seeds]  # = gymnasium's seeding.np_random(s)
         self.sim.reset(self._rngs)
+        self._on_reset()
         if self._view is not None:
             self._view.restart()
         self._done[:] = False
         self._cost[:] = 0.0
         self._started = True
-        return self.layout.encode_batch(self.sim), self._info()
+        return self.layout.encode_batch(self.sim), dict(self._info(), **self._extra_reset_info())
+
+    def _on_reset(self) -> None:
+        """Hook: a new batch of episodes starts."""
 
     def step(self, actions):
         if not self._started:
             raise RuntimeError("call reset() before step()")
         a = check_actions(actions, self.num_envs, self.single_action_space.shape[0])
-        sim, k = self.sim, self.num_agvs
-        cfg = self.config
-        increment = a[:, : 2 * k].reshape(-1, k, 2) * cfg.control.accel_increment_max_mps2
-        power = decode_power(a[:, 2 * k : 3 * k], cfg.power_budget_w)
-        drone_next = move_drones(sim.drone_position, a[:, 3 * k :] * cfg.drone.max_speed_mps,
-                                 cfg.drone.max_speed_mps, cfg.slot_s, tuple(cfg.area_m))
+        sim = self.sim
+        increment, power, drone_next, extra = self._decide(a)
         same_step = self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
         restart = np.zeros(self.num_envs, dtype=bool) if same_step else self._done.copy()
         record = sim.step(increment, power, drone_next, self._draw_fading())
@@ -154,6 +163,11 @@ class JointVectorEnv(VectorEnv):
         truncated = sim.slot >= sim.num_slots
         terminated = np.zeros(self.num_envs, dtype=bool)
         info = self._info(cost_tracking, cost_effort, applied)  # restarted rows describe their new episode
+        if extra:
+            if restart.any():
+                extra = {key: np.where(restart.reshape((-1,) + (1,) * (v.ndim - 1)), r, v)
+                         for (key, v), r in zip(extra.items(), self._extra_reset_info().values())}
+            info.update(extra)
         info["episode_control_cost"] = np.where(truncated, self._cost, 0.0)
         info["_episode_control_cost"] = truncated.copy()
         self._cost[truncated] = 0.0
@@ -167,6 +181,26 @@ class JointVectorEnv(VectorEnv):
             obs = self.layout.encode_batch(sim)
             self._done = np.zeros(self.num_envs, dtype=bool)
         return obs, -cost, terminated, truncated, info
+
+    # ------------------------------------------------------------------ the role's decisions
+    def _decide(self, a: np.ndarray):
+        """Increments (N, K, 2), powers (N, K), next drone positions (N, 2) and the role's extra
+        info for a batch of checked actions."""
+        k, cfg = self.num_agvs, self.config
+        increment = a[:, : 2 * k].reshape(-1, k, 2) * cfg.control.accel_increment_max_mps2
+        power, drone_next = self._decide_comm(a[:, 2 * k :])
+        return increment, power, drone_next, {}
+
+    def _decide_comm(self, a: np.ndarray):
+        """Powers and next drone positions from the communication part [power (K), drone (2)]."""
+        k, cfg = self.num_agvs, self.config
+        power = decode_power(a[:, :k], cfg.power_budget_w)
+        drone_next = move_drones(self.sim.drone_position, a[:, k:] * cfg.drone.max_speed_mps,
+                                 cfg.drone.max_speed_mps, cfg.slot_s, tuple(cfg.area_m))
+        return power, drone_next
+
+    def _extra_reset_info(self) -> dict:
+        return {}
 
     def _restart(self, which: np.ndarray) -> None:
         """New episodes for the envs ``which`` (autoreset), each from its own generator."""
@@ -210,6 +244,62 @@ class JointVectorEnv(VectorEnv):
             "drone_position": np.array(sim.drone_position, dtype=np.float64),
             "applied_increment": np.zeros((b, self.num_agvs, 2)) if applied is None else np.array(applied),
         }
+
+
+class CommVectorEnv(JointVectorEnv):
+    """N copies of ``lawn/Comm-v0`` (v0 interface) in one batched simulation: the actions set
+    powers and the drone, and the N x K outage-aware MPC QPs of a step are solved together
+    (``qp_backend="batched"``, :class:`lawn_env.qp.PencilQP`, warm-started per scenario; problems
+    it cannot settle go to DAQP one by one and are counted in ``info["mpc_fallbacks"]``).
+    ``qp_backend="daqp"`` solves them one by one instead (the single env's solver)."""
+
+    role = "comm"
+
+    def __init__(self, num_envs: int, config: ScenarioConfig | Mapping | str | None = None,
+                 render_mode: str | None = None, interface: Any = None, qp_backend: str = "batched",
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_env: int = 0,
+                 **overrides: Any):
+        super().__init__(num_envs, config, render_mode, interface, autoreset_mode, render_env, **overrides)
+        if qp_backend not in ("batched", "daqp"):
+            raise ValueError(f"qp_backend={qp_backend!r}; valid for the native vector env: 'batched', 'daqp'")
+        self.mpc = OutageAwareMPC.from_config(self.config, backend=qp_backend)
+        self._planning_link = LinkParams.from_config(self.config, planning=True)
+        self._altitude_sq = self.config.drone.altitude_m ** 2
+        self.last_mpc_solve_time_s = float("nan")
+
+    def _on_reset(self) -> None:
+        self.mpc.reset()
+
+    def _restart(self, which: np.ndarray) -> None:
+        super()._restart(which)
+        self.mpc.reset(which)  # a new episode starts without the old one's warm starts
+
+    def _decide(self, a: np.ndarray):
+        sim = self.sim
+        power, drone_next = self._decide_comm(a)
+        psi = link_success(sim.x_aug, drone_next, power, self._planning_link, self._altitude_sq)
+        if self.mpc.backend.name == "batched":
+            solution = self.mpc.solve(sim.x_aug, sim.reference_windows(), psi)
+            increments, iterations, status = solution.increments[:, :, 0, :], solution.iterations, solution.status
+            self.last_mpc_solve_time_s = solution.solve_time_s
+        else:  # one env at a time through the single env's solver
+            windows = sim.reference_windows()
+            parts = [self.mpc.solve(sim.x_aug[i], windows[i], psi[i]) for i in range(self.num_envs)]
+            increments = np.stack([p.increments[:, 0, :] for p in parts])
+            iterations = np.stack([p.iterations for p in parts])
+            status = np.stack([p.status for p in parts])
+            self.last_mpc_solve_time_s = sum(p.solve_time_s for p in parts)
+        extra = {"mpc_iterations": iterations.astype(np.int64),
+                 "mpc_fallbacks": np.count_nonzero(status, axis=1).astype(np.int64),
+                 "success_probability_planned": np.asarray(psi, dtype=np.float64)}
+        return increments, power, drone_next, extra
+
+    def _extra_reset_info(self) -> dict:
+        sim = self.sim
+        return {"mpc_iterations": np.zeros((self.num_envs, self.num_agvs), dtype=np.int64),
+                "mpc_fallbacks": np.zeros(self.num_envs, dtype=np.int64),
+                "success_probability_planned": link_success(sim.x_aug, sim.drone_position, sim.last_power_w,
+                                                            self._planning_link, self._altitude_sq)}
 
 
 class _EnvView:
