@@ -50,7 +50,7 @@ from pydantic.dataclasses import dataclass
 
 from . import spaces
 from .channel import LinkParams, success_probability
-from .drone import move_drone
+from .drone import move_drone, move_drones
 from .mpc import OutageAwareMPC
 
 __all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "resolve_interface", "ActionLayout", "Decision",
@@ -101,6 +101,18 @@ class RLInterface:
         if self.reward == "cost":
             return -cost
         return -min(cost, self.cost_clip) / self.cost_scale
+
+    def rewards_from_costs(self, costs: np.ndarray) -> np.ndarray:
+        """:meth:`reward_from_cost` over an array of stage costs (the vector envs)."""
+        costs = np.asarray(costs, dtype=float)
+        return -costs if self.reward == "cost" else -np.minimum(costs, self.cost_clip) / self.cost_scale
+
+    def terminates_batch(self, position_error_m: np.ndarray) -> np.ndarray:
+        """:meth:`terminates` per scenario of a batch: position errors (B, K, 2) -> (B,) bool."""
+        if self.termination_distance_m is None:
+            return np.zeros(position_error_m.shape[0], dtype=bool)
+        d2 = (position_error_m * position_error_m).sum(axis=-1)
+        return d2.max(axis=-1) > self.termination_distance_m**2
 
     def terminal_penalty(self, remaining_slots: int) -> float:
         """Added to the reward of a terminating step: the floor for every slot not played."""
@@ -187,7 +199,8 @@ class ActionLayout:
     the observation's decode carry the same arrays.
     """
 
-    def __init__(self, config, role: str = "joint", interface: RLInterface | Mapping | str | None = None):
+    def __init__(self, config, role: str = "joint", interface: RLInterface | Mapping | str | None = None,
+                 mpc_backend: str = "daqp"):
         if role not in ROLES:
             raise ValueError(f"role={role!r}; valid: {', '.join(ROLES)}")
         self.interface = resolve_interface(interface)
@@ -206,12 +219,40 @@ class ActionLayout:
         self._altitude_sq = config.drone.altitude_m**2
         if self.scheme == "anchored":
             self._link = LinkParams.from_config(config, planning=True)
-            self.mpc = OutageAwareMPC.from_config(config) if role == "joint" else None
+            self.mpc = OutageAwareMPC.from_config(config, backend=mpc_backend) if role == "joint" else None
 
-    def reset(self) -> None:
-        """Start an episode (the anchor MPC's warm starts are per episode, like the envs' MPC)."""
+    def reset(self, which: np.ndarray | None = None) -> None:
+        """Start an episode (the anchor MPC's warm starts are per episode, like the envs' MPC);
+        ``which`` (batched decoding with the ``"batched"`` MPC) restarts only those scenarios."""
         if self.scheme == "anchored" and self.mpc is not None:
-            self.mpc.reset()
+            self.mpc.reset(which)
+
+    def decode_batch(self, actions: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
+                     drone_position: np.ndarray) -> Decision:
+        """:meth:`decode` over a batch of B scenarios: checked actions (B, size), states (B, K, 6),
+        reference windows (B, K, N_p+1, 6), drone positions (B, 2); the Decision's arrays get a
+        leading B axis. The anchored increments need an MPC built with ``mpc_backend="batched"``."""
+        a = actions
+        k = self.num_agvs
+        comm = a[:, self._inc_size :]
+        if self.scheme == "direct":
+            power = spaces.decode_power(comm[:, :k], self._pmax)
+            drone_next = move_drones(drone_position, comm[:, k:] * self._vmax, self._vmax, self._dt, self._area)
+            increment = a[:, : 2 * k].reshape(-1, k, 2) * self._inc_max if self._inc_size else None
+            return Decision(increment, power, drone_next)
+        target = x_aug[..., 0:2].mean(axis=-2) + comm[:, k:] * self.interface.drone_offset_m
+        step = target - drone_position
+        dist = np.hypot(step[:, 0], step[:, 1])[:, None]
+        reach = self._vmax * self._dt
+        velocity = np.where(dist <= reach, step / self._dt, step * (self._vmax / np.maximum(dist, reach)))
+        drone_next = move_drones(drone_position, velocity, self._vmax, self._dt, self._area)
+        power = self._anchored_power(comm[:, :k], x_aug, drone_next)
+        increment = None
+        if self._inc_size:
+            increment = self.anchor_increment(x_aug, reference, power, drone_next)
+            increment += a[:, : 2 * k].reshape(-1, k, 2) * (self.interface.residual_scale * self._inc_max)
+            np.clip(increment, -self._inc_max, self._inc_max, out=increment)
+        return Decision(increment, power, drone_next)
 
     # ------------------------------------------------------------------ decode
     def decode(self, action: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
@@ -244,12 +285,13 @@ class ActionLayout:
         return move_drone(drone_position, velocity, self._vmax, self._dt, self._area)
 
     def _power_prior(self, x_aug: np.ndarray, drone_next: np.ndarray) -> np.ndarray:
-        diff = x_aug[:, 0:2] - drone_next
-        return (diff * diff).sum(axis=1) + self._altitude_sq
+        """d_k^2 from the drone's next position, (..., K) (any leading batch axes)."""
+        diff = x_aug[..., 0:2] - drone_next[..., None, :]
+        return (diff * diff).sum(axis=-1) + self._altitude_sq
 
     def _anchored_power(self, a: np.ndarray, x_aug: np.ndarray, drone_next: np.ndarray) -> np.ndarray:
         w = self._power_prior(x_aug, drone_next) * np.exp(a * self.interface.power_log_range)
-        return w * (self._pmax / w.sum())
+        return w * (self._pmax / w.sum(axis=-1, keepdims=True))
 
     def anchor_increment(self, x_aug: np.ndarray, reference: np.ndarray, power_w: np.ndarray,
                          drone_next: np.ndarray, slot: int | None = None) -> np.ndarray:
@@ -258,7 +300,7 @@ class ActionLayout:
         ``slot`` is needed when the planners know a control period > 1 (:meth:`OutageAwareMPC.prepare`)."""
         d = np.sqrt(self._power_prior(x_aug, drone_next))
         psi = success_probability(power_w, d, **self._link._kwargs)
-        return self.mpc.solve(x_aug, reference, psi, slot).increments[:, 0, :].copy()
+        return self.mpc.solve(x_aug, reference, psi, slot).increments[..., 0, :].copy()
 
     # ------------------------------------------------------------------ encode
     def encode(self, decision: Decision, x_aug: np.ndarray, reference: np.ndarray | None,

@@ -163,8 +163,8 @@ def test_renders_the_chosen_env_with_its_trails():
 
 
 def test_unsupported_settings_are_refused_not_ignored():
-    with pytest.raises(ValueError, match="v0 interface only"):
-        _make(interface="rl")
+    with pytest.raises(ValueError, match="interface='fast'"):
+        _make(interface="fast")
     with pytest.raises(ValueError, match="disturbance mode"):
         _make(config="disturbed")
     with pytest.raises(ValueError, match="num_envs"):
@@ -213,6 +213,75 @@ def test_sb3_trains_on_the_native_vector_env(tmp_path):
                     hp_overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, eval_every=128, eval_episodes=1,
                     checkpoint_every=128, progress=False, interface="v0", vec="native")
     assert summary["timesteps"] == 256 and summary["best_validation_cost"] > 0
-    with pytest.raises(ValueError, match="--vec native runs lawn/Joint-v0 on the v0 interface"):
-        train("ppo", "lawn/Joint-v0", ScenarioConfig(num_slots=12), 64, 0, tmp_path / "rl", n_envs=2,
+    # the training protocol's default (the RL interface) on Comm-v0's native vector env
+    summary = train("ppo", "lawn/Comm-v0", ScenarioConfig(num_slots=12), 128, 0, tmp_path / "comm", n_envs=4,
+                    hp_overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, eval_every=128, eval_episodes=1,
+                    checkpoint_every=128, progress=False, vec="native")
+    assert summary["timesteps"] == 128 and summary["best_validation_cost"] > 0
+    with pytest.raises(ValueError, match="--vec native runs lawn/Joint-v0"):
+        train("ppo", "lawn/Parallel-v0", ScenarioConfig(num_slots=12), 64, 0, tmp_path / "rl", n_envs=2,
               progress=False, vec="native")
+
+
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+def test_rl_interface_lockstep_with_the_single_env(env_id, monkeypatch):
+    """With the RL interface (anchored actions, scaled reward, termination, clipped features) env i
+    of the vector env equals the single RL env on seed s + i, to 1e-12, until its episode ends; an
+    ended env restarts with next-step autoreset and reports its realized control cost."""
+    from lawn_env.mpc import OutageAwareMPC
+
+    config = ScenarioConfig(num_slots=30)
+    iface = {"base": "rl", "termination_distance_m": 4.0}  # tight, so that some env is terminated
+    comm = env_id == "lawn/Comm-v0"
+    extra = {"qp_backend": "batched"} if comm else {}
+    rng = np.random.default_rng(3)
+    size = (1 if comm else 3) * 4 + 2
+    actions = rng.uniform(-1, 1, (30, N, size)).astype(np.float32)
+    actions[:, 1] *= 0.1  # env 1 stays on track, the others may be terminated
+    singles = []
+    real = channel.sample_normalized_fading
+    for i in range(N):
+        draws = []
+
+        def recording(rng_, m, size_, draws=draws):
+            out = real(rng_, m, size_)
+            draws.append(out.copy())
+            return out
+
+        monkeypatch.setattr(channel, "sample_normalized_fading", recording)
+        env = gym.make(env_id, config=config, interface=iface, **extra)
+        if not comm:  # the anchor's MPC with the vector env's solver (DAQP agrees to ~1e-9 only)
+            env.unwrapped.actions.mpc = OutageAwareMPC.from_config(env.unwrapped.config, backend="batched")
+        obs, _ = env.reset(seed=20 + i)
+        rows = [(obs, 0.0, False, False)]
+        for t in range(30):
+            obs, reward, terminated, truncated, _ = env.step(actions[t, i])
+            rows.append((obs, reward, terminated, truncated))
+            if terminated or truncated:
+                break
+        monkeypatch.setattr(channel, "sample_normalized_fading", real)
+        while len(draws) < 30:  # after the single episode ends: any fading (the vector env restarts)
+            draws.append(np.ones(4))
+        singles.append((np.array(draws), rows))
+    fading = np.stack([s[0] for s in singles], axis=1)
+    envs = _make(env_id=env_id, config=config, interface=iface, **extra)
+    assert envs.single_observation_space == env.observation_space
+    assert envs.single_action_space == env.action_space
+    it = iter(fading)
+    monkeypatch.setattr(envs.unwrapped, "_draw_fading", lambda: next(it))
+    obs, _ = envs.reset(seed=20)
+    live = np.ones(N, dtype=bool)
+    ended_any = False
+    for t in range(30):
+        obs, reward, terminated, truncated, info = envs.step(actions[t])
+        assert envs.observation_space.contains(obs)
+        for i in np.flatnonzero(live):
+            s_obs, s_reward, s_term, s_trunc = singles[i][1][t + 1]
+            np.testing.assert_allclose(obs[i], s_obs, rtol=1e-9, atol=1e-9)  # float32 features
+            np.testing.assert_allclose(reward[i], s_reward, rtol=1e-12, atol=1e-12)
+            assert (terminated[i], truncated[i]) == (s_term, s_trunc)
+            if s_term or s_trunc:
+                live[i] = False
+                ended_any = ended_any or s_term
+                assert info["_episode_control_cost"][i] and info["episode_control_cost"][i] > 0
+    assert ended_any and not live.any()  # some env was terminated, every env ended

@@ -364,8 +364,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--init-from", metavar="DIR", help="start from a behaviour-cloned run of the same algorithm")
     tr.add_argument("--resume", metavar="DIR", help="continue an interrupted run from its last checkpoint")
     tr.add_argument("--vec", choices=["dummy", "native"], default="dummy",
-                    help="SB3 DummyVecEnv of single envs (default) or lawn's batched vector env (lawn/Joint-v0, "
-                         "--interface v0)")
+                    help="SB3 DummyVecEnv of single envs (default) or lawn's batched vector env (Joint-v0, "
+                         "Comm-v0 and their RL ids, any --interface)")
     tr.add_argument("--quiet", action="store_true")
     _add_config_args(tr)
     tr.set_defaults(func=cmd_train)

@@ -46,7 +46,7 @@ import numpy as np
 import lawn_env
 from agents.runs import read_json
 from lawn_env import ScenarioConfig
-from lawn_env.interface import V0_INTERFACE, resolve_interface
+from lawn_env.interface import resolve_interface
 
 from .checkpoints import Checkpoint, clear_history, latest_checkpoint, restore_history
 
@@ -116,12 +116,11 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
     if vec not in ("dummy", "native"):
         raise ValueError(f"--vec {vec!r}; valid: dummy, native")
     if vec == "native":
-        if env_id != "lawn/Joint-v0" or resolve_interface(interface) != V0_INTERFACE:
-            raise ValueError(f"--vec native runs lawn/Joint-v0 on the v0 interface so far (got {env_id}, interface "
-                             f"{resolve_interface(interface).action_scheme}); pass --interface v0, or --vec dummy")
-        from .vec import NativeVecEnv
+        from .vec import NATIVE_ENV_IDS, NativeVecEnv
 
-        venv = VecMonitor(NativeVecEnv(config, n_envs))
+        if env_id not in NATIVE_ENV_IDS:
+            raise ValueError(f"--vec native runs {', '.join(NATIVE_ENV_IDS)} (got {env_id}); pass --vec dummy")
+        venv = VecMonitor(NativeVecEnv(config, n_envs, env_id, interface=interface))
         venv.seed(seed)
     elif env_id == "lawn/Parallel-v0":
         from .marl import make_marl_vec_env

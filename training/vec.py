@@ -1,7 +1,7 @@
 """Stable-Baselines3 on lawn's native vector env (``lawn train --vec native``).
 
-:class:`NativeVecEnv` is an SB3 ``VecEnv`` over :class:`lawn_env.envs.vector.JointVectorEnv`
-run with same-step autoreset, which is SB3's convention: the step that ends an episode returns
+:class:`NativeVecEnv` is an SB3 ``VecEnv`` over :class:`lawn_env.envs.vector.JointVectorEnv` or
+``CommVectorEnv`` (any interface) run with same-step autoreset, which is SB3's convention: the step that ends an episode returns
 the next episode's first observation, the final one in ``infos[i]["terminal_observation"]``
 and ``infos[i]["TimeLimit.truncated"]`` for truncations. ``VecMonitor`` (episode returns and
 lengths) and ``VecNormalize`` go on top as on any SB3 VecEnv.
@@ -14,17 +14,27 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
-from lawn_env import ScenarioConfig
-from lawn_env.envs.vector import JointVectorEnv
+from lawn_env import RL_ENV_IDS, ScenarioConfig
+from lawn_env.envs.vector import CommVectorEnv, JointVectorEnv
 
-__all__ = ["NativeVecEnv"]
+__all__ = ["NATIVE_ENV_IDS", "NativeVecEnv"]
+
+_CLASSES = {"lawn/Joint-v0": JointVectorEnv, "lawn/Comm-v0": CommVectorEnv}
+#: The ids with a native vector env (the RL ids are their base ids with ``interface="rl"``).
+NATIVE_ENV_IDS = tuple(_CLASSES) + tuple(i for i, base in RL_ENV_IDS.items() if base in _CLASSES)
 
 
 class NativeVecEnv(VecEnv):
-    """``n_envs`` scenarios of ``lawn/Joint-v0`` (v0 interface) in one batched simulation."""
+    """``n_envs`` scenarios of ``env_id`` (``NATIVE_ENV_IDS``) in one batched simulation, on
+    ``interface`` (an RL id's default: ``"rl"``)."""
 
-    def __init__(self, config: ScenarioConfig, n_envs: int):
-        self.venv = JointVectorEnv(n_envs, config=config, autoreset_mode="SameStep")
+    def __init__(self, config: ScenarioConfig, n_envs: int, env_id: str = "lawn/Joint-v0", interface=None):
+        if env_id not in NATIVE_ENV_IDS:
+            raise ValueError(f"env_id={env_id!r}: the native vector envs are {', '.join(NATIVE_ENV_IDS)}")
+        base = RL_ENV_IDS.get(env_id, env_id)
+        if interface is None and base != env_id:
+            interface = "rl"
+        self.venv = _CLASSES[base](n_envs, config=config, interface=interface, autoreset_mode="SameStep")
         super().__init__(n_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self._seed: int | None = None
         self._actions: np.ndarray | None = None

@@ -23,8 +23,11 @@ Gymnasium's vector ones (as ``CartPoleVectorEnv``):
 ``mpc_fallbacks`` (N,) and ``success_probability_planned`` (N, K) as the single env's does.
 
 ``render_mode="rgb_array"`` draws env ``render_env`` (default 0) as the single env draws itself.
-Only the paper's benchmark interface (v0) is batched so far, and not the disturbance mode;
-other settings raise a ``ValueError`` saying so (``vectorization_mode="sync"`` runs them).
+``interface=`` takes the single envs' RL interface (:mod:`lawn_env.interface`; ``"rl"`` is
+``lawn/JointRL-v0`` and ``lawn/CommRL-v0``): anchored actions decoded for the whole batch (the
+Joint anchor's MPC solved by the batched QP solver), the scaled reward, termination with its
+penalty, clipped observations. The disturbance mode is not batched yet: such configs raise a
+``ValueError`` saying so (``vectorization_mode="sync"`` runs them).
 """
 
 from __future__ import annotations
@@ -40,10 +43,9 @@ from ..batch import BatchSimulation
 from ..channel import LinkParams
 from ..core import link_success
 from ..config import ScenarioConfig
-from ..drone import move_drones
-from ..interface import V0_INTERFACE, resolve_interface
+from ..interface import ActionLayout, resolve_interface
 from ..mpc import OutageAwareMPC
-from ..spaces import ObservationLayout, decode_power
+from ..spaces import ObservationLayout
 from .base import resolve_config
 
 __all__ = ["CommVectorEnv", "JointVectorEnv", "check_actions"]
@@ -70,7 +72,7 @@ def check_actions(actions, num_envs: int, size: int) -> np.ndarray:
 
 
 class JointVectorEnv(VectorEnv):
-    """N copies of ``lawn/Joint-v0`` (v0 interface) in one batched simulation."""
+    """N copies of ``lawn/Joint-v0`` (any interface) in one batched simulation."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 4}
     role = "joint"
@@ -81,9 +83,7 @@ class JointVectorEnv(VectorEnv):
                  **overrides: Any):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode={render_mode!r}; valid: 'rgb_array' (one env, render_env) or None")
-        if resolve_interface(interface) != V0_INTERFACE:
-            raise ValueError(f"interface={interface!r}: the native vector env implements the v0 interface only so far; "
-                             "use gym.make_vec(..., vectorization_mode='sync') for the RL interface")
+        self.interface = resolve_interface(interface)
         modes = {m.value: m for m in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)}
         mode = modes.get(autoreset_mode.value if isinstance(autoreset_mode, AutoresetMode) else autoreset_mode)
         if mode is None:
@@ -101,9 +101,9 @@ class JointVectorEnv(VectorEnv):
         self.layout = ObservationLayout(self.config)
         k = self.config.num_agvs
         self.num_agvs = k
-        self.single_observation_space = V0_INTERFACE.observation_space(self.layout.size)
-        size = 3 * k + 2 if self.role == "joint" else k + 2
-        self.single_action_space = gym.spaces.Box(-1.0, 1.0, shape=(size,), dtype=np.float32)
+        self.single_observation_space = self.interface.observation_space(self.layout.size)
+        self.actions = ActionLayout(self.config, self.role, self.interface, mpc_backend="batched")
+        self.single_action_space = self.actions.space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._rngs: list[np.random.Generator] = []
@@ -135,10 +135,14 @@ class JointVectorEnv(VectorEnv):
         self._done[:] = False
         self._cost[:] = 0.0
         self._started = True
-        return self.layout.encode_batch(self.sim), dict(self._info(), **self._extra_reset_info())
+        return self._observe(), dict(self._info(), **self._extra_reset_info())
 
     def _on_reset(self) -> None:
-        """Hook: a new batch of episodes starts."""
+        """A new batch of episodes starts (the anchored actions' MPC forgets its warm starts)."""
+        self.actions.reset()
+
+    def _observe(self) -> np.ndarray:
+        return self.interface.observe(self.layout.encode_batch(self.sim))
 
     def step(self, actions):
         if not self._started:
@@ -160,44 +164,47 @@ class JointVectorEnv(VectorEnv):
             applied[restart] = 0.0
         cost = cost_tracking + cost_effort
         self._cost += cost
-        truncated = sim.slot >= sim.num_slots
-        terminated = np.zeros(self.num_envs, dtype=bool)
+        iface = self.interface
+        reward = iface.rewards_from_costs(cost)
+        terminated = iface.terminates_batch(sim.tracking_error[..., 0:2]) & ~restart
+        if terminated.any():  # the reward floor of every slot not played (RL interface)
+            remaining = sim.num_slots - sim.slot[terminated]
+            reward[terminated] += np.where(remaining > 0, remaining * iface.reward_floor, 0.0)
+        reward[restart] = 0.0
+        truncated = (sim.slot >= sim.num_slots) & ~terminated
         info = self._info(cost_tracking, cost_effort, applied)  # restarted rows describe their new episode
         if extra:
             if restart.any():
                 extra = {key: np.where(restart.reshape((-1,) + (1,) * (v.ndim - 1)), r, v)
                          for (key, v), r in zip(extra.items(), self._extra_reset_info().values())}
             info.update(extra)
-        info["episode_control_cost"] = np.where(truncated, self._cost, 0.0)
-        info["_episode_control_cost"] = truncated.copy()
-        self._cost[truncated] = 0.0
+        ended = truncated | terminated
+        info["episode_control_cost"] = np.where(ended, self._cost, 0.0)
+        info["_episode_control_cost"] = ended
+        self._cost[ended] = 0.0
         self._done = truncated | terminated
-        obs = self.layout.encode_batch(sim)
+        obs = self._observe()
         if same_step and self._done.any():  # same-step autoreset: the final observation goes to info
             ended = self._done
             info["final_obs"] = obs
             info["_final_obs"] = ended
             self._restart(ended)  # info keeps describing the step that ended them
-            obs = self.layout.encode_batch(sim)
+            obs = self._observe()
             self._done = np.zeros(self.num_envs, dtype=bool)
-        return obs, -cost, terminated, truncated, info
+        return obs, reward, terminated, truncated, info
 
     # ------------------------------------------------------------------ the role's decisions
     def _decide(self, a: np.ndarray):
         """Increments (N, K, 2), powers (N, K), next drone positions (N, 2) and the role's extra
         info for a batch of checked actions."""
-        k, cfg = self.num_agvs, self.config
-        increment = a[:, : 2 * k].reshape(-1, k, 2) * cfg.control.accel_increment_max_mps2
-        power, drone_next = self._decide_comm(a[:, 2 * k :])
-        return increment, power, drone_next, {}
+        d = self._decisions(a)
+        return d.increment, d.power_w, d.drone_next, {}
 
-    def _decide_comm(self, a: np.ndarray):
-        """Powers and next drone positions from the communication part [power (K), drone (2)]."""
-        k, cfg = self.num_agvs, self.config
-        power = decode_power(a[:, :k], cfg.power_budget_w)
-        drone_next = move_drones(self.sim.drone_position, a[:, k:] * cfg.drone.max_speed_mps,
-                                 cfg.drone.max_speed_mps, cfg.slot_s, tuple(cfg.area_m))
-        return power, drone_next
+    def _decisions(self, a: np.ndarray):
+        """The actions decoded under the env's action scheme (:meth:`ActionLayout.decode_batch`)."""
+        sim = self.sim
+        windows = sim.reference_windows() if self.actions.scheme == "anchored" and self.role == "joint" else None
+        return self.actions.decode_batch(a, sim.x_aug, windows, sim.drone_position)
 
     def _extra_reset_info(self) -> dict:
         return {}
@@ -205,6 +212,7 @@ class JointVectorEnv(VectorEnv):
     def _restart(self, which: np.ndarray) -> None:
         """New episodes for the envs ``which`` (autoreset), each from its own generator."""
         self.sim.reset(self._rngs, which)
+        self.actions.reset(which)
         if self._view is not None and which[self.render_env]:
             self._view.restart()
 
@@ -247,7 +255,7 @@ class JointVectorEnv(VectorEnv):
 
 
 class CommVectorEnv(JointVectorEnv):
-    """N copies of ``lawn/Comm-v0`` (v0 interface) in one batched simulation: the actions set
+    """N copies of ``lawn/Comm-v0`` (any interface) in one batched simulation: the actions set
     powers and the drone, and the N x K outage-aware MPC QPs of a step are solved together
     (``qp_backend="batched"``, :class:`lawn_env.qp.PencilQP`, warm-started per scenario; problems
     it cannot settle go to DAQP one by one and are counted in ``info["mpc_fallbacks"]``).
@@ -276,7 +284,7 @@ class CommVectorEnv(JointVectorEnv):
 
     def _decide(self, a: np.ndarray):
         sim = self.sim
-        power, drone_next = self._decide_comm(a)
+        _, power, drone_next = self._decisions(a)
         psi = link_success(sim.x_aug, drone_next, power, self._planning_link, self._altitude_sq)
         if self.mpc.backend.name == "batched":
             solution = self.mpc.solve(sim.x_aug, sim.reference_windows(), psi)
