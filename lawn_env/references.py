@@ -259,9 +259,10 @@ def fit_envelope(path: "_Curve", envelope: Envelope, max_rounds: int = 60):
     def fits(candidate) -> bool:
         return envelope_violation(candidate.evaluate(t), envelope.accel_max, envelope.increment_max) <= 1.0
 
-    if fits(path):
+    violation = envelope_violation(path.evaluate(t), envelope.accel_max, envelope.increment_max)
+    if violation <= 1.0:  # fits(path), evaluated once
         return path
-    factor = envelope_violation(path.evaluate(t), envelope.accel_max, envelope.increment_max) ** (-1.0 / 2.0)
+    factor = violation ** (-1.0 / 2.0)
     for _ in range(max_rounds):
         candidate = replace(path, warp=path.warp.scaled(factor))
         if fits(candidate):
