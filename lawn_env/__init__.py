@@ -44,7 +44,8 @@ for _env_id, _entry_point in ENV_IDS.items():
                  **_EPISODE)
 for _env_id, _base in RL_ENV_IDS.items():
     if _env_id not in registry:
-        register(id=_env_id, entry_point=ENV_IDS[_base], kwargs={"interface": "rl"}, **_EPISODE)
+        register(id=_env_id, entry_point=ENV_IDS[_base], vector_entry_point=VECTOR_ENTRY_POINTS.get(_base),
+                 kwargs={"interface": "rl"}, **_EPISODE)
 
 __all__ = [
     "ENV_IDS",

@@ -162,6 +162,17 @@ def test_renders_the_chosen_env_with_its_trails():
         _make(render_mode="human")
 
 
+@pytest.mark.parametrize("env_id", ["lawn/JointRL-v0", "lawn/CommRL-v0"])
+def test_rl_ids_have_native_vector_envs_on_the_rl_interface(env_id):
+    envs = gym.make_vec(env_id, num_envs=2)  # the vector entry point is the default mode
+    single = gym.make(env_id)
+    assert envs.unwrapped.interface == single.unwrapped.interface == lawn_env.RL_INTERFACE
+    assert envs.single_observation_space == single.observation_space
+    envs.reset(seed=0)
+    _, reward, *_ = envs.step(np.zeros(envs.action_space.shape, dtype=np.float32))
+    assert reward.shape == (2,) and (reward <= 0).all() and (reward >= lawn_env.RL_INTERFACE.reward_floor).all()
+
+
 def test_unsupported_settings_are_refused_not_ignored():
     with pytest.raises(ValueError, match="interface='fast'"):
         _make(interface="fast")
