@@ -40,7 +40,8 @@ class BatchSimulation:
         self.steps = self.num_slots + self.horizon + 1
         self.reference = None
         self.shared_reference = None  # (K, T, 6) when every scenario has the same (fixed) path set
-        self.reference_packed = None
+        self.reference_packed = None  # (B, K, T, 8) [reference, 0, 0] rows for the stage cost (random paths)
+        self.shared_packed = None  # (K, T, 8) the same for a fixed path set, shared by every scenario
         self.x_aug = self.tracking_error = None
         self.drone_position = None
         self.slot = np.zeros(self.num_envs, dtype=np.int64)
@@ -65,8 +66,13 @@ class BatchSimulation:
                 self.reference = np.broadcast_to(s._paper_table, (b,) + s._paper_table.shape)
             else:
                 self.reference = np.zeros((b, k, self.steps, 6))
-            self.reference_packed = np.concatenate(
-                [self.reference, np.zeros(self.reference.shape[:3] + (2,))], axis=3)
+            if self.shared_reference is not None:
+                self.shared_packed = np.concatenate([self.shared_reference, np.zeros(self.shared_reference.shape[:2] + (2,))],
+                                                    axis=2)
+                self.reference_packed = None
+            else:
+                self.reference_packed = np.concatenate(
+                    [self.reference, np.zeros(self.reference.shape[:3] + (2,))], axis=3)
             self.tracking_error = np.zeros((b, k, 6))
         cfg = self.config
         offsets = np.empty((idx.size, k, 2))
@@ -99,7 +105,11 @@ class BatchSimulation:
         packed, delivered, outage_p = transmit(self.x_aug, du, power_w, drone_next, normalized_fading, s.link,
                                                s._altitude_sq, s._packed_t)
         self.slot += 1
-        err, terms = stage_terms(packed, self.reference_packed[self._rows, :, self.slot], s._packed_w)
+        if self.shared_packed is not None:  # one path set: gather from its (K, T, 8) table, not the batch's
+            reference = self.shared_packed[:, self.slot].transpose(1, 0, 2)
+        else:
+            reference = self.reference_packed[self._rows, :, self.slot]
+        err, terms = stage_terms(packed, reference, s._packed_w)
         self.x_aug = packed[..., 0:6]
         self.tracking_error = err[..., 0:6]
         self.drone_position = drone_next

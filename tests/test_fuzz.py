@@ -127,6 +127,7 @@ def check_config(ov: dict) -> str:
                     assert env.observation_space.contains(obs), (env_id, "observation outside its space")
                     if terminated or truncated:
                         break
+            _check_vector_envs(cfg)
             env = gym.make("lawn/Joint-v0", config=cfg)
             obs, _ = env.reset(seed=0)
             for name in ("rg-mpc", "ao-mpc"):
@@ -140,6 +141,26 @@ def check_config(ov: dict) -> str:
     finally:
         tracemalloc.stop()
     return "ran"
+
+
+def _check_vector_envs(cfg) -> None:
+    """The native vector envs on a config that validates: they run (finite, inside their spaces,
+    the batched QPs never failing an episode) or, in the disturbance mode they do not batch yet,
+    refuse it saying so."""
+    for env_id, interface in (("lawn/Joint-v0", "v0"), ("lawn/Comm-v0", "v0"), ("lawn/Comm-v0", "rl")):
+        make = lambda: gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point",  # noqa: E731
+                                    config=cfg, interface=interface)
+        if cfg.disturbance.active:
+            with pytest.raises(ValueError, match="disturbance"):
+                make()
+            return
+        envs = make()
+        envs.action_space.seed(1)
+        obs, _ = envs.reset(seed=0)
+        assert _finite(obs) and envs.observation_space.contains(obs), (env_id, interface, "vector reset")
+        for _ in range(min(3, cfg.num_slots)):
+            obs, reward, _, _, info = envs.step(envs.action_space.sample())
+            assert _finite(obs) and _finite(reward) and envs.observation_space.contains(obs), (env_id, interface)
 
 
 def test_random_configs_either_run_or_are_refused_naming_the_field():
