@@ -5,7 +5,8 @@ with a leading batch axis and advances them all with one call, through the same 
 functions as :class:`lawn_env.core.Simulation` (:func:`~lawn_env.core.saturate_increment`,
 :func:`~lawn_env.core.transmit`, :func:`~lawn_env.core.stage_terms`, :func:`initial_state`).
 Scenario ``i`` draws its references and initial offsets from its own generator, exactly as a
-single :class:`~lawn_env.core.Simulation` reset with that generator does; the fading of all
+single :class:`~lawn_env.core.Simulation` reset with that generator does (the restarting
+scenarios' paths are drawn together by :func:`lawn_env.references.sample_paths`); the fading of all
 scenarios comes from one batched generator, so a step costs a handful of numpy calls whatever
 B is. The disturbance mode is not batched yet: configs with it are refused.
 """
@@ -75,15 +76,15 @@ class BatchSimulation:
                     [self.reference, np.zeros(self.reference.shape[:3] + (2,))], axis=3)
             self.tracking_error = np.zeros((b, k, 6))
         cfg = self.config
+        if s._paper_table is None:  # every restarting scenario's paths drawn together, one table call
+            paths = references.sample_paths([rngs[i] for i in idx.tolist()], k, cfg.reference.families, s.area,
+                                            duration_s=(self.steps - 1) * s.slot_s, envelope=s._envelope)
+            tables = references.reference_table([p for row in paths for p in row], self.steps, s.slot_s)
+            self.reference[idx] = tables.reshape(idx.size, k, self.steps, 6)
+            self.reference_packed[idx, :, :, 0:6] = self.reference[idx]
         offsets = np.empty((idx.size, k, 2))
-        for j, i in enumerate(idx.tolist()):
-            rng = rngs[i]
-            if s._paper_table is None:
-                paths = references.random_paths(rng, k, cfg.reference.families, s.area,
-                                                duration_s=(self.steps - 1) * s.slot_s, envelope=s._envelope)
-                self.reference[i] = references.reference_table(paths, self.steps, s.slot_s)
-                self.reference_packed[i, :, :, 0:6] = self.reference[i]
-            offsets[j] = rng.normal(0.0, cfg.reference.initial_offset_std_m, size=(k, 2))
+        for j, i in enumerate(idx.tolist()):  # after its paths, as Simulation.reset draws them
+            offsets[j] = rngs[i].normal(0.0, cfg.reference.initial_offset_std_m, size=(k, 2))
         start = self.reference[idx, :, 0]
         self.x_aug[idx] = initial_state(start, offsets, s._area_lo, s._area_hi)
         self.tracking_error[idx] = self.x_aug[idx] - start

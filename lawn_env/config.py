@@ -117,7 +117,7 @@ class ControlConfig:
     """Diagonal of the state-error weight Q1 (6 entries in [0, 1e6]; the two position weights > 0: the
     terminal weight Q3 solves a DARE that needs the position error in the cost) (paper: I6)."""
     q2_diag: tuple[float, float] = (1.0, 1.0)
-    """Diagonal of the increment weight Q2 (2 entries in (0, 1e6], Q2 positive definite) (paper: I2)."""
+    """Diagonal of the increment weight Q2 (2 entries in [1e-6, 1e6], Q2 positive definite) (paper: I2)."""
     accel_max_mps2: Annotated[float, Field(ge=0.01, le=100)] = 2.0
     """Acceleration bound a_max per axis, m/s^2, in [0.01, 100] (10 g; observations are scaled by
     it) *(decided)*."""
@@ -131,9 +131,10 @@ class ControlConfig:
             raise ValueError(f"control.q1_diag={self.q1_diag}: entries must lie in [0, 1e6] and the two position "
                              "weights be > 0 (the DARE of the terminal weight needs the position error in the cost; "
                              "weights beyond 1e6 make it numerically singular)")
-        if any(w <= 0 or w > 1e6 for w in self.q2_diag):
-            raise ValueError(f"control.q2_diag={self.q2_diag}: every entry must lie in (0, 1e6] (Q2 positive "
-                             "definite; larger weights make the DARE numerically singular)")
+        if any(w < 1e-6 or w > 1e6 for w in self.q2_diag):
+            raise ValueError(f"control.q2_diag={self.q2_diag}: every entry must lie in [1e-6, 1e6] (Q2 positive "
+                             "definite: smaller weights leave the MPC's QPs numerically singular, larger ones the "
+                             "DARE)")
         return self
 
 

@@ -9,7 +9,10 @@ vel = c'(theta) theta', acc = c''(theta) theta'^2 + c'(theta) theta''. The warp
 Families: ``lemniscate`` (figure eight), ``rounded_rectangle`` (straight runs with sharp,
 small-radius corners), ``sinusoid`` (sinusoidal sweep along a line) and ``spline`` (a periodic
 cubic spline through random waypoints). :func:`paper_paths` is the fixed paper-like set for
-K = 3 and K = 4; :func:`random_paths` draws K paths from a seeded generator.
+K = 3 and K = 4; :func:`random_paths` draws K paths from a seeded generator, and
+:func:`sample_paths` does so for many generators at once (the vector envs' resets).
+:func:`evaluate_paths` evaluates many paths in a few numpy calls per family (each family's
+equations are written once, over a leading path axis; ``path.evaluate`` is its one-path case).
 
 Feasibility (MODEL.md §1, decided): a reference the AGV cannot follow makes tracking error
 unavoidable. :func:`fit_envelope` slows a path down (a uniform time scaling, so the path keeps its
@@ -41,6 +44,8 @@ __all__ = [
     "random_paths",
     "slowed_until",
     "reference_table",
+    "evaluate_paths",
+    "sample_paths",
     "FAMILIES",
 ]
 
@@ -67,19 +72,60 @@ class TimeWarp:
         return theta, dtheta, ddtheta
 
 
+def _warps(paths) -> tuple[np.ndarray, ...]:
+    """theta, theta', theta'' of the paths' warps at times ``t``: a function of t -> three (G, T)."""
+    w = np.array([[p.warp.w] for p in paths])
+    theta0 = np.array([[p.warp.theta0] for p in paths])
+    a = np.array([[p.warp.a] for p in paths])
+    nu = np.array([[p.warp.nu] for p in paths])
+    phi = np.array([[p.warp.phi] for p in paths])
+
+    def at(t: np.ndarray):  # TimeWarp.__call__, the same operations over a leading path axis
+        arg = nu * t + phi
+        sin = np.sin(arg)  # each sine and cosine once: they are most of the cost
+        theta = theta0 + w * t + a * sin
+        dtheta = w + a * nu * np.cos(arg)
+        ddtheta = -a * nu**2 * sin
+        return theta, dtheta, ddtheta
+
+    return at
+
+
 class _Curve:
     warp: TimeWarp
 
-    def curve(self, theta: np.ndarray):  # pragma: no cover - interface
+    @classmethod
+    def curves(cls, paths: list, theta: np.ndarray):  # pragma: no cover - interface
+        """c, c', c'' of the paths (all of this family) at their parameters ``theta`` (G, T): (G, T, 2) each."""
         raise NotImplementedError
+
+    def curve(self, theta: np.ndarray):
+        """c, c', c'' at parameters ``theta`` (T,): (T, 2) each."""
+        c, d1, d2 = type(self).curves([self], np.asarray(theta, dtype=float)[None])
+        return c[0], d1[0], d2[0]
 
     def evaluate(self, t: np.ndarray) -> np.ndarray:
         """Reference augmented states [x, y, v_x, v_y, a_x, a_y] at times ``t`` (s): (T, 6)."""
-        theta, dth, ddth = self.warp(np.asarray(t, dtype=float))
-        c, dc, ddc = self.curve(theta)
-        vel = dc * dth[:, None]
-        acc = ddc * (dth**2)[:, None] + dc * ddth[:, None]
-        return np.hstack([c, vel, acc])
+        return evaluate_paths([self], t)[0]
+
+
+def evaluate_paths(paths, t: np.ndarray) -> np.ndarray:
+    """Reference augmented states of many paths at times ``t``: (P, T, 6), row i equal to
+    ``paths[i].evaluate(t)``. The paths of each family are evaluated together, a few numpy calls
+    over a leading path axis (vel = c'(theta) theta', acc = c''(theta) theta'^2 + c'(theta) theta'')."""
+    t = np.asarray(t, dtype=float)
+    out = np.empty((len(paths), t.size, 6))
+    groups: dict = {}
+    for i, p in enumerate(paths):
+        groups.setdefault(type(p), []).append(i)
+    for cls, idx in groups.items():
+        members = [paths[i] for i in idx]
+        theta, dth, ddth = _warps(members)(t)
+        c, dc, ddc = cls.curves(members, theta)
+        out[idx, :, 0:2] = c
+        out[idx, :, 2:4] = dc * dth[..., None]
+        out[idx, :, 4:6] = ddc * (dth**2)[..., None] + dc * ddth[..., None]
+    return out
 
 
 def _rotation(angle: float) -> np.ndarray:
@@ -97,12 +143,17 @@ class Lemniscate(_Curve):
     warp: TimeWarp
     rotation: float = 0.0
 
-    def curve(self, theta):
-        rot = _rotation(self.rotation)
-        local = np.stack([self.sx * np.cos(theta), 0.5 * self.sy * np.sin(2 * theta)], axis=-1)
-        d1 = np.stack([-self.sx * np.sin(theta), self.sy * np.cos(2 * theta)], axis=-1)
-        d2 = np.stack([-self.sx * np.cos(theta), -2 * self.sy * np.sin(2 * theta)], axis=-1)
-        return np.asarray(self.center) + local @ rot.T, d1 @ rot.T, d2 @ rot.T
+    @classmethod
+    def curves(cls, paths, theta):
+        sx = np.array([[p.sx] for p in paths])
+        sy = np.array([[p.sy] for p in paths])
+        rot_t = np.stack([_rotation(p.rotation).T for p in paths])
+        center = np.array([[p.center] for p in paths], dtype=float)
+        cos, sin2 = np.cos(theta), np.sin(2 * theta)
+        local = np.stack([sx * cos, 0.5 * sy * sin2], axis=-1)
+        d1 = np.stack([-sx * np.sin(theta), sy * np.cos(2 * theta)], axis=-1)
+        d2 = np.stack([-sx * cos, -2 * sy * sin2], axis=-1)
+        return center + local @ rot_t, d1 @ rot_t, d2 @ rot_t
 
 
 @dataclass(frozen=True)
@@ -132,30 +183,38 @@ class RoundedRectangle(_Curve):
             ("arc", arc, (cx - hx + r, cy - hy + r), math.pi),
         ]
 
-    def curve(self, theta):
-        segs = self._segments()
-        lengths = np.array([s[1] for s in segs])
-        starts = np.concatenate([[0.0], np.cumsum(lengths)[:-1]])
-        perimeter = lengths.sum()
+    @classmethod
+    def curves(cls, paths, theta):
+        segs = [p._segments() for p in paths]
+        lengths = np.array([[s[1] for s in seg] for seg in segs])
+        starts = np.stack([np.concatenate([[0.0], np.cumsum(row)[:-1]]) for row in lengths])
+        perimeter = np.array([[row.sum()] for row in lengths])
+        radius = np.array([[p.radius] for p in paths])
         s = np.mod(theta, perimeter)
-        idx = np.clip(np.searchsorted(starts, s, side="right") - 1, 0, len(segs) - 1)
-        c = np.empty((s.size, 2))
+        # the segment of each point: searchsorted(starts, s, side="right") - 1 over a leading path axis
+        idx = np.clip((starts[:, None, :] <= s[..., None]).sum(axis=-1) - 1, 0, starts.shape[1] - 1)
+        c = np.empty(s.shape + (2,))
         d1 = np.empty_like(c)
         d2 = np.zeros_like(c)
-        for i, (kind, _, anchor, orient) in enumerate(segs):
+        for i in range(starts.shape[1]):
             sel = idx == i
             if not sel.any():
                 continue
-            ds = s[sel] - starts[i]
+            rows = np.nonzero(sel)[0]
+            ds = s[sel] - starts[rows, i]
+            kind, _, _, orient = segs[0][i]  # the kinds and orientations are the same for every rectangle
+            anchor = np.array([seg[i][2] for seg in segs], dtype=float)[rows]
             if kind == "line":
-                c[sel] = np.asarray(anchor) + ds[:, None] * np.asarray(orient)
+                c[sel] = anchor + ds[:, None] * np.asarray(orient)
                 d1[sel] = orient
             else:
-                ang = orient + ds / self.radius
-                u = np.stack([np.cos(ang), np.sin(ang)], axis=-1)
-                c[sel] = np.asarray(anchor) + self.radius * u
-                d1[sel] = np.stack([-np.sin(ang), np.cos(ang)], axis=-1)
-                d2[sel] = -u / self.radius
+                r = radius[rows, 0]
+                ang = orient + ds / r
+                cos, sin = np.cos(ang), np.sin(ang)
+                u = np.stack([cos, sin], axis=-1)
+                c[sel] = anchor + r[:, None] * u
+                d1[sel] = np.stack([-sin, cos], axis=-1)
+                d2[sel] = -u / r[:, None]
         return c, d1, d2
 
 
@@ -170,14 +229,18 @@ class Sinusoid(_Curve):
     warp: TimeWarp
     phase: float = 0.0
 
-    def curve(self, theta):
-        u = np.array([math.cos(self.heading), math.sin(self.heading)])
-        n = np.array([-u[1], u[0]])
-        arg = self.wavenumber * theta + self.phase
-        a, k = self.amplitude, self.wavenumber
-        c = np.asarray(self.start) + theta[:, None] * u + (a * np.sin(arg))[:, None] * n
-        d1 = u + (a * k * np.cos(arg))[:, None] * n
-        d2 = (-a * k * k * np.sin(arg))[:, None] * n
+    @classmethod
+    def curves(cls, paths, theta):
+        u = np.array([[[math.cos(p.heading), math.sin(p.heading)]] for p in paths])  # (G, 1, 2)
+        n = np.stack([-u[..., 1], u[..., 0]], axis=-1)
+        k = np.array([[p.wavenumber] for p in paths])
+        a = np.array([[p.amplitude] for p in paths])
+        arg = k * theta + np.array([[p.phase] for p in paths])
+        start = np.array([[p.start] for p in paths], dtype=float)
+        sin = np.sin(arg)
+        c = start + theta[..., None] * u + (a * sin)[..., None] * n
+        d1 = u + (a * k * np.cos(arg))[..., None] * n
+        d2 = (-a * k * k * sin)[..., None] * n
         return c, d1, d2
 
 
@@ -200,10 +263,14 @@ class SplinePath(_Curve):
     def _spline(self) -> tuple[CubicSpline, float]:
         return _periodic_spline(self.waypoints)
 
-    def curve(self, theta):
-        spline, period = self._spline()
-        s = np.mod(theta, period)
-        return spline(s), spline(s, 1), spline(s, 2)
+    @classmethod
+    def curves(cls, paths, theta):
+        out = [np.empty(theta.shape + (2,)) for _ in range(3)]
+        for i, p in enumerate(paths):  # one spline per path (waypoint counts differ)
+            spline, period = p._spline()
+            s = np.mod(theta[i], period)
+            out[0][i], out[1][i], out[2][i] = spline(s), spline(s, 1), spline(s, 2)
+        return tuple(out)
 
 
 FAMILIES = {
@@ -242,6 +309,39 @@ def envelope_violation(table: np.ndarray, accel_max: float, increment_max: float
     if acc.shape[-2] > 1:
         ratio = max(ratio, np.abs(np.diff(acc, axis=-2)).max() / increment_max)
     return float(ratio)
+
+
+def _violations(tables: np.ndarray, accel_max: float, increment_max: float) -> np.ndarray:
+    """:func:`envelope_violation` of each table of a stack (P, T, 6): (P,)."""
+    acc = tables[..., 4:6]
+    ratio = np.abs(acc).max(axis=(1, 2)) / accel_max
+    if acc.shape[-2] > 1:
+        ratio = np.maximum(ratio, np.abs(np.diff(acc, axis=-2)).max(axis=(1, 2)) / increment_max)
+    return ratio
+
+
+def fit_envelopes(paths: list, envelope: Envelope, max_rounds: int = 60) -> list:
+    """:func:`fit_envelope` of many paths at once (the same factors: each round evaluates every
+    path still outside the envelope in one :func:`evaluate_paths` call)."""
+    t = np.arange(envelope.num_steps) * envelope.slot_s
+    out = list(paths)
+    violation = _violations(evaluate_paths(paths, t), envelope.accel_max, envelope.increment_max)
+    todo = [i for i in range(len(paths)) if violation[i] > 1.0]
+    factor = {i: float(violation[i]) ** (-1.0 / 2.0) for i in todo}
+    for _ in range(max_rounds):
+        if not todo:
+            return out
+        candidates = [replace(paths[i], warp=paths[i].warp.scaled(factor[i])) for i in todo]
+        fits = _violations(evaluate_paths(candidates, t), envelope.accel_max, envelope.increment_max) <= 1.0
+        for i, cand, ok in zip(todo, candidates, fits.tolist()):
+            if ok:
+                out[i] = cand
+            else:
+                factor[i] *= 0.98
+        todo = [i for i, ok in zip(todo, fits.tolist()) if not ok]
+    for i in todo:  # extreme configs: halvings (fit_envelope's fallback)
+        out[i] = fit_envelope(paths[i], envelope, max_rounds=max_rounds)
+    return out
 
 
 def fit_envelope(path: "_Curve", envelope: Envelope, max_rounds: int = 60):
@@ -380,6 +480,46 @@ def _inside(table: np.ndarray, area_m, margin: float) -> bool:
     )
 
 
+def _inside_many(tables: np.ndarray, area_m, margin: float) -> np.ndarray:
+    """:func:`_inside` of each table of a stack (P, T, 6): (P,) bool."""
+    x0, x1, y0, y1 = area_m
+    x, y = tables[..., 0], tables[..., 1]
+    return ((x >= x0 + margin).all(axis=1) & (x <= x1 - margin).all(axis=1)
+            & (y >= y0 + margin).all(axis=1) & (y <= y1 - margin).all(axis=1))
+
+
+def sample_paths(rngs: list, num_agvs: int, families, area_m, duration_s: float, margin_m: float = 2.0,
+                 max_tries: int = 20, envelope: Envelope | None = None) -> list[list[_Curve]]:
+    """:func:`random_paths` for many generators at once: ``[random_paths(rng, ...) for rng in
+    rngs]``, the same draws from each generator and the same paths, with the envelope fits and
+    area checks of all scenarios' candidates evaluated together (one candidate per scenario and
+    round: a scenario's next draw depends on whether its last one was accepted)."""
+    t = np.linspace(0.0, duration_s, max(2, int(min(duration_s, 1e5) * 4) + 1))
+    margin = min(margin_m, 0.05 * min(area_m[1] - area_m[0], area_m[3] - area_m[2]))
+    paths: list[list[_Curve]] = [[] for _ in rngs]
+    family = [None] * len(rngs)
+    tries = [0] * len(rngs)
+    live = [i for i in range(len(rngs)) if num_agvs > 0]
+    while live:
+        candidates = []
+        for i in live:
+            if tries[i] == 0:
+                family[i] = families[int(rngs[i].integers(len(families)))]
+            candidates.append(_random_path(rngs[i], family[i], area_m, margin))
+        if envelope is not None:
+            candidates = fit_envelopes(candidates, envelope)
+        inside = _inside_many(evaluate_paths(candidates, t), area_m, margin).tolist()
+        for i, path, ok in zip(live, candidates, inside):
+            tries[i] += 1
+            if ok or tries[i] == max_tries:
+                if not ok:  # every draw left the area: the last one, slowed until it stays inside
+                    path = slowed_until(path, lambda p: _inside(p.evaluate(t), area_m, margin))
+                paths[i].append(path)
+                tries[i] = 0
+        live = [i for i in live if len(paths[i]) < num_agvs]
+    return paths
+
+
 def random_paths(rng: np.random.Generator, num_agvs: int, families, area_m, duration_s: float,
                  margin_m: float = 2.0, max_tries: int = 20, envelope: Envelope | None = None) -> list[_Curve]:
     """Draw ``num_agvs`` paths from ``families`` (seeded by ``rng``), each inside the area
@@ -388,24 +528,9 @@ def random_paths(rng: np.random.Generator, num_agvs: int, families, area_m, dura
     before the area check. The families are sized to fit a 60 s episode (a draw needs at most one
     retry there); when ``max_tries`` draws all leave the area (long episodes, where an open
     sinusoid walks out), the last draw is slowed down until it stays inside."""
-    t = np.linspace(0.0, duration_s, max(2, int(min(duration_s, 1e5) * 4) + 1))
-    margin = min(margin_m, 0.05 * min(area_m[1] - area_m[0], area_m[3] - area_m[2]))
-    paths = []
-    for _ in range(num_agvs):
-        family = families[int(rng.integers(len(families)))]
-        for _ in range(max_tries):
-            path = _random_path(rng, family, area_m, margin)
-            if envelope is not None:
-                path = fit_envelope(path, envelope)
-            if _inside(path.evaluate(t), area_m, margin):
-                break
-        else:
-            path = slowed_until(path, lambda p: _inside(p.evaluate(t), area_m, margin))
-        paths.append(path)
-    return paths
+    return sample_paths([rng], num_agvs, families, area_m, duration_s, margin_m, max_tries, envelope)[0]
 
 
 def reference_table(paths, num_steps: int, slot_s: float) -> np.ndarray:
-    """Reference augmented states at slots 0..num_steps-1: (K, num_steps, 6)."""
-    t = np.arange(num_steps) * slot_s
-    return np.stack([p.evaluate(t) for p in paths])
+    """Reference augmented states at slots 0..num_steps-1: (K, num_steps, 6) (any number of paths)."""
+    return evaluate_paths(paths, np.arange(num_steps) * slot_s)

@@ -193,6 +193,7 @@ def test_random_configs_many(monkeypatch):
     {"num_slots": 5000, "num_agvs": 8},
     {"control.q1_diag": [1e-9, 1e-9, 0, 0, 0, 0]},
     {"control.q2_diag": [1e6, 1e6]},
+    {"control.q2_diag": [1.0, 1e-6]},
     {"power_budget_dbw": 60.0},
     {"power_budget_dbw": -100.0},
     {"disturbance.measurement_noise_position_m": 1e3},
@@ -207,6 +208,7 @@ def test_the_issue_s_crashing_configs_run_at_the_edges_of_the_valid_range(case):
     ({"slot_s": 1000.0}, "slot_s"),
     ({"drone.max_speed_mps": 5e-324}, "max_speed_mps"),
     ({"control.horizon": 214}, "horizon"),
+    ({"control.q2_diag": [1.0, 5e-324]}, "q2_diag"),  # the batched QP solver's Cholesky of 2 Q2 failed
     ({"power_budget_dbw": 5000.0}, "power_budget_dbw"),
     ({"disturbance.measurement_noise_position_m": 1e40}, "measurement_noise_position_m"),
 ])

@@ -119,3 +119,26 @@ def test_random_paths_seeded_and_inside(rng):
 def test_unknown_family():
     with pytest.raises(ValueError, match="unknown reference family"):
         references.random_paths(np.random.default_rng(0), 1, ("zigzag",), (0, 200, 0, 200), 10.0)
+
+
+@pytest.mark.parametrize("num_slots, envelope_on", [(120, True), (2000, True), (120, False)],
+                         ids=["default", "long-episodes-retry", "no-envelope"])
+def test_sample_paths_draws_what_random_paths_draws_from_each_generator(num_slots, envelope_on):
+    """The batched sampler (vector envs) gives each generator the paths random_paths gives it, and
+    leaves each generator in the same state (the initial offsets are drawn next)."""
+    cfg = ScenarioConfig(num_agvs=6, num_slots=num_slots)
+    steps = num_slots + cfg.control.horizon + 1
+    envelope = references.Envelope.from_config(cfg, steps) if envelope_on else None
+    kwargs = dict(num_agvs=6, families=cfg.reference.families, area_m=(0.0, 200.0, 0.0, 200.0),
+                  duration_s=(steps - 1) * cfg.slot_s, envelope=envelope)
+    batched_rngs = [np.random.default_rng(s) for s in range(5)]
+    batched = references.sample_paths(batched_rngs, **kwargs)
+    for s in range(5):
+        rng = np.random.default_rng(s)
+        assert references.random_paths(rng, **kwargs) == batched[s]
+        assert rng.random() == batched_rngs[s].random()
+    flat = [p for row in batched for p in row]
+    t = np.arange(steps) * cfg.slot_s
+    table = references.evaluate_paths(flat, t)
+    for i in (0, 7, 13, 29):
+        np.testing.assert_array_equal(table[i], flat[i].evaluate(t))
