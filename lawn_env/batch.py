@@ -8,7 +8,11 @@ Scenario ``i`` draws its references and initial offsets from its own generator, 
 single :class:`~lawn_env.core.Simulation` reset with that generator does (the restarting
 scenarios' paths are drawn together by :func:`lawn_env.references.sample_paths`); the fading of all
 scenarios comes from one batched generator, so a step costs a handful of numpy calls whatever
-B is. The disturbance mode is not batched yet: configs with it are refused.
+B is. The disturbance mode runs through the same functions as the single simulation
+(:func:`~lawn_env.core.apply_wind`, :func:`~lawn_env.core.disturb`,
+:func:`~lawn_env.core.measure`); its per-slot draws come from the caller (the vector env's batched
+generator), the measurement noise at reset from each scenario's generator, as in
+:meth:`Simulation.reset`.
 """
 
 from __future__ import annotations
@@ -17,7 +21,8 @@ import numpy as np
 
 from . import references
 from .config import ScenarioConfig
-from .core import Simulation, initial_state, link_outage, saturate_increment, stage_terms, transmit
+from .core import (Simulation, apply_wind, disturb, initial_state, link_outage, measure, saturate_increment,
+                   stage_terms, transmit)
 
 __all__ = ["BatchSimulation"]
 
@@ -30,9 +35,6 @@ class BatchSimulation:
     def __init__(self, config: ScenarioConfig, num_envs: int):
         if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
             raise ValueError(f"num_envs={num_envs!r}: must be an integer >= 1")
-        if config.disturbance.active:
-            raise ValueError("the batched simulation does not implement the disturbance mode yet "
-                             "(config.disturbance is active); use gym.make_vec with vectorization_mode='sync'")
         self.config = config
         self.num_envs = int(num_envs)
         self.single = Simulation(config)  # parameters, matrices and the fixed path set, shared
@@ -44,6 +46,9 @@ class BatchSimulation:
         self.reference_packed = None  # (B, K, T, 8) [reference, 0, 0] rows for the stage cost (random paths)
         self.shared_packed = None  # (K, T, 8) the same for a fixed path set, shared by every scenario
         self.x_aug = self.tracking_error = None
+        self.x_obs = self.error_obs = None  # what the policies observe (the true state without measurement noise)
+        self.disturbed = config.disturbance.active
+        self._applied = None  # the applied accelerations under actuator lag, (B, K, 2)
         self.drone_position = None
         self.slot = np.zeros(self.num_envs, dtype=np.int64)
         self._rows = np.arange(self.num_envs)
@@ -88,6 +93,22 @@ class BatchSimulation:
         start = self.reference[idx, :, 0]
         self.x_aug[idx] = initial_state(start, offsets, s._area_lo, s._area_hi)
         self.tracking_error[idx] = self.x_aug[idx] - start
+        if self.disturbed:
+            if self._applied is None:
+                self._applied = np.zeros((b, k, 2))
+            self._applied[idx] = self.x_aug[idx, :, 4:6]
+            d = cfg.disturbance
+            if d.measurement_noise_position_m > 0 or d.measurement_noise_velocity_mps > 0:
+                if self.x_obs is None or self.x_obs is self.x_aug:
+                    self.x_obs, self.error_obs = self.x_aug.copy(), self.tracking_error.copy()
+                for i in idx.tolist():  # after the offsets, from the scenario's generator (Simulation._observe)
+                    pos = rngs[i].normal(0.0, d.measurement_noise_position_m, (k, 2))
+                    vel = rngs[i].normal(0.0, d.measurement_noise_velocity_mps, (k, 2))
+                    self.x_obs[i], self.error_obs[i] = measure(self.x_aug[i], self.tracking_error[i], pos, vel)
+            else:
+                self.x_obs, self.error_obs = self.x_aug, self.tracking_error
+        else:
+            self.x_obs, self.error_obs = self.x_aug, self.tracking_error
         self.drone_position[idx] = np.asarray(cfg.drone.start_m, dtype=float)
         self.slot[idx] = 0
         self.last_power_w[idx] = s.power_budget_w / k
@@ -97,14 +118,28 @@ class BatchSimulation:
 
     # ------------------------------------------------------------------ one slot
     def step(self, increment: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray,
-             normalized_fading: np.ndarray) -> dict:
+             normalized_fading: np.ndarray, noise: dict | None = None) -> dict:
         """Advance every scenario one slot: increments (B, K, 2), powers (B, K), next drone
-        positions (B, 2), fading m|h|^2 (B, K). Returns the slot's arrays: ``tracking_cost`` and
-        ``effort_cost`` (B, K), ``delivered``, ``outage_probability``, ``applied_increment``."""
+        positions (B, 2), fading m|h|^2 (B, K) and, in the disturbance mode, the slot's other draws
+        ``noise`` (:meth:`noise_shapes`). Returns the slot's arrays: ``tracking_cost`` and
+        ``effort_cost`` (B, K), ``delivered``, ``outage_probability``, ``applied_increment`` and
+        ``drone_position`` (after the wind)."""
         s = self.single
+        d = self.config.disturbance
+        if self.disturbed:  # Simulation.step's disturbance mode, with the same functions
+            wind = np.asarray(d.wind_mps, dtype=float)
+            if "gust" in noise:
+                wind = wind + noise["gust"]
+            drone_next = apply_wind(drone_next, wind, s.slot_s, s._area_lo, s._area_hi)
         du = saturate_increment(self.x_aug[..., 4:6], increment, s.accel_max)
+        if self.disturbed and d.control_period_slots > 1:
+            du[self.slot % d.control_period_slots != 0] = 0.0  # no command this slot: nothing is sent
         packed, delivered, outage_p = transmit(self.x_aug, du, power_w, drone_next, normalized_fading, s.link,
                                                s._altitude_sq, s._packed_t)
+        if self.disturbed:
+            lag = s._lag_alpha if d.actuator_lag_s > 0 else None
+            self._applied = disturb(packed, self.x_aug[..., 4:6] + packed[..., 6:8], self._applied, lag,
+                                    s._accel_effect_t, noise.get("process_position"), noise.get("process_velocity"))
         self.slot += 1
         if self.shared_packed is not None:  # one path set: gather from its (K, T, 8) table, not the batch's
             reference = self.shared_packed[:, self.slot].transpose(1, 0, 2)
@@ -113,12 +148,36 @@ class BatchSimulation:
         err, terms = stage_terms(packed, reference, s._packed_w)
         self.x_aug = packed[..., 0:6]
         self.tracking_error = err[..., 0:6]
+        if "measurement_position" in (noise or {}):
+            self.x_obs, self.error_obs = measure(self.x_aug, self.tracking_error, noise["measurement_position"],
+                                                 noise["measurement_velocity"])
+        else:
+            self.x_obs, self.error_obs = self.x_aug, self.tracking_error
         self.drone_position = drone_next
         self.last_power_w = power_w
         self.last_delivered = delivered
         self.last_outage_probability = outage_p
         return {"tracking_cost": terms[..., 0], "effort_cost": terms[..., 1], "delivered": delivered,
                 "outage_probability": outage_p, "applied_increment": packed[..., 6:8]}
+
+    def noise_shapes(self) -> dict:
+        """The disturbance mode's draws of one slot besides the fading, name -> (shape, std), in the
+        order :meth:`Simulation.step` draws them (the gust, the process noise, then the
+        measurement noise); empty without the disturbance mode."""
+        if not self.disturbed:
+            return {}
+        d, b, k = self.config.disturbance, self.num_envs, self.num_agvs
+        out = {}
+        if d.wind_gust_std_mps > 0:
+            out["gust"] = ((b, 2), d.wind_gust_std_mps)
+        if d.process_noise_position_m > 0:
+            out["process_position"] = ((b, k, 2), d.process_noise_position_m)
+        if d.process_noise_velocity_mps > 0:
+            out["process_velocity"] = ((b, k, 2), d.process_noise_velocity_mps)
+        if d.measurement_noise_position_m > 0 or d.measurement_noise_velocity_mps > 0:
+            out["measurement_position"] = ((b, k, 2), d.measurement_noise_position_m)
+            out["measurement_velocity"] = ((b, k, 2), d.measurement_noise_velocity_mps)
+        return out
 
     def reference_windows(self) -> np.ndarray:
         """Reference augmented states at slots n..n+N_p of every scenario: (B, K, N_p+1, 6)."""

@@ -20,8 +20,8 @@ from . import channel, drone, references
 from .config import ScenarioConfig
 from .dynamics import PredictionModel, packed_step_matrices
 
-__all__ = ["Simulation", "Snapshot", "SlotRecord", "initial_state", "saturate_increment", "link_outage", "link_success", "transmit",
-           "stage_terms"]
+__all__ = ["Simulation", "Snapshot", "SlotRecord", "initial_state", "saturate_increment", "link_outage", "link_success",
+           "apply_wind", "disturb", "measure", "transmit", "stage_terms"]
 
 
 # ---------------------------------------------------------------------- the slot's equations
@@ -65,6 +65,41 @@ def link_success(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray, l
     ``link`` is their link model (``LinkParams.from_config(config, planning=True)``)."""
     diff = x_aug[..., 0:2] - drone_xy[..., None, :]
     return special.gammaincc(link.m, link.outage_argument_sq(power_w, (diff * diff) @ _ONES2 + altitude_sq))
+
+
+def apply_wind(drone_next: np.ndarray, wind_mps: np.ndarray, slot_s: float, area_lo: np.ndarray,
+               area_hi: np.ndarray) -> np.ndarray:
+    """The drone's next position (..., 2) drifted by the slot's wind (mean plus gust, (..., 2) m/s)
+    and kept in the area (disturbance mode)."""
+    return np.clip(drone_next + wind_mps * slot_s, area_lo, area_hi)
+
+
+def disturb(packed: np.ndarray, commanded: np.ndarray, applied: np.ndarray, lag_alpha: float | None,
+            accel_effect_t: np.ndarray, position_noise: np.ndarray | None,
+            velocity_noise: np.ndarray | None) -> np.ndarray:
+    """The disturbance mode's changes to the transition, in place on the packed rows (..., K, 8):
+    the actuator lag (``lag_alpha``, None without lag) moves the AGV with the applied acceleration
+    instead of the commanded u[n] (the difference enters through A~'s acceleration column, the
+    same model), and process noise (..., K, 2) perturbs position and velocity. Returns the new
+    applied accelerations."""
+    if lag_alpha is not None:
+        applied = lag_alpha * applied + (1.0 - lag_alpha) * commanded
+        packed[..., 0:4] += (applied - commanded) @ accel_effect_t
+    if position_noise is not None:
+        packed[..., 0:2] += position_noise
+    if velocity_noise is not None:
+        packed[..., 2:4] += velocity_noise
+    return applied
+
+
+def measure(x_aug: np.ndarray, tracking_error: np.ndarray, position_noise: np.ndarray,
+            velocity_noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """What the policies observe under measurement noise (..., K, 2) on positions and velocities:
+    the state and the tracking error, both with the same noise."""
+    noise = np.zeros_like(x_aug)
+    noise[..., 0:2] = position_noise
+    noise[..., 2:4] = velocity_noise
+    return x_aug + noise, tracking_error + noise
 
 
 def transmit(x_aug: np.ndarray, du: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray,
@@ -256,7 +291,8 @@ class Simulation:
             wind = np.asarray(d.wind_mps, dtype=float)
             if d.wind_gust_std_mps > 0:
                 wind = wind + rng.normal(0.0, d.wind_gust_std_mps, 2)
-            drone_next = np.clip(np.asarray(drone_next, dtype=float) + wind * self.slot_s, self._area_lo, self._area_hi)
+            drone_next = apply_wind(np.asarray(drone_next, dtype=float), wind, self.slot_s, self._area_lo,
+                                    self._area_hi)
         x_aug = self.x_aug
         du = saturate_increment(x_aug[:, 4:6], increment, self.accel_max)
         if disturbed and self.slot % d.control_period_slots:
@@ -278,19 +314,12 @@ class Simulation:
         return self._record(SlotRecord(tracking, effort, delivered, outage_p, du, power_w, drone_next, x_next[:, 0:2]))
 
     def _disturb(self, packed: np.ndarray, commanded: np.ndarray) -> None:
-        """The disturbance mode's changes to the transition, in place on the packed rows: the
-        actuator lag moves the AGV with the applied acceleration instead of the commanded u[n]
-        (the difference enters through A~'s acceleration column, the same model), and process
-        noise perturbs position and velocity."""
-        d = self.config.disturbance
-        if d.actuator_lag_s > 0:
-            applied = self._lag_alpha * self._applied + (1.0 - self._lag_alpha) * commanded
-            packed[:, 0:4] += (applied - commanded) @ self._accel_effect_t
-            self._applied = applied
-        if d.process_noise_position_m > 0:
-            packed[:, 0:2] += self.rng.normal(0.0, d.process_noise_position_m, (self.num_agvs, 2))
-        if d.process_noise_velocity_mps > 0:
-            packed[:, 2:4] += self.rng.normal(0.0, d.process_noise_velocity_mps, (self.num_agvs, 2))
+        """:func:`disturb` with this episode's process noise (drawn position first, then velocity)."""
+        d, k = self.config.disturbance, self.num_agvs
+        pos = self.rng.normal(0.0, d.process_noise_position_m, (k, 2)) if d.process_noise_position_m > 0 else None
+        vel = self.rng.normal(0.0, d.process_noise_velocity_mps, (k, 2)) if d.process_noise_velocity_mps > 0 else None
+        lag = self._lag_alpha if d.actuator_lag_s > 0 else None
+        self._applied = disturb(packed, commanded, self._applied, lag, self._accel_effect_t, pos, vel)
 
     def _record(self, record: SlotRecord) -> SlotRecord:
         """The slot's bookkeeping (the AGV state is already updated)."""
@@ -307,11 +336,9 @@ class Simulation:
         if d.measurement_noise_position_m <= 0 and d.measurement_noise_velocity_mps <= 0:
             self.x_obs, self.error_obs = self.x_aug, self.tracking_error
             return
-        noise = np.zeros_like(self.x_aug)
-        noise[:, 0:2] = self.rng.normal(0.0, d.measurement_noise_position_m, (self.num_agvs, 2))
-        noise[:, 2:4] = self.rng.normal(0.0, d.measurement_noise_velocity_mps, (self.num_agvs, 2))
-        self.x_obs = self.x_aug + noise
-        self.error_obs = self.tracking_error + noise
+        pos = self.rng.normal(0.0, d.measurement_noise_position_m, (self.num_agvs, 2))
+        vel = self.rng.normal(0.0, d.measurement_noise_velocity_mps, (self.num_agvs, 2))
+        self.x_obs, self.error_obs = measure(self.x_aug, self.tracking_error, pos, vel)
 
     @property
     def done(self) -> bool:

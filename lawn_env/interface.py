@@ -228,10 +228,11 @@ class ActionLayout:
             self.mpc.reset(which)
 
     def decode_batch(self, actions: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
-                     drone_position: np.ndarray) -> Decision:
+                     drone_position: np.ndarray, slot: np.ndarray | None = None) -> Decision:
         """:meth:`decode` over a batch of B scenarios: checked actions (B, size), states (B, K, 6),
         reference windows (B, K, N_p+1, 6), drone positions (B, 2); the Decision's arrays get a
-        leading B axis. The anchored increments need an MPC built with ``mpc_backend="batched"``."""
+        leading B axis; ``slot`` (B,) the scenarios' slots (move blocking with a control period). The
+        anchored increments need an MPC built with ``mpc_backend="batched"``."""
         a = actions
         k = self.num_agvs
         comm = a[:, self._inc_size :]
@@ -249,7 +250,7 @@ class ActionLayout:
         power = self._anchored_power(comm[:, :k], x_aug, drone_next)
         increment = None
         if self._inc_size:
-            increment = self.anchor_increment(x_aug, reference, power, drone_next)
+            increment = self.anchor_increment(x_aug, reference, power, drone_next, slot)
             increment += a[:, : 2 * k].reshape(-1, k, 2) * (self.interface.residual_scale * self._inc_max)
             np.clip(increment, -self._inc_max, self._inc_max, out=increment)
         return Decision(increment, power, drone_next)

@@ -323,14 +323,18 @@ class OutageAwareMPC:
 
         ``slot`` (the current slot n) is required when the MPC plans with a control period > 1:
         increments are then allowed only at the slots n + i where a command goes out
-        (:func:`lawn_env.dynamics.command_mask`)."""
+        (:func:`lawn_env.dynamics.command_mask`); a batch takes one slot per scenario (B,)."""
         k = self.num_agvs
         if self.control_period == 1:
             neg, pos = self._boxes[0]
         elif slot is None:
             raise ValueError(f"this MPC plans with control_period={self.control_period}: pass slot= (the current slot)")
-        else:
+        elif np.ndim(slot) == 0:
             neg, pos = self._boxes[int(slot) % self.control_period]
+        else:  # one slot per scenario of a batch (B,): each scenario's own phase
+            phase = np.asarray(slot) % self.control_period
+            neg = np.stack([b[0] for b in self._boxes])[phase]
+            pos = np.stack([b[1] for b in self._boxes])[phase]
         window = self.model.horizon + 1
         lead = x_aug.shape[:-2]
         if x_aug.shape[-2:] != (k, 6) or chi_ref.shape != lead + (k, window, 6) or (lead and self.backend.name != "batched"):

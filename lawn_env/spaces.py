@@ -261,10 +261,10 @@ class ObservationLayout:
         blocks = out[:, : k * f].reshape(b, k, f)
         w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
         drone = (bsim.drone_position - self.center) * self._inv_half
-        state = bsim.x_aug * self._state_scale
+        state = bsim.x_obs * self._state_scale
         state -= self._state_shift_scaled
         blocks[..., 0:6] = state
-        blocks[..., 6:12] = bsim.tracking_error * self._ref_scale
+        blocks[..., 6:12] = bsim.error_obs * self._ref_scale
         shared = bsim.shared_reference
         if shared is not None and shared.nbytes * self.window <= self.batch_window_table_bytes:
             if self._batch_ref_source is not shared:

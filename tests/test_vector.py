@@ -176,8 +176,6 @@ def test_rl_ids_have_native_vector_envs_on_the_rl_interface(env_id):
 def test_unsupported_settings_are_refused_not_ignored():
     with pytest.raises(ValueError, match="interface='fast'"):
         _make(interface="fast")
-    with pytest.raises(ValueError, match="disturbance mode"):
-        _make(config="disturbed")
     with pytest.raises(ValueError, match="num_envs"):
         _make(num_envs=0)
 
@@ -296,3 +294,74 @@ def test_rl_interface_lockstep_with_the_single_env(env_id, monkeypatch):
                 ended_any = ended_any or s_term
                 assert info["_episode_control_cost"][i] and info["episode_control_cost"][i] > 0
     assert ended_any and not live.any()  # some env was terminated, every env ended
+
+
+class _Recording:
+    """A generator that records what the single env draws from it (normal and gamma draws)."""
+
+    def __init__(self, rng):
+        self._rng, self.log = rng, []
+
+    def normal(self, *args, **kwargs):
+        out = self._rng.normal(*args, **kwargs)
+        self.log.append(np.array(out))
+        return out
+
+    def standard_gamma(self, *args, **kwargs):
+        out = self._rng.standard_gamma(*args, **kwargs)
+        self.log.append(np.array(out))
+        return out
+
+    def __getattr__(self, name):
+        return getattr(self._rng, name)
+
+
+@pytest.mark.parametrize("env_id, interface", [("lawn/Joint-v0", "v0"), ("lawn/Comm-v0", "v0"), ("lawn/Joint-v0", "rl")])
+def test_disturbance_mode_lockstep_with_the_single_env(env_id, interface, monkeypatch):
+    """The disturbed preset (wind and gusts, control period 2 with period-aware planning, actuator
+    lag, process and measurement noise): env i equals the single env on seed s + i to 1e-12 when
+    both see the same draws (the single env's, in the order it draws them)."""
+    from lawn_env.mpc import OutageAwareMPC
+
+    config = lawn_env.presets.get("disturbed").override({"num_slots": 20})
+    comm = env_id == "lawn/Comm-v0"
+    extra = {"qp_backend": "batched"} if comm else {}
+    d = config.disturbance
+    envs = _make(env_id=env_id, config=config, interface=interface, **extra)
+    names = list(envs.unwrapped.sim.noise_shapes())
+    rng = np.random.default_rng(5)
+    actions = rng.uniform(-1, 1, (20,) + envs.action_space.shape).astype(np.float32)
+    singles = []
+    for i in range(N):
+        env = gym.make(env_id, config=config, interface=interface, **extra)
+        if interface == "rl" and not comm:
+            env.unwrapped.actions.mpc = OutageAwareMPC.from_config(env.unwrapped.config, backend="batched")
+        env.reset(seed=30 + i)
+        rec = _Recording(env.unwrapped.sim.rng)
+        env.unwrapped.sim.rng = rec
+        rows = []
+        for t in range(20):
+            n0 = len(rec.log)
+            obs, reward, terminated, truncated, _ = env.step(actions[t, i])
+            draws = rec.log[n0:]  # gust, fading, process position, process velocity, measurement (2)
+            gust, fading, rest = draws[0], draws[1], draws[2:]
+            assert d.wind_gust_std_mps > 0 and len(rest) == len(names) - 1
+            slot_draws = dict(zip(names, [gust] + rest))
+            rows.append((fading, slot_draws, obs, reward, env.unwrapped.sim.x_aug.copy(), terminated or truncated))
+            if terminated or truncated:
+                break
+        singles.append(rows)
+    steps = min(len(rows) for rows in singles)
+    it_fading = iter([np.stack([s[t][0] for s in singles]) for t in range(steps)])
+    it_noise = iter([{k: np.stack([s[t][1][k] for s in singles]) for k in names} for t in range(steps)])
+    monkeypatch.setattr(envs.unwrapped, "_draw_fading", lambda: next(it_fading))
+    monkeypatch.setattr(envs.unwrapped, "_draw_noise", lambda: next(it_noise))
+    envs.reset(seed=30)
+    for t in range(steps):
+        obs, reward, terminated, truncated, _ = envs.step(actions[t])
+        for i in range(N):
+            _, _, s_obs, s_reward, s_x, _ = singles[i][t]
+            np.testing.assert_allclose(envs.unwrapped.sim.x_aug[i], s_x, rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(reward[i], s_reward, rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(obs[i], s_obs, rtol=1e-6, atol=1e-6)
+    assert steps >= 10

@@ -26,8 +26,9 @@ Gymnasium's vector ones (as ``CartPoleVectorEnv``):
 ``interface=`` takes the single envs' RL interface (:mod:`lawn_env.interface`; ``"rl"`` is
 ``lawn/JointRL-v0`` and ``lawn/CommRL-v0``): anchored actions decoded for the whole batch (the
 Joint anchor's MPC solved by the batched QP solver), the scaled reward, termination with its
-penalty, clipped observations. The disturbance mode is not batched yet: such configs raise a
-``ValueError`` saying so (``vectorization_mode="sync"`` runs them).
+penalty, clipped observations. The disturbance mode runs as in the single env (wind on the drone,
+a reduced control rate, actuator lag, process and measurement noise); its per-slot draws come
+from the batched generator like the fading.
 """
 
 from __future__ import annotations
@@ -116,6 +117,11 @@ class JointVectorEnv(VectorEnv):
         """m|h|^2 of every link of every scenario for this slot, (N, K), from the batched generator."""
         return self.np_random.standard_gamma(self.sim.single.link.m, (self.num_envs, self.num_agvs))
 
+    def _draw_noise(self) -> dict:
+        """The disturbance mode's other draws of this slot (gust, process and measurement noise;
+        :meth:`BatchSimulation.noise_shapes`), from the batched generator; empty without it."""
+        return {name: self.np_random.normal(0.0, std, shape) for name, (shape, std) in self.sim.noise_shapes().items()}
+
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
         if isinstance(seed, (list, tuple)):
@@ -152,7 +158,7 @@ class JointVectorEnv(VectorEnv):
         increment, power, drone_next, extra = self._decide(a)
         same_step = self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
         restart = np.zeros(self.num_envs, dtype=bool) if same_step else self._done.copy()
-        record = sim.step(increment, power, drone_next, self._draw_fading())
+        record = sim.step(increment, power, drone_next, self._draw_fading(), self._draw_noise())
         cost_tracking = record["tracking_cost"].sum(axis=1)
         cost_effort = record["effort_cost"].sum(axis=1)
         applied = record["applied_increment"].copy()
@@ -204,7 +210,7 @@ class JointVectorEnv(VectorEnv):
         """The actions decoded under the env's action scheme (:meth:`ActionLayout.decode_batch`)."""
         sim = self.sim
         windows = sim.reference_windows() if self.actions.scheme == "anchored" and self.role == "joint" else None
-        return self.actions.decode_batch(a, sim.x_aug, windows, sim.drone_position)
+        return self.actions.decode_batch(a, sim.x_obs, windows, sim.drone_position, sim.slot)
 
     def _extra_reset_info(self) -> dict:
         return {}
@@ -287,12 +293,12 @@ class CommVectorEnv(JointVectorEnv):
         _, power, drone_next = self._decisions(a)
         psi = link_success(sim.x_aug, drone_next, power, self._planning_link, self._altitude_sq)
         if self.mpc.backend.name == "batched":
-            solution = self.mpc.solve(sim.x_aug, sim.reference_windows(), psi)
+            solution = self.mpc.solve(sim.x_aug, sim.reference_windows(), psi, sim.slot)
             increments, iterations, status = solution.increments[:, :, 0, :], solution.iterations, solution.status
             self.last_mpc_solve_time_s = solution.solve_time_s
         else:  # one env at a time through the single env's solver
             windows = sim.reference_windows()
-            parts = [self.mpc.solve(sim.x_aug[i], windows[i], psi[i]) for i in range(self.num_envs)]
+            parts = [self.mpc.solve(sim.x_aug[i], windows[i], psi[i], int(sim.slot[i])) for i in range(self.num_envs)]
             increments = np.stack([p.increments[:, 0, :] for p in parts])
             iterations = np.stack([p.iterations for p in parts])
             status = np.stack([p.status for p in parts])
