@@ -67,18 +67,13 @@ class BatchSimulation:
             self.last_power_w = np.zeros((b, k))
             self.last_delivered = np.ones((b, k), dtype=bool)
             self.last_outage_probability = np.zeros((b, k))
-            if s._paper_table is not None:
+            if s._paper_table is not None:  # one path set for every scenario: shared, never copied per scenario
                 self.shared_reference = s._paper_table
                 self.reference = np.broadcast_to(s._paper_table, (b,) + s._paper_table.shape)
+                self.shared_packed = np.concatenate([s._paper_table, np.zeros((k, self.steps, 2))], axis=2)
             else:
                 self.reference = np.zeros((b, k, self.steps, 6))
-            if self.shared_reference is not None:
-                self.shared_packed = np.concatenate([self.shared_reference, np.zeros(self.shared_reference.shape[:2] + (2,))],
-                                                    axis=2)
-                self.reference_packed = None
-            else:
-                self.reference_packed = np.concatenate(
-                    [self.reference, np.zeros(self.reference.shape[:3] + (2,))], axis=3)
+                self.reference_packed = np.zeros((b, k, self.steps, 8))
             self.tracking_error = np.zeros((b, k, 6))
         cfg = self.config
         if s._paper_table is None:  # every restarting scenario's paths drawn together, one table call

@@ -53,8 +53,7 @@ def link_outage(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray, li
     """The outage argument x (Prop. 1) and the closed-form outage probability gammainc(m, x) of
     the links from the drone at ``drone_xy`` (..., 2) to the AGVs (x_aug (..., K, 6)) with powers
     (..., K), on squared distances (channel.distance_sq)."""
-    diff = x_aug[..., 0:2] - drone_xy[..., None, :]
-    x = link.outage_argument_sq(power_w, (diff * diff) @ _ONES2 + altitude_sq)
+    x = link.outage_argument_sq(power_w, _link_distance_sq(x_aug, drone_xy, altitude_sq))
     return x, special.gammainc(link.m, x)
 
 
@@ -63,8 +62,13 @@ def link_success(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray, l
     """The success probability psi = gammaincc(m, x) of the links from the drone at ``drone_xy``
     (..., 2) to the AGVs (x_aug (..., K, 6)) with powers (..., K): the planners' psi when
     ``link`` is their link model (``LinkParams.from_config(config, planning=True)``)."""
+    return special.gammaincc(link.m, link.outage_argument_sq(power_w, _link_distance_sq(x_aug, drone_xy, altitude_sq)))
+
+
+def _link_distance_sq(x_aug: np.ndarray, drone_xy: np.ndarray, altitude_sq: float) -> np.ndarray:
+    """channel.distance_sq from the drone (..., 2) to the AGVs (..., K, 6), inlined for the hot path."""
     diff = x_aug[..., 0:2] - drone_xy[..., None, :]
-    return special.gammaincc(link.m, link.outage_argument_sq(power_w, (diff * diff) @ _ONES2 + altitude_sq))
+    return (diff * diff) @ _ONES2 + altitude_sq
 
 
 def apply_wind(drone_next: np.ndarray, wind_mps: np.ndarray, slot_s: float, area_lo: np.ndarray,

@@ -96,34 +96,36 @@ class RLInterface:
         """The lowest reward of one slot (``-inf`` for the raw cost)."""
         return -self.cost_clip / self.cost_scale if self.reward == "scaled" else -math.inf
 
-    def reward_from_cost(self, cost: float) -> float:
-        """The slot's reward for a realized stage cost."""
-        if self.reward == "cost":
-            return -cost
-        return -min(cost, self.cost_clip) / self.cost_scale
-
     def rewards_from_costs(self, costs: np.ndarray) -> np.ndarray:
-        """:meth:`reward_from_cost` over an array of stage costs (the vector envs)."""
+        """The slots' rewards for realized stage costs (any shape)."""
         costs = np.asarray(costs, dtype=float)
         return -costs if self.reward == "cost" else -np.minimum(costs, self.cost_clip) / self.cost_scale
 
+    def reward_from_cost(self, cost: float) -> float:
+        """The slot's reward for a realized stage cost (:meth:`rewards_from_costs` of one)."""
+        return float(self.rewards_from_costs(cost))
+
     def terminates_batch(self, position_error_m: np.ndarray) -> np.ndarray:
-        """:meth:`terminates` per scenario of a batch: position errors (B, K, 2) -> (B,) bool."""
+        """Per scenario: termination is on and some AGV's position error exceeds the bound;
+        position errors (B, K, 2) -> (B,) bool."""
+        position_error_m = np.asarray(position_error_m, dtype=float)
         if self.termination_distance_m is None:
             return np.zeros(position_error_m.shape[0], dtype=bool)
         d2 = (position_error_m * position_error_m).sum(axis=-1)
         return d2.max(axis=-1) > self.termination_distance_m**2
 
-    def terminal_penalty(self, remaining_slots: int) -> float:
-        """Added to the reward of a terminating step: the floor for every slot not played."""
-        return remaining_slots * self.reward_floor if remaining_slots > 0 else 0.0
-
     def terminates(self, position_error_m: np.ndarray) -> bool:
-        """True when termination is on and some AGV's position error exceeds the bound."""
-        if self.termination_distance_m is None:
-            return False
-        d2 = (np.asarray(position_error_m) ** 2).sum(axis=-1)
-        return bool(d2.max() > self.termination_distance_m**2)
+        """:meth:`terminates_batch` of one scenario, position errors (K, 2)."""
+        return bool(self.terminates_batch(np.asarray(position_error_m)[None])[0])
+
+    def terminal_penalties(self, remaining_slots: np.ndarray) -> np.ndarray:
+        """Added to the reward of a terminating step: the floor for every slot not played (any shape)."""
+        remaining = np.asarray(remaining_slots)
+        return np.where(remaining > 0, np.maximum(remaining, 1) * self.reward_floor, 0.0)
+
+    def terminal_penalty(self, remaining_slots: int) -> float:
+        """:meth:`terminal_penalties` of one step."""
+        return float(self.terminal_penalties(remaining_slots))
 
     @property
     def obs_bound(self) -> float:

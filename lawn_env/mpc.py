@@ -66,12 +66,17 @@ class _DaqpBackend:
 
     name = "daqp"
 
-    def __init__(self, num_agvs: int, constraint_matrix: np.ndarray):
+    def __init__(self, num_agvs: int, constraint_matrix: np.ndarray, hessians=None):
         import daqp
 
         self._daqp = daqp
         self._a = np.array(constraint_matrix, dtype=float, order="C")  # DAQP wants a writable buffer
         self._models = [None] * num_agvs
+
+    def forget(self, rows: np.ndarray) -> None:
+        """Drop the workspaces (warm starts) of the problems ``rows``."""
+        for i in rows.tolist():
+            self._models[i] = None
 
     def solve(self, k: int, p: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
               bounds_changed: bool = True):
@@ -102,7 +107,7 @@ class _OsqpBackend:
     settings = dict(eps_abs=1e-10, eps_rel=1e-10, polishing=True, polish_refine_iter=10,
                     max_iter=50000, verbose=False, warm_starting=True)
 
-    def __init__(self, num_agvs: int, constraint_matrix: np.ndarray):
+    def __init__(self, num_agvs: int, constraint_matrix: np.ndarray, hessians=None):
         import osqp
         from scipy import sparse
 
@@ -165,9 +170,9 @@ class _QpsolversBackend:
 
 class _BatchedBackend:
     """Every problem of a solve at once: :class:`lawn_env.qp.PencilQP` (a primal-dual active-set
-    method over the whole stack, ADMM where an active set does not settle, warm-started from the
-    previous solve's active sets), exact where its KKT check passes; the others by DAQP one by
-    one (warm-started workspaces per problem; ``last_settled_share`` is the batched share).
+    step over the whole stack, warm-started from the previous solve's active sets), exact where
+    its KKT check passes; the others by DAQP one by one (warm-started workspaces per problem;
+    ``last_settled_share`` is the batched share).
 
     The increment bounds are tightened by a relative ``TIGHTEN`` (1e-9) inside the batched solve:
     with a_max an integer multiple of Delta-a_max (the default, 2 and 1 m/s^2), a saturating
@@ -194,8 +199,7 @@ class _BatchedBackend:
         if self._active is not None:
             self._active[rows] = 0
         if self._daqp is not None:
-            for i in rows.tolist():
-                self._daqp._models[i] = None
+            self._daqp.forget(rows)
 
     def solve_all(self, s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray):
         """The M problems at Hessian scalars ``s`` = psi^2: minimizers (M, n), objectives (M,),
@@ -235,14 +239,13 @@ class _BatchedBackend:
         return np.zeros(self._n), 0, 2
 
 
+#: The named backends; each is built from (num_agvs, constraint matrix T, Hessians (P0, P1)).
 BACKENDS = {"daqp": _DaqpBackend, "osqp": _OsqpBackend, "batched": _BatchedBackend}
 
 
 def _make_backend(name: str, num_agvs: int, constraint_matrix: np.ndarray, hessians: tuple[np.ndarray, np.ndarray]):
-    if name == "batched":
-        return _BatchedBackend(num_agvs, constraint_matrix, hessians)
     if name in BACKENDS:
-        return BACKENDS[name](num_agvs, constraint_matrix)
+        return BACKENDS[name](num_agvs, constraint_matrix, hessians)
     if name.startswith("qpsolvers:"):
         return _QpsolversBackend(name.split(":", 1)[1], num_agvs, constraint_matrix)
     raise ValueError(f"unknown QP backend {name!r}; valid: {', '.join(BACKENDS)}, or 'qpsolvers:<solver name>'")
@@ -277,6 +280,7 @@ class OutageAwareMPC:
             allowed = np.repeat(command_mask(phase, model.horizon, self.control_period), 2)
             pos = np.broadcast_to(np.where(allowed, self.accel_increment_max, 0.0), (self.num_agvs, n))
             self._boxes.append((-pos, pos))
+        self._box_upper = np.stack([b[1] for b in self._boxes])  # (P, K, n): one row per slot phase (batches)
         self._u_index = np.tile([4, 5], model.horizon)
         self._last_data = None
 
@@ -332,9 +336,8 @@ class OutageAwareMPC:
         elif np.ndim(slot) == 0:
             neg, pos = self._boxes[int(slot) % self.control_period]
         else:  # one slot per scenario of a batch (B,): each scenario's own phase
-            phase = np.asarray(slot) % self.control_period
-            neg = np.stack([b[0] for b in self._boxes])[phase]
-            pos = np.stack([b[1] for b in self._boxes])[phase]
+            pos = self._box_upper[np.asarray(slot) % self.control_period]
+            neg = -pos
         window = self.model.horizon + 1
         lead = x_aug.shape[:-2]
         if x_aug.shape[-2:] != (k, 6) or chi_ref.shape != lead + (k, window, 6) or (lead and self.backend.name != "batched"):

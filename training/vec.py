@@ -14,14 +14,14 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
-from lawn_env import RL_ENV_IDS, ScenarioConfig
-from lawn_env.envs.vector import CommVectorEnv, JointVectorEnv
+import gymnasium as gym
+
+from lawn_env import ENV_IDS, RL_ENV_IDS, ScenarioConfig
 
 __all__ = ["NATIVE_ENV_IDS", "NativeVecEnv"]
 
-_CLASSES = {"lawn/Joint-v0": JointVectorEnv, "lawn/Comm-v0": CommVectorEnv}
-#: The ids with a native vector env (the RL ids are their base ids with ``interface="rl"``).
-NATIVE_ENV_IDS = tuple(_CLASSES) + tuple(i for i, base in RL_ENV_IDS.items() if base in _CLASSES)
+#: The ids registered with a native vector env (their ``vector_entry_point``).
+NATIVE_ENV_IDS = tuple(i for i in (*ENV_IDS, *RL_ENV_IDS) if gym.spec(i).vector_entry_point is not None)
 
 
 class NativeVecEnv(VecEnv):
@@ -31,10 +31,9 @@ class NativeVecEnv(VecEnv):
     def __init__(self, config: ScenarioConfig, n_envs: int, env_id: str = "lawn/Joint-v0", interface=None):
         if env_id not in NATIVE_ENV_IDS:
             raise ValueError(f"env_id={env_id!r}: the native vector envs are {', '.join(NATIVE_ENV_IDS)}")
-        base = RL_ENV_IDS.get(env_id, env_id)
-        if interface is None and base != env_id:
-            interface = "rl"
-        self.venv = _CLASSES[base](n_envs, config=config, interface=interface, autoreset_mode="SameStep")
+        kwargs = {} if interface is None else {"interface": interface}  # None keeps the id's own (RL ids: "rl")
+        self.venv = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", config=config,
+                                 autoreset_mode="SameStep", **kwargs)
         super().__init__(n_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self._seed: int | None = None
         self._actions: np.ndarray | None = None

@@ -174,24 +174,23 @@ class JointVectorEnv(VectorEnv):
         reward = iface.rewards_from_costs(cost)
         terminated = iface.terminates_batch(sim.tracking_error[..., 0:2]) & ~restart
         if terminated.any():  # the reward floor of every slot not played (RL interface)
-            remaining = sim.num_slots - sim.slot[terminated]
-            reward[terminated] += np.where(remaining > 0, remaining * iface.reward_floor, 0.0)
+            reward[terminated] += iface.terminal_penalties(sim.num_slots - sim.slot[terminated])
         reward[restart] = 0.0
         truncated = (sim.slot >= sim.num_slots) & ~terminated
         info = self._info(cost_tracking, cost_effort, applied)  # restarted rows describe their new episode
         if extra:
-            if restart.any():
-                extra = {key: np.where(restart.reshape((-1,) + (1,) * (v.ndim - 1)), r, v)
-                         for (key, v), r in zip(extra.items(), self._extra_reset_info().values())}
+            if restart.any():  # restarted rows describe their new episode here too
+                fresh = self._extra_reset_info()
+                extra = {key: np.where(restart.reshape((-1,) + (1,) * (v.ndim - 1)), fresh[key], v)
+                         for key, v in extra.items()}
             info.update(extra)
         ended = truncated | terminated
         info["episode_control_cost"] = np.where(ended, self._cost, 0.0)
         info["_episode_control_cost"] = ended
         self._cost[ended] = 0.0
-        self._done = truncated | terminated
+        self._done = ended.copy()  # info holds ended itself
         obs = self._observe()
-        if same_step and self._done.any():  # same-step autoreset: the final observation goes to info
-            ended = self._done
+        if same_step and ended.any():  # same-step autoreset: the final observation goes to info
             info["final_obs"] = obs
             info["_final_obs"] = ended
             self._restart(ended)  # info keeps describing the step that ended them
