@@ -44,7 +44,7 @@ class BatchSimulation:
         self.reference = None
         self.shared_reference = None  # (K, T, 6) when every scenario has the same (fixed) path set
         self.reference_packed = None  # (B, K, T, 8) [reference, 0, 0] rows for the stage cost (random paths)
-        self.shared_packed = None  # (K, T, 8) the same for a fixed path set, shared by every scenario
+        self.shared_packed = None  # (T, K, 8) the same for a fixed path set, shared by every scenario
         self.x_aug = self.tracking_error = None
         self.x_obs = self.error_obs = None  # what the policies observe (the true state without measurement noise)
         self.disturbed = config.disturbance.active
@@ -70,7 +70,8 @@ class BatchSimulation:
             if s._paper_table is not None:  # one path set for every scenario: shared, never copied per scenario
                 self.shared_reference = s._paper_table
                 self.reference = np.broadcast_to(s._paper_table, (b,) + s._paper_table.shape)
-                self.shared_packed = np.concatenate([s._paper_table, np.zeros((k, self.steps, 2))], axis=2)
+                packed = np.concatenate([s._paper_table, np.zeros((k, self.steps, 2))], axis=2)
+                self.shared_packed = np.ascontiguousarray(packed.transpose(1, 0, 2))  # slot-major: one gather per step
             else:
                 self.reference = np.zeros((b, k, self.steps, 6))
                 self.reference_packed = np.zeros((b, k, self.steps, 8))
@@ -136,8 +137,8 @@ class BatchSimulation:
             self._applied = disturb(packed, self.x_aug[..., 4:6] + packed[..., 6:8], self._applied, lag,
                                     s._accel_effect_t, noise.get("process_position"), noise.get("process_velocity"))
         self.slot += 1
-        if self.shared_packed is not None:  # one path set: gather from its (K, T, 8) table, not the batch's
-            reference = self.shared_packed[:, self.slot].transpose(1, 0, 2)
+        if self.shared_packed is not None:  # one path set: gather from its (T, K, 8) table, not the batch's
+            reference = self.shared_packed[self.slot]
         else:
             reference = self.reference_packed[self._rows, :, self.slot]
         err, terms = stage_terms(packed, reference, s._packed_w)

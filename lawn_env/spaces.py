@@ -103,6 +103,11 @@ def encode_drone(next_position: np.ndarray, position: np.ndarray, max_speed_mps:
     return np.clip(v, -1.0, 1.0)
 
 
+def _clipped(x: np.ndarray, bound: float | None) -> np.ndarray:
+    """``x`` clipped to ``[-bound, bound]`` (a new array; ``x`` itself when ``bound`` is None)."""
+    return x if bound is None else np.clip(x, -bound, bound)
+
+
 class ObservationLayout:
     """The observation vector of the central environments, and its inverse.
 
@@ -146,6 +151,14 @@ class ObservationLayout:
         self._state_shift = np.concatenate([self.center, np.zeros(4)])
         self._state_shift_scaled = self._state_shift * self._state_scale
         self._inv_half = 1.0 / self.half_extent
+        # encode_batch's row products: [x~ | e] -> [state (6), error (6), position / half-extent (2)]
+        self._dyn_state = np.zeros((6, 14))
+        self._dyn_state[np.arange(6), np.arange(6)] = self._state_scale
+        self._dyn_state[[0, 1], [12, 13]] = self._state_scale[0:2]
+        self._dyn_error = np.zeros((6, 14))
+        self._dyn_error[np.arange(6), np.arange(6, 12)] = self._ref_scale
+        self._dyn_shift = np.zeros(14)
+        self._dyn_shift[[0, 1, 12, 13]] = np.tile(self._state_shift_scaled[0:2], 2)
         self._inv_power = 1.0 / self.power_budget_w
         w0 = 12
         w1 = w0 + 6 * self.window
@@ -161,7 +174,7 @@ class ObservationLayout:
         self._ref_source = None
         self._windows = None
         self._chunk_start = self._chunk_end = 0
-        self._batch_ref_source = self._batch_windows = None
+        self._batch_template_key = self._batch_template_rows = None
         self._buffer = np.zeros(self.size)
         self._views = self._make_views()
 
@@ -204,7 +217,7 @@ class ObservationLayout:
     #: floats, whatever the episode length).
     window_chunk = 256
     #: :meth:`encode_batch` precomputes a fixed path set's windows for the whole episode up to this
-    #: size, and gathers them per step beyond it.
+    #: size (float32 bytes), and gathers them per step beyond it.
     batch_window_table_bytes = 64 << 20
 
     def reference_windows(self, reference: np.ndarray, start: int = 0, stop: int | None = None) -> np.ndarray:
@@ -251,35 +264,70 @@ class ObservationLayout:
         self._buffer[-1] = sim.slot / self.num_slots
         return self._buffer.astype(np.float32)
 
-    def encode_batch(self, bsim) -> np.ndarray:
+    def encode_batch(self, bsim, bound: float | None = None) -> np.ndarray:
         """Observations of a :class:`~lawn_env.batch.BatchSimulation`: (B, size) float32, row i
-        equal to :meth:`encode` of scenario i (the same features and scalings, batched). A fixed
-        path set shares one precomputed window table while it stays under
-        ``batch_window_table_bytes``."""
+        equal to :meth:`encode` of scenario i up to float32 rounding (the same features and
+        scalings, batched), every feature clipped to ``[-bound, bound]`` when ``bound`` is given
+        (as :meth:`RLInterface.observe` clips an observation: clipping before the float32 cast
+        gives the same numbers).
+
+        A fixed path set shares one precomputed float32 table of the observation's slot-dependent
+        part (the reference windows and slot n / N, clipped) while it stays under
+        ``batch_window_table_bytes``: a step gathers one table row per scenario and writes the
+        state-dependent features over it."""
         b, k, f = bsim.num_envs, self.num_agvs, self.agv_features
-        out = np.empty((b, self.size), dtype=np.float32)
-        blocks = out[:, : k * f].reshape(b, k, f)
         w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
-        drone = (bsim.drone_position - self.center) * self._inv_half
-        state = bsim.x_obs * self._state_scale
-        state -= self._state_shift_scaled
-        blocks[..., 0:6] = state
-        blocks[..., 6:12] = bsim.error_obs * self._ref_scale
-        shared = bsim.shared_reference
-        if shared is not None and shared.nbytes * self.window <= self.batch_window_table_bytes:
-            if self._batch_ref_source is not shared:
-                self._batch_ref_source = shared
-                self._batch_windows = self.reference_windows(shared)
-            blocks[..., w0:w1] = self._batch_windows[:, bsim.slot].transpose(1, 0, 2)
+        template = self._batch_template(bsim.shared_reference, bound)
+        if template is not None:
+            out = template[bsim.slot]  # a new array
+            blocks = out[:, : k * f].reshape(b, k, f)
         else:
-            blocks[..., w0:w1] = self.scaled_windows(bsim.reference_windows())
-        blocks[..., w1 : w1 + 2] = state[..., 0:2] - drone[:, None, :]
-        blocks[..., w1 + 2] = bsim.last_outage_probability
-        blocks[..., w1 + 3] = bsim.last_delivered
-        blocks[..., w1 + 4] = bsim.last_power_w * self._inv_power
-        out[:, -3:-1] = drone
-        out[:, -1] = bsim.slot / self.num_slots
+            out = np.empty((b, self.size), dtype=np.float32)
+            blocks = out[:, : k * f].reshape(b, k, f)
+            blocks[..., w0:w1] = _clipped(self.scaled_windows(bsim.reference_windows()), bound)
+            out[:, -1] = _clipped(bsim.slot / self.num_slots, bound)
+        # state (6), tracking error (6) and position relative to the drone (2) of every AGV as two
+        # row products (numpy's broadcasting over 6-wide rows is several times slower): the scalings
+        # are diagonal, so every entry is the one product encode() computes, then the shifts
+        drone = (bsim.drone_position - self.center) * self._inv_half
+        dyn = bsim.x_obs.reshape(-1, 6) @ self._dyn_state
+        dyn += bsim.error_obs.reshape(-1, 6) @ self._dyn_error
+        shift = np.empty((b, 1, 14))
+        shift[:] = self._dyn_shift
+        shift[:, 0, 12:14] += drone  # position relative to the drone
+        dyn = dyn.reshape(b, k, 14)
+        dyn -= shift
+        dyn = _clipped(dyn, bound)
+        blocks[..., 0:12] = dyn[..., 0:12]
+        blocks[..., w1 : w1 + 2] = dyn[..., 12:14]
+        # the remaining features lie in [-1, 1] (up to rounding): clipped only under a tighter bound
+        small = bound if bound is not None and bound < 2.0 else None
+        blocks[..., w1 + 2] = _clipped(bsim.last_outage_probability, small)
+        blocks[..., w1 + 3] = _clipped(bsim.last_delivered, small)
+        blocks[..., w1 + 4] = _clipped(bsim.last_power_w * self._inv_power, small)
+        out[:, -3:-1] = _clipped(drone, small)
         return out
+
+    def _batch_template(self, shared: np.ndarray | None, bound: float | None) -> np.ndarray | None:
+        """(slots, size) float32 rows holding the features that depend only on the slot for the
+        fixed path set ``shared`` (K, T, 6): reference windows and slot n / N, clipped to ``bound``;
+        None for per-scenario paths or when over ``batch_window_table_bytes``."""
+        if shared is None:
+            return None
+        key = self._batch_template_key
+        if key is not None and key[0] is shared and key[1] == bound:
+            return self._batch_template_rows
+        slots = shared.shape[1] - self.window + 1
+        if slots * self.size * 4 > self.batch_window_table_bytes:
+            return None
+        windows = self.reference_windows(shared)  # (K, slots, 6W)
+        rows = np.zeros((slots, self.size), dtype=np.float32)
+        k, f = self.num_agvs, self.agv_features
+        w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
+        rows[:, : k * f].reshape(slots, k, f)[..., w0:w1] = _clipped(windows.transpose(1, 0, 2), bound)
+        rows[:, -1] = _clipped(np.arange(slots) / self.num_slots, bound)
+        self._batch_template_key, self._batch_template_rows = (shared, bound), rows
+        return rows
 
     def agv_blocks(self, obs: np.ndarray) -> np.ndarray:
         """(K, agv_features) view of the per-AGV part."""

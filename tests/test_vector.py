@@ -189,6 +189,36 @@ def test_batched_drone_moves_equal_the_single_rule():
     np.testing.assert_allclose(batched, single, rtol=1e-14, atol=1e-12)
 
 
+@pytest.mark.parametrize("obs_clip", [None, 10.0, 0.3])
+@pytest.mark.parametrize("config", [ScenarioConfig(num_slots=20), ScenarioConfig(num_agvs=5, num_slots=20)],
+                         ids=["paper-paths", "random-paths"])
+def test_batched_observations_equal_the_single_envs_clipped(config, obs_clip):
+    """encode_batch (a precomputed slot table for a fixed path set, per-scenario windows for
+    random paths) with its clipping before the float32 cast gives what the single env observes
+    (bit for bit at reset; then to float32 rounding: the position relative to the drone is
+    shifted in one subtraction, not two), also under a bound below 1 that clips probabilities
+    and positions."""
+    iface = {"obs_clip": obs_clip}
+    envs = _make(config=config, interface=iface)
+    obs, _ = envs.reset(seed=5)
+    singles = [gym.make("lawn/Joint-v0", config=config, interface=iface) for _ in range(N)]
+    for i, env in enumerate(singles):
+        np.testing.assert_array_equal(obs[i], env.reset(seed=5 + i)[0])
+    sim = envs.unwrapped.sim
+    for _ in range(3):  # then the single envs in the vector env's states (any fading)
+        obs = envs.step(np.zeros(envs.action_space.shape, dtype=np.float32))[0]
+        for i, env in enumerate(singles):
+            single = env.unwrapped.sim
+            single.x_aug, single.x_obs, single.error_obs = sim.x_aug[i], sim.x_obs[i], sim.error_obs[i]
+            single.drone_position, single.slot = sim.drone_position[i], int(sim.slot[i])
+            single.last_power_w, single.last_delivered = sim.last_power_w[i], sim.last_delivered[i]
+            single.last_outage_probability = sim.last_outage_probability[i]
+            expected = env.unwrapped.interface.observe(env.unwrapped.layout.encode(single))
+            np.testing.assert_allclose(obs[i], expected, rtol=1e-6, atol=1e-7)
+    if obs_clip == 0.3:
+        assert (np.abs(obs) == np.float32(0.3)).any()
+
+
 def test_same_step_autoreset_puts_the_final_observation_in_info():
     from lawn_env.envs.vector import JointVectorEnv
 

@@ -148,7 +148,7 @@ class JointVectorEnv(VectorEnv):
         self.actions.reset()
 
     def _observe(self) -> np.ndarray:
-        return self.interface.observe(self.layout.encode_batch(self.sim))
+        return self.layout.encode_batch(self.sim, bound=self.interface.obs_bound)
 
     def step(self, actions):
         if not self._started:
