@@ -1,10 +1,11 @@
 """Policies that drive the lawn environments: the AO-MPC expert, the paper's baselines, a
-scripted heuristic, and (later) wrappers for learned policies. ``make_policy(name, config)``
-builds any of them; ``POLICIES`` is the registry."""
+scripted heuristic, and wrappers for learned policies. ``make_policy(name, config)`` builds any
+of them; ``POLICIES`` is the registry; ``rollout(env, policy, seed)`` runs one episode."""
 
 from .ao import AOSettings, AOSolver, Plan, expected_cost
 from .policies import BENCHMARK_POLICIES, PAPER_POLICIES, POLICIES, Policy, make_policy, policy_names
 from .reduced import GlobalPlanner, ReducedGradientPlanner
+from .rollouts import Episode, Step, rollout
 from .scripted import HeuristicPolicy
 
 __all__ = [
@@ -21,4 +22,7 @@ __all__ = [
     "make_policy",
     "policy_names",
     "HeuristicPolicy",
+    "rollout",
+    "Episode",
+    "Step",
 ]

@@ -30,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 
 import lawn_env  # noqa: F401
-from agents import AOSettings, AOSolver, make_policy
+from agents import AOSettings, AOSolver, make_policy, rollout
 from lawn_env import ScenarioConfig
 from lawn_env.mpc import OutageAwareMPC
 
@@ -41,17 +41,9 @@ def closed_loop(config: ScenarioConfig, episodes: int, slots: int | None = None,
     policy = make_policy(policy_name, config)
     times, pairs = [], []
     for ep in range(episodes):
-        obs, _ = env.reset(seed=ep)
-        policy.reset(ep)
-        done, n = False, 0
-        while not done and (slots is None or n < slots):
-            snap = env.snapshot()
-            start = time.perf_counter()
-            action = policy.act(obs)
-            times.append(time.perf_counter() - start)
-            pairs.append((snap, policy.last_plan))
-            obs, _, _, done, _ = env.step(action)
-            n += 1
+        run = rollout(env, policy, ep, snapshots=True, max_steps=slots,
+                      on_step=lambda step: pairs.append((step.snapshot, policy.last_plan)))
+        times.extend(run.decision_s)
     return np.array(times), pairs
 
 

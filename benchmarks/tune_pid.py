@@ -15,26 +15,37 @@ import gymnasium as gym
 import numpy as np
 
 import lawn_env  # noqa: F401
+from agents import rollout
 from agents.tracking import pid_rollout
 from lawn_env import presets, spaces
 from lawn_env.dynamics import PredictionModel
 
 
+class TrackingPID:
+    """The PID tracking law alone (equal power, hovering drone), acting on the env's full state."""
+
+    def __init__(self, env, gains: tuple[float, float, float]):
+        self.env, self.gains = env, gains
+        self.cfg = env.config
+        self.model = PredictionModel.from_config(self.cfg)
+        k, budget = self.cfg.num_agvs, self.cfg.power_budget_w
+        self.power = spaces.encode_power(np.full(k, budget / k), budget)
+
+    def reset(self, seed: int | None = None) -> None:
+        self.integral = np.zeros((self.cfg.num_agvs, 2))
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        c = self.cfg.control
+        snap = self.env.snapshot()
+        du, self.integral = pid_rollout(snap.x_aug, snap.reference, self.integral, self.model, self.gains,
+                                        c.accel_max_mps2, c.accel_increment_max_mps2, 10.0)
+        return np.concatenate([spaces.encode_increments(du[:, 0], c.accel_increment_max_mps2), self.power,
+                               [0.0, 0.0]]).astype(np.float32)
+
+
 def episode_cost(kp: float, ki: float, kd: float, seed: int) -> float:
-    cfg = presets.get("paper-nominal")
-    env = gym.make("lawn/Joint-v0", config=cfg).unwrapped
-    model = PredictionModel.from_config(cfg)
-    env.reset(seed=seed)
-    integral = np.zeros((cfg.num_agvs, 2))
-    power = spaces.encode_power(np.full(cfg.num_agvs, cfg.power_budget_w / cfg.num_agvs), cfg.power_budget_w)
-    done = False
-    while not done:
-        snap = env.snapshot()
-        du, integral = pid_rollout(snap.x_aug, snap.reference, integral, model, (kp, ki, kd),
-                                   cfg.control.accel_max_mps2, cfg.control.accel_increment_max_mps2, 10.0)
-        action = np.concatenate([spaces.encode_increments(du[:, 0], cfg.control.accel_increment_max_mps2), power, [0.0, 0.0]])
-        _, _, _, done, info = env.step(action.astype(np.float32))
-    return info["episode_metrics"]["control_cost"]
+    env = gym.make("lawn/Joint-v0", config=presets.get("paper-nominal")).unwrapped
+    return rollout(env, TrackingPID(env, (kp, ki, kd)), seed).metrics["control_cost"]
 
 
 def main() -> None:

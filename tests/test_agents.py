@@ -334,3 +334,32 @@ def test_period_aware_planning_keeps_tracking_where_the_unaware_ablation_collaps
     aware = run_episode("epa", "lawn/Joint-v0", base, 0)
     unaware = run_episode("epa", "lawn/Joint-v0", base.override(**{"disturbance.period_aware_planning": False}), 0)
     assert aware["rmse_m"] < 1.0 < 5 * aware["rmse_m"] < unaware["rmse_m"]
+
+
+
+def test_rollout_hooks_stop_and_cap_the_episode_and_see_the_state_acted_in():
+    from agents import rollout
+
+    cfg = ScenarioConfig(num_slots=12)
+    env = gym.make("lawn/Joint-v0", config=cfg)
+    policy = make_policy("heuristic", cfg)
+    costs = []
+    full = rollout(env, policy, 3, on_step=lambda step: costs.append(step.info["stage_cost"]))
+    assert full.ended and full.truncated and full.length == 12 and full.decision_s.shape == (12,)
+    assert rollout(env, policy, 3).metrics == full.metrics  # a seed fixes the episode
+    seen = []
+
+    def on_step(step):
+        assert step.snapshot.slot == step.slot and env.unwrapped.sim.slot == step.slot + 1
+        assert step.reward == pytest.approx(-step.info["stage_cost"])
+        seen.append(step.info["stage_cost"])
+        return step.slot == 4
+
+    early = rollout(env, policy, 3, on_step=on_step, snapshots=True)
+    assert early.length == 5 and not early.ended and seen == costs[:5]
+    with pytest.raises(ValueError, match="no episode metrics"):
+        early.metrics
+    capped = rollout(env, policy, 3, max_steps=2, on_step=lambda step: seen.append(step.snapshot))
+    assert capped.length == 2 and not capped.ended and seen[-2:] == [None, None]
+    with pytest.raises(ValueError, match="max_steps"):
+        rollout(env, policy, 3, max_steps=0)

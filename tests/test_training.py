@@ -206,7 +206,7 @@ def test_errors_name_the_problem(tmp_path, capsys):
 
 
 def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_path):
-    from training.evaluate import rollout
+    from training.evaluate import episode_row
     from training.train import VALIDATION_SEED_BASE
 
     out, summary = _train(tmp_path, "ppo", "lawn/Comm-v0", steps=256, name="rl")
@@ -215,7 +215,7 @@ def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_
     assert summary["best_validation_cost"] == min(float(line.split(",")[1]) for line in curve[1:])
     policy = make_policy(f"sb3:{out}")
     assert policy.interface.action_scheme == "anchored" and policy.env_id == "lawn/Comm-v0"
-    row = rollout(policy, "lawn/Comm-v0", SMALL, seed=VALIDATION_SEED_BASE)
+    row = episode_row(policy, "lawn/Comm-v0", SMALL, seed=VALIDATION_SEED_BASE)
     assert row["slots"] == SMALL.num_slots  # no termination on the unmodified scenario
 
 

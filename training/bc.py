@@ -23,7 +23,7 @@ from typing import Any, Mapping
 import gymnasium as gym
 import numpy as np
 
-from agents import make_policy
+from agents import Step, make_policy, rollout
 from agents.learned import ObsNormalizer, SB3Policy
 from lawn_env import ScenarioConfig
 from lawn_env.interface import ActionLayout, Decision, resolve_interface
@@ -40,29 +40,41 @@ def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, s
     expert = make_policy(expert_name, config, env_id=env_id)
     iface = resolve_interface(interface)
     scheme = ActionLayout(config, "joint" if env_id == "lawn/Joint-v0" else "comm", iface)
+    driver = _Labelling(expert, actor)
     obs_list, act_list, costs = [], [], []
+
+    def on_step(step: Step) -> bool:
+        snap, plan = step.snapshot, expert.last_plan  # the expert planned this slot (driver.act)
+        decision = Decision(plan.increments[:, 0], plan.power_w, plan.drone_position)
+        obs_list.append(iface.observe(step.obs.copy()))
+        act_list.append(scheme.encode(decision, snap.x_aug, snap.reference, snap.drone_position, snap.slot))
+        return len(obs_list) >= steps
+
     episode = 0
     while len(obs_list) < steps:
-        obs, _ = env.reset(seed=seed + episode)
-        expert.reset(seed + episode)
-        if actor is not None:
-            actor.reset(seed + episode)
-        done = False
-        while not done and len(obs_list) < steps:
-            snap = env.unwrapped.snapshot()
-            v0_action = expert.act(obs)  # the expert plans every slot, also when it does not act
-            plan = expert.last_plan
-            decision = Decision(plan.increments[:, 0], plan.power_w, plan.drone_position)
-            obs_list.append(iface.observe(obs.copy()))
-            act_list.append(scheme.encode(decision, snap.x_aug, snap.reference, snap.drone_position, snap.slot))
-            action = v0_action if actor is None else actor.act(obs)
-            obs, _, terminated, truncated, info = env.step(action)
-            done = terminated or truncated
-        if done:
-            costs.append(info["episode_metrics"]["control_cost"])
+        run = rollout(env, driver, seed + episode, on_step=on_step, snapshots=True)
+        if run.ended:
+            costs.append(run.metrics["control_cost"])
         episode += 1
     env.close()
     return np.array(obs_list, dtype=np.float32), np.array(act_list, dtype=np.float32), costs
+
+
+class _Labelling:
+    """Drives the env with ``actor`` (default: the expert) while the expert plans every slot, so
+    that each visited state gets the expert's label (``expert.last_plan``)."""
+
+    def __init__(self, expert, actor=None):
+        self.expert, self.actor = expert, actor
+
+    def reset(self, seed: int | None = None) -> None:
+        self.expert.reset(seed)
+        if self.actor is not None:
+            self.actor.reset(seed)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        action = self.expert.act(obs)  # the expert plans every slot, also when it does not act
+        return action if self.actor is None else self.actor.act(obs)
 
 
 def _deterministic_action(model, obs_tensor):

@@ -13,7 +13,7 @@ from agents.learned import MARLPolicy, ObsNormalizer, SB3Policy
 from lawn_env import ScenarioConfig
 
 from .checkpoints import write_checkpoint
-from .evaluate import rollout
+from .evaluate import episode_row
 from .tables import mean_ci
 
 __all__ = ["ControlCostValidation", "RunCheckpoint", "ActorWarmup"]
@@ -57,7 +57,7 @@ class ControlCostValidation(BaseCallback):
     def validate(self) -> tuple[float, float]:
         policy = self._policy()
         env_id = "lawn/Joint-v0" if self.env_id == "lawn/Parallel-v0" else self.env_id
-        costs = [rollout(policy, env_id, self.config, self.seed_base + i)["control_cost"]
+        costs = [episode_row(policy, env_id, self.config, self.seed_base + i)["control_cost"]
                  for i in range(self.episodes)]
         return mean_ci(costs)
 

@@ -12,7 +12,6 @@ import csv
 import json
 import math
 import multiprocessing
-import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any, Iterable, Mapping
@@ -24,9 +23,10 @@ from tqdm.auto import tqdm
 
 import lawn_env
 from agents import make_policy
+from agents.rollouts import Step, rollout
 from lawn_env import ScenarioConfig
 
-__all__ = ["rollout", "run_episode", "pool_map", "worker_pool", "evaluate", "summarize", "write_rows", "SUMMARY_METRICS"]
+__all__ = ["episode_row", "run_episode", "pool_map", "worker_pool", "evaluate", "summarize", "write_rows", "SUMMARY_METRICS"]
 
 #: Metrics summarized with a mean and a 95 % interval (name, label).
 SUMMARY_METRICS = (
@@ -37,36 +37,32 @@ SUMMARY_METRICS = (
 )
 
 
-def rollout(policy, env_id: str, config: ScenarioConfig, seed: int) -> dict:
+def episode_row(policy, env_id: str, config: ScenarioConfig, seed: int) -> dict:
     """One seeded, full episode of the unmodified scenario (``env_id`` of ``lawn_env.ENV_IDS``)
-    under a built policy; returns a flat row of MODEL.md §6 metrics plus decision statistics."""
+    under a built policy (:func:`agents.rollout`); returns a flat row of MODEL.md §6 metrics plus
+    decision statistics."""
     if env_id not in lawn_env.ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; valid: {', '.join(lawn_env.ENV_IDS)}")
-    env = gym.make(env_id, config=config)
-    obs, _ = env.reset(seed=seed)
-    policy.reset(seed)
-    decision_s, ao_iterations, fallbacks, stage_costs = [], [], 0, []
-    done = False
-    info: dict = {}
-    while not done:
-        start = time.perf_counter()
-        action = policy.act(obs)
-        decision_s.append(time.perf_counter() - start)
+    ao_iterations, stage_costs = [], []
+    fallbacks = 0
+
+    def on_step(step: Step) -> None:
+        nonlocal fallbacks
         plan = getattr(policy, "last_plan", None)
         if plan is not None:
             ao_iterations.append(plan.iterations)
             fallbacks += plan.info.get("qp_fallbacks", 0)
-        obs, _, terminated, truncated, info = env.step(action)
-        fallbacks += int(info.get("mpc_fallbacks", 0))
-        stage_costs.append(float(info["stage_cost"]))
-        done = terminated or truncated
+        fallbacks += int(step.info.get("mpc_fallbacks", 0))
+        stage_costs.append(float(step.info["stage_cost"]))
+
+    env = gym.make(env_id, config=config)
+    episode = rollout(env, policy, seed, on_step=on_step)
     env.close()
-    m = info["episode_metrics"]
     row = {"policy": policy.name, "env": env_id, "seed": seed}
-    for key, value in m.items():
+    for key, value in episode.metrics.items():
         row[key] = json.dumps(value) if isinstance(value, list) else value
-    row["decision_time_median_s"] = float(np.median(decision_s))
-    row["decision_time_p95_s"] = float(np.percentile(decision_s, 95))
+    row["decision_time_median_s"] = episode.decision_time_median_s
+    row["decision_time_p95_s"] = float(np.percentile(episode.decision_s, 95))
     row["ao_iterations_mean"] = float(np.mean(ao_iterations)) if ao_iterations else math.nan
     row["qp_fallbacks"] = fallbacks
     row["stage_costs"] = json.dumps(stage_costs)  # realized stage cost per slot (the per-slot figures read it)
@@ -75,9 +71,9 @@ def rollout(policy, env_id: str, config: ScenarioConfig, seed: int) -> dict:
 
 def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
                 policy_kwargs: Mapping[str, Any] | None = None) -> dict:
-    """One seeded episode of the named policy (:func:`rollout`)."""
+    """One seeded episode of the named policy (:func:`episode_row`)."""
     agent = make_policy(policy, config, env_id=env_id, **dict(policy_kwargs or {}))
-    row = rollout(agent, env_id, config, seed)
+    row = episode_row(agent, env_id, config, seed)
     row["policy"] = policy
     return row
 

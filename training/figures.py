@@ -446,21 +446,15 @@ def _path_rows(cases, quick: bool) -> list[dict]:
     """Drone, AGV and reference positions of one episode (seed 0) per (label, preset, policy)."""
     import gymnasium as gym
 
-    from agents import make_policy
+    from agents import make_policy, rollout
     from lawn_env import presets
 
     rows = []
     for label, preset, policy in cases:
         cfg = presets.get(preset).override(num_slots=30 if quick else 120)
         env = gym.make("lawn/Joint-v0", config=cfg).unwrapped
-        agent = make_policy(policy, cfg)
-        obs, _ = env.reset(seed=0)
-        agent.reset(0)
-        done = False
-        while not done:
-            obs, _, _, done, info = env.step(agent.act(obs))
+        cost = rollout(env, make_policy(policy, cfg), 0).metrics["control_cost"]
         traj = env.sim.trajectories()
-        cost = info["episode_metrics"]["control_cost"]
         for n in range(traj["drone_position"].shape[0]):
             base = {"case": label, "preset": preset, "policy": policy, "slot": n, "control_cost": cost}
             rows.append({**base, "who": "drone", "x": traj["drone_position"][n, 0], "y": traj["drone_position"][n, 1]})

@@ -21,7 +21,7 @@ from typing import Any, Mapping, Sequence
 import gymnasium as gym
 import numpy as np
 
-from agents import make_policy
+from agents import Step, make_policy, rollout
 from agents.ao import AOSettings, AOSolver
 from lawn_env import ScenarioConfig
 
@@ -37,13 +37,12 @@ def gap_episode(policies: Sequence[str], driver: str, config: ScenarioConfig, se
     drive = make_policy(driver, config)
     planners = {name: make_policy(name, config) for name in policies}
     reference = make_policy("global-mpc", config, **dict(global_settings or {}))
-    obs, _ = env.reset(seed=seed)
-    for policy in (drive, reference, *planners.values()):
+    for policy in (reference, *planners.values()):
         policy.reset(seed)
     rows = []
-    done, slot = False, 0
-    while not done:
-        snap = env.snapshot()
+
+    def on_step(step: Step) -> None:  # the planners and the reference plan the state the driver acted in
+        snap, slot = step.snapshot, step.slot
         results = {}
         for name, policy in planners.items():
             start = time.perf_counter()
@@ -61,8 +60,8 @@ def gap_episode(policies: Sequence[str], driver: str, config: ScenarioConfig, se
                              "global_min_power_share": float(glob.power_w.min() / budget),
                              "power_w": json.dumps(plan.power_w.round(6).tolist()),
                              "global_power_w": json.dumps(glob.power_w.round(6).tolist())})
-        obs, _, _, done, _ = env.step(drive.act(obs))
-        slot += 1
+
+    rollout(env, drive, seed, on_step=on_step, snapshots=True)
     return rows
 
 
@@ -164,14 +163,13 @@ def convergence(config: ScenarioConfig, slots: Sequence[int], seed: int = 0, dri
     reference = make_policy("global-mpc", config, **dict(global_settings or {}))
     fast = make_policy("rg-mpc", config)
     ao = AOSolver(config, AOSettings(max_iterations=iterations, tolerance=0.0))
-    obs, _ = env.reset(seed=seed)
-    for p in (drive, reference, fast):
+    for p in (reference, fast):
         p.reset(seed)
-    wanted = set(slots)
+    wanted, last = set(slots), max(slots)
     rows = []
-    slot, done = 0, False
-    while not done and slot <= max(slots):
-        snap = env.snapshot()
+
+    def on_step(step: Step) -> bool:
+        snap, slot = step.snapshot, step.slot
         fast_value = fast.plan(snap).objective  # rg-mpc plans every slot, as deployed
         if slot in wanted:
             glob = reference.plan(snap).objective
@@ -180,8 +178,9 @@ def convergence(config: ScenarioConfig, slots: Sequence[int], seed: int = 0, dri
                 for b, block in enumerate(("control", "power", "drone")):
                     rows.append({"slot": slot, "iteration": it, "block": block, "objective": row[b],
                                  "global_objective": glob, "rg_mpc_objective": fast_value})
-        obs, _, _, done, _ = env.step(drive.act(obs))
-        slot += 1
+        return slot >= last
+
+    rollout(env, drive, seed, on_step=on_step, snapshots=True)
     return rows
 
 
