@@ -21,8 +21,8 @@ import numpy as np
 from lawn_env import ScenarioConfig
 from lawn_env.interface import ActionLayout, RLInterface, resolve_interface
 
+from .base import COMM, JOINT, Policy
 from .errors import MissingExtra
-from .policies import COMM, JOINT, Policy
 from .runs import read_json
 
 __all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "LOADERS", "ZOO_DIR", "zoo_agents", "export_agent"]

@@ -32,10 +32,18 @@ from lawn_env import ObservationLayout, ScenarioConfig, spaces
 from lawn_env.core import Snapshot
 from lawn_env.drone import move_drone
 from lawn_env.dynamics import command_mask, planning_period
-from lawn_env.envs.base import resolve_config
+from lawn_env.presets import resolve_config
 
 from .ao import AOSettings, AOSolver, Plan
-from .reduced import GlobalPlanner, GlobalSettings, ReducedGradientPlanner, ReducedSettings
+from .base import JOINT, Policy
+from .learned import LOADERS
+from .reduced import (
+    GlobalPlanner,
+    GlobalSettings,
+    ReducedGradientPlanner,
+    ReducedSettings,
+)
+from .scripted import HeuristicPolicy
 from .tracking import lqr_gain, lqr_rollout, pid_rollout
 
 __all__ = [
@@ -56,56 +64,11 @@ __all__ = [
     "snapshot_from_observation",
 ]
 
-JOINT, COMM = "lawn/Joint-v0", "lawn/Comm-v0"
-
-
 def snapshot_from_observation(layout: ObservationLayout, config: ScenarioConfig, obs) -> Snapshot:
     """The planner's state recovered from an observation (float32-exact, see ObservationLayout.decode)."""
     d = layout.decode(obs)
     return Snapshot(x_aug=d["x_aug"], reference=d["reference"], drone_position=d["drone_position"],
                     slot=d["slot"], config=config, last_power_w=d["last_power_w"])
-
-
-class Policy:
-    """Base of every policy: config, target environment, seeding and SB3-style ``predict``."""
-
-    name = "policy"
-    env_ids: tuple[str, ...] = (JOINT, COMM)
-    #: True when the policy keeps per-episode state (it then drives one environment at a time)
-    stateful = False
-
-    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT,
-                 seed: int | None = None):
-        self.config = resolve_config(config)
-        if env_id not in self.env_ids:
-            raise ValueError(f"policy {self.name!r} drives {', '.join(self.env_ids)}; got env_id={env_id!r}")
-        self.env_id = env_id
-        self.layout = ObservationLayout(self.config)
-        self._seed_rng = np.random.default_rng(seed)
-
-    def reset(self, seed: int | None = None) -> None:
-        """Start an episode; ``seed`` fixes any randomness of the policy (else its own stream)."""
-        rng = np.random.default_rng(seed) if seed is not None else self._seed_rng
-        self._on_reset(rng)
-
-    def _on_reset(self, rng: np.random.Generator) -> None:
-        pass
-
-    def act(self, obs) -> np.ndarray:  # pragma: no cover - interface
-        raise NotImplementedError
-
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        """Stable-Baselines3's signature: a single observation or a batch of them."""
-        obs = np.asarray(observation, dtype=np.float32)
-        if obs.ndim == 1:
-            return self.act(obs), state
-        if obs.ndim != 2:
-            raise ValueError(f"observation has shape {obs.shape}; expected ({self.layout.size},) or (n_envs, {self.layout.size})")
-        if obs.shape[0] > 1 and self.stateful:
-            raise ValueError(f"policy {self.name!r} keeps per-episode state: evaluate it on one environment at a time")
-        if episode_start is not None and np.asarray(episode_start).any():
-            self.reset()
-        return np.stack([self.act(o) for o in obs]), state
 
 
 class PlannerPolicy(Policy):
@@ -280,12 +243,6 @@ class GlobalMPCPolicy(PlannerPolicy):
         return self.solver.plan(snapshot)
 
 
-def _heuristic(config=None, env_id: str = JOINT, seed: int | None = None, **kwargs):
-    from .scripted import HeuristicPolicy
-
-    return HeuristicPolicy(config, env_id=env_id, seed=seed, **kwargs)
-
-
 #: The one registry of policy names; the command line reads its choices from here.
 POLICIES: dict[str, Any] = {
     "rg-mpc": RGMPCPolicy,
@@ -294,7 +251,7 @@ POLICIES: dict[str, Any] = {
     "sf": SFPolicy,
     "pid": PIDPolicy,
     "lqr": LQRPolicy,
-    "heuristic": _heuristic,
+    "heuristic": HeuristicPolicy,
     "global-mpc": GlobalMPCPolicy,
 }
 
@@ -327,8 +284,6 @@ def make_policy(name: str, config: ScenarioConfig | Mapping | str | None = None,
     """
     if isinstance(name, str) and ":" in name:
         prefix, path = name.split(":", 1)
-        from .learned import LOADERS
-
         if prefix not in LOADERS:
             raise ValueError(f"unknown policy prefix {prefix!r} in {name!r}; valid: sb3:DIR, bc:DIR, marl:DIR, "
                              "zoo:NAME")

@@ -17,7 +17,7 @@ import numpy as np
 
 from lawn_env import spaces
 
-from .policies import JOINT, Policy
+from .base import JOINT, Policy
 
 __all__ = ["HeuristicPolicy"]
 

@@ -13,6 +13,7 @@ from .config import ChannelConfig, ControlConfig, DisturbanceConfig, DroneConfig
 from .core import Simulation, Snapshot
 from .envs import CommEnv, JointEnv, LawnParallelEnv, env, parallel_env, raw_env
 from .interface import RL_INTERFACE, ActionLayout, RLInterface
+from .presets import resolve_config
 from .spaces import ObservationLayout
 
 __version__ = "0.1.0"
@@ -59,6 +60,7 @@ __all__ = [
     "ReferenceConfig",
     "DisturbanceConfig",
     "ScenarioConfig",
+    "resolve_config",
     "Simulation",
     "Snapshot",
     "ObservationLayout",

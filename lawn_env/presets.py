@@ -6,9 +6,11 @@ Register more with :func:`register` (a duplicate name raises).
 
 from __future__ import annotations
 
+from typing import Any, Mapping
+
 from .config import ChannelConfig, DisturbanceConfig, ReferenceConfig, ScenarioConfig
 
-__all__ = ["PRESETS", "get", "names", "register"]
+__all__ = ["PRESETS", "get", "names", "register", "resolve_config"]
 
 PRESETS: dict[str, ScenarioConfig] = {}
 
@@ -50,3 +52,22 @@ register("disturbed", ScenarioConfig(disturbance=DisturbanceConfig(
     wind_mps=(2.0, 2.5), wind_gust_std_mps=1.0, actuator_lag_s=0.3, process_noise_position_m=0.05,
     process_noise_velocity_mps=0.05, measurement_noise_position_m=0.2, measurement_noise_velocity_mps=0.1,
     control_period_slots=2)))
+
+
+def resolve_config(config: ScenarioConfig | Mapping | str | None = None, **overrides: Any) -> ScenarioConfig:
+    """A ScenarioConfig from a config object, a dict, a preset name or None (the defaults),
+    with keyword overrides (top-level fields, or a section name mapped to a dict)."""
+    if config is None:
+        cfg = get("default")
+    elif isinstance(config, ScenarioConfig):
+        cfg = config
+    elif isinstance(config, str):
+        cfg = get(config)
+    elif isinstance(config, Mapping):
+        cfg = ScenarioConfig.from_dict(config)
+    else:
+        raise TypeError(
+            f"config must be a ScenarioConfig, a dict, a preset name ({', '.join(names())}) or None; "
+            f"got {type(config).__name__}"
+        )
+    return cfg.override(overrides) if overrides else cfg

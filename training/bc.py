@@ -124,7 +124,7 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     from .callbacks import ControlCostValidation
-    from .train import TRAIN_SEED_BASE, VALIDATION_SEED_BASE, _versions, limit_torch_threads, write_learning_curve
+    from .protocol import TRAIN_SEED_BASE, VALIDATION_SEED_BASE, limit_torch_threads, versions, write_learning_curve
 
     limit_torch_threads()
     if env_id not in ("lawn/Joint-v0", "lawn/Comm-v0"):
@@ -180,7 +180,7 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
             "interface": interface.to_dict(),
             "num_timesteps": int(len(obs)), "hyperparams_version": version, "wall_time_s": elapsed,
             "expert_mean_control_cost": float(np.mean(expert_costs)) if expert_costs else None,
-            "versions": _versions()}
+            "versions": versions()}
     (out_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
     (out_dir / "hyperparams.json").write_text(json.dumps(resolved, indent=2))
     (out_dir / "run.json").write_text(json.dumps(spec, indent=2))

@@ -26,9 +26,7 @@ trains on the plain v0 interface). Whatever the interface, the periodic validati
 comparison run full 120-slot episodes of the unmodified scenario and report their realized
 control cost.
 
-Seeds. Training seed s draws its environments from ``TRAIN_SEED_BASE + 1000 s`` on; model
-selection uses the validation seeds ``VALIDATION_SEED_BASE + i``; ``lawn benchmark`` tests on
-seeds 0-19 by default. The three ranges never meet.
+Seeds: :mod:`training.protocol` (training, validation and test seeds never meet).
 """
 
 from __future__ import annotations
@@ -36,27 +34,21 @@ from __future__ import annotations
 import inspect
 import json
 import pickle
-import platform
 import time
 from pathlib import Path
 from typing import Any, Mapping
 
-import numpy as np
 
-import lawn_env
 from agents.runs import read_json
 from lawn_env import ScenarioConfig
 from lawn_env.interface import resolve_interface
 
 from .checkpoints import Checkpoint, clear_history, latest_checkpoint, restore_history
+from .protocol import TRAIN_SEED_BASE, VALIDATION_SEED_BASE, limit_torch_threads, versions, write_learning_curve
 
 __all__ = ["ALGOS", "TRAIN_ENV_IDS", "load_hyperparams", "train", "train_seeds", "train_task", "resume", "RunSpec",
            "TRAIN_SEED_BASE", "VALIDATION_SEED_BASE"]
 
-#: Training environments of seed s start at TRAIN_SEED_BASE + 1000 s (disjoint from test seeds 0-19).
-TRAIN_SEED_BASE = 1_000_000
-#: Validation (model selection) episodes use VALIDATION_SEED_BASE + i.
-VALIDATION_SEED_BASE = 500_000
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: Environment ids ``lawn train`` accepts; ``lawn/Parallel-v0`` is the PettingZoo env (parameter sharing).
@@ -183,7 +175,7 @@ def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: 
     spec = RunSpec(algo=algo, env=env_id, seed=seed, timesteps=timesteps, hyperparams_version=version,
                    interface=params.get("interface"),
                    eval_every=eval_every, eval_episodes=eval_episodes, checkpoint_every=checkpoint_every,
-                   init_from=str(init_from) if init_from else None, vec=vec, versions=_versions())
+                   init_from=str(init_from) if init_from else None, vec=vec, versions=versions())
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
     (out_dir / "hyperparams.json").write_text(json.dumps(params, indent=2))
@@ -231,14 +223,6 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
     summary = _learn(spec, params, config, out_dir, start=checkpoint, progress=progress)
     summary["resumed_from"] = checkpoint.steps if checkpoint is not None else None
     return summary
-
-
-def limit_torch_threads() -> None:
-    """One torch thread: these networks are small, and several threads per run oversubscribe the
-    cores when runs go side by side (measured: SAC's update 100x slower with two concurrent runs)."""
-    import torch
-
-    torch.set_num_threads(1)
 
 
 def _lr_schedule(value):
@@ -362,60 +346,3 @@ def _init_from(model, source: Path, env) -> None:
     if isinstance(env, VecNormalize) and norm_path.exists():
         with open(norm_path, "rb") as fh:
             env.obs_rms = pickle.load(fh).obs_rms
-
-
-def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict:
-    """learning_curve.png and summary.md from the periodic validation (``learning_curve.csv``)."""
-    out_dir = Path(out_dir)
-    path = out_dir / "learning_curve.csv"
-    rows = []
-    if path.exists():
-        import csv
-
-        rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(path.open())]
-    if rows:
-        _plot_curve(rows, out_dir / "learning_curve.png", f"{spec['algo']} on {spec['env']}, seed {spec['seed']}")
-    best = min(rows, key=lambda r: r["control_cost"]) if rows else None
-    summary = {
-        "algo": spec["algo"], "env": spec["env"], "seed": spec["seed"], "timesteps": spec.get("num_timesteps"),
-        "wall_time_s": spec.get("wall_time_s"), "interface": spec.get("interface"),
-        "final_validation_cost": rows[-1]["control_cost"] if rows else None,
-        "best_validation_cost": best["control_cost"] if best else None,
-        "best_at_timesteps": int(best["timesteps"]) if best else None,
-    }
-    lines = [f"# {spec['algo']} on {spec['env']}", ""]
-    lines += [f"- {k}: {v}" for k, v in summary.items()]
-    (out_dir / "summary.md").write_text("\n".join(lines) + "\n")
-    return summary
-
-
-def _plot_curve(rows, path: Path, title: str) -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(6, 3.5), dpi=110)
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot(111)
-    t = [r["timesteps"] for r in rows]
-    m = np.array([r["control_cost"] for r in rows])
-    s = np.array([r["control_cost_ci95"] for r in rows])
-    ax.plot(t, m, "-o", ms=3)
-    ax.fill_between(t, np.maximum(m - s, m * 0.1), m + s, alpha=0.2)
-    ax.set_yscale("log")
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("validation control cost (mean, 95 % CI)")
-    ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path)
-
-
-def _versions() -> dict:
-    import gymnasium
-    import stable_baselines3
-    import torch
-
-    from .provenance import provenance
-
-    return {"lawn": lawn_env.__version__, "stable_baselines3": stable_baselines3.__version__,
-            "torch": torch.__version__, "gymnasium": gymnasium.__version__, "python": platform.python_version(),
-            "source": provenance()}

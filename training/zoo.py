@@ -24,8 +24,9 @@ from agents.learned import ZOO_DIR, export_agent, zoo_agents
 from lawn_env import ScenarioConfig
 
 from .evaluate import evaluate, pool_map, write_rows
+from .protocol import VALIDATION_SEED_BASE
 from .tables import mean_ci
-from .train import VALIDATION_SEED_BASE, train_task
+from .train import train_task
 
 __all__ = ["Recipe", "RECIPES", "train_recipes", "build_zoo", "format_zoo_list"]
 

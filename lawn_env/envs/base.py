@@ -8,32 +8,13 @@ from typing import Any, Mapping
 import gymnasium as gym
 import numpy as np
 
-from .. import presets
 from ..config import ScenarioConfig
 from ..core import Simulation, Snapshot
 from ..interface import V0_INTERFACE, ActionLayout, RLInterface, resolve_interface
+from ..presets import resolve_config
 from ..spaces import ObservationLayout
 
-__all__ = ["resolve_config", "SimulationView", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS", "slot_info"]
-
-
-def resolve_config(config: ScenarioConfig | Mapping | str | None = None, **overrides: Any) -> ScenarioConfig:
-    """A ScenarioConfig from a config object, a dict, a preset name or None (the defaults),
-    with keyword overrides (top-level fields, or a section name mapped to a dict)."""
-    if config is None:
-        cfg = presets.get("default")
-    elif isinstance(config, ScenarioConfig):
-        cfg = config
-    elif isinstance(config, str):
-        cfg = presets.get(config)
-    elif isinstance(config, Mapping):
-        cfg = ScenarioConfig.from_dict(config)
-    else:
-        raise TypeError(
-            f"config must be a ScenarioConfig, a dict, a preset name ({', '.join(presets.names())}) or None; "
-            f"got {type(config).__name__}"
-        )
-    return cfg.override(overrides) if overrides else cfg
+__all__ = ["SimulationView", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS", "slot_info"]
 
 
 #: The info keys every step and reset of the central environments (and the parallel env's "drone")

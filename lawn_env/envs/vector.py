@@ -42,12 +42,12 @@ from gymnasium.vector.utils import batch_space
 
 from ..batch import BatchSimulation
 from ..channel import LinkParams
-from ..core import link_success
 from ..config import ScenarioConfig
+from ..core import link_success
 from ..interface import ActionLayout, resolve_interface
 from ..mpc import OutageAwareMPC
+from ..presets import resolve_config
 from ..spaces import ObservationLayout
-from .base import resolve_config
 
 __all__ = ["CommVectorEnv", "JointVectorEnv", "check_actions"]
 

@@ -1,0 +1,57 @@
+"""The base of every policy: what a policy is built from and what it offers (see
+:mod:`agents.policies` for the registry of named policies)."""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from lawn_env import ObservationLayout, ScenarioConfig
+from lawn_env.presets import resolve_config
+
+__all__ = ["Policy", "JOINT", "COMM"]
+
+JOINT, COMM = "lawn/Joint-v0", "lawn/Comm-v0"
+
+
+class Policy:
+    """Base of every policy: config, target environment, seeding and SB3-style ``predict``."""
+
+    name = "policy"
+    env_ids: tuple[str, ...] = (JOINT, COMM)
+    #: True when the policy keeps per-episode state (it then drives one environment at a time)
+    stateful = False
+
+    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT,
+                 seed: int | None = None):
+        self.config = resolve_config(config)
+        if env_id not in self.env_ids:
+            raise ValueError(f"policy {self.name!r} drives {', '.join(self.env_ids)}; got env_id={env_id!r}")
+        self.env_id = env_id
+        self.layout = ObservationLayout(self.config)
+        self._seed_rng = np.random.default_rng(seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start an episode; ``seed`` fixes any randomness of the policy (else its own stream)."""
+        rng = np.random.default_rng(seed) if seed is not None else self._seed_rng
+        self._on_reset(rng)
+
+    def _on_reset(self, rng: np.random.Generator) -> None:
+        pass
+
+    def act(self, obs) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        """Stable-Baselines3's signature: a single observation or a batch of them."""
+        obs = np.asarray(observation, dtype=np.float32)
+        if obs.ndim == 1:
+            return self.act(obs), state
+        if obs.ndim != 2:
+            raise ValueError(f"observation has shape {obs.shape}; expected ({self.layout.size},) or (n_envs, {self.layout.size})")
+        if obs.shape[0] > 1 and self.stateful:
+            raise ValueError(f"policy {self.name!r} keeps per-episode state: evaluate it on one environment at a time")
+        if episode_start is not None and np.asarray(episode_start).any():
+            self.reset()
+        return np.stack([self.act(o) for o in obs]), state
