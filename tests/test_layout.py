@@ -1,0 +1,97 @@
+"""The package's layering (README, Layout): training -> agents -> lawn_env, no import cycles
+between modules (function-level imports included), and no module importing another's private
+names."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGES = ("lawn_env", "agents", "training")
+
+
+def _modules() -> dict[str, Path]:
+    mods = {}
+    for pkg in PACKAGES:
+        for f in (ROOT / pkg).rglob("*.py"):
+            name = ".".join(f.relative_to(ROOT).with_suffix("").parts)
+            mods[name.removesuffix(".__init__")] = f
+    return mods
+
+
+def _imports(mods: dict[str, Path]):
+    """module -> set of modules it imports, and the (module, from, name) private imports."""
+    edges, private = {m: set() for m in mods}, []
+    for m, f in mods.items():
+        package = m.split(".") if f.name == "__init__.py" else m.split(".")[:-1]
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                target = node.module
+                if node.level:
+                    target = ".".join(package[: len(package) - node.level + 1] + ([node.module] if node.module else []))
+                for alias in node.names:
+                    sub = f"{target}.{alias.name}"
+                    hit = sub if sub in mods else target
+                    if hit in mods and hit != m:
+                        edges[m].add(hit)
+                    if alias.name.startswith("_") and not alias.name.startswith("__"):
+                        private.append((m, target, alias.name))
+            elif isinstance(node, ast.Import):
+                edges[m].update(a.name for a in node.names if a.name in mods and a.name != m)
+    return edges, private
+
+
+def _cycles(edges: dict[str, set]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in edges[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in edges:
+        if v not in index:
+            visit(v)
+    return out
+
+
+EDGES, PRIVATE = _imports(_modules())
+
+
+def test_no_import_cycles():
+    assert _cycles(EDGES) == []
+
+
+def test_no_private_names_imported_across_modules():
+    assert PRIVATE == []
+
+
+@pytest.mark.parametrize("lower, upper", [("lawn_env", "agents"), ("lawn_env", "training"), ("agents", "training")])
+def test_layers_point_down(lower, upper):
+    bad = [(m, t) for m, ts in EDGES.items() if m.split(".")[0] == lower for t in ts if t.split(".")[0] == upper]
+    assert bad == []
+
+
+def test_the_checker_sees_cycles_and_private_imports():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert ("training.train", "training.protocol", "TRAIN_SEED_BASE") not in PRIVATE
+    assert "training.protocol" in EDGES["training.train"] and "agents.base" in EDGES["agents.policies"]
