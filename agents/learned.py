@@ -23,28 +23,25 @@ from lawn_env.interface import ActionLayout, RLInterface, resolve_interface
 
 from .base import COMM, JOINT, Policy
 from .errors import MissingExtra
-from .runs import read_json
+from .runs import (
+    RL_EXTRA,
+    RunDir,
+    algorithm_class,
+    policy_network_class,
+    read_json,
+    read_run,
+)
 
-__all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "LOADERS", "ZOO_DIR", "zoo_agents", "export_agent"]
+__all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "LOADERS", "learned_name_forms", "ZOO_DIR", "zoo_agents", "export_agent"]
 
 #: Shipped agents: one folder per agent (``lawn zoo`` lists them).
 ZOO_DIR = Path(__file__).parent / "zoo"
-_RL_EXTRA = "trained agents need the rl extra: bash scripts/setup.sh full, or pip install torch==2.13.0 && pip install -e '.[rl]'"
-
-
-def _read_run(path: Path) -> dict:
-    path = Path(path)
-    if not (path / "run.json").exists() or not (path / "model.zip").exists():
-        raise ValueError(f"{path} is not a lawn train run directory (needs run.json and model.zip)")
-    return read_json(path / "run.json")
-
-
 def _sb3():
     try:
         import stable_baselines3
         import torch
     except ImportError:  # exercised only without the extra
-        raise MissingExtra(_RL_EXTRA) from None
+        raise MissingExtra(f"trained agents need the rl extra: {RL_EXTRA}") from None
     torch.set_num_threads(1)  # small networks, one observation at a time
     return stable_baselines3
 
@@ -58,12 +55,9 @@ def _selected(path: Path) -> tuple[Path, Path]:
     return path / "model.zip", path / "vecnormalize.pkl"
 
 
-def _load_model(path: Path, algo: str):
-    sb3 = _sb3()
-    classes = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3, "a2c": sb3.A2C}
-    if algo not in classes:
-        raise ValueError(f"{path}: unknown algorithm {algo!r} in run.json; valid: {', '.join(classes)}")
-    return classes[algo].load(str(_selected(path)[0]), device="cpu")
+def _load_model(run: RunDir):
+    _sb3()
+    return algorithm_class(run.algo, f"{run.path}: run.json: ").load(str(_selected(run.path)[0]), device="cpu")
 
 
 class ObsNormalizer:
@@ -142,15 +136,15 @@ class SB3Policy(Policy):
     def from_run(cls, path, config: ScenarioConfig | None = None, env_id: str | None = None,
                  seed: int | None = None) -> "SB3Policy":
         path = Path(path)
-        run = _read_run(path)
-        trained_env = run["env"]
+        run = read_run(path, require_model=True)
+        trained_env = run.env
         if trained_env not in cls.env_ids:
             raise ValueError(f"{path} was trained on {trained_env}; use marl:{path} for multi-agent runs")
         if env_id not in (None, trained_env):
             raise ValueError(f"{path} was trained on {trained_env}, not {env_id}")
         trained_config = ScenarioConfig.from_dict(read_json(path / "config.json"))
-        model = _load_model(path, run.get("target", run["algo"]))
-        return cls(model, config if config is not None else trained_config, trained_env, run.get("interface"),
+        model = _load_model(run)
+        return cls(model, config if config is not None else trained_config, trained_env, run.record.get("interface"),
                    ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}")
 
     def _on_reset(self, rng) -> None:
@@ -194,14 +188,14 @@ class MARLPolicy(Policy):
     def from_run(cls, path, config: ScenarioConfig | None = None, env_id: str | None = None,
                  seed: int | None = None) -> "MARLPolicy":
         path = Path(path)
-        run = _read_run(path)
-        if run["env"] != "lawn/Parallel-v0":
-            raise ValueError(f"{path} was trained on {run['env']}, not the multi-agent env; use sb3:{path}")
+        run = read_run(path, require_model=True)
+        if run.env != "lawn/Parallel-v0":
+            raise ValueError(f"{path} was trained on {run.env}, not the multi-agent env; use sb3:{path}")
         if env_id not in (None, JOINT):
             raise ValueError(f"{path} is a multi-agent policy; it drives {JOINT}, not {env_id}")
         trained_config = ScenarioConfig.from_dict(read_json(path / "config.json"))
-        return cls(_load_model(path, run["algo"]), config if config is not None else trained_config,
-                   run.get("interface"), ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}")
+        return cls(_load_model(run), config if config is not None else trained_config,
+                   run.record.get("interface"), ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}")
 
     def _on_reset(self, rng) -> None:
         self.scheme.reset()
@@ -232,25 +226,19 @@ class MARLPolicy(Policy):
 
 
 # ---------------------------------------------------------------------- shipped agents (zoo)
-_POLICY_CLASSES = {"ppo": "stable_baselines3.common.policies:ActorCriticPolicy",
-                   "a2c": "stable_baselines3.common.policies:ActorCriticPolicy",
-                   "sac": "stable_baselines3.sac.policies:Actor",
-                   "td3": "stable_baselines3.td3.policies:Actor"}
-
-
 def export_agent(run_dir: Path, out_dir: Path, record: dict[str, Any]) -> Path:
     """Write a run's policy network (weights only: no optimizer state, and for SAC/TD3 the actor
     alone, without critics) and observation statistics as a shipped agent with ``agent.json``."""
     run_dir, out_dir = Path(run_dir), Path(out_dir)
-    run = _read_run(run_dir)
-    algo = run.get("target", run["algo"])
-    model = _load_model(run_dir, algo)
+    run = read_run(run_dir, require_model=True)
+    algo = run.algo
+    model = _load_model(run)
     out_dir.mkdir(parents=True, exist_ok=True)
     (model.actor if algo in ("sac", "td3") else model.policy).save(str(out_dir / "policy.zip"))
     normalizer = ObsNormalizer.load(_selected(run_dir)[1])
     if normalizer is not None:
         normalizer.save(out_dir / "normalizer.npz")
-    agent = {"algo": algo, "env": run["env"], "interface": run.get("interface"),
+    agent = {"algo": algo, "env": run.env, "interface": run.record.get("interface"),
              "config": read_json(run_dir / "config.json"), **record}
     (out_dir / "agent.json").write_text(json.dumps(agent, indent=2) + "\n")
     return out_dir
@@ -269,10 +257,8 @@ def _load_zoo(name: str, config=None, env_id=None, seed=None) -> Policy:
         raise ValueError(f"unknown zoo agent {name!r}; shipped: {', '.join(agents) or 'none'} (lawn zoo lists them)")
     record = agents[name]
     _sb3()
-    import importlib
-
-    module, cls_name = _POLICY_CLASSES[record["algo"]].split(":")
-    network = getattr(importlib.import_module(module), cls_name).load(str(ZOO_DIR / name / "policy.zip"), device="cpu")
+    network_class = policy_network_class(record["algo"], f"zoo:{name}: agent.json: ")
+    network = network_class.load(str(ZOO_DIR / name / "policy.zip"), device="cpu")
     cfg = config if config is not None else ScenarioConfig.from_dict(record["config"])
     normalizer = ObsNormalizer.load(ZOO_DIR / name / "normalizer.npz")
     if record["env"] == "lawn/Parallel-v0":
@@ -293,6 +279,11 @@ def _no_settings(loader):
     return load
 
 
-#: Prefixes of ``make_policy`` names for learned agents: ``sb3:DIR``, ``bc:DIR``, ``marl:DIR``, ``zoo:NAME``.
-LOADERS = {"sb3": _no_settings(SB3Policy.from_run), "bc": _no_settings(SB3Policy.from_run),
-           "marl": _no_settings(MARLPolicy.from_run), "zoo": _no_settings(_load_zoo)}
+#: Prefixes of ``make_policy`` names for learned agents: ``zoo:NAME``, ``sb3:DIR``, ``bc:DIR``, ``marl:DIR``.
+LOADERS = {"zoo": _no_settings(_load_zoo), "sb3": _no_settings(SB3Policy.from_run),
+           "bc": _no_settings(SB3Policy.from_run), "marl": _no_settings(MARLPolicy.from_run)}
+
+
+def learned_name_forms(sep: str = ", ") -> str:
+    """The forms of learned agents' names, for messages and help texts: ``zoo:NAME, sb3:DIR, ...``."""
+    return sep.join(f"{prefix}:{'NAME' if prefix == 'zoo' else 'DIR'}" for prefix in LOADERS)

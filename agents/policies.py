@@ -36,7 +36,7 @@ from lawn_env.presets import resolve_config
 
 from .ao import AOSettings, AOSolver, Plan
 from .base import JOINT, Policy
-from .learned import LOADERS
+from .learned import LOADERS, learned_name_forms
 from .reduced import (
     GlobalPlanner,
     GlobalSettings,
@@ -266,7 +266,7 @@ def policy_names() -> list[str]:
 
 
 #: Prefixes of learned agents' names (agents.learned.LOADERS): run directories and shipped agents.
-LEARNED_PREFIXES = ("sb3", "bc", "marl", "zoo")
+LEARNED_PREFIXES = tuple(LOADERS)
 
 
 def is_policy_name(name: str) -> bool:
@@ -285,8 +285,7 @@ def make_policy(name: str, config: ScenarioConfig | Mapping | str | None = None,
     if isinstance(name, str) and ":" in name:
         prefix, path = name.split(":", 1)
         if prefix not in LOADERS:
-            raise ValueError(f"unknown policy prefix {prefix!r} in {name!r}; valid: sb3:DIR, bc:DIR, marl:DIR, "
-                             "zoo:NAME")
+            raise ValueError(f"unknown policy prefix {prefix!r} in {name!r}; valid: {learned_name_forms()}")
         # no config: the agent's own training config (DIR/config.json)
         return LOADERS[prefix](path, resolve_config(config) if config is not None else None,
                                env_id=env_id, seed=seed, **kwargs)
@@ -295,5 +294,5 @@ def make_policy(name: str, config: ScenarioConfig | Mapping | str | None = None,
         factory = POLICIES[name]
     except (KeyError, TypeError):
         raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICIES)}, "
-                         "or sb3:DIR, bc:DIR, marl:DIR, zoo:NAME for trained agents") from None
+                         f"or {learned_name_forms()} for trained agents") from None
     return factory(config, env_id=env_id, seed=seed, **kwargs)

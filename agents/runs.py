@@ -1,13 +1,56 @@
-"""Run directories on disk (``lawn train`` output, shipped agents): reading their JSON files with
-errors that name the file and what is wrong with it."""
+"""Run directories on disk (``lawn train`` output, shipped agents) and the algorithms they hold:
+the one reader of ``run.json`` (:func:`read_run`), the one map of Stable-Baselines3 algorithms
+(:data:`ALGORITHMS`), and JSON reading with errors that name the file and what is wrong with it.
+Nothing here imports SB3 or torch until a class is asked for."""
 
 from __future__ import annotations
 
+import importlib
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["read_json"]
+from .errors import MissingExtra
+
+__all__ = ["ALGORITHMS", "RL_EXTRA", "RunDir", "algorithm_class", "policy_network_class", "read_json", "read_run"]
+
+#: The SB3 algorithms of runs and shipped agents: name -> (algorithm class, the class of the policy
+#: network a shipped agent keeps: the whole actor-critic policy, or the actor alone for SAC/TD3).
+ALGORITHMS: dict[str, tuple[str, str]] = {
+    "ppo": ("stable_baselines3:PPO", "stable_baselines3.common.policies:ActorCriticPolicy"),
+    "a2c": ("stable_baselines3:A2C", "stable_baselines3.common.policies:ActorCriticPolicy"),
+    "sac": ("stable_baselines3:SAC", "stable_baselines3.sac.policies:Actor"),
+    "td3": ("stable_baselines3:TD3", "stable_baselines3.td3.policies:Actor"),
+}
+#: How to install what training and trained agents need.
+RL_EXTRA = "bash scripts/setup.sh full, or pip install torch==2.13.0 && pip install -e '.[rl]'"
+
+
+def _import(spec: str) -> type:
+    module, name = spec.split(":")
+    try:
+        return getattr(importlib.import_module(module), name)
+    except ImportError:  # exercised only without the extra
+        raise MissingExtra(f"trained agents and training need the rl extra: {RL_EXTRA}") from None
+
+
+def _check_algorithm(algo: str, where: str) -> None:
+    if algo not in ALGORITHMS:
+        raise ValueError(f"{where}unknown algorithm {algo!r}; valid: {', '.join(ALGORITHMS)}")
+
+
+def algorithm_class(algo: str, where: str = "") -> type:
+    """The SB3 algorithm class of ``algo`` (``ppo``, ``a2c``, ``sac``, ``td3``); ``where`` prefixes the
+    error (the file or option the name came from)."""
+    _check_algorithm(algo, where)
+    return _import(ALGORITHMS[algo][0])
+
+
+def policy_network_class(algo: str, where: str = "") -> type:
+    """The class of the network a shipped agent of ``algo`` keeps (:data:`ALGORITHMS`)."""
+    _check_algorithm(algo, where)
+    return _import(ALGORITHMS[algo][1])
 
 
 def read_json(path: Path, context: str = "", missing: str = "") -> Any:
@@ -25,3 +68,46 @@ def read_json(path: Path, context: str = "", missing: str = "") -> Any:
         return json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{prefix}{path} is not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+
+
+@dataclass(frozen=True)
+class RunDir:
+    """A ``lawn train`` run directory and its ``run.json`` record."""
+
+    path: Path
+    record: dict[str, Any]
+
+    @property
+    def env(self) -> str:
+        return self.record["env"]
+
+    @property
+    def algo(self) -> str:
+        """The algorithm of the model it holds (behaviour cloning: the target algorithm's)."""
+        return self.record.get("target", self.record["algo"])
+
+    @property
+    def kind(self) -> str:
+        """The prefix of its policy name: ``marl`` (the parallel env), ``bc`` (behaviour cloning)
+        or ``sb3``."""
+        if self.record.get("env") == "lawn/Parallel-v0":
+            return "marl"
+        return "bc" if self.record.get("trainer") == "bc" else "sb3"
+
+    @property
+    def policy_name(self) -> str:
+        """The name ``make_policy`` and ``lawn evaluate --policy`` take for it."""
+        return f"{self.kind}:{self.path}"
+
+
+def read_run(path: Path | str, context: str = "", require_model: bool = False) -> RunDir:
+    """The run directory at ``path``: a ``ValueError`` (prefixed by ``context``) when it has no
+    valid ``run.json`` with an ``env`` and an ``algo``, or, with ``require_model``, no ``model.zip``."""
+    path = Path(path)
+    record = read_json(path / "run.json", context, "not a lawn train run directory")
+    prefix = f"{context} {path}: " if context else f"{path}: "
+    if not isinstance(record, dict) or not {"env", "algo"} <= set(record):
+        raise ValueError(f"{prefix}run.json has no 'env' and 'algo' (not written by lawn train)")
+    if require_model and not (path / "model.zip").exists():
+        raise ValueError(f"{prefix}no model.zip: the run has not finished (lawn train --resume {path} continues it)")
+    return RunDir(path, record)

@@ -25,10 +25,14 @@ import numpy as np
 
 from agents import Step, make_policy, rollout
 from agents.learned import ObsNormalizer, SB3Policy
+from agents.runs import algorithm_class
 from lawn_env import ScenarioConfig
 from lawn_env.interface import ActionLayout, Decision, resolve_interface
 
-__all__ = ["collect", "fit", "train_bc_run"]
+__all__ = ["collect", "fit", "train_bc_run", "BC_TARGETS"]
+
+#: The algorithms whose policy network behaviour cloning fits (the ``target`` hyperparameter).
+BC_TARGETS = ("ppo", "sac")
 
 
 def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, interface, actor=None):
@@ -119,12 +123,17 @@ def fit(model, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_size: in
 
 def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int, out_dir: Path,
                  params: Mapping[str, Any], version: int, progress: bool = True) -> dict:
-    from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.running_mean_std import RunningMeanStd
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     from .callbacks import ControlCostValidation
-    from .protocol import TRAIN_SEED_BASE, VALIDATION_SEED_BASE, limit_torch_threads, versions, write_learning_curve
+    from .protocol import (
+        TRAIN_SEED_BASE,
+        VALIDATION_SEED_BASE,
+        limit_torch_threads,
+        versions,
+        write_learning_curve,
+    )
 
     limit_torch_threads()
     if env_id not in ("lawn/Joint-v0", "lawn/Comm-v0"):
@@ -132,9 +141,8 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     p = dict(params)
     p.pop("n_envs", None)  # expert rollouts run in one environment
     target = p.pop("target", "ppo")
-    targets = {"ppo": PPO, "sac": SAC}
-    if target not in targets:
-        raise ValueError(f"bc target {target!r}; valid: {', '.join(targets)}")
+    if target not in BC_TARGETS:
+        raise ValueError(f"bc target {target!r}; valid: {', '.join(BC_TARGETS)}")
     expert = p.pop("expert", "rg-mpc")
     epochs, batch_size = int(p.pop("epochs", 30)), int(p.pop("batch_size", 256))
     lr = float(p.pop("learning_rate", 1e-3))
@@ -157,7 +165,7 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     venv.obs_rms = RunningMeanStd(shape=obs.shape[1:])
     venv.obs_rms.update(obs.astype(np.float64))
     venv.training = False
-    model = targets[target]("MlpPolicy", venv, seed=seed, policy_kwargs=policy_kwargs, verbose=0, device="cpu")
+    model = algorithm_class(target)("MlpPolicy", venv, seed=seed, policy_kwargs=policy_kwargs, verbose=0, device="cpu")
 
     def normalized(o):
         return venv.normalize_obs(o).astype(np.float32)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import lawn_env
 from agents.errors import MissingExtra
-from agents.runs import read_json
+from agents.runs import read_run
 from lawn_env import presets
 
 
@@ -271,22 +271,18 @@ _COUNT, _SEED = _int_at_least(1), _int_at_least(0)
 
 
 def _policy_name(value: str) -> str:
+    from agents.learned import learned_name_forms
     from agents.policies import is_policy_name, policy_names
 
     if not is_policy_name(value):
         raise argparse.ArgumentTypeError(
-            f"unknown policy {value!r}; valid: {', '.join(policy_names())}, or sb3:DIR, bc:DIR, marl:DIR, zoo:NAME")
+            f"unknown policy {value!r}; valid: {', '.join(policy_names())}, or {learned_name_forms()}")
     return value
 
 
 def _included(paths: list[str]) -> list[str]:
     """Policy names for trained run directories: marl:, bc: or sb3: by what run.json says."""
-    names = []
-    for path in paths:
-        run = read_json(Path(path) / "run.json", "--include", "not a lawn train run directory")
-        prefix = "marl" if run.get("env") == "lawn/Parallel-v0" else "bc" if run.get("trainer") == "bc" else "sb3"
-        names.append(f"{prefix}:{path}")
-    return names
+    return [read_run(path, "--include").policy_name for path in paths]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -307,11 +303,12 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(func=cmd_demo)
 
     from agents import BENCHMARK_POLICIES, policy_names
+    from agents.learned import learned_name_forms
 
     workers_default = min(2, os.cpu_count() or 1)
     ev = command("evaluate", help="run a policy on seeded episodes and write one row per episode")
     ev.add_argument("--policy", required=True, type=_policy_name,
-                    help=f"{', '.join(policy_names())}, or zoo:NAME / sb3:DIR / bc:DIR / marl:DIR for learned agents")
+                    help=f"{', '.join(policy_names())}, or {learned_name_forms(' / ')} for learned agents")
     ev.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
                     help="default: lawn/Joint-v0, or the env a trained agent was trained on")
     ev.add_argument("--episodes", type=_COUNT, default=10)
@@ -326,7 +323,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     bm = command("benchmark", help="the expert and the baselines on the same seeded episodes")
     bm.add_argument("--policies", nargs="+", default=list(BENCHMARK_POLICIES), type=_policy_name,
-                    help=f"{', '.join(policy_names())}, or zoo:NAME / sb3:DIR / bc:DIR / marl:DIR (default: "
+                    help=f"{', '.join(policy_names())}, or {learned_name_forms(' / ')} (default: "
                          f"{' '.join(BENCHMARK_POLICIES)})")
     bm.add_argument("--env", default="lawn/Joint-v0", choices=list(lawn_env.ENV_IDS))
     bm.add_argument("--include", nargs="*", default=[], metavar="DIR",

@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 
-from agents.runs import read_json
+from agents.runs import ALGORITHMS, algorithm_class, read_json, read_run
 from lawn_env import ScenarioConfig
 from lawn_env.interface import resolve_interface
 
@@ -55,19 +55,8 @@ HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 TRAIN_ENV_IDS = ("lawn/Joint-v0", "lawn/Comm-v0", "lawn/Parallel-v0", "CartPole-v1")
 
 
-def _algos() -> dict[str, Any]:
-    try:
-        from stable_baselines3 import A2C, PPO, SAC, TD3
-    except ImportError:  # exercised only without the extra
-        from agents.errors import MissingExtra
-
-        raise MissingExtra("training needs the rl extra: bash scripts/setup.sh full, "
-                           "or pip install torch==2.13.0 && pip install -e '.[rl]'") from None
-    return {"ppo": PPO, "sac": SAC, "td3": TD3, "a2c": A2C}
-
-
 #: The algorithm names ``lawn train`` accepts (``bc`` is behaviour cloning, training/bc.py).
-ALGOS = ("ppo", "sac", "td3", "a2c", "bc")
+ALGOS = (*ALGORITHMS, "bc")
 
 
 def load_hyperparams(algo: str, env_id: str, overrides: Mapping[str, Any] | None = None) -> tuple[dict, int]:
@@ -191,7 +180,7 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
     an off-policy algorithm restored (:mod:`training.checkpoints`). A run killed before its first
     checkpoint restarts from scratch; a finished run is left alone unless ``timesteps`` extends it."""
     out_dir = Path(out_dir)
-    spec = RunSpec(read_json(out_dir / "run.json", "--resume", "not a lawn train run directory"))
+    spec = RunSpec(read_run(out_dir, "--resume").record)
     for key in ("algo", "env", "seed", "timesteps", "checkpoint_every", "eval_every", "eval_episodes"):
         if key not in spec:
             raise ValueError(f"--resume {out_dir}: run.json has no {key!r} (not written by lawn train)")
@@ -240,8 +229,7 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
     from .callbacks import ActorWarmup, ControlCostValidation, RunCheckpoint
 
     limit_torch_threads()
-    algos = _algos()
-    cls = algos[spec["algo"]]
+    cls = algorithm_class(spec["algo"])
     params = dict(params)
     n_envs = int(params.pop("n_envs", 1))
     normalize = params.pop("normalize", False)

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from agents.learned import ZOO_DIR, export_agent, zoo_agents
+from agents.runs import read_run
 from lawn_env import ScenarioConfig
 
 from .evaluate import evaluate, pool_map, write_rows
@@ -119,11 +120,6 @@ def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, 
     return done
 
 
-def _prefix(run_dir: Path) -> str:
-    run = json.loads((run_dir / "run.json").read_text())
-    return "marl" if run["env"] == "lawn/Parallel-v0" else "bc" if run.get("trainer") == "bc" else "sb3"
-
-
 def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, progress: bool = True,
               episodes: int = TEST_EPISODES, export: bool = True) -> str:
     """Evaluate every finished recipe run on the test seeds 0..episodes-1 beside rg-mpc and epa,
@@ -137,7 +133,7 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
         raise ValueError(f"{runs}: no finished recipe runs (lawn zoo train --runs {runs} trains them)")
     envs = sorted({r.evaluated_on for r, _ in found})
     tasks = [(name, env, cfg, i, {}) for env in envs for name in ("rg-mpc", "epa") for i in range(episodes)]
-    tasks += [(f"{_prefix(d)}:{d}", r.evaluated_on, cfg, i, {}) for r, dirs in found for d in dirs for i in range(episodes)]
+    tasks += [(read_run(d).policy_name, r.evaluated_on, cfg, i, {}) for r, dirs in found for d in dirs for i in range(episodes)]
     rows = evaluate(tasks, workers=workers, progress=progress, desc="zoo benchmark")
     write_rows(rows, out_doc.parent / "learned" / "episodes.csv")
     cost = {(r["policy"], r["env"], int(r["seed"])): float(r["control_cost"]) for r in rows}
@@ -158,12 +154,12 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
             if r.evaluated_on != env:
                 continue
             specs = [json.loads((d / "run.json").read_text()) for d in dirs]
-            per_seed = [paired(f"{_prefix(d)}:{d}", env).mean() for d in dirs]
-            costs = [np.mean([cost[(f"{_prefix(d)}:{d}", env, i)] for i in range(episodes)]) for d in dirs]
+            per_seed = [paired(read_run(d).policy_name, env).mean() for d in dirs]
+            costs = [np.mean([cost[(read_run(d).policy_name, env, i)] for i in range(episodes)]) for d in dirs]
             across, across_ci = mean_ci(per_seed)
             validation = [_best_validation(d) for d in dirs]
             chosen = dirs[int(np.argmin(validation))]
-            ship = mean_ci(paired(f"{_prefix(chosen)}:{chosen}", env))
+            ship = mean_ci(paired(read_run(chosen).policy_name, env))
             wall = np.mean([s["wall_time_s"] for s in specs])
             steps = int(specs[0].get("num_timesteps", r.timesteps))
             iface = specs[0].get("interface") or {}
