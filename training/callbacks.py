@@ -3,7 +3,6 @@ rollout boundaries, actor warm-up."""
 
 from __future__ import annotations
 
-import csv
 import time
 from pathlib import Path
 
@@ -14,6 +13,7 @@ from lawn_env import ScenarioConfig
 
 from .checkpoints import write_checkpoint
 from .evaluate import episode_row
+from .protocol import append_learning_curve, read_learning_curve
 from .tables import mean_ci
 
 __all__ = ["ControlCostValidation", "RunCheckpoint", "ActorWarmup"]
@@ -36,14 +36,12 @@ class ControlCostValidation(BaseCallback):
         super().__init__(verbose=0)
         self.env_id, self.config, self.interface = env_id, config, interface
         self.episodes, self.every, self.out_dir, self.seed_base = episodes, every, Path(out_dir), seed_base
-        self.curve = self.out_dir / "learning_curve.csv"
         self.best = float("inf")
         self._last = -1
         self._next = every
-        if self.curve.exists():  # a resumed run: keep its history and its best
-            rows = list(csv.DictReader(self.curve.open()))
-            self.best = min((float(r["control_cost"]) for r in rows), default=float("inf"))
-            self._last = max((int(float(r["timesteps"])) for r in rows), default=-1)
+        rows = read_learning_curve(self.out_dir)  # a resumed run: keep its history and its best
+        self.best = min((r["control_cost"] for r in rows), default=float("inf"))
+        self._last = max((int(r["timesteps"]) for r in rows), default=-1)
 
     def _on_training_start(self) -> None:
         self._next = _next_mark(self.num_timesteps, self.every)
@@ -74,12 +72,7 @@ class ControlCostValidation(BaseCallback):
     def _record(self) -> None:
         self._last = self.num_timesteps
         mean, half = self.validate()
-        new = not self.curve.exists()
-        with self.curve.open("a", newline="") as fh:
-            writer = csv.writer(fh)
-            if new:
-                writer.writerow(["timesteps", "control_cost", "control_cost_ci95"])
-            writer.writerow([self.num_timesteps, mean, half])
+        append_learning_curve(self.out_dir, self.num_timesteps, mean, half)
         self.logger.record("validation/control_cost", mean)
         if mean < self.best:
             self.best = mean

@@ -8,7 +8,6 @@ come back in seed order whatever the scheduling.
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import multiprocessing
@@ -18,13 +17,14 @@ from typing import Any, Iterable, Mapping
 
 import gymnasium as gym
 import numpy as np
-from scipy import stats
 from tqdm.auto import tqdm
 
 import lawn_env
 from agents import make_policy
 from agents.rollouts import Step, rollout
 from lawn_env import ScenarioConfig
+
+from .tables import mean_ci, paired_difference, write_csv
 
 __all__ = ["episode_row", "run_episode", "pool_map", "worker_pool", "evaluate", "summarize", "write_rows", "SUMMARY_METRICS"]
 
@@ -139,11 +139,7 @@ def summarize(rows: list[dict], metrics=SUMMARY_METRICS, by: str = "policy") -> 
     for name, members in groups.items():
         entry = {by: name, "episodes": len(members)}
         for key, _ in metrics:
-            values = np.array([float(r[key]) for r in members])
-            mean = float(values.mean())
-            half = float(stats.t.ppf(0.975, values.size - 1) * values.std(ddof=1) / math.sqrt(values.size)) if values.size > 1 else math.nan
-            entry[key] = mean
-            entry[f"{key}_ci95"] = half
+            entry[key], entry[f"{key}_ci95"] = mean_ci(float(r[key]) for r in members)
         out.append(entry)
     return out
 
@@ -152,8 +148,6 @@ def paired_cost_difference(rows: list[dict], reference: str, metric: str = "cont
     """Per policy: mean and 95 % t-interval half-width of the per-seed relative difference
     ``(x - x_ref) / x_ref`` against ``reference`` on the seeds both ran (a paired comparison,
     :func:`training.tables.paired_difference`)."""
-    from .tables import paired_difference
-
     ref = {r["seed"]: float(r[metric]) for r in rows if r["policy"] == reference}
     out = {}
     for name in dict.fromkeys(r["policy"] for r in rows):
@@ -202,11 +196,5 @@ def write_rows(rows: list[dict], path: str | Path) -> Path:
     if suffix == ".json":
         path.write_text(json.dumps(rows, indent=2))
     else:
-        fields: list[str] = []
-        for row in rows:
-            fields += [k for k in row if k not in fields]
-        with path.open("w", newline="") as fh:
-            writer = csv.DictWriter(fh, fieldnames=fields)
-            writer.writeheader()
-            writer.writerows(rows)
+        write_csv(rows, path)
     return path

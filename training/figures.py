@@ -26,7 +26,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from .tables import mean_ci, paired_difference, verdict
+from .tables import mean_ci, paired_difference, parse_bool, verdict
 
 __all__ = ["EXPERIMENTS", "Experiment", "Claim", "make_figures", "check_claims", "format_claims",
            "write_reproduction", "REPORT_SLOT"]
@@ -83,17 +83,6 @@ def _pick(quick: bool, full, short):
 # ---------------------------------------------------------------------- reading tables
 def _f(row, key) -> float:
     return float(row[key])
-
-
-def _bool(value) -> bool:
-    if isinstance(value, bool):
-        return value
-    text = str(value).strip().lower()
-    if text in ("true", "1"):
-        return True
-    if text in ("false", "0"):
-        return False
-    raise ValueError(f"not a boolean table value: {value!r}")
 
 
 def slot_cost(row, slot: int = REPORT_SLOT) -> float:
@@ -548,7 +537,7 @@ def _disturbance_plot(tables, path: Path) -> None:
     ax = fig.add_subplot(1, 3, 3)
     per = tables["disturbance-period"]
     for aware, ls in ((True, "-"), (False, ":")):
-        sub = [r for r in per if _bool(r["disturbance.period_aware_planning"]) == aware]
+        sub = [r for r in per if parse_bool(r["disturbance.period_aware_planning"]) == aware]
         for policy in dict.fromkeys(r["policy"] for r in sub):
             _curve(ax, sub, "disturbance.control_period_slots", "control_cost", policy,
                    label=f"{policy}, {'plans with' if aware else 'ignores'} the period", ls=ls)
@@ -576,7 +565,7 @@ def _disturbance_claims(tables) -> list[Claim]:
             def get(aware, p=p):
                 return {int(r["seed"]): _f(r, "control_cost") for r in per
                         if r["policy"] == policy and int(float(r["disturbance.control_period_slots"])) == p
-                        and _bool(r["disturbance.period_aware_planning"]) == aware}
+                        and parse_bool(r["disturbance.period_aware_planning"]) == aware}
             parts.append((f"P={p}", get(True), get(False)))
         if parts:
             out.append(_multi("disturbance", f"disturbance.period-aware.{policy}", f"{policy} (project's check): "

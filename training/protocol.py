@@ -9,6 +9,7 @@ seeds 0-19 by default. The three ranges never meet.
 
 from __future__ import annotations
 
+import csv
 import platform
 from pathlib import Path
 from typing import Any, Mapping
@@ -18,8 +19,10 @@ import numpy as np
 import lawn_env
 
 from .provenance import provenance
+from .tables import read_csv
 
-__all__ = ["TRAIN_SEED_BASE", "VALIDATION_SEED_BASE", "limit_torch_threads", "versions", "write_learning_curve"]
+__all__ = ["TRAIN_SEED_BASE", "VALIDATION_SEED_BASE", "limit_torch_threads", "versions", "read_learning_curve",
+           "append_learning_curve", "write_learning_curve"]
 
 #: Training environments of seed s start at TRAIN_SEED_BASE + 1000 s (disjoint from test seeds 0-19).
 TRAIN_SEED_BASE = 1_000_000
@@ -46,15 +49,31 @@ def versions() -> dict:
             "source": provenance()}
 
 
+#: The columns of ``learning_curve.csv``.
+CURVE_FIELDS = ("timesteps", "control_cost", "control_cost_ci95")
+
+
+def read_learning_curve(run_dir: Path) -> list[dict[str, float]]:
+    """The periodic validation of a run (``learning_curve.csv``): rows of :data:`CURVE_FIELDS` as
+    floats, in order (empty before the first validation)."""
+    return [{k: float(v) for k, v in r.items()} for r in read_csv(Path(run_dir) / "learning_curve.csv")]
+
+
+def append_learning_curve(run_dir: Path, timesteps: int, mean: float, half: float) -> None:
+    """One validation appended to ``learning_curve.csv`` (its header first on a new file)."""
+    path = Path(run_dir) / "learning_curve.csv"
+    new = not path.exists()
+    with path.open("a", newline="") as fh:
+        writer = csv.writer(fh)
+        if new:
+            writer.writerow(CURVE_FIELDS)
+        writer.writerow([timesteps, mean, half])
+
+
 def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict:
     """learning_curve.png and summary.md from the periodic validation (``learning_curve.csv``)."""
     out_dir = Path(out_dir)
-    path = out_dir / "learning_curve.csv"
-    rows = []
-    if path.exists():
-        import csv
-
-        rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(path.open())]
+    rows = read_learning_curve(out_dir)
     if rows:
         _plot_curve(rows, out_dir / "learning_curve.png", f"{spec['algo']} on {spec['env']}, seed {spec['seed']}")
     best = min(rows, key=lambda r: r["control_cost"]) if rows else None

@@ -26,7 +26,6 @@ extra).
 
 from __future__ import annotations
 
-import csv
 import hashlib
 import itertools
 import json
@@ -36,6 +35,8 @@ from typing import Any, Mapping
 
 import lawn_env
 from lawn_env import presets
+
+from .tables import mean_ci, read_csv, write_csv
 
 __all__ = ["SweepSpec", "SweepTableError", "load_spec", "expand", "run_sweep", "read_table", "read_rows",
            "config_hash", "summarize_sweep"]
@@ -181,25 +182,8 @@ def read_rows(path: Path) -> tuple[list[dict], list[str]]:
 
 
 def read_table(path: Path) -> list[dict]:
-    path = Path(path)
-    if not path.exists():
-        return []
-    with path.open(newline="") as fh:
-        return list(csv.DictReader(fh))
-
-
-def _write_atomic(rows: list[dict], path: Path) -> None:
-    fields: list[str] = []
-    for row in rows:
-        fields += [k for k in row if k not in fields]
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    with tmp.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=fields)
-        writer.writeheader()
-        writer.writerows(rows)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    """Every row of a sweep table as written (an empty list before the first row)."""
+    return read_csv(path)
 
 
 def _run(task) -> dict:
@@ -259,7 +243,7 @@ def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: 
     if not tasks:
         ordered = _canonical(rows, wanted)
         if dropped or ordered != rows:
-            _write_atomic(ordered, table)
+            write_csv(ordered, table, atomic=True)
         return ordered
     from tqdm.auto import tqdm
 
@@ -267,13 +251,13 @@ def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: 
     try:
         for row in execute(_run, tasks, workers, backend):
             rows.append(row)
-            _write_atomic(rows, table)
+            write_csv(rows, table, atomic=True)
             bar.update()
     finally:
         bar.close()
     rows = read_rows(table)[0]
     if all(k in {_key(r) for r in rows} for k in wanted):  # complete: one order, however it was interrupted
-        _write_atomic(_canonical(rows, wanted), table)
+        write_csv(_canonical(rows, wanted), table, atomic=True)
         rows = read_rows(table)[0]
     return rows
 
@@ -325,11 +309,6 @@ def execute(fn, tasks, workers: int, backend: str):
 
 def summarize_sweep(rows: list[dict], grid_keys, metrics=("control_cost", "rmse_m", "outage_rate")) -> str:
     """Markdown table: mean ± 95 % interval of ``metrics`` per grid point and policy."""
-    import math
-
-    import numpy as np
-    from scipy import stats
-
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
         groups.setdefault(tuple(str(r[k]) for k in grid_keys) + (r["policy"],), []).append(r)
@@ -338,8 +317,7 @@ def summarize_sweep(rows: list[dict], grid_keys, metrics=("control_cost", "rmse_
     for key, members in groups.items():
         cells = list(key) + [str(len(members))]
         for m in metrics:
-            v = np.array([float(r[m]) for r in members])
-            half = stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size) if v.size > 1 else float("nan")
-            cells.append(f"{v.mean():.4g} ± {half:.2g}")
+            mean, half = mean_ci(float(r[m]) for r in members)
+            cells.append(f"{mean:.4g} ± {half:.2g}")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)

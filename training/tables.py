@@ -1,14 +1,60 @@
-"""Summary statistics shared by the reports: mean and 95 % t-interval half-width."""
+"""The table layer of every report: CSV rows written and read one way (:func:`write_csv`,
+:func:`read_csv`, :func:`parse_bool`) and the summary statistics (mean and 95 % t-interval
+half-width, the paired per-seed difference, the verdict of a claim)."""
 
 from __future__ import annotations
 
+import csv
 import math
+import os
+from pathlib import Path
 from typing import Iterable, Mapping
 
 import numpy as np
 from scipy import stats
 
-__all__ = ["mean_ci", "paired_difference", "verdict"]
+__all__ = ["mean_ci", "paired_difference", "verdict", "write_csv", "read_csv", "parse_bool"]
+
+
+def write_csv(rows: list[dict], path: Path | str, atomic: bool = False) -> Path:
+    """Rows as CSV with the union of their keys as columns (first-seen order). ``atomic`` writes a
+    temporary file, syncs it and renames it over ``path``, so a reader never sees half a table."""
+    path = Path(path)
+    fields: list[str] = []
+    for row in rows:
+        fields += [k for k in row if k not in fields]
+    target = path.with_suffix(path.suffix + ".tmp") if atomic else path
+    with target.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(rows)
+        if atomic:
+            fh.flush()
+            os.fsync(fh.fileno())
+    if atomic:
+        os.replace(target, path)
+    return path
+
+
+def read_csv(path: Path | str) -> list[dict[str, str]]:
+    """The rows of a CSV file as dicts of strings (an empty list when the file does not exist)."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def parse_bool(value) -> bool:
+    """A boolean table cell: a bool, or ``true``/``false``/``1``/``0`` in any case."""
+    if isinstance(value, bool):
+        return value
+    text = str(value).strip().lower()
+    if text in ("true", "1"):
+        return True
+    if text in ("false", "0"):
+        return False
+    raise ValueError(f"not a boolean table value: {value!r}")
 
 
 def mean_ci(values: Iterable[float]) -> tuple[float, float]:

@@ -25,7 +25,7 @@ from agents.runs import read_run
 from lawn_env import ScenarioConfig
 
 from .evaluate import evaluate, pool_map, write_rows
-from .protocol import VALIDATION_SEED_BASE
+from .protocol import VALIDATION_SEED_BASE, read_learning_curve
 from .tables import mean_ci
 from .train import train_task
 
@@ -192,7 +192,6 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
 def _plot_curves(found, reference: dict[str, float], path: Path) -> None:
     """Validation cost against training steps, every seed of every recipe, with rg-mpc's cost on
     the same validation seeds."""
-    import csv
 
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -204,9 +203,8 @@ def _plot_curves(found, reference: dict[str, float], path: Path) -> None:
     for j, (r, dirs) in enumerate(found):
         ax = fig.add_subplot(rows_, cols, j + 1)
         for d in dirs:
-            rows = list(csv.DictReader((d / "learning_curve.csv").open()))
-            ax.plot([float(x["timesteps"]) for x in rows], [float(x["control_cost"]) for x in rows], "-o", ms=2,
-                    label=d.name)
+            rows = read_learning_curve(d)
+            ax.plot([x["timesteps"] for x in rows], [x["control_cost"] for x in rows], "-o", ms=2, label=d.name)
         ax.axhline(reference[r.evaluated_on], color="k", ls="--", lw=1, label="rg-mpc")
         ax.set_yscale("log")
         ax.set_title(r.name, fontsize=9)
@@ -219,12 +217,7 @@ def _plot_curves(found, reference: dict[str, float], path: Path) -> None:
 
 
 def _best_validation(run_dir: Path) -> float:
-    curve = run_dir / "learning_curve.csv"
-    if not curve.exists():
-        return math.inf
-    import csv
-
-    return min(float(r["control_cost"]) for r in csv.DictReader(curve.open()))
+    return min((r["control_cost"] for r in read_learning_curve(run_dir)), default=math.inf)
 
 
 def _export(r: Recipe, chosen: Path, dirs, specs, ship, across, across_ci, env) -> None:
