@@ -3,6 +3,7 @@ scripted heuristic, and wrappers for learned policies. ``make_policy(name, confi
 of them; ``POLICIES`` is the registry; ``rollout(env, policy, seed)`` runs one episode."""
 
 from .ao import AOSettings, AOSolver, Plan, expected_cost
+from .base import Planner
 from .policies import BENCHMARK_POLICIES, PAPER_POLICIES, POLICIES, Policy, make_policy, policy_names
 from .reduced import GlobalPlanner, ReducedGradientPlanner
 from .rollouts import Episode, Step, rollout
@@ -12,6 +13,7 @@ __all__ = [
     "AOSettings",
     "AOSolver",
     "Plan",
+    "Planner",
     "expected_cost",
     "Policy",
     "POLICIES",

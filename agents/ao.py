@@ -39,7 +39,6 @@ from typing import Annotated, Sequence
 import numpy as np
 from pydantic import ConfigDict, Field
 from pydantic.dataclasses import dataclass as pydantic_dataclass
-from scipy import special
 
 from lawn_env import channel
 from lawn_env.config import ScenarioConfig
@@ -116,32 +115,39 @@ class Plan:
 
 
 class SlotProblem:
-    """One slot's per-slot problem: evaluates J^ and its pieces for any candidate."""
+    """One slot's planning problem, the shape both experts share: the snapshot's state, the slot's
+    QP data (the planner's warm-started MPC), the planning link and the slot's feasible sets (power
+    budget, the drone's reach from where it is, the area); evaluates J^ and its pieces."""
 
-    def __init__(self, solver: "AOSolver", snapshot: Snapshot):
-        self.solver = solver
+    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot):
+        self.mpc = mpc
+        self.link = link
+        config = snapshot.config
         self.x_aug = np.asarray(snapshot.x_aug, dtype=float)
         self.reference = np.asarray(snapshot.reference, dtype=float)
         self.q_prev = np.asarray(snapshot.drone_position, dtype=float)
-        k = solver.num_agvs
-        if self.x_aug.shape != (k, 6) or self.reference.shape != (k, solver.horizon + 1, 6):
+        k, window = config.num_agvs, config.control.horizon + 1
+        if self.x_aug.shape != (k, 6) or self.reference.shape != (k, window, 6):
             raise ValueError(
                 f"snapshot shapes x_aug {self.x_aug.shape}, reference {self.reference.shape}; expected "
-                f"({k}, 6) and ({k}, {solver.horizon + 1}, 6) for this config"
+                f"({k}, 6) and ({k}, {window}, 6) for this config"
             )
         self.agv_xy = self.x_aug[:, 0:2]
-        self.data: SlotData = solver.mpc.prepare(self.x_aug, self.reference, snapshot.slot)
+        self.data: SlotData = mpc.prepare(self.x_aug, self.reference, snapshot.slot)
+        self.budget = config.power_budget_w
+        self.reach = config.drone_reach_m
+        self.area = tuple(config.area_m)
 
     # ------------------------------------------------------------------ pieces of J^
     def coefficients(self, dmu: np.ndarray):
         """L, S, W of J^_k = L psi^2 + 2 S psi + W for increments ``dmu`` (K, N_p, 2) (paper, P4)."""
-        return cost_coefficients(self.solver.model, self.data.linear, self.data.constant, dmu)
+        return cost_coefficients(self.mpc.model, self.data.linear, self.data.constant, dmu)
 
     def distance_sq(self, q: np.ndarray) -> np.ndarray:
-        return channel.distance_sq(q, self.agv_xy, self.solver.link.altitude_m)
+        return self.link.distance_sq(q, self.agv_xy)
 
     def success(self, power_w: np.ndarray, q: np.ndarray) -> np.ndarray:
-        return special.gammaincc(self.solver.link.m, self.solver.link.outage_argument_sq(power_w, self.distance_sq(q)))
+        return self.link.success_sq(power_w, self.distance_sq(q))
 
     def objective(self, dmu: np.ndarray, power_w: np.ndarray, q: np.ndarray) -> float:
         lcoef, scoef, wcoef = self.coefficients(dmu)
@@ -163,13 +169,12 @@ class PowerObjective:
         """(J^, state) where state feeds :meth:`gradient`."""
         pf = np.maximum(p, channel.POWER_FLOOR_W)
         x = self._link.outage_argument_sq(pf, self._d2)
-        psi = special.gammaincc(self._link.m, x)
+        psi = self._link.success_at(x)
         return float(self._l @ (psi * psi) + self._two_s @ psi) + self._w, (psi, pf, x)
 
     def gradient(self, state) -> np.ndarray:
         psi, pf, x = state
-        # d psi / d p = density(x) (x - x_ce) / p, as in channel.success_and_gradients (reusing x)
-        dpsi = channel.gamma_density(self._link.m, x) * (x - self._link.coefficients[1]) / pf
+        dpsi = self._link.success_power_slope(x, pf)  # reusing the value's x
         return (self._two_l * psi + self._two_s) * dpsi
 
 
@@ -181,14 +186,9 @@ class DroneObjective:
         self._agv = agv_xy
         self._power = power_w
         self._link = link
-        c_d, self._c_ce = link.coefficients
-        self._gain = c_d / np.maximum(power_w, channel.POWER_FLOOR_W)  # x = gain d^2 + c_ce
-        self._h2 = link.altitude_m**2
-        self._ones = np.ones(2)
 
     def value(self, q: np.ndarray) -> float:
-        diff = self._agv - q
-        psi = special.gammaincc(self._link.m, ((diff * diff) @ self._ones + self._h2) * self._gain + self._c_ce)
+        psi = self._link.success_sq(self._power, self._link.distance_sq(q, self._agv))
         return float(((self._l * psi + 2.0 * self._s) * psi + self._w).sum())
 
     def gradient(self, q: np.ndarray) -> np.ndarray:
@@ -208,8 +208,6 @@ class AOSolver:
         self.mpc = OutageAwareMPC.from_config(config, backend=self.settings.qp_backend)
         self.link = channel.LinkParams.from_config(config, planning=True)
         self.power_budget_w = config.power_budget_w
-        self.step_m = config.drone.max_speed_mps * config.slot_s
-        self.area = tuple(config.area_m)
         self._memory: dict = {}
 
     def reset(self) -> None:
@@ -293,7 +291,7 @@ class AOSolver:
         t_start = self._memory.get("sca_t", 1.0)
         for iterations in range(1, s.sca_max_iterations + 1):
             grad = objective.gradient(q)
-            target = linear_argmin_disc_box(grad, prob.q_prev, self.step_m, self.area)
+            target = linear_argmin_disc_box(grad, prob.q_prev, prob.reach, prob.area)
             step = target - q
             length = math.hypot(step[0], step[1])
             if length < s.sca_tolerance_m:
@@ -317,6 +315,10 @@ class AOSolver:
         return q, value, iterations
 
     # ------------------------------------------------------------------ the AO loop
+    def plan(self, snapshot: Snapshot) -> Plan:
+        """The paper's joint AO over all three blocks (:class:`agents.base.Planner`)."""
+        return self.solve(snapshot)
+
     def solve(self, snapshot: Snapshot, *, blocks: Sequence[str] = BLOCKS, increments: np.ndarray | None = None,
               power_w: np.ndarray | None = None, drone_position: np.ndarray | None = None) -> Plan:
         """Alternate the given ``blocks`` from the initial point and return the plan.
@@ -331,7 +333,7 @@ class AOSolver:
             raise ValueError(f"unknown AO blocks {unknown}; valid: {', '.join(BLOCKS)}")
         if "control" not in blocks and increments is None:
             raise ValueError("increments are required when the control block is not optimized")
-        prob = SlotProblem(self, snapshot)
+        prob = SlotProblem(self.mpc, self.link, snapshot)
         self._memory = {}  # step sizes carried across the AO iterations of this slot
         if power_w is not None:
             p = np.asarray(power_w, dtype=float)
@@ -413,7 +415,7 @@ def expected_cost(snapshot: Snapshot, accel_increments, power_w, drone_position,
     r = model.residual(x_aug, np.asarray(snapshot.reference, dtype=float))
     z = dmu.reshape(k, -1)
     fz = z @ model.f.T
-    psi = special.gammaincc(link.m, link.outage_argument_sq(p, channel.distance_sq(q, x_aug[:, 0:2], link.altitude_m)))
+    psi = link.success_sq(p, link.distance_sq(q, x_aug[:, 0:2]))
     e = r + psi[:, None] * fz  # chi - chi_ref with the expected dynamics
     per = np.einsum("ki,ij,kj->k", e, model.q4, e) + np.einsum("ki,ij,kj->k", z, model.q5, z)
     return per if per_agv else float(per.sum())

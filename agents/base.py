@@ -1,18 +1,33 @@
-"""The base of every policy: what a policy is built from and what it offers (see
-:mod:`agents.policies` for the registry of named policies)."""
+"""The base of every policy and the planner protocol: what a policy is built from and what it
+offers, and what plans a slot from the full state (see :mod:`agents.policies` for the registry
+of named policies)."""
 
 from __future__ import annotations
 
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping, Protocol
 
 import numpy as np
 
 from lawn_env import ObservationLayout, ScenarioConfig
+from lawn_env.core import Snapshot
 from lawn_env.presets import resolve_config
 
-__all__ = ["Policy", "JOINT", "COMM"]
+if TYPE_CHECKING:
+    from .ao import Plan
+
+__all__ = ["Policy", "Planner", "JOINT", "COMM"]
 
 JOINT, COMM = "lawn/Joint-v0", "lawn/Comm-v0"
+
+
+class Planner(Protocol):
+    """Plans one slot from the full state: the experts' solvers (:class:`agents.AOSolver`,
+    :class:`agents.ReducedGradientPlanner`, :class:`agents.GlobalPlanner`) and the planner
+    policies. ``reset`` drops what the planner carries across slots (warm starts)."""
+
+    def reset(self) -> None: ...
+
+    def plan(self, snapshot: Snapshot) -> Plan: ...
 
 
 class Policy:
@@ -22,6 +37,8 @@ class Policy:
     env_ids: tuple[str, ...] = (JOINT, COMM)
     #: True when the policy keeps per-episode state (it then drives one environment at a time)
     stateful = False
+    #: The plan behind the last action (planner policies; None for policies that do not plan)
+    last_plan: Plan | None = None
 
     def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT,
                  seed: int | None = None):

@@ -79,7 +79,6 @@ class PlannerPolicy(Policy):
     def __init__(self, config=None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
         super().__init__(config, env_id, seed)
         self.solver = self._make_solver(**settings)
-        self.last_plan: Plan | None = None
         c = self.config
         self._scales = (c.control.accel_increment_max_mps2, c.power_budget_w, c.drone.max_speed_mps, c.slot_s)
 

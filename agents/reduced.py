@@ -35,7 +35,6 @@ from typing import Annotated
 import numpy as np
 from pydantic import ConfigDict, Field
 from pydantic.dataclasses import dataclass as pydantic_dataclass
-from scipy import special
 
 from lawn_env import channel
 from lawn_env.config import ScenarioConfig
@@ -43,7 +42,7 @@ from lawn_env.core import Snapshot
 from lawn_env.dynamics import cost_coefficients
 from lawn_env.mpc import OutageAwareMPC
 
-from .ao import Plan
+from .ao import Plan, SlotProblem
 from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
 
 __all__ = ["ReducedProblem", "ValueTable", "ReducedSettings", "ReducedGradientPlanner", "GlobalPlanner",
@@ -64,21 +63,12 @@ class Evaluation:
     fallbacks: int
 
 
-class ReducedProblem:
-    """Phi(p, q) of one slot, evaluated with exact QPs (the shared, warm-started MPC)."""
+class ReducedProblem(SlotProblem):
+    """Phi(p, q) of one slot, evaluated with exact QPs (the shared, warm-started MPC): the AO's
+    slot problem with the controls solved out."""
 
-    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig):
-        self.mpc = mpc
-        self.link = link
-        self.config = config
-        self.x_aug = np.asarray(snapshot.x_aug, dtype=float)
-        self.reference = np.asarray(snapshot.reference, dtype=float)
-        self.q_prev = np.asarray(snapshot.drone_position, dtype=float)
-        self.agv_xy = self.x_aug[:, 0:2]
-        self.data = mpc.prepare(self.x_aug, self.reference, snapshot.slot)
-        self.budget = config.power_budget_w
-        self.radius = config.drone.max_speed_mps * config.slot_s
-        self.area = tuple(config.area_m)
+    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot):
+        super().__init__(mpc, link, snapshot)
         self.evaluations = 0
 
     # ------------------------------------------------------------------ exact
@@ -87,10 +77,6 @@ class ReducedProblem:
         sol = self.mpc.solve_prepared(self.data, psi)
         lcoef, scoef, _ = cost_coefficients(self.mpc.model, self.data.linear, self.data.constant, sol.increments)
         return sol.value, 2.0 * psi * lcoef + 2.0 * scoef, sol  # envelope theorem: V' = dJ^/dpsi at z*
-
-    def success(self, power_w: np.ndarray, q: np.ndarray) -> np.ndarray:
-        d2 = channel.distance_sq(q, self.agv_xy, self.link.altitude_m)
-        return special.gammaincc(self.link.m, self.link.outage_argument_sq(power_w, d2))
 
     def evaluate(self, power_w: np.ndarray, q: np.ndarray) -> Evaluation:
         self.evaluations += 1
@@ -123,7 +109,7 @@ class ReducedProblem:
                 gnorm = math.sqrt(float(g @ g))
                 if gnorm == 0.0 or not math.isfinite(gnorm):  # flat, or under/overflowed at extreme configs
                     continue
-                alpha = steps[block] or 0.5 * (self.budget if block == "p" else self.radius) / gnorm
+                alpha = steps[block] or 0.5 * (self.budget if block == "p" else self.reach) / gnorm
                 if not (math.isfinite(alpha) and alpha > 0.0):
                     continue
                 accepted = None
@@ -131,7 +117,7 @@ class ReducedProblem:
                     if block == "p":
                         x_new = project_budget(x - alpha * g, self.budget)
                     else:
-                        x_new = project_disc_box(x - alpha * g, self.q_prev, self.radius, self.area)
+                        x_new = project_disc_box(x - alpha * g, self.q_prev, self.reach, self.area)
                     delta = x_new - x
                     if not np.all(np.isfinite(delta)) or float(delta @ delta) == 0.0:
                         break
@@ -177,9 +163,8 @@ class ReducedProblem:
 
     def _split(self, table: "ValueTable", positions: np.ndarray, levels: int):
         units = np.arange(levels + 1) * (self.budget / levels)
-        diff = positions[:, None, :] - self.agv_xy[None, :, :]
-        d2 = (diff**2).sum(axis=2) + self.link.altitude_m**2  # (n, K)
-        psi = special.gammaincc(self.link.m, self.link.outage_argument_sq(units[None, None, :], d2[:, :, None]))
+        d2 = self.link.distance_sq(positions[:, None, :], self.agv_xy[None, :, :])  # (n, K)
+        psi = self.link.success_sq(units[None, None, :], d2[:, :, None])
         return min_plus_allocation(table(psi))  # tabulated V_k for every (position, AGV, power level)
 
 
@@ -272,7 +257,7 @@ class _ReducedPlannerBase:
     def _search(self, problem: ReducedProblem) -> Evaluation:
         s = self.settings
         table = problem.table(self.psi_grid)
-        positions = disc_box_grid(problem.q_prev, problem.radius, problem.area, s.drone_spacing_m, s.max_drone_points)
+        positions = disc_box_grid(problem.q_prev, problem.reach, problem.area, s.drone_spacing_m, s.max_drone_points)
         _, p, q = problem.grid_search(table, positions, s.power_levels, s.coarse_power_levels, s.keep_positions)
         return problem.evaluate(p, q)
 
@@ -290,13 +275,13 @@ class ReducedGradientPlanner(_ReducedPlannerBase):
 
     def plan(self, snapshot: Snapshot) -> Plan:
         start = time.perf_counter()
-        problem = ReducedProblem(self.mpc, self.link, snapshot, self.config)
+        problem = ReducedProblem(self.mpc, self.link, snapshot)
         k = self.config.num_agvs
         starts = {"search": self._search(problem),
                   "equal": problem.evaluate(np.full(k, problem.budget / k), problem.q_prev)}
         if self._last is not None:
             p_last, v_last = self._last
-            q_cont = project_disc_box(problem.q_prev + v_last, problem.q_prev, problem.radius, problem.area)
+            q_cont = project_disc_box(problem.q_prev + v_last, problem.q_prev, problem.reach, problem.area)
             starts["previous"] = problem.evaluate(p_last, q_cont)
         origin = min(starts, key=lambda name: starts[name].phi)
         best = problem.refine(starts[origin], self.settings.refine_iterations)
@@ -315,10 +300,10 @@ class GlobalPlanner(_ReducedPlannerBase):
 
     def plan(self, snapshot: Snapshot) -> Plan:
         start = time.perf_counter()
-        problem = ReducedProblem(self.mpc, self.link, snapshot, self.config)
+        problem = ReducedProblem(self.mpc, self.link, snapshot)
         s = self.settings
         table = problem.table(self.psi_grid)
-        positions = disc_box_grid(problem.q_prev, problem.radius, problem.area, s.drone_spacing_m, s.max_drone_points)
+        positions = disc_box_grid(problem.q_prev, problem.reach, problem.area, s.drone_spacing_m, s.max_drone_points)
         grid_value, p, q = problem.grid_search(table, positions, s.power_levels)
         found = problem.evaluate(p, q)
         best = problem.refine(found, s.refine_iterations)

@@ -45,7 +45,7 @@ class HeuristicPolicy(Policy):
         centroid = x[:, 0:2].mean(axis=0)
         step = centroid - q
         dist = np.linalg.norm(step)
-        reach = cfg.drone.max_speed_mps * cfg.slot_s
+        reach = cfg.drone_reach_m
         q_next = centroid if dist <= reach else q + step * (reach / dist)
         return np.concatenate([
             spaces.encode_increments(du, cfg.control.accel_increment_max_mps2),

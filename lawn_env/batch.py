@@ -110,7 +110,7 @@ class BatchSimulation:
         self.last_power_w[idx] = s.power_budget_w / k
         self.last_delivered[idx] = True
         self.last_outage_probability[idx] = link_outage(self.x_aug[idx], self.drone_position[idx], self.last_power_w[idx],
-                                                        s.link, s._altitude_sq)[1]
+                                                        s.link)[1]
 
     # ------------------------------------------------------------------ one slot
     def step(self, increment: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray,
@@ -131,7 +131,7 @@ class BatchSimulation:
         if self.disturbed and d.control_period_slots > 1:
             du[self.slot % d.control_period_slots != 0] = 0.0  # no command this slot: nothing is sent
         packed, delivered, outage_p = transmit(self.x_aug, du, power_w, drone_next, normalized_fading, s.link,
-                                               s._altitude_sq, s._packed_t)
+                                               s._packed_t)
         if self.disturbed:
             lag = s._lag_alpha if d.actuator_lag_s > 0 else None
             self._applied = disturb(packed, self.x_aug[..., 4:6] + packed[..., 6:8], self._applied, lag,

@@ -157,13 +157,53 @@ class LinkParams:
         """(c_d, c_ce) with the outage argument x = c_d d^2 / p + c_ce (see :func:`outage_argument_sq`)."""
         return _outage_coefficients(self.snr_threshold, self.alpha0, self.noise_power_w, self.m, self.ce_error_var)
 
+    # ------------------------------------------------------------------ the one home of psi
+    # Every view of the link (the simulator, the vector envs, the planners, the RL interface's
+    # anchor) computes distances, outage and success probabilities and their slopes here.
+    @functools.cached_property
+    def altitude_sq(self) -> float:
+        return self.altitude_m * self.altitude_m
+
+    def distance_sq(self, drone_xy, agv_xy) -> np.ndarray:
+        """Squared 3-D distances d^2 = ||c - q||^2 + H^2 (m^2) from the drone at ``drone_xy`` to the
+        AGVs at ``agv_xy`` (both (..., 2), broadcasting; :func:`distance_sq` for this altitude)."""
+        return _distance_sq(drone_xy, agv_xy, self.altitude_sq)
+
     def outage_argument_sq(self, power_w, distance_sq_m2):
         """x of Prop. 1 for this link (fast path of :func:`outage_argument_sq`)."""
         c_d, c_ce = self.coefficients
         return _outage_argument(power_w, distance_sq_m2, c_d, c_ce)
 
+    def outage_at(self, x):
+        """Outage probability gammainc(m, x) at outage arguments ``x``."""
+        return special.gammainc(self.m, x)
+
+    def success_at(self, x):
+        """Success probability psi = gammaincc(m, x) at outage arguments ``x`` (accurate when tiny)."""
+        return special.gammaincc(self.m, x)
+
+    def outage_sq(self, power_w, distance_sq_m2):
+        """Outage probability at powers (W) and squared distances (m^2)."""
+        return self.outage_at(self.outage_argument_sq(power_w, distance_sq_m2))
+
+    def success_sq(self, power_w, distance_sq_m2):
+        """Success probability psi at powers (W) and squared distances (m^2): what every planner plans
+        with (``LinkParams.from_config(config, planning=True)``)."""
+        return self.success_at(self.outage_argument_sq(power_w, distance_sq_m2))
+
+    def success_slope_term(self, x):
+        """g = x^(m-1) e^(-x) / Gamma(m) (x - x_ce) >= 0 at outage arguments ``x``: d psi/dp = g / p and
+        d psi/d(d^2) = -g / d^2 (x falls with p and grows with d^2; x_ce is the part power cannot remove)."""
+        return gamma_density(self.m, x) * (x - self.coefficients[1])
+
+    def success_power_slope(self, x, power_w):
+        """d psi / d p (1/W) at outage arguments ``x`` of powers ``power_w`` (floored at
+        ``POWER_FLOOR_W`` as the arguments were)."""
+        return self.success_slope_term(x) / power_w
+
     @functools.cached_property
-    def _kwargs(self) -> dict:
+    def kwargs(self) -> dict:
+        """The link as keyword arguments of the module-level functions (:func:`outage_probability`, ...)."""
         return dict(
             snr_threshold=self.snr_threshold,
             alpha0=self.alpha0,
@@ -173,10 +213,20 @@ class LinkParams:
         )
 
 
+_ONES2 = np.ones(2)
+
+
 def distance_sq(drone_xy: np.ndarray, agv_xy: np.ndarray, altitude_m: float) -> np.ndarray:
     """Squared 3-D distance d^2 = ||q - c||^2 + H^2, m^2 (broadcasts over leading axes)."""
+    return _distance_sq(drone_xy, agv_xy, altitude_m * altitude_m)
+
+
+def _distance_sq(drone_xy, agv_xy, altitude_sq: float) -> np.ndarray:
     diff = np.asarray(agv_xy, dtype=float) - drone_xy
-    return (diff * diff).sum(axis=-1) + altitude_m * altitude_m
+    sq = diff * diff
+    if sq.ndim <= 2:  # (K, 2) @ (2,): the same two-term sums as a reduction over the last axis, faster
+        return sq @ _ONES2 + altitude_sq
+    return (sq.reshape(-1, 2) @ _ONES2).reshape(sq.shape[:-1]) + altitude_sq
 
 
 #: Powers are floored here before dividing; gammainc(m, x) is exactly 1.0 in double precision
@@ -238,13 +288,6 @@ def gamma_density(m: int, x):
     return np.exp(special.xlogy(m - 1, x) - x - special.gammaln(m))
 
 
-def _success_terms(power_w, distance_sq_m2, link: LinkParams):
-    """psi and g = x^(m-1) e^(-x) / Gamma(m) * (x - x_ce) >= 0, from which
-    d psi/dp = g / p and d psi/d(d^2) = -g / d^2 (x decreases in p, increases in d^2; x_ce is the
-    part of x that power cannot remove). Powers are floored at ``POWER_FLOOR_W``."""
-    p = np.maximum(power_w, POWER_FLOOR_W)
-    x = link.outage_argument_sq(p, distance_sq_m2)
-    return special.gammaincc(link.m, x), gamma_density(link.m, x) * (x - link.coefficients[1]), p
 
 
 def success_and_gradients(power_w, drone_xy, agv_xy, link: LinkParams):
@@ -255,9 +298,11 @@ def success_and_gradients(power_w, drone_xy, agv_xy, link: LinkParams):
     dx/d(d^2) = (x - x_ce)/d^2. At p = 0 (floored at ``POWER_FLOOR_W``) psi and both derivatives are 0.
     """
     diff = np.asarray(drone_xy, dtype=float) - np.asarray(agv_xy, dtype=float)
-    d2 = np.einsum("...i,...i->...", diff, diff) + link.altitude_m**2
-    psi, g, p = _success_terms(power_w, d2, link)
-    return psi, g / p, (-2.0 * g / d2)[..., None] * diff
+    d2 = link.distance_sq(drone_xy, agv_xy)
+    p = np.maximum(power_w, POWER_FLOOR_W)
+    x = link.outage_argument_sq(p, d2)
+    g = link.success_slope_term(x)
+    return link.success_at(x), g / p, (-2.0 * g / d2)[..., None] * diff
 
 
 def realized_snr(power_w, distance_m, fading, *, alpha0, noise_power_w, ce_error_var=0.0):
@@ -292,5 +337,5 @@ def delivered_from_fading(normalized_fading, outage_arg) -> np.ndarray:
 def sample_delivery(rng: np.random.Generator, power_w, distance_m, link: LinkParams) -> np.ndarray:
     """Draw Nakagami-m fading and return True where the command arrives (MODEL.md §2)."""
     distance_m = np.asarray(distance_m, dtype=float)
-    x = outage_argument(power_w, distance_m, **link._kwargs)
+    x = link.outage_argument_sq(power_w, np.square(distance_m))
     return delivered_from_fading(sample_normalized_fading(rng, link.m, x.shape), x)

@@ -282,6 +282,11 @@ class ScenarioConfig:
         return 10.0 ** (self.power_budget_dbw / 10.0)
 
     @property
+    def drone_reach_m(self) -> float:
+        """V_max Δτ: how far the drone can move in one slot, m."""
+        return self.drone.max_speed_mps * self.slot_s
+
+    @property
     def duration_s(self) -> float:
         return self.num_slots * self.slot_s
 

@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from scipy import special
 
 from . import channel, drone, references
 from .config import ScenarioConfig
@@ -48,27 +47,19 @@ def saturate_increment(u_prev: np.ndarray, du: np.ndarray, accel_max: float) -> 
     return u
 
 
-def link_outage(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray, link: channel.LinkParams,
-                altitude_sq: float) -> tuple[np.ndarray, np.ndarray]:
-    """The outage argument x (Prop. 1) and the closed-form outage probability gammainc(m, x) of
-    the links from the drone at ``drone_xy`` (..., 2) to the AGVs (x_aug (..., K, 6)) with powers
-    (..., K), on squared distances (channel.distance_sq)."""
-    x = link.outage_argument_sq(power_w, _link_distance_sq(x_aug, drone_xy, altitude_sq))
-    return x, special.gammainc(link.m, x)
+def link_outage(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray,
+                link: channel.LinkParams) -> tuple[np.ndarray, np.ndarray]:
+    """The outage argument x (Prop. 1) and the outage probability of the links from the drone at
+    ``drone_xy`` (..., 2) to the AGVs (x_aug (..., K, 6)) with powers (..., K)."""
+    x = link.outage_argument_sq(power_w, link.distance_sq(drone_xy[..., None, :], x_aug[..., 0:2]))
+    return x, link.outage_at(x)
 
 
-def link_success(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray, link: channel.LinkParams,
-                 altitude_sq: float) -> np.ndarray:
-    """The success probability psi = gammaincc(m, x) of the links from the drone at ``drone_xy``
-    (..., 2) to the AGVs (x_aug (..., K, 6)) with powers (..., K): the planners' psi when
-    ``link`` is their link model (``LinkParams.from_config(config, planning=True)``)."""
-    return special.gammaincc(link.m, link.outage_argument_sq(power_w, _link_distance_sq(x_aug, drone_xy, altitude_sq)))
-
-
-def _link_distance_sq(x_aug: np.ndarray, drone_xy: np.ndarray, altitude_sq: float) -> np.ndarray:
-    """channel.distance_sq from the drone (..., 2) to the AGVs (..., K, 6), inlined for the hot path."""
-    diff = x_aug[..., 0:2] - drone_xy[..., None, :]
-    return _rows_matmul(diff * diff, _ONES2) + altitude_sq
+def link_success(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray, link: channel.LinkParams) -> np.ndarray:
+    """The success probability psi of the links from the drone at ``drone_xy`` (..., 2) to the AGVs
+    (x_aug (..., K, 6)) with powers (..., K): the planners' psi when ``link`` is their link model
+    (``LinkParams.from_config(config, planning=True)``)."""
+    return link.success_sq(power_w, link.distance_sq(drone_xy[..., None, :], x_aug[..., 0:2]))
 
 
 def apply_wind(drone_next: np.ndarray, wind_mps: np.ndarray, slot_s: float, area_lo: np.ndarray,
@@ -107,12 +98,12 @@ def measure(x_aug: np.ndarray, tracking_error: np.ndarray, position_noise: np.nd
 
 
 def transmit(x_aug: np.ndarray, du: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray,
-             normalized_fading: np.ndarray, link: channel.LinkParams, altitude_sq: float, packed_t: np.ndarray):
+             normalized_fading: np.ndarray, link: channel.LinkParams, packed_t: np.ndarray):
     """One slot's links and transition: the commands go from the drone at ``drone_next`` (..., 2)
     to the AGVs (x_aug (..., K, 6)) with powers (..., K); those whose fading m|h|^2 reaches the
     outage argument arrive. Returns the packed rows [x~[n+1], du] (..., K, 8) of the delivered
     increments (dynamics.packed_step_matrices), ``delivered`` and the outage probabilities."""
-    x, outage_p = link_outage(x_aug, drone_next, power_w, link, altitude_sq)
+    x, outage_p = link_outage(x_aug, drone_next, power_w, link)
     delivered = channel.delivered_from_fading(normalized_fading, x)
     du = du * delivered[..., None]
     return _rows_matmul(np.concatenate((x_aug, du), axis=-1), packed_t), delivered, outage_p
@@ -131,9 +122,6 @@ def _rows_matmul(a: np.ndarray, m: np.ndarray) -> np.ndarray:
     if a.ndim <= 2:
         return a @ m
     return (a.reshape(-1, a.shape[-1]) @ m).reshape(a.shape[:-1] + m.shape[1:])
-
-
-_ONES2 = np.ones(2)
 
 
 @dataclass(frozen=True)
@@ -188,7 +176,6 @@ class Simulation:
         self._disturbed = config.disturbance.active
         lag = config.disturbance.actuator_lag_s
         self._lag_alpha = float(np.exp(-config.slot_s / lag)) if lag > 0 else 0.0
-        self._altitude_sq = config.drone.altitude_m**2
         self.power_budget_w = config.power_budget_w
         self.accel_max = config.control.accel_max_mps2
         self.max_speed = config.drone.max_speed_mps
@@ -251,12 +238,11 @@ class Simulation:
     # ------------------------------------------------------------------ channel helpers
     def outage_probability(self, power_w: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
         """Closed-form outage of the true link at the current AGV positions."""
-        return link_outage(self.x_aug, np.asarray(drone_position, dtype=float), power_w, self.link, self._altitude_sq)[1]
+        return link_outage(self.x_aug, np.asarray(drone_position, dtype=float), power_w, self.link)[1]
 
     def planning_success(self, power_w: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
         """psi of the planners' link model (CSI-aware or not, see ChannelConfig)."""
-        return link_success(self.x_aug, np.asarray(drone_position, dtype=float), power_w, self.planning_link,
-                            self._altitude_sq)
+        return link_success(self.x_aug, np.asarray(drone_position, dtype=float), power_w, self.planning_link)
 
     def drone_target(self, velocity_mps: np.ndarray) -> np.ndarray:
         """Next drone position for a commanded velocity (speed-limited, kept in the area)."""
@@ -310,7 +296,7 @@ class Simulation:
         if disturbed and self.slot % d.control_period_slots:
             du[:] = 0.0  # no command this slot (reduced control rate): nothing is sent
         fading = channel.sample_normalized_fading(rng, self.link.m, self.num_agvs)
-        packed, delivered, outage_p = transmit(x_aug, du, power_w, drone_next, fading, self.link, self._altitude_sq,
+        packed, delivered, outage_p = transmit(x_aug, du, power_w, drone_next, fading, self.link,
                                                self._packed_t)
         du = packed[:, 6:8]
         if disturbed:

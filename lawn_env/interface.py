@@ -49,7 +49,7 @@ from pydantic import ConfigDict, Field, model_validator
 from pydantic.dataclasses import dataclass
 
 from . import spaces
-from .channel import LinkParams, success_probability
+from .channel import LinkParams
 from .drone import move_drone, move_drones
 from .mpc import OutageAwareMPC
 
@@ -217,8 +217,8 @@ class ActionLayout:
         self._pmax = config.power_budget_w
         self._vmax = config.drone.max_speed_mps
         self._dt = config.slot_s
+        self._reach = config.drone_reach_m
         self._area = tuple(config.area_m)
-        self._altitude_sq = config.drone.altitude_m**2
         if self.scheme == "anchored":
             self._link = LinkParams.from_config(config, planning=True)
             self.mpc = OutageAwareMPC.from_config(config, backend=mpc_backend) if role == "joint" else None
@@ -246,7 +246,7 @@ class ActionLayout:
         target = x_aug[..., 0:2].mean(axis=-2) + comm[:, k:] * self.interface.drone_offset_m
         step = target - drone_position
         dist = np.hypot(step[:, 0], step[:, 1])[:, None]
-        reach = self._vmax * self._dt
+        reach = self._reach
         velocity = np.where(dist <= reach, step / self._dt, step * (self._vmax / np.maximum(dist, reach)))
         drone_next = move_drones(drone_position, velocity, self._vmax, self._dt, self._area)
         power = self._anchored_power(comm[:, :k], x_aug, drone_next)
@@ -283,14 +283,13 @@ class ActionLayout:
         target = x_aug[:, 0:2].mean(axis=0) + a * self.interface.drone_offset_m
         step = target - drone_position
         dist = math.hypot(*step.tolist())
-        reach = self._vmax * self._dt
+        reach = self._reach
         velocity = step / self._dt if dist <= reach else step * (self._vmax / dist)
         return move_drone(drone_position, velocity, self._vmax, self._dt, self._area)
 
     def _power_prior(self, x_aug: np.ndarray, drone_next: np.ndarray) -> np.ndarray:
         """d_k^2 from the drone's next position, (..., K) (any leading batch axes)."""
-        diff = x_aug[..., 0:2] - drone_next[..., None, :]
-        return (diff * diff).sum(axis=-1) + self._altitude_sq
+        return self._link.distance_sq(drone_next[..., None, :], x_aug[..., 0:2])
 
     def _anchored_power(self, a: np.ndarray, x_aug: np.ndarray, drone_next: np.ndarray) -> np.ndarray:
         w = self._power_prior(x_aug, drone_next) * np.exp(a * self.interface.power_log_range)
@@ -301,8 +300,7 @@ class ActionLayout:
         """The tracking controller under the residual: the outage-aware MPC's first increment at each
         link's planned success probability, (K, 2) m/s^2 (a new array; before the residual).
         ``slot`` is needed when the planners know a control period > 1 (:meth:`OutageAwareMPC.prepare`)."""
-        d = np.sqrt(self._power_prior(x_aug, drone_next))
-        psi = success_probability(power_w, d, **self._link._kwargs)
+        psi = self._link.success_sq(power_w, self._power_prior(x_aug, drone_next))
         return self.mpc.solve(x_aug, reference, psi, slot).increments[..., 0, :].copy()
 
     # ------------------------------------------------------------------ encode
@@ -321,7 +319,7 @@ class ActionLayout:
         target = drone_next
         move = drone_next - drone_position
         dist = math.hypot(*move.tolist())
-        reach = self._vmax * self._dt
+        reach = self._reach
         if dist >= reach * (1 - 1e-9):  # a full-speed move: any target further along the ray gives it
             u = move / dist
             target = drone_position + max(dist, float((centroid - drone_position) @ u)) * u

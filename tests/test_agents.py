@@ -15,6 +15,10 @@ from lawn_env.mpc import OutageAwareMPC
 CFG = ScenarioConfig()
 
 
+def _slot_problem(solver, snap):
+    return SlotProblem(solver.mpc, solver.link, snap)
+
+
 def _snapshots(count, seed=0, config=CFG):
     """Snapshots along random-action episodes, with extra random offsets and accelerations."""
     env = gym.make("lawn/Joint-v0", config=config).unwrapped
@@ -68,7 +72,7 @@ def test_control_block_matches_an_independent_qp_solve():
     solver = AOSolver(CFG)
     reference = OutageAwareMPC.from_config(CFG, backend="osqp")
     for snap in _snapshots(6, seed=4):
-        prob = SlotProblem(solver, snap)
+        prob = SlotProblem(solver.mpc, solver.link, snap)
         p = np.array([0.1, 0.2, 0.3, 0.4])
         q = snap.drone_position
         dmu, value, _ = solver.control_block(prob, p, q, None, math.inf)
@@ -81,7 +85,7 @@ def test_control_block_matches_an_independent_qp_solve():
 def test_power_gradient_matches_finite_differences(rng):
     solver = AOSolver(CFG)
     for snap in _snapshots(5, seed=5):
-        prob = SlotProblem(solver, snap)
+        prob = SlotProblem(solver.mpc, solver.link, snap)
         dmu, _, _ = solver.control_block(prob, solver.equal_power(), snap.drone_position, None, math.inf)
         obj = solver.power_objective(prob.coefficients(dmu), prob.distance_sq(snap.drone_position))
         p = rng.uniform(0.05, 0.4, 4)
@@ -99,7 +103,7 @@ def test_power_gradient_matches_finite_differences(rng):
 def test_drone_gradient_matches_finite_differences():
     solver = AOSolver(CFG)
     for snap in _snapshots(5, seed=6):
-        prob = SlotProblem(solver, snap)
+        prob = SlotProblem(solver.mpc, solver.link, snap)
         p = solver.equal_power()
         dmu, _, _ = solver.control_block(prob, p, snap.drone_position, None, math.inf)
         obj = solver.drone_objective(prob, prob.coefficients(dmu), p)
@@ -301,7 +305,7 @@ def test_returned_increments_are_the_exact_qp_optimum_at_the_returned_point(name
         action = policy.act(obs)
         plan = policy.last_plan
         if slot % 3 == 0:
-            psi = SlotProblem(policy.solver if name != "rg-mpc" else AOSolver(CFG), snap).success(
+            psi = _slot_problem(policy.solver if name != "rg-mpc" else AOSolver(CFG), snap).success(
                 plan.power_w, plan.drone_position)
             mine = expected_cost(snap, plan.increments, plan.power_w, plan.drone_position, per_agv=True)
             for k in range(CFG.num_agvs):

@@ -75,8 +75,8 @@ def test_outage_closed_form_matches_monte_carlo(m, rho, target):
     # find the power giving the target outage, then sample deliveries at that power
     from scipy.optimize import brentq
 
-    power = brentq(lambda p: channel.outage_probability(p, dist, **link._kwargs) - target, 1e-12, 1e6)
-    p_closed = float(channel.outage_probability(power, dist, **link._kwargs))
+    power = brentq(lambda p: channel.outage_probability(p, dist, **link.kwargs) - target, 1e-12, 1e6)
+    p_closed = float(channel.outage_probability(power, dist, **link.kwargs))
     n = 400_000
     delivered = channel.sample_delivery(np.random.default_rng(7), np.full(n, power), np.full(n, dist), link)
     p_mc = 1.0 - delivered.mean()
@@ -89,7 +89,7 @@ def test_realized_snr_agrees_with_fading_threshold(rng):
     power = rng.uniform(0.01, 1.0, 10_000)
     dist = rng.uniform(50, 250, 10_000)
     g = channel.sample_normalized_fading(rng, link.m, power.shape)
-    x = channel.outage_argument(power, dist, **link._kwargs)
+    x = channel.outage_argument(power, dist, **link.kwargs)
     via_threshold = channel.delivered_from_fading(g, x)
     snr = channel.realized_snr(power, dist, g / link.m, alpha0=link.alpha0, noise_power_w=link.noise_power_w,
                                ce_error_var=link.ce_error_var)
@@ -98,14 +98,14 @@ def test_realized_snr_agrees_with_fading_threshold(rng):
     mismatch = via_threshold != via_rate
     # the two forms can differ only at the threshold itself (rounding), never in bulk
     assert mismatch.sum() <= 2
-    assert via_threshold.mean() == pytest.approx(1 - channel.outage_probability(power, dist, **link._kwargs).mean(), abs=0.02)
+    assert via_threshold.mean() == pytest.approx(1 - channel.outage_probability(power, dist, **link.kwargs).mean(), abs=0.02)
 
 
 def test_outage_accurate_for_tiny_values():
     link = presets.get("paper-nominal")
     params = LinkParams.from_config(link)
-    p = channel.outage_probability(0.25, 60.0, **params._kwargs)
-    x = float(channel.outage_argument(0.25, 60.0, **params._kwargs))
+    p = channel.outage_probability(0.25, 60.0, **params.kwargs)
+    x = float(channel.outage_argument(0.25, 60.0, **params.kwargs))
     # series for m = 2: P = 1 - e^-x (1 + x) = x^2/2 - x^3/3 + ...
     assert p == pytest.approx(x**2 / 2 - x**3 / 3 + x**4 / 8, rel=1e-9)
     # the paper's sum form 1 - e^-x (1 + x) cancels ~8 digits at these outages: a relative error
@@ -117,7 +117,7 @@ def test_outage_accurate_for_tiny_values():
 
 def test_zero_power_means_outage_and_no_nan():
     link = _link()
-    p = channel.outage_probability(np.array([0.0, 0.5]), np.array([60.0, 60.0]), **link._kwargs)
+    p = channel.outage_probability(np.array([0.0, 0.5]), np.array([60.0, 60.0]), **link.kwargs)
     assert p[0] == 1.0 and 0 < p[1] < 1
     psi, dp, dq = channel.success_and_gradients(np.array([0.0, 0.5]), np.zeros(2), np.array([[30.0, 40.0]] * 2), link)
     assert psi[0] == 0.0 and dp[0] == 0.0 and np.all(dq[0] == 0.0)
@@ -132,8 +132,8 @@ def test_gradients_match_finite_differences(m, rho, rng):
     agv = rng.uniform(0, 200, (6, 2))
     psi, dpsi_dp, dpsi_dq = channel.success_and_gradients(power, drone, agv, link)
     dist = np.sqrt(channel.distance_sq(drone, agv, link.altitude_m))
-    assert np.allclose(psi, channel.success_probability(power, dist, **link._kwargs))
-    assert np.allclose(psi, 1 - channel.outage_probability(power, dist, **link._kwargs))
+    assert np.allclose(psi, channel.success_probability(power, dist, **link.kwargs))
+    assert np.allclose(psi, 1 - channel.outage_probability(power, dist, **link.kwargs))
     h = 1e-6
     fd_p = (channel.success_and_gradients(power + h, drone, agv, link)[0]
             - channel.success_and_gradients(power - h, drone, agv, link)[0]) / (2 * h)
@@ -161,14 +161,14 @@ def test_regimes_of_model_md_section_8():
     dmax = float(np.sqrt(channel.distance_sq(corners[0], corners[1], 50.0)))
     nominal = LinkParams.from_config(presets.get("paper-nominal"))
     equal = 1.0 / 4
-    worst = channel.outage_probability(equal, dmax, **nominal._kwargs)  # corner to corner: 3.6e-5
-    best = channel.outage_probability(equal, 50.0, **nominal._kwargs)  # straight above: 3.3e-8
-    from_center = channel.outage_probability(equal, np.sqrt(channel.distance_sq(drone, grid, 50.0)), **nominal._kwargs)
+    worst = channel.outage_probability(equal, dmax, **nominal.kwargs)  # corner to corner: 3.6e-5
+    best = channel.outage_probability(equal, 50.0, **nominal.kwargs)  # straight above: 3.3e-8
+    from_center = channel.outage_probability(equal, np.sqrt(channel.distance_sq(drone, grid, 50.0)), **nominal.kwargs)
     assert 1e-8 < best < worst < 1e-4
     assert from_center.max() < 3e-6  # a drone anywhere central keeps every link at ~1e-6 or better
     default = LinkParams.from_config(presets.get("default"))
     d = np.sqrt(channel.distance_sq(drone, grid, 50.0))
-    p = channel.outage_probability(equal, d, **default._kwargs)
+    p = channel.outage_probability(equal, d, **default.kwargs)
     assert p.min() < 0.05 and p.max() > 0.5  # outage matters at the default point: 0.024 .. 0.63
 
 
@@ -181,7 +181,7 @@ def test_ce_floor_makes_outage_power_independent_at_0_dbw():
         cfg = presets.get("paper-nominal").override(power_budget_dbw=budget, **{"channel.ce_error_var": 0.1})
         link = LinkParams.from_config(cfg)
         p_max = cfg.power_budget_w
-        out = np.array([channel.outage_probability(p, d, **link._kwargs) for p in (p_max / 16, p_max / 4, p_max)])
+        out = np.array([channel.outage_probability(p, d, **link.kwargs) for p in (p_max / 16, p_max / 4, p_max)])
         if spread == "floor":
             assert 0.033 < out.min() and out.max() < 0.043
         else:
@@ -193,4 +193,4 @@ def test_ce_error_floor_at_the_default_rate_threshold():
     rho = 1e-3 even at full power straight above the AGV, practically 1 at rho = 1e-2."""
     for rho, low, high in ((1e-3, 0.68, 0.70), (1e-2, 1 - 1e-8, 1.0)):
         link = LinkParams.from_config(presets.get("default").override(**{"channel.ce_error_var": rho}))
-        assert low <= channel.outage_probability(1.0, 50.0, **link._kwargs) <= high
+        assert low <= channel.outage_probability(1.0, 50.0, **link.kwargs) <= high

@@ -16,7 +16,7 @@ CFG = ScenarioConfig()
 
 def _problem(snap, backend="daqp"):
     return ReducedProblem(OutageAwareMPC.from_config(CFG, backend=backend), channel.LinkParams.from_config(CFG, planning=True),
-                          snap, CFG)
+                          snap)
 
 
 def test_envelope_derivative_matches_finite_differences(rng):

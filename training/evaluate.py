@@ -48,7 +48,7 @@ def episode_row(policy, env_id: str, config: ScenarioConfig, seed: int) -> dict:
 
     def on_step(step: Step) -> None:
         nonlocal fallbacks
-        plan = getattr(policy, "last_plan", None)
+        plan = policy.last_plan
         if plan is not None:
             ao_iterations.append(plan.iterations)
             fallbacks += plan.info.get("qp_fallbacks", 0)

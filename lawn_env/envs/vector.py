@@ -277,7 +277,6 @@ class CommVectorEnv(JointVectorEnv):
             raise ValueError(f"qp_backend={qp_backend!r}; valid for the native vector env: 'batched', 'daqp'")
         self.mpc = OutageAwareMPC.from_config(self.config, backend=qp_backend)
         self._planning_link = LinkParams.from_config(self.config, planning=True)
-        self._altitude_sq = self.config.drone.altitude_m ** 2
         self.last_mpc_solve_time_s = float("nan")
 
     def _on_reset(self) -> None:
@@ -290,7 +289,7 @@ class CommVectorEnv(JointVectorEnv):
     def _decide(self, a: np.ndarray):
         sim = self.sim
         _, power, drone_next = self._decisions(a)
-        psi = link_success(sim.x_aug, drone_next, power, self._planning_link, self._altitude_sq)
+        psi = link_success(sim.x_aug, drone_next, power, self._planning_link)
         if self.mpc.backend.name == "batched":
             solution = self.mpc.solve(sim.x_aug, sim.reference_windows(), psi, sim.slot)
             increments, iterations, status = solution.increments[:, :, 0, :], solution.iterations, solution.status
@@ -312,7 +311,7 @@ class CommVectorEnv(JointVectorEnv):
         return {"mpc_iterations": np.zeros((self.num_envs, self.num_agvs), dtype=np.int64),
                 "mpc_fallbacks": np.zeros(self.num_envs, dtype=np.int64),
                 "success_probability_planned": link_success(sim.x_aug, sim.drone_position, sim.last_power_w,
-                                                            self._planning_link, self._altitude_sq)}
+                                                            self._planning_link)}
 
 
 class _EnvView:
