@@ -142,9 +142,7 @@ class SB3Policy(Policy):
             raise ValueError(f"{path} was trained on {trained_env}; use marl:{path} for multi-agent runs")
         if env_id not in (None, trained_env):
             raise ValueError(f"{path} was trained on {trained_env}, not {env_id}")
-        trained_config = ScenarioConfig.from_dict(read_json(path / "config.json"))
-        model = _load_model(run)
-        return cls(model, config if config is not None else trained_config, trained_env, run.record.get("interface"),
+        return cls(_load_model(run), config if config is not None else run.load_config(), trained_env, run.interface,
                    ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}")
 
     def _on_reset(self, rng) -> None:
@@ -193,9 +191,8 @@ class MARLPolicy(Policy):
             raise ValueError(f"{path} was trained on {run.env}, not the multi-agent env; use sb3:{path}")
         if env_id not in (None, JOINT):
             raise ValueError(f"{path} is a multi-agent policy; it drives {JOINT}, not {env_id}")
-        trained_config = ScenarioConfig.from_dict(read_json(path / "config.json"))
-        return cls(_load_model(run), config if config is not None else trained_config,
-                   run.record.get("interface"), ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}")
+        return cls(_load_model(run), config if config is not None else run.load_config(), run.interface,
+                   ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}")
 
     def _on_reset(self, rng) -> None:
         self.scheme.reset()
@@ -238,7 +235,7 @@ def export_agent(run_dir: Path, out_dir: Path, record: dict[str, Any]) -> Path:
     normalizer = ObsNormalizer.load(_selected(run_dir)[1])
     if normalizer is not None:
         normalizer.save(out_dir / "normalizer.npz")
-    agent = {"algo": algo, "env": run.env, "interface": run.record.get("interface"),
+    agent = {"algo": algo, "env": run.env, "interface": run.interface,
              "config": read_json(run_dir / "config.json"), **record}
     (out_dir / "agent.json").write_text(json.dumps(agent, indent=2) + "\n")
     return out_dir

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from lawn_env import ScenarioConfig
+
 from .errors import MissingExtra
 
 __all__ = ["ALGORITHMS", "RL_EXTRA", "RunDir", "algorithm_class", "policy_network_class", "read_json", "read_run"]
@@ -93,6 +95,15 @@ class RunDir:
         if self.record.get("env") == "lawn/Parallel-v0":
             return "marl"
         return "bc" if self.record.get("trainer") == "bc" else "sb3"
+
+    @property
+    def interface(self) -> Any:
+        """The RL interface the agent trained with (None: the v0 interface)."""
+        return self.record.get("interface")
+
+    def load_config(self, context: str = "", missing: str = "") -> ScenarioConfig:
+        """The exact scenario config of the run (``config.json``)."""
+        return ScenarioConfig.from_dict(read_json(self.path / "config.json", context, missing))
 
     @property
     def policy_name(self) -> str:

@@ -157,9 +157,9 @@ def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: 
 
         return train_bc_run(env_id, config, timesteps, seed, out_dir, params, version, progress=progress)
     if init_from is not None:
-        source = read_json(Path(init_from) / "run.json", "--init-from", "not a lawn train run directory")
-        if source.get("interface") != params.get("interface"):
-            raise ValueError(f"--init-from {init_from}: it was trained with interface {source.get('interface')}, "
+        source = read_run(init_from, "--init-from")
+        if source.interface != params.get("interface"):
+            raise ValueError(f"--init-from {init_from}: it was trained with interface {source.interface}, "
                              f"this run uses {params.get('interface')}; pass the same --interface")
     spec = RunSpec(algo=algo, env=env_id, seed=seed, timesteps=timesteps, hyperparams_version=version,
                    interface=params.get("interface"),
@@ -180,14 +180,15 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
     an off-policy algorithm restored (:mod:`training.checkpoints`). A run killed before its first
     checkpoint restarts from scratch; a finished run is left alone unless ``timesteps`` extends it."""
     out_dir = Path(out_dir)
-    spec = RunSpec(read_run(out_dir, "--resume").record)
+    run = read_run(out_dir, "--resume")
+    spec = RunSpec(run.record)
     for key in ("algo", "env", "seed", "timesteps", "checkpoint_every", "eval_every", "eval_episodes"):
         if key not in spec:
             raise ValueError(f"--resume {out_dir}: run.json has no {key!r} (not written by lawn train)")
     if spec["algo"] == "bc":
         raise ValueError("behaviour cloning runs are not resumable; rerun lawn train --algo bc")
     params = read_json(out_dir / "hyperparams.json", "--resume", "the run directory is incomplete")
-    config = ScenarioConfig.from_dict(read_json(out_dir / "config.json", "--resume", "the run directory is incomplete"))
+    config = run.load_config("--resume", "the run directory is incomplete")
     target = int(spec["timesteps"]) if timesteps is None else int(timesteps)
     checkpoint = latest_checkpoint(out_dir)
     done = int(spec.get("num_timesteps") or 0)
