@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from typing import Annotated, Sequence
 
 import numpy as np
+import numpy.typing as npt
 from pydantic import ConfigDict, Field
 from pydantic.dataclasses import dataclass as pydantic_dataclass
 
@@ -44,7 +45,7 @@ from lawn_env import channel
 from lawn_env.config import ScenarioConfig
 from lawn_env.core import Snapshot
 from lawn_env.dynamics import PredictionModel, cost_coefficients
-from lawn_env.mpc import OutageAwareMPC, SlotData
+from lawn_env.mpc import MPCSolution, OutageAwareMPC, SlotData
 
 from .optim import linear_argmin_disc_box, project_budget
 
@@ -139,7 +140,7 @@ class SlotProblem:
         self.area = tuple(config.area_m)
 
     # ------------------------------------------------------------------ pieces of J^
-    def coefficients(self, dmu: np.ndarray):
+    def coefficients(self, dmu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """L, S, W of J^_k = L psi^2 + 2 S psi + W for increments ``dmu`` (K, N_p, 2) (paper, P4)."""
         return cost_coefficients(self.mpc.model, self.data.linear, self.data.constant, dmu)
 
@@ -159,20 +160,20 @@ class PowerObjective:
     """J^(p) = sum L psi(p)^2 + 2 S psi(p) + W for fixed increments and drone (problem P4), with
     the analytic gradient of Algorithm 1: dJ/dp_k = (2 L_k psi_k + 2 S_k) d psi_k / d p_k."""
 
-    def __init__(self, coef, d2: np.ndarray, link: channel.LinkParams):
+    def __init__(self, coef: tuple[np.ndarray, np.ndarray, np.ndarray], d2: np.ndarray, link: channel.LinkParams):
         lcoef, scoef, wcoef = coef
         self._l, self._two_l, self._two_s, self._w = lcoef, 2.0 * lcoef, 2.0 * scoef, float(wcoef.sum())
         self._d2 = d2
         self._link = link
 
-    def value(self, p: np.ndarray):
+    def value(self, p: np.ndarray) -> tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """(J^, state) where state feeds :meth:`gradient`."""
         pf = np.maximum(p, channel.POWER_FLOOR_W)
         x = self._link.outage_argument_sq(pf, self._d2)
         psi = self._link.success_at(x)
         return float(self._l @ (psi * psi) + self._two_s @ psi) + self._w, (psi, pf, x)
 
-    def gradient(self, state) -> np.ndarray:
+    def gradient(self, state: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
         psi, pf, x = state
         dpsi = self._link.success_power_slope(x, pf)  # reusing the value's x
         return (self._two_l * psi + self._two_s) * dpsi
@@ -181,7 +182,7 @@ class PowerObjective:
 class DroneObjective:
     """J^(q) for fixed increments and powers (problem P5) and its gradient (paper eq. grad_q)."""
 
-    def __init__(self, coef, agv_xy: np.ndarray, power_w: np.ndarray, link: channel.LinkParams):
+    def __init__(self, coef: tuple[np.ndarray, np.ndarray, np.ndarray], agv_xy: np.ndarray, power_w: np.ndarray, link: channel.LinkParams):
         self._l, self._s, self._w = coef
         self._agv = agv_xy
         self._power = power_w
@@ -218,7 +219,8 @@ class AOSolver:
         return np.full(self.num_agvs, self.power_budget_w / self.num_agvs)
 
     # ------------------------------------------------------------------ blocks
-    def control_block(self, prob: SlotProblem, power_w, q, dmu, current: float):
+    def control_block(self, prob: SlotProblem, power_w: np.ndarray, q: np.ndarray, dmu: np.ndarray | None,
+                      current: float) -> tuple[np.ndarray, float, MPCSolution]:
         """P3 at psi(p, q); keeps ``dmu`` if the new solve does not lower J^ (numerical safety)."""
         psi = prob.success(power_w, q)
         sol = self.mpc.solve_prepared(prob.data, psi)
@@ -227,15 +229,16 @@ class AOSolver:
             return sol.increments, value, sol
         return dmu, current, sol
 
-    def power_objective(self, coef, d2: np.ndarray) -> "PowerObjective":
+    def power_objective(self, coef: tuple[np.ndarray, np.ndarray, np.ndarray], d2: np.ndarray) -> PowerObjective:
         """J^(p) for fixed increments (coefficients ``coef``) and squared distances ``d2``."""
         return PowerObjective(coef, d2, self.link)
 
-    def drone_objective(self, prob: SlotProblem, coef, power_w: np.ndarray) -> "DroneObjective":
+    def drone_objective(self, prob: SlotProblem, coef: tuple[np.ndarray, np.ndarray, np.ndarray], power_w: np.ndarray) -> DroneObjective:
         """J^(q) for fixed increments and powers."""
         return DroneObjective(coef, prob.agv_xy, power_w, self.link)
 
-    def power_block(self, coef, d2: np.ndarray, p_current: np.ndarray, current: float):
+    def power_block(self, coef: tuple[np.ndarray, np.ndarray, np.ndarray], d2: np.ndarray, p_current: np.ndarray,
+                    current: float) -> tuple[np.ndarray, float, int]:
         """Algorithm 1 (from ``p_current``, or from equal power with ``pgd_restart_equal``);
         returns the better of its result and ``p_current``.
 
@@ -280,7 +283,8 @@ class AOSolver:
             return p, value, iterations
         return p_current, current, iterations
 
-    def drone_block(self, prob: SlotProblem, coef, power_w, q_current: np.ndarray, current: float):
+    def drone_block(self, prob: SlotProblem, coef: tuple[np.ndarray, np.ndarray, np.ndarray], power_w: np.ndarray, q_current: np.ndarray,
+                    current: float) -> tuple[np.ndarray, float, int]:
         """SCA over the speed disc and the area, with the monotonicity safeguard."""
         s = self.settings
         objective = self.drone_objective(prob, coef, power_w)
@@ -393,7 +397,8 @@ class AOSolver:
         )
 
 
-def expected_cost(snapshot: Snapshot, accel_increments, power_w, drone_position, *, per_agv: bool = False):
+def expected_cost(snapshot: Snapshot, accel_increments: npt.ArrayLike, power_w: npt.ArrayLike,
+                  drone_position: npt.ArrayLike, *, per_agv: bool = False) -> float | np.ndarray:
     """J^_n of MODEL.md §3 for any candidate (increments (K, N_p, 2), powers (K,), drone q[n] (2,)).
 
     Uses the planners' link model (``channel.ce_aware_planning``); feasibility is not checked.

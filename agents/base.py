@@ -4,7 +4,7 @@ of named policies)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Mapping, Protocol
+from typing import TYPE_CHECKING, Any, Mapping, Protocol
 
 import numpy as np
 
@@ -57,10 +57,11 @@ class Policy:
     def _on_reset(self, rng: np.random.Generator) -> None:
         pass
 
-    def act(self, obs) -> np.ndarray:  # pragma: no cover - interface
+    def act(self, obs: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+    def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
+                deterministic: bool = True) -> tuple[np.ndarray, Any]:
         """Stable-Baselines3's signature: a single observation or a batch of them."""
         obs = np.asarray(observation, dtype=np.float32)
         if obs.ndim == 1:

@@ -68,7 +68,7 @@ class ObsNormalizer:
         self.clip, self.epsilon = float(clip), float(epsilon)
 
     @classmethod
-    def from_vecnormalize(cls, venv) -> "ObsNormalizer | None":
+    def from_vecnormalize(cls, venv: Any) -> ObsNormalizer | None:
         if venv is None or not getattr(venv, "norm_obs", False):
             return None
         return cls(venv.obs_rms.mean, venv.obs_rms.var, venv.clip_obs, venv.epsilon)
@@ -117,7 +117,7 @@ class SB3Policy(Policy):
     name = "sb3"
     env_ids = (JOINT, COMM)
 
-    def __init__(self, network, config: ScenarioConfig, env_id: str, interface: RLInterface | dict | str | None = None,
+    def __init__(self, network: Any, config: ScenarioConfig, env_id: str, interface: RLInterface | dict | str | None = None,
                  normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "sb3"):
         super().__init__(config, env_id, seed)
         self.network = network
@@ -133,8 +133,8 @@ class SB3Policy(Policy):
                              f"({self.layout.size},): evaluate it with its training config")
 
     @classmethod
-    def from_run(cls, path, config: ScenarioConfig | None = None, env_id: str | None = None,
-                 seed: int | None = None) -> "SB3Policy":
+    def from_run(cls, path: str | Path, config: ScenarioConfig | None = None, env_id: str | None = None,
+                 seed: int | None = None) -> SB3Policy:
         path = Path(path)
         run = read_run(path, require_model=True)
         trained_env = run.env
@@ -148,7 +148,7 @@ class SB3Policy(Policy):
     def _on_reset(self, rng) -> None:
         self.scheme.reset()
 
-    def act(self, obs) -> np.ndarray:
+    def act(self, obs: np.ndarray) -> np.ndarray:
         raw = np.asarray(obs, dtype=np.float32)
         x = self.interface.observe(raw.copy())
         if self.normalizer is not None:
@@ -166,7 +166,7 @@ class MARLPolicy(Policy):
     name = "marl"
     env_ids = (JOINT,)
 
-    def __init__(self, network, config: ScenarioConfig, interface: RLInterface | dict | str | None = None,
+    def __init__(self, network: Any, config: ScenarioConfig, interface: RLInterface | dict | str | None = None,
                  normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "marl"):
         super().__init__(config, JOINT, seed)
         self.network = network
@@ -183,8 +183,8 @@ class MARLPolicy(Policy):
                              f"has K={k}: evaluate it with its training config")
 
     @classmethod
-    def from_run(cls, path, config: ScenarioConfig | None = None, env_id: str | None = None,
-                 seed: int | None = None) -> "MARLPolicy":
+    def from_run(cls, path: str | Path, config: ScenarioConfig | None = None, env_id: str | None = None,
+                 seed: int | None = None) -> MARLPolicy:
         path = Path(path)
         run = read_run(path, require_model=True)
         if run.env != "lawn/Parallel-v0":
@@ -197,7 +197,7 @@ class MARLPolicy(Policy):
     def _on_reset(self, rng) -> None:
         self.scheme.reset()
 
-    def agent_observations(self, obs) -> np.ndarray:
+    def agent_observations(self, obs: np.ndarray) -> np.ndarray:
         """(K+1, width): the drone's and each AGV's padded observation with its one-hot indicator,
         in PettingZoo's agent order (drone, agv_0, ...), as the agents see them (clipped)."""
         central = self.interface.observe(np.array(obs, dtype=np.float32))
@@ -211,7 +211,7 @@ class MARLPolicy(Policy):
         out[np.arange(self.n_agents), self.obs_width + np.arange(self.n_agents)] = 1.0
         return out
 
-    def act(self, obs) -> np.ndarray:
+    def act(self, obs: np.ndarray) -> np.ndarray:
         x = self.agent_observations(obs)
         if self.normalizer is not None:
             x = self.normalizer.normalize_obs(x)

@@ -64,7 +64,7 @@ __all__ = [
     "snapshot_from_observation",
 ]
 
-def snapshot_from_observation(layout: ObservationLayout, config: ScenarioConfig, obs) -> Snapshot:
+def snapshot_from_observation(layout: ObservationLayout, config: ScenarioConfig, obs: np.ndarray) -> Snapshot:
     """The planner's state recovered from an observation (float32-exact, see ObservationLayout.decode)."""
     d = layout.decode(obs)
     return Snapshot(x_aug=d["x_aug"], reference=d["reference"], drone_position=d["drone_position"],
@@ -76,7 +76,7 @@ class PlannerPolicy(Policy):
 
     stateful = True
 
-    def __init__(self, config=None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
+    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
         super().__init__(config, env_id, seed)
         self.solver = self._make_solver(**settings)
         c = self.config
@@ -96,7 +96,7 @@ class PlannerPolicy(Policy):
         """The horizon slots where a command goes out (move blocking, MODEL.md §7)."""
         return command_mask(snapshot.slot, self.config.control.horizon, planning_period(self.config))
 
-    def act(self, obs) -> np.ndarray:
+    def act(self, obs: np.ndarray) -> np.ndarray:
         snapshot = snapshot_from_observation(self.layout, self.config, obs)
         plan = self.plan(snapshot)
         self.last_plan = plan
@@ -139,7 +139,7 @@ class SFPolicy(PlannerPolicy):
 
     name = "sf"
 
-    def __init__(self, config=None, env_id: str = JOINT, seed: int | None = None, heading_rad: float = 0.0,
+    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT, seed: int | None = None, heading_rad: float = 0.0,
                  **settings: Any):
         if not math.isfinite(heading_rad):
             raise ValueError(f"heading_rad={heading_rad!r} must be finite")
@@ -177,7 +177,7 @@ class PIDPolicy(PlannerPolicy):
 
     name = "pid"
 
-    def __init__(self, config=None, env_id: str = JOINT, seed: int | None = None, gains: PIDGains | Mapping | None = None,
+    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT, seed: int | None = None, gains: PIDGains | Mapping | None = None,
                  **settings: Any):
         super().__init__(config, env_id, seed, **settings)
         self.gains = gains if isinstance(gains, PIDGains) else PIDGains(**dict(gains or {}))
@@ -204,7 +204,7 @@ class LQRPolicy(PlannerPolicy):
 
     name = "lqr"
 
-    def __init__(self, config=None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
+    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
         super().__init__(config, env_id, seed, **settings)
         self.gain = lqr_gain(self.solver.model)
 

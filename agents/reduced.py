@@ -40,7 +40,7 @@ from lawn_env import channel
 from lawn_env.config import ScenarioConfig
 from lawn_env.core import Snapshot
 from lawn_env.dynamics import cost_coefficients
-from lawn_env.mpc import OutageAwareMPC
+from lawn_env.mpc import MPCSolution, OutageAwareMPC
 
 from .ao import Plan, SlotProblem
 from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
@@ -72,7 +72,7 @@ class ReducedProblem(SlotProblem):
         self.evaluations = 0
 
     # ------------------------------------------------------------------ exact
-    def values_at_psi(self, psi: np.ndarray):
+    def values_at_psi(self, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray, MPCSolution]:
         """V_k(psi_k) and V_k'(psi_k) (envelope) with exact QPs: (K,), (K,), solution."""
         sol = self.mpc.solve_prepared(self.data, psi)
         lcoef, scoef, _ = cost_coefficients(self.mpc.model, self.data.linear, self.data.constant, sol.increments)
@@ -148,8 +148,8 @@ class ReducedProblem(SlotProblem):
             values[i], slopes[i] = v, s
         return ValueTable(psi_grid, values, slopes)
 
-    def grid_search(self, table: "ValueTable", positions: np.ndarray, levels: int, coarse_levels: int | None = None,
-                    keep: int = 4):
+    def grid_search(self, table: ValueTable, positions: np.ndarray, levels: int, coarse_levels: int | None = None,
+                    keep: int = 4) -> tuple[float, np.ndarray, np.ndarray]:
         """Best (p, q) of the tabulated Phi over ``positions`` (n, 2) and power splits in units of
         P_max / levels (exact on that grid, min-plus DP). With ``coarse_levels`` every position is
         first scored on the coarser power grid and only the ``keep`` best are split finely.

@@ -14,6 +14,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Protocol
 
+import gymnasium as gym
 import numpy as np
 
 from lawn_env.core import Snapshot
@@ -72,7 +73,7 @@ class Episode:
         return float(np.median(self.decision_s)) if self.decision_s.size else float("nan")
 
 
-def rollout(env, policy: Actor, seed: int | None, *, on_step: Callable[[Step], bool | None] | None = None,
+def rollout(env: gym.Env, policy: Actor, seed: int | None, *, on_step: Callable[[Step], bool | None] | None = None,
             snapshots: bool = False, max_steps: int | None = None) -> Episode:
     """Run one episode of ``env`` (a lawn environment, wrapped or not) under ``policy``:
     ``env.reset(seed=seed)``, ``policy.reset(seed)``, then ``policy.act`` and ``env.step`` until the

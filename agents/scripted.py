@@ -13,9 +13,11 @@ reasonable" reference point for the demo and for smoke tests.
 
 from __future__ import annotations
 
+from typing import Mapping
+
 import numpy as np
 
-from lawn_env import spaces
+from lawn_env import ScenarioConfig, spaces
 
 from .base import JOINT, Policy
 
@@ -28,7 +30,7 @@ class HeuristicPolicy(Policy):
     name = "heuristic"
     env_ids = (JOINT,)
 
-    def __init__(self, config=None, env_id: str = JOINT, seed: int | None = None, kp: float = 0.4, kd: float = 0.9):
+    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT, seed: int | None = None, kp: float = 0.4, kd: float = 0.9):
         super().__init__(config, env_id, seed)
         self.kp, self.kd = float(kp), float(kd)
 

@@ -24,9 +24,14 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 from scipy import optimize, special
+
+if TYPE_CHECKING:
+    from .config import ScenarioConfig
 
 __all__ = [
     "LOG2E",
@@ -134,7 +139,7 @@ class LinkParams:
     ce_error_var: float = 0.0
 
     @classmethod
-    def from_config(cls, config, *, planning: bool = False) -> "LinkParams":
+    def from_config(cls, config: ScenarioConfig, *, planning: bool = False) -> LinkParams:
         """Link of a :class:`~lawn_env.config.ScenarioConfig`.
 
         With ``planning=True`` and ``channel.ce_aware_planning=False`` the CE error is ignored
@@ -164,39 +169,39 @@ class LinkParams:
     def altitude_sq(self) -> float:
         return self.altitude_m * self.altitude_m
 
-    def distance_sq(self, drone_xy, agv_xy) -> np.ndarray:
+    def distance_sq(self, drone_xy: npt.ArrayLike, agv_xy: npt.ArrayLike) -> np.ndarray:
         """Squared 3-D distances d^2 = ||c - q||^2 + H^2 (m^2) from the drone at ``drone_xy`` to the
         AGVs at ``agv_xy`` (both (..., 2), broadcasting; :func:`distance_sq` for this altitude)."""
         return _distance_sq(drone_xy, agv_xy, self.altitude_sq)
 
-    def outage_argument_sq(self, power_w, distance_sq_m2):
+    def outage_argument_sq(self, power_w: npt.ArrayLike, distance_sq_m2: npt.ArrayLike) -> np.ndarray:
         """x of Prop. 1 for this link (fast path of :func:`outage_argument_sq`)."""
         c_d, c_ce = self.coefficients
         return _outage_argument(power_w, distance_sq_m2, c_d, c_ce)
 
-    def outage_at(self, x):
+    def outage_at(self, x: npt.ArrayLike) -> np.ndarray:
         """Outage probability gammainc(m, x) at outage arguments ``x``."""
         return special.gammainc(self.m, x)
 
-    def success_at(self, x):
+    def success_at(self, x: npt.ArrayLike) -> np.ndarray:
         """Success probability psi = gammaincc(m, x) at outage arguments ``x`` (accurate when tiny)."""
         return special.gammaincc(self.m, x)
 
-    def outage_sq(self, power_w, distance_sq_m2):
+    def outage_sq(self, power_w: npt.ArrayLike, distance_sq_m2: npt.ArrayLike) -> np.ndarray:
         """Outage probability at powers (W) and squared distances (m^2)."""
         return self.outage_at(self.outage_argument_sq(power_w, distance_sq_m2))
 
-    def success_sq(self, power_w, distance_sq_m2):
+    def success_sq(self, power_w: npt.ArrayLike, distance_sq_m2: npt.ArrayLike) -> np.ndarray:
         """Success probability psi at powers (W) and squared distances (m^2): what every planner plans
         with (``LinkParams.from_config(config, planning=True)``)."""
         return self.success_at(self.outage_argument_sq(power_w, distance_sq_m2))
 
-    def success_slope_term(self, x):
+    def success_slope_term(self, x: npt.ArrayLike) -> np.ndarray:
         """g = x^(m-1) e^(-x) / Gamma(m) (x - x_ce) >= 0 at outage arguments ``x``: d psi/dp = g / p and
         d psi/d(d^2) = -g / d^2 (x falls with p and grows with d^2; x_ce is the part power cannot remove)."""
         return gamma_density(self.m, x) * (x - self.coefficients[1])
 
-    def success_power_slope(self, x, power_w):
+    def success_power_slope(self, x: npt.ArrayLike, power_w: npt.ArrayLike) -> np.ndarray:
         """d psi / d p (1/W) at outage arguments ``x`` of powers ``power_w`` (floored at
         ``POWER_FLOOR_W`` as the arguments were)."""
         return self.success_slope_term(x) / power_w
@@ -240,7 +245,8 @@ def _outage_coefficients(snr_threshold, alpha0, noise_power_w, m, ce_error_var):
     return scale * noise_power_w / alpha0, scale * ce_error_var
 
 
-def outage_argument_sq(power_w, distance_sq_m2, *, snr_threshold, alpha0, noise_power_w, m, ce_error_var=0.0):
+def outage_argument_sq(power_w: npt.ArrayLike, distance_sq_m2: npt.ArrayLike, *, snr_threshold: float, alpha0: float,
+                       noise_power_w: float, m: float, ce_error_var: float = 0.0) -> np.ndarray:
     """x of Prop. 1 from the squared distance: x = m G_th (rho + d^2 sigma^2 / (alpha0 p)) / (1 - rho).
 
     Pr(outage) = Pr(|h|^2 < x / m) = gammainc(m, x) since m |h|^2 ~ Gamma(m, 1).
@@ -255,13 +261,15 @@ def _outage_argument(power_w, distance_sq_m2, c_d: float, c_ce: float):
     return x + c_ce if c_ce else x
 
 
-def outage_argument(power_w, distance_m, *, snr_threshold, alpha0, noise_power_w, m, ce_error_var=0.0):
+def outage_argument(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float, noise_power_w: float,
+                    m: float, ce_error_var: float = 0.0) -> np.ndarray:
     """The incomplete-gamma argument x of Prop. 1 (``x = m g`` for perfect CSI)."""
     return outage_argument_sq(power_w, np.square(distance_m), snr_threshold=snr_threshold, alpha0=alpha0,
                               noise_power_w=noise_power_w, m=m, ce_error_var=ce_error_var)
 
 
-def outage_probability(power_w, distance_m, *, snr_threshold, alpha0, noise_power_w, m, ce_error_var=0.0):
+def outage_probability(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float, noise_power_w: float,
+                       m: float, ce_error_var: float = 0.0) -> np.ndarray:
     """Outage probability Pr(G < G_th) = gammainc(m, x) (Prop. 1, MODEL.md §2).
 
     Evaluated with the regularized incomplete gamma function, accurate for tiny outage (the
@@ -274,7 +282,8 @@ def outage_probability(power_w, distance_m, *, snr_threshold, alpha0, noise_powe
     return special.gammainc(m, x)
 
 
-def success_probability(power_w, distance_m, *, snr_threshold, alpha0, noise_power_w, m, ce_error_var=0.0):
+def success_probability(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float, noise_power_w: float,
+                        m: float, ce_error_var: float = 0.0) -> np.ndarray:
     """psi = 1 - P = gammaincc(m, x), accurate also when psi is tiny."""
     x = outage_argument(
         power_w, distance_m, snr_threshold=snr_threshold, alpha0=alpha0,
@@ -283,14 +292,15 @@ def success_probability(power_w, distance_m, *, snr_threshold, alpha0, noise_pow
     return special.gammaincc(m, x)
 
 
-def gamma_density(m: int, x):
+def gamma_density(m: float, x: npt.ArrayLike) -> np.ndarray:
     """x^(m-1) e^(-x) / Gamma(m) = -d psi / dx, in log form (accurate for large x)."""
     return np.exp(special.xlogy(m - 1, x) - x - special.gammaln(m))
 
 
 
 
-def success_and_gradients(power_w, drone_xy, agv_xy, link: LinkParams):
+def success_and_gradients(power_w: npt.ArrayLike, drone_xy: npt.ArrayLike, agv_xy: npt.ArrayLike,
+                          link: LinkParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """psi, d psi / d p (1/W) and d psi / d q (1/m, shape (..., 2)) for each link.
 
     ``drone_xy`` broadcasts against ``agv_xy`` (..., 2). The derivatives use the log form of the
@@ -305,25 +315,26 @@ def success_and_gradients(power_w, drone_xy, agv_xy, link: LinkParams):
     return link.success_at(x), g / p, (-2.0 * g / d2)[..., None] * diff
 
 
-def realized_snr(power_w, distance_m, fading, *, alpha0, noise_power_w, ce_error_var=0.0):
+def realized_snr(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, fading: npt.ArrayLike, *, alpha0: float, noise_power_w: float,
+                 ce_error_var: float = 0.0) -> np.ndarray:
     """Effective SNR for fading power gains ``fading`` = |h|^2 (MMSE CE error as noise)."""
     beta_p = alpha0 / np.square(distance_m) * np.asarray(power_w, dtype=float)
     return (1.0 - ce_error_var) * beta_p * fading / (ce_error_var * beta_p + noise_power_w)
 
 
-def sample_fading(rng: np.random.Generator, m: int, size) -> np.ndarray:
+def sample_fading(rng: np.random.Generator, m: float, size: int | tuple[int, ...]) -> np.ndarray:
     """Nakagami-m power gains |h|^2 ~ Gamma(shape m, scale 1/m) (unit mean)."""
     return rng.standard_gamma(m, size) / m
 
 
-def sample_normalized_fading(rng: np.random.Generator, m: int, size) -> np.ndarray:
+def sample_normalized_fading(rng: np.random.Generator, m: float, size: int | tuple[int, ...]) -> np.ndarray:
     """m |h|^2 ~ Gamma(m, 1): the fading on the scale of the outage argument x.
 
     The same draws as :func:`sample_fading` times m (one generator call, one fewer operation)."""
     return rng.standard_gamma(m, size)
 
 
-def delivered_from_fading(normalized_fading, outage_arg) -> np.ndarray:
+def delivered_from_fading(normalized_fading: npt.ArrayLike, outage_arg: npt.ArrayLike) -> np.ndarray:
     """True where the command arrives: realized SNR >= G_th, i.e. ``m |h|^2 >= x``.
 
     ``G_eff >= G_th`` rearranges to ``|h|^2 >= G_th (rho + sigma^2 d^2/(alpha0 p)) / (1 - rho) = x / m``
@@ -334,7 +345,7 @@ def delivered_from_fading(normalized_fading, outage_arg) -> np.ndarray:
     return normalized_fading >= outage_arg
 
 
-def sample_delivery(rng: np.random.Generator, power_w, distance_m, link: LinkParams) -> np.ndarray:
+def sample_delivery(rng: np.random.Generator, power_w: npt.ArrayLike, distance_m: npt.ArrayLike, link: LinkParams) -> np.ndarray:
     """Draw Nakagami-m fading and return True where the command arrives (MODEL.md §2)."""
     distance_m = np.asarray(distance_m, dtype=float)
     x = link.outage_argument_sq(power_w, np.square(distance_m))

@@ -10,7 +10,7 @@ environments do (see :mod:`lawn_env.spaces`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -98,7 +98,8 @@ def measure(x_aug: np.ndarray, tracking_error: np.ndarray, position_noise: np.nd
 
 
 def transmit(x_aug: np.ndarray, du: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray,
-             normalized_fading: np.ndarray, link: channel.LinkParams, packed_t: np.ndarray):
+             normalized_fading: np.ndarray, link: channel.LinkParams,
+             packed_t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One slot's links and transition: the commands go from the drone at ``drone_next`` (..., 2)
     to the AGVs (x_aug (..., K, 6)) with powers (..., K); those whose fading m|h|^2 reaches the
     outage argument arrive. Returns the packed rows [x~[n+1], du] (..., K, 8) of the delivered
@@ -109,7 +110,8 @@ def transmit(x_aug: np.ndarray, du: np.ndarray, power_w: np.ndarray, drone_next:
     return _rows_matmul(np.concatenate((x_aug, du), axis=-1), packed_t), delivered, outage_p
 
 
-def stage_terms(packed: np.ndarray, reference_packed: np.ndarray, packed_w: np.ndarray):
+def stage_terms(packed: np.ndarray, reference_packed: np.ndarray,
+                packed_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The packed error [x~[n+1] - x~_ref[n+1], du] and the stage cost's two terms per AGV
     (e' Q1 e, du' Q2 du): (..., K, 8) and (..., K, 2)."""
     err = packed - reference_packed
@@ -139,7 +141,7 @@ class Snapshot:
     drone_position: np.ndarray
     slot: int
     config: ScenarioConfig
-    last_power_w: np.ndarray = field(default=None)
+    last_power_w: np.ndarray | None = None  # the powers of slot n-1 (warm starts); None when unknown
 
 
 class SlotRecord(NamedTuple):

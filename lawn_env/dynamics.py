@@ -10,8 +10,13 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from .config import ScenarioConfig
 from scipy import linalg
 
 __all__ = [
@@ -95,7 +100,7 @@ def command_mask(slot: int, horizon: int, period: int) -> np.ndarray:
     return (slot + np.arange(horizon)) % period == 0
 
 
-def planning_period(config) -> int:
+def planning_period(config: ScenarioConfig) -> int:
     """The control period the planners plan with: ``disturbance.control_period_slots`` when
     ``disturbance.period_aware_planning`` (the default), else 1 (the unaware ablation)."""
     d = config.disturbance
@@ -126,7 +131,7 @@ class PredictionModel:
     increment_sum: np.ndarray  # T, (2N_p, 2N_p)
 
     @classmethod
-    def from_config(cls, config) -> "PredictionModel":
+    def from_config(cls, config: ScenarioConfig) -> PredictionModel:
         ctl = config.control
         return _build_model(float(config.slot_s), int(ctl.horizon), tuple(ctl.q1_diag), tuple(ctl.q2_diag))
 
@@ -138,7 +143,7 @@ class PredictionModel:
         """r = C x~ - chi_ref per AGV: (..., K, 6) and (..., K, N_p+1, 6) -> (..., K, 6(N_p+1))."""
         return x_aug @ self.c.T - chi_ref.reshape(x_aug.shape[:-1] + (-1,))
 
-    def predict(self, x_aug: np.ndarray, dmu: np.ndarray, psi) -> np.ndarray:
+    def predict(self, x_aug: np.ndarray, dmu: np.ndarray, psi: npt.ArrayLike) -> np.ndarray:
         """Expected predicted states chi = C x~ + psi F Delta-mu, (K, N_p+1, 6)."""
         k = x_aug.shape[0]
         psi = np.broadcast_to(np.asarray(psi, dtype=float), (k,))
@@ -177,7 +182,8 @@ def stage_cost(err: np.ndarray, du: np.ndarray, q1_diag: np.ndarray, q2_diag: np
     return (err * err) @ q1_diag, (du * du) @ q2_diag
 
 
-def packed_step_matrices(a_aug: np.ndarray, b_aug: np.ndarray, q1_diag, q2_diag) -> tuple[np.ndarray, np.ndarray]:
+def packed_step_matrices(a_aug: np.ndarray, b_aug: np.ndarray, q1_diag: npt.ArrayLike,
+                         q2_diag: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """The transition and the stage cost on the packed row [x~, Delta-u] (8 entries), for the
     simulator's hot path: ``[x~, du] @ T = [A~ x~ + B~ du, du]`` and, with ``e`` the packed
     error ``[x~ - x~_ref, du]``, ``(e * e) @ W = [e' Q1 e, du' Q2 du]``. Built from the same
@@ -193,7 +199,8 @@ def packed_step_matrices(a_aug: np.ndarray, b_aug: np.ndarray, q1_diag, q2_diag)
     return t, w
 
 
-def expected_cost_coefficients(model: PredictionModel, x_aug: np.ndarray, chi_ref: np.ndarray, dmu: np.ndarray):
+def expected_cost_coefficients(model: PredictionModel, x_aug: np.ndarray, chi_ref: np.ndarray,
+                               dmu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """L, S, W of J^_k(psi) = L psi^2 + 2 S psi + W for fixed Delta-mu (paper, P4).
 
     L = Dmu' F'Q4F Dmu, S = (C x~ - chi_ref)' Q4 F Dmu, W = Dmu' Q5 Dmu + (C x~ - chi_ref)' Q4 (C x~ - chi_ref).
@@ -203,7 +210,8 @@ def expected_cost_coefficients(model: PredictionModel, x_aug: np.ndarray, chi_re
     return cost_coefficients(model, r @ model.ftq4.T, ((r @ model.q4) * r).sum(axis=1), dmu)
 
 
-def cost_coefficients(model: PredictionModel, linear: np.ndarray, constant: np.ndarray, dmu: np.ndarray):
+def cost_coefficients(model: PredictionModel, linear: np.ndarray, constant: np.ndarray,
+                      dmu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """L, S, W from the slot's precomputed ``linear`` = F'Q4 r (K, 2N_p) and ``constant`` =
     r'Q4 r (K,) (see :meth:`lawn_env.mpc.OutageAwareMPC.prepare`); the one implementation of the
     coefficients of P4. The envelope derivative of the QP's value in psi is ``2 psi L + 2 S``."""

@@ -50,6 +50,7 @@ from pydantic.dataclasses import dataclass
 
 from . import spaces
 from .channel import LinkParams
+from .config import ScenarioConfig
 from .drone import move_drone, move_drones
 from .mpc import OutageAwareMPC
 
@@ -201,7 +202,7 @@ class ActionLayout:
     the observation's decode carry the same arrays.
     """
 
-    def __init__(self, config, role: str = "joint", interface: RLInterface | Mapping | str | None = None,
+    def __init__(self, config: ScenarioConfig, role: str = "joint", interface: RLInterface | Mapping | str | None = None,
                  mpc_backend: str = "daqp"):
         if role not in ROLES:
             raise ValueError(f"role={role!r}; valid: {', '.join(ROLES)}")

@@ -27,10 +27,15 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from .dynamics import PredictionModel, command_mask, planning_period
+
+if TYPE_CHECKING:
+    from .config import ScenarioConfig
 
 __all__ = ["MPCSolution", "OutageAwareMPC", "SlotData", "BACKENDS"]
 
@@ -303,7 +308,7 @@ class OutageAwareMPC:
         self.backend = _make_backend(state["backend"], self.num_agvs, self._constraint, self._hessians)
 
     @classmethod
-    def from_config(cls, config, backend: str = "daqp") -> "OutageAwareMPC":
+    def from_config(cls, config: ScenarioConfig, backend: str = "daqp") -> OutageAwareMPC:
         ctl = config.control
         return cls(PredictionModel.from_config(config), config.num_agvs, ctl.accel_max_mps2,
                    ctl.accel_increment_max_mps2, backend=backend, control_period=planning_period(config))
@@ -361,11 +366,11 @@ class OutageAwareMPC:
         return p, q
 
     # ------------------------------------------------------------------ solve
-    def solve(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi, slot: int | None = None) -> MPCSolution:
+    def solve(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi: npt.ArrayLike, slot: int | None = None) -> MPCSolution:
         """Solve the K QPs at success probabilities ``psi`` (K,) (``slot`` as for :meth:`prepare`)."""
         return self.solve_prepared(self.prepare(x_aug, chi_ref, slot), psi)
 
-    def solve_prepared(self, data: "SlotData", psi) -> MPCSolution:
+    def solve_prepared(self, data: SlotData, psi: npt.ArrayLike) -> MPCSolution:
         """Solve the K QPs of a prepared slot at success probabilities ``psi`` (K,): the AO's
         control block calls this once per iteration with the same ``data`` (the bounds are then
         passed to the workspaces only once)."""

@@ -27,9 +27,13 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 from scipy.interpolate import CubicSpline
+
+if TYPE_CHECKING:
+    from .config import ScenarioConfig
 
 __all__ = [
     "TimeWarp",
@@ -109,7 +113,7 @@ class _Curve:
         return evaluate_paths([self], t)[0]
 
 
-def evaluate_paths(paths, t: np.ndarray) -> np.ndarray:
+def evaluate_paths(paths: Sequence[_Curve], t: np.ndarray) -> np.ndarray:
     """Reference augmented states of many paths at times ``t``: (P, T, 6), row i equal to
     ``paths[i].evaluate(t)``. The paths of each family are evaluated together, a few numpy calls
     over a leading path axis (vel = c'(theta) theta', acc = c''(theta) theta'^2 + c'(theta) theta'')."""
@@ -144,7 +148,7 @@ class Lemniscate(_Curve):
     rotation: float = 0.0
 
     @classmethod
-    def curves(cls, paths, theta):
+    def curves(cls, paths: Sequence[Lemniscate], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         sx = np.array([[p.sx] for p in paths])
         sy = np.array([[p.sy] for p in paths])
         rot_t = np.stack([_rotation(p.rotation).T for p in paths])
@@ -184,7 +188,7 @@ class RoundedRectangle(_Curve):
         ]
 
     @classmethod
-    def curves(cls, paths, theta):
+    def curves(cls, paths: Sequence[_Curve], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         segs = [p._segments() for p in paths]
         lengths = np.array([[s[1] for s in seg] for seg in segs])
         starts = np.stack([np.concatenate([[0.0], np.cumsum(row)[:-1]]) for row in lengths])
@@ -230,7 +234,7 @@ class Sinusoid(_Curve):
     phase: float = 0.0
 
     @classmethod
-    def curves(cls, paths, theta):
+    def curves(cls, paths: Sequence[_Curve], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         u = np.array([[[math.cos(p.heading), math.sin(p.heading)]] for p in paths])  # (G, 1, 2)
         n = np.stack([-u[..., 1], u[..., 0]], axis=-1)
         k = np.array([[p.wavenumber] for p in paths])
@@ -264,7 +268,7 @@ class SplinePath(_Curve):
         return _periodic_spline(self.waypoints)
 
     @classmethod
-    def curves(cls, paths, theta):
+    def curves(cls, paths: Sequence[_Curve], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         out = [np.empty(theta.shape + (2,)) for _ in range(3)]
         for i, p in enumerate(paths):  # one spline per path (waypoint counts differ)
             spline, period = p._spline()
@@ -292,7 +296,7 @@ class Envelope:
     num_steps: int
 
     @classmethod
-    def from_config(cls, config, num_steps: int) -> "Envelope | None":
+    def from_config(cls, config: ScenarioConfig, num_steps: int) -> Envelope | None:
         """The envelope of ``config`` (None when ``reference.envelope_fraction`` is None)."""
         f = config.reference.envelope_fraction
         if f is None:
@@ -344,7 +348,7 @@ def fit_envelopes(paths: list, envelope: Envelope, max_rounds: int = 60) -> list
     return out
 
 
-def fit_envelope(path: "_Curve", envelope: Envelope, max_rounds: int = 60):
+def fit_envelope(path: _Curve, envelope: Envelope, max_rounds: int = 60) -> _Curve:
     """``path`` slowed down by the largest uniform time scaling in (0, 1] that keeps it inside
     ``envelope`` at every slot (the path itself when it already is).
 
@@ -371,7 +375,7 @@ def fit_envelope(path: "_Curve", envelope: Envelope, max_rounds: int = 60):
     return slowed_until(path, fits, factor)
 
 
-def slowed_until(path: "_Curve", accept, first: float = 1.0, refine: int = 30):
+def slowed_until(path: _Curve, accept: Callable[[_Curve], bool], first: float = 1.0, refine: int = 30) -> _Curve:
     """``path`` slowed by a uniform time scaling in (0, ``first``] that ``accept`` takes: halvings
     until one is accepted (a path slowed to a standstill demands nothing and stays where it
     starts), then ``refine`` bisection steps back up towards the largest accepted factor."""
@@ -402,7 +406,8 @@ def _scaled(area_m, x: float, y: float) -> tuple[float, float]:
     return (x0 + (x1 - x0) * x / 200.0, y0 + (y1 - y0) * y / 200.0)
 
 
-def paper_paths(num_agvs: int, area_m=(0.0, 200.0, 0.0, 200.0), envelope: Envelope | None = None) -> list[_Curve]:
+def paper_paths(num_agvs: int, area_m: Sequence[float] = (0.0, 200.0, 0.0, 200.0),
+                envelope: Envelope | None = None) -> list[_Curve]:
     """The fixed paper-like set (MODEL.md §1): K = 4 puts two AGVs with the more complex paths
     (sinusoidal sweep, spline with tight bends) in the lower region, as in the paper's Fig. 6;
     K = 3 keeps the first three. Defined on the nominal 200 m area and scaled to ``area_m``;
@@ -488,7 +493,8 @@ def _inside_many(tables: np.ndarray, area_m, margin: float) -> np.ndarray:
             & (y >= y0 + margin).all(axis=1) & (y <= y1 - margin).all(axis=1))
 
 
-def sample_paths(rngs: list, num_agvs: int, families, area_m, duration_s: float, margin_m: float = 2.0,
+def sample_paths(rngs: Sequence[np.random.Generator], num_agvs: int, families: Sequence[str], area_m: Sequence[float],
+                 duration_s: float, margin_m: float = 2.0,
                  max_tries: int = 20, envelope: Envelope | None = None) -> list[list[_Curve]]:
     """:func:`random_paths` for many generators at once: ``[random_paths(rng, ...) for rng in
     rngs]``, the same draws from each generator and the same paths, with the envelope fits and
@@ -520,7 +526,8 @@ def sample_paths(rngs: list, num_agvs: int, families, area_m, duration_s: float,
     return paths
 
 
-def random_paths(rng: np.random.Generator, num_agvs: int, families, area_m, duration_s: float,
+def random_paths(rng: np.random.Generator, num_agvs: int, families: Sequence[str], area_m: Sequence[float],
+                 duration_s: float,
                  margin_m: float = 2.0, max_tries: int = 20, envelope: Envelope | None = None) -> list[_Curve]:
     """Draw ``num_agvs`` paths from ``families`` (seeded by ``rng``), each inside the area
     (with ``margin_m``, at most 5 % of the shorter side) over ``[0, duration_s]``; draws that leave
@@ -531,6 +538,6 @@ def random_paths(rng: np.random.Generator, num_agvs: int, families, area_m, dura
     return sample_paths([rng], num_agvs, families, area_m, duration_s, margin_m, max_tries, envelope)[0]
 
 
-def reference_table(paths, num_steps: int, slot_s: float) -> np.ndarray:
+def reference_table(paths: Sequence[_Curve], num_steps: int, slot_s: float) -> np.ndarray:
     """Reference augmented states at slots 0..num_steps-1: (K, num_steps, 6) (any number of paths)."""
     return evaluate_paths(paths, np.arange(num_steps) * slot_s)

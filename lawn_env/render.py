@@ -6,7 +6,14 @@ an off-screen Agg canvas; ``human`` opens a pyplot window and refreshes it.
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from .config import ScenarioConfig
+    from .core import Simulation
 
 __all__ = ["Renderer", "plot_episode"]
 
@@ -49,7 +56,7 @@ def _draw(ax, sim, *, links: bool = True, trails: bool = True, title: str | None
 
 
 class Renderer:
-    def __init__(self, config, human: bool = False):
+    def __init__(self, config: ScenarioConfig, human: bool = False):
         self.human = human
         if human:
             import matplotlib.pyplot as plt
@@ -65,7 +72,7 @@ class Renderer:
             self.canvas = FigureCanvasAgg(self.fig)
             self.ax = self.fig.add_subplot(111)
 
-    def draw(self, sim):
+    def draw(self, sim: Simulation) -> np.ndarray | None:
         _draw(self.ax, sim)
         if self.human:
             self.fig.canvas.draw_idle()
@@ -74,12 +81,12 @@ class Renderer:
         self.canvas.draw()
         return np.asarray(self.canvas.buffer_rgba())[:, :, :3].copy()
 
-    def close(self):
+    def close(self) -> None:
         if self.human:
             self._plt.close(self.fig)
 
 
-def plot_episode(sim, path, title: str | None = None) -> None:
+def plot_episode(sim: Simulation, path: str | Path, title: str | None = None) -> None:
     """Save a PNG (or any matplotlib format, by extension) of a finished or running episode."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure

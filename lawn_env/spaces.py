@@ -17,7 +17,14 @@ followed by 3 global features (see :meth:`ObservationLayout.feature_names`).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from .batch import BatchSimulation
+    from .config import ScenarioConfig
+    from .core import Simulation
 
 __all__ = [
     "ObservationLayout",
@@ -38,7 +45,7 @@ POSITION_ERROR_SCALE_M = 10.0
 VELOCITY_SCALE_MPS = 5.0
 
 
-def check_action(action, size: int, name: str = "action") -> np.ndarray:
+def check_action(action: Any, size: int, name: str = "action") -> np.ndarray:
     """Validate a normalized action as Gymnasium's ``Box.contains`` would: real numbers (a float or
     integer array, or a flat list of numbers) of shape exactly ``(size,)``, finite, inside [-1, 1].
     Complex, boolean, string and object inputs and other shapes raise ``ValueError`` naming
@@ -134,7 +141,7 @@ class ObservationLayout:
 
     global_features = 3
 
-    def __init__(self, config):
+    def __init__(self, config: ScenarioConfig):
         self.num_agvs = config.num_agvs
         self.horizon = config.control.horizon
         self.num_slots = config.num_slots
@@ -237,7 +244,7 @@ class ObservationLayout:
         win *= self._ref_scale
         return win.reshape(win.shape[:-2] + (-1,))
 
-    def encode(self, sim) -> np.ndarray:
+    def encode(self, sim: Simulation) -> np.ndarray:
         """Observation of a :class:`~lawn_env.core.Simulation` at its current slot (a new array).
 
         Filled into a persistent float64 buffer through fixed views, then cast once: this runs
@@ -264,7 +271,7 @@ class ObservationLayout:
         self._buffer[-1] = sim.slot / self.num_slots
         return self._buffer.astype(np.float32)
 
-    def encode_batch(self, bsim, bound: float | None = None) -> np.ndarray:
+    def encode_batch(self, bsim: BatchSimulation, bound: float | None = None) -> np.ndarray:
         """Observations of a :class:`~lawn_env.batch.BatchSimulation`: (B, size) float32, row i
         equal to :meth:`encode` of scenario i up to float32 rounding (the same features and
         scalings, batched), every feature clipped to ``[-bound, bound]`` when ``bound`` is given

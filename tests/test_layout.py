@@ -1,6 +1,7 @@
 """The package's layering (README, Layout): training -> agents -> lawn_env, no import cycles
-between modules (function-level imports included), and no module importing another's private
-names."""
+between modules (function-level imports included; imports for annotations only, under
+``if TYPE_CHECKING:``, aside), no module importing another's private names, and every public
+function annotated."""
 
 import ast
 from pathlib import Path
@@ -20,12 +21,25 @@ def _modules() -> dict[str, Path]:
     return mods
 
 
+def _runtime_nodes(tree: ast.Module):
+    """Every node except those under ``if TYPE_CHECKING:`` (imports for annotations only)."""
+    stack = [tree]
+    while stack:
+        node = stack.pop()
+        yield node
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.If) and isinstance(child.test, ast.Name) and child.test.id == "TYPE_CHECKING":
+                stack.extend(child.orelse)
+                continue
+            stack.append(child)
+
+
 def _imports(mods: dict[str, Path]):
-    """module -> set of modules it imports, and the (module, from, name) private imports."""
+    """module -> set of modules it imports at run time, and the (module, from, name) private imports."""
     edges, private = {m: set() for m in mods}, []
     for m, f in mods.items():
         package = m.split(".") if f.name == "__init__.py" else m.split(".")[:-1]
-        for node in ast.walk(ast.parse(f.read_text())):
+        for node in _runtime_nodes(ast.parse(f.read_text())):
             if isinstance(node, ast.ImportFrom):
                 target = node.module
                 if node.level:
@@ -95,3 +109,27 @@ def test_the_checker_sees_cycles_and_private_imports():
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert ("training.train", "training.protocol", "TRAIN_SEED_BASE") not in PRIVATE
     assert "training.protocol" in EDGES["training.train"] and "agents.base" in EDGES["agents.policies"]
+
+
+def _unannotated(tree: ast.Module) -> list[str]:
+    """Public functions and methods (of public classes) with an unannotated parameter or return."""
+    out = []
+
+    def visit(node, owner=""):
+        for n in ast.iter_child_nodes(node):
+            if isinstance(n, ast.ClassDef) and not n.name.startswith("_"):
+                visit(n, f"{n.name}.")
+            elif isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and (n.name == "__init__" or not n.name.startswith("_")):
+                params = [a for a in n.args.posonlyargs + n.args.args + n.args.kwonlyargs if a.arg not in ("self", "cls")]
+                params += [a for a in (n.args.vararg, n.args.kwarg) if a is not None]
+                if any(a.annotation is None for a in params) or (n.returns is None and n.name != "__init__"):
+                    out.append(f"{owner}{n.name}")
+
+    visit(tree)
+    return out
+
+
+def test_every_public_function_is_annotated():
+    missing = {name: _unannotated(ast.parse(path.read_text())) for name, path in _modules().items()}
+    assert {name: funcs for name, funcs in missing.items() if funcs} == {}
+    assert _unannotated(ast.parse("def f(x): pass\nclass C:\n    def g(self, y: int): pass")) == ["f", "C.g"]

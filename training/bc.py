@@ -25,9 +25,10 @@ import numpy as np
 
 from agents import Step, make_policy, rollout
 from agents.learned import ObsNormalizer, SB3Policy
+from agents.rollouts import Actor
 from agents.runs import algorithm_class
 from lawn_env import ScenarioConfig
-from lawn_env.interface import ActionLayout, Decision, resolve_interface
+from lawn_env.interface import ActionLayout, Decision, RLInterface, resolve_interface
 
 __all__ = ["collect", "fit", "train_bc_run", "BC_TARGETS"]
 
@@ -35,7 +36,8 @@ __all__ = ["collect", "fit", "train_bc_run", "BC_TARGETS"]
 BC_TARGETS = ("ppo", "sac")
 
 
-def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, interface, actor=None):
+def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, interface: RLInterface | Mapping | str | None,
+            actor: Actor | None = None) -> tuple[np.ndarray, np.ndarray, list[float]]:
     """``steps`` transitions of seeded episodes of the v0 env; states visited by ``actor`` (a v0
     policy, default the expert) and labelled with the expert's decision encoded in the
     interface's action scheme. Returns the observations as the learner sees them (the
@@ -89,7 +91,7 @@ def _deterministic_action(model, obs_tensor):
     return model.policy.get_distribution(obs_tensor).mode()
 
 
-def fit(model, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_size: int, learning_rate: float,
+def fit(model: Any, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_size: int, learning_rate: float,
         seed: int) -> list[float]:
     """Mean-squared-error regression of the model's deterministic action on the expert's; returns
     the loss of every epoch (over the whole data set, before the epoch's updates for epoch 0)."""

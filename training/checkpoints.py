@@ -27,6 +27,7 @@ import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 __all__ = ["Checkpoint", "latest_checkpoint", "write_checkpoint", "restore_history", "clear_history",
            "HISTORY_FILES", "BEST_FILES"]
@@ -68,7 +69,7 @@ def _history(out_dir: Path) -> dict[str, int]:
     return sizes
 
 
-def write_checkpoint(out_dir: Path, model, state: dict) -> Checkpoint:
+def write_checkpoint(out_dir: Path, model: Any, state: dict) -> Checkpoint:
     """Save ``model`` (and its normalization statistics and replay buffer) with the run's history
     lengths as ``checkpoints/<steps>/``, atomically; older checkpoints are removed."""
     out_dir = Path(out_dir)

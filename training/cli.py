@@ -51,7 +51,7 @@ def _add_config_args(p: argparse.ArgumentParser) -> None:
                    help="config override with a dotted key, e.g. --set channel.blocklength=256 (repeatable)")
 
 
-def cmd_demo(args) -> int:
+def cmd_demo(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
     cfg = _config(args)
@@ -70,7 +70,7 @@ def _policy_kwargs(items: list[str]) -> dict:
     return _parse_overrides(items, "--policy-arg")
 
 
-def cmd_evaluate(args) -> int:
+def cmd_evaluate(args: argparse.Namespace) -> int:
     from .evaluate import evaluate, format_table, summarize, write_rows
 
     cfg = _config(args)
@@ -91,7 +91,7 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
-def cmd_benchmark(args) -> int:
+def cmd_benchmark(args: argparse.Namespace) -> int:
     from agents import make_policy
 
     from .benchmark import run_benchmark
@@ -109,7 +109,7 @@ def cmd_benchmark(args) -> int:
     return 0
 
 
-def cmd_gap(args) -> int:
+def cmd_gap(args: argparse.Namespace) -> int:
     from agents import make_policy
 
     from .gap import convergence, format_gap_table, global_power_shares, run_gap, summarize_gaps, write_gap_outputs
@@ -147,7 +147,7 @@ def cmd_gap(args) -> int:
     return 0
 
 
-def cmd_train(args) -> int:
+def cmd_train(args: argparse.Namespace) -> int:
     try:
         import stable_baselines3  # noqa: F401
         import supersuit  # noqa: F401
@@ -195,7 +195,7 @@ def cmd_train(args) -> int:
     return 0
 
 
-def cmd_zoo(args) -> int:
+def cmd_zoo(args: argparse.Namespace) -> int:
     from .zoo import build_zoo, format_zoo_list, train_recipes
 
     if args.action == "list":
@@ -219,7 +219,7 @@ def cmd_zoo(args) -> int:
 ZOO_HINT = "agents/zoo/<name>/ (policy.zip, normalizer.npz, agent.json)"
 
 
-def cmd_sweep(args) -> int:
+def cmd_sweep(args: argparse.Namespace) -> int:
     from .sweep import load_spec, run_sweep, summarize_sweep
 
     spec = load_spec(args.spec)
@@ -230,7 +230,7 @@ def cmd_sweep(args) -> int:
     return 0
 
 
-def cmd_figures(args) -> int:
+def cmd_figures(args: argparse.Namespace) -> int:
     from .figures import make_figures
 
     if args.docs and args.quick:

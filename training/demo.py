@@ -9,10 +9,12 @@ import gymnasium as gym
 
 import lawn_env  # noqa: F401  (registers the ids)
 from agents import HeuristicPolicy, rollout
+from lawn_env import ScenarioConfig
 from lawn_env.render import plot_episode
 
 
-def run_demo(seed: int, out_dir: Path, config=None, overrides: dict | None = None) -> dict:
+def run_demo(seed: int, out_dir: Path, config: ScenarioConfig | str | None = None,
+             overrides: dict | None = None) -> dict:
     """Run one episode, write ``metrics.json`` and ``paths.png`` into ``out_dir``; return the metrics."""
     env = gym.make("lawn/Joint-v0", config=config, **(overrides or {}))
     episode = rollout(env, HeuristicPolicy(env.unwrapped.config), seed)

@@ -13,14 +13,14 @@ import math
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import gymnasium as gym
 import numpy as np
 from tqdm.auto import tqdm
 
 import lawn_env
-from agents import make_policy
+from agents import Policy, make_policy
 from agents.rollouts import Step, rollout
 from lawn_env import ScenarioConfig
 
@@ -37,7 +37,7 @@ SUMMARY_METRICS = (
 )
 
 
-def episode_row(policy, env_id: str, config: ScenarioConfig, seed: int) -> dict:
+def episode_row(policy: Policy, env_id: str, config: ScenarioConfig, seed: int) -> dict:
     """One seeded, full episode of the unmodified scenario (``env_id`` of ``lawn_env.ENV_IDS``)
     under a built policy (:func:`agents.rollout`); returns a flat row of MODEL.md §6 metrics plus
     decision statistics."""
@@ -110,7 +110,7 @@ def worker_pool(workers: int) -> ProcessPoolExecutor:
                                initializer=_die_with_parent, initargs=(os.getpid(),))
 
 
-def pool_map(fn, tasks: list, workers: int, progress: bool, desc: str) -> list:
+def pool_map(fn: Callable[[Any], Any], tasks: list, workers: int, progress: bool, desc: str) -> list:
     """``[fn(t) for t in tasks]`` in a process pool when ``workers > 1``, with a progress bar;
     results in task order whatever the scheduling."""
     bar = tqdm(total=len(tasks), desc=desc, unit="ep", disable=None if progress else True, leave=False)
@@ -130,7 +130,7 @@ def pool_map(fn, tasks: list, workers: int, progress: bool, desc: str) -> list:
         bar.close()
 
 
-def summarize(rows: list[dict], metrics=SUMMARY_METRICS, by: str = "policy") -> list[dict]:
+def summarize(rows: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy") -> list[dict]:
     """Mean and 95 % t-interval half-width of each metric per group, in first-seen group order."""
     groups: dict[str, list[dict]] = {}
     for row in rows:
@@ -157,7 +157,7 @@ def paired_cost_difference(rows: list[dict], reference: str, metric: str = "cont
     return out
 
 
-def format_table(summary: list[dict], metrics=SUMMARY_METRICS, by: str = "policy",
+def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy",
                  paired: dict[str, tuple[float, float]] | None = None, reference: str | None = None) -> str:
     """A Markdown table: mean ± 95 % interval per metric (decision time in ms), and optionally the
     paired relative cost difference against ``reference``."""

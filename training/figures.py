@@ -22,7 +22,7 @@ import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -85,7 +85,7 @@ def _f(row, key) -> float:
     return float(row[key])
 
 
-def slot_cost(row, slot: int = REPORT_SLOT) -> float:
+def slot_cost(row: Mapping[str, Any], slot: int = REPORT_SLOT) -> float:
     """The realized stage cost of ``slot`` in an episode row (``stage_costs``, a JSON list)."""
     costs = json.loads(row["stage_costs"]) if isinstance(row["stage_costs"], str) else row["stage_costs"]
     return float(costs[min(slot, len(costs) - 1)])
@@ -622,7 +622,7 @@ def _tables(exp: Experiment, out: Path, quick: bool, workers: int, progress: boo
     return tables
 
 
-def make_figures(names, out: Path, quick: bool = False, workers: int = 1, progress: bool = True) -> dict[str, float]:
+def make_figures(names: Sequence[str], out: Path, quick: bool = False, workers: int = 1, progress: bool = True) -> dict[str, float]:
     """Build the named figures (all when ``names`` is empty): run the missing table rows, plot;
     returns seconds per figure."""
     names = list(names) or list(EXPERIMENTS)

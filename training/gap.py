@@ -221,7 +221,7 @@ def plot_convergence(rows: list[dict], path: Path) -> None:
     fig.savefig(path)
 
 
-def write_gap_outputs(rows, summary, conv_rows, out_dir: Path) -> None:
+def write_gap_outputs(rows: list[dict], summary: list[dict], conv_rows: list[dict], out_dir: Path) -> None:
     out_dir = Path(out_dir)
     write_rows(rows, out_dir / "gap_rows.csv")
     write_rows(summary, out_dir / "gap_summary.csv")

@@ -45,7 +45,7 @@ def replace_block(path: Path, name: str, content: str, source: str | None = None
     path.write_text(text[: i + len(begin)] + "\n" + body + "\n" + text[j:])
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="splice a Markdown file into a generated README block")
     parser.add_argument("name")
     parser.add_argument("file")

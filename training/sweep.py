@@ -31,7 +31,7 @@ import itertools
 import json
 import os
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import lawn_env
 from lawn_env import presets
@@ -113,7 +113,7 @@ def load_spec(spec: str | Path | Mapping[str, Any]) -> SweepSpec:
     return out
 
 
-def point_config(spec: Mapping[str, Any], point: Mapping[str, Any]):
+def point_config(spec: Mapping[str, Any], point: Mapping[str, Any]) -> lawn_env.ScenarioConfig:
     """The scenario of one grid point: its ``preset`` (a grid key may switch presets) with the
     spec's fixed overrides, then the point's other values."""
     rest = {k: v for k, v in point.items() if k != "preset"}
@@ -270,7 +270,7 @@ def _canonical(rows: list[dict], wanted: Mapping[tuple, Any]) -> list[dict]:
     return foreign + sorted((r for r in rows if _key(r) in rank), key=lambda r: rank[_key(r)])
 
 
-def execute(fn, tasks, workers: int, backend: str):
+def execute(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int, backend: str) -> Iterator[Any]:
     """Yield ``fn(task)`` for every task as the runs finish, on a process pool or on Ray
     (local, or the cluster at ``$RAY_ADDRESS``); ``fn`` must be a module-level function."""
     if backend == "ray":
@@ -307,7 +307,8 @@ def execute(fn, tasks, workers: int, backend: str):
                 yield fut.result()
 
 
-def summarize_sweep(rows: list[dict], grid_keys, metrics=("control_cost", "rmse_m", "outage_rate")) -> str:
+def summarize_sweep(rows: list[dict], grid_keys: Sequence[str],
+                    metrics: Sequence[str] = ("control_cost", "rmse_m", "outage_rate")) -> str:
     """Markdown table: mean ± 95 % interval of ``metrics`` per grid point and policy."""
     groups: dict[tuple, list[dict]] = {}
     for r in rows:

@@ -45,7 +45,7 @@ def read_csv(path: Path | str) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
-def parse_bool(value) -> bool:
+def parse_bool(value: object) -> bool:
     """A boolean table cell: a bool, or ``true``/``false``/``1``/``0`` in any case."""
     if isinstance(value, bool):
         return value

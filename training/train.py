@@ -38,13 +38,18 @@ import time
 from pathlib import Path
 from typing import Any, Mapping
 
-
 from agents.runs import ALGORITHMS, algorithm_class, read_json, read_run
 from lawn_env import ScenarioConfig
-from lawn_env.interface import resolve_interface
+from lawn_env.interface import RLInterface, resolve_interface
 
 from .checkpoints import Checkpoint, clear_history, latest_checkpoint, restore_history
-from .protocol import TRAIN_SEED_BASE, VALIDATION_SEED_BASE, limit_torch_threads, versions, write_learning_curve
+from .protocol import (
+    TRAIN_SEED_BASE,
+    VALIDATION_SEED_BASE,
+    limit_torch_threads,
+    versions,
+    write_learning_curve,
+)
 
 __all__ = ["ALGOS", "TRAIN_ENV_IDS", "load_hyperparams", "train", "train_seeds", "train_task", "resume", "RunSpec",
            "TRAIN_SEED_BASE", "VALIDATION_SEED_BASE"]
@@ -83,9 +88,10 @@ def _check_algo_kwargs(cls, kwargs: Mapping[str, Any]) -> None:
         raise ValueError(f"unknown {cls.__name__} hyperparameters {unknown}; valid: {', '.join(sorted(valid))}")
 
 
-def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, normalize, monitor_dir: Path | None,
-                   vecnormalize_path: Path | None = None, training: bool = True, interface=None,
-                   append_monitor: bool = False, vec: str = "dummy"):
+def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, normalize: bool | Mapping[str, Any],
+                   monitor_dir: Path | None, vecnormalize_path: Path | None = None, training: bool = True,
+                   interface: RLInterface | Mapping | str | None = None, append_monitor: bool = False,
+                   vec: str = "dummy") -> Any:
     """A seeded SB3 VecEnv (Monitor-wrapped) with optional VecNormalize, on the given interface;
     ``append_monitor`` continues existing monitor logs (a resumed run) instead of replacing them.
     ``vec="native"`` runs the copies in lawn's batched vector env (:mod:`training.vec`; episode
@@ -300,7 +306,7 @@ def train_task(task: dict) -> dict:
 
 
 def train_seeds(seeds: list[int], out_dir: Path, workers: int = 1, progress: bool = True, backend: str = "process",
-                **kwargs) -> dict:
+                **kwargs: Any) -> dict:
     """Train one run per seed into ``out_dir/seed-<s>`` (a process pool when ``workers > 1``, or
     Ray with ``backend="ray"``, as ``lawn sweep``) and summarize the selected models' validation
     costs across seeds (mean and 95 % interval)."""

@@ -9,14 +9,14 @@ lengths) and ``VecNormalize`` go on top as on any SB3 VecEnv.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Mapping
 
+import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
-import gymnasium as gym
-
 from lawn_env import ENV_IDS, RL_ENV_IDS, ScenarioConfig
+from lawn_env.interface import RLInterface
 
 __all__ = ["NATIVE_ENV_IDS", "NativeVecEnv"]
 
@@ -28,7 +28,8 @@ class NativeVecEnv(VecEnv):
     """``n_envs`` scenarios of ``env_id`` (``NATIVE_ENV_IDS``) in one batched simulation, on
     ``interface`` (an RL id's default: ``"rl"``)."""
 
-    def __init__(self, config: ScenarioConfig, n_envs: int, env_id: str = "lawn/Joint-v0", interface=None):
+    def __init__(self, config: ScenarioConfig, n_envs: int, env_id: str = "lawn/Joint-v0",
+                 interface: RLInterface | Mapping | str | None = None):
         if env_id not in NATIVE_ENV_IDS:
             raise ValueError(f"env_id={env_id!r}: the native vector envs are {', '.join(NATIVE_ENV_IDS)}")
         kwargs = {} if interface is None else {"interface": interface}  # None keeps the id's own (RL ids: "rl")
@@ -39,7 +40,7 @@ class NativeVecEnv(VecEnv):
         self._actions: np.ndarray | None = None
         self.render_mode = None
 
-    def reset(self):
+    def reset(self) -> np.ndarray:
         obs, _ = self.venv.reset(seed=self._seed)
         self._seed = None
         return obs
@@ -47,7 +48,7 @@ class NativeVecEnv(VecEnv):
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = actions  # SB3 clips Box actions before stepping; the env rejects what it cannot take
 
-    def step_wait(self):
+    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
         obs, reward, terminated, truncated, info = self.venv.step(self._actions)
         done = terminated | truncated
         infos: list[dict[str, Any]] = [{"stage_cost": float(c)} for c in info["stage_cost"]]
@@ -57,7 +58,7 @@ class NativeVecEnv(VecEnv):
                 infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
         return obs, reward.astype(np.float32), done, infos
 
-    def seed(self, seed: int | None = None):
+    def seed(self, seed: int | None = None) -> list[int | None]:
         self._seed = seed
         return [None if seed is None else seed + i for i in range(self.num_envs)]
 
@@ -65,14 +66,14 @@ class NativeVecEnv(VecEnv):
         self.venv.close()
 
     # attribute access as SB3's VecEnvs offer it (one batched env: the same answer for every index)
-    def get_attr(self, attr_name: str, indices=None) -> list:
+    def get_attr(self, attr_name: str, indices: Any = None) -> list:
         return [getattr(self.venv, attr_name)] * len(self._get_indices(indices))
 
-    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
         setattr(self.venv, attr_name, value)
 
-    def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list:
+    def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list:
         raise NotImplementedError(f"env_method({method_name!r}): the native vector env has no per-env objects")
 
-    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
         return [False] * len(self._get_indices(indices))

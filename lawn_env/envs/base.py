@@ -25,8 +25,9 @@ INFO_KEYS = ("slot", "stage_cost", "reward_tracking", "reward_effort", "delivere
 COMM_INFO_KEYS = ("mpc_iterations", "mpc_fallbacks", "success_probability_planned")
 
 
-def slot_info(slot, cost_tracking, cost_effort, delivered, outage_probability, power_w, drone_position,
-              applied_increment) -> dict:
+def slot_info(slot: int, cost_tracking: float, cost_effort: float, delivered: np.ndarray,
+              outage_probability: np.ndarray, power_w: np.ndarray, drone_position: np.ndarray,
+              applied_increment: np.ndarray) -> dict[str, Any]:
     """One slot's info dict (``INFO_KEYS``, flat: TorchRL's readers turn every value into a tensor):
     ``slot`` int64, ``stage_cost`` and its split ``reward_tracking`` + ``reward_effort`` (negated)
     float64, ``delivered`` (K,) bool,
@@ -86,7 +87,7 @@ class SimulationView:
             raise RuntimeError("call reset() before snapshot()")
         return self.sim.snapshot()
 
-    def render(self):
+    def render(self) -> np.ndarray | None:
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
             return None
@@ -98,7 +99,7 @@ class SimulationView:
             self._renderer = Renderer(self.config, human=self.render_mode == "human")
         return self._renderer.draw(self.sim)
 
-    def close(self):
+    def close(self) -> None:
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
@@ -119,18 +120,18 @@ class LawnEnvBase(SimulationView, gym.Env):
 
     # ------------------------------------------------------------------ gym API
     @property
-    def spec(self):
+    def spec(self) -> gym.envs.registration.EnvSpec | None:
         """The ``EnvSpec`` ``gym.make`` gave this env, with ``max_episode_steps`` = ``num_slots``:
         the episode length, which the env enforces itself (truncation at ``num_slots``)."""
         return self.__dict__.get("_spec")
 
     @spec.setter
-    def spec(self, value) -> None:
+    def spec(self, value: gym.envs.registration.EnvSpec | None) -> None:
         if value is not None and value.max_episode_steps is None:
             value = dataclasses.replace(value, max_episode_steps=self.config.num_slots)
         self.__dict__["_spec"] = value
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
         self.sim.reset(self.np_random)

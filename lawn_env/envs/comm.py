@@ -90,7 +90,7 @@ class CommEnv(LawnEnvBase):
     def _on_reset(self) -> None:
         self.mpc.reset()  # episodes are independent of one another, warm starts included
 
-    def step(self, action):
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         self._check_running()
         _, power, drone_next = self._decide(check_action(action, self.actions.size))
         psi = self.sim.planning_success(power, drone_next)

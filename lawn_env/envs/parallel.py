@@ -105,7 +105,7 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
             raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.possible_agents)}") from None
 
     # ------------------------------------------------------------------ API
-    def reset(self, seed: int | None = None, options: dict | None = None):
+    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
         if seed is not None:
             self._np_random, _ = seeding.np_random(seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
@@ -134,7 +134,7 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
             infos[agent] = info
         return infos
 
-    def step(self, actions: dict):
+    def step(self, actions: dict[str, np.ndarray]) -> tuple[dict, dict, dict, dict, dict]:
         if not self.agents:
             raise RuntimeError("the episode has ended (or reset() was never called); call reset() before step()")
         if not isinstance(actions, Mapping):
@@ -189,7 +189,7 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         """MODEL.md §6's metrics of the episode so far (the central envs put them in the last info)."""
         return self.sim.episode_metrics()
 
-    def render(self, *args, **kwargs):
+    def render(self, *args: Any, **kwargs: Any) -> np.ndarray | None:
         """As the central environments' ``render()``; extra arguments (RLlib's
         ``ParallelPettingZooEnv.render()`` passes a mode) are ignored: ``render_mode`` decides."""
         return super().render()

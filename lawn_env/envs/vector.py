@@ -52,7 +52,7 @@ from ..spaces import ObservationLayout
 __all__ = ["CommVectorEnv", "JointVectorEnv", "check_actions"]
 
 
-def check_actions(actions, num_envs: int, size: int) -> np.ndarray:
+def check_actions(actions: Any, num_envs: int, size: int) -> np.ndarray:
     """Validate a batch of normalized actions: real numbers of shape exactly (num_envs, size),
     finite, inside [-1, 1]; a ``ValueError`` names the first bad env index. Returns float64."""
     try:
@@ -123,7 +123,8 @@ class JointVectorEnv(VectorEnv):
         return {name: self.np_random.normal(0.0, std, shape) for name, (shape, std) in self.sim.noise_shapes().items()}
 
     # ------------------------------------------------------------------ API
-    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
+    def reset(self, *, seed: int | list[int] | None = None,
+              options: dict | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         if isinstance(seed, (list, tuple)):
             if len(seed) != self.num_envs:
                 raise ValueError(f"seed: a list of {len(seed)} seeds for {self.num_envs} envs")
@@ -150,7 +151,7 @@ class JointVectorEnv(VectorEnv):
     def _observe(self) -> np.ndarray:
         return self.layout.encode_batch(self.sim, bound=self.interface.obs_bound)
 
-    def step(self, actions):
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if not self._started:
             raise RuntimeError("call reset() before step()")
         a = check_actions(actions, self.num_envs, self.single_action_space.shape[0])
@@ -221,7 +222,7 @@ class JointVectorEnv(VectorEnv):
         if self._view is not None and which[self.render_env]:
             self._view.restart()
 
-    def render(self):
+    def render(self) -> np.ndarray | None:
         """An RGB frame (H, W, 3) of env ``render_env``: area, references, trails, links colored by
         outage probability, as the single env draws it."""
         if self.render_mode is None:
@@ -235,7 +236,7 @@ class JointVectorEnv(VectorEnv):
             self._renderer = Renderer(self.config)
         return self._renderer.draw(self._view)
 
-    def close_extras(self, **kwargs) -> None:
+    def close_extras(self, **kwargs: Any) -> None:
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
