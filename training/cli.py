@@ -286,6 +286,8 @@ def _included(paths: list[str]) -> list[str]:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .gap import CONVERGENCE_SLOTS
+
     parser = argparse.ArgumentParser(prog="lawn", description="Wireless predictive control over low-altitude networks.")
     parser.add_argument("--version", action="version", version=f"lawn {lawn_env.__version__}")
     parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
@@ -407,7 +409,7 @@ def build_parser() -> argparse.ArgumentParser:
     gp.add_argument("--episodes", type=_COUNT, default=5)
     gp.add_argument("--seed", type=_SEED, default=0)
     gp.add_argument("--every", type=_COUNT, default=3, help="compare at every n-th slot (default: %(default)s)")
-    gp.add_argument("--convergence-slots", type=int, nargs="*", default=[11, 19, 28, 41],
+    gp.add_argument("--convergence-slots", type=int, nargs="*", default=list(CONVERGENCE_SLOTS),
                     help="slots of the first episode for the AO convergence figure (none to skip)")
     gp.add_argument("--global-arg", action="append", default=[], metavar="KEY=VALUE",
                     help="resolution of the global reference, e.g. --global-arg drone_spacing_m=0.25")

@@ -173,10 +173,10 @@ def _label(ax, title, xlabel, ylabel, legend_size=7):
 def _convergence_table(out: Path, quick: bool) -> list[dict]:
     from lawn_env import ScenarioConfig
 
-    from .gap import convergence
+    from .gap import CONVERGENCE_SLOTS, convergence
 
     cfg = ScenarioConfig(num_slots=30) if quick else ScenarioConfig()
-    slots = [11, 19] if quick else [11, 19, 28, 41]
+    slots = CONVERGENCE_SLOTS[:2] if quick else CONVERGENCE_SLOTS
     glob = {"psi_points": 41, "drone_spacing_m": 2.5, "power_levels": 40} if quick else {}
     return convergence(cfg, slots, seed=0, driver="ao-mpc", iterations=20, global_settings=glob)
 

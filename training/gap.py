@@ -27,7 +27,7 @@ from lawn_env import ScenarioConfig
 
 from .evaluate import write_rows
 
-__all__ = ["gap_episode", "run_gap", "summarize_gaps", "convergence", "plot_gaps", "plot_convergence"]
+__all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "convergence", "plot_gaps", "plot_convergence"]
 
 
 def gap_episode(policies: Sequence[str], driver: str, config: ScenarioConfig, seed: int, every: int,
@@ -152,6 +152,11 @@ def plot_gaps(rows: list[dict], path: Path) -> None:
     ax2.set_title(f"along episode seed {first_seed}", fontsize=10)
     fig.tight_layout()
     fig.savefig(path)
+
+
+#: The slots of the convergence figure (``lawn gap --convergence-slots`` and ``lawn figures``): early
+#: transients and later regimes of the default episode.
+CONVERGENCE_SLOTS = (11, 19, 28, 41)
 
 
 def convergence(config: ScenarioConfig, slots: Sequence[int], seed: int = 0, driver: str = "ao-mpc",
