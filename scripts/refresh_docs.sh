@@ -4,7 +4,7 @@
 #   docs/REPRODUCTION.md, docs/figures/reproduction/   lawn figures (the paper's experiments)
 #   README blocks benchmark, benchmark-nominal          lawn benchmark (+ docs/figures/benchmark.png)
 #   README block gap                                    lawn gap (+ docs/figures/gap.png, convergence.png)
-#   README blocks expert-speed, env-throughput, train-throughput   benchmarks/*.py --markdown
+#   README blocks expert-speed, env-throughput, train-throughput, vector-step   benchmarks/*.py --markdown
 #   README block learned-agents, docs/LEARNED.md        lawn zoo build (needs the training runs in
 #                                                       runs/agents: with --train, scripts/train_agents.sh
 #                                                       trains them first, hours on 2 cores)
@@ -57,6 +57,8 @@ if want throughput; then
   splice env-throughput runs/env_throughput.md "python benchmarks/env_throughput.py"
   "$py" benchmarks/train_throughput.py --markdown runs/train_throughput.md || true
   splice train-throughput runs/train_throughput.md "python benchmarks/train_throughput.py"
+  "$py" benchmarks/vector_step_breakdown.py --markdown runs/vector_step.md
+  splice vector-step runs/vector_step.md "python benchmarks/vector_step_breakdown.py"
 fi
 if want learned; then
   if [ "$train" = 1 ]; then

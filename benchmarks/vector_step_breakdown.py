@@ -1,0 +1,82 @@
+"""Where a native vector env step spends its time (issue #13): each part of
+``JointVectorEnv.step`` timed on its own at N envs, beside the whole step, in one run.
+
+Parts: checking the actions, decoding them, the fading draws, the simulation step
+(``BatchSimulation.step``) and, inside it, the links' outage probabilities (scipy's regularized
+incomplete gamma function on N K links), and the observation (``ObservationLayout.encode_batch``).
+Each figure is the best of ``--repeats`` timings of ``--number`` calls, in microseconds per
+batched step, with the env-steps/s the part alone would allow.
+
+Usage: ``python benchmarks/vector_step_breakdown.py [--num-envs 1024] [--num-agvs 4]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import timeit
+
+import gymnasium as gym
+
+import lawn_env  # noqa: F401  (registers the ids)
+from lawn_env.envs.vector import check_actions
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--num-envs", type=int, default=1024)
+    parser.add_argument("--num-agvs", type=int, default=4)
+    parser.add_argument("--number", type=int, default=50, help="calls per timing (default: 50)")
+    parser.add_argument("--repeats", type=int, default=5, help="timings per part; the best counts (default: 5)")
+    parser.add_argument("--markdown", help="also write the README's table of this run to this file")
+    args = parser.parse_args(argv)
+    envs = gym.make_vec("lawn/Joint-v0", num_envs=args.num_envs, vectorization_mode="vector_entry_point",
+                        num_agvs=args.num_agvs)
+    env = envs.unwrapped
+    envs.reset(seed=0)
+    envs.action_space.seed(0)
+    action = envs.action_space.sample()
+    for _ in range(5):
+        envs.step(action)
+    sim, link = env.sim, env.sim.single.link
+    checked = check_actions(action, env.num_envs, env.single_action_space.shape[0])
+    decision = env._decisions(checked)  # the parts of step, timed one by one
+    fading = env._draw_fading()
+    state = (sim.x_aug, sim.tracking_error, sim.x_obs, sim.error_obs, sim.drone_position, sim.slot.copy(),
+             sim.last_power_w, sim.last_delivered, sim.last_outage_probability)
+
+    def sim_step() -> None:  # one slot, then the state put back (the same slot every call)
+        sim.step(decision.increment, decision.power_w, decision.drone_next, fading, {})
+        (sim.x_aug, sim.tracking_error, sim.x_obs, sim.error_obs, sim.drone_position, slot,
+         sim.last_power_w, sim.last_delivered, sim.last_outage_probability) = state
+        sim.slot[:] = slot
+
+    x = link.outage_argument_sq(decision.power_w, link.distance_sq(decision.drone_next[:, None, :], sim.x_aug[..., 0:2]))
+    parts = [
+        ("whole step (its autoresets included)", lambda: envs.step(action)),
+        ("check the actions", lambda: check_actions(action, env.num_envs, env.single_action_space.shape[0])),
+        ("decode the actions", lambda: env._decisions(checked)),
+        ("draw the fading", env._draw_fading),
+        ("simulation step", sim_step),
+        ("  of which: outage probabilities (gammainc)", lambda: link.outage_at(x)),
+        ("observation (encode_batch)", lambda: env.layout.encode_batch(sim, bound=env.interface.obs_bound)),
+    ]
+    print(f"lawn/Joint-v0 vector env, N = {args.num_envs}, K = {args.num_agvs}: microseconds per batched step")
+    print(f"{'part':45s} {'us/step':>10s} {'env-steps/s alone':>18s}")
+    rows = []
+    for name, fn in parts:
+        best = min(timeit.repeat(fn, number=args.number, repeat=args.repeats)) / args.number
+        rows.append((name.strip(), best))
+        print(f"{name:45s} {best * 1e6:10.1f} {args.num_envs / best:18,.0f}")
+    envs.close()
+    if args.markdown:
+        lines = [f"`lawn/Joint-v0` vector env, N = {args.num_envs}, K = {args.num_agvs} (best of {args.repeats} timings "
+                 f"of {args.number} calls):", "", "| part of a step | µs per batched step | env-steps/s it alone allows |",
+                 "|---|---|---|"]
+        lines += [f"| {name} | {best * 1e6:,.0f} | {args.num_envs / best:,.0f} |" for name, best in rows]
+        with open(args.markdown, "w") as fh:
+            fh.write("\n".join(lines) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
