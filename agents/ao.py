@@ -115,6 +115,10 @@ class Plan:
     info: dict = field(default_factory=dict)
 
 
+#: L, S, W of J^_k = L psi^2 + 2 S psi + W per AGV (paper, P4), each (K,).
+Coefficients = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
 class SlotProblem:
     """One slot's planning problem, the shape both experts share: the snapshot's state, the slot's
     QP data (the planner's warm-started MPC), the planning link and the slot's feasible sets (power
@@ -140,7 +144,7 @@ class SlotProblem:
         self.area = tuple(config.area_m)
 
     # ------------------------------------------------------------------ pieces of J^
-    def coefficients(self, dmu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def coefficients(self, dmu: np.ndarray) -> Coefficients:
         """L, S, W of J^_k = L psi^2 + 2 S psi + W for increments ``dmu`` (K, N_p, 2) (paper, P4)."""
         return cost_coefficients(self.mpc.model, self.data.linear, self.data.constant, dmu)
 
@@ -160,20 +164,20 @@ class PowerObjective:
     """J^(p) = sum L psi(p)^2 + 2 S psi(p) + W for fixed increments and drone (problem P4), with
     the analytic gradient of Algorithm 1: dJ/dp_k = (2 L_k psi_k + 2 S_k) d psi_k / d p_k."""
 
-    def __init__(self, coef: tuple[np.ndarray, np.ndarray, np.ndarray], d2: np.ndarray, link: channel.LinkParams):
+    def __init__(self, coef: Coefficients, d2: np.ndarray, link: channel.LinkParams):
         lcoef, scoef, wcoef = coef
         self._l, self._two_l, self._two_s, self._w = lcoef, 2.0 * lcoef, 2.0 * scoef, float(wcoef.sum())
         self._d2 = d2
         self._link = link
 
-    def value(self, p: np.ndarray) -> tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """(J^, state) where state feeds :meth:`gradient`."""
+    def value(self, p: np.ndarray) -> tuple[float, tuple[np.ndarray, ...]]:
+        """(J^, state) where state = (psi, floored powers, outage arguments) feeds :meth:`gradient`."""
         pf = np.maximum(p, channel.POWER_FLOOR_W)
         x = self._link.outage_argument_sq(pf, self._d2)
         psi = self._link.success_at(x)
         return float(self._l @ (psi * psi) + self._two_s @ psi) + self._w, (psi, pf, x)
 
-    def gradient(self, state: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    def gradient(self, state: tuple[np.ndarray, ...]) -> np.ndarray:
         psi, pf, x = state
         dpsi = self._link.success_power_slope(x, pf)  # reusing the value's x
         return (self._two_l * psi + self._two_s) * dpsi
@@ -182,7 +186,7 @@ class PowerObjective:
 class DroneObjective:
     """J^(q) for fixed increments and powers (problem P5) and its gradient (paper eq. grad_q)."""
 
-    def __init__(self, coef: tuple[np.ndarray, np.ndarray, np.ndarray], agv_xy: np.ndarray, power_w: np.ndarray, link: channel.LinkParams):
+    def __init__(self, coef: Coefficients, agv_xy: np.ndarray, power_w: np.ndarray, link: channel.LinkParams):
         self._l, self._s, self._w = coef
         self._agv = agv_xy
         self._power = power_w
@@ -229,15 +233,15 @@ class AOSolver:
             return sol.increments, value, sol
         return dmu, current, sol
 
-    def power_objective(self, coef: tuple[np.ndarray, np.ndarray, np.ndarray], d2: np.ndarray) -> PowerObjective:
+    def power_objective(self, coef: Coefficients, d2: np.ndarray) -> PowerObjective:
         """J^(p) for fixed increments (coefficients ``coef``) and squared distances ``d2``."""
         return PowerObjective(coef, d2, self.link)
 
-    def drone_objective(self, prob: SlotProblem, coef: tuple[np.ndarray, np.ndarray, np.ndarray], power_w: np.ndarray) -> DroneObjective:
+    def drone_objective(self, prob: SlotProblem, coef: Coefficients, power_w: np.ndarray) -> DroneObjective:
         """J^(q) for fixed increments and powers."""
         return DroneObjective(coef, prob.agv_xy, power_w, self.link)
 
-    def power_block(self, coef: tuple[np.ndarray, np.ndarray, np.ndarray], d2: np.ndarray, p_current: np.ndarray,
+    def power_block(self, coef: Coefficients, d2: np.ndarray, p_current: np.ndarray,
                     current: float) -> tuple[np.ndarray, float, int]:
         """Algorithm 1 (from ``p_current``, or from equal power with ``pgd_restart_equal``);
         returns the better of its result and ``p_current``.
@@ -283,7 +287,7 @@ class AOSolver:
             return p, value, iterations
         return p_current, current, iterations
 
-    def drone_block(self, prob: SlotProblem, coef: tuple[np.ndarray, np.ndarray, np.ndarray], power_w: np.ndarray, q_current: np.ndarray,
+    def drone_block(self, prob: SlotProblem, coef: Coefficients, power_w: np.ndarray, q_current: np.ndarray,
                     current: float) -> tuple[np.ndarray, float, int]:
         """SCA over the speed disc and the area, with the monotonicity safeguard."""
         s = self.settings

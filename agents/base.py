@@ -4,13 +4,13 @@ of named policies)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Mapping, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from lawn_env import ObservationLayout, ScenarioConfig
+from lawn_env import ObservationLayout
 from lawn_env.core import Snapshot
-from lawn_env.presets import resolve_config
+from lawn_env.presets import ConfigLike, resolve_config
 
 if TYPE_CHECKING:
     from .ao import Plan
@@ -40,7 +40,7 @@ class Policy:
     #: The plan behind the last action (planner policies; None for policies that do not plan)
     last_plan: Plan | None = None
 
-    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT,
+    def __init__(self, config: ConfigLike = None, env_id: str = JOINT,
                  seed: int | None = None):
         self.config = resolve_config(config)
         if env_id not in self.env_ids:
@@ -67,7 +67,8 @@ class Policy:
         if obs.ndim == 1:
             return self.act(obs), state
         if obs.ndim != 2:
-            raise ValueError(f"observation has shape {obs.shape}; expected ({self.layout.size},) or (n_envs, {self.layout.size})")
+            raise ValueError(f"observation has shape {obs.shape}; expected ({self.layout.size},) or "
+                             f"(n_envs, {self.layout.size})")
         if obs.shape[0] > 1 and self.stateful:
             raise ValueError(f"policy {self.name!r} keeps per-episode state: evaluate it on one environment at a time")
         if episode_start is not None and np.asarray(episode_start).any():

@@ -19,20 +19,14 @@ from typing import Any
 import numpy as np
 
 from lawn_env import ScenarioConfig
-from lawn_env.interface import ActionLayout, RLInterface, resolve_interface
+from lawn_env.interface import ActionLayout, InterfaceLike, resolve_interface
 
 from .base import COMM, JOINT, Policy
 from .errors import MissingExtra
-from .runs import (
-    RL_EXTRA,
-    RunDir,
-    algorithm_class,
-    policy_network_class,
-    read_json,
-    read_run,
-)
+from .runs import RL_EXTRA, RunDir, algorithm_class, policy_network_class, read_json, read_run
 
-__all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "LOADERS", "learned_name_forms", "ZOO_DIR", "zoo_agents", "export_agent"]
+__all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "LOADERS", "learned_name_forms", "ZOO_DIR", "zoo_agents",
+           "export_agent"]
 
 #: Shipped agents: one folder per agent (``lawn zoo`` lists them).
 ZOO_DIR = Path(__file__).parent / "zoo"
@@ -117,7 +111,7 @@ class SB3Policy(Policy):
     name = "sb3"
     env_ids = (JOINT, COMM)
 
-    def __init__(self, network: Any, config: ScenarioConfig, env_id: str, interface: RLInterface | dict | str | None = None,
+    def __init__(self, network: Any, config: ScenarioConfig, env_id: str, interface: InterfaceLike = None,
                  normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "sb3"):
         super().__init__(config, env_id, seed)
         self.network = network
@@ -166,7 +160,7 @@ class MARLPolicy(Policy):
     name = "marl"
     env_ids = (JOINT,)
 
-    def __init__(self, network: Any, config: ScenarioConfig, interface: RLInterface | dict | str | None = None,
+    def __init__(self, network: Any, config: ScenarioConfig, interface: InterfaceLike = None,
                  normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "marl"):
         super().__init__(config, JOINT, seed)
         self.network = network

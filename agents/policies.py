@@ -32,17 +32,12 @@ from lawn_env import ObservationLayout, ScenarioConfig, spaces
 from lawn_env.core import Snapshot
 from lawn_env.drone import move_drone
 from lawn_env.dynamics import command_mask, planning_period
-from lawn_env.presets import resolve_config
+from lawn_env.presets import ConfigLike, resolve_config
 
 from .ao import AOSettings, AOSolver, Plan
 from .base import JOINT, Policy
 from .learned import LOADERS, learned_name_forms
-from .reduced import (
-    GlobalPlanner,
-    GlobalSettings,
-    ReducedGradientPlanner,
-    ReducedSettings,
-)
+from .reduced import GlobalPlanner, GlobalSettings, ReducedGradientPlanner, ReducedSettings
 from .scripted import HeuristicPolicy
 from .tracking import lqr_gain, lqr_rollout, pid_rollout
 
@@ -76,7 +71,7 @@ class PlannerPolicy(Policy):
 
     stateful = True
 
-    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
+    def __init__(self, config: ConfigLike = None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
         super().__init__(config, env_id, seed)
         self.solver = self._make_solver(**settings)
         c = self.config
@@ -139,8 +134,8 @@ class SFPolicy(PlannerPolicy):
 
     name = "sf"
 
-    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT, seed: int | None = None, heading_rad: float = 0.0,
-                 **settings: Any):
+    def __init__(self, config: ConfigLike = None, env_id: str = JOINT, seed: int | None = None,
+                 heading_rad: float = 0.0, **settings: Any):
         if not math.isfinite(heading_rad):
             raise ValueError(f"heading_rad={heading_rad!r} must be finite")
         super().__init__(config, env_id, seed, **settings)
@@ -177,8 +172,8 @@ class PIDPolicy(PlannerPolicy):
 
     name = "pid"
 
-    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT, seed: int | None = None, gains: PIDGains | Mapping | None = None,
-                 **settings: Any):
+    def __init__(self, config: ConfigLike = None, env_id: str = JOINT, seed: int | None = None,
+                 gains: PIDGains | Mapping | None = None, **settings: Any):
         super().__init__(config, env_id, seed, **settings)
         self.gains = gains if isinstance(gains, PIDGains) else PIDGains(**dict(gains or {}))
         self.integral = np.zeros((self.config.num_agvs, 2))
@@ -204,7 +199,7 @@ class LQRPolicy(PlannerPolicy):
 
     name = "lqr"
 
-    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
+    def __init__(self, config: ConfigLike = None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
         super().__init__(config, env_id, seed, **settings)
         self.gain = lqr_gain(self.solver.model)
 
@@ -273,7 +268,7 @@ def is_policy_name(name: str) -> bool:
     return name in POLICIES or (":" in name and name.split(":", 1)[0] in LEARNED_PREFIXES)
 
 
-def make_policy(name: str, config: ScenarioConfig | Mapping | str | None = None, env_id: str | None = None,
+def make_policy(name: str, config: ConfigLike = None, env_id: str | None = None,
                 seed: int | None = None, **kwargs: Any) -> Policy:
     """Build a registered policy for ``config`` driving ``env_id``.
 

@@ -13,11 +13,10 @@ reasonable" reference point for the demo and for smoke tests.
 
 from __future__ import annotations
 
-from typing import Mapping
-
 import numpy as np
 
-from lawn_env import ScenarioConfig, spaces
+from lawn_env import spaces
+from lawn_env.presets import ConfigLike
 
 from .base import JOINT, Policy
 
@@ -30,7 +29,8 @@ class HeuristicPolicy(Policy):
     name = "heuristic"
     env_ids = (JOINT,)
 
-    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, env_id: str = JOINT, seed: int | None = None, kp: float = 0.4, kd: float = 0.9):
+    def __init__(self, config: ConfigLike = None, env_id: str = JOINT, seed: int | None = None, kp: float = 0.4,
+                 kd: float = 0.9):
         super().__init__(config, env_id, seed)
         self.kp, self.kd = float(kp), float(kd)
 

@@ -50,7 +50,8 @@ def main(argv: list[str] | None = None) -> int:
          sim.last_power_w, sim.last_delivered, sim.last_outage_probability) = state
         sim.slot[:] = slot
 
-    x = link.outage_argument_sq(decision.power_w, link.distance_sq(decision.drone_next[:, None, :], sim.x_aug[..., 0:2]))
+    d2 = link.distance_sq(decision.drone_next[:, None, :], sim.x_aug[..., 0:2])
+    x = link.outage_argument_sq(decision.power_w, d2)
     parts = [
         ("whole step (its autoresets included)", lambda: envs.step(action)),
         ("check the actions", lambda: check_actions(action, env.num_envs, env.single_action_space.shape[0])),
@@ -69,9 +70,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name:45s} {best * 1e6:10.1f} {args.num_envs / best:18,.0f}")
     envs.close()
     if args.markdown:
-        lines = [f"`lawn/Joint-v0` vector env, N = {args.num_envs}, K = {args.num_agvs} (best of {args.repeats} timings "
-                 f"of {args.number} calls):", "", "| part of a step | µs per batched step | env-steps/s it alone allows |",
-                 "|---|---|---|"]
+        lines = [f"`lawn/Joint-v0` vector env, N = {args.num_envs}, K = {args.num_agvs} "
+                 f"(best of {args.repeats} timings of {args.number} calls):", "",
+                 "| part of a step | µs per batched step | env-steps/s it alone allows |", "|---|---|---|"]
         lines += [f"| {name} | {best * 1e6:,.0f} | {args.num_envs / best:,.0f} |" for name, best in rows]
         with open(args.markdown, "w") as fh:
             fh.write("\n".join(lines) + "\n")

@@ -226,12 +226,17 @@ def distance_sq(drone_xy: np.ndarray, agv_xy: np.ndarray, altitude_m: float) -> 
     return _distance_sq(drone_xy, agv_xy, altitude_m * altitude_m)
 
 
-def _distance_sq(drone_xy, agv_xy, altitude_sq: float) -> np.ndarray:
-    diff = np.asarray(agv_xy, dtype=float) - drone_xy
+def _distance_sq(drone_xy: npt.ArrayLike, agv_xy: npt.ArrayLike, altitude_sq: float) -> np.ndarray:
+    return _squared_norms(np.asarray(agv_xy, dtype=float) - drone_xy) + altitude_sq
+
+
+def _squared_norms(diff: np.ndarray) -> np.ndarray:
+    """||v||^2 of the 2-vectors ``diff`` (..., 2): the same two-term sums as a reduction over the
+    last axis, as a product with ones (faster, and one 2-D product for any leading axes)."""
     sq = diff * diff
-    if sq.ndim <= 2:  # (K, 2) @ (2,): the same two-term sums as a reduction over the last axis, faster
-        return sq @ _ONES2 + altitude_sq
-    return (sq.reshape(-1, 2) @ _ONES2).reshape(sq.shape[:-1]) + altitude_sq
+    if sq.ndim <= 2:
+        return sq @ _ONES2
+    return (sq.reshape(-1, 2) @ _ONES2).reshape(sq.shape[:-1])
 
 
 #: Powers are floored here before dividing; gammainc(m, x) is exactly 1.0 in double precision
@@ -261,15 +266,15 @@ def _outage_argument(power_w, distance_sq_m2, c_d: float, c_ce: float):
     return x + c_ce if c_ce else x
 
 
-def outage_argument(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float, noise_power_w: float,
-                    m: float, ce_error_var: float = 0.0) -> np.ndarray:
+def outage_argument(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float,
+                    noise_power_w: float, m: float, ce_error_var: float = 0.0) -> np.ndarray:
     """The incomplete-gamma argument x of Prop. 1 (``x = m g`` for perfect CSI)."""
     return outage_argument_sq(power_w, np.square(distance_m), snr_threshold=snr_threshold, alpha0=alpha0,
                               noise_power_w=noise_power_w, m=m, ce_error_var=ce_error_var)
 
 
-def outage_probability(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float, noise_power_w: float,
-                       m: float, ce_error_var: float = 0.0) -> np.ndarray:
+def outage_probability(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float,
+                       noise_power_w: float, m: float, ce_error_var: float = 0.0) -> np.ndarray:
     """Outage probability Pr(G < G_th) = gammainc(m, x) (Prop. 1, MODEL.md §2).
 
     Evaluated with the regularized incomplete gamma function, accurate for tiny outage (the
@@ -282,8 +287,8 @@ def outage_probability(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr
     return special.gammainc(m, x)
 
 
-def success_probability(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float, noise_power_w: float,
-                        m: float, ce_error_var: float = 0.0) -> np.ndarray:
+def success_probability(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float,
+                        noise_power_w: float, m: float, ce_error_var: float = 0.0) -> np.ndarray:
     """psi = 1 - P = gammaincc(m, x), accurate also when psi is tiny."""
     x = outage_argument(
         power_w, distance_m, snr_threshold=snr_threshold, alpha0=alpha0,
@@ -297,8 +302,6 @@ def gamma_density(m: float, x: npt.ArrayLike) -> np.ndarray:
     return np.exp(special.xlogy(m - 1, x) - x - special.gammaln(m))
 
 
-
-
 def success_and_gradients(power_w: npt.ArrayLike, drone_xy: npt.ArrayLike, agv_xy: npt.ArrayLike,
                           link: LinkParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """psi, d psi / d p (1/W) and d psi / d q (1/m, shape (..., 2)) for each link.
@@ -308,15 +311,15 @@ def success_and_gradients(power_w: npt.ArrayLike, drone_xy: npt.ArrayLike, agv_x
     dx/d(d^2) = (x - x_ce)/d^2. At p = 0 (floored at ``POWER_FLOOR_W``) psi and both derivatives are 0.
     """
     diff = np.asarray(drone_xy, dtype=float) - np.asarray(agv_xy, dtype=float)
-    d2 = link.distance_sq(drone_xy, agv_xy)
+    d2 = _squared_norms(diff) + link.altitude_sq
     p = np.maximum(power_w, POWER_FLOOR_W)
     x = link.outage_argument_sq(p, d2)
     g = link.success_slope_term(x)
     return link.success_at(x), g / p, (-2.0 * g / d2)[..., None] * diff
 
 
-def realized_snr(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, fading: npt.ArrayLike, *, alpha0: float, noise_power_w: float,
-                 ce_error_var: float = 0.0) -> np.ndarray:
+def realized_snr(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, fading: npt.ArrayLike, *, alpha0: float,
+                 noise_power_w: float, ce_error_var: float = 0.0) -> np.ndarray:
     """Effective SNR for fading power gains ``fading`` = |h|^2 (MMSE CE error as noise)."""
     beta_p = alpha0 / np.square(distance_m) * np.asarray(power_w, dtype=float)
     return (1.0 - ce_error_var) * beta_p * fading / (ce_error_var * beta_p + noise_power_w)
@@ -345,7 +348,8 @@ def delivered_from_fading(normalized_fading: npt.ArrayLike, outage_arg: npt.Arra
     return normalized_fading >= outage_arg
 
 
-def sample_delivery(rng: np.random.Generator, power_w: npt.ArrayLike, distance_m: npt.ArrayLike, link: LinkParams) -> np.ndarray:
+def sample_delivery(rng: np.random.Generator, power_w: npt.ArrayLike, distance_m: npt.ArrayLike,
+                    link: LinkParams) -> np.ndarray:
     """Draw Nakagami-m fading and return True where the command arrives (MODEL.md §2)."""
     distance_m = np.asarray(distance_m, dtype=float)
     x = link.outage_argument_sq(power_w, np.square(distance_m))

@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
+from scipy import linalg
 
 if TYPE_CHECKING:
     from .config import ScenarioConfig
-from scipy import linalg
 
 __all__ = [
     "agv_matrices",

@@ -55,7 +55,7 @@ from .drone import move_drone, move_drones
 from .mpc import OutageAwareMPC
 
 __all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "resolve_interface", "ActionLayout", "Decision",
-           "ROLES"]
+           "ROLES", "InterfaceLike"]
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 
@@ -156,9 +156,11 @@ V0_INTERFACE = RLInterface()
 #: The RL-ready interface (``interface="rl"``; the ids ``lawn/JointRL-v0`` and ``lawn/CommRL-v0``).
 RL_INTERFACE = RLInterface(action_scheme="anchored", reward="scaled", termination_distance_m=25.0, obs_clip=10.0)
 _NAMED = {"v0": V0_INTERFACE, "rl": RL_INTERFACE}
+#: What every ``interface=`` argument takes: an RLInterface, a dict of its fields, "v0"/"rl" or None (v0).
+InterfaceLike = RLInterface | Mapping | str | None
 
 
-def resolve_interface(interface: RLInterface | Mapping | str | None) -> RLInterface:
+def resolve_interface(interface: InterfaceLike) -> RLInterface:
     """An :class:`RLInterface` from itself, a dict of its fields, ``"v0"``/``"rl"`` or None (v0)."""
     if interface is None:
         return V0_INTERFACE
@@ -202,7 +204,7 @@ class ActionLayout:
     the observation's decode carry the same arrays.
     """
 
-    def __init__(self, config: ScenarioConfig, role: str = "joint", interface: RLInterface | Mapping | str | None = None,
+    def __init__(self, config: ScenarioConfig, role: str = "joint", interface: InterfaceLike = None,
                  mpc_backend: str = "daqp"):
         if role not in ROLES:
             raise ValueError(f"role={role!r}; valid: {', '.join(ROLES)}")
@@ -251,11 +253,7 @@ class ActionLayout:
         velocity = np.where(dist <= reach, step / self._dt, step * (self._vmax / np.maximum(dist, reach)))
         drone_next = move_drones(drone_position, velocity, self._vmax, self._dt, self._area)
         power = self._anchored_power(comm[:, :k], x_aug, drone_next)
-        increment = None
-        if self._inc_size:
-            increment = self.anchor_increment(x_aug, reference, power, drone_next, slot)
-            increment += a[:, : 2 * k].reshape(-1, k, 2) * (self.interface.residual_scale * self._inc_max)
-            np.clip(increment, -self._inc_max, self._inc_max, out=increment)
+        increment = self._residual(a[:, : 2 * k], x_aug, reference, power, drone_next, slot) if self._inc_size else None
         return Decision(increment, power, drone_next)
 
     # ------------------------------------------------------------------ decode
@@ -273,11 +271,7 @@ class ActionLayout:
             return Decision(increment, power, drone_next)
         drone_next = self._anchored_drone(comm[k:], x_aug, drone_position)
         power = self._anchored_power(comm[:k], x_aug, drone_next)
-        increment = None
-        if self._inc_size:
-            increment = self.anchor_increment(x_aug, reference, power, drone_next, slot)
-            increment += a[: 2 * k].reshape(k, 2) * (self.interface.residual_scale * self._inc_max)
-            np.clip(increment, -self._inc_max, self._inc_max, out=increment)
+        increment = self._residual(a[: 2 * k], x_aug, reference, power, drone_next, slot) if self._inc_size else None
         return Decision(increment, power, drone_next)
 
     def _anchored_drone(self, a: np.ndarray, x_aug: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
@@ -295,6 +289,15 @@ class ActionLayout:
     def _anchored_power(self, a: np.ndarray, x_aug: np.ndarray, drone_next: np.ndarray) -> np.ndarray:
         w = self._power_prior(x_aug, drone_next) * np.exp(a * self.interface.power_log_range)
         return w * (self._pmax / w.sum(axis=-1, keepdims=True))
+
+    def _residual(self, a: np.ndarray, x_aug: np.ndarray, reference: np.ndarray, power_w: np.ndarray,
+                  drone_next: np.ndarray, slot: int | np.ndarray | None) -> np.ndarray:
+        """The anchored increments: the anchor's plus the normalized residual ``a`` (..., 2K),
+        within the increment bound."""
+        increment = self.anchor_increment(x_aug, reference, power_w, drone_next, slot)
+        increment += a.reshape(increment.shape) * (self.interface.residual_scale * self._inc_max)
+        np.clip(increment, -self._inc_max, self._inc_max, out=increment)
+        return increment
 
     def anchor_increment(self, x_aug: np.ndarray, reference: np.ndarray, power_w: np.ndarray,
                          drone_next: np.ndarray, slot: int | None = None) -> np.ndarray:

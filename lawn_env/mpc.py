@@ -345,7 +345,8 @@ class OutageAwareMPC:
             neg = -pos
         window = self.model.horizon + 1
         lead = x_aug.shape[:-2]
-        if x_aug.shape[-2:] != (k, 6) or chi_ref.shape != lead + (k, window, 6) or (lead and self.backend.name != "batched"):
+        batch_ok = not lead or self.backend.name == "batched"
+        if x_aug.shape[-2:] != (k, 6) or chi_ref.shape != lead + (k, window, 6) or not batch_ok:
             raise ValueError(f"x_aug has shape {x_aug.shape} and chi_ref {chi_ref.shape}; this MPC (num_agvs={k}, "
                              f"horizon={self.model.horizon}) needs ({k}, 6) and ({k}, {window}, 6), with a leading "
                              "batch axis (B, ...) only for the 'batched' backend")

@@ -10,9 +10,11 @@ from typing import Any, Mapping
 
 from .config import ChannelConfig, DisturbanceConfig, ReferenceConfig, ScenarioConfig
 
-__all__ = ["PRESETS", "get", "names", "register", "resolve_config"]
+__all__ = ["PRESETS", "get", "names", "register", "resolve_config", "ConfigLike"]
 
 PRESETS: dict[str, ScenarioConfig] = {}
+#: What every ``config=`` argument takes: a ScenarioConfig, a dict of its fields, a preset name or None.
+ConfigLike = ScenarioConfig | Mapping | str | None
 
 
 def register(name: str, config: ScenarioConfig) -> None:
@@ -54,7 +56,7 @@ register("disturbed", ScenarioConfig(disturbance=DisturbanceConfig(
     control_period_slots=2)))
 
 
-def resolve_config(config: ScenarioConfig | Mapping | str | None = None, **overrides: Any) -> ScenarioConfig:
+def resolve_config(config: ConfigLike = None, **overrides: Any) -> ScenarioConfig:
     """A ScenarioConfig from a config object, a dict, a preset name or None (the defaults),
     with keyword overrides (top-level fields, or a section name mapped to a dict)."""
     if config is None:

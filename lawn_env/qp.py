@@ -100,16 +100,16 @@ class PencilQP:
         st = _State(z=z0.copy(), y=np.zeros((mm, self.m)), act=act, iterations=np.ones(mm, dtype=np.int64),
                     converged=~act.any(axis=1) & ((az0 <= upper) & (az0 >= lower)).all(axis=1))
         ctx = (s, q, lower, upper, equality, d, z0, az0)
-        self._active_set(ctx, st, np.flatnonzero(~st.converged), self.steps)
+        self._active_set(ctx, st, np.flatnonzero(~st.converged))
         return self._finish(ctx, st)
 
     # ------------------------------------------------------------------ the active-set steps
-    def _active_set(self, ctx, st: "_State", todo: np.ndarray, iterations: int) -> np.ndarray:
-        """Primal-dual active-set updates of the problems ``todo`` from their current guesses;
-        returns those whose guess has not settled after ``iterations`` updates."""
+    def _active_set(self, ctx: tuple, st: _State, todo: np.ndarray) -> None:
+        """``steps`` primal-dual active-set updates of the problems ``todo`` from their current
+        guesses (in place on ``st``; a problem stops once its guess settles)."""
         s, q, lower, upper, equality, d, z0, az0 = ctx
         g, w = self.g, self.w
-        for _ in range(iterations):
+        for _ in range(self.steps):
             if todo.size == 0:
                 break
             st.iterations[todo] += 1
@@ -146,10 +146,9 @@ class PencilQP:
             st.z[todo], st.y[todo], st.act[todo] = z_t, y_t, new
             st.converged[todo[settled]] = True
             todo = todo[~settled]
-        return todo
 
     # ------------------------------------------------------------------ the answer
-    def _finish(self, ctx, st: "_State") -> PencilSolution:
+    def _finish(self, ctx: tuple, st: _State) -> PencilSolution:
         """The KKT check of every answer (primal feasibility, multiplier signs) and objectives."""
         s, q, lower, upper, equality, d, z0, az0 = ctx
         z, y, act = st.z, st.y, st.act

@@ -325,9 +325,13 @@ def _violations(tables: np.ndarray, accel_max: float, increment_max: float) -> n
 
 
 def fit_envelopes(paths: list, envelope: Envelope, max_rounds: int = 60) -> list:
-    """:func:`fit_envelope` of many paths at once (the same factors: each round evaluates every
-    path still outside the envelope in one :func:`evaluate_paths` call)."""
+    """:func:`fit_envelope` of many paths at once (each round evaluates every path still outside
+    the envelope in one :func:`evaluate_paths` call)."""
     t = np.arange(envelope.num_steps) * envelope.slot_s
+
+    def fits(candidate: _Curve) -> bool:
+        return envelope_violation(candidate.evaluate(t), envelope.accel_max, envelope.increment_max) <= 1.0
+
     out = list(paths)
     violation = _violations(evaluate_paths(paths, t), envelope.accel_max, envelope.increment_max)
     todo = [i for i in range(len(paths)) if violation[i] > 1.0]
@@ -336,15 +340,15 @@ def fit_envelopes(paths: list, envelope: Envelope, max_rounds: int = 60) -> list
         if not todo:
             return out
         candidates = [replace(paths[i], warp=paths[i].warp.scaled(factor[i])) for i in todo]
-        fits = _violations(evaluate_paths(candidates, t), envelope.accel_max, envelope.increment_max) <= 1.0
-        for i, cand, ok in zip(todo, candidates, fits.tolist()):
+        fits_now = _violations(evaluate_paths(candidates, t), envelope.accel_max, envelope.increment_max) <= 1.0
+        for i, cand, ok in zip(todo, candidates, fits_now.tolist()):
             if ok:
                 out[i] = cand
             else:
                 factor[i] *= 0.98
-        todo = [i for i, ok in zip(todo, fits.tolist()) if not ok]
-    for i in todo:  # extreme configs: halvings (fit_envelope's fallback)
-        out[i] = fit_envelope(paths[i], envelope, max_rounds=max_rounds)
+        todo = [i for i, ok in zip(todo, fits_now.tolist()) if not ok]
+    for i in todo:  # extreme configs: halvings from the last factor
+        out[i] = slowed_until(paths[i], fits, factor[i])
     return out
 
 
@@ -352,27 +356,13 @@ def fit_envelope(path: _Curve, envelope: Envelope, max_rounds: int = 60) -> _Cur
     """``path`` slowed down by the largest uniform time scaling in (0, 1] that keeps it inside
     ``envelope`` at every slot (the path itself when it already is).
 
-    Accelerations scale with the square of the factor and their per-slot changes with its square
-    (jumps at curvature breaks) to cube (smooth paths), so the first guess is the cube root of the
-    worst ratio; the factor is then shrunk by 2 % until every slot passes. Extreme configs (an
-    envelope many orders of magnitude below the path's demand) fall back to halving the factor,
-    which always ends: a standing path demands nothing.
+    Accelerations scale with the square of the factor, so the first guess is the inverse square
+    root of the worst ratio; the factor is then shrunk by 2 % until every slot passes (per-slot
+    changes of the acceleration scale faster than the square at curvature breaks). After
+    ``max_rounds`` shrinks (an envelope many orders of magnitude below the path's demand) the
+    factor is halved instead, which always ends: a standing path demands nothing.
     """
-    t = np.arange(envelope.num_steps) * envelope.slot_s
-
-    def fits(candidate) -> bool:
-        return envelope_violation(candidate.evaluate(t), envelope.accel_max, envelope.increment_max) <= 1.0
-
-    violation = envelope_violation(path.evaluate(t), envelope.accel_max, envelope.increment_max)
-    if violation <= 1.0:  # fits(path), evaluated once
-        return path
-    factor = violation ** (-1.0 / 2.0)
-    for _ in range(max_rounds):
-        candidate = replace(path, warp=path.warp.scaled(factor))
-        if fits(candidate):
-            return candidate
-        factor *= 0.98
-    return slowed_until(path, fits, factor)
+    return fit_envelopes([path], envelope, max_rounds)[0]
 
 
 def slowed_until(path: _Curve, accept: Callable[[_Curve], bool], first: float = 1.0, refine: int = 30) -> _Curve:

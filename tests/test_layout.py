@@ -105,10 +105,20 @@ def test_layers_point_down(lower, upper):
     assert bad == []
 
 
-def test_the_checker_sees_cycles_and_private_imports():
-    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
-    assert ("training.train", "training.protocol", "TRAIN_SEED_BASE") not in PRIVATE
-    assert "training.protocol" in EDGES["training.train"] and "agents.base" in EDGES["agents.policies"]
+def test_the_checker_sees_cycles_private_imports_and_skips_annotation_imports(tmp_path):
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from .b import thing\n")
+    (pkg / "b.py").write_text("def f():\n    from . import c\n")  # a function-level import counts
+    (pkg / "c.py").write_text("from pkg.a import _hidden\n")
+    (pkg / "d.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .a import x\n")
+    (pkg / "e.py").write_text("from .d import y\n")
+    mods = {f"pkg.{f.stem}" if f.stem != "__init__" else "pkg": f for f in pkg.glob("*.py")}
+    edges, private = _imports(mods)
+    assert _cycles(edges) == [["pkg.a", "pkg.b", "pkg.c"]]
+    assert private == [("pkg.c", "pkg.a", "_hidden")]
+    assert edges["pkg.d"] == set() and edges["pkg.e"] == {"pkg.d"}
 
 
 def _unannotated(tree: ast.Module) -> list[str]:

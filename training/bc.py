@@ -28,7 +28,7 @@ from agents.learned import ObsNormalizer, SB3Policy
 from agents.rollouts import Actor
 from agents.runs import algorithm_class
 from lawn_env import ScenarioConfig
-from lawn_env.interface import ActionLayout, Decision, RLInterface, resolve_interface
+from lawn_env.interface import ActionLayout, Decision, InterfaceLike, resolve_interface
 
 __all__ = ["collect", "fit", "train_bc_run", "BC_TARGETS"]
 
@@ -36,7 +36,7 @@ __all__ = ["collect", "fit", "train_bc_run", "BC_TARGETS"]
 BC_TARGETS = ("ppo", "sac")
 
 
-def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, interface: RLInterface | Mapping | str | None,
+def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, interface: InterfaceLike,
             actor: Actor | None = None) -> tuple[np.ndarray, np.ndarray, list[float]]:
     """``steps`` transitions of seeded episodes of the v0 env; states visited by ``actor`` (a v0
     policy, default the expert) and labelled with the expert's decision encoded in the

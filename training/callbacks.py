@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Mapping
 
 from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.learned import MARLPolicy, ObsNormalizer, SB3Policy
 from lawn_env import ScenarioConfig
-from lawn_env.interface import RLInterface
+from lawn_env.interface import InterfaceLike
 
 from .checkpoints import write_checkpoint
 from .evaluate import episode_row
@@ -33,8 +32,8 @@ class ControlCostValidation(BaseCallback):
     seeds ``seed_base + i``; append the mean realized control cost to ``learning_curve.csv`` and
     keep the model with the lowest one as ``best_model.zip`` (+ ``best_vecnormalize.pkl``)."""
 
-    def __init__(self, env_id: str, config: ScenarioConfig, interface: RLInterface | Mapping | str | None, episodes: int, every: int, out_dir: Path,
-                 seed_base: int):
+    def __init__(self, env_id: str, config: ScenarioConfig, interface: InterfaceLike, episodes: int, every: int,
+                 out_dir: Path, seed_base: int):
         super().__init__(verbose=0)
         self.env_id, self.config, self.interface = env_id, config, interface
         self.episodes, self.every, self.out_dir, self.seed_base = episodes, every, Path(out_dir), seed_base

@@ -26,7 +26,8 @@ from lawn_env import ScenarioConfig
 
 from .tables import mean_ci, paired_difference, write_csv
 
-__all__ = ["episode_row", "run_episode", "pool_map", "worker_pool", "evaluate", "summarize", "write_rows", "SUMMARY_METRICS"]
+__all__ = ["episode_row", "run_episode", "pool_map", "worker_pool", "evaluate", "summarize", "write_rows",
+           "SUMMARY_METRICS"]
 
 #: Metrics summarized with a mean and a 95 % interval (name, label).
 SUMMARY_METRICS = (

@@ -622,7 +622,8 @@ def _tables(exp: Experiment, out: Path, quick: bool, workers: int, progress: boo
     return tables
 
 
-def make_figures(names: Sequence[str], out: Path, quick: bool = False, workers: int = 1, progress: bool = True) -> dict[str, float]:
+def make_figures(names: Sequence[str], out: Path, quick: bool = False, workers: int = 1,
+                 progress: bool = True) -> dict[str, float]:
     """Build the named figures (all when ``names`` is empty): run the missing table rows, plot;
     returns seconds per figure."""
     names = list(names) or list(EXPERIMENTS)

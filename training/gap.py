@@ -27,7 +27,8 @@ from lawn_env import ScenarioConfig
 
 from .evaluate import write_rows
 
-__all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "convergence", "plot_gaps", "plot_convergence"]
+__all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "convergence", "plot_gaps",
+           "plot_convergence"]
 
 
 def gap_episode(policies: Sequence[str], driver: str, config: ScenarioConfig, seed: int, every: int,

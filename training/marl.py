@@ -10,15 +10,15 @@ coupled learners). ``agents.learned.MARLPolicy`` runs such a policy on ``lawn/Jo
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any
 
 from lawn_env import ScenarioConfig, parallel_env
-from lawn_env.interface import RLInterface
+from lawn_env.interface import InterfaceLike
 
 __all__ = ["wrap_parallel", "make_marl_vec_env"]
 
 
-def wrap_parallel(config: ScenarioConfig, interface: RLInterface | Mapping | str | None = None) -> Any:
+def wrap_parallel(config: ScenarioConfig, interface: InterfaceLike = None) -> Any:
     """The PettingZoo env (on the given interface) with SuperSuit's padding and agent indicator."""
     import supersuit as ss
 
@@ -28,7 +28,7 @@ def wrap_parallel(config: ScenarioConfig, interface: RLInterface | Mapping | str
     return ss.agent_indicator_v0(env, type_only=False)
 
 
-def make_marl_vec_env(config: ScenarioConfig, n_envs: int, seed: int, interface: RLInterface | Mapping | str | None = None) -> Any:
+def make_marl_vec_env(config: ScenarioConfig, n_envs: int, seed: int, interface: InterfaceLike = None) -> Any:
     """An SB3 VecEnv with one sub-environment per agent per copy of the system, seeded."""
     import supersuit as ss
     from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper

@@ -40,16 +40,10 @@ from typing import Any, Mapping
 
 from agents.runs import ALGORITHMS, algorithm_class, read_json, read_run
 from lawn_env import ScenarioConfig
-from lawn_env.interface import RLInterface, resolve_interface
+from lawn_env.interface import InterfaceLike, resolve_interface
 
 from .checkpoints import Checkpoint, clear_history, latest_checkpoint, restore_history
-from .protocol import (
-    TRAIN_SEED_BASE,
-    VALIDATION_SEED_BASE,
-    limit_torch_threads,
-    versions,
-    write_learning_curve,
-)
+from .protocol import TRAIN_SEED_BASE, VALIDATION_SEED_BASE, limit_torch_threads, versions, write_learning_curve
 
 __all__ = ["ALGOS", "TRAIN_ENV_IDS", "load_hyperparams", "train", "train_seeds", "train_task", "resume", "RunSpec",
            "TRAIN_SEED_BASE", "VALIDATION_SEED_BASE"]
@@ -90,7 +84,7 @@ def _check_algo_kwargs(cls, kwargs: Mapping[str, Any]) -> None:
 
 def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, normalize: bool | Mapping[str, Any],
                    monitor_dir: Path | None, vecnormalize_path: Path | None = None, training: bool = True,
-                   interface: RLInterface | Mapping | str | None = None, append_monitor: bool = False,
+                   interface: InterfaceLike = None, append_monitor: bool = False,
                    vec: str = "dummy") -> Any:
     """A seeded SB3 VecEnv (Monitor-wrapped) with optional VecNormalize, on the given interface;
     ``append_monitor`` continues existing monitor logs (a resumed run) instead of replacing them.

@@ -1,22 +1,22 @@
 """Stable-Baselines3 on lawn's native vector env (``lawn train --vec native``).
 
 :class:`NativeVecEnv` is an SB3 ``VecEnv`` over :class:`lawn_env.envs.vector.JointVectorEnv` or
-``CommVectorEnv`` (any interface) run with same-step autoreset, which is SB3's convention: the step that ends an episode returns
-the next episode's first observation, the final one in ``infos[i]["terminal_observation"]``
+``CommVectorEnv`` (any interface) run with same-step autoreset, which is SB3's convention: the
+step that ends an episode returns the next episode's first observation, the final one in ``infos[i]["terminal_observation"]``
 and ``infos[i]["TimeLimit.truncated"]`` for truncations. ``VecMonitor`` (episode returns and
 lengths) and ``VecNormalize`` go on top as on any SB3 VecEnv.
 """
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from lawn_env import ENV_IDS, RL_ENV_IDS, ScenarioConfig
-from lawn_env.interface import RLInterface
+from lawn_env.interface import InterfaceLike
 
 __all__ = ["NATIVE_ENV_IDS", "NativeVecEnv"]
 
@@ -29,7 +29,7 @@ class NativeVecEnv(VecEnv):
     ``interface`` (an RL id's default: ``"rl"``)."""
 
     def __init__(self, config: ScenarioConfig, n_envs: int, env_id: str = "lawn/Joint-v0",
-                 interface: RLInterface | Mapping | str | None = None):
+                 interface: InterfaceLike = None):
         if env_id not in NATIVE_ENV_IDS:
             raise ValueError(f"env_id={env_id!r}: the native vector envs are {', '.join(NATIVE_ENV_IDS)}")
         kwargs = {} if interface is None else {"interface": interface}  # None keeps the id's own (RL ids: "rl")

@@ -87,10 +87,9 @@ def _recipe(name: str) -> Recipe:
 
 
 def _finished(run_dir: Path, timesteps: int) -> bool:
-    run = run_dir / "run.json"
-    if not run.exists():
+    if not (run_dir / "run.json").exists():
         return False
-    data = json.loads(run.read_text())
+    data = read_run(run_dir).record
     return int(data.get("num_timesteps", 0)) >= (timesteps if data.get("trainer") != "bc" else 1)
 
 
@@ -133,7 +132,9 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
         raise ValueError(f"{runs}: no finished recipe runs (lawn zoo train --runs {runs} trains them)")
     envs = sorted({r.evaluated_on for r, _ in found})
     tasks = [(name, env, cfg, i, {}) for env in envs for name in ("rg-mpc", "epa") for i in range(episodes)]
-    tasks += [(read_run(d).policy_name, r.evaluated_on, cfg, i, {}) for r, dirs in found for d in dirs for i in range(episodes)]
+    run = {d: read_run(d) for _, dirs in found for d in dirs}
+    tasks += [(run[d].policy_name, r.evaluated_on, cfg, i, {})
+              for r, dirs in found for d in dirs for i in range(episodes)]
     rows = evaluate(tasks, workers=workers, progress=progress, desc="zoo benchmark")
     write_rows(rows, out_doc.parent / "learned" / "episodes.csv")
     cost = {(r["policy"], r["env"], int(r["seed"])): float(r["control_cost"]) for r in rows}
@@ -153,13 +154,13 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
         for r, dirs in found:
             if r.evaluated_on != env:
                 continue
-            specs = [json.loads((d / "run.json").read_text()) for d in dirs]
-            per_seed = [paired(read_run(d).policy_name, env).mean() for d in dirs]
-            costs = [np.mean([cost[(read_run(d).policy_name, env, i)] for i in range(episodes)]) for d in dirs]
+            specs = [run[d].record for d in dirs]
+            per_seed = [paired(run[d].policy_name, env).mean() for d in dirs]
+            costs = [np.mean([cost[(run[d].policy_name, env, i)] for i in range(episodes)]) for d in dirs]
             across, across_ci = mean_ci(per_seed)
             validation = [_best_validation(d) for d in dirs]
             chosen = dirs[int(np.argmin(validation))]
-            ship = mean_ci(paired(read_run(chosen).policy_name, env))
+            ship = mean_ci(paired(run[chosen].policy_name, env))
             wall = np.mean([s["wall_time_s"] for s in specs])
             steps = int(specs[0].get("num_timesteps", r.timesteps))
             iface = specs[0].get("interface") or {}
@@ -168,11 +169,10 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
                 f"| {r.label} (`zoo:{r.name}`) | {env} | {r.algo.upper() if r.algo != 'bc' else 'BC→PPO net'}, {scheme} "
                 f"| {steps:,} steps | {len(dirs)} | {wall:.0f} s | {_num(float(np.mean(costs)))} "
                 f"| {_pct(across)}{'' if math.isnan(across_ci) else ' ± ' + _pct(across_ci, sign=False)} "
-                f"| {_pct(ship[0])} ± {_pct(ship[1], sign=False)} (seed {json.loads((chosen / 'run.json').read_text())['seed']}) |")
+                f"| {_pct(ship[0])} ± {_pct(ship[1], sign=False)} (seed {run[chosen].record['seed']}) |")
             if export:
                 _export(r, chosen, dirs, specs, ship, across, across_ci, env)
-    sources = sorted({json.loads((d / "run.json").read_text()).get("versions", {}).get("source", "not recorded")
-                      for _, dirs in found for d in dirs})
+    sources = sorted({rd.record.get("versions", {}).get("source", "not recorded") for rd in run.values()})
     lines += ["", "Training runs made at: " + "; ".join(sources) + (
         " (runs from before commits were recorded were trained on the scenario of their day; their learning "
         "curves are in that scenario, every cost in this table is measured now)" if "not recorded" in sources else "")
@@ -224,7 +224,7 @@ def _export(r: Recipe, chosen: Path, dirs, specs, ship, across, across_ci, env) 
     record = {
         "name": r.name, "label": r.label, "trained_on": r.env_id, "evaluated_on": env,
         "command": r.command(), "budget_steps": int(specs[0].get("num_timesteps", r.timesteps)),
-        "training_seeds": [s["seed"] for s in specs], "shipped_seed": json.loads((chosen / "run.json").read_text())["seed"],
+        "training_seeds": [s["seed"] for s in specs], "shipped_seed": read_run(chosen).record["seed"],
         "selected_on": "lowest mean control cost on the validation seeds (500000 + i), never the test seeds",
         "wall_time_s": [round(s["wall_time_s"], 1) for s in specs],
         "benchmark": {"test_seeds": f"0-{TEST_EPISODES - 1}", "reference": "rg-mpc",

@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Mapping
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from ..config import ScenarioConfig
 from ..core import Simulation, Snapshot
-from ..interface import V0_INTERFACE, ActionLayout, RLInterface, resolve_interface
-from ..presets import resolve_config
+from ..interface import V0_INTERFACE, ActionLayout, InterfaceLike, RLInterface, resolve_interface
+from ..presets import ConfigLike, resolve_config
 from ..spaces import ObservationLayout
 
 __all__ = ["SimulationView", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS", "slot_info"]
@@ -110,8 +109,8 @@ class LawnEnvBase(SimulationView, gym.Env):
 
     role = "joint"
 
-    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-                 interface: RLInterface | Mapping | str | None = None, **overrides: Any):
+    def __init__(self, config: ConfigLike = None, render_mode: str | None = None,
+                 interface: InterfaceLike = None, **overrides: Any):
         self._setup_view(config, render_mode, overrides, interface, self.role)
         self.num_agvs = self.config.num_agvs
         self.observation_space = self.interface.observation_space(self.layout.size)

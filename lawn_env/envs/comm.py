@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
-from ..config import ScenarioConfig
-from ..interface import RLInterface
+from ..interface import InterfaceLike
 from ..mpc import OutageAwareMPC
+from ..presets import ConfigLike
 from ..spaces import check_action
 from .base import LawnEnvBase
 
@@ -60,9 +60,10 @@ class CommEnv(LawnEnvBase):
 
     ``gym.make("lawn/Comm-v0", config=None, render_mode=None, qp_backend="daqp", interface=None,
     **overrides)``; ``qp_backend`` is ``"daqp"``, ``"osqp"``, ``"batched"`` (the native vector
-    env's solver, :mod:`lawn_env.qp`) or ``"qpsolvers:<name>"`` (:mod:`lawn_env.mpc`); ``interface`` as for ``lawn/Joint-v0`` (``lawn/CommRL-v0`` is this env
-    with ``interface="rl"``: power ``p_k ∝ d_k^2 exp(2 a_k)`` spending the budget, drone toward
-    the AGVs' centroid ``+ a * 50 m``).
+    env's solver, :mod:`lawn_env.qp`) or ``"qpsolvers:<name>"`` (:mod:`lawn_env.mpc`);
+    ``interface`` as for ``lawn/Joint-v0`` (``lawn/CommRL-v0`` is this env with
+    ``interface="rl"``: power ``p_k ∝ d_k^2 exp(2 a_k)`` spending the budget, drone toward the
+    AGVs' centroid ``+ a * 50 m``).
 
     ## Version History
 
@@ -76,8 +77,8 @@ class CommEnv(LawnEnvBase):
 
     role = "comm"
 
-    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-                 qp_backend: str = "daqp", interface: RLInterface | Mapping | str | None = None, **overrides: Any):
+    def __init__(self, config: ConfigLike = None, render_mode: str | None = None,
+                 qp_backend: str = "daqp", interface: InterfaceLike = None, **overrides: Any):
         super().__init__(config, render_mode, interface, **overrides)
         self.mpc = OutageAwareMPC.from_config(self.config, backend=qp_backend)
         self.last_mpc_solve_time_s = float("nan")

@@ -10,8 +10,8 @@ from gymnasium.utils import seeding
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from ..config import ScenarioConfig
-from ..interface import RLInterface
+from ..interface import InterfaceLike
+from ..presets import ConfigLike
 from ..spaces import check_action
 from .base import SimulationView, slot_info
 
@@ -66,8 +66,8 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
 
     metadata = {"name": "lawn_v0", "render_modes": ["human", "rgb_array"], "render_fps": 4, "is_parallelizable": True}
 
-    def __init__(self, config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-                 interface: RLInterface | Mapping | str | None = None, max_cycles: int | None = None,
+    def __init__(self, config: ConfigLike = None, render_mode: str | None = None,
+                 interface: InterfaceLike = None, max_cycles: int | None = None,
                  **overrides: Any):
         if max_cycles is not None:  # PettingZoo's name for the episode length
             if "num_slots" in overrides and overrides["num_slots"] != max_cycles:
@@ -105,7 +105,8 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
             raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.possible_agents)}") from None
 
     # ------------------------------------------------------------------ API
-    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+    def reset(self, seed: int | None = None,
+              options: dict | None = None) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
         if seed is not None:
             self._np_random, _ = seeding.np_random(seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
@@ -195,24 +196,24 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         return super().render()
 
 
-def parallel_env(config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-                 interface: RLInterface | Mapping | str | None = None, max_cycles: int | None = None,
+def parallel_env(config: ConfigLike = None, render_mode: str | None = None,
+                 interface: InterfaceLike = None, max_cycles: int | None = None,
                  **overrides: Any) -> LawnParallelEnv:
     """Create the PettingZoo parallel environment (see :class:`LawnParallelEnv`); ``max_cycles``
     is PettingZoo's name for ``num_slots``."""
     return LawnParallelEnv(config, render_mode=render_mode, interface=interface, max_cycles=max_cycles, **overrides)
 
 
-def raw_env(config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-            interface: RLInterface | Mapping | str | None = None, max_cycles: int | None = None,
+def raw_env(config: ConfigLike = None, render_mode: str | None = None,
+            interface: InterfaceLike = None, max_cycles: int | None = None,
             **overrides: Any) -> AECEnv:
     """The same environment through PettingZoo's AEC API (agents act in turn, ``"drone"`` first;
     the slot advances once every agent has acted): ``parallel_to_aec`` of :func:`parallel_env`."""
     return parallel_to_aec(parallel_env(config, render_mode, interface, max_cycles, **overrides))
 
 
-def env(config: ScenarioConfig | Mapping | str | None = None, render_mode: str | None = None,
-        interface: RLInterface | Mapping | str | None = None, max_cycles: int | None = None,
+def env(config: ConfigLike = None, render_mode: str | None = None,
+        interface: InterfaceLike = None, max_cycles: int | None = None,
         **overrides: Any) -> AECEnv:
     """PettingZoo's conventional AEC constructor: :func:`raw_env` (already order-enforcing; actions
     out of their box raise ``ValueError``, so no clipping wrapper is added)."""

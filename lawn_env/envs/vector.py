@@ -33,7 +33,7 @@ from the batched generator like the fading.
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -42,11 +42,10 @@ from gymnasium.vector.utils import batch_space
 
 from ..batch import BatchSimulation
 from ..channel import LinkParams
-from ..config import ScenarioConfig
 from ..core import link_success
 from ..interface import ActionLayout, resolve_interface
 from ..mpc import OutageAwareMPC
-from ..presets import resolve_config
+from ..presets import ConfigLike, resolve_config
 from ..spaces import ObservationLayout
 
 __all__ = ["CommVectorEnv", "JointVectorEnv", "check_actions"]
@@ -78,7 +77,7 @@ class JointVectorEnv(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 4}
     role = "joint"
 
-    def __init__(self, num_envs: int, config: ScenarioConfig | Mapping | str | None = None,
+    def __init__(self, num_envs: int, config: ConfigLike = None,
                  render_mode: str | None = None, interface: Any = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_env: int = 0,
                  **overrides: Any):
@@ -269,7 +268,7 @@ class CommVectorEnv(JointVectorEnv):
 
     role = "comm"
 
-    def __init__(self, num_envs: int, config: ScenarioConfig | Mapping | str | None = None,
+    def __init__(self, num_envs: int, config: ConfigLike = None,
                  render_mode: str | None = None, interface: Any = None, qp_backend: str = "batched",
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_env: int = 0,
                  **overrides: Any):
@@ -281,6 +280,7 @@ class CommVectorEnv(JointVectorEnv):
         self.last_mpc_solve_time_s = float("nan")
 
     def _on_reset(self) -> None:
+        super()._on_reset()
         self.mpc.reset()
 
     def _restart(self, which: np.ndarray) -> None:
