@@ -409,6 +409,15 @@ class OutageAwareMPC:
             solve_time_s=time.perf_counter() - start,
         )
 
+    def command_stakes(self, data: SlotData) -> np.ndarray:
+        """What delivering each AGV's command is worth this slot: ``V_k(0) - V_k(1)`` >= 0, the QP's
+        optimal value when the command is sure to be lost minus when it is sure to arrive (any
+        leading batch axes, (..., K)). At psi = 0 the increments never act, so zero is optimal
+        (feasible, since the simulator keeps |u[n-1]| <= a_max) and ``V_k(0) = r' Q4 r`` is the
+        prepared constant; ``V_k(1)`` is one solve."""
+        delivered = self.solve_prepared(data, np.ones(data.constant.shape)).value
+        return np.maximum(data.constant - delivered, 0.0)
+
     def _solve_stack(self, data: "SlotData", psi: np.ndarray, start: float) -> MPCSolution:
         """Every QP of the slot (any leading batch axes) in one batched solve."""
         lead = data.constant.shape

@@ -9,7 +9,7 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 import lawn_env
 from agents import make_policy
 from lawn_env import ScenarioConfig
-from lawn_env.interface import RL_INTERFACE, ActionLayout, Decision, RLInterface, resolve_interface
+from lawn_env.interface import RL_INTERFACE, STAKE_FLOOR, ActionLayout, Decision, RLInterface, resolve_interface
 
 RL_IDS = list(lawn_env.RL_ENV_IDS)
 SHORT = ScenarioConfig(num_slots=30)
@@ -121,6 +121,50 @@ def test_zero_action_of_the_anchored_scheme_is_a_sound_policy(env_id):
     plain_zero = _zero_action_cost("lawn/Comm-v0", 0, None)
     assert np.isfinite(zero) and zero < 3 * epa  # a small factor of EPA ...
     assert plain_zero > 100 * epa  # ... where the v0 zero action (hover at the start) is a catastrophe
+    by_distance = np.mean([_zero_action_cost(env_id, s, {"base": "rl", "power_anchor": "distance"}) for s in seeds])
+    assert zero < by_distance  # the stake prior is the better anchor (benchmarks/anchors.py measures by how much)
+
+
+def test_stake_prior_is_the_linearized_slot_problems_power_split():
+    """The stakes are V_k(0) - V_k(1) of the slot's QPs; the zero action's powers are P_max
+    (w d^2m)^(1/(m+1)) normalized; a worthless command keeps a floor, and with no stake at all the
+    split goes by distance alone."""
+    cfg = ScenarioConfig()
+    env = gym.make("lawn/Comm-v0").unwrapped
+    env.reset(seed=3)
+    for _ in range(3):
+        env.step(env.action_space.sample())
+    sim = env.sim
+    layout = ActionLayout(cfg, "comm", "rl")
+    mpc = layout.mpc
+    data = mpc.prepare(sim.x_obs, sim.reference_window(), sim.slot)
+    stakes = mpc.command_stakes(data)
+    lost, sure = mpc.solve_prepared(data, np.zeros(4)).value, mpc.solve_prepared(data, np.ones(4)).value
+    np.testing.assert_allclose(stakes, lost - sure, rtol=1e-9)
+    assert np.all(stakes > 0)
+    decision = layout.decode(np.zeros(layout.size), sim.x_obs, sim.reference_window(), sim.drone_position, sim.slot)
+    d2 = layout._link.distance_sq(decision.drone_next, sim.x_obs[:, :2])
+    m = cfg.channel.nakagami_m
+    weights = (stakes * d2**m) ** (1 / (m + 1))
+    np.testing.assert_allclose(decision.power_w, cfg.power_budget_w * weights / weights.sum(), rtol=1e-9)
+    # the AGV whose command is worth most per unit of distance gets the most power
+    assert np.argmax(decision.power_w / d2 ** (m / (m + 1))) == np.argmax(stakes)
+
+    class Fixed:  # stand-in for the MPC's stakes
+        def __init__(self, w):
+            self.w = np.asarray(w, dtype=float)
+
+        def command_stakes(self, data):
+            return self.w
+
+    layout.mpc = Fixed([5.0, 0.0, 5.0, 5.0])
+    prior = layout.power_prior(sim.x_obs, decision.drone_next, data)
+    floor = STAKE_FLOOR * 15.0 / 4
+    np.testing.assert_allclose(prior[1], (floor * d2[1] ** m) ** (1 / (m + 1)))
+    layout.mpc = Fixed(np.zeros(4))
+    np.testing.assert_allclose(layout.power_prior(sim.x_obs, decision.drone_next, data), d2 ** (m / (m + 1)))
+    with pytest.raises(ValueError, match="pass the reference window"):
+        layout.decode(np.zeros(layout.size), sim.x_obs, None, sim.drone_position)
 
 
 @pytest.mark.parametrize("role", ["joint", "comm"])

@@ -289,8 +289,9 @@ def test_rl_interface_lockstep_with_the_single_env(env_id, monkeypatch):
 
         monkeypatch.setattr(channel, "sample_normalized_fading", recording)
         env = gym.make(env_id, config=config, interface=iface, **extra)
-        if not comm:  # the anchor's MPC with the vector env's solver (DAQP agrees to ~1e-9 only)
-            env.unwrapped.actions.mpc = OutageAwareMPC.from_config(env.unwrapped.config, backend="batched")
+        # the anchor's MPC (the residual's controller, the stakes) with the vector env's solver (DAQP
+        # agrees to ~1e-9 only)
+        env.unwrapped.actions.mpc = OutageAwareMPC.from_config(env.unwrapped.config, backend="batched")
         obs, _ = env.reset(seed=20 + i)
         rows = [(obs, 0.0, False, False)]
         for t in range(30):
