@@ -343,3 +343,21 @@ def test_a_sigkilled_lawn_train_resumes_to_the_uninterrupted_counts(tmp_path):
     subprocess.run([sys.executable, "-m", "training.cli", "train", "--resume", str(tmp_path / "killed"), "--quiet"],
                    check=True, cwd=os.getcwd())
     assert _history(tmp_path / "killed")[:3] == _history(tmp_path / "whole")[:3]
+
+
+def test_recipe_commands_parse_as_lawn_train():
+    """Every zoo recipe's printed command is one `lawn train` accepts, with its budget, seeds,
+    vector env and hyperparameters (shell-quoted JSON) exactly as the recipe trains them."""
+    import shlex
+
+    from training.cli import _parse_overrides, build_parser
+    from training.zoo import RECIPES
+
+    for recipe in RECIPES:
+        argv = shlex.split(recipe.command().replace("<s>", "0"))
+        assert argv[:2] == ["lawn", "train"]
+        args = build_parser().parse_args(argv[1:])
+        assert (args.algo, args.env, args.timesteps) == (recipe.algo, recipe.env_id, recipe.timesteps)
+        assert tuple(args.seeds) == recipe.seeds and args.vec == recipe.vec
+        assert _parse_overrides(args.hp, "--hp") == recipe.hp
+    assert any(r.vec == "native" for r in RECIPES)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import shlex
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,6 +48,7 @@ class Recipe:
     hp: dict = field(default_factory=dict)
     init_from: str | None = None  # another recipe's name: seed s starts from that recipe's seed s
     eval_every: int = 25_000
+    vec: str = "dummy"  # lawn train --vec: "native" trains on lawn's batched vector env
 
     @property
     def evaluated_on(self) -> str:
@@ -55,7 +57,9 @@ class Recipe:
     def command(self) -> str:
         parts = [f"lawn train --algo {self.algo} --env {self.env_id} --timesteps {self.timesteps}",
                  f"--seeds {' '.join(map(str, self.seeds))}", f"--out RUNS/{self.name}"]
-        parts += [f"--hp {k}={json.dumps(v)}" for k, v in self.hp.items()]
+        parts += [f"--hp {shlex.quote(f'{k}={json.dumps(v)}')}" for k, v in self.hp.items()]
+        if self.vec != "dummy":
+            parts.append(f"--vec {self.vec}")
         if self.init_from:
             parts.append(f"--init-from RUNS/{self.init_from}/seed-<s>")
         return " ".join(parts)
@@ -66,8 +70,9 @@ _FINE_TUNE = {"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2
 
 #: The learned comparators, in training order (a recipe that starts from another comes after it).
 RECIPES: tuple[Recipe, ...] = (
-    Recipe("ppo-comm", "PPO (RL interface)", "ppo", "lawn/Comm-v0", 200_000),
-    Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v0", 200_000),
+    Recipe("ppo-comm", "PPO (RL interface)", "ppo", "lawn/Comm-v0", 300_000, eval_every=50_000, vec="native"),
+    Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v0", 300_000, eval_every=50_000,
+           vec="native"),
     Recipe("ppo-marl", "PPO multi-agent, shared weights", "ppo", "lawn/Parallel-v0", 150_000, eval_every=25_000),
     Recipe("sac-comm", "SAC (RL interface)", "sac", "lawn/Comm-v0", 20_000, seeds=(0,), eval_every=5_000),
     Recipe("bc-comm", "BC of rg-mpc (+4 DAgger rounds)", "bc", "lawn/Comm-v0", 12_000, hp=_DAGGER),
@@ -113,7 +118,7 @@ def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, 
                     shutil.rmtree(out)  # an unfinished run: start it again from scratch
                 tasks.append(dict(algo=r.algo, env_id=r.env_id, config=ScenarioConfig(), timesteps=r.timesteps, seed=s,
                                   out_dir=out, hp_overrides=dict(r.hp), eval_every=r.eval_every, eval_episodes=10,
-                                  progress=False,
+                                  progress=False, vec=r.vec,
                                   init_from=runs / r.init_from / f"seed-{s}" if r.init_from else None))
         pool_map(train_task, tasks, workers, progress, desc="training runs")
     return done
