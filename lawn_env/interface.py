@@ -25,8 +25,9 @@ accelerating; single slots cost up to 1e7), so every environment also takes
       high-SNR outage ``P_out ∝ (d^2 / p)^m`` the Lagrange condition gives
       ``prior_k = (w_k d_k^(2m))^(1/(m+1))``; stakes are floored at ``STAKE_FLOOR`` of their mean.
       An AGV far off its track gets the power it needs to be brought back, which the distance
-      prior does not give it (on 20 validation seeds the zero action costs +0.8 % of ``rg-mpc``
-      with this prior and +53 % with the distance prior; ``benchmarks/anchors.py``).
+      prior does not give it (on 20 validation seeds the zero action costs +4.6 % of ``rg-mpc``,
+      paired per seed, worst seed +45 %, against +44 % and +453 % with the distance prior;
+      ``python benchmarks/anchors.py``).
     Increments (Joint): a residual ``a * residual_scale * Delta-a_max`` on the first increment
     of the outage-aware MPC at each link's planned success probability (the QP P3 that drives
     the AGVs of ``lawn/Comm-v0``, :class:`lawn_env.mpc.OutageAwareMPC`), clipped to the control
@@ -92,7 +93,7 @@ class RLInterface:
     power_anchor: Literal["distance", "stake"] = "distance"
     """Anchored power prior: ``distance`` (equal outage) or ``stake`` (by what each command is worth)."""
     power_log_range: PositiveFloat = 2.0
-    """Anchored power: weights ``d^2 exp(a * power_log_range)``; links differ at most by e^(2 range) from the prior."""
+    """Anchored power: weights ``prior exp(a * power_log_range)``; links differ at most by e^(2 range) from the prior."""
     residual_scale: PositiveFloat = 1.0
     """Anchored increments: residual ``a * residual_scale * Delta-a_max`` on the tracking controller."""
 
@@ -323,6 +324,9 @@ class ActionLayout:
         d2 = self._link.distance_sq(drone_next[..., None, :], x_aug[..., 0:2])
         if not self._stake:
             return d2
+        if data is None:
+            raise ValueError("power_anchor='stake' weighs the links by the slot's stakes: pass data, the slot's "
+                             "prepared MPC data (layout.mpc.prepare(x_aug, reference, slot))")
         stake = self.mpc.command_stakes(data)
         floor = STAKE_FLOOR * stake.mean(axis=-1, keepdims=True)
         stake = np.where(floor > 0, np.maximum(stake, floor), 1.0)  # no stake anywhere: by distance alone

@@ -5,6 +5,7 @@
 #   README blocks benchmark, benchmark-nominal          lawn benchmark (+ docs/figures/benchmark.png)
 #   README block gap                                    lawn gap (+ docs/figures/gap.png, convergence.png)
 #   README blocks expert-speed, env-throughput, train-throughput, vector-step   benchmarks/*.py --markdown
+#   README block anchors (with learned)                 benchmarks/anchors.py --markdown
 #   README block learned-agents, docs/LEARNED.md        lawn zoo build (needs the training runs in
 #                                                       runs/agents: with --train, scripts/train_agents.sh
 #                                                       trains them first, hours on 2 cores)
@@ -61,6 +62,8 @@ if want throughput; then
   splice vector-step runs/vector_step.md "python benchmarks/vector_step_breakdown.py"
 fi
 if want learned; then
+  "$py" benchmarks/anchors.py --markdown runs/anchors.md
+  splice anchors runs/anchors.md "python benchmarks/anchors.py"
   if [ "$train" = 1 ]; then
     bash scripts/train_agents.sh runs/agents
   elif [ -d runs/agents ]; then
