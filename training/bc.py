@@ -30,7 +30,10 @@ from agents.runs import algorithm_class
 from lawn_env import ScenarioConfig
 from lawn_env.interface import ActionLayout, Decision, InterfaceLike, resolve_interface
 
-__all__ = ["collect", "fit", "train_bc_run", "BC_TARGETS"]
+__all__ = ["collect", "fit", "train_bc_run", "BC_TARGETS", "VALIDATION_EPISODES"]
+
+#: Validation episodes of a cloned policy (one validation, after the fit).
+VALIDATION_EPISODES = 5
 
 #: The algorithms whose policy network behaviour cloning fits (the ``target`` hyperparameter).
 BC_TARGETS = ("ppo", "sac")
@@ -189,13 +192,14 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     spec = {"algo": target, "target": target, "trainer": "bc", "env": env_id, "seed": seed, "timesteps": timesteps,
             "interface": interface.to_dict(),
             "num_timesteps": int(len(obs)), "hyperparams_version": version, "wall_time_s": elapsed,
+            "eval_episodes": VALIDATION_EPISODES,
             "expert_mean_control_cost": float(np.mean(expert_costs)) if expert_costs else None,
             "versions": versions()}
     (out_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
     (out_dir / "hyperparams.json").write_text(json.dumps(resolved, indent=2))
     (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
     (out_dir / "bc_losses.json").write_text(json.dumps(history, indent=2))
-    validation = ControlCostValidation(env_id, config, interface.to_dict(), episodes=5, every=1, out_dir=out_dir,
+    validation = ControlCostValidation(env_id, config, interface.to_dict(), episodes=VALIDATION_EPISODES, every=1, out_dir=out_dir,
                                        seed_base=VALIDATION_SEED_BASE)
     validation.model = model
     mean, half = validation.validate()

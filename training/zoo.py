@@ -25,6 +25,7 @@ from agents.learned import ZOO_DIR, export_agent, zoo_agents
 from agents.runs import read_run
 from lawn_env import ScenarioConfig
 
+from .bc import VALIDATION_EPISODES as BC_VALIDATION_EPISODES
 from .evaluate import evaluate, pool_map, write_rows
 from .protocol import VALIDATION_SEED_BASE, read_learning_curve
 from .tables import mean_ci
@@ -150,6 +151,8 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
     lines = ["| agent | env (evaluated on) | algorithm, interface | budget per run | training seeds | wall time per run "
              "| control cost (mean over seeds) | vs rg-mpc, mean over training seeds | shipped seed vs rg-mpc (paired, 20 test seeds) |",
              "|" + "---|" * 9]
+    per_run = ["| recipe | training seed | power prior | best validation cost (episodes) | vs rg-mpc (paired, test seeds) "
+               "| worst test seed vs rg-mpc | wall time |", "|" + "---|" * 7]
     for env in envs:
         for name in ("rg-mpc", "epa"):
             c = mean_ci(cost[(name, env, i)] for i in range(episodes))
@@ -165,6 +168,14 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
             across, across_ci = mean_ci(per_seed)
             validation = [_best_validation(d) for d in dirs]
             chosen = dirs[int(np.argmin(validation))]
+            for d, spec, best in zip(dirs, specs, validation):
+                diff = paired(run[d].policy_name, env)
+                mean, half = mean_ci(diff)
+                prior = (spec.get("interface") or {}).get("power_anchor", "distance")
+                shown = spec.get("eval_episodes", BC_VALIDATION_EPISODES)  # BC runs before it was recorded
+                per_run.append(f"| `{r.name}`{' (shipped)' if d == chosen else ''} | {spec['seed']} | {prior} "
+                               f"| {_num(best)} ({shown}) | {_pct(mean)} ± {_pct(half, sign=False)} | {_pct(float(diff.max()))} "
+                               f"| {spec['wall_time_s']:.0f} s |")
             ship = mean_ci(paired(run[chosen].policy_name, env))
             wall = np.mean([s["wall_time_s"] for s in specs])
             steps = int(specs[0].get("num_timesteps", r.timesteps))
@@ -188,7 +199,7 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
                                progress=False) for env in envs}
     _plot_curves(found, {env: float(np.mean([r["control_cost"] for r in rs])) for env, rs in reference.items()},
                  out_doc.parent / "learned" / "curves.png")
-    out_doc.write_text(_document(table, episodes))
+    out_doc.write_text(_document(table, "\n".join(per_run), episodes))
     if readme is not None:
         _replace_block(readme, table)
     return table
@@ -242,7 +253,7 @@ def _export(r: Recipe, chosen: Path, dirs, specs, ship, across, across_ci, env) 
     export_agent(chosen, target, record)
 
 
-def _document(table: str, episodes: int) -> str:
+def _document(table: str, per_run: str, episodes: int) -> str:
     from .provenance import provenance
 
     return f"""# Learned comparators
@@ -258,6 +269,12 @@ run and gives a 95 % t-interval across training seeds; the last column is the pa
 interval of the shipped run over the test seeds.
 
 {table}
+
+Every training run (the power prior is the anchored power split the run trained and acts with,
+`lawn_env.interface`; the best validation cost is the selected checkpoint's, on the first
+validation seeds; the worst test seed is the largest per-seed relative difference against `rg-mpc`):
+
+{per_run}
 
 Validation cost during training (every seed of every recipe; dashed: `rg-mpc` on the same
 validation seeds):
