@@ -320,7 +320,7 @@ class ActionLayout:
         """The anchored power split's weights, (..., K) (any leading batch axes; the zero action's
         powers are ``P_max prior / sum(prior)``): ``d_k^2`` from the drone's next position, or with
         ``power_anchor="stake"`` ``(w_k d_k^(2m))^(1/(m+1))`` for the stakes ``w_k`` of the slot's
-        prepared MPC ``data`` (module docstring)."""
+        prepared MPC ``data`` (module docstring), scaled so that the largest weight is 1."""
         d2 = self._link.distance_sq(drone_next[..., None, :], x_aug[..., 0:2])
         if not self._stake:
             return d2
@@ -331,7 +331,8 @@ class ActionLayout:
         floor = STAKE_FLOOR * stake.mean(axis=-1, keepdims=True)
         stake = np.where(floor > 0, np.maximum(stake, floor), 1.0)  # no stake anywhere: by distance alone
         m = self._link.m
-        return (stake * d2**m) ** (1.0 / (m + 1.0))
+        log_w = (np.log(stake) + m * np.log(d2)) / (m + 1.0)  # in logs: d^(2m) overflows for large m
+        return np.exp(log_w - log_w.max(axis=-1, keepdims=True))
 
     def _anchored_power(self, a: np.ndarray, x_aug: np.ndarray, drone_next: np.ndarray,
                         data: SlotData | None) -> np.ndarray:

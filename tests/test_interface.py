@@ -157,12 +157,21 @@ def test_stake_prior_is_the_linearized_slot_problems_power_split():
         def command_stakes(self, data):
             return self.w
 
+    def split(w):  # the weights' shares (the prior is scale-free)
+        return np.asarray(w) / np.sum(w)
+
     layout.mpc = Fixed([5.0, 0.0, 5.0, 5.0])
     prior = layout.power_prior(sim.x_obs, decision.drone_next, data)
-    floor = STAKE_FLOOR * 15.0 / 4
-    np.testing.assert_allclose(prior[1], (floor * d2[1] ** m) ** (1 / (m + 1)))
+    floored = np.array([5.0, STAKE_FLOOR * 15.0 / 4, 5.0, 5.0])
+    np.testing.assert_allclose(split(prior), split((floored * d2**m) ** (1 / (m + 1))), rtol=1e-12)
     layout.mpc = Fixed(np.zeros(4))
-    np.testing.assert_allclose(layout.power_prior(sim.x_obs, decision.drone_next, data), d2 ** (m / (m + 1)))
+    np.testing.assert_allclose(split(layout.power_prior(sim.x_obs, decision.drone_next, data)),
+                               split(d2 ** (m / (m + 1))), rtol=1e-12)
+    # a large Nakagami m (d^(2m) would overflow) still gives a finite split that spends the budget
+    deep = ActionLayout(ScenarioConfig(channel={"nakagami_m": 71}), "comm", "rl")
+    far = deep.decode(np.zeros(deep.size), sim.x_obs, sim.reference_window(), sim.drone_position, sim.slot)
+    assert np.all(np.isfinite(far.power_w)) and far.power_w.min() > 0
+    assert far.power_w.sum() == pytest.approx(cfg.power_budget_w)
     with pytest.raises(ValueError, match="pass the reference window"):
         layout.decode(np.zeros(layout.size), sim.x_obs, None, sim.drone_position)
 
