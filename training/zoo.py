@@ -75,7 +75,7 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v0", 300_000, eval_every=50_000,
            vec="native"),
     Recipe("ppo-marl", "PPO multi-agent, shared weights", "ppo", "lawn/Parallel-v0", 150_000, eval_every=25_000),
-    Recipe("sac-comm", "SAC (RL interface)", "sac", "lawn/Comm-v0", 20_000, seeds=(0,), eval_every=5_000),
+    Recipe("sac-comm", "SAC (RL interface)", "sac", "lawn/Comm-v0", 20_000, eval_every=5_000),
     Recipe("bc-comm", "BC of rg-mpc (+4 DAgger rounds)", "bc", "lawn/Comm-v0", 12_000, hp=_DAGGER),
     Recipe("ppo-comm-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Comm-v0", 60_000, init_from="bc-comm",
            hp=_FINE_TUNE, eval_every=10_000),
