@@ -199,8 +199,8 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     (out_dir / "hyperparams.json").write_text(json.dumps(resolved, indent=2))
     (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
     (out_dir / "bc_losses.json").write_text(json.dumps(history, indent=2))
-    validation = ControlCostValidation(env_id, config, interface.to_dict(), episodes=VALIDATION_EPISODES, every=1, out_dir=out_dir,
-                                       seed_base=VALIDATION_SEED_BASE)
+    validation = ControlCostValidation(env_id, config, interface.to_dict(), episodes=VALIDATION_EPISODES, every=1,
+                                       out_dir=out_dir, seed_base=VALIDATION_SEED_BASE)
     validation.model = model
     mean, half = validation.validate()
     (out_dir / "learning_curve.csv").write_text(f"timesteps,control_cost,control_cost_ci95\n{len(obs)},{mean},{half}\n")
