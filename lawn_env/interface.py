@@ -274,10 +274,7 @@ class ActionLayout:
         reach = self._reach
         velocity = np.where(dist <= reach, step / self._dt, step * (self._vmax / np.maximum(dist, reach)))
         drone_next = move_drones(drone_position, velocity, self._vmax, self._dt, self._area)
-        data = self._prepare(x_aug, reference, slot)
-        power = self._anchored_power(comm[:, :k], x_aug, drone_next, data)
-        increment = self._residual(a[:, : 2 * k], x_aug, data, power, drone_next) if self._inc_size else None
-        return Decision(increment, power, drone_next)
+        return self._anchored(a[:, : 2 * k], comm[:, :k], x_aug, reference, slot, drone_next)
 
     # ------------------------------------------------------------------ decode
     def decode(self, action: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
@@ -293,10 +290,7 @@ class ActionLayout:
             increment = a[: 2 * k].reshape(k, 2) * self._inc_max if self._inc_size else None
             return Decision(increment, power, drone_next)
         drone_next = self._anchored_drone(comm[k:], x_aug, drone_position)
-        data = self._prepare(x_aug, reference, slot)
-        power = self._anchored_power(comm[:k], x_aug, drone_next, data)
-        increment = self._residual(a[: 2 * k], x_aug, data, power, drone_next) if self._inc_size else None
-        return Decision(increment, power, drone_next)
+        return self._anchored(a[: 2 * k], comm[:k], x_aug, reference, slot, drone_next)
 
     def _anchored_drone(self, a: np.ndarray, x_aug: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
         target = x_aug[:, 0:2].mean(axis=0) + a * self.interface.drone_offset_m
@@ -316,12 +310,34 @@ class ActionLayout:
                              f"{self.interface.power_anchor!r}) plan with the MPC: pass the reference window")
         return self.mpc.prepare(x_aug, reference, slot)
 
+    def _anchored(self, a_increment: np.ndarray, a_power: np.ndarray, x_aug: np.ndarray,
+                  reference: np.ndarray | None, slot: int | np.ndarray | None, drone_next: np.ndarray) -> Decision:
+        """The anchored decision once the drone's next position is known (single or batched): the
+        power split around the prior and, for Joint, the residual on the anchor MPC's increments,
+        within the increment bound."""
+        data = self._prepare(x_aug, reference, slot)
+        d2 = self._distance_sq(x_aug, drone_next)
+        w = self._prior(d2, data) * np.exp(a_power * self.interface.power_log_range)
+        power = w * (self._pmax / w.sum(axis=-1, keepdims=True))
+        if not self._inc_size:
+            return Decision(None, power, drone_next)
+        increment = self._anchor_increment(data, power, d2)
+        increment += a_increment.reshape(increment.shape) * (self.interface.residual_scale * self._inc_max)
+        np.clip(increment, -self._inc_max, self._inc_max, out=increment)
+        return Decision(increment, power, drone_next)
+
+    def _distance_sq(self, x_aug: np.ndarray, drone_next: np.ndarray) -> np.ndarray:
+        """d_k^2 from the drone's next position to the AGVs, (..., K)."""
+        return self._link.distance_sq(drone_next[..., None, :], x_aug[..., 0:2])
+
     def power_prior(self, x_aug: np.ndarray, drone_next: np.ndarray, data: SlotData | None = None) -> np.ndarray:
         """The anchored power split's weights, (..., K) (any leading batch axes; the zero action's
         powers are ``P_max prior / sum(prior)``): ``d_k^2`` from the drone's next position, or with
         ``power_anchor="stake"`` ``(w_k d_k^(2m))^(1/(m+1))`` for the stakes ``w_k`` of the slot's
         prepared MPC ``data`` (module docstring), scaled so that the largest weight is 1."""
-        d2 = self._link.distance_sq(drone_next[..., None, :], x_aug[..., 0:2])
+        return self._prior(self._distance_sq(x_aug, drone_next), data)
+
+    def _prior(self, d2: np.ndarray, data: SlotData | None) -> np.ndarray:
         if not self._stake:
             return d2
         if data is None:
@@ -334,26 +350,10 @@ class ActionLayout:
         log_w = (np.log(stake) + m * np.log(d2)) / (m + 1.0)  # in logs: d^(2m) overflows for large m
         return np.exp(log_w - log_w.max(axis=-1, keepdims=True))
 
-    def _anchored_power(self, a: np.ndarray, x_aug: np.ndarray, drone_next: np.ndarray,
-                        data: SlotData | None) -> np.ndarray:
-        w = self.power_prior(x_aug, drone_next, data) * np.exp(a * self.interface.power_log_range)
-        return w * (self._pmax / w.sum(axis=-1, keepdims=True))
-
-    def _residual(self, a: np.ndarray, x_aug: np.ndarray, data: SlotData, power_w: np.ndarray,
-                  drone_next: np.ndarray) -> np.ndarray:
-        """The anchored increments: the anchor's plus the normalized residual ``a`` (..., 2K),
-        within the increment bound."""
-        increment = self._anchor_increment(x_aug, data, power_w, drone_next)
-        increment += a.reshape(increment.shape) * (self.interface.residual_scale * self._inc_max)
-        np.clip(increment, -self._inc_max, self._inc_max, out=increment)
-        return increment
-
-    def _anchor_increment(self, x_aug: np.ndarray, data: SlotData, power_w: np.ndarray,
-                          drone_next: np.ndarray) -> np.ndarray:
+    def _anchor_increment(self, data: SlotData, power_w: np.ndarray, d2: np.ndarray) -> np.ndarray:
         """The tracking controller under the residual: the outage-aware MPC's first increment at each
         link's planned success probability, (..., K, 2) m/s^2 (a new array; before the residual)."""
-        psi = self._link.success_sq(power_w, self._link.distance_sq(drone_next[..., None, :], x_aug[..., 0:2]))
-        return self.mpc.solve_prepared(data, psi).increments[..., 0, :].copy()
+        return self.mpc.solve_prepared(data, self._link.success_sq(power_w, d2)).increments[..., 0, :].copy()
 
     # ------------------------------------------------------------------ encode
     def encode(self, decision: Decision, x_aug: np.ndarray, reference: np.ndarray | None,
@@ -377,12 +377,13 @@ class ActionLayout:
             target = drone_position + max(dist, float((centroid - drone_position) @ u)) * u
         a_drone = np.clip((target - centroid) / self.interface.drone_offset_m, -1.0, 1.0)
         data = self._prepare(x_aug, reference, slot)
-        log_w = np.log(np.maximum(power, 1e-300) / self.power_prior(x_aug, drone_next, data))
+        d2 = self._distance_sq(x_aug, drone_next)
+        log_w = np.log(np.maximum(power, 1e-300) / self._prior(d2, data))
         log_w -= 0.5 * (log_w.max() + log_w.min())  # any common shift gives the same split: center the range
         a_power = np.clip(log_w / self.interface.power_log_range, -1.0, 1.0)
         parts = [a_power, a_drone]
         if self._inc_size:
-            anchor = self._anchor_increment(x_aug, data, power, drone_next)
+            anchor = self._anchor_increment(data, power, d2)
             scale = self.interface.residual_scale * self._inc_max
             parts.insert(0, np.clip((np.asarray(decision.increment, dtype=float) - anchor) / scale, -1, 1).reshape(-1))
         return np.concatenate(parts).astype(np.float32)

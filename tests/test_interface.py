@@ -132,6 +132,7 @@ def test_stake_prior_is_the_linearized_slot_problems_power_split():
     cfg = ScenarioConfig()
     env = gym.make("lawn/Comm-v0").unwrapped
     env.reset(seed=3)
+    env.action_space.seed(3)
     for _ in range(3):
         env.step(env.action_space.sample())
     sim = env.sim
@@ -145,10 +146,23 @@ def test_stake_prior_is_the_linearized_slot_problems_power_split():
     decision = layout.decode(np.zeros(layout.size), sim.x_obs, sim.reference_window(), sim.drone_position, sim.slot)
     d2 = layout._link.distance_sq(decision.drone_next, sim.x_obs[:, :2])
     m = cfg.channel.nakagami_m
-    weights = (stakes * d2**m) ** (1 / (m + 1))
+    floored = np.maximum(stakes, STAKE_FLOOR * stakes.mean())  # a nearly worthless command keeps the floor
+    weights = (floored * d2**m) ** (1 / (m + 1))
     np.testing.assert_allclose(decision.power_w, cfg.power_budget_w * weights / weights.sum(), rtol=1e-9)
     # the AGV whose command is worth most per unit of distance gets the most power
     assert np.argmax(decision.power_w / d2 ** (m / (m + 1))) == np.argmax(stakes)
+    env.reset(seed=3)  # actions that leave AGV 1 a command worth less than the floor
+    env.action_space.seed(49)
+    for _ in range(3):
+        env.step(env.action_space.sample())
+    sim = env.sim
+    data = mpc.prepare(sim.x_obs, sim.reference_window(), sim.slot)
+    stakes = mpc.command_stakes(data)
+    assert stakes.min() < STAKE_FLOOR * stakes.mean()
+    decision = layout.decode(np.zeros(layout.size), sim.x_obs, sim.reference_window(), sim.drone_position, sim.slot)
+    d2 = layout._link.distance_sq(decision.drone_next, sim.x_obs[:, :2])
+    weights = (np.maximum(stakes, STAKE_FLOOR * stakes.mean()) * d2**m) ** (1 / (m + 1))
+    np.testing.assert_allclose(decision.power_w, cfg.power_budget_w * weights / weights.sum(), rtol=1e-9)
 
     class Fixed:  # stand-in for the MPC's stakes
         def __init__(self, w):
