@@ -45,7 +45,7 @@ from lawn_env import channel
 from lawn_env.config import ScenarioConfig
 from lawn_env.core import Snapshot
 from lawn_env.dynamics import PredictionModel, cost_coefficients
-from lawn_env.mpc import MPCSolution, OutageAwareMPC, SlotData
+from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC, SlotData
 
 from .optim import linear_argmin_disc_box, project_budget
 
@@ -89,7 +89,7 @@ class AOSettings:
     Off by default: psi is flat near p = 0, so a link whose power collapsed to 0 has a zero
     gradient and Algorithm 1 started there never gives it power again (the AGV then drifts on its
     last acceleration); equal power re-evaluates every link each slot."""
-    qp_backend: str = "daqp"
+    qp_backend: str = DEFAULT_BACKEND
     """QP backend of the control block (see :mod:`lawn_env.mpc`)."""
 
 

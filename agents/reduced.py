@@ -40,7 +40,7 @@ from lawn_env import channel
 from lawn_env.config import ScenarioConfig
 from lawn_env.core import Snapshot
 from lawn_env.dynamics import cost_coefficients
-from lawn_env.mpc import MPCSolution, OutageAwareMPC
+from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
 
 from .ao import Plan, SlotProblem
 from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
@@ -73,7 +73,8 @@ class ReducedProblem(SlotProblem):
 
     # ------------------------------------------------------------------ exact
     def values_at_psi(self, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray, MPCSolution]:
-        """V_k(psi_k) and V_k'(psi_k) (envelope) with exact QPs: (K,), (K,), solution."""
+        """V_k(psi_k) and V_k'(psi_k) (envelope) with exact QPs: (..., K), (..., K), solution; ``psi``
+        (..., K) with any leading axes (a table's psi values) is one batched solve."""
         sol = self.mpc.solve_prepared(self.data, psi)
         lcoef, scoef, _ = cost_coefficients(self.mpc.model, self.data.linear, self.data.constant, sol.increments)
         return sol.value, 2.0 * psi * lcoef + 2.0 * scoef, sol  # envelope theorem: V' = dJ^/dpsi at z*
@@ -141,11 +142,9 @@ class ReducedProblem(SlotProblem):
 
     # ------------------------------------------------------------------ tabulated search
     def table(self, psi_grid: np.ndarray) -> "ValueTable":
-        values = np.empty((psi_grid.size, self.x_aug.shape[0]))
-        slopes = np.empty_like(values)
-        for i, psi in enumerate(psi_grid):
-            v, s, _ = self.values_at_psi(np.full(self.x_aug.shape[0], psi))
-            values[i], slopes[i] = v, s
+        """V_k and its envelope slope at every psi of ``psi_grid`` for every AGV: one batched solve."""
+        psi = np.repeat(np.asarray(psi_grid, dtype=float)[:, None], self.x_aug.shape[0], axis=1)
+        values, slopes, _ = self.values_at_psi(psi)
         return ValueTable(psi_grid, values, slopes)
 
     def grid_search(self, table: ValueTable, positions: np.ndarray, levels: int, coarse_levels: int | None = None,
@@ -217,7 +216,7 @@ class ReducedSettings:
     """Units of P_max / power_levels for the exact split of the starting point."""
     refine_iterations: Annotated[int, Field(ge=0)] = 4
     """Rounds of alternating projected-gradient steps (p, then q) on the exact Phi."""
-    qp_backend: str = "daqp"
+    qp_backend: str = DEFAULT_BACKEND
 
 
 @pydantic_dataclass(frozen=True, config=_CFG)
@@ -230,7 +229,7 @@ class GlobalSettings:
     max_drone_points: Annotated[int, Field(ge=1)] = 20_000
     power_levels: Annotated[int, Field(ge=2)] = 200
     refine_iterations: Annotated[int, Field(ge=0)] = 60
-    qp_backend: str = "daqp"
+    qp_backend: str = DEFAULT_BACKEND
 
 
 class _ReducedPlannerBase:

@@ -214,9 +214,10 @@ def cost_coefficients(model: PredictionModel, linear: np.ndarray, constant: np.n
                       dmu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """L, S, W from the slot's precomputed ``linear`` = F'Q4 r (K, 2N_p) and ``constant`` =
     r'Q4 r (K,) (see :meth:`lawn_env.mpc.OutageAwareMPC.prepare`); the one implementation of the
-    coefficients of P4. The envelope derivative of the QP's value in psi is ``2 psi L + 2 S``."""
-    z = dmu.reshape(linear.shape)
-    lcoef = ((z @ model.ftq4f) * z).sum(axis=1)
-    scoef = (linear * z).sum(axis=1)
-    wcoef = ((z @ model.q5) * z).sum(axis=1) + constant
+    coefficients of P4. The envelope derivative of the QP's value in psi is ``2 psi L + 2 S``.
+    ``dmu`` (..., K, N_p, 2) may carry leading axes of its own (one per psi value of a table)."""
+    z = dmu.reshape(dmu.shape[:-2] + (-1,))
+    lcoef = ((z @ model.ftq4f) * z).sum(axis=-1)
+    scoef = (linear * z).sum(axis=-1)
+    wcoef = ((z @ model.q5) * z).sum(axis=-1) + constant
     return lcoef, scoef, wcoef

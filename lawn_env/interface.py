@@ -64,7 +64,7 @@ from . import spaces
 from .channel import LinkParams
 from .config import ScenarioConfig
 from .drone import move_drone, move_drones
-from .mpc import OutageAwareMPC, SlotData
+from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
 
 __all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FLOOR", "resolve_interface", "ActionLayout",
            "Decision", "ROLES", "InterfaceLike"]
@@ -224,7 +224,7 @@ class ActionLayout:
     """
 
     def __init__(self, config: ScenarioConfig, role: str = "joint", interface: InterfaceLike = None,
-                 mpc_backend: str = "daqp"):
+                 mpc_backend: str = DEFAULT_BACKEND):
         if role not in ROLES:
             raise ValueError(f"role={role!r}; valid: {', '.join(ROLES)}")
         self.interface = resolve_interface(interface)
@@ -250,7 +250,7 @@ class ActionLayout:
 
     def reset(self, which: np.ndarray | None = None) -> None:
         """Start an episode (the anchor MPC's warm starts are per episode, like the envs' MPC);
-        ``which`` (batched decoding with the ``"batched"`` MPC) restarts only those scenarios."""
+        ``which`` (a mask over a batch's scenarios) restarts only those scenarios."""
         if self.mpc is not None:
             self.mpc.reset(which)
 
@@ -258,8 +258,7 @@ class ActionLayout:
                      drone_position: np.ndarray, slot: np.ndarray | None = None) -> Decision:
         """:meth:`decode` over a batch of B scenarios: checked actions (B, size), states (B, K, 6),
         reference windows (B, K, N_p+1, 6), drone positions (B, 2); the Decision's arrays get a
-        leading B axis; ``slot`` (B,) the scenarios' slots (move blocking with a control period). The
-        anchored increments and stakes need an MPC built with ``mpc_backend="batched"``."""
+        leading B axis; ``slot`` (B,) the scenarios' slots (move blocking with a control period)."""
         a = actions
         k = self.num_agvs
         comm = a[:, self._inc_size :]

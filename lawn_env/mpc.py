@@ -12,42 +12,46 @@ P > 1 that the planners know (MODEL.md §7), move blocking fixes the increments 
 command goes out to zero (their bounds become [0, 0]), so a command is planned to be held for P slots. The optimal value
 ``V_k = 1/2 z*' P z* + q' z* + M`` is the expected cost J^_k of MODEL.md §3.
 
-Backends are named as in qpsolvers. ``"daqp"`` (default) and ``"osqp"`` keep one persistent
-solver workspace per AGV, updated in place and warm-started from the previous solve;
-``"qpsolvers:<name>"`` calls any other qpsolvers backend (stateless). ``"batched"`` solves every
-QP of a call at once, also over a leading batch axis of scenarios (``x_aug`` (B, K, 6)): the
-batched active-set steps of :class:`lawn_env.qp.PencilQP` settle the problems whose active set
-is empty or unchanged since the previous solve, exactly; DAQP solves the rest one by one (the
-native ``lawn/Comm-v0`` vector env uses it). A failed or inaccurate
-solve falls back to a cold OSQP solve at high accuracy, then to the always-feasible zero
-sequence; fallbacks are counted in the returned :class:`MPCSolution`, never raised.
+Every solve takes any leading batch axes (``x_aug`` (..., K, 6): scenarios, psi values, AGVs).
+Backends are named as in qpsolvers. ``"compiled"`` (the default) solves the whole stack in one
+compiled call (:mod:`lawn_env.qp`: per axis, move blocking eliminated, warm-started from each
+problem's previous working set, kept as plain arrays so that copies and pickles continue bitwise),
+exact to rounding. The references solve one problem at a time through Python: ``"daqp"`` and
+``"osqp"`` keep one persistent, warm-started workspace per problem; ``"qpsolvers:<name>"`` calls
+any other qpsolvers backend (stateless). A problem the backend cannot settle goes to a cold DAQP
+solve, then a cold OSQP solve at high accuracy, then the always-feasible zero sequence; fallbacks
+are counted in the returned :class:`MPCSolution` (``status``), never raised.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from .dynamics import PredictionModel, command_mask, planning_period
+from .qp import AxisPencils
 
 if TYPE_CHECKING:
     from .config import ScenarioConfig
 
-__all__ = ["MPCSolution", "OutageAwareMPC", "SlotData", "BACKENDS"]
+__all__ = ["MPCSolution", "OutageAwareMPC", "SlotData", "BACKENDS", "DEFAULT_BACKEND"]
+
+#: The backend every caller uses unless told otherwise.
+DEFAULT_BACKEND = "compiled"
 
 
 @dataclass(frozen=True)
 class MPCSolution:
-    """Solution of the K control QPs at one slot."""
+    """Solution of the control QPs at one slot (leading axes as the solve's: (..., K))."""
 
-    increments: np.ndarray  # (K, N_p, 2) Delta-mu_k, m/s^2
-    value: np.ndarray  # (K,) V_k = optimal J^_k
-    status: np.ndarray  # (K,) 0 primary backend, 1 fallback OSQP, 2 fallback zero sequence (leading axes: batched)
-    iterations: np.ndarray  # (K,) solver iterations of the accepted solve
+    increments: np.ndarray  # (..., K, N_p, 2) Delta-mu_k, m/s^2
+    value: np.ndarray  # (..., K) V_k = optimal J^_k
+    status: np.ndarray  # (..., K) 0 primary backend, 1 fallback (DAQP or OSQP), 2 fallback zero sequence
+    iterations: np.ndarray  # (..., K) solver iterations of the accepted solve
     solve_time_s: float
 
     @property
@@ -57,62 +61,62 @@ class MPCSolution:
 
 @dataclass(frozen=True)
 class SlotData:
-    """The psi-independent data of one slot's K QPs (see :meth:`OutageAwareMPC.prepare`)."""
+    """The psi-independent data of one slot's QPs (see :meth:`OutageAwareMPC.prepare`)."""
 
-    residual: np.ndarray  # r = C x~ - chi_ref, (K, 6(N_p+1))
-    linear: np.ndarray  # F' Q4 r, (K, 2 N_p)
-    constant: np.ndarray  # M = r' Q4 r, (K,)
-    lower: np.ndarray  # (K, 4 N_p): increment bounds, then bounds on T z
+    residual: np.ndarray  # r = C x~ - chi_ref, (..., K, 6(N_p+1))
+    linear: np.ndarray  # F' Q4 r, (..., K, 2 N_p)
+    constant: np.ndarray  # M = r' Q4 r, (..., K)
+    lower: np.ndarray  # (..., K, 4 N_p): increment bounds, then bounds on T z
     upper: np.ndarray
+    phase: Any = 0  # slot phase (slot % control period): an int, or one per scenario (...,)
 
 
 class _DaqpBackend:
-    """One persistent ``daqp.Model`` per AGV (dual active set, exact, warm-started)."""
+    """One persistent ``daqp.Model`` per problem index (dual active set, exact, warm-started)."""
 
     name = "daqp"
 
-    def __init__(self, num_agvs: int, constraint_matrix: np.ndarray, hessians=None):
+    def __init__(self, constraint_matrix: np.ndarray):
         import daqp
 
         self._daqp = daqp
         self._a = np.array(constraint_matrix, dtype=float, order="C")  # DAQP wants a writable buffer
-        self._models = [None] * num_agvs
+        self._models: dict[int, Any] = {}
 
     def forget(self, rows: np.ndarray) -> None:
         """Drop the workspaces (warm starts) of the problems ``rows``."""
-        for i in rows.tolist():
-            self._models[i] = None
+        for i in np.asarray(rows).tolist():
+            self._models.pop(i, None)
 
     def solve(self, k: int, p: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
               bounds_changed: bool = True):
-        model = self._models[k]
+        model = self._models.get(k)
         if model is None:
             model = self._daqp.Model()
             exitflag, _ = model.setup(p, q, self._a, upper, lower)
-            self._models[k] = model
             if exitflag < 0:
-                self._models[k] = None
                 return None, 0, 0.0
+            self._models[k] = model
         else:
             flag = model.update(H=p, f=q, bupper=upper, blower=lower) if bounds_changed else model.update(H=p, f=q)
             if flag < 0:
-                self._models[k] = None
+                self._models.pop(k, None)
                 return None, 0, 0.0
         x, fval, exitflag, info = model.solve()
         if exitflag != 1:
-            self._models[k] = None  # start the next solve from a fresh workspace
+            self._models.pop(k, None)  # start the next solve from a fresh workspace
             return None, info.get("iterations", 0), 0.0
         return x, info["iterations"], fval
 
 
 class _OsqpBackend:
-    """One persistent ``osqp.OSQP`` per AGV, warm-started, polished, tight tolerances."""
+    """One persistent ``osqp.OSQP`` per problem index, warm-started, polished, tight tolerances."""
 
     name = "osqp"
     settings = dict(eps_abs=1e-10, eps_rel=1e-10, polishing=True, polish_refine_iter=10,
                     max_iter=50000, verbose=False, warm_starting=True)
 
-    def __init__(self, num_agvs: int, constraint_matrix: np.ndarray, hessians=None):
+    def __init__(self, constraint_matrix: np.ndarray):
         import osqp
         from scipy import sparse
 
@@ -124,10 +128,14 @@ class _OsqpBackend:
         order = np.lexsort((rows, cols))
         self._triu_csc = (rows[order], cols[order])
         self._sparse = sparse
-        self._solvers = [None] * num_agvs
+        self._solvers: dict[int, Any] = {}
+
+    def forget(self, rows: np.ndarray) -> None:
+        for i in np.asarray(rows).tolist():
+            self._solvers.pop(i, None)
 
     def solve(self, k, p, q, lower, upper, bounds_changed: bool = True):
-        solver = self._solvers[k]
+        solver = self._solvers.get(k)
         px = p[self._triu_csc]
         if solver is None:
             solver = self._osqp.OSQP()
@@ -141,7 +149,7 @@ class _OsqpBackend:
         status = getattr(res.info, "status_val", None)
         ok = (status == 1 or res.info.status == "solved") and np.all(np.isfinite(res.x))
         if not ok:
-            self._solvers[k] = None
+            self._solvers.pop(k, None)
             return None, int(res.info.iter), 0.0
         x = np.asarray(res.x)
         return x, int(res.info.iter), float(0.5 * x @ p @ x + q @ x)
@@ -150,7 +158,7 @@ class _OsqpBackend:
 class _QpsolversBackend:
     """Any qpsolvers backend by name, stateless."""
 
-    def __init__(self, solver: str, num_agvs: int, constraint_matrix: np.ndarray):
+    def __init__(self, solver: str, constraint_matrix: np.ndarray):
         import qpsolvers
 
         if solver not in qpsolvers.available_solvers:
@@ -163,6 +171,9 @@ class _QpsolversBackend:
         self._g = np.vstack([constraint_matrix, -constraint_matrix])
         self._n = constraint_matrix.shape[1]
 
+    def forget(self, rows: np.ndarray) -> None:
+        pass
+
     def solve(self, k, p, q, lower, upper, bounds_changed: bool = True):
         n = self._n
         h = np.concatenate([upper[n:], -lower[n:]])
@@ -173,98 +184,57 @@ class _QpsolversBackend:
         return x, 0, float(0.5 * x @ p @ x + q @ x)
 
 
-class _BatchedBackend:
-    """Every problem of a solve at once: :class:`lawn_env.qp.PencilQP` (a primal-dual active-set
-    step over the whole stack, warm-started from the previous solve's active sets), exact where
-    its KKT check passes; the others by DAQP one by one (warm-started workspaces per problem;
-    ``last_settled_share`` is the batched share).
+class _CompiledBackend:
+    """The whole stack in one compiled call (:class:`lawn_env.qp.AxisPencils`), warm-started from
+    each problem's previous working set. The working sets are plain int8 arrays, one per shape of
+    the calls' stacks (a planner's psi table and its single evaluations keep theirs apart), so a
+    copy or a pickle of the MPC continues bitwise like the original."""
 
-    The increment bounds are tightened by a relative ``TIGHTEN`` (1e-9) inside the batched solve:
-    with a_max an integer multiple of Delta-a_max (the default, 2 and 1 m/s^2), a saturating
-    sequence of increments meets the acceleration bound exactly and makes the active set
-    degenerate, where an active-set step cannot settle. The answers stay feasible for the
-    original bounds and their values move by about 1e-9 relative."""
+    name = "compiled"
 
-    name = "batched"
-    TIGHTEN = 1e-9
+    def __init__(self, pencils: AxisPencils):
+        self.pencils = pencils
+        self.working_sets: dict[tuple, np.ndarray] = {}  # stack shape -> (M, 2, 2 N_p) int8
 
-    def __init__(self, num_agvs: int, constraint_matrix: np.ndarray, hessians: tuple[np.ndarray, np.ndarray]):
-        from .qp import PencilQP
+    def forget(self, rows: np.ndarray, lead: int) -> None:
+        """Drop the warm starts of the scenarios ``rows`` of the stacks whose first axis has ``lead``
+        entries."""
+        for shape, sets in self.working_sets.items():
+            if shape and shape[0] == lead:
+                sets.reshape(shape + sets.shape[1:])[rows] = 0
 
-        n = constraint_matrix.shape[1]
-        self._n = n
-        self.qp = PencilQP(hessians[0], hessians[1], np.vstack([np.eye(n), constraint_matrix]))
-        self._a = np.array(constraint_matrix, dtype=float, order="C")
-        self._active = None  # (M, 2n) active sets of the previous solve
-        self._daqp, self._daqp_size = None, 0  # DAQP workspaces of the problems the batched steps leave
-        self.last_settled_share = float("nan")  # of the last solve's problems, settled by the batched steps
-
-    def forget(self, rows: np.ndarray) -> None:
-        """Drop the warm starts of the problems ``rows`` (flat indices)."""
-        if self._active is not None:
-            self._active[rows] = 0
-        if self._daqp is not None:
-            self._daqp.forget(rows)
-
-    def solve_all(self, s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray):
-        """The M problems at Hessian scalars ``s`` = psi^2: minimizers (M, n), objectives (M,),
-        status (M,) int8 and iterations (M,)."""
-        n, mm = self._n, s.shape[0]
-        lo, up = lower.copy(), upper.copy()
-        lo[:, :n] *= 1.0 - self.TIGHTEN
-        up[:, :n] *= 1.0 - self.TIGHTEN
-        warm = self._active if self._active is not None and self._active.shape[0] == mm else None
-        sol = self.qp.solve(s, q, lo, up, active=warm)
-        self._active = sol.active
-        z, fval = sol.z, sol.objective
-        status = np.zeros(mm, dtype=np.int8)
-        iterations = sol.iterations.copy()
-        unsettled = np.flatnonzero(~sol.converged)
-        self.last_settled_share = 1.0 - unsettled.size / max(mm, 1)
-        if unsettled.size:
-            if self._daqp is None or self._daqp_size != mm:
-                self._daqp, self._daqp_size = _DaqpBackend(mm, self._a), mm
-            p_all = s[unsettled, None, None] * self.qp.p1 + self.qp.p0
-        for j, i in enumerate(unsettled.tolist()):
-            p = p_all[j]
-            x, its, _ = self._daqp.solve(i, p, q[i], lower[i], upper[i])
-            if x is None:  # DAQP failed: a cold OSQP solve, then the zero sequence (counted, status 1 and 2)
-                x, its, status[i] = self._fallback(p, q[i], lower[i], upper[i])
-            z[i], iterations[i] = x, its
-        if unsettled.size:
-            zu = z[unsettled]
-            fval[unsettled] = 0.5 * np.einsum("ij,ijk,ik->i", zu, p_all, zu) + (q[unsettled] * zu).sum(axis=1)
-            self._active[unsettled] = 0  # (DAQP's own active sets as guesses measured slower: weakly active rows)
-        return z, fval, status, iterations
-
-    def _fallback(self, p, q, lower, upper):
-        x, its, _ = _OsqpBackend(1, self._a).solve(0, p, q, lower, upper)
-        if x is not None:
-            return x, its, 1
-        return np.zeros(self._n), 0, 2
+    def solve_all(self, shape: tuple, s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                  phase: np.ndarray):
+        sets = self.working_sets.get(shape)
+        if sets is None:
+            sets = self.working_sets[shape] = np.zeros((s.shape[0], 2, 2 * self.pencils.horizon), dtype=np.int8)
+        return self.pencils.solve(s, q, lower, upper, phase, sets)
 
 
-#: The named backends; each is built from (num_agvs, constraint matrix T, Hessians (P0, P1)).
-BACKENDS = {"daqp": _DaqpBackend, "osqp": _OsqpBackend, "batched": _BatchedBackend}
+#: The named backends.
+BACKENDS = ("compiled", "daqp", "osqp")
 
 
-def _make_backend(name: str, num_agvs: int, constraint_matrix: np.ndarray, hessians: tuple[np.ndarray, np.ndarray]):
-    if name in BACKENDS:
-        return BACKENDS[name](num_agvs, constraint_matrix, hessians)
+def _reference_backend(name: str, constraint_matrix: np.ndarray):
+    if name == "daqp":
+        return _DaqpBackend(constraint_matrix)
+    if name == "osqp":
+        return _OsqpBackend(constraint_matrix)
     if name.startswith("qpsolvers:"):
-        return _QpsolversBackend(name.split(":", 1)[1], num_agvs, constraint_matrix)
+        return _QpsolversBackend(name.split(":", 1)[1], constraint_matrix)
     raise ValueError(f"unknown QP backend {name!r}; valid: {', '.join(BACKENDS)}, or 'qpsolvers:<solver name>'")
 
 
 class OutageAwareMPC:
-    """The K control QPs (P3) with persistent per-AGV solver workspaces.
+    """The control QPs (P3) of K AGVs, over any leading batch axes.
 
     ``solve(x_aug, chi_ref, psi)`` returns the optimal increment sequences. Build with
-    :meth:`from_config`. The same object serves the Comm-v0 environment and the experts.
+    :meth:`from_config`. The same object serves the Comm environments, the RL interface's anchors
+    and the experts.
     """
 
     def __init__(self, model: PredictionModel, num_agvs: int, accel_max: float, accel_increment_max: float,
-                 backend: str = "daqp", control_period: int = 1):
+                 backend: str = DEFAULT_BACKEND, control_period: int = 1):
         if int(control_period) < 1:
             raise ValueError(f"control_period={control_period!r}: must be an integer >= 1")
         self.model = model
@@ -277,17 +247,20 @@ class OutageAwareMPC:
         self._constraint = model.increment_sum
         self._q5_2 = 2.0 * np.asarray(model.q5)
         self._ftq4f_2 = 2.0 * np.asarray(model.ftq4f)
-        self.backend = _make_backend(backend, self.num_agvs, self._constraint, self._hessians)
-        self._fallback = None  # built lazily: most runs never need it
+        masks = [command_mask(phase, model.horizon, self.control_period) for phase in range(self.control_period)]
+        self.backend_name = backend
+        self.backend = self._make_backend(backend, masks)
+        self._masks = masks
+        self._fallback: _DaqpBackend | None = None  # cold DAQP solves of the problems a backend leaves
         # increment bounds per slot phase: zero where move blocking holds the acceleration
-        self._boxes = []
-        for phase in range(self.control_period):
-            allowed = np.repeat(command_mask(phase, model.horizon, self.control_period), 2)
-            pos = np.broadcast_to(np.where(allowed, self.accel_increment_max, 0.0), (self.num_agvs, n))
-            self._boxes.append((-pos, pos))
-        self._box_upper = np.stack([b[1] for b in self._boxes])  # (P, K, n): one row per slot phase (batches)
+        self._box_upper = np.stack([np.repeat(np.where(mask, self.accel_increment_max, 0.0), 2) for mask in masks])
         self._u_index = np.tile([4, 5], model.horizon)
         self._last_data = None
+
+    def _make_backend(self, name: str, masks: list[np.ndarray]):
+        if name == "compiled":
+            return _CompiledBackend(_pencils(self.model, self.control_period))
+        return _reference_backend(name, self._constraint)
 
     @property
     def _hessians(self) -> tuple[np.ndarray, np.ndarray]:
@@ -295,119 +268,151 @@ class OutageAwareMPC:
         return self._q5_2, self._ftq4f_2
 
     def __getstate__(self) -> dict:
-        """Copies and pickles carry the problem, not the solver workspaces (C objects and modules):
-        the copy starts its next solve cold, which changes iteration counts, not solutions."""
+        """Copies and pickles carry the problem and the compiled backend's working sets (plain
+        arrays: the copy continues bitwise); the reference backends' workspaces (C objects) are
+        not carried, so such a copy starts its next solve cold."""
         state = self.__dict__.copy()
-        state["backend"] = self.backend.name
+        if self.backend_name != "compiled":
+            state["backend"] = None
         state["_fallback"] = None
         state["_last_data"] = None
         return state
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
-        self.backend = _make_backend(state["backend"], self.num_agvs, self._constraint, self._hessians)
+        if self.backend is None:
+            self.backend = self._make_backend(self.backend_name, self._masks)
 
     @classmethod
-    def from_config(cls, config: ScenarioConfig, backend: str = "daqp") -> OutageAwareMPC:
+    def from_config(cls, config: ScenarioConfig, backend: str = DEFAULT_BACKEND) -> OutageAwareMPC:
         ctl = config.control
         return cls(PredictionModel.from_config(config), config.num_agvs, ctl.accel_max_mps2,
                    ctl.accel_increment_max_mps2, backend=backend, control_period=planning_period(config))
 
     def reset(self, which: np.ndarray | None = None) -> None:
-        """Drop the solver workspaces (warm starts): the next solve starts cold, so an episode's
-        solutions do not depend on the episodes before it. With the ``"batched"`` backend,
-        ``which`` (a boolean mask over the leading batch axis of the last solve) drops only those
-        scenarios' warm starts."""
-        if which is not None and self.backend.name == "batched":
-            rows = np.flatnonzero(np.repeat(np.asarray(which, dtype=bool), self.num_agvs))
-            self.backend.forget(rows)
-            return
-        self.backend = _make_backend(self.backend.name, self.num_agvs, self._constraint, self._hessians)
+        """Drop the warm starts: the next solve starts cold, so an episode's solutions do not depend
+        on the episodes before it. ``which`` (a boolean mask over the leading batch axis of the
+        solves) drops only those scenarios' warm starts."""
+        if which is not None:
+            which = np.asarray(which, dtype=bool)
+            rows = np.flatnonzero(which)
+            if self.backend_name == "compiled":
+                self.backend.forget(rows, which.shape[0])
+                return
+        self.backend = self._make_backend(self.backend_name, self._masks)
         self._fallback = None
         self._last_data = None
 
     # ------------------------------------------------------------------ problem data
-    def prepare(self, x_aug: np.ndarray, chi_ref: np.ndarray, slot: int | None = None) -> "SlotData":
-        """The parts of the K QPs that do not depend on psi (one slot's state and reference).
+    def prepare(self, x_aug: np.ndarray, chi_ref: np.ndarray, slot: npt.ArrayLike | None = None) -> SlotData:
+        """The parts of the QPs that do not depend on psi (one slot's state and reference; any
+        leading batch axes ``x_aug`` (..., K, 6), ``chi_ref`` (..., K, N_p+1, 6)).
 
         ``slot`` (the current slot n) is required when the MPC plans with a control period > 1:
         increments are then allowed only at the slots n + i where a command goes out
-        (:func:`lawn_env.dynamics.command_mask`); a batch takes one slot per scenario (B,)."""
+        (:func:`lawn_env.dynamics.command_mask`); a batch takes one slot per scenario (...,)."""
         k = self.num_agvs
-        if self.control_period == 1:
-            neg, pos = self._boxes[0]
-        elif slot is None:
-            raise ValueError(f"this MPC plans with control_period={self.control_period}: pass slot= (the current slot)")
-        elif np.ndim(slot) == 0:
-            neg, pos = self._boxes[int(slot) % self.control_period]
-        else:  # one slot per scenario of a batch (B,): each scenario's own phase
-            pos = self._box_upper[np.asarray(slot) % self.control_period]
-            neg = -pos
         window = self.model.horizon + 1
         lead = x_aug.shape[:-2]
-        batch_ok = not lead or self.backend.name == "batched"
-        if x_aug.shape[-2:] != (k, 6) or chi_ref.shape != lead + (k, window, 6) or not batch_ok:
+        if x_aug.shape[-2:] != (k, 6) or chi_ref.shape != lead + (k, window, 6):
             raise ValueError(f"x_aug has shape {x_aug.shape} and chi_ref {chi_ref.shape}; this MPC (num_agvs={k}, "
-                             f"horizon={self.model.horizon}) needs ({k}, 6) and ({k}, {window}, 6), with a leading "
-                             "batch axis (B, ...) only for the 'batched' backend")
+                             f"horizon={self.model.horizon}) needs ({k}, 6) and ({k}, {window}, 6), with any leading "
+                             "batch axes (..., K, 6) and (..., K, N_p+1, 6)")
+        if self.control_period == 1:
+            phase: Any = 0
+        elif slot is None:
+            raise ValueError(f"this MPC plans with control_period={self.control_period}: pass slot= (the current slot)")
+        else:
+            phase = np.asarray(slot, dtype=np.int64) % self.control_period
+            if phase.shape not in ((), lead):
+                raise ValueError(f"slot has shape {phase.shape}; expected a scalar or one per scenario {lead}")
+            phase = int(phase) if phase.ndim == 0 else phase
+        pos = self._box_upper[phase]  # (2 N_p,) or (..., 2 N_p)
+        if np.ndim(phase):
+            pos = pos[..., None, :]
         r = self.model.residual(x_aug, chi_ref)
         u_prev = x_aug[..., self._u_index]  # u[n-1] repeated over the horizon, (..., K, 2 N_p)
         shape = u_prev.shape
+        pos = np.broadcast_to(pos, shape)
         return SlotData(
             residual=r,
             linear=r @ self.model.ftq4.T,  # F' Q4 r, so H = 2 psi (F' Q4 r)'
             constant=((r @ self.model.q4) * r).sum(axis=-1),
-            lower=np.concatenate([np.broadcast_to(neg, shape), -self.accel_max - u_prev], axis=-1),
-            upper=np.concatenate([np.broadcast_to(pos, shape), self.accel_max - u_prev], axis=-1),
+            lower=np.concatenate([-pos, -self.accel_max - u_prev], axis=-1),
+            upper=np.concatenate([pos, self.accel_max - u_prev], axis=-1),
+            phase=phase,
         )
 
-    def _objective(self, data: "SlotData", psi: np.ndarray):
-        p = (psi * psi)[:, None, None] * self._ftq4f_2 + self._q5_2  # P = 2 G = 2 (psi^2 F'Q4F + Q5)
-        q = (2.0 * psi)[:, None] * data.linear
-        return p, q
-
     # ------------------------------------------------------------------ solve
-    def solve(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi: npt.ArrayLike, slot: int | None = None) -> MPCSolution:
-        """Solve the K QPs at success probabilities ``psi`` (K,) (``slot`` as for :meth:`prepare`)."""
+    def solve(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi: npt.ArrayLike,
+              slot: npt.ArrayLike | None = None) -> MPCSolution:
+        """Solve the QPs at success probabilities ``psi`` (..., K) (``slot`` as for :meth:`prepare`)."""
         return self.solve_prepared(self.prepare(x_aug, chi_ref, slot), psi)
 
     def solve_prepared(self, data: SlotData, psi: npt.ArrayLike) -> MPCSolution:
-        """Solve the K QPs of a prepared slot at success probabilities ``psi`` (K,): the AO's
-        control block calls this once per iteration with the same ``data`` (the bounds are then
-        passed to the workspaces only once)."""
+        """Solve the QPs of a prepared slot at success probabilities ``psi`` (broadcast to the
+        data's (..., K)): the planners call this many times with the same ``data``. ``data`` may
+        also be evaluated at a stack of psi values with leading axes of their own, e.g. ``psi``
+        (L, K) on data (K,): one call for a planner's psi table."""
         start = time.perf_counter()
-        k = self.num_agvs
         psi = np.asarray(psi, dtype=float)
-        if self.backend.name == "batched":
-            return self._solve_stack(data, psi, start)
-        if psi.shape != (k,):
-            psi = np.broadcast_to(psi, (k,))
-        p, q = self._objective(data, psi)
-        lower, upper = data.lower, data.upper
-        bounds_changed = data is not self._last_data
-        self._last_data = data
-        z = np.empty((k, self._n))
-        fval = np.empty(k)
-        status = np.zeros(k, dtype=np.int8)
-        iterations = np.zeros(k, dtype=np.int64)
-        solve = self.backend.solve
-        for i in range(k):
-            x, its, f = solve(i, p[i], q[i], lower[i], upper[i], bounds_changed)
-            if x is None:
-                x, its, status[i] = self._fallback_solve(i, p[i], q[i], lower[i], upper[i])
-                f = 0.5 * x @ p[i] @ x + q[i] @ x
-            if self.control_period > 1:  # the blocked increments exactly zero (solvers return ~1e-14)
-                x = np.clip(x, lower[i, : self._n], upper[i, : self._n])
-            z[i] = x
-            fval[i] = f
-            iterations[i] = its
+        lead = np.broadcast_shapes(psi.shape, data.constant.shape)
+        if lead[-1:] != (self.num_agvs,):
+            raise ValueError(f"psi has shape {psi.shape}; expected one per AGV (..., {self.num_agvs})")
+        psi = np.broadcast_to(psi, lead)
+        n = self._n
+        count = int(np.prod(lead))
+        q = ((2.0 * psi)[..., None] * data.linear).reshape(count, n)  # H' = 2 psi F'Q4 r
+        lower = _writable(np.broadcast_to(data.lower, lead + (2 * n,)).reshape(count, 2 * n))
+        upper = _writable(np.broadcast_to(data.upper, lead + (2 * n,)).reshape(count, 2 * n))
+        s = (psi * psi).reshape(count)
+        if self.backend_name == "compiled":
+            phase = np.broadcast_to(np.asarray(data.phase, dtype=np.int64)[..., None], lead).reshape(count)
+            z, fval, iterations, settled = self.backend.solve_all(lead, s, q, lower, upper, phase)
+            status = np.zeros(count, dtype=np.int8)
+            for i in np.flatnonzero(~settled).tolist():
+                z[i], fval[i], iterations[i], status[i] = self._fallback_solve(i, s[i], q[i], lower[i], upper[i])
+        else:
+            z, fval, iterations, status = self._solve_each(data, s, q, lower, upper)
+        if self.control_period > 1:  # the blocked increments exactly zero (reference solvers return ~1e-14)
+            z = np.clip(z, lower[:, :n], upper[:, :n])
         return MPCSolution(
-            increments=z.reshape(k, self.model.horizon, 2),
-            value=fval + data.constant,
-            status=status,
-            iterations=iterations,
+            increments=z.reshape(lead + (self.model.horizon, 2)),
+            value=fval.reshape(lead) + data.constant,
+            status=status.reshape(lead),
+            iterations=iterations.reshape(lead),
             solve_time_s=time.perf_counter() - start,
         )
+
+    def _solve_each(self, data: SlotData, s, q, lower, upper):
+        """The reference backends: one problem at a time, each with its own warm workspace."""
+        count, n = q.shape
+        bounds_changed = data is not self._last_data
+        self._last_data = data
+        z = np.empty((count, n))
+        fval = np.empty(count)
+        status = np.zeros(count, dtype=np.int8)
+        iterations = np.zeros(count, dtype=np.int64)
+        for i in range(count):
+            p = s[i] * self._ftq4f_2 + self._q5_2
+            x, its, f = self.backend.solve(i, p, q[i], lower[i], upper[i], bounds_changed)
+            if x is None:
+                x, f, its, status[i] = self._fallback_solve(i, s[i], q[i], lower[i], upper[i])
+            z[i], fval[i], iterations[i] = x, f, its
+        return z, fval, iterations, status
+
+    def _fallback_solve(self, i: int, s: float, q: np.ndarray, lower: np.ndarray, upper: np.ndarray):
+        """A problem the backend did not settle: a cold DAQP solve, then a cold OSQP solve, then the
+        zero sequence (feasible whenever |u[n-1]| <= a_max, which the simulator keeps). Returns
+        (z, objective, iterations, status 1 or 2)."""
+        p = s * self._ftq4f_2 + self._q5_2
+        for name in ("daqp", "osqp"):
+            if name == self.backend_name:
+                continue
+            x, its, _ = _reference_backend(name, self._constraint).solve(0, p, q, lower, upper)
+            if x is not None:
+                return x, float(0.5 * x @ p @ x + q @ x), its, 1
+        return np.zeros(self._n), 0.0, 0, 2
 
     def command_stakes(self, data: SlotData) -> np.ndarray:
         """What delivering each AGV's command is worth this slot: ``V_k(0) - V_k(1)`` >= 0, the QP's
@@ -418,30 +423,20 @@ class OutageAwareMPC:
         delivered = self.solve_prepared(data, np.ones(data.constant.shape)).value
         return np.maximum(data.constant - delivered, 0.0)
 
-    def _solve_stack(self, data: "SlotData", psi: np.ndarray, start: float) -> MPCSolution:
-        """Every QP of the slot (any leading batch axes) in one batched solve."""
-        lead = data.constant.shape
-        psi = np.broadcast_to(psi, lead)
-        n = self._n
-        q = (2.0 * psi)[..., None] * data.linear
-        z, fval, status, iterations = self.backend.solve_all(
-            (psi * psi).reshape(-1), q.reshape(-1, n), data.lower.reshape(-1, 2 * n), data.upper.reshape(-1, 2 * n))
-        if self.control_period > 1:  # the blocked increments exactly zero
-            z = np.clip(z, data.lower.reshape(-1, 2 * n)[:, :n], data.upper.reshape(-1, 2 * n)[:, :n])
-        return MPCSolution(
-            increments=z.reshape(lead + (self.model.horizon, 2)),
-            value=fval.reshape(lead) + data.constant,
-            status=status.reshape(lead),
-            iterations=iterations.reshape(lead),
-            solve_time_s=time.perf_counter() - start,
-        )
 
-    def _fallback_solve(self, i, p, q, lower, upper):
-        if self.backend.name != "osqp":
-            if self._fallback is None:
-                self._fallback = _OsqpBackend(self.num_agvs, self._constraint)
-            x, its, _ = self._fallback.solve(i, p, q, lower, upper)
-            if x is not None:
-                return x, its, 1
-        # the zero sequence is feasible whenever |u[n-1]| <= a_max, which the simulator keeps
-        return np.zeros(self._n), 0, 2
+def _writable(arr: np.ndarray) -> np.ndarray:
+    """C-contiguous and writable (the compiled kernel and DAQP take such buffers; no copy when it is)."""
+    return np.require(arr, dtype=float, requirements=("C", "W"))
+
+
+def _pencils(model: PredictionModel, period: int) -> AxisPencils:
+    """The per-axis pencils of a model and control period (built once per pair, shared)."""
+    key = (id(model), period)
+    found = _PENCILS.get(key)
+    if found is None or found[0] is not model:
+        masks = [command_mask(phase, model.horizon, period) for phase in range(period)]
+        found = _PENCILS[key] = (model, AxisPencils.build(2.0 * model.q5, 2.0 * model.ftq4f, model.horizon, masks))
+    return found[1]
+
+
+_PENCILS: dict[tuple, tuple[PredictionModel, AxisPencils]] = {}

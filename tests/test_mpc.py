@@ -18,7 +18,7 @@ def _problems(rng, count, k=4):
         yield x, table[:k, n : n + 11], rng.uniform(0.05, 1.0, k)
 
 
-@pytest.mark.parametrize("backend", ["daqp", "osqp"])
+@pytest.mark.parametrize("backend", ["compiled", "daqp", "osqp"])
 def test_qp_solution_matches_independent_solve(backend, rng, independent_qp):
     mpc = OutageAwareMPC.from_config(CFG, backend=backend)
     for x, ref, psi in _problems(rng, 4):
@@ -76,7 +76,7 @@ def test_infeasible_data_falls_back_without_raising(rng):
 
 
 def test_unknown_backend_lists_valid_ones():
-    with pytest.raises(ValueError, match="valid: daqp, osqp"):
+    with pytest.raises(ValueError, match="valid: compiled, daqp, osqp"):
         OutageAwareMPC.from_config(CFG, backend="gurobi")
     with pytest.raises(ValueError, match="not installed"):
         OutageAwareMPC.from_config(CFG, backend="qpsolvers:nonexistent")

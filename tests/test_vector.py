@@ -44,11 +44,11 @@ def _single_episode(config, seed, actions, monkeypatch, env_id="lawn/Joint-v0", 
 def test_lockstep_with_the_single_env_on_the_same_fading(config, env_id, monkeypatch):
     """Env i of the vector env reset with seed s equals the single env reset with s + i for a
     whole episode, to 1e-12, when both see the same fading draws (Comm-v0: both with the
-    batched QP solver, whose answers depend only on each problem's own data and warm start)."""
+    compiled QP solver, whose answers depend only on each problem's own data and warm start)."""
     rng = np.random.default_rng(0)
     comm = env_id == "lawn/Comm-v0"
     size = (1 if comm else 3) * config.num_agvs + 2
-    extra = {"qp_backend": "batched"} if comm else {}
+    extra = {}
     actions = rng.uniform(-1, 1, (config.num_slots, N, size)).astype(np.float32)
     singles = [_single_episode(config, 10 + i, actions[:, i], monkeypatch, env_id, **extra) for i in range(N)]
     fading = np.stack([s[0] for s in singles], axis=1)  # (T, N, K)
@@ -100,12 +100,12 @@ def test_next_step_autoreset_truncation_and_seeding(env_id):
 
 def test_comm_vector_env_reports_its_qps_and_matches_the_one_by_one_solver():
     """Comm-v0's vector env: per-env MPC info with a leading env axis, the same keys as the
-    single env's, and the batched solver's episode equal to DAQP's (one QP at a time) to 1e-6."""
+    single env's, and the compiled solver's episode equal to DAQP's (one QP at a time) to 1e-6."""
     config = ScenarioConfig(num_slots=12)
     single = gym.make("lawn/Comm-v0", config=config)
     _, single_info = single.reset(seed=0)
     runs = {}
-    for backend in ("batched", "daqp"):
+    for backend in ("compiled", "daqp"):
         envs = _make(env_id="lawn/Comm-v0", config=config, qp_backend=backend)
         assert envs.single_action_space == single.action_space
         assert envs.single_observation_space == single.observation_space
@@ -119,9 +119,9 @@ def test_comm_vector_env_reports_its_qps_and_matches_the_one_by_one_solver():
             assert info["mpc_iterations"].shape == (N, 4) and info["mpc_fallbacks"].shape == (N,)
             assert info["success_probability_planned"].shape == (N, 4) and not info["mpc_fallbacks"].any()
         runs[backend] = np.array(rewards)
-    np.testing.assert_allclose(runs["batched"], runs["daqp"], rtol=1e-6)
-    with pytest.raises(ValueError, match="qp_backend='osqp'"):
-        _make(env_id="lawn/Comm-v0", qp_backend="osqp")
+    np.testing.assert_allclose(runs["compiled"], runs["daqp"], rtol=1e-6)
+    with pytest.raises(ValueError, match="unknown QP backend 'batched'; valid: compiled, daqp, osqp"):
+        _make(env_id="lawn/Comm-v0", qp_backend="batched")
 
 
 @pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
@@ -267,12 +267,11 @@ def test_rl_interface_lockstep_with_the_single_env(env_id, monkeypatch):
     """With the RL interface (anchored actions, scaled reward, termination, clipped features) env i
     of the vector env equals the single RL env on seed s + i, to 1e-12, until its episode ends; an
     ended env restarts with next-step autoreset and reports its realized control cost."""
-    from lawn_env.mpc import OutageAwareMPC
 
     config = ScenarioConfig(num_slots=30)
     iface = {"base": "rl", "termination_distance_m": 4.0}  # tight, so that some env is terminated
     comm = env_id == "lawn/Comm-v0"
-    extra = {"qp_backend": "batched"} if comm else {}
+    extra = {}
     rng = np.random.default_rng(3)
     size = (1 if comm else 3) * 4 + 2
     actions = rng.uniform(-1, 1, (30, N, size)).astype(np.float32)
@@ -289,9 +288,6 @@ def test_rl_interface_lockstep_with_the_single_env(env_id, monkeypatch):
 
         monkeypatch.setattr(channel, "sample_normalized_fading", recording)
         env = gym.make(env_id, config=config, interface=iface, **extra)
-        # the anchor's MPC (the residual's controller, the stakes) with the vector env's solver (DAQP
-        # agrees to ~1e-9 only)
-        env.unwrapped.actions.mpc = OutageAwareMPC.from_config(env.unwrapped.config, backend="batched")
         obs, _ = env.reset(seed=20 + i)
         rows = [(obs, 0.0, False, False)]
         for t in range(30):
@@ -352,11 +348,10 @@ def test_disturbance_mode_lockstep_with_the_single_env(env_id, interface, monkey
     """The disturbed preset (wind and gusts, control period 2 with period-aware planning, actuator
     lag, process and measurement noise): env i equals the single env on seed s + i to 1e-12 when
     both see the same draws (the single env's, in the order it draws them)."""
-    from lawn_env.mpc import OutageAwareMPC
 
     config = lawn_env.presets.get("disturbed").override({"num_slots": 20})
     comm = env_id == "lawn/Comm-v0"
-    extra = {"qp_backend": "batched"} if comm else {}
+    extra = {}
     d = config.disturbance
     envs = _make(env_id=env_id, config=config, interface=interface, **extra)
     names = list(envs.unwrapped.sim.noise_shapes())
@@ -365,8 +360,6 @@ def test_disturbance_mode_lockstep_with_the_single_env(env_id, interface, monkey
     singles = []
     for i in range(N):
         env = gym.make(env_id, config=config, interface=interface, **extra)
-        if interface == "rl" and not comm:
-            env.unwrapped.actions.mpc = OutageAwareMPC.from_config(env.unwrapped.config, backend="batched")
         env.reset(seed=30 + i)
         rec = _Recording(env.unwrapped.sim.rng)
         env.unwrapped.sim.rng = rec

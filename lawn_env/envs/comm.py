@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from ..interface import InterfaceLike
-from ..mpc import OutageAwareMPC
+from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike
 from ..spaces import check_action
 from .base import LawnEnvBase
@@ -58,9 +58,9 @@ class CommEnv(LawnEnvBase):
 
     ## Arguments
 
-    ``gym.make("lawn/Comm-v0", config=None, render_mode=None, qp_backend="daqp", interface=None,
-    **overrides)``; ``qp_backend`` is ``"daqp"``, ``"osqp"``, ``"batched"`` (the native vector
-    env's solver, :mod:`lawn_env.qp`) or ``"qpsolvers:<name>"`` (:mod:`lawn_env.mpc`);
+    ``gym.make("lawn/Comm-v0", config=None, render_mode=None, qp_backend="compiled", interface=None,
+    **overrides)``; ``qp_backend`` is ``"compiled"`` (the exact compiled solver of
+    :mod:`lawn_env.qp`) or a reference, ``"daqp"``, ``"osqp"`` or ``"qpsolvers:<name>"`` (:mod:`lawn_env.mpc`);
     ``interface`` as for ``lawn/Joint-v0`` (``lawn/CommRL-v0`` is this env with
     ``interface="rl"``: power ``p_k ∝ d_k^2 exp(2 a_k)`` spending the budget, drone toward the
     AGVs' centroid ``+ a * 50 m``).
@@ -73,12 +73,14 @@ class CommEnv(LawnEnvBase):
       carries ``max_episode_steps`` (= ``num_slots``; the registry entry has no time limit, the
       env truncates itself); v0 observations saturate at ±1e6 (``OBS_LIMIT``, the space's
       bound); the dynamics and rewards are unchanged.
+    * v0 (later): the MPC's QPs are solved by the compiled exact solver (``qp_backend="compiled"``,
+      the default; issue #22): the same decisions up to the solvers' rounding.
     """
 
     role = "comm"
 
     def __init__(self, config: ConfigLike = None, render_mode: str | None = None,
-                 qp_backend: str = "daqp", interface: InterfaceLike = None, **overrides: Any):
+                 qp_backend: str = DEFAULT_BACKEND, interface: InterfaceLike = None, **overrides: Any):
         super().__init__(config, render_mode, interface, **overrides)
         self.mpc = OutageAwareMPC.from_config(self.config, backend=qp_backend)
         self.last_mpc_solve_time_s = float("nan")

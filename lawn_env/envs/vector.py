@@ -19,7 +19,7 @@ Gymnasium's vector ones (as ``CartPoleVectorEnv``):
   ``_episode_control_cost`` on the step an episode ends.
 
 ``lawn/Comm-v0``'s N x K outage-aware MPC QPs of a step are solved together
-(:class:`CommVectorEnv`, ``qp_backend="batched"``); its info adds ``mpc_iterations`` (N, K),
+(:class:`CommVectorEnv`); its info adds ``mpc_iterations`` (N, K),
 ``mpc_fallbacks`` (N,) and ``success_probability_planned`` (N, K) as the single env's does.
 
 ``render_mode="rgb_array"`` draws env ``render_env`` (default 0) as the single env draws itself.
@@ -44,7 +44,7 @@ from ..batch import BatchSimulation
 from ..channel import LinkParams
 from ..core import link_success
 from ..interface import ActionLayout, resolve_interface
-from ..mpc import OutageAwareMPC
+from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
 from ..spaces import ObservationLayout
 
@@ -102,7 +102,7 @@ class JointVectorEnv(VectorEnv):
         k = self.config.num_agvs
         self.num_agvs = k
         self.single_observation_space = self.interface.observation_space(self.layout.size)
-        self.actions = ActionLayout(self.config, self.role, self.interface, mpc_backend="batched")
+        self.actions = ActionLayout(self.config, self.role, self.interface, mpc_backend=DEFAULT_BACKEND)
         self.single_action_space = self.actions.space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -262,19 +262,18 @@ class JointVectorEnv(VectorEnv):
 class CommVectorEnv(JointVectorEnv):
     """N copies of ``lawn/Comm-v0`` (any interface) in one batched simulation: the actions set
     powers and the drone, and the N x K outage-aware MPC QPs of a step are solved together
-    (``qp_backend="batched"``, :class:`lawn_env.qp.PencilQP`, warm-started per scenario; problems
-    it cannot settle go to DAQP one by one and are counted in ``info["mpc_fallbacks"]``).
-    ``qp_backend="daqp"`` solves them one by one instead (the single env's solver)."""
+    (the compiled solver of :mod:`lawn_env.qp`, warm-started per scenario; problems it cannot
+    settle go to DAQP one by one and are counted in ``info["mpc_fallbacks"]``). ``qp_backend``
+    names a reference backend instead (``"daqp"``, ``"osqp"``, ``"qpsolvers:<name>"``: one QP at a
+    time through Python)."""
 
     role = "comm"
 
     def __init__(self, num_envs: int, config: ConfigLike = None,
-                 render_mode: str | None = None, interface: Any = None, qp_backend: str = "batched",
+                 render_mode: str | None = None, interface: Any = None, qp_backend: str = DEFAULT_BACKEND,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_env: int = 0,
                  **overrides: Any):
         super().__init__(num_envs, config, render_mode, interface, autoreset_mode, render_env, **overrides)
-        if qp_backend not in ("batched", "daqp"):
-            raise ValueError(f"qp_backend={qp_backend!r}; valid for the native vector env: 'batched', 'daqp'")
         self.mpc = OutageAwareMPC.from_config(self.config, backend=qp_backend)
         self._planning_link = LinkParams.from_config(self.config, planning=True)
         self.last_mpc_solve_time_s = float("nan")
@@ -291,17 +290,9 @@ class CommVectorEnv(JointVectorEnv):
         sim = self.sim
         _, power, drone_next = self._decisions(a)
         psi = link_success(sim.x_aug, drone_next, power, self._planning_link)
-        if self.mpc.backend.name == "batched":
-            solution = self.mpc.solve(sim.x_aug, sim.reference_windows(), psi, sim.slot)
-            increments, iterations, status = solution.increments[:, :, 0, :], solution.iterations, solution.status
-            self.last_mpc_solve_time_s = solution.solve_time_s
-        else:  # one env at a time through the single env's solver
-            windows = sim.reference_windows()
-            parts = [self.mpc.solve(sim.x_aug[i], windows[i], psi[i], int(sim.slot[i])) for i in range(self.num_envs)]
-            increments = np.stack([p.increments[:, 0, :] for p in parts])
-            iterations = np.stack([p.iterations for p in parts])
-            status = np.stack([p.status for p in parts])
-            self.last_mpc_solve_time_s = sum(p.solve_time_s for p in parts)
+        solution = self.mpc.solve(sim.x_aug, sim.reference_windows(), psi, sim.slot)
+        increments, iterations, status = solution.increments[:, :, 0, :], solution.iterations, solution.status
+        self.last_mpc_solve_time_s = solution.solve_time_s
         extra = {"mpc_iterations": iterations.astype(np.int64),
                  "mpc_fallbacks": np.count_nonzero(status, axis=1).astype(np.int64),
                  "success_probability_planned": np.asarray(psi, dtype=np.float64)}
