@@ -8,7 +8,7 @@ CartPoleVectorEnv, resets included. Prints the tables and checks the targets of 
 * ``lawn/Joint-v0`` at K = 4: at least 30,000 steps/s and within 7x of CartPole's step time;
 * ``lawn/Comm-v0`` at K = 4: at least 3,000 steps/s;
 * the native vector envs at N = 1024: Joint-v0 at least 1,000,000 env-steps/s at K = 4 and
-  150,000 at K = 32, Comm-v0 at least 100,000 at K = 4 (its batched QP solver beside DAQP one
+  150,000 at K = 32, Comm-v0 at least 100,000 at K = 4 (its compiled QP solver beside DAQP one
   QP at a time in the same run).
 
 Usage: ``python benchmarks/env_throughput.py [--steps 20000] [--repeats 5] [--json out.json]``
@@ -102,8 +102,8 @@ def main(argv=None) -> int:
     vrows = [("CartPoleVectorEnv", "-", measure_vector("CartPole-v1", n, args.vector_steps, vrep))]
     for k in (4, 32):
         vrows.append(("lawn/Joint-v0", k, measure_vector("lawn/Joint-v0", n, args.vector_steps, vrep, num_agvs=k)))
-    # Comm-v0 solves N x K QPs per step: the batched solver beside DAQP one QP at a time, same run
-    for label, backend in (("lawn/Comm-v0", "batched"), ("lawn/Comm-v0 (DAQP per QP)", "daqp")):
+    # Comm-v0 solves N x K QPs per step: the compiled solver beside DAQP one QP at a time, same run
+    for label, backend in (("lawn/Comm-v0", "compiled"), ("lawn/Comm-v0 (DAQP per QP)", "daqp")):
         vrows.append((label, 4, measure_vector("lawn/Comm-v0", n, args.comm_vector_steps, vrep, qp_backend=backend)))
     print(f"native vector envs, N = {n} (env-steps/s, resets included)")
     for env_id, k, rate in vrows:

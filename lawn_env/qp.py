@@ -48,7 +48,7 @@ __all__ = ["AxisPencils", "solve_stack", "SOLVER_TOL", "SOLVER_MAX_ITER"]
 #: Feasibility tolerance of an answer, relative to ``max(1, |bound|)``.
 SOLVER_TOL = 1e-10
 #: Iterations (working-set changes) after which a problem is handed to the fallback.
-SOLVER_MAX_ITER = 60
+SOLVER_MAX_ITER = 100
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,13 +102,15 @@ class AxisPencils:
             red[np.arange(nf), np.arange(nf)] = 1.0
             red[n : n + nf, :nf] = np.tril(np.ones((nf, nf)))
             for ax in range(2):
-                sub0 = np.eye(n)
-                sub1 = np.zeros((n, n))
-                block0, block1 = p0[ax::2, ax::2], p1[ax::2, ax::2]
-                sub0[:nf, :nf] = block0[np.ix_(idx, idx)]
-                sub1[:nf, :nf] = block1[np.ix_(idx, idx)]
-                sub0, sub1 = 0.5 * (sub0 + sub0.T), 0.5 * (sub1 + sub1.T)
-                ev, vec = scipy.linalg.eigh(sub1, sub0)  # raises if P0 is not positive definite
+                # the free block's pencil first; padded variables decoupled with P0 = I, P1 = 0, so
+                # W is block diagonal and the kernel's loops run over the nf free variables only
+                sub0, sub1 = np.eye(n), np.zeros((n, n))
+                block0, block1 = p0[ax::2, ax::2][np.ix_(idx, idx)], p1[ax::2, ax::2][np.ix_(idx, idx)]
+                sub0[:nf, :nf], sub1[:nf, :nf] = 0.5 * (block0 + block0.T), 0.5 * (block1 + block1.T)
+                vec = np.eye(n)
+                ev = np.zeros(n)
+                if nf:
+                    ev[:nf], vec[:nf, :nf] = scipy.linalg.eigh(sub1[:nf, :nf], sub0[:nf, :nf])  # raises unless P0 > 0
                 w[ph, ax], lam[ph, ax] = vec, np.maximum(ev, 0.0)  # P1 is PSD: clip rounding below zero
                 g[ph, ax] = red @ vec
                 a[ph, ax] = red
@@ -118,7 +120,8 @@ class AxisPencils:
         return cls(n, per, free, num_free, group_end, w, lam, g, a, q0, q1)
 
     def solve(self, s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray, phase: np.ndarray,
-              active: np.ndarray, tol: float = SOLVER_TOL, max_iter: int = SOLVER_MAX_ITER):
+              active: np.ndarray, tol: float = SOLVER_TOL,
+              max_iter: int = SOLVER_MAX_ITER) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The stack of M AGV problems (full layout: ``q`` (M, 2N_p), ``lower``/``upper`` (M, 4N_p),
         increment bounds then running-sum bounds, axes interleaved; ``s`` (M,) = psi^2; ``phase``
         (M,) int slot phase) from the working sets ``active`` (M, 2, 2N_p) int8, updated in place.
@@ -135,9 +138,14 @@ class AxisPencils:
 
 
 @numba.njit(cache=True)
-def solve_stack(s, q, lower, upper, phase, free, num_free, group_end, w, lam, g, a, p0, p1, active,
-                z_out, obj_out, it_out, ok_out, tol, max_iter):  # pragma: no cover - compiled
-    """Compiled loop over M AGV problems x 2 axes (see :meth:`AxisPencils.solve`)."""
+def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray, phase: np.ndarray,
+                free: np.ndarray, num_free: np.ndarray, group_end: np.ndarray, w: np.ndarray, lam: np.ndarray,
+                g: np.ndarray, a: np.ndarray, p0: np.ndarray, p1: np.ndarray, active: np.ndarray, z_out: np.ndarray,
+                obj_out: np.ndarray, it_out: np.ndarray, ok_out: np.ndarray, tol: float,
+                max_iter: int) -> None:  # pragma: no cover - compiled
+    """Compiled loop over M AGV problems x 2 axes (see :meth:`AxisPencils.solve`). The reduced
+    constraint rows are ``z_j`` (row j) and ``sum_{i<=j} z_i`` (row n + j), j < n_F: their values
+    are computed from that structure (``a`` documents it; the tests check it)."""
     num = s.shape[0]
     n = w.shape[2]
     m = 2 * n
@@ -149,8 +157,8 @@ def solve_stack(s, q, lower, upper, phase, free, num_free, group_end, w, lam, g,
     z0 = np.empty(n)
     zz = np.empty(n)
     y = np.empty(n)
-    az = np.empty(m)
     az0 = np.empty(m)
+    member = np.zeros(m, dtype=np.int8)  # which rows are in the working set
     rows = np.empty(m, dtype=np.int64)  # working set: constraint rows ...
     sgn = np.empty(m)  # ... and their sides (+1 upper, -1 lower)
     lmb = np.zeros(m)  # multipliers of the working set
@@ -166,65 +174,54 @@ def solve_stack(s, q, lower, upper, phase, free, num_free, group_end, w, lam, g,
         obj = 0.0
         for ax in range(2):
             # ---------------------------------------------------------- reduced data of this axis
-            for j in range(n):
-                if j < nf:
-                    h = free[ph, j]
-                    qa[j] = q[i, 2 * h + ax]
-                    lo[j] = lower[i, 2 * h + ax]
-                    up[j] = upper[i, 2 * h + ax]
-                    lrow = -np.inf
-                    urow = np.inf
-                    for r in range(h, group_end[ph, j]):
-                        lv = lower[i, 2 * n + 2 * r + ax]
-                        uv = upper[i, 2 * n + 2 * r + ax]
-                        if lv > lrow:
-                            lrow = lv
-                        if uv < urow:
-                            urow = uv
-                    lo[n + j] = lrow
-                    up[n + j] = urow
-                else:
-                    qa[j] = 0.0
-                    lo[j] = -np.inf
-                    up[j] = np.inf
-                    lo[n + j] = -np.inf
-                    up[n + j] = np.inf
+            for j in range(nf):
+                h = free[ph, j]
+                qa[j] = q[i, 2 * h + ax]
+                lo[j] = lower[i, 2 * h + ax]
+                up[j] = upper[i, 2 * h + ax]
+                lrow = -np.inf
+                urow = np.inf
+                for r in range(h, group_end[ph, j]):
+                    lrow = max(lrow, lower[i, 2 * n + 2 * r + ax])
+                    urow = min(urow, upper[i, 2 * n + 2 * r + ax])
+                lo[n + j] = lrow
+                up[n + j] = urow
             wv = w[ph, ax]
             gv = g[ph, ax]
-            av = a[ph, ax]
-            for j in range(n):
-                d[j] = 1.0 / (1.0 + s[i] * lam[ph, ax, j])
+            si = s[i]
+            for j in range(nf):
+                d[j] = 1.0 / (1.0 + si * lam[ph, ax, j])
             # unconstrained minimizer z0 = -W D W' q
-            for j in range(n):
+            for j in range(nf):
                 acc = 0.0
-                for k in range(n):
+                for k in range(nf):
                     acc += wv[k, j] * qa[k]
                 y[j] = -acc * d[j]
-            for k in range(n):
+            run = 0.0
+            for k in range(nf):
                 acc = 0.0
-                for j in range(n):
+                for j in range(nf):
                     acc += wv[k, j] * y[j]
                 z0[k] = acc
-            for r in range(m):
-                acc = 0.0
-                for k in range(n):
-                    acc += av[r, k] * z0[k]
-                az0[r] = acc
+                run += acc
+                az0[k] = acc
+                az0[n + k] = run
             # ---------------------------------------------------------- warm start: independent rows of the guess
             nw = 0
+            member[:] = 0
             for r in range(m):
                 side = active[i, ax, r]
                 if side == 0:
                     continue
-                if (side > 0 and not np.isfinite(up[r])) or (side < 0 and not np.isfinite(lo[r])):
-                    active[i, ax, r] = 0
+                active[i, ax, r] = 0
+                if r % n >= nf:
                     continue
-                if _append(gv, d, rows, sgn, nw, r, float(side), chol, col, n):
+                if _append(gv, d, rows, sgn, nw, r, float(side), chol, col, nf):
                     rows[nw] = r
                     sgn[nw] = float(side)
                     lmb[nw] = 0.0
+                    member[r] = 1
                     nw += 1
-                active[i, ax, r] = 0
             # ---------------------------------------------------------- the dual active-set iterations
             it = 0
             done = False
@@ -233,10 +230,7 @@ def solve_stack(s, q, lower, upper, phase, free, num_free, group_end, w, lam, g,
                 # equality-constrained multipliers on the working set: M_WW lst = -(slack of z0)
                 for t in range(nw):
                     r = rows[t]
-                    if sgn[t] > 0:
-                        rhs[t] = -(up[r] - az0[r])
-                    else:
-                        rhs[t] = -(az0[r] - lo[r])
+                    rhs[t] = (az0[r] - up[r]) if sgn[t] > 0 else (lo[r] - az0[r])
                 _chol_solve(chol, nw, rhs, lst)
                 blocking = -1
                 step = 1.0
@@ -249,42 +243,42 @@ def solve_stack(s, q, lower, upper, phase, free, num_free, group_end, w, lam, g,
                 if blocking >= 0:  # step towards lst until a multiplier reaches zero, drop it
                     for t in range(nw):
                         lmb[t] += step * (lst[t] - lmb[t])
+                    _drop_factor_row(chol, nw, blocking)
+                    member[rows[blocking]] = 0
                     nw = _remove(rows, sgn, lmb, nw, blocking)
-                    _factor(gv, d, rows, sgn, nw, chol, n)
                     continue
                 for t in range(nw):
                     lmb[t] = lst[t]
                 # primal point z = z0 - W D G_W' (sgn lmb) and the most violated constraint
-                for k in range(n):
+                for k in range(nf):
                     acc = 0.0
                     for t in range(nw):
                         acc += gv[rows[t], k] * sgn[t] * lmb[t]
                     y[k] = acc * d[k]
-                for k in range(n):
-                    acc = z0[k]
-                    for j in range(n):
-                        acc -= wv[k, j] * y[j]
-                    zz[k] = acc
-                worst = 0.0
+                worst = tol
                 add_row = -1
                 add_side = 0.0
-                for r in range(m):
-                    acc = 0.0
-                    for k in range(n):
-                        acc += av[r, k] * zz[k]
-                    az[r] = acc
-                    if np.isfinite(up[r]):
-                        v = (acc - up[r]) / max(1.0, abs(up[r]))
-                        if v > tol and v > worst:
-                            worst, add_row, add_side = v, r, 1.0
-                    if np.isfinite(lo[r]):
-                        v = (lo[r] - acc) / max(1.0, abs(lo[r]))
-                        if v > tol and v > worst:
-                            worst, add_row, add_side = v, r, -1.0
+                run = 0.0
+                for k in range(nf):
+                    acc = z0[k]
+                    for j in range(nf):
+                        acc -= wv[k, j] * y[j]
+                    zz[k] = acc
+                    run += acc
+                    for r, v in ((k, acc), (n + k, run)):
+                        if member[r]:  # held as an equality (to rounding) by the working set
+                            continue
+                        over = (v - up[r]) / max(1.0, abs(up[r]))
+                        if over > worst:
+                            worst, add_row, add_side = over, r, 1.0
+                        under = (lo[r] - v) / max(1.0, abs(lo[r]))
+                        if under > worst:
+                            worst, add_row, add_side = under, r, -1.0
                 if add_row < 0:
                     done = True
                     break
-                if _append(gv, d, rows, sgn, nw, add_row, add_side, chol, col, n):
+                member[add_row] = 1
+                if _append(gv, d, rows, sgn, nw, add_row, add_side, chol, col, nf):
                     rows[nw] = add_row
                     sgn[nw] = add_side
                     lmb[nw] = 0.0
@@ -305,25 +299,49 @@ def solve_stack(s, q, lower, upper, phase, free, num_free, group_end, w, lam, g,
                     break
                 for t in range(nw):
                     lmb[t] -= step * rhs[t]
+                member[rows[blocking]] = 0
                 nw = _remove(rows, sgn, lmb, nw, blocking)
                 rows[nw] = add_row
                 sgn[nw] = add_side
                 lmb[nw] = step
                 nw += 1
-                _factor(gv, d, rows, sgn, nw, chol, n)
+                _factor(gv, d, rows, sgn, nw, chol, nf)
             total_it += it
             if not done:
                 good = False
                 continue
+            # one step of iterative refinement: z = z0 - (...) loses digits to cancellation when
+            # |z0| >> |z| (small Q2, far from the reference); project z back onto the working set's
+            # equalities, dz = P^-1 A_W' mu with M_WW mu = (bound - A z)_W
+            if nw:
+                run = 0.0
+                for k in range(nf):
+                    run += zz[k]
+                    az0[n + k] = run  # reused: the running sums of z
+                for t in range(nw):
+                    r = rows[t]
+                    v = zz[r] if r < n else az0[r]
+                    rhs[t] = sgn[t] * ((up[r] if sgn[t] > 0 else lo[r]) - v)
+                _chol_solve(chol, nw, rhs, lst)
+                for k in range(nf):
+                    acc = 0.0
+                    for t in range(nw):
+                        acc += gv[rows[t], k] * sgn[t] * lst[t]
+                    y[k] = acc * d[k]
+                for k in range(nf):
+                    acc = 0.0
+                    for j in range(nf):
+                        acc += wv[k, j] * y[j]
+                    zz[k] += acc
             for t in range(nw):
                 active[i, ax, rows[t]] = np.int8(sgn[t])
-            pz = 0.0
-            for k in range(n):
+            p0v = p0[ph, ax]
+            p1v = p1[ph, ax]
+            for k in range(nf):
                 acc = 0.0
-                for j in range(n):
-                    acc += (s[i] * p1[ph, ax, k, j] + p0[ph, ax, k, j]) * zz[j]
-                pz += zz[k] * (0.5 * acc + qa[k])
-            obj += pz
+                for j in range(nf):
+                    acc += (si * p1v[k, j] + p0v[k, j]) * zz[j]
+                obj += zz[k] * (0.5 * acc + qa[k])
             for j in range(nf):  # an active increment bound met exactly, not to rounding
                 z_out[i, 2 * free[ph, j] + ax] = min(max(zz[j], lo[j]), up[j])
         obj_out[i] = obj
@@ -378,6 +396,28 @@ def _factor(gv, d, rows, sgn, nw, chol, n):  # pragma: no cover - compiled
                 chol[t, t] = np.sqrt(max(acc, 1e-300))
             else:
                 chol[t, u] = acc / chol[u, u]
+
+
+@numba.njit(cache=True)
+def _drop_factor_row(chol, nw, t):  # pragma: no cover - compiled
+    """The Cholesky factor without row and column ``t`` of its matrix, in O(nw^2): the trailing
+    block takes a rank-one update with the dropped column (Givens rotations), then moves up."""
+    # rank-one update L22 L22' + x x' with x = chol[t+1:nw, t] (overwritten as it goes)
+    for k in range(t + 1, nw):
+        x_k = chol[k, t]
+        lkk = chol[k, k]
+        r = np.sqrt(lkk * lkk + x_k * x_k)
+        c = r / lkk
+        sn = x_k / lkk
+        chol[k, k] = r
+        for i in range(k + 1, nw):
+            chol[i, k] = (chol[i, k] + sn * chol[i, t]) / c
+            chol[i, t] = c * chol[i, t] - sn * chol[i, k]
+    for i in range(t, nw - 1):  # move the rows and columns after t up and left by one
+        for j in range(t):
+            chol[i, j] = chol[i + 1, j]
+        for j in range(t, i + 1):
+            chol[i, j] = chol[i + 1, j + 1]
 
 
 @numba.njit(cache=True)
