@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 __all__ = ["project_budget", "linear_argmin_disc_box", "project_disc_box", "disc_box_grid", "min_plus_allocation"]
@@ -162,36 +163,51 @@ def disc_box_grid(center: np.ndarray, radius: float, area_m: tuple[float, float,
     return pts
 
 
-def min_plus_allocation(costs: np.ndarray, chunk: int = 64) -> tuple[np.ndarray, np.ndarray]:
+def min_plus_allocation(costs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Exact split of J units among K users on a grid: min over sum j_k <= J of sum_k costs[:, k, j_k].
 
     ``costs`` (B, K, J+1) holds, for B independent problems (e.g. drone positions), user k's cost
-    with j units. Min-plus dynamic programming over users, vectorized over problems (in chunks to
-    bound memory). Returns the optimal values (B,) and allocations (B, K) in units.
+    with j units. Min-plus dynamic programming over users (compiled; ties go to the fewest units
+    and the smallest budget). Returns the optimal values (B,) and allocations (B, K) in units.
     """
+    costs = np.ascontiguousarray(costs, dtype=float)
+    if costs.ndim != 3 or costs.shape[1] < 1 or costs.shape[2] < 1:
+        raise ValueError(f"costs has shape {costs.shape}; expected (B, K, J+1) with K >= 1 and J >= 0")
+    return _min_plus(costs)
+
+
+@numba.njit(cache=True)
+def _min_plus(costs):  # pragma: no cover - compiled
     b_total, k, levels = costs.shape
-    idx = np.arange(levels)
-    shift = idx[:, None] - idx[None, :]  # [budget, units] -> budget left for the earlier users
-    valid = shift >= 0
-    shift = np.where(valid, shift, 0)
     values = np.empty(b_total)
     alloc = np.empty((b_total, k), dtype=np.int64)
-    for s in range(0, b_total, chunk):
-        c = costs[s : s + chunk]
-        f = np.minimum.accumulate(c[:, 0, :], axis=1)  # first user, at most b units
-        first_choice = np.argmin(np.where(valid[None], c[:, 0, None, :], np.inf), axis=2)
-        choices = [first_choice]
+    f = np.empty(levels)
+    g = np.empty(levels)
+    choice = np.empty((k, levels), dtype=np.int64)
+    for b in range(b_total):
+        best, arg = np.inf, 0
+        for budget in range(levels):  # the first user, at most ``budget`` units
+            if costs[b, 0, budget] < best:
+                best, arg = costs[b, 0, budget], budget
+            f[budget] = best
+            choice[0, budget] = arg
         for user in range(1, k):
-            total = f[:, shift] + c[:, user, None, :]  # (chunk, budget, units)
-            total = np.where(valid[None], total, np.inf)
-            arg = np.argmin(total, axis=2)
-            f = np.take_along_axis(total, arg[:, :, None], axis=2)[:, :, 0]
-            choices.append(arg)
-        best_budget = np.argmin(f, axis=1)
-        values[s : s + chunk] = f[np.arange(f.shape[0]), best_budget]
-        budget = best_budget
+            for budget in range(levels):
+                best, arg = np.inf, 0
+                for units in range(budget + 1):
+                    total = f[budget - units] + costs[b, user, units]
+                    if total < best:
+                        best, arg = total, units
+                g[budget] = best
+                choice[user, budget] = arg
+            f[:] = g
+        budget = 0
+        for j in range(1, levels):
+            if f[j] < f[budget]:
+                budget = j
+        values[b] = f[budget]
         for user in range(k - 1, -1, -1):
-            units = choices[user][np.arange(f.shape[0]), budget]
-            alloc[s : s + chunk, user] = units
-            budget = budget - units
+            units = choice[user, budget]
+            alloc[b, user] = units
+            budget -= units
     return values, alloc

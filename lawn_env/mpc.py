@@ -25,6 +25,7 @@ are counted in the returned :class:`MPCSolution` (``status``), never raised.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -69,6 +70,11 @@ class SlotData:
     lower: np.ndarray  # (..., K, 4 N_p): increment bounds, then bounds on T z
     upper: np.ndarray
     phase: Any = 0  # slot phase (slot % control period): an int, or one per scenario (...,)
+
+    @functools.cached_property
+    def phase_flat(self) -> np.ndarray:
+        """The slot phase of every problem, flattened over (..., K): int64."""
+        return np.broadcast_to(np.asarray(self.phase, dtype=np.int64)[..., None], self.constant.shape).reshape(-1)
 
 
 class _DaqpBackend:
@@ -208,6 +214,8 @@ class _CompiledBackend:
         sets = self.working_sets.get(shape)
         if sets is None:
             sets = self.working_sets[shape] = np.zeros((s.shape[0], 2, 2 * self.pencils.horizon), dtype=np.int8)
+        if not (lower.flags.c_contiguous and upper.flags.c_contiguous):
+            lower, upper = _writable(lower), _writable(upper)
         return self.pencils.solve(s, q, lower, upper, phase, sets)
 
 
@@ -338,8 +346,8 @@ class OutageAwareMPC:
             residual=r,
             linear=r @ self.model.ftq4.T,  # F' Q4 r, so H = 2 psi (F' Q4 r)'
             constant=((r @ self.model.q4) * r).sum(axis=-1),
-            lower=np.concatenate([-pos, -self.accel_max - u_prev], axis=-1),
-            upper=np.concatenate([pos, self.accel_max - u_prev], axis=-1),
+            lower=np.ascontiguousarray(np.concatenate([-pos, -self.accel_max - u_prev], axis=-1)),
+            upper=np.ascontiguousarray(np.concatenate([pos, self.accel_max - u_prev], axis=-1)),
             phase=phase,
         )
 
@@ -356,22 +364,29 @@ class OutageAwareMPC:
         (L, K) on data (K,): one call for a planner's psi table."""
         start = time.perf_counter()
         psi = np.asarray(psi, dtype=float)
-        lead = np.broadcast_shapes(psi.shape, data.constant.shape)
-        if lead[-1:] != (self.num_agvs,):
-            raise ValueError(f"psi has shape {psi.shape}; expected one per AGV (..., {self.num_agvs})")
-        psi = np.broadcast_to(psi, lead)
         n = self._n
-        count = int(np.prod(lead))
-        q = ((2.0 * psi)[..., None] * data.linear).reshape(count, n)  # H' = 2 psi F'Q4 r
-        lower = _writable(np.broadcast_to(data.lower, lead + (2 * n,)).reshape(count, 2 * n))
-        upper = _writable(np.broadcast_to(data.upper, lead + (2 * n,)).reshape(count, 2 * n))
-        s = (psi * psi).reshape(count)
-        if self.backend_name == "compiled":
+        lead = data.constant.shape
+        if psi.shape == lead:  # the common case: no broadcasting, the prepared arrays as they are
+            count = data.constant.size
+            lower, upper = data.lower.reshape(count, 2 * n), data.upper.reshape(count, 2 * n)
+            phase = data.phase_flat
+        else:
+            lead = np.broadcast_shapes(psi.shape, lead)
+            if lead[-1:] != (self.num_agvs,):
+                raise ValueError(f"psi has shape {psi.shape}; expected one per AGV (..., {self.num_agvs})")
+            psi = np.broadcast_to(psi, lead)
+            count = int(np.prod(lead))
+            lower = _writable(np.broadcast_to(data.lower, lead + (2 * n,)).reshape(count, 2 * n))
+            upper = _writable(np.broadcast_to(data.upper, lead + (2 * n,)).reshape(count, 2 * n))
             phase = np.broadcast_to(np.asarray(data.phase, dtype=np.int64)[..., None], lead).reshape(count)
+        q = ((2.0 * psi)[..., None] * data.linear).reshape(count, n)  # H' = 2 psi F'Q4 r
+        s = (psi * psi).reshape(count)
+        if self.backend_name == "compiled":  # blocked increments come back exactly zero
             z, fval, iterations, settled = self.backend.solve_all(lead, s, q, lower, upper, phase)
             status = np.zeros(count, dtype=np.int8)
-            for i in np.flatnonzero(~settled).tolist():
-                z[i], fval[i], iterations[i], status[i] = self._fallback_solve(i, s[i], q[i], lower[i], upper[i])
+            if not settled.all():
+                for i in np.flatnonzero(~settled).tolist():
+                    z[i], fval[i], iterations[i], status[i] = self._fallback_solve(i, s[i], q[i], lower[i], upper[i])
         else:
             z, fval, iterations, status = self._solve_each(data, s, q, lower, upper)
         if self.control_period > 1:  # the blocked increments exactly zero (reference solvers return ~1e-14)

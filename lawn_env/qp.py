@@ -127,28 +127,26 @@ class AxisPencils:
         (M,) int slot phase) from the working sets ``active`` (M, 2, 2N_p) int8, updated in place.
         Returns ``z`` (M, 2N_p), ``objective`` (M,) (``1/2 z'Pz + q'z``), ``iterations`` (M,),
         ``settled`` (M,) bool."""
-        mm = s.shape[0]
-        z = np.zeros((mm, 2 * self.horizon))
-        objective = np.zeros(mm)
-        iterations = np.zeros(mm, dtype=np.int64)
-        settled = np.zeros(mm, dtype=np.bool_)
-        solve_stack(s, q, lower, upper, phase, self.free, self.num_free, self.group_end, self.w, self.lam,
-                    self.g, self.a, self.p0, self.p1, active, z, objective, iterations, settled, tol, max_iter)
-        return z, objective, iterations, settled
+        return solve_stack(s, q, lower, upper, phase, self.free, self.num_free, self.group_end, self.w, self.lam,
+                           self.g, self.p0, self.p1, active, tol, max_iter)
 
 
 @numba.njit(cache=True)
 def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray, phase: np.ndarray,
                 free: np.ndarray, num_free: np.ndarray, group_end: np.ndarray, w: np.ndarray, lam: np.ndarray,
-                g: np.ndarray, a: np.ndarray, p0: np.ndarray, p1: np.ndarray, active: np.ndarray, z_out: np.ndarray,
-                obj_out: np.ndarray, it_out: np.ndarray, ok_out: np.ndarray, tol: float,
-                max_iter: int) -> None:  # pragma: no cover - compiled
+                g: np.ndarray, p0: np.ndarray, p1: np.ndarray, active: np.ndarray, tol: float,
+                max_iter: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Compiled loop over M AGV problems x 2 axes (see :meth:`AxisPencils.solve`). The reduced
     constraint rows are ``z_j`` (row j) and ``sum_{i<=j} z_i`` (row n + j), j < n_F: their values
-    are computed from that structure (``a`` documents it; the tests check it)."""
+    are computed from that structure (:attr:`AxisPencils.a` documents it; the tests check it).
+    Returns (z, objective, iterations, settled) as :meth:`AxisPencils.solve`."""
     num = s.shape[0]
     n = w.shape[2]
     m = 2 * n
+    z_out = np.zeros((num, 2 * n))
+    obj_out = np.zeros(num)
+    it_out = np.zeros(num, dtype=np.int64)
+    ok_out = np.zeros(num, dtype=np.bool_)
     # scratch, allocated once per call
     qa = np.empty(n)
     lo = np.empty(m)
@@ -353,6 +351,7 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
             for ax in range(2):
                 for r in range(m):
                     active[i, ax, r] = 0
+    return z_out, obj_out, it_out, ok_out
 
 
 @numba.njit(cache=True, inline="always")

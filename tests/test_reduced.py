@@ -91,7 +91,7 @@ def test_rg_mpc_is_never_worse_than_the_paper_ao_on_sampled_slots():
 
 def test_min_plus_allocation_against_brute_force(rng):
     costs = rng.random((6, 3, 8))
-    values, alloc = min_plus_allocation(costs, chunk=4)
+    values, alloc = min_plus_allocation(costs)
     for b in range(6):
         best = min(sum(costs[b, k, j[k]] for k in range(3))
                    for j in itertools.product(range(8), repeat=3) if sum(j) <= 7)
