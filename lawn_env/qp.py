@@ -83,6 +83,8 @@ class AxisPencils:
         if coupling != 0.0:
             raise ValueError(f"AxisPencils: the x-y blocks of the Hessians are not zero (max {coupling:.3g}); "
                              "the axes decouple only for diagonal Q1 and Q2")
+        if np.count_nonzero(p0 - np.diag(np.diag(p0))):
+            raise ValueError("AxisPencils: p0 (2 Q5) must be diagonal (Q2 is diagonal)")
         free = np.full((per, n), -1, dtype=np.int64)
         num_free = np.zeros(per, dtype=np.int64)
         group_end = np.zeros((per, n), dtype=np.int64)
@@ -131,7 +133,7 @@ class AxisPencils:
                            self.g, self.p0, self.p1, active, tol, max_iter)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray, phase: np.ndarray,
                 free: np.ndarray, num_free: np.ndarray, group_end: np.ndarray, w: np.ndarray, lam: np.ndarray,
                 g: np.ndarray, p0: np.ndarray, p1: np.ndarray, active: np.ndarray, tol: float,
@@ -156,6 +158,8 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
     zz = np.empty(n)
     y = np.empty(n)
     az0 = np.empty(m)
+    tup = np.empty(m)
+    tlo = np.empty(m)
     member = np.zeros(m, dtype=np.int8)  # which rows are in the working set
     rows = np.empty(m, dtype=np.int64)  # working set: constraint rows ...
     sgn = np.empty(m)  # ... and their sides (+1 upper, -1 lower)
@@ -184,6 +188,10 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                     urow = min(urow, upper[i, 2 * n + 2 * r + ax])
                 lo[n + j] = lrow
                 up[n + j] = urow
+            for j in range(nf):  # feasibility thresholds, relative to the bound
+                for r in (j, n + j):
+                    tup[r] = tol * max(1.0, abs(up[r]))
+                    tlo[r] = tol * max(1.0, abs(lo[r]))
             wv = w[ph, ax]
             gv = g[ph, ax]
             si = s[i]
@@ -204,7 +212,8 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                 run += acc
                 az0[k] = acc
                 az0[n + k] = run
-            # ---------------------------------------------------------- warm start: independent rows of the guess
+            # ---------------------------------------------------------- start: independent rows of the guess (with zero
+            # multipliers, any set is a feasible start for the dual)
             nw = 0
             member[:] = 0
             for r in range(m):
@@ -217,6 +226,20 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                 if _append(gv, d, rows, sgn, nw, r, float(side), chol, col, nf):
                     rows[nw] = r
                     sgn[nw] = float(side)
+                    lmb[nw] = 0.0
+                    member[r] = 1
+                    nw += 1
+            for r in range(m):  # and the rows the unconstrained minimizer violates
+                if r % n >= nf or member[r]:
+                    continue
+                side = 0.0
+                if az0[r] > up[r]:
+                    side = 1.0
+                elif az0[r] < lo[r]:
+                    side = -1.0
+                if side != 0.0 and _append(gv, d, rows, sgn, nw, r, side, chol, col, nf):
+                    rows[nw] = r
+                    sgn[nw] = side
                     lmb[nw] = 0.0
                     member[r] = 1
                     nw += 1
@@ -238,6 +261,26 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                         if blocking < 0 or frac < step:
                             step = frac
                             blocking = t
+                if blocking >= 0 and step == 0.0:
+                    # at a zero start (multipliers all zero) every row with a negative multiplier can
+                    # go at once: the multipliers stay zero, feasible for the dual
+                    zero = True
+                    for t in range(nw):
+                        if lmb[t] != 0.0:
+                            zero = False
+                    if zero:
+                        keep = 0
+                        for t in range(nw):
+                            if lst[t] < 0.0:
+                                member[rows[t]] = 0
+                            else:
+                                rows[keep] = rows[t]
+                                sgn[keep] = sgn[t]
+                                lmb[keep] = 0.0
+                                keep += 1
+                        nw = keep
+                        _factor(gv, d, rows, sgn, nw, chol, nf)
+                        continue
                 if blocking >= 0:  # step towards lst until a multiplier reaches zero, drop it
                     for t in range(nw):
                         lmb[t] += step * (lst[t] - lmb[t])
@@ -253,7 +296,7 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                     for t in range(nw):
                         acc += gv[rows[t], k] * sgn[t] * lmb[t]
                     y[k] = acc * d[k]
-                worst = tol
+                worst = 0.0
                 add_row = -1
                 add_side = 0.0
                 run = 0.0
@@ -266,11 +309,11 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                     for r, v in ((k, acc), (n + k, run)):
                         if member[r]:  # held as an equality (to rounding) by the working set
                             continue
-                        over = (v - up[r]) / max(1.0, abs(up[r]))
-                        if over > worst:
+                        over = v - up[r]
+                        if over > tup[r] and over > worst:
                             worst, add_row, add_side = over, r, 1.0
-                        under = (lo[r] - v) / max(1.0, abs(lo[r]))
-                        if under > worst:
+                        under = lo[r] - v
+                        if under > tlo[r] and under > worst:
                             worst, add_row, add_side = under, r, -1.0
                 if add_row < 0:
                     done = True
@@ -316,30 +359,33 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                 for k in range(nf):
                     run += zz[k]
                     az0[n + k] = run  # reused: the running sums of z
+                off = False
                 for t in range(nw):
                     r = rows[t]
                     v = zz[r] if r < n else az0[r]
                     rhs[t] = sgn[t] * ((up[r] if sgn[t] > 0 else lo[r]) - v)
-                _chol_solve(chol, nw, rhs, lst)
-                for k in range(nf):
-                    acc = 0.0
-                    for t in range(nw):
-                        acc += gv[rows[t], k] * sgn[t] * lst[t]
-                    y[k] = acc * d[k]
-                for k in range(nf):
-                    acc = 0.0
-                    for j in range(nf):
-                        acc += wv[k, j] * y[j]
-                    zz[k] += acc
+                    if abs(rhs[t]) > 0.01 * (tup[r] if sgn[t] > 0 else tlo[r]):
+                        off = True
+                if off:  # only where the residual is not already far below the tolerance
+                    _chol_solve(chol, nw, rhs, lst)
+                    for k in range(nf):
+                        acc = 0.0
+                        for t in range(nw):
+                            acc += gv[rows[t], k] * sgn[t] * lst[t]
+                        y[k] = acc * d[k]
+                    for k in range(nf):
+                        acc = 0.0
+                        for j in range(nf):
+                            acc += wv[k, j] * y[j]
+                        zz[k] += acc
             for t in range(nw):
                 active[i, ax, rows[t]] = np.int8(sgn[t])
-            p0v = p0[ph, ax]
             p1v = p1[ph, ax]
-            for k in range(nf):
+            for k in range(nf):  # 1/2 z'(s P1 + P0) z + q'z, P0 diagonal
                 acc = 0.0
                 for j in range(nf):
-                    acc += (si * p1v[k, j] + p0v[k, j]) * zz[j]
-                obj += zz[k] * (0.5 * acc + qa[k])
+                    acc += p1v[k, j] * zz[j]
+                obj += zz[k] * (0.5 * (si * acc + p0[ph, ax, k, k] * zz[k]) + qa[k])
             for j in range(nf):  # an active increment bound met exactly, not to rounding
                 z_out[i, 2 * free[ph, j] + ax] = min(max(zz[j], lo[j]), up[j])
         obj_out[i] = obj
@@ -354,7 +400,7 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
     return z_out, obj_out, it_out, ok_out
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _dual_entry(gv, d, r1, s1, r2, s2, n):  # pragma: no cover - compiled
     acc = 0.0
     for k in range(n):
@@ -362,7 +408,7 @@ def _dual_entry(gv, d, r1, s1, r2, s2, n):  # pragma: no cover - compiled
     return s1 * s2 * acc
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _append(gv, d, rows, sgn, nw, r, side, chol, col, n):  # pragma: no cover - compiled
     """Extend the Cholesky factor by row ``r`` (side ``side``); False (factor unchanged, ``col``
     holding ``L^-1 M_W,r``) when the row is linearly dependent on the working set's rows."""
@@ -383,7 +429,7 @@ def _append(gv, d, rows, sgn, nw, r, side, chol, col, n):  # pragma: no cover - 
     return True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _factor(gv, d, rows, sgn, nw, chol, n):  # pragma: no cover - compiled
     """Cholesky factor of the working set's dual Hessian from scratch."""
     for t in range(nw):
@@ -397,7 +443,7 @@ def _factor(gv, d, rows, sgn, nw, chol, n):  # pragma: no cover - compiled
                 chol[t, u] = acc / chol[u, u]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _drop_factor_row(chol, nw, t):  # pragma: no cover - compiled
     """The Cholesky factor without row and column ``t`` of its matrix, in O(nw^2): the trailing
     block takes a rank-one update with the dropped column (Givens rotations), then moves up."""
@@ -419,7 +465,7 @@ def _drop_factor_row(chol, nw, t):  # pragma: no cover - compiled
             chol[i, j] = chol[i + 1, j + 1]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _remove(rows, sgn, lmb, nw, t):  # pragma: no cover - compiled
     for u in range(t, nw - 1):
         rows[u] = rows[u + 1]
@@ -428,7 +474,7 @@ def _remove(rows, sgn, lmb, nw, t):  # pragma: no cover - compiled
     return nw - 1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _chol_solve(chol, nw, rhs, out):  # pragma: no cover - compiled
     """out = (L L')^-1 rhs on the leading nw entries."""
     for t in range(nw):
@@ -443,7 +489,7 @@ def _chol_solve(chol, nw, rhs, out):  # pragma: no cover - compiled
         out[t] = acc / chol[t, t]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _chol_solve_l(chol, nw, half, out):  # pragma: no cover - compiled
     """out = L'^-1 half (``half`` = L^-1 b already): the second half of :func:`_chol_solve`."""
     for t in range(nw - 1, -1, -1):
