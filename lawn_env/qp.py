@@ -168,6 +168,7 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
     rhs = np.empty(m)
     col = np.empty(m)
     chol = np.zeros((m, m))  # lower Cholesky factor of the working set's dual Hessian
+    cinv = np.zeros(m)  # the inverses of its diagonal (multiplications, not divisions, in the solves)
     for i in range(num):
         ph = phase[i]
         nf = num_free[ph]
@@ -223,7 +224,7 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                 active[i, ax, r] = 0
                 if r % n >= nf:
                     continue
-                if _append(gv, d, rows, sgn, nw, r, float(side), chol, col, nf):
+                if _append(gv, d, rows, sgn, nw, r, float(side), chol, cinv, col, nf):
                     rows[nw] = r
                     sgn[nw] = float(side)
                     lmb[nw] = 0.0
@@ -237,7 +238,7 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                     side = 1.0
                 elif az0[r] < lo[r]:
                     side = -1.0
-                if side != 0.0 and _append(gv, d, rows, sgn, nw, r, side, chol, col, nf):
+                if side != 0.0 and _append(gv, d, rows, sgn, nw, r, side, chol, cinv, col, nf):
                     rows[nw] = r
                     sgn[nw] = side
                     lmb[nw] = 0.0
@@ -252,7 +253,7 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                 for t in range(nw):
                     r = rows[t]
                     rhs[t] = (az0[r] - up[r]) if sgn[t] > 0 else (lo[r] - az0[r])
-                _chol_solve(chol, nw, rhs, lst)
+                _chol_solve(chol, cinv, nw, rhs, lst)
                 blocking = -1
                 step = 1.0
                 for t in range(nw):
@@ -279,12 +280,12 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                                 lmb[keep] = 0.0
                                 keep += 1
                         nw = keep
-                        _factor(gv, d, rows, sgn, nw, chol, nf)
+                        _factor(gv, d, rows, sgn, nw, chol, cinv, nf)
                         continue
                 if blocking >= 0:  # step towards lst until a multiplier reaches zero, drop it
                     for t in range(nw):
                         lmb[t] += step * (lst[t] - lmb[t])
-                    _drop_factor_row(chol, nw, blocking)
+                    _drop_factor_row(chol, cinv, nw, blocking)
                     member[rows[blocking]] = 0
                     nw = _remove(rows, sgn, lmb, nw, blocking)
                     continue
@@ -319,7 +320,7 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                     done = True
                     break
                 member[add_row] = 1
-                if _append(gv, d, rows, sgn, nw, add_row, add_side, chol, col, nf):
+                if _append(gv, d, rows, sgn, nw, add_row, add_side, chol, cinv, col, nf):
                     rows[nw] = add_row
                     sgn[nw] = add_side
                     lmb[nw] = 0.0
@@ -327,7 +328,7 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                     continue
                 # the new row depends on the working set: move along the null direction of the
                 # working set's rows (z unchanged, the new multiplier grows) until one reaches zero
-                _chol_solve_l(chol, nw, col, rhs)  # col held L^-1 M_W,new; rhs = M_WW^-1 M_W,new
+                _chol_solve_l(chol, cinv, nw, col, rhs)  # col held L^-1 M_W,new; rhs = M_WW^-1 M_W,new
                 blocking = -1
                 step = 0.0
                 for t in range(nw):
@@ -346,7 +347,7 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                 sgn[nw] = add_side
                 lmb[nw] = step
                 nw += 1
-                _factor(gv, d, rows, sgn, nw, chol, nf)
+                _factor(gv, d, rows, sgn, nw, chol, cinv, nf)
             total_it += it
             if not done:
                 good = False
@@ -367,7 +368,7 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                     if abs(rhs[t]) > 0.01 * (tup[r] if sgn[t] > 0 else tlo[r]):
                         off = True
                 if off:  # only where the residual is not already far below the tolerance
-                    _chol_solve(chol, nw, rhs, lst)
+                    _chol_solve(chol, cinv, nw, rhs, lst)
                     for k in range(nf):
                         acc = 0.0
                         for t in range(nw):
@@ -409,14 +410,14 @@ def _dual_entry(gv, d, r1, s1, r2, s2, n):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _append(gv, d, rows, sgn, nw, r, side, chol, col, n):  # pragma: no cover - compiled
+def _append(gv, d, rows, sgn, nw, r, side, chol, cinv, col, n):  # pragma: no cover - compiled
     """Extend the Cholesky factor by row ``r`` (side ``side``); False (factor unchanged, ``col``
     holding ``L^-1 M_W,r``) when the row is linearly dependent on the working set's rows."""
     for t in range(nw):
         acc = _dual_entry(gv, d, rows[t], sgn[t], r, side, n)
         for u in range(t):
             acc -= chol[t, u] * col[u]
-        col[t] = acc / chol[t, t]
+        col[t] = acc * cinv[t]
     diag = _dual_entry(gv, d, r, side, r, side, n)
     rest = diag
     for t in range(nw):
@@ -426,11 +427,12 @@ def _append(gv, d, rows, sgn, nw, r, side, chol, col, n):  # pragma: no cover - 
     for t in range(nw):
         chol[nw, t] = col[t]
     chol[nw, nw] = np.sqrt(rest)
+    cinv[nw] = 1.0 / chol[nw, nw]
     return True
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _factor(gv, d, rows, sgn, nw, chol, n):  # pragma: no cover - compiled
+def _factor(gv, d, rows, sgn, nw, chol, cinv, n):  # pragma: no cover - compiled
     """Cholesky factor of the working set's dual Hessian from scratch."""
     for t in range(nw):
         for u in range(t + 1):
@@ -439,12 +441,13 @@ def _factor(gv, d, rows, sgn, nw, chol, n):  # pragma: no cover - compiled
                 acc -= chol[t, v] * chol[u, v]
             if u == t:
                 chol[t, t] = np.sqrt(max(acc, 1e-300))
+                cinv[t] = 1.0 / chol[t, t]
             else:
-                chol[t, u] = acc / chol[u, u]
+                chol[t, u] = acc * cinv[u]
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _drop_factor_row(chol, nw, t):  # pragma: no cover - compiled
+def _drop_factor_row(chol, cinv, nw, t):  # pragma: no cover - compiled
     """The Cholesky factor without row and column ``t`` of its matrix, in O(nw^2): the trailing
     block takes a rank-one update with the dropped column (Givens rotations), then moves up."""
     # rank-one update L22 L22' + x x' with x = chol[t+1:nw, t] (overwritten as it goes)
@@ -455,10 +458,12 @@ def _drop_factor_row(chol, nw, t):  # pragma: no cover - compiled
         c = r / lkk
         sn = x_k / lkk
         chol[k, k] = r
+        cinv[k] = 1.0 / r
         for i in range(k + 1, nw):
             chol[i, k] = (chol[i, k] + sn * chol[i, t]) / c
             chol[i, t] = c * chol[i, t] - sn * chol[i, k]
     for i in range(t, nw - 1):  # move the rows and columns after t up and left by one
+        cinv[i] = cinv[i + 1]
         for j in range(t):
             chol[i, j] = chol[i + 1, j]
         for j in range(t, i + 1):
@@ -475,25 +480,25 @@ def _remove(rows, sgn, lmb, nw, t):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _chol_solve(chol, nw, rhs, out):  # pragma: no cover - compiled
+def _chol_solve(chol, cinv, nw, rhs, out):  # pragma: no cover - compiled
     """out = (L L')^-1 rhs on the leading nw entries."""
     for t in range(nw):
         acc = rhs[t]
         for u in range(t):
             acc -= chol[t, u] * out[u]
-        out[t] = acc / chol[t, t]
+        out[t] = acc * cinv[t]
     for t in range(nw - 1, -1, -1):
         acc = out[t]
         for u in range(t + 1, nw):
             acc -= chol[u, t] * out[u]
-        out[t] = acc / chol[t, t]
+        out[t] = acc * cinv[t]
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _chol_solve_l(chol, nw, half, out):  # pragma: no cover - compiled
+def _chol_solve_l(chol, cinv, nw, half, out):  # pragma: no cover - compiled
     """out = L'^-1 half (``half`` = L^-1 b already): the second half of :func:`_chol_solve`."""
     for t in range(nw - 1, -1, -1):
         acc = half[t]
         for u in range(t + 1, nw):
             acc -= chol[u, t] * out[u]
-        out[t] = acc / chol[t, t]
+        out[t] = acc * cinv[t]
