@@ -129,6 +129,7 @@ class PredictionModel:
     ftq4: np.ndarray  # F' Q4, (2N_p, 6(N_p+1))
     q4c: np.ndarray  # Q4 C, (6(N_p+1), 6)
     increment_sum: np.ndarray  # T, (2N_p, 2N_p)
+    q1_tiled: np.ndarray  # diag(Q1) repeated N_p times: Q4's diagonal blocks, (6 N_p,)
 
     @classmethod
     def from_config(cls, config: ScenarioConfig) -> PredictionModel:
@@ -140,8 +141,17 @@ class PredictionModel:
         return 2 * self.horizon
 
     def residual(self, x_aug: np.ndarray, chi_ref: np.ndarray) -> np.ndarray:
-        """r = C x~ - chi_ref per AGV: (..., K, 6) and (..., K, N_p+1, 6) -> (..., K, 6(N_p+1))."""
-        return x_aug @ self.c.T - chi_ref.reshape(x_aug.shape[:-1] + (-1,))
+        """r = C x~ - chi_ref per AGV: (..., K, 6) and (..., K, N_p+1, 6) -> (..., K, 6(N_p+1)) (one
+        2-D product over all leading axes: numpy's stacked (B, K, 6) @ (6, m) is several times slower)."""
+        lead = x_aug.shape[:-1]
+        flat = np.reshape(x_aug, (-1, x_aug.shape[-1])) @ self.c.T
+        return flat.reshape(lead + (-1,)) - chi_ref.reshape(lead + (-1,))
+
+    def cost_to_go(self, r: np.ndarray) -> np.ndarray:
+        """r' Q4 r for residuals r (..., 6(N_p+1)): Q4 = diag(Q1 x N_p, Q3) with Q1 diagonal, so the
+        first N_p blocks are a weighted sum of squares and only the terminal block is a 6 x 6 form."""
+        head, tail = r[..., :-6], r[..., -6:]
+        return (head * head) @ self.q1_tiled + ((tail @ self.q3) * tail).sum(axis=-1)
 
     def predict(self, x_aug: np.ndarray, dmu: np.ndarray, psi: npt.ArrayLike) -> np.ndarray:
         """Expected predicted states chi = C x~ + psi F Delta-mu, (K, N_p+1, 6)."""
@@ -163,6 +173,7 @@ def _build_model(slot_s: float, horizon: int, q1_diag: tuple, q2_diag: tuple) ->
     arrays = dict(
         a_aug=a_aug, b_aug=b_aug, q1=q1, q2=q2, q3=q3, c=c, f=f, q4=q4, q5=q5,
         ftq4f=ftq4 @ f, ftq4=ftq4, q4c=q4 @ c, increment_sum=increment_sum_matrix(horizon),
+        q1_tiled=np.tile(np.asarray(q1_diag, dtype=float), horizon),
     )
     for arr in arrays.values():
         arr.setflags(write=False)
@@ -207,7 +218,7 @@ def expected_cost_coefficients(model: PredictionModel, x_aug: np.ndarray, chi_re
     Shapes: x_aug (K, 6), chi_ref (K, N_p+1, 6), dmu (K, N_p, 2) -> three (K,) arrays.
     """
     r = model.residual(x_aug, chi_ref)
-    return cost_coefficients(model, r @ model.ftq4.T, ((r @ model.q4) * r).sum(axis=1), dmu)
+    return cost_coefficients(model, r @ model.ftq4.T, model.cost_to_go(r), dmu)
 
 
 def cost_coefficients(model: PredictionModel, linear: np.ndarray, constant: np.ndarray,

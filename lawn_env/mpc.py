@@ -262,7 +262,6 @@ class OutageAwareMPC:
         self._fallback: _DaqpBackend | None = None  # cold DAQP solves of the problems a backend leaves
         # increment bounds per slot phase: zero where move blocking holds the acceleration
         self._box_upper = np.stack([np.repeat(np.where(mask, self.accel_increment_max, 0.0), 2) for mask in masks])
-        self._u_index = np.tile([4, 5], model.horizon)
         self._last_data = None
 
     def _make_backend(self, name: str, masks: list[np.ndarray]):
@@ -335,19 +334,26 @@ class OutageAwareMPC:
             if phase.shape not in ((), lead):
                 raise ValueError(f"slot has shape {phase.shape}; expected a scalar or one per scenario {lead}")
             phase = int(phase) if phase.ndim == 0 else phase
-        pos = self._box_upper[phase]  # (2 N_p,) or (..., 2 N_p)
+        n = self._n
+        flat_x = np.reshape(x_aug, (-1, 6))
+        r = self.model.residual(flat_x, chi_ref.reshape(-1, window, 6))  # 2-D products over every problem
+        lower = np.empty((flat_x.shape[0], 2 * n))
+        upper = np.empty((flat_x.shape[0], 2 * n))
+        pos = self._box_upper[phase]  # (2 N_p,) or (..., 2 N_p), one row per scenario
         if np.ndim(phase):
-            pos = pos[..., None, :]
-        r = self.model.residual(x_aug, chi_ref)
-        u_prev = x_aug[..., self._u_index]  # u[n-1] repeated over the horizon, (..., K, 2 N_p)
-        shape = u_prev.shape
-        pos = np.broadcast_to(pos, shape)
+            pos = np.repeat(pos.reshape(-1, n), k, axis=0)
+        upper[:, :n] = pos
+        np.negative(upper[:, :n], out=lower[:, :n])
+        u_prev = np.tile(flat_x[:, 4:6], self.model.horizon)  # u[n-1] repeated over the horizon
+        np.subtract(self.accel_max, u_prev, out=upper[:, n:])
+        np.subtract(-self.accel_max, u_prev, out=lower[:, n:])
+        shape = lead + (k,)
         return SlotData(
-            residual=r,
-            linear=r @ self.model.ftq4.T,  # F' Q4 r, so H = 2 psi (F' Q4 r)'
-            constant=((r @ self.model.q4) * r).sum(axis=-1),
-            lower=np.ascontiguousarray(np.concatenate([-pos, -self.accel_max - u_prev], axis=-1)),
-            upper=np.ascontiguousarray(np.concatenate([pos, self.accel_max - u_prev], axis=-1)),
+            residual=r.reshape(shape + (-1,)),
+            linear=(r @ self.model.ftq4.T).reshape(shape + (n,)),  # F' Q4 r, so H = 2 psi (F' Q4 r)'
+            constant=self.model.cost_to_go(r).reshape(shape),
+            lower=lower.reshape(shape + (2 * n,)),
+            upper=upper.reshape(shape + (2 * n,)),
             phase=phase,
         )
 
