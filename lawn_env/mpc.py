@@ -193,27 +193,28 @@ class _QpsolversBackend:
 class _CompiledBackend:
     """The whole stack in one compiled call (:class:`lawn_env.qp.AxisPencils`), warm-started from
     each problem's previous working set. The working sets are plain int8 arrays, one per shape of
-    the calls' stacks (a planner's psi table and its single evaluations keep theirs apart), so a
-    copy or a pickle of the MPC continues bitwise like the original."""
+    the calls' stacks and caller's key (a planner's psi table and its single evaluations, the RL
+    interface's stakes at psi = 1 and its anchor keep theirs apart), so a copy or a pickle of the
+    MPC continues bitwise like the original."""
 
     name = "compiled"
 
     def __init__(self, pencils: AxisPencils):
         self.pencils = pencils
-        self.working_sets: dict[tuple, np.ndarray] = {}  # stack shape -> (M, 2, 2 N_p) int8
+        self.working_sets: dict[tuple, np.ndarray] = {}  # (stack shape, key) -> (M, 2, 2 N_p) int8
 
     def forget(self, rows: np.ndarray, lead: int) -> None:
         """Drop the warm starts of the scenarios ``rows`` of the stacks whose first axis has ``lead``
         entries."""
-        for shape, sets in self.working_sets.items():
+        for (shape, _), sets in self.working_sets.items():
             if shape and shape[0] == lead:
                 sets.reshape(shape + sets.shape[1:])[rows] = 0
 
-    def solve_all(self, shape: tuple, s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+    def solve_all(self, key: tuple, s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                   phase: np.ndarray):
-        sets = self.working_sets.get(shape)
+        sets = self.working_sets.get(key)
         if sets is None:
-            sets = self.working_sets[shape] = np.zeros((s.shape[0], 2, 2 * self.pencils.horizon), dtype=np.int8)
+            sets = self.working_sets[key] = np.zeros((s.shape[0], 2, 2 * self.pencils.horizon), dtype=np.int8)
         if not (lower.flags.c_contiguous and upper.flags.c_contiguous):
             lower, upper = _writable(lower), _writable(upper)
         return self.pencils.solve(s, q, lower, upper, phase, sets)
@@ -363,11 +364,12 @@ class OutageAwareMPC:
         """Solve the QPs at success probabilities ``psi`` (..., K) (``slot`` as for :meth:`prepare`)."""
         return self.solve_prepared(self.prepare(x_aug, chi_ref, slot), psi)
 
-    def solve_prepared(self, data: SlotData, psi: npt.ArrayLike) -> MPCSolution:
+    def solve_prepared(self, data: SlotData, psi: npt.ArrayLike, warm_key: str = "") -> MPCSolution:
         """Solve the QPs of a prepared slot at success probabilities ``psi`` (broadcast to the
         data's (..., K)): the planners call this many times with the same ``data``. ``data`` may
         also be evaluated at a stack of psi values with leading axes of their own, e.g. ``psi``
-        (L, K) on data (K,): one call for a planner's psi table."""
+        (L, K) on data (K,): one call for a planner's psi table. Calls with another ``warm_key``
+        keep warm starts of their own (a caller that alternates two kinds of solves of one shape)."""
         start = time.perf_counter()
         psi = np.asarray(psi, dtype=float)
         n = self._n
@@ -388,7 +390,7 @@ class OutageAwareMPC:
         q = ((2.0 * psi)[..., None] * data.linear).reshape(count, n)  # H' = 2 psi F'Q4 r
         s = (psi * psi).reshape(count)
         if self.backend_name == "compiled":  # blocked increments come back exactly zero
-            z, fval, iterations, settled = self.backend.solve_all(lead, s, q, lower, upper, phase)
+            z, fval, iterations, settled = self.backend.solve_all((lead, warm_key), s, q, lower, upper, phase)
             status = np.zeros(count, dtype=np.int8)
             if not settled.all():
                 for i in np.flatnonzero(~settled).tolist():
@@ -441,7 +443,7 @@ class OutageAwareMPC:
         leading batch axes, (..., K)). At psi = 0 the increments never act, so zero is optimal
         (feasible, since the simulator keeps |u[n-1]| <= a_max) and ``V_k(0) = r' Q4 r`` is the
         prepared constant; ``V_k(1)`` is one solve."""
-        delivered = self.solve_prepared(data, np.ones(data.constant.shape)).value
+        delivered = self.solve_prepared(data, np.ones(data.constant.shape), warm_key="stakes").value
         return np.maximum(data.constant - delivered, 0.0)
 
 

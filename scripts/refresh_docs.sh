@@ -5,6 +5,9 @@
 #   README blocks benchmark, benchmark-nominal          lawn benchmark (+ docs/figures/benchmark.png)
 #   README block gap                                    lawn gap (+ docs/figures/gap.png, convergence.png)
 #   README blocks expert-speed, env-throughput, train-throughput, vector-step   benchmarks/*.py --markdown
+#   README blocks numba-jit, qp-speed, speedups (--only qp)   benchmarks/{numba_jit,qp_speed,speedups}.py
+#                                                       (speedups: side by side with the commit before
+#                                                       the compiled solver, in a git worktree ../before)
 #   README block anchors (with learned)                 benchmarks/anchors.py --markdown
 #   README block learned-agents, docs/LEARNED.md        lawn zoo build (needs the training runs in
 #                                                       runs/agents: with --train, scripts/train_agents.sh
@@ -20,7 +23,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --train) train=1 ;;
     --only) shift; while [ $# -gt 0 ] && [[ "$1" != --* ]]; do only+=("$1"); shift; done; continue ;;
-    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|learned ...]" >&2; exit 2 ;;
+    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|qp|learned ...]" >&2; exit 2 ;;
   esac
   shift
 done
@@ -60,6 +63,14 @@ if want throughput; then
   splice train-throughput runs/train_throughput.md "python benchmarks/train_throughput.py"
   "$py" benchmarks/vector_step_breakdown.py --markdown runs/vector_step.md
   splice vector-step runs/vector_step.md "python benchmarks/vector_step_breakdown.py"
+fi
+if want qp; then
+  "$py" benchmarks/numba_jit.py --markdown runs/numba_jit.md
+  splice numba-jit runs/numba_jit.md "python benchmarks/numba_jit.py"
+  "$py" benchmarks/qp_speed.py --markdown runs/qp_speed.md || true  # a FAIL is reported in the table
+  splice qp-speed runs/qp_speed.md "python benchmarks/qp_speed.py"
+  "$py" benchmarks/speedups.py --markdown runs/speedups.md || true
+  splice speedups runs/speedups.md "python benchmarks/speedups.py"
 fi
 if want learned; then
   "$py" benchmarks/anchors.py --markdown runs/anchors.md
