@@ -6,7 +6,7 @@ the area. The three blocks alternate until the relative decrease of J^ over an i
 ``tolerance`` or ``max_iterations`` is reached:
 
 1. control (P3): one exact QP per AGV at psi_k(p_k, q), through the shared
-   :class:`lawn_env.mpc.OutageAwareMPC` (persistent, warm-started DAQP workspaces);
+   :class:`lawn_env.mpc.OutageAwareMPC` (the compiled exact solver, warm-started);
 2. power (P4): Algorithm 1, projected gradient with Armijo backtracking, analytic gradient,
    exact projection onto the budget set, started from equal power;
 3. drone (P5/P6): SCA with the linear surrogate of the paper, minimized exactly over the speed

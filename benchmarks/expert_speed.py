@@ -4,8 +4,8 @@
    ``lawn/Joint-v0`` closed loop; each slot's decision is timed (median and p95) at K = 4 (paper
    paths, 2 episodes) and K = 32 (random paths, 1 episode).
 2. The control block (the K QPs P3 at each plan's success probabilities) is solved at every slot
-   of those episodes, in order, by the package's path (``OutageAwareMPC``: DAQP, one persistent
-   warm-started workspace per AGV; best of three passes), and at an evenly spaced sample of the slots by a
+   of those episodes, in order, by the package's path (``OutageAwareMPC``: the compiled solver of
+   :mod:`lawn_env.qp`, warm-started per AGV; best of three passes), and at an evenly spaced sample of the slots by a
    straightforward CVXPY model of the same QPs (one problem with the K blocks, parameters for the
    data, compiled once, Clarabel at tight tolerances); objectives are compared on the sample.
 

@@ -22,8 +22,8 @@ class CommEnv(LawnEnvBase):
     The communication-resource problem of the paper: every slot the agent chooses the split of
     the power budget over the K links and the drone's move. Each AGV is driven by the
     outage-aware MPC of MODEL.md §3: the QP P3 with the success probability psi_k of its link
-    at the chosen power and drone position, solved exactly (DAQP's dual active-set method,
-    one persistent warm-started workspace per AGV). Its first increment is sent and arrives or
+    at the chosen power and drone position, solved exactly (the compiled dual active-set solver
+    of :mod:`lawn_env.qp`, warm-started per AGV). Its first increment is sent and arrives or
     not as in ``lawn/Joint-v0``. Good power and trajectory decisions raise psi where the MPC
     needs it.
 
