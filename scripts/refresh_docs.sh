@@ -12,6 +12,8 @@
 #   README block learned-agents, docs/LEARNED.md        lawn zoo build (needs the training runs in
 #                                                       runs/agents: with --train, scripts/train_agents.sh
 #                                                       trains them first, hours on 2 cores)
+#   README block zoo-drift                              benchmarks/zoo_drift.py (the table's shipped agents
+#                                                       and experts re-evaluated at the current code)
 #   bash scripts/refresh_docs.sh [--train] [--only NAME ...]
 # Generated data goes to runs/ (not committed). Timed benchmarks are run one at a time.
 set -euo pipefail
@@ -79,8 +81,13 @@ if want learned; then
     bash scripts/train_agents.sh runs/agents
   elif [ -d runs/agents ]; then
     "$lawn" zoo build --runs runs/agents --quiet
+  fi
+  # the shipped agents and the experts re-evaluated against the table's recorded episodes
+  if "$py" benchmarks/zoo_drift.py --markdown runs/zoo_drift.md; then
+    splice zoo-drift runs/zoo_drift.md "python benchmarks/zoo_drift.py"
   else
-    echo "refresh_docs: no runs/agents: the learned-agents table needs the training runs (rerun with --train)" >&2
+    splice zoo-drift runs/zoo_drift.md "python benchmarks/zoo_drift.py"
+    echo "refresh_docs: the learned-agents table no longer holds at this code: rebuild it with --train" >&2
     exit 3
   fi
 fi
