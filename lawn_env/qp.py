@@ -24,9 +24,15 @@ meets the acceleration bound exactly, a_max being an integer multiple of Delta-a
   ``(s P1 + P0)^-1 = W diag(1 / (1 + s lambda)) W'`` for every s, so the unconstrained minimizer
   and the dual Hessian ``A P^-1 A' = G diag(d) G'`` (``G = A W``) cost a few matrix-vector products
   per problem; no per-problem inverse or factorization of P.
-* **Warm starts.** A problem starts from a given working set (its previous solve's, kept by the
-  caller as a plain int8 array), its rows taken while they stay linearly independent; an empty
-  set is the cold start. Any start gives the same minimizer (the problem is strictly convex).
+* **Warm starts.** A problem starts from its previous working set (kept by the caller as a plain
+  int8 array) and the rows its unconstrained minimizer violates, each taken while the set stays
+  linearly independent, all with zero multipliers (feasible for the dual, so any start is valid);
+  the rows whose equality-constrained multipliers come out negative leave together before the
+  first step. Any start gives the same minimizer (the problem is strictly convex); a good one
+  saves steps.
+* **Cheap steps.** The Cholesky factor of the working set's dual Hessian grows by one row when a
+  constraint joins and is downdated in O(|W|^2) when one leaves; the constraint values come from
+  the rows' structure (increments and their running sums), not a matrix product.
 * **Exact answers.** A problem ends when its multipliers are non-negative and every constraint holds
   to ``tol`` (relative to the bound): its KKT conditions hold to rounding. A problem that reaches the
   iteration cap or finds the working set infeasible is flagged (``settled`` False) for the caller's

@@ -148,6 +148,11 @@ def test_per_axis_pencils_reproduce_the_full_hessian():
                 inv = w @ np.diag(1 / (1 + s * pen.lam[ph, ax])) @ w.T
                 np.testing.assert_allclose(inv[:nf, :nf], np.linalg.inv(full), rtol=1e-9, atol=1e-12)
                 np.testing.assert_allclose(inv[:nf, nf:], 0.0, atol=1e-12)
+            # the structure the kernel computes the constraint values from: z_j, then running sums
+            a = pen.a[ph, ax]
+            np.testing.assert_array_equal(a[:nf, :nf], np.eye(nf))
+            np.testing.assert_array_equal(a[10 : 10 + nf, :nf], np.tril(np.ones((nf, nf))))
+            np.testing.assert_allclose(pen.g[ph, ax], a @ pen.w[ph, ax], atol=1e-15)
 
 
 def test_coupled_weights_are_refused_with_a_clear_error():
