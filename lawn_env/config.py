@@ -16,6 +16,8 @@ import dataclasses
 import typing
 from typing import Annotated, Any, Literal, Mapping
 
+import numpy as np
+
 from pydantic import ConfigDict, Field, model_validator
 from pydantic.dataclasses import dataclass
 
@@ -268,6 +270,17 @@ class ScenarioConfig:
                     f"channel.rate_threshold_bps_hz={ch.rate_threshold_bps_hz}, channel.blocklength={ch.blocklength}, "
                     f"channel.bler={ch.bler}: no SNR threshold reaches this rate at this blocklength ({exc})"
                 ) from None
+        from .dynamics import PredictionModel  # the MPC's terminal weight Q3 must exist for these weights
+
+        ctl = self.control
+        try:
+            PredictionModel.from_config(self)  # cached per (slot, horizon, Q1, Q2)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            raise ValueError(
+                f"control.q1_diag={ctl.q1_diag}, control.q2_diag={ctl.q2_diag} (slot_s={self.slot_s}): the terminal "
+                f"weight Q3, the solution of the discrete Riccati equation, is not finite for these weights ({exc}); "
+                "keep the weights within a few orders of magnitude of each other"
+            ) from None
         if self.control.accel_increment_max_mps2 > 2 * self.control.accel_max_mps2:
             raise ValueError(
                 f"control.accel_increment_max_mps2={self.control.accel_increment_max_mps2} exceeds "

@@ -58,6 +58,8 @@ def terminal_weight(a_aug: np.ndarray, b_aug: np.ndarray, q1: np.ndarray, q2: np
     Q3 = Q1 + A~' Q3 A~ - A~' Q3 B~ (Q2 + B~' Q3 B~)^-1 B~' Q3 A~.
     """
     q3 = linalg.solve_discrete_are(a_aug, b_aug, q1, q2)
+    if not np.all(np.isfinite(q3)):
+        raise ValueError("the discrete Riccati equation has no finite solution for these weights")
     return 0.5 * (q3 + q3.T)
 
 
