@@ -351,8 +351,12 @@ class ActionLayout:
 
     def _anchor_increment(self, data: SlotData, power_w: np.ndarray, d2: np.ndarray) -> np.ndarray:
         """The tracking controller under the residual: the outage-aware MPC's first increment at each
-        link's planned success probability, (..., K, 2) m/s^2 (a new array; before the residual)."""
-        return self.mpc.solve_prepared(data, self._link.success_sq(power_w, d2)).increments[..., 0, :].copy()
+        link's planned success probability, (..., K, 2) m/s^2 (a new array; before the residual). With
+        the stake prior it starts from this slot's stake solve's working sets (the same QPs at psi = 1:
+        closer to these than the previous slot's)."""
+        start = "stakes" if self._stake else None
+        psi = self._link.success_sq(power_w, d2)
+        return self.mpc.solve_prepared(data, psi, start_from=start).increments[..., 0, :].copy()
 
     # ------------------------------------------------------------------ encode
     def encode(self, decision: Decision, x_aug: np.ndarray, reference: np.ndarray | None,

@@ -211,7 +211,11 @@ class _CompiledBackend:
                 sets.reshape(shape + sets.shape[1:])[rows] = 0
 
     def solve_all(self, key: tuple, s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                  phase: np.ndarray):
+                  phase: np.ndarray, start: tuple | None = None):
+        """Solve the stack from the working sets kept under ``key`` (or copied from ``start``'s)."""
+        source = self.working_sets.get(start) if start is not None else None
+        if source is not None:
+            self.working_sets[key] = source.copy()
         sets = self.working_sets.get(key)
         if sets is None:
             sets = self.working_sets[key] = np.zeros((s.shape[0], 2, 2 * self.pencils.horizon), dtype=np.int8)
@@ -364,12 +368,15 @@ class OutageAwareMPC:
         """Solve the QPs at success probabilities ``psi`` (..., K) (``slot`` as for :meth:`prepare`)."""
         return self.solve_prepared(self.prepare(x_aug, chi_ref, slot), psi)
 
-    def solve_prepared(self, data: SlotData, psi: npt.ArrayLike, warm_key: str = "") -> MPCSolution:
+    def solve_prepared(self, data: SlotData, psi: npt.ArrayLike, warm_key: str = "",
+                       start_from: str | None = None) -> MPCSolution:
         """Solve the QPs of a prepared slot at success probabilities ``psi`` (broadcast to the
         data's (..., K)): the planners call this many times with the same ``data``. ``data`` may
         also be evaluated at a stack of psi values with leading axes of their own, e.g. ``psi``
         (L, K) on data (K,): one call for a planner's psi table. Calls with another ``warm_key``
-        keep warm starts of their own (a caller that alternates two kinds of solves of one shape)."""
+        keep warm starts of their own (a caller that alternates two kinds of solves of one shape);
+        ``start_from`` names another key whose working sets (of the same shape) this solve starts
+        from instead, when they exist (the compiled backend; the others ignore both)."""
         start = time.perf_counter()
         psi = np.asarray(psi, dtype=float)
         n = self._n
@@ -390,7 +397,8 @@ class OutageAwareMPC:
         q = ((2.0 * psi)[..., None] * data.linear).reshape(count, n)  # H' = 2 psi F'Q4 r
         s = (psi * psi).reshape(count)
         if self.backend_name == "compiled":  # blocked increments come back exactly zero
-            z, fval, iterations, settled = self.backend.solve_all((lead, warm_key), s, q, lower, upper, phase)
+            z, fval, iterations, settled = self.backend.solve_all((lead, warm_key), s, q, lower, upper, phase,
+                                                                  None if start_from is None else (lead, start_from))
             status = np.zeros(count, dtype=np.int8)
             if not settled.all():
                 for i in np.flatnonzero(~settled).tolist():
