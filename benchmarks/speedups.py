@@ -31,6 +31,8 @@ import sys
 import time
 from pathlib import Path
 
+from report import finish  # benchmarks/report.py, beside this script
+
 HERE = Path(__file__).resolve().parents[1]
 #: The commit before the compiled solver (issue #22).
 BEFORE_COMMIT = "9f88288"
@@ -180,15 +182,9 @@ def main(argv=None) -> int:
     print(f"{'figure':<44}{'before':>14}{'after':>14}{'after/before':>14}")
     for key, b, a, r in rows:
         print(f"{key:<44}{b:>14,.4g}{a:>14,.4g}{r:>14.2f}")
-    for name, ok in checks:
-        print(f"[{'PASS' if ok else 'FAIL'}] {name}")
-    if args.markdown:
-        lines = [head + ":", "", "| figure | before | after | after / before |", "|---|---|---|---|"]
-        lines += [f"| {k} | {b:,.4g} | {a:,.4g} | {r:.2f} |" for k, b, a, r in rows]
-        lines += [""] + [f"* [{'PASS' if ok else 'FAIL'}] {name}" for name, ok in checks]
-        with open(args.markdown, "w") as fh:
-            fh.write("\n".join(lines) + "\n")
-    return 0 if all(ok for _, ok in checks) else 1
+    lines = [head + ":", "", "| figure | before | after | after / before |", "|---|---|---|---|"]
+    lines += [f"| {k} | {b:,.4g} | {a:,.4g} | {r:.2f} |" for k, b, a, r in rows]
+    return finish(checks, args.markdown, lines)
 
 
 if __name__ == "__main__":
