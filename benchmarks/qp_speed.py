@@ -8,6 +8,8 @@ same run:
   each problem warm-started from its previous slot's working set, as in the env; the figure is
   wall time per AGV-QP of the whole ``solve_prepared`` call (Python wrapper included);
 * **compiled, cold** — every stack from empty working sets;
+* **where the kernel's time goes** — the compiled kernel alone, and the same calls stopped after
+  no working-set step and after one (the per-problem setup and the first step apart);
 * **DAQP, Python API** — ``daqp.solve`` called once per AGV-QP (the 20-variable problem, cold) on a
   sample of the same problems (``--daqp-sample``), and DAQP's own C time per QP from its info.
 
@@ -65,6 +67,41 @@ def replay(config, stacks, warm: bool, repeats: int) -> tuple[float, list]:
     return best, out
 
 
+def kernel_breakdown(config, stacks, repeats: int) -> dict[str, float]:
+    """Where the kernel's time goes, seconds per AGV-QP, warm starts as in use: the compiled kernel
+    alone (no Python wrapper), then the same calls stopped after 0 and after 1 working-set step
+    (each from the working sets the full replay had at that stack), so the setup (reduced data,
+    unconstrained minimizer, the start set's factor) and the first step show apart from the rest."""
+    mpc = OutageAwareMPC.from_config(config)
+    pencils = mpc.backend.pencils
+    calls, starts = [], []
+    sets = None
+    for data, psi in stacks:
+        count = psi.size
+        args = ((psi * psi).ravel(), ((2.0 * psi)[..., None] * data.linear).reshape(count, -1),
+                data.lower.reshape(count, -1), data.upper.reshape(count, -1), data.phase_flat)
+        if sets is None:
+            sets = np.zeros((count, 2, 2 * pencils.horizon), dtype=np.int8)
+        starts.append(sets.copy())
+        pencils.solve(*args, sets)
+        calls.append(args)
+    total = sum(a[0].size for a in calls)
+    out = {}
+    for label, cap in (("kernel alone", None), ("of which: setup, no step", 0), ("setup and the first step", 1)):
+        best = float("inf")
+        for _ in range(repeats):
+            copies = [s.copy() for s in starts]
+            start = time.perf_counter()
+            for args, sets in zip(calls, copies):
+                if cap is None:
+                    pencils.solve(*args, sets)
+                else:
+                    pencils.solve(*args, sets, max_iter=cap)
+            best = min(best, time.perf_counter() - start)
+        out[label] = best / total
+    return out
+
+
 def daqp_sample(config, stacks, sample: int, seed: int = 0):
     """DAQP's Python API, one cold call per AGV-QP, on ``sample`` problems drawn from the stacks:
     (wall s per QP, DAQP's own solve time per QP, [(stack, scenario, agv, objective)])."""
@@ -108,12 +145,14 @@ def main(argv=None) -> int:
     count = sum(d.constant.size for d, _ in stacks)
     warm_s, solutions = replay(config, stacks, warm=True, repeats=args.repeats)
     cold_s, _ = replay(config, stacks, warm=False, repeats=args.repeats)
+    parts = kernel_breakdown(config, stacks, args.repeats)
     daqp_wall, daqp_own, sample = daqp_sample(config, stacks, args.daqp_sample)
     errors = [abs(solutions[t].value[b, i] - stacks[t][0].constant[b, i] - v) / max(1.0, abs(v))
               for t, b, i, v in sample if np.isfinite(v)]
     fallbacks = sum(s.num_fallbacks for s in solutions)
     iters = np.concatenate([s.iterations.ravel() for s in solutions])
     rows = [("compiled, warm starts as in use", warm_s / count),
+            *((f"compiled: {name}", per) for name, per in parts.items()),
             ("compiled, cold", cold_s / count),
             ("DAQP, Python API, one QP per call", daqp_wall),
             ("DAQP's own C time (from its info)", daqp_own)]
