@@ -379,6 +379,9 @@ class OutageAwareMPC:
         from instead, when they exist (the compiled backend; the others ignore both)."""
         start = time.perf_counter()
         psi = np.asarray(psi, dtype=float)
+        if not ((psi >= 0.0) & (psi <= 1.0)).all():  # NaN fails both
+            bad = psi[~((psi >= 0.0) & (psi <= 1.0))].ravel()[0]
+            raise ValueError(f"psi={bad!r}: success probabilities must lie in [0, 1]")
         n = self._n
         lead = data.constant.shape
         if psi.shape == lead:  # the common case: no broadcasting, the prepared arrays as they are

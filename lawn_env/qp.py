@@ -393,6 +393,9 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
                 for j in range(nf):
                     acc += p1v[k, j] * zz[j]
                 obj += zz[k] * (0.5 * (si * acc + p0[ph, ax, k, k] * zz[k]) + qa[k])
+            if not np.isfinite(obj):  # non-finite data (a caller's NaN or inf): the fallback decides
+                good = False
+                continue
             for j in range(nf):  # an active increment bound met exactly, not to rounding
                 z_out[i, 2 * free[ph, j] + ax] = min(max(zz[j], lo[j]), up[j])
         obj_out[i] = obj

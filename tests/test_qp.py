@@ -178,3 +178,18 @@ def test_unsettled_problems_fall_back_and_are_counted():
     table = mpc.solve_prepared(data, np.linspace(0, 1, 5)[:, None] * np.ones(6))
     assert table.value.shape == (5, 6) and table.num_fallbacks == 5
     np.testing.assert_allclose(table.value[0], data.constant)  # psi = 0: zero increments, V = r'Q4r
+
+
+def test_bad_psi_and_non_finite_data_are_refused_or_fall_back():
+    """psi outside [0, 1] (or NaN) raises an error naming psi; data that is not finite is never
+    returned as a solution (the fallback decides, and counts it)."""
+    cfg, _, x, ref, psi = _slot_stack(6, seed=5)
+    mpc = _mpc(cfg, 6, "compiled")
+    for bad in (np.nan, 1.5, -0.1):
+        with pytest.raises(ValueError, match=r"psi=.*must lie in \[0, 1\]"):
+            mpc.solve(x, ref, np.array([0.5, bad, 0.5, 0.5, 0.5, 0.5]))
+    data = mpc.prepare(x, ref)
+    broken = type(data)(data.residual, data.linear.copy(), data.constant, data.lower, data.upper)
+    broken.linear[1, 3] = np.inf
+    sol = mpc.solve_prepared(broken, np.full(6, 0.5))
+    assert sol.status[1] > 0 and not sol.status[[0, 2, 3, 4, 5]].any()
