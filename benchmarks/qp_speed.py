@@ -117,7 +117,7 @@ def daqp_sample(config, stacks, sample: int, seed: int = 0):
     for t, b, i in picks:
         data, psi = stacks[t]
         s = psi[b, i] ** 2
-        p = np.ascontiguousarray(s * mpc._ftq4f_2 + mpc._q5_2)
+        p = np.ascontiguousarray(mpc.hessian(s))
         q = np.ascontiguousarray(2.0 * psi[b, i] * data.linear[b, i])
         problems.append((p, q, np.ascontiguousarray(data.upper[b, i]), np.ascontiguousarray(data.lower[b, i])))
     sense = np.zeros(2 * n, dtype=np.int32)

@@ -89,11 +89,6 @@ class _DaqpBackend:
         self._a = np.array(constraint_matrix, dtype=float, order="C")  # DAQP wants a writable buffer
         self._models: dict[int, Any] = {}
 
-    def forget(self, rows: np.ndarray) -> None:
-        """Drop the workspaces (warm starts) of the problems ``rows``."""
-        for i in np.asarray(rows).tolist():
-            self._models.pop(i, None)
-
     def solve(self, k: int, p: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
               bounds_changed: bool = True):
         model = self._models.get(k)
@@ -136,10 +131,6 @@ class _OsqpBackend:
         self._sparse = sparse
         self._solvers: dict[int, Any] = {}
 
-    def forget(self, rows: np.ndarray) -> None:
-        for i in np.asarray(rows).tolist():
-            self._solvers.pop(i, None)
-
     def solve(self, k, p, q, lower, upper, bounds_changed: bool = True):
         solver = self._solvers.get(k)
         px = p[self._triu_csc]
@@ -176,9 +167,6 @@ class _QpsolversBackend:
         self.name = f"qpsolvers:{solver}"
         self._g = np.vstack([constraint_matrix, -constraint_matrix])
         self._n = constraint_matrix.shape[1]
-
-    def forget(self, rows: np.ndarray) -> None:
-        pass
 
     def solve(self, k, p, q, lower, upper, bounds_changed: bool = True):
         n = self._n
@@ -262,22 +250,20 @@ class OutageAwareMPC:
         self._ftq4f_2 = 2.0 * np.asarray(model.ftq4f)
         masks = [command_mask(phase, model.horizon, self.control_period) for phase in range(self.control_period)]
         self.backend_name = backend
-        self.backend = self._make_backend(backend, masks)
-        self._masks = masks
-        self._fallback: _DaqpBackend | None = None  # cold DAQP solves of the problems a backend leaves
+        self.backend = self._make_backend(backend)
         # increment bounds per slot phase: zero where move blocking holds the acceleration
         self._box_upper = np.stack([np.repeat(np.where(mask, self.accel_increment_max, 0.0), 2) for mask in masks])
         self._last_data = None
 
-    def _make_backend(self, name: str, masks: list[np.ndarray]):
+    def _make_backend(self, name: str):
         if name == "compiled":
             return _CompiledBackend(_pencils(self.model, self.control_period))
         return _reference_backend(name, self._constraint)
 
-    @property
-    def _hessians(self) -> tuple[np.ndarray, np.ndarray]:
-        """(P0, P1) with P = P0 + psi^2 P1: 2 Q5 and 2 F'Q4F."""
-        return self._q5_2, self._ftq4f_2
+    def hessian(self, s: float) -> np.ndarray:
+        """P = 2 G = 2 (psi^2 F'Q4F + Q5) of one AGV's QP at ``s`` = psi^2 (2 N_p x 2 N_p), for the
+        reference backends, which take the full matrix."""
+        return s * self._ftq4f_2 + self._q5_2
 
     def __getstate__(self) -> dict:
         """Copies and pickles carry the problem and the compiled backend's working sets (plain
@@ -286,14 +272,13 @@ class OutageAwareMPC:
         state = self.__dict__.copy()
         if self.backend_name != "compiled":
             state["backend"] = None
-        state["_fallback"] = None
         state["_last_data"] = None
         return state
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         if self.backend is None:
-            self.backend = self._make_backend(self.backend_name, self._masks)
+            self.backend = self._make_backend(self.backend_name)
 
     @classmethod
     def from_config(cls, config: ScenarioConfig, backend: str = DEFAULT_BACKEND) -> OutageAwareMPC:
@@ -311,8 +296,7 @@ class OutageAwareMPC:
             if self.backend_name == "compiled":
                 self.backend.forget(rows, which.shape[0])
                 return
-        self.backend = self._make_backend(self.backend_name, self._masks)
-        self._fallback = None
+        self.backend = self._make_backend(self.backend_name)
         self._last_data = None
 
     # ------------------------------------------------------------------ problem data
@@ -428,7 +412,7 @@ class OutageAwareMPC:
         status = np.zeros(count, dtype=np.int8)
         iterations = np.zeros(count, dtype=np.int64)
         for i in range(count):
-            p = s[i] * self._ftq4f_2 + self._q5_2
+            p = self.hessian(s[i])
             x, its, f = self.backend.solve(i, p, q[i], lower[i], upper[i], bounds_changed)
             if x is None:
                 x, f, its, status[i] = self._fallback_solve(i, s[i], q[i], lower[i], upper[i])
@@ -439,7 +423,7 @@ class OutageAwareMPC:
         """A problem the backend did not settle: a cold DAQP solve, then a cold OSQP solve, then the
         zero sequence (feasible whenever |u[n-1]| <= a_max, which the simulator keeps). Returns
         (z, objective, iterations, status 1 or 2)."""
-        p = s * self._ftq4f_2 + self._q5_2
+        p = self.hessian(s)
         for name in ("daqp", "osqp"):
             if name == self.backend_name:
                 continue
@@ -463,14 +447,9 @@ def _writable(arr: np.ndarray) -> np.ndarray:
     return np.require(arr, dtype=float, requirements=("C", "W"))
 
 
+@functools.lru_cache(maxsize=32)
 def _pencils(model: PredictionModel, period: int) -> AxisPencils:
-    """The per-axis pencils of a model and control period (built once per pair, shared)."""
-    key = (id(model), period)
-    found = _PENCILS.get(key)
-    if found is None or found[0] is not model:
-        masks = [command_mask(phase, model.horizon, period) for phase in range(period)]
-        found = _PENCILS[key] = (model, AxisPencils.build(2.0 * model.q5, 2.0 * model.ftq4f, model.horizon, masks))
-    return found[1]
-
-
-_PENCILS: dict[tuple, tuple[PredictionModel, AxisPencils]] = {}
+    """The per-axis pencils of a model (itself cached, compared by identity) and control period,
+    built once per pair and shared."""
+    masks = [command_mask(phase, model.horizon, period) for phase in range(period)]
+    return AxisPencils.build(2.0 * model.q5, 2.0 * model.ftq4f, model.horizon, masks)

@@ -102,7 +102,7 @@ class JointVectorEnv(VectorEnv):
         k = self.config.num_agvs
         self.num_agvs = k
         self.single_observation_space = self.interface.observation_space(self.layout.size)
-        self.actions = ActionLayout(self.config, self.role, self.interface, mpc_backend=DEFAULT_BACKEND)
+        self.actions = ActionLayout(self.config, self.role, self.interface)
         self.single_action_space = self.actions.space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
