@@ -373,9 +373,13 @@ class OutageAwareMPC:
             lower, upper = data.lower.reshape(count, 2 * n), data.upper.reshape(count, 2 * n)
             phase = data.phase_flat
         else:
-            lead = np.broadcast_shapes(psi.shape, lead)
-            if lead[-1:] != (self.num_agvs,):
-                raise ValueError(f"psi has shape {psi.shape}; expected one per AGV (..., {self.num_agvs})")
+            try:
+                lead = np.broadcast_shapes(psi.shape, lead)
+            except ValueError:
+                lead = ()
+            if lead[-len(data.constant.shape):] != data.constant.shape:
+                raise ValueError(f"psi has shape {psi.shape}; expected one per problem of the prepared data "
+                                 f"{data.constant.shape}, with any leading axes of its own") from None
             psi = np.broadcast_to(psi, lead)
             count = int(np.prod(lead))
             lower = _writable(np.broadcast_to(data.lower, lead + (2 * n,)).reshape(count, 2 * n))

@@ -129,3 +129,18 @@ def test_period_needs_the_slot_and_the_unaware_ablation_plans_every_slot(rng):
     assert OutageAwareMPC.from_config(unaware).control_period == 1
     assert np.array_equal(OutageAwareMPC.from_config(unaware).solve(x, ref, psi).increments,
                           OutageAwareMPC.from_config(CFG).solve(x, ref, psi).increments)
+
+
+def test_batch_shape_errors_name_the_argument(rng):
+    """A batch's slots must be one per scenario and a psi stack one per AGV: errors name them."""
+    cfg = CFG.override(**{"disturbance.control_period_slots": 2})
+    mpc = OutageAwareMPC.from_config(cfg)
+    x, ref, psi = next(_problems(rng, 1))
+    xs, refs = np.stack([x, x, x]), np.stack([ref, ref, ref])
+    with pytest.raises(ValueError, match=r"slot has shape \(2,\); expected a scalar or one per scenario \(3,\)"):
+        mpc.prepare(xs, refs, slot=np.array([0, 1]))
+    data = mpc.prepare(xs, refs, slot=np.array([0, 1, 2]))
+    with pytest.raises(ValueError, match=r"psi has shape \(3, 3\); expected one per problem of the prepared data \(3, 4\)"):
+        mpc.solve_prepared(data, np.full((3, 3), 0.5))
+    sol = mpc.solve_prepared(data, np.full((5, 3, 4), 0.5))  # a psi stack over the batch: one call
+    assert sol.value.shape == (5, 3, 4) and not sol.status.any()

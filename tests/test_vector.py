@@ -48,11 +48,10 @@ def test_lockstep_with_the_single_env_on_the_same_fading(config, env_id, monkeyp
     rng = np.random.default_rng(0)
     comm = env_id == "lawn/Comm-v0"
     size = (1 if comm else 3) * config.num_agvs + 2
-    extra = {}
     actions = rng.uniform(-1, 1, (config.num_slots, N, size)).astype(np.float32)
-    singles = [_single_episode(config, 10 + i, actions[:, i], monkeypatch, env_id, **extra) for i in range(N)]
+    singles = [_single_episode(config, 10 + i, actions[:, i], monkeypatch, env_id) for i in range(N)]
     fading = np.stack([s[0] for s in singles], axis=1)  # (T, N, K)
-    envs = _make(env_id=env_id, config=config, **extra)
+    envs = _make(env_id=env_id, config=config)
     it = iter(fading)
     monkeypatch.setattr(envs.unwrapped, "_draw_fading", lambda: next(it))
     obs, _ = envs.reset(seed=10)
@@ -271,7 +270,6 @@ def test_rl_interface_lockstep_with_the_single_env(env_id, monkeypatch):
     config = ScenarioConfig(num_slots=30)
     iface = {"base": "rl", "termination_distance_m": 4.0}  # tight, so that some env is terminated
     comm = env_id == "lawn/Comm-v0"
-    extra = {}
     rng = np.random.default_rng(3)
     size = (1 if comm else 3) * 4 + 2
     actions = rng.uniform(-1, 1, (30, N, size)).astype(np.float32)
@@ -287,7 +285,7 @@ def test_rl_interface_lockstep_with_the_single_env(env_id, monkeypatch):
             return out
 
         monkeypatch.setattr(channel, "sample_normalized_fading", recording)
-        env = gym.make(env_id, config=config, interface=iface, **extra)
+        env = gym.make(env_id, config=config, interface=iface)
         obs, _ = env.reset(seed=20 + i)
         rows = [(obs, 0.0, False, False)]
         for t in range(30):
@@ -300,7 +298,7 @@ def test_rl_interface_lockstep_with_the_single_env(env_id, monkeypatch):
             draws.append(np.ones(4))
         singles.append((np.array(draws), rows))
     fading = np.stack([s[0] for s in singles], axis=1)
-    envs = _make(env_id=env_id, config=config, interface=iface, **extra)
+    envs = _make(env_id=env_id, config=config, interface=iface)
     assert envs.single_observation_space == env.observation_space
     assert envs.single_action_space == env.action_space
     it = iter(fading)
@@ -351,15 +349,14 @@ def test_disturbance_mode_lockstep_with_the_single_env(env_id, interface, monkey
 
     config = lawn_env.presets.get("disturbed").override({"num_slots": 20})
     comm = env_id == "lawn/Comm-v0"
-    extra = {}
     d = config.disturbance
-    envs = _make(env_id=env_id, config=config, interface=interface, **extra)
+    envs = _make(env_id=env_id, config=config, interface=interface)
     names = list(envs.unwrapped.sim.noise_shapes())
     rng = np.random.default_rng(5)
     actions = rng.uniform(-1, 1, (20,) + envs.action_space.shape).astype(np.float32)
     singles = []
     for i in range(N):
-        env = gym.make(env_id, config=config, interface=interface, **extra)
+        env = gym.make(env_id, config=config, interface=interface)
         env.reset(seed=30 + i)
         rec = _Recording(env.unwrapped.sim.rng)
         env.unwrapped.sim.rng = rec
