@@ -2,6 +2,7 @@
 scripted heuristic, and wrappers for learned policies. ``make_policy(name, config)`` builds any
 of them; ``POLICIES`` is the registry; ``rollout(env, policy, seed)`` runs one episode."""
 
+from .anchors import ANCHORS, AnchorPolicy, anchor_name
 from .ao import AOSettings, AOSolver, Plan, expected_cost
 from .base import Planner
 from .policies import BENCHMARK_POLICIES, PAPER_POLICIES, POLICIES, Policy, make_policy, policy_names
@@ -10,6 +11,9 @@ from .rollouts import Episode, Step, rollout
 from .scripted import HeuristicPolicy
 
 __all__ = [
+    "ANCHORS",
+    "AnchorPolicy",
+    "anchor_name",
     "AOSettings",
     "AOSolver",
     "Plan",

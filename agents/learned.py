@@ -19,8 +19,9 @@ from typing import Any
 import numpy as np
 
 from lawn_env import ScenarioConfig
-from lawn_env.interface import ActionLayout, InterfaceLike, resolve_interface
+from lawn_env.interface import InterfaceLike
 
+from .anchors import InterfacePolicy, load_anchor
 from .base import COMM, JOINT, Policy
 from .errors import MissingExtra
 from .runs import RL_EXTRA, RunDir, algorithm_class, policy_network_class, read_json, read_run
@@ -91,16 +92,7 @@ class ObsNormalizer:
         return np.clip(x, -self.clip, self.clip).astype(np.float32)
 
 
-def _v0_action(policy, action: np.ndarray, obs: np.ndarray) -> np.ndarray:
-    """The v0 action that carries out ``action`` of the policy's training scheme at ``obs``."""
-    if policy.interface.action_scheme == "direct":
-        return action.astype(np.float32)
-    state = policy.layout.decode(obs)
-    args = (state["x_aug"], state["reference"], state["drone_position"], state["slot"])
-    return policy.v0.encode(policy.scheme.decode(action, *args), *args)
-
-
-class SB3Policy(Policy):
+class SB3Policy(InterfacePolicy):
     """A trained single-agent network acting on ``lawn/Joint-v0`` or ``lawn/Comm-v0``.
 
     ``network(obs) -> action`` is any deterministic SB3 predictor (a model or a bare policy);
@@ -113,13 +105,9 @@ class SB3Policy(Policy):
 
     def __init__(self, network: Any, config: ScenarioConfig, env_id: str, interface: InterfaceLike = None,
                  normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "sb3"):
-        super().__init__(config, env_id, seed)
+        super().__init__(config, env_id, interface, seed)
         self.network = network
         self.normalizer = normalizer
-        self.interface = resolve_interface(interface)
-        role = "joint" if env_id == JOINT else "comm"
-        self.scheme = ActionLayout(self.config, role, self.interface)
-        self.v0 = ActionLayout(self.config, role, None)
         self.name = label
         expected = tuple(network.observation_space.shape)
         if expected != (self.layout.size,):
@@ -139,19 +127,16 @@ class SB3Policy(Policy):
         return cls(_load_model(run), config if config is not None else run.load_config(), trained_env, run.interface,
                    ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}")
 
-    def _on_reset(self, rng) -> None:
-        self.scheme.reset()
-
     def act(self, obs: np.ndarray) -> np.ndarray:
         raw = np.asarray(obs, dtype=np.float32)
         x = self.interface.observe(raw.copy())
         if self.normalizer is not None:
             x = self.normalizer.normalize_obs(x)
         action, _ = self.network.predict(x, deterministic=True)
-        return _v0_action(self, np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0), raw)
+        return self.to_v0(np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0), raw)
 
 
-class MARLPolicy(Policy):
+class MARLPolicy(InterfacePolicy):
     """A parameter-shared multi-agent policy driving ``lawn/Joint-v0`` from the central observation:
     each agent's observation is rebuilt as SuperSuit built it in training (padding, one-hot agent
     indicator), the agents' actions are assembled into the central action of the training scheme
@@ -162,12 +147,9 @@ class MARLPolicy(Policy):
 
     def __init__(self, network: Any, config: ScenarioConfig, interface: InterfaceLike = None,
                  normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "marl"):
-        super().__init__(config, JOINT, seed)
+        super().__init__(config, JOINT, interface, seed)
         self.network = network
         self.normalizer = normalizer
-        self.interface = resolve_interface(interface)
-        self.scheme = ActionLayout(self.config, "joint", self.interface)
-        self.v0 = ActionLayout(self.config, "joint", None)
         self.name = label
         k = self.config.num_agvs
         self.n_agents = k + 1
@@ -187,9 +169,6 @@ class MARLPolicy(Policy):
             raise ValueError(f"{path} is a multi-agent policy; it drives {JOINT}, not {env_id}")
         return cls(_load_model(run), config if config is not None else run.load_config(), run.interface,
                    ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}")
-
-    def _on_reset(self, rng) -> None:
-        self.scheme.reset()
 
     def agent_observations(self, obs: np.ndarray) -> np.ndarray:
         """(K+1, width): the drone's and each AGV's padded observation with its one-hot indicator,
@@ -213,7 +192,7 @@ class MARLPolicy(Policy):
         actions = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
         k = self.config.num_agvs
         central = np.concatenate([actions[1:, :2].reshape(-1), actions[0, : k + 2]])
-        return _v0_action(self, central, np.asarray(obs, dtype=np.float32))
+        return self.to_v0(central, np.asarray(obs, dtype=np.float32))
 
 
 # ---------------------------------------------------------------------- shipped agents (zoo)
@@ -270,11 +249,12 @@ def _no_settings(loader):
     return load
 
 
-#: Prefixes of ``make_policy`` names for learned agents: ``zoo:NAME``, ``sb3:DIR``, ``bc:DIR``, ``marl:DIR``.
+#: Prefixes of ``make_policy`` names for learned agents and their anchors: ``zoo:NAME``, ``sb3:DIR``,
+#: ``bc:DIR``, ``marl:DIR``, and ``anchor:NAME`` (the zero action of an interface, :mod:`agents.anchors`).
 LOADERS = {"zoo": _no_settings(_load_zoo), "sb3": _no_settings(SB3Policy.from_run),
-           "bc": _no_settings(SB3Policy.from_run), "marl": _no_settings(MARLPolicy.from_run)}
+           "bc": _no_settings(SB3Policy.from_run), "marl": _no_settings(MARLPolicy.from_run), "anchor": load_anchor}
 
 
 def learned_name_forms(sep: str = ", ") -> str:
     """The forms of learned agents' names, for messages and help texts: ``zoo:NAME, sb3:DIR, ...``."""
-    return sep.join(f"{prefix}:{'NAME' if prefix == 'zoo' else 'DIR'}" for prefix in LOADERS)
+    return sep.join(f"{prefix}:{'NAME' if prefix in ('zoo', 'anchor') else 'DIR'}" for prefix in LOADERS)
