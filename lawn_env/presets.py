@@ -10,7 +10,7 @@ from typing import Any, Mapping
 
 from .config import ChannelConfig, DisturbanceConfig, ReferenceConfig, ScenarioConfig
 
-__all__ = ["PRESETS", "get", "names", "register", "resolve_config", "ConfigLike"]
+__all__ = ["PRESETS", "SUITE", "SUITE_VERSION", "get", "names", "register", "resolve_config", "ConfigLike"]
 
 PRESETS: dict[str, ScenarioConfig] = {}
 #: What every ``config=`` argument takes: a ScenarioConfig, a dict of its fields, a preset name or None.
@@ -54,6 +54,21 @@ register("disturbed", ScenarioConfig(disturbance=DisturbanceConfig(
     wind_mps=(2.0, 2.5), wind_gust_std_mps=1.0, actuator_lag_s=0.3, process_noise_position_m=0.05,
     process_noise_velocity_mps=0.05, measurement_noise_position_m=0.2, measurement_noise_velocity_mps=0.1,
     control_period_slots=2)))
+#: Eight AGVs on the default area and budget: twice the links to share one power budget.
+register("k8", ScenarioConfig(num_agvs=8))
+#: The budget 2 dB below the default (-2 dBW): outage is high on far links, and where power goes matters more.
+register("low-power", ScenarioConfig(power_budget_dbw=-2.0))
+#: Commands of 128 channel uses instead of 1024: the finite-blocklength penalty raises the SNR threshold.
+register("short-blocklength", ScenarioConfig(channel=ChannelConfig(blocklength=128)))
+#: Imperfect CSI: a normalized estimation-error variance of 1e-4 (MODEL.md §2), planned for (the
+#: CE-aware outage). It caps the effective SNR at 40 dB, 10 dB above the default threshold; at
+#: 1e-3 the cap meets the threshold and every policy loses most commands.
+register("imperfect-csi", ScenarioConfig(channel=ChannelConfig(ce_error_var=1e-4)))
+
+#: The task suite of ``lawn benchmark --suite`` and the leaderboard (docs/LEADERBOARD.md): preset
+#: names, default first. A change of its members or of their configs is a new SUITE_VERSION.
+SUITE: tuple[str, ...] = ("default", "k3", "k8", "low-power", "short-blocklength", "imperfect-csi", "disturbed")
+SUITE_VERSION = 1
 
 
 def resolve_config(config: ConfigLike = None, **overrides: Any) -> ScenarioConfig:
