@@ -8,6 +8,7 @@ from typing import Sequence
 from lawn_env import ScenarioConfig
 
 from .evaluate import SUMMARY_METRICS, evaluate, format_table, paired_cost_difference, summarize, write_rows
+from .score import scores_by_policy
 
 __all__ = ["run_benchmark", "plot_summary"]
 
@@ -15,18 +16,22 @@ __all__ = ["run_benchmark", "plot_summary"]
 def run_benchmark(policies: Sequence[str], env_id: str, config: ScenarioConfig, episodes: int, seed: int,
                   out_dir: Path, workers: int = 1, progress: bool = True) -> tuple[list[dict], list[dict]]:
     """Run every policy on seeds ``seed .. seed+episodes-1``; write ``episodes.csv``,
-    ``summary.csv``, ``summary.md`` and ``benchmark.png`` into ``out_dir``."""
+    ``summary.csv``, ``summary.md`` and ``benchmark.png`` into ``out_dir``. With ``epa`` and
+    ``rg-mpc`` among the policies, the summary has the normalized score (:mod:`training.score`)."""
     tasks = [(name, env_id, config, seed + i, {}) for name in policies for i in range(episodes)]
     rows = evaluate(tasks, workers=workers, progress=progress, desc="benchmark")
     summary = summarize(rows)
     paired = paired_cost_difference(rows, policies[0])
+    scores = {policy: score for (_, _, policy), score in scores_by_policy(rows).items()}
     for entry in summary:
         mean, half = paired.get(entry["policy"], (float("nan"), float("nan")))
         entry[f"cost_vs_{policies[0]}"], entry[f"cost_vs_{policies[0]}_ci95"] = mean, half
+        if entry["policy"] in scores:
+            entry["score"], entry["score_low"], entry["score_high"] = scores[entry["policy"]][:3]
     out_dir = Path(out_dir)
     write_rows(rows, out_dir / "episodes.csv")
     write_rows(summary, out_dir / "summary.csv")
-    (out_dir / "summary.md").write_text(format_table(summary, paired=paired, reference=policies[0]) + "\n")
+    (out_dir / "summary.md").write_text(format_table(summary, paired=paired, reference=policies[0], scores=scores) + "\n")
     plot_summary(summary, out_dir / "benchmark.png",
                  title=f"{env_id}, K={config.num_agvs}, {episodes} seeds from {seed}: mean ± 95 % interval")
     return rows, summary

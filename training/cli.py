@@ -82,30 +82,83 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
     policy = make_policy(args.policy, cfg, env_id=args.env, **kwargs)  # fail fast on bad names and settings
     args.env = args.env or policy.env_id
-    tasks = [(args.policy, args.env, cfg, args.seed + i, kwargs) for i in range(args.episodes)]
+    from .score import SCORE_HIGH, SCORE_LOW, scores_by_policy
+
+    seeds = [args.seed + i for i in range(args.episodes)]
+    references = [] if args.no_score else [p for p in (SCORE_HIGH, SCORE_LOW) if p != args.policy]
+    tasks = [(name, args.env, cfg, s, kwargs if name == args.policy else {}) for name in [args.policy, *references]
+             for s in seeds]
     rows = evaluate(tasks, workers=args.workers, progress=not args.quiet, desc=args.policy)
-    write_rows(rows, out)
-    print(f"lawn evaluate: {args.policy} on {args.env}, {args.episodes} episodes from seed {args.seed}")
-    print(format_table(summarize(rows)))
-    print(f"wrote {len(rows)} rows to {out}")
+    mine = [r for r in rows if r["policy"] == args.policy]
+    write_rows(mine, out)
+    scores = None if args.no_score else {
+        p: score for (_, _, p), score in scores_by_policy(rows).items() if p == args.policy}
+    print(f"lawn evaluate: {args.policy} on {args.env}, {args.episodes} episodes from seed {args.seed}"
+          + ("" if args.no_score else f" (score: {SCORE_LOW} and {SCORE_HIGH} on the same seeds)"))
+    print(format_table(summarize(mine), scores=scores))
+    print(f"wrote {len(mine)} rows to {out}")
     return 0
 
 
 def cmd_benchmark(args: argparse.Namespace) -> int:
-    from agents import make_policy
+    from agents import BENCHMARK_POLICIES, make_policy
 
     from .benchmark import run_benchmark
 
+    if args.suite or args.protocol == "learned":
+        return _benchmark_protocol(args)
+    if args.tasks or args.docs:
+        raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
     cfg = _config(args)
-    args.policies = list(args.policies) + _included(args.include)
+    args.policies = list(args.policies or BENCHMARK_POLICIES) + _included(args.include)
     for name in args.policies:
         make_policy(name, cfg, env_id=args.env)  # fail fast
+    args.episodes = args.episodes or 20
     _, summary = run_benchmark(args.policies, args.env, cfg, args.episodes, args.seed, Path(args.out),
                                workers=args.workers, progress=not args.quiet)
     print(f"lawn benchmark: {args.env}, preset {args.preset}, K={cfg.num_agvs}, {args.episodes} seeds from "
           f"{args.seed}; mean ± 95 % interval")
     print((Path(args.out) / "summary.md").read_text().rstrip())
     print(f"wrote {args.out}/episodes.csv, summary.csv, summary.md, benchmark.png")
+    return 0
+
+
+def _benchmark_protocol(args: argparse.Namespace) -> int:
+    """``lawn benchmark --protocol learned`` and ``lawn benchmark --suite``."""
+    from .leaderboard import run_learned_protocol, run_suite, suite_policies, suite_table, write_leaderboard
+    from .protocol import TEST_EPISODES
+
+    if args.preset != "default" or args.set:
+        raise ValueError("--protocol learned and --suite fix the scenario (the suite's tasks are presets): "
+                         "drop --preset/--set, or use --tasks")
+    episodes = args.episodes or TEST_EPISODES
+    extra = _included(args.include)
+    out = Path(args.out)
+    if args.suite:
+        from lawn_env.presets import SUITE
+
+        tasks = args.tasks or list(SUITE)
+        policies = list(args.policies or suite_policies()) + extra
+        rows, skipped, seconds = run_suite(policies, tasks, episodes, out, workers=args.workers,
+                                           progress=not args.quiet)
+        board, refs = suite_table(rows, policies, tasks, skipped)
+        print(f"lawn benchmark --suite: {len(policies)} policies x {len(tasks)} tasks, {episodes} seeds each, "
+              f"{seconds / 60:.1f} min; normalized score v1 [95 %] (0 = epa, 100 = rg-mpc)")
+        print(board)
+        for (task, policy), why in skipped.items():
+            print(f"  n/a {policy} on {task}: {why}")
+        (out / "leaderboard.md").write_text(board + "\n\n" + refs + "\n")
+        print(f"wrote {out}/episodes.csv and {out}/leaderboard.md")
+        if args.docs:
+            print(f"wrote {write_leaderboard(Path(args.docs) / 'LEADERBOARD.md', board, refs, skipped, episodes, seconds, args.workers)}")
+        return 0
+    if args.tasks or args.docs:
+        raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
+    table = run_learned_protocol(list(args.policies or []) + extra, out, episodes, workers=args.workers,
+                                 progress=not args.quiet)
+    print(f"lawn benchmark --protocol learned: test seeds 0-{episodes - 1}, full unmodified episodes")
+    print(table)
+    print(f"wrote {out}/episodes.csv and {out}/summary.md")
     return 0
 
 
@@ -319,18 +372,31 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--policy-arg", action="append", default=[], metavar="KEY=VALUE",
                     help="policy setting, e.g. --policy-arg tolerance=1e-3 (repeatable)")
     ev.add_argument("--workers", type=_COUNT, default=workers_default, help="processes (default: %(default)s)")
+    ev.add_argument("--no-score", action="store_true",
+                    help="skip the normalized score (which runs epa and rg-mpc on the same seeds)")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_config_args(ev)
     ev.set_defaults(func=cmd_evaluate)
 
-    bm = command("benchmark", help="the expert and the baselines on the same seeded episodes")
-    bm.add_argument("--policies", nargs="+", default=list(BENCHMARK_POLICIES), type=_policy_name,
+    bm = command("benchmark", help="the expert and the baselines on the same seeded episodes; --protocol learned "
+                                   "and --suite: the learned agents' protocol and the task suite's leaderboard")
+    bm.add_argument("--policies", nargs="+", default=None, type=_policy_name,
                     help=f"{', '.join(policy_names())}, or {learned_name_forms(' / ')} (default: "
-                         f"{' '.join(BENCHMARK_POLICIES)})")
+                         f"{' '.join(BENCHMARK_POLICIES)}; with --protocol learned every shipped agent with its "
+                         "anchor and the references; with --suite every expert, baseline, anchor and shipped agent)")
+    bm.add_argument("--protocol", choices=["paper", "learned"], default="paper",
+                    help="paper (default): the policies on --episodes seeds of one scenario; learned: agents "
+                         "beside rg-mpc, epa and their own anchors on the 100 test seeds, with the normalized score")
+    bm.add_argument("--suite", action="store_true",
+                    help="the task suite (lawn_env.presets.SUITE): normalized score of every policy on every task")
+    bm.add_argument("--tasks", nargs="+", default=None, choices=presets.names(), metavar="TASK",
+                    help="--suite: only these tasks (presets)")
+    bm.add_argument("--docs", default=None, metavar="DIR", help="--suite: also write DIR/LEADERBOARD.md")
     bm.add_argument("--env", default="lawn/Joint-v0", choices=list(lawn_env.ENV_IDS))
     bm.add_argument("--include", nargs="*", default=[], metavar="DIR",
                     help="trained run directories (lawn train) to add to the comparison")
-    bm.add_argument("--episodes", type=_COUNT, default=20)
+    bm.add_argument("--episodes", type=_COUNT, default=None,
+                    help="seeds from --seed (default: 20; 100 test seeds for --protocol learned and --suite)")
     bm.add_argument("--seed", type=_SEED, default=0)
     bm.add_argument("--out", default="runs/benchmark", help="output directory (default: %(default)s)")
     bm.add_argument("--workers", type=_COUNT, default=workers_default, help="processes (default: %(default)s)")

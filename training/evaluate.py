@@ -159,10 +159,16 @@ def paired_cost_difference(rows: list[dict], reference: str, metric: str = "cont
 
 
 def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy",
-                 paired: dict[str, tuple[float, float]] | None = None, reference: str | None = None) -> str:
-    """A Markdown table: mean ± 95 % interval per metric (decision time in ms), and optionally the
-    paired relative cost difference against ``reference``."""
+                 paired: dict[str, tuple[float, float]] | None = None, reference: str | None = None,
+                 scores: Mapping[str, tuple] | None = None) -> str:
+    """A Markdown table: mean ± 95 % interval per metric (decision time in ms), optionally the
+    normalized score (``scores``: policy -> :func:`training.score.normalized_score`) and the paired
+    relative cost difference against ``reference``."""
+    from .score import SCORE_VERSION, format_score
+
     header = [by, "episodes"] + [label.replace("(s)", "(ms)") for _, label in metrics]
+    if scores:
+        header.insert(3, f"score v{SCORE_VERSION} [95 %]")
     if paired:
         header.append(f"cost vs {reference} (paired)")
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
@@ -172,6 +178,8 @@ def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMA
             scale = 1e3 if key.startswith("decision_time") else 1.0
             mean, half = entry[key] * scale, entry[f"{key}_ci95"] * scale
             cells.append(f"{_fmt(mean)} ± {_fmt(half)}")
+        if scores:
+            cells.insert(3, format_score(scores.get(entry[by])))
         if paired:
             mean, half = paired.get(entry[by], (math.nan, math.nan))
             cells.append("–" if entry[by] == reference else f"{mean * 100:+.1f} % ± {half * 100:.1f} %")

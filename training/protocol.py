@@ -3,8 +3,9 @@ disjoint seed ranges, one torch thread per run, the versions stamped into ``run.
 learning curve and summary written from the periodic validation.
 
 Seeds. Training seed s draws its environments from ``TRAIN_SEED_BASE + 1000 s`` on; model
-selection uses the validation seeds ``VALIDATION_SEED_BASE + i``; ``lawn benchmark`` tests on
-seeds 0-19 by default. The three ranges never meet.
+selection uses the validation seeds ``VALIDATION_SEED_BASE + i``; learned agents are tested on the
+seeds 0..TEST_EPISODES-1 (``lawn benchmark --protocol learned``, ``lawn zoo build``; ``lawn
+benchmark`` alone tests on 0-19 by default). The three ranges never meet.
 """
 
 from __future__ import annotations
@@ -21,13 +22,16 @@ import lawn_env
 from .provenance import provenance
 from .tables import read_csv
 
-__all__ = ["TRAIN_SEED_BASE", "VALIDATION_SEED_BASE", "limit_torch_threads", "versions", "read_learning_curve",
+__all__ = ["TRAIN_SEED_BASE", "VALIDATION_SEED_BASE", "TEST_EPISODES", "limit_torch_threads", "versions", "read_learning_curve",
            "append_learning_curve", "write_learning_curve"]
 
 #: Training environments of seed s start at TRAIN_SEED_BASE + 1000 s (disjoint from test seeds 0-19).
 TRAIN_SEED_BASE = 1_000_000
 #: Validation (model selection) episodes use VALIDATION_SEED_BASE + i.
 VALIDATION_SEED_BASE = 500_000
+#: Test episodes of the learned protocol: seeds 0..TEST_EPISODES-1. Per-seed relative differences
+#: between agents have a standard deviation of 10-20 %, so a +-3 % interval needs about 100 seeds.
+TEST_EPISODES = 100
 
 
 def limit_torch_threads() -> None:

@@ -13,7 +13,8 @@ from typing import Iterable, Mapping
 import numpy as np
 from scipy import stats
 
-__all__ = ["mean_ci", "paired_difference", "verdict", "write_csv", "read_csv", "parse_bool"]
+__all__ = ["mean_ci", "paired_difference", "verdict", "write_csv", "read_csv", "parse_bool", "fmt_pct", "fmt_num",
+           "fmt_paired"]
 
 
 def write_csv(rows: list[dict], path: Path | str, atomic: bool = False) -> Path:
@@ -97,3 +98,24 @@ def verdict(mean: float, half: float, expect: str, tie_tolerance: float = 0.01) 
     if lo > 0:
         return "differs"
     return "not significant"
+
+
+def fmt_pct(x: float, sign: bool = True) -> str:
+    """A fraction as a percentage: ``+3.8 %`` (``3.8 %`` without the sign); ``n/a`` when not finite."""
+    if not math.isfinite(x):
+        return "n/a"
+    return f"{x * 100:+.1f} %" if sign else f"{x * 100:.1f} %"
+
+
+def fmt_num(x: float) -> str:
+    """A cost: thousands separated below 1e5, three significant digits above; ``n/a`` when not finite."""
+    if not math.isfinite(x):
+        return "n/a"
+    return f"{x:,.0f}" if abs(x) < 1e5 else f"{x:.3g}"
+
+
+def fmt_paired(mean: float, half: float) -> str:
+    """A paired relative difference with its 95 % half-width: ``+3.8 % ± 4.7 %``."""
+    if not math.isfinite(mean):
+        return "n/a"
+    return fmt_pct(mean) + ("" if not math.isfinite(half) else f" ± {fmt_pct(half, sign=False)}")

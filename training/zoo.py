@@ -2,9 +2,9 @@
 
 :data:`RECIPES` is the one list of learned comparators. ``lawn zoo train`` trains every recipe
 for each of its training seeds into ``RUNS/<name>/seed-<s>`` (a process pool; finished runs are
-kept); ``lawn zoo build`` evaluates every run on the benchmark's test seeds (full 120-slot
-episodes of the unmodified scenario, realized control cost, paired with ``rg-mpc`` on the same
-seeds), exports the run selected on the validation seeds as ``agents/zoo/<name>`` (policy
+kept); ``lawn zoo build`` evaluates every run by the learned protocol (:mod:`training.leaderboard`:
+full 120-slot episodes of the unmodified scenario on 100 test seeds, realized control cost,
+paired with ``rg-mpc`` and with the agent's own anchor on the same seeds, normalized score), exports the run selected on the validation seeds as ``agents/zoo/<name>`` (policy
 weights and observation statistics only) and writes the learned-agents table into
 ``docs/LEARNED.md`` and the README. ``lawn zoo list`` shows the shipped agents.
 ``scripts/train_agents.sh`` runs both steps.
@@ -27,13 +27,14 @@ from lawn_env import ScenarioConfig
 
 from .bc import VALIDATION_EPISODES as BC_VALIDATION_EPISODES
 from .evaluate import evaluate, pool_map, write_rows
-from .protocol import VALIDATION_SEED_BASE, read_learning_curve
-from .tables import mean_ci
+from .leaderboard import costs_of, learned_entries, own_anchor, run_entries
+from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve
+from .score import SCORE_HIGH, SCORE_VERSION, format_score, scores_by_policy
+from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci, paired_difference
 from .train import train_task
 
 __all__ = ["Recipe", "RECIPES", "train_recipes", "build_zoo", "format_zoo_list"]
 
-TEST_EPISODES = 20
 
 
 @dataclass(frozen=True)
@@ -127,82 +128,82 @@ def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, 
 
 def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, progress: bool = True,
               episodes: int = TEST_EPISODES, export: bool = True) -> str:
-    """Evaluate every finished recipe run on the test seeds 0..episodes-1 beside rg-mpc and epa,
-    export the validation-selected seed of each recipe, write the table; returns it (Markdown)."""
+    """Evaluate every finished recipe run by the learned protocol (:mod:`training.leaderboard`: test
+    seeds 0..episodes-1 beside rg-mpc, epa and each agent's own anchor), export the
+    validation-selected seed of each recipe, write the tables; returns the recipe table (Markdown)."""
     runs = Path(runs)
-    cfg = ScenarioConfig()
     found = [(r, [runs / r.name / f"seed-{s}" for s in r.seeds if _finished(runs / r.name / f"seed-{s}", r.timesteps)])
              for r in RECIPES]
     found = [(r, dirs) for r, dirs in found if dirs]
     if not found:
         raise ValueError(f"{runs}: no finished recipe runs (lawn zoo train --runs {runs} trains them)")
-    envs = sorted({r.evaluated_on for r, _ in found})
-    tasks = [(name, env, cfg, i, {}) for env in envs for name in ("rg-mpc", "epa") for i in range(episodes)]
     run = {d: read_run(d) for _, dirs in found for d in dirs}
-    tasks += [(run[d].policy_name, r.evaluated_on, cfg, i, {})
-              for r, dirs in found for d in dirs for i in range(episodes)]
-    rows = evaluate(tasks, workers=workers, progress=progress, desc="zoo benchmark")
+    entries = learned_entries([run[d].policy_name for _, dirs in found for d in dirs])
+    rows = run_entries(entries, ScenarioConfig(), range(episodes), workers, progress, desc="zoo benchmark")
     write_rows(rows, out_doc.parent / "learned" / "episodes.csv")
-    cost = {(r["policy"], r["env"], int(r["seed"])): float(r["control_cost"]) for r in rows}
-
-    def paired(policy: str, env: str) -> np.ndarray:
-        return np.array([cost[(policy, env, i)] / cost[("rg-mpc", env, i)] - 1.0 for i in range(episodes)])
-
-    lines = ["| agent | env (evaluated on) | algorithm, interface | budget per run | training seeds | wall time per run "
-             "| control cost (mean over seeds) | vs rg-mpc, mean over training seeds | shipped seed vs rg-mpc (paired, 20 test seeds) |",
-             "|" + "---|" * 9]
-    per_run = ["| recipe | training seed | power prior | best validation cost (episodes) | vs rg-mpc (paired, test seeds) "
-               "| worst test seed vs rg-mpc | wall time |", "|" + "---|" * 7]
+    scores = scores_by_policy(rows)
+    envs = list(dict.fromkeys(env for _, env in entries))
+    table = [f"| agent | env | algorithm, budget per run | acts around | control cost | score v{SCORE_VERSION} [95 %] "
+             "| vs rg-mpc (paired) | vs own anchor (paired) | vs own anchor, mean over training seeds |", "|" + "---|" * 9]
+    per_run = [f"| recipe | training seed | acts around | best validation cost (episodes) | score v{SCORE_VERSION} "
+               "| vs rg-mpc (paired) | vs own anchor (paired) | worst test seed vs own anchor | wall time |",
+               "|" + "---|" * 9]
     for env in envs:
-        for name in ("rg-mpc", "epa"):
-            c = mean_ci(cost[(name, env, i)] for i in range(episodes))
-            d = mean_ci(paired(name, env))
-            vs = "–" if name == "rg-mpc" else f"{_pct(d[0])} ± {_pct(d[1], sign=False)}"
-            lines.append(f"| {name} | {env} | expert | – | – | – | {_num(c[0])} ± {_num(c[1])} | {vs} | {vs} |")
+        for policy, _ in [e for e in entries if e[1] == env and not e[0].startswith(("sb3:", "bc:", "marl:"))]:
+            table.append(_row(rows, scores, policy, env, policy, "expert" if ":" not in policy else "zero action", "–"))
         for r, dirs in found:
             if r.evaluated_on != env:
                 continue
-            specs = [run[d].record for d in dirs]
-            per_seed = [paired(run[d].policy_name, env).mean() for d in dirs]
-            costs = [np.mean([cost[(run[d].policy_name, env, i)] for i in range(episodes)]) for d in dirs]
-            across, across_ci = mean_ci(per_seed)
             validation = [_best_validation(d) for d in dirs]
             chosen = dirs[int(np.argmin(validation))]
-            for d, spec, best in zip(dirs, specs, validation):
-                diff = paired(run[d].policy_name, env)
-                mean, half = mean_ci(diff)
-                prior = (spec.get("interface") or {}).get("power_anchor", "distance")
-                shown = spec.get("eval_episodes", BC_VALIDATION_EPISODES)  # BC runs before it was recorded
-                per_run.append(f"| `{r.name}`{' (shipped)' if d == chosen else ''} | {spec['seed']} | {prior} "
-                               f"| {_num(best)} ({shown}) | {_pct(mean)} ± {_pct(half, sign=False)} | {_pct(float(diff.max()))} "
-                               f"| {spec['wall_time_s']:.0f} s |")
-            ship = mean_ci(paired(run[chosen].policy_name, env))
-            wall = np.mean([s["wall_time_s"] for s in specs])
-            steps = int(specs[0].get("num_timesteps", r.timesteps))
-            iface = specs[0].get("interface") or {}
-            scheme = "v0" if iface.get("action_scheme", "direct") == "direct" else "RL interface"
-            lines.append(
-                f"| {r.label} (`zoo:{r.name}`) | {env} | {r.algo.upper() if r.algo != 'bc' else 'BC→PPO net'}, {scheme} "
-                f"| {steps:,} steps | {len(dirs)} | {wall:.0f} s | {_num(float(np.mean(costs)))} "
-                f"| {_pct(across)}{'' if math.isnan(across_ci) else ' ± ' + _pct(across_ci, sign=False)} "
-                f"| {_pct(ship[0])} ± {_pct(ship[1], sign=False)} (seed {run[chosen].record['seed']}) |")
+            gains = [_paired(rows, run[d].policy_name, own_anchor(run[d].policy_name), env) for d in dirs]
+            across = mean_ci(g[0] for g in gains)
+            for d, best, gain in zip(dirs, validation, gains):
+                spec = run[d].record
+                policy = run[d].policy_name
+                anchor_costs = costs_of(rows, own_anchor(policy), env)
+                cost = costs_of(rows, policy, env)
+                worst = max(cost[s] / anchor_costs[s] - 1.0 for s in cost)
+                per_run.append(f"| `{r.name}`{' (shipped)' if d == chosen else ''} | {spec['seed']} | {own_anchor(policy)} "
+                               f"| {fmt_num(best)} ({spec.get('eval_episodes', BC_VALIDATION_EPISODES)}) "
+                               f"| {format_score(scores.get(('default', env, policy)))} "
+                               f"| {fmt_paired(*_paired(rows, policy, SCORE_HIGH, env))} | {fmt_paired(*gain)} "
+                               f"| {fmt_pct(worst)} | {spec['wall_time_s']:.0f} s |")
+            specs = [run[d].record for d in dirs]
+            algo = r.algo.upper() if r.algo != "bc" else "BC"
+            budget = f"{algo}, {int(specs[0].get('num_timesteps', r.timesteps)):,} steps, {np.mean([s['wall_time_s'] for s in specs]):.0f} s"
+            table.append(_row(rows, scores, run[chosen].policy_name, env,
+                              f"{r.label} (`zoo:{r.name}`, seed {run[chosen].record['seed']})", budget,
+                              f"{fmt_paired(*across)} ({len(dirs)} seeds)"))
             if export:
-                _export(r, chosen, dirs, specs, ship, across, across_ci, env)
+                _export(r, chosen, specs, rows, scores, env, episodes, across)
     sources = sorted({rd.record.get("versions", {}).get("source", "not recorded") for rd in run.values()})
-    lines += ["", "Training runs made at: " + "; ".join(sources) + (
-        " (runs from before commits were recorded were trained on the scenario of their day; their learning "
-        "curves are in that scenario, every cost in this table is measured now)" if "not recorded" in sources else "")
-        + "."]
-    table = "\n".join(lines)
+    text = "\n".join(table) + (f"\n\n{episodes} test seeds (0-{episodes - 1}); training runs made at: "
+                               + "; ".join(sources) + ".")
     out_doc.parent.mkdir(parents=True, exist_ok=True)
-    reference = {env: evaluate([("rg-mpc", env, cfg, VALIDATION_SEED_BASE + i, {}) for i in range(10)], workers=workers,
-                               progress=False) for env in envs}
+    reference = {env: evaluate([("rg-mpc", env, ScenarioConfig(), VALIDATION_SEED_BASE + i, {}) for i in range(10)],
+                               workers=workers, progress=False) for env in envs}
     _plot_curves(found, {env: float(np.mean([r["control_cost"] for r in rs])) for env, rs in reference.items()},
                  out_doc.parent / "learned" / "curves.png")
-    out_doc.write_text(_document(table, "\n".join(per_run), episodes))
+    out_doc.write_text(_document(text, "\n".join(per_run), episodes))
     if readme is not None:
-        _replace_block(readme, table)
-    return table
+        _replace_block(readme, text)
+    return text
+
+
+def _paired(rows, policy: str, reference: str, env: str) -> tuple[float, float]:
+    mean, half, _ = paired_difference(costs_of(rows, policy, env), costs_of(rows, reference, env))
+    return mean, half
+
+
+def _row(rows, scores, policy: str, env: str, label: str, how: str, across: str) -> str:
+    """One row of the recipe table: an expert, an anchor or a recipe's shipped run."""
+    cost = mean_ci(costs_of(rows, policy, env).values())
+    anchor = own_anchor(policy)
+    vs_ref = "–" if policy == SCORE_HIGH else fmt_paired(*_paired(rows, policy, SCORE_HIGH, env))
+    vs_anchor = "–" if anchor is None else fmt_paired(*_paired(rows, policy, anchor, env))
+    return (f"| {label} | {env} | {how} | {anchor or '–'} | {fmt_num(cost[0])} ± {fmt_num(cost[1])} "
+            f"| {format_score(scores.get(('default', env, policy)))} | {vs_ref} | {vs_anchor} | {across} |")
 
 
 def _plot_curves(found, reference: dict[str, float], path: Path) -> None:
@@ -236,16 +237,20 @@ def _best_validation(run_dir: Path) -> float:
     return min((r["control_cost"] for r in read_learning_curve(run_dir)), default=math.inf)
 
 
-def _export(r: Recipe, chosen: Path, dirs, specs, ship, across, across_ci, env) -> None:
+def _export(r: Recipe, chosen: Path, specs, rows, scores, env: str, episodes: int, across) -> None:
+    policy = read_run(chosen).policy_name
+    anchor = own_anchor(policy)
     record = {
         "name": r.name, "label": r.label, "trained_on": r.env_id, "evaluated_on": env,
         "command": r.command(), "budget_steps": int(specs[0].get("num_timesteps", r.timesteps)),
         "training_seeds": [s["seed"] for s in specs], "shipped_seed": read_run(chosen).record["seed"],
         "selected_on": "lowest mean control cost on the validation seeds (500000 + i), never the test seeds",
         "wall_time_s": [round(s["wall_time_s"], 1) for s in specs],
-        "benchmark": {"test_seeds": f"0-{TEST_EPISODES - 1}", "reference": "rg-mpc",
-                      "shipped_vs_reference": [ship[0], ship[1]],
-                      "across_training_seeds_vs_reference": [across, across_ci]},
+        "benchmark": {"test_seeds": f"0-{episodes - 1}", "reference": SCORE_HIGH, "anchor": anchor,
+                      "score_version": SCORE_VERSION, "score": list(scores[("default", env, policy)][:3]),
+                      "shipped_vs_reference": list(_paired(rows, policy, SCORE_HIGH, env)),
+                      "shipped_vs_anchor": list(_paired(rows, policy, anchor, env)),
+                      "across_training_seeds_vs_anchor": list(across)},
     }
     target = ZOO_DIR / r.name
     if target.exists():
@@ -261,18 +266,23 @@ def _document(table: str, per_run: str, episodes: int) -> str:
 Generated by `lawn zoo build` (`scripts/train_agents.sh` trains and builds) at {provenance()}. Every number is the
 realized control cost of full 120-slot episodes of the unmodified scenario (`lawn/Comm-v0` or
 `lawn/Joint-v0`, default config) on the test seeds 0-{episodes - 1}, whatever interface the agent
-was trained with. Model selection (the best checkpoint of a run, the shipped seed of a recipe)
-uses only the validation seeds 500000+i; training episodes use seeds 1000000 + 1000 s + ....
-"vs rg-mpc" is the per-test-seed relative difference in control cost against `rg-mpc` on the
-same seed, averaged over the test seeds; "mean over training seeds" averages that per training
-run and gives a 95 % t-interval across training seeds; the last column is the paired 95 %
-interval of the shipped run over the test seeds.
+was trained with (the learned protocol, `training/leaderboard.py`). Model selection (the best
+checkpoint of a run, the shipped seed of a recipe) uses only the validation seeds 500000+i;
+training episodes use seeds 1000000 + 1000 s + ....
+
+Each agent acts around the zero action of its interface ("acts around": `anchor:stake` or
+`anchor:distance`, `agents/anchors.py`), which is a row of its own on the same seeds; "vs own
+anchor" is the per-test-seed relative difference in control cost against it, averaged over the
+test seeds with a paired 95 % t-interval: what learning adds. "vs rg-mpc" is the same against the
+expert. The score is the normalized score v1 (`training/score.py`: 0 = `epa`, 100 = `rg-mpc`,
+95 % paired bootstrap interval). The last column averages "vs own anchor" per training run and
+gives a 95 % t-interval across the training seeds.
 
 {table}
 
-Every training run (the power prior is the anchored power split the run trained and acts with,
-`lawn_env.interface`; the best validation cost is the selected checkpoint's, on the first
-validation seeds; the worst test seed is the largest per-seed relative difference against `rg-mpc`):
+Every training run (the best validation cost is the selected checkpoint's, on the first
+validation seeds; the worst test seed is the largest per-seed relative difference against the
+run's own anchor):
 
 {per_run}
 
@@ -289,18 +299,6 @@ def _replace_block(readme: Path, table: str) -> None:
     replace_block(readme, "learned-agents", table, source="lawn zoo build")
 
 
-def _pct(x: float, sign: bool = True) -> str:
-    if not math.isfinite(x):
-        return "n/a"
-    return f"{x * 100:+.1f} %" if sign else f"{x * 100:.1f} %"
-
-
-def _num(x: float) -> str:
-    if not math.isfinite(x):
-        return "n/a"
-    return f"{x:,.0f}" if abs(x) < 1e5 else f"{x:.3g}"
-
-
 def format_zoo_list() -> str:
     agents = zoo_agents()
     if not agents:
@@ -309,10 +307,13 @@ def format_zoo_list() -> str:
     for name, rec in agents.items():
         bench = rec.get("benchmark", {})
         ship = bench.get("shipped_vs_reference", [math.nan, math.nan])
+        gain = bench.get("shipped_vs_anchor", [math.nan, math.nan])
         lines.append(f"zoo:{name}  {rec.get('label', '')}")
         lines.append(f"  drives {rec.get('evaluated_on')} (trained on {rec.get('trained_on')}, {rec.get('algo')}), "
                      f"{rec.get('budget_steps', 0):,} steps, training seeds {rec.get('training_seeds')}, shipped seed "
                      f"{rec.get('shipped_seed')}")
-        lines.append(f"  test seeds {bench.get('test_seeds')}: cost vs rg-mpc {_pct(ship[0])} ± {_pct(ship[1], sign=False)}")
+        lines.append(f"  test seeds {bench.get('test_seeds')}: cost vs rg-mpc {fmt_paired(*ship)}, vs its anchor "
+                     f"{bench.get('anchor', '?')} {fmt_paired(*gain)}, score v{bench.get('score_version', '?')} "
+                     f"{bench.get('score', [math.nan])[0]:.1f}")
         lines.append(f"  trained with: {rec.get('command')}")
     return "\n".join(lines)

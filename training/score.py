@@ -1,0 +1,94 @@
+"""The normalized score of the benchmark (D4RL's convention, adapted to a cost).
+
+Score version 1 (:data:`SCORE_VERSION`). On one task and environment, over the seeds evaluated,
+with ``E_i`` the control cost of ``epa`` (the paper's equal-power baseline), ``R_i`` that of
+``rg-mpc`` (the package's best expert) and ``x_i`` the policy's, all on seed ``i``::
+
+    s_i   = 100 * (E_i - x_i) / mean_j (E_j - R_j)
+    score = mean_i s_i = 100 * (mean E - mean x) / (mean E - mean R)
+
+0 is EPA, 100 is ``rg-mpc``, above 100 beats it, below 0 is worse than equal power. The numerator
+is paired (the same seed's EPA cost), the denominator is the mean reference gap over the seeds:
+the per-seed gap ``E_i - R_i`` ranges from 11 % to 2,000 % of ``R_i`` on the first 20 test seeds
+of the default task, and is negative on some seeds of the harder tasks (EPA beats ``rg-mpc`` on
+a seed of ``imperfect-csi`` and ``disturbed``), so a per-seed ratio would be dominated by a few
+seeds or undefined. The 95 % interval is a paired bootstrap over seeds (the triples
+``(E_i, R_i, x_i)`` resampled together, so the denominator's own uncertainty is in it;
+``scipy.stats.bootstrap``, percentile method, a fixed seed).
+
+The reference costs are not constants: they are the two reference policies' realized costs on
+the same seeds, task and environment, run beside the policy (``lawn evaluate`` and ``lawn
+benchmark`` run them when the rows lack them). The references' code is versioned with the
+package; docs/LEADERBOARD.md lists their mean costs per task.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Iterable, Mapping
+
+import numpy as np
+from scipy import stats
+
+__all__ = ["SCORE_VERSION", "SCORE_LOW", "SCORE_HIGH", "normalized_score", "scores_by_policy", "format_score"]
+
+SCORE_VERSION = 1
+#: The policies that define 0 and 100.
+SCORE_LOW, SCORE_HIGH = "epa", "rg-mpc"
+_RESAMPLES = 2000
+
+
+def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: Mapping[int, float]
+                     ) -> tuple[float, float, float, int]:
+    """Score, 95 % interval (low end, high end) and seed count of a policy's per-seed costs
+    ``cost`` against the references' per-seed costs ``low`` (EPA) and ``high`` (rg-mpc), over the
+    seeds all three hold. NaN interval for fewer than 3 seeds; ValueError when the references do
+    not separate (mean EPA cost not above mean rg-mpc cost), where no score is defined."""
+    seeds = [s for s in cost if s in low and s in high]
+    if not seeds:
+        raise ValueError("no seed holds the policy's and both references' costs: run epa and rg-mpc on the "
+                         "same seeds, task and environment")
+    x = np.array([float(cost[s]) for s in seeds])
+    e = np.array([float(low[s]) for s in seeds])
+    r = np.array([float(high[s]) for s in seeds])
+    gap = float(np.mean(e - r))
+    if not gap > 0:
+        raise ValueError(f"the references do not separate on these {len(seeds)} seeds: mean {SCORE_LOW} cost "
+                         f"{e.mean():.6g} is not above mean {SCORE_HIGH} cost {r.mean():.6g}")
+    score = 100.0 * float(np.mean(e - x)) / gap
+    if len(seeds) < 3:
+        return score, math.nan, math.nan, len(seeds)
+
+    def statistic(e_, r_, x_, axis=-1):
+        return 100.0 * np.mean(e_ - x_, axis=axis) / np.mean(e_ - r_, axis=axis)
+
+    res = stats.bootstrap((e, r, x), statistic, paired=True, vectorized=True, n_resamples=_RESAMPLES,
+                          method="percentile", random_state=np.random.default_rng(20261124))
+    return score, float(res.confidence_interval.low), float(res.confidence_interval.high), len(seeds)
+
+
+def scores_by_policy(rows: Iterable[Mapping], metric: str = "control_cost") -> dict[tuple[str, str, str], tuple]:
+    """Scores of every (task, env, policy) of evaluation rows (``policy``, ``env``, ``seed``,
+    ``metric`` and optionally ``task``, default ``""``), against the reference rows of the same task
+    and env. Groups without both references are left out."""
+    costs: dict[tuple[str, str, str], dict[int, float]] = {}
+    for row in rows:
+        key = (str(row.get("task", "")), str(row["env"]), str(row["policy"]))
+        costs.setdefault(key, {})[int(row["seed"])] = float(row[metric])
+    out = {}
+    for (task, env, policy), cost in costs.items():
+        low, high = costs.get((task, env, SCORE_LOW)), costs.get((task, env, SCORE_HIGH))
+        if low is None or high is None:
+            continue
+        out[(task, env, policy)] = normalized_score(cost, low, high)
+    return out
+
+
+def format_score(score: tuple[float, float, float, int] | None) -> str:
+    """``96.8 [91.2, 101.5]`` (the interval omitted when undefined), ``–`` for no score."""
+    if score is None or not math.isfinite(score[0]):
+        return "–"
+    mean, lo, hi = score[:3]
+    if not (math.isfinite(lo) and math.isfinite(hi)) or f"{lo:.1f}" == f"{hi:.1f}":
+        return f"{mean:.1f}"
+    return f"{mean:.1f} [{lo:.1f}, {hi:.1f}]"
