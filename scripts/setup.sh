@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Create .venv and install lawn into it.
 #   scripts/setup.sh        core install (lawn_env, agents, training; no torch)
-#   scripts/setup.sh full   + the CPU build of torch, stable-baselines3 and the test tools
+#   scripts/setup.sh full   + the CPU build of torch, stable-baselines3, minari and the test tools
 # torch is installed first, pinned to the CPU build, so nothing that depends on it pulls the
 # CUDA wheels. Idempotent: rerunning only installs what is missing.
 set -euo pipefail
@@ -16,7 +16,7 @@ case "$mode" in
   core) "${pip[@]}" -e . ;;
   full)
     "${pip[@]}" "torch==2.13.0"
-    "${pip[@]}" -e ".[rl,test]"
+    "${pip[@]}" -e ".[rl,test,data]"
     ;;
   *) echo "usage: scripts/setup.sh [core|full]" >&2; exit 2 ;;
 esac

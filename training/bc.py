@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterable, Mapping
 
 import gymnasium as gym
 import numpy as np
@@ -27,10 +27,12 @@ from agents import Step, make_policy, rollout
 from agents.learned import ObsNormalizer, SB3Policy
 from agents.rollouts import Actor
 from agents.runs import algorithm_class
-from lawn_env import ScenarioConfig
-from lawn_env.interface import ActionLayout, Decision, InterfaceLike, resolve_interface
+from lawn_env import ObservationLayout, ScenarioConfig
+from lawn_env.presets import resolve_config
+from lawn_env.interface import ActionLayout, InterfaceLike, resolve_interface
+from lawn_env.spaces import check_action
 
-__all__ = ["collect", "fit", "train_bc_run", "BC_TARGETS", "VALIDATION_EPISODES"]
+__all__ = ["collect", "label_transitions", "fit", "train_bc_run", "BC_TARGETS", "VALIDATION_EPISODES"]
 
 #: Validation episodes of a cloned policy (one validation, after the fit).
 VALIDATION_EPISODES = 5
@@ -41,40 +43,65 @@ BC_TARGETS = ("ppo", "sac")
 
 def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, interface: InterfaceLike,
             actor: Actor | None = None) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """``steps`` transitions of seeded episodes of the v0 env; states visited by ``actor`` (a v0
-    policy, default the expert) and labelled with the expert's decision encoded in the
-    interface's action scheme. Returns the observations as the learner sees them (the
-    interface's clipping), the labels and the episode costs."""
+    """``steps`` transitions of seeded episodes (seed, seed + 1, ...) of the v0 env; states visited by
+    ``actor`` (a v0 policy, default the expert) and labelled with the expert's action there
+    (:func:`label_transitions`). Returns the observations as the learner sees them (the
+    interface's clipping), the labels and the costs of the episodes that ended."""
     env = gym.make(env_id, config=config)
     expert = make_policy(expert_name, config, env_id=env_id)
-    iface = resolve_interface(interface)
-    scheme = ActionLayout(config, "joint" if env_id == "lawn/Joint-v0" else "comm", iface)
     driver = _Labelling(expert, actor)
-    obs_list, act_list, costs = [], [], []
+    episodes: list[tuple[list, list]] = []
+    costs = []
+    count = 0
 
     def on_step(step: Step) -> bool:
-        snap, plan = step.snapshot, expert.last_plan  # the expert planned this slot (driver.act)
-        decision = Decision(plan.increments[:, 0], plan.power_w, plan.drone_position)
-        obs_list.append(iface.observe(step.obs.copy()))
-        act_list.append(scheme.encode(decision, snap.x_aug, snap.reference, snap.drone_position, snap.slot))
-        return len(obs_list) >= steps
+        nonlocal count
+        episodes[-1][0].append(step.obs.copy())
+        episodes[-1][1].append(driver.expert_action)
+        count += 1
+        return count >= steps
 
     episode = 0
-    while len(obs_list) < steps:
-        run = rollout(env, driver, seed + episode, on_step=on_step, snapshots=True)
+    while count < steps:
+        episodes.append(([], []))
+        run = rollout(env, driver, seed + episode, on_step=on_step)
         if run.ended:
             costs.append(run.metrics["control_cost"])
         episode += 1
     env.close()
-    return np.array(obs_list, dtype=np.float32), np.array(act_list, dtype=np.float32), costs
+    obs, labels = label_transitions(config, env_id, interface, [(np.array(o), np.array(a)) for o, a in episodes])
+    return obs, labels, costs
+
+
+def label_transitions(config: ScenarioConfig, env_id: str, interface: InterfaceLike,
+                      episodes: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Behaviour-cloning pairs from v0 transitions: per episode (in order), the v0 observations
+    (T, n) and the v0 actions (T, m) chosen there, whoever chose them (a live expert, a Minari
+    dataset). Returns the observations as the learner sees them (the interface's clipping) and the
+    actions re-expressed in the interface's scheme (decode as v0, encode in the scheme)."""
+    iface = resolve_interface(interface)
+    role = "joint" if env_id == "lawn/Joint-v0" else "comm"
+    v0, scheme = ActionLayout(config, role, None), ActionLayout(config, role, iface)
+    layout = ObservationLayout(config)
+    obs_out, act_out = [], []
+    for observations, actions in episodes:
+        scheme.reset()  # the stake prior's MPC starts every episode afresh, as the envs' MPC does
+        for o, a in zip(observations, actions):
+            state = layout.decode(o)
+            args = (state["x_aug"], state["reference"], state["drone_position"], state["slot"])
+            act_out.append(scheme.encode(v0.decode(check_action(a, v0.size), *args), *args))
+            obs_out.append(iface.observe(np.array(o, dtype=np.float32)))
+    n, m = layout.size, scheme.size
+    return (np.array(obs_out, dtype=np.float32).reshape(-1, n), np.array(act_out, dtype=np.float32).reshape(-1, m))
 
 
 class _Labelling:
-    """Drives the env with ``actor`` (default: the expert) while the expert plans every slot, so
-    that each visited state gets the expert's label (``expert.last_plan``)."""
+    """Drives the env with ``actor`` (default: the expert) while the expert decides every slot, so
+    that each visited state gets the expert's action (``expert_action``)."""
 
     def __init__(self, expert, actor=None):
         self.expert, self.actor = expert, actor
+        self.expert_action = None
 
     def reset(self, seed: int | None = None) -> None:
         self.expert.reset(seed)
@@ -82,8 +109,8 @@ class _Labelling:
             self.actor.reset(seed)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        action = self.expert.act(obs)  # the expert plans every slot, also when it does not act
-        return action if self.actor is None else self.actor.act(obs)
+        self.expert_action = self.expert.act(obs)  # the expert decides every slot, also when it does not act
+        return self.expert_action if self.actor is None else self.actor.act(obs)
 
 
 def _deterministic_action(model, obs_tensor):
@@ -126,8 +153,34 @@ def fit(model: Any, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_siz
     return losses
 
 
+def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, steps: int, interface: InterfaceLike
+                        ) -> tuple[np.ndarray, np.ndarray, list[float], list]:
+    """The first ``steps`` transitions of a Minari dataset (``lawn dataset create``) as
+    behaviour-cloning pairs (:func:`label_transitions`), with the costs of its whole episodes and
+    their seeds. The dataset must hold episodes of ``env_id`` with ``config``."""
+    from .datasets import dataset_task, episodes_of, load_dataset
+
+    dataset = load_dataset(dataset_id)
+    recorded_env, recorded_config = dataset_task(dataset)
+    if recorded_env != env_id:
+        raise ValueError(f"--dataset {dataset_id!r} holds episodes of {recorded_env}; this run trains on {env_id}")
+    if resolve_config(recorded_config) != config:
+        raise ValueError(f"--dataset {dataset_id!r} was recorded with config {recorded_config!r}, not this run's "
+                         "scenario: pass the same --preset/--set")
+    chosen, seeds, left = [], [], steps
+    for seed, obs, actions in episodes_of(dataset):
+        if left <= 0:
+            break
+        chosen.append((obs[:left], actions[:left]))
+        seeds.append(seed)
+        left -= len(actions)
+    costs = [float(np.sum(ep.infos["stage_cost"][1:])) for ep in dataset.iterate_episodes()]
+    obs, labels = label_transitions(config, env_id, interface, chosen)
+    return obs, labels, costs, seeds
+
+
 def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int, out_dir: Path,
-                 params: Mapping[str, Any], version: int, progress: bool = True) -> dict:
+                 params: Mapping[str, Any], version: int, progress: bool = True, dataset: str | None = None) -> dict:
     from stable_baselines3.common.running_mean_std import RunningMeanStd
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
@@ -164,7 +217,10 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     episode_seed = TRAIN_SEED_BASE + 1000 * seed  # expert episodes never use test or validation seeds
-    obs, actions, expert_costs = collect(env_id, config, expert, timesteps, episode_seed, interface)
+    if dataset is None:
+        obs, actions, expert_costs = collect(env_id, config, expert, timesteps, episode_seed, interface)
+    else:  # the dataset's episodes are the expert data; DAgger rounds still ask the expert live
+        obs, actions, expert_costs, dataset_seeds = dataset_transitions(dataset, env_id, config, timesteps, interface)
     venv = VecNormalize(DummyVecEnv([lambda: gym.make(env_id, config=config, interface=interface)]),
                         norm_reward=False)
     venv.obs_rms = RunningMeanStd(shape=obs.shape[1:])
@@ -194,6 +250,7 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
             "num_timesteps": int(len(obs)), "hyperparams_version": version, "wall_time_s": elapsed,
             "eval_episodes": VALIDATION_EPISODES,
             "expert_mean_control_cost": float(np.mean(expert_costs)) if expert_costs else None,
+            "dataset": None if dataset is None else {"id": dataset, "episode_seeds": dataset_seeds},
             "versions": versions()}
     (out_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
     (out_dir / "hyperparams.json").write_text(json.dumps(resolved, indent=2))

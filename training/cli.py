@@ -225,7 +225,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                       hp_overrides=_parse_overrides(args.hp, "--hp"), n_envs=args.n_envs, eval_every=args.eval_every,
                       eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every,
                       init_from=Path(args.init_from) if args.init_from else None, interface=args.interface,
-                      vec=args.vec)
+                      vec=args.vec, dataset=args.dataset)
         if args.seeds:
             result = train_seeds(args.seeds, Path(args.out), workers=args.workers, progress=not args.quiet,
                                  backend=args.backend, **kwargs)
@@ -266,6 +266,19 @@ def cmd_zoo(args: argparse.Namespace) -> int:
                       workers=args.workers, progress=not args.quiet)
     print(table)
     print(f"wrote {args.doc}" + (f", the table in {args.readme}" if args.readme else "") + f" and {ZOO_HINT}")
+    return 0
+
+
+def cmd_dataset(args: argparse.Namespace) -> int:
+    from .datasets import create_dataset
+
+    dataset = create_dataset(args.policy, args.env, args.episodes, args.seed, args.dataset_id, task=args.task,
+                             progress=not args.quiet)
+    steps = int(dataset.total_steps)
+    print(f"lawn dataset create: {args.dataset_id}: {args.episodes} episodes (seeds {args.seed}-"
+          f"{args.seed + args.episodes - 1}) of {args.policy} on {args.env}, task {args.task}, {steps} steps")
+    print(f"load it with minari.load_dataset({args.dataset_id!r}); clone it with lawn train --algo bc --env {args.env} "
+          f"--dataset {args.dataset_id} --timesteps {steps} --out runs/bc-{args.policy.replace(':', '-')}")
     return 0
 
 
@@ -431,6 +444,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--vec", choices=["dummy", "native"], default="dummy",
                     help="SB3 DummyVecEnv of single envs (default) or lawn's batched vector env (Joint-v0, "
                          "Comm-v0 and their RL ids, any --interface)")
+    tr.add_argument("--dataset", metavar="ID", help="bc: clone the episodes of this Minari dataset (lawn dataset create) "
+                                                     "instead of live expert rollouts; --timesteps caps the transitions")
     tr.add_argument("--quiet", action="store_true")
     _add_config_args(tr)
     tr.set_defaults(func=cmd_train)
@@ -444,6 +459,19 @@ def build_parser() -> argparse.ArgumentParser:
     zo.add_argument("--workers", type=_COUNT, default=workers_default)
     zo.add_argument("--quiet", action="store_true")
     zo.set_defaults(func=cmd_zoo)
+
+    ds = command("dataset", help="record a policy's episodes as a Minari dataset (data extra)")
+    ds.add_argument("action", choices=["create"])
+    ds.add_argument("--policy", required=True, type=_policy_name,
+                    help=f"any policy: {', '.join(policy_names())}, or {learned_name_forms(' / ')}")
+    ds.add_argument("--env", required=True, choices=["lawn/Joint-v0", "lawn/Comm-v0"])
+    ds.add_argument("--episodes", type=_COUNT, required=True)
+    ds.add_argument("--seed", type=_SEED, default=0, help="first seed; episode i uses seed + i (as lawn evaluate)")
+    ds.add_argument("--dataset-id", required=True, metavar="ID",
+                    help="Minari id, e.g. lawn/comm/rg-mpc-v0; stored under MINARI_DATASETS_PATH")
+    ds.add_argument("--task", default="default", choices=presets.names(), help="scenario preset (default: %(default)s)")
+    ds.add_argument("--quiet", action="store_true")
+    ds.set_defaults(func=cmd_dataset)
 
     sw = command("sweep", help="run a grid of config fields x policies x seeds into a tidy table")
     sw.add_argument("spec", help="sweep spec (YAML or JSON)")

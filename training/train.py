@@ -133,13 +133,16 @@ def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: 
           hp_overrides: Mapping[str, Any] | None = None, n_envs: int | None = None, eval_every: int = 5000,
           eval_episodes: int = 5, checkpoint_every: int = 10000, progress: bool = True,
           init_from: Path | None = None, interface: str | Mapping | None = None, callbacks: list | None = None,
-          vec: str = "dummy") -> dict:
+          vec: str = "dummy", dataset: str | None = None) -> dict:
     """Train an agent from scratch; returns the run summary (also written to ``out_dir``).
 
     ``callbacks`` are extra SB3 callbacks, run after the run's own (validation, checkpoints);
     ``vec="native"`` trains on lawn's batched vector env (:func:`make_train_env`).
     ``interface`` (``"rl"``, ``"v0"`` or a dict of :class:`lawn_env.RLInterface` fields) replaces
-    the hyperparameter file's choice."""
+    the hyperparameter file's choice. ``dataset`` (behaviour cloning only) is a Minari dataset id whose
+    episodes are the expert data (:mod:`training.datasets`) instead of live expert rollouts."""
+    if dataset is not None and algo != "bc":
+        raise ValueError(f"--dataset {dataset!r}: only behaviour cloning (--algo bc) trains from a dataset")
     if timesteps < 1:
         raise ValueError(f"--timesteps must be >= 1, got {timesteps}")
     params, version = load_hyperparams(algo, env_id, hp_overrides)
@@ -155,7 +158,8 @@ def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: 
     if algo == "bc":
         from .bc import train_bc_run
 
-        return train_bc_run(env_id, config, timesteps, seed, out_dir, params, version, progress=progress)
+        return train_bc_run(env_id, config, timesteps, seed, out_dir, params, version, progress=progress,
+                            dataset=dataset)
     if init_from is not None:
         source = read_run(init_from, "--init-from")
         if source.interface != params.get("interface"):
