@@ -86,7 +86,8 @@ def anchor_name(interface: InterfaceLike) -> str:
     return f"anchor:{iface.power_anchor}"
 
 
-def load_anchor(name: str, config=None, env_id=None, seed=None, **kwargs) -> AnchorPolicy:
+def load_anchor(name: str, config: Any = None, env_id: str | None = None, seed: int | None = None,
+                **kwargs: Any) -> AnchorPolicy:
     """``make_policy("anchor:NAME")``: anchors take no settings."""
     if kwargs:
         raise ValueError(f"anchor:{name} takes no settings; got {sorted(kwargs)}")

@@ -3,7 +3,8 @@ against ``rg-mpc`` on the same seeds, in one run.
 
 Every row plays full 120-slot episodes of the unmodified ``lawn/Comm-v0`` scenario and reports the
 realized control cost (mean and 95 % interval over seeds) and the paired per-seed difference
-against ``rg-mpc``. The rows:
+against ``rg-mpc``. The rows are the anchor policies of :mod:`agents.anchors` (``anchor:NAME``,
+the rows the learned protocol puts beside every agent):
 
 * ``hover`` -- the v0 interface's zero action (the drone hovers at its start, equal power);
 * ``distance`` -- the anchored scheme with the distance prior (drone over the AGVs' centroid, the
@@ -23,38 +24,20 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import gymnasium as gym
-import numpy as np
-
-import lawn_env  # noqa: F401  (registers the ids)
-from agents import make_policy, rollout
+from agents import ANCHORS
+from lawn_env import ScenarioConfig
+from training.evaluate import evaluate
 from training.protocol import VALIDATION_SEED_BASE
 from training.tables import mean_ci, paired_difference
 
 ENV_ID = "lawn/Comm-v0"
-#: The anchors compared: the interface each zero action is decoded by (the scenario is v0's).
-ANCHORS = {
-    "hover": None,
-    "distance": {"base": "rl", "power_anchor": "distance"},
-    "stake": {"base": "rl"},
-}
 
 
-def zero_action_costs(interface, seeds: list[int]) -> dict[int, float]:
-    """Realized control cost of the zero action decoded by ``interface``, per seed (full episodes:
-    the cost reward and no termination, whatever the interface's own)."""
-    iface = None if interface is None else {**interface, "reward": "cost", "termination_distance_m": None}
-    env = gym.make(ENV_ID, interface=iface)
-    zero = np.zeros(env.action_space.shape, dtype=np.float32)
-    costs = {}
-    for seed in seeds:
-        env.reset(seed=seed)
-        done = False
-        while not done:
-            _, _, terminated, truncated, info = env.step(zero)
-            done = terminated or truncated
-        costs[seed] = info["episode_metrics"]["control_cost"]
-    return costs
+def episode_costs(anchor: str, seeds: list[int], workers: int) -> dict[int, float]:
+    """Realized control cost of a policy (an ``anchor:NAME``, or the reference) per seed (full episodes of the
+    unmodified scenario, :class:`agents.AnchorPolicy`)."""
+    rows = evaluate([(anchor, ENV_ID, ScenarioConfig(), s, {}) for s in seeds], workers=workers, progress=False)
+    return {int(r["seed"]): float(r["control_cost"]) for r in rows}
 
 
 def _relative(x: float, sign: bool = True) -> str:
@@ -68,12 +51,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--episodes", type=int, default=20, help="validation seeds (default: 20)")
     parser.add_argument("--markdown", help="also write the table of this run to this file")
+    parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args(argv)
     seeds = [VALIDATION_SEED_BASE + i for i in range(args.episodes)]
-    env = gym.make(ENV_ID)
-    expert = make_policy("rg-mpc", env_id=ENV_ID)
-    reference = {s: rollout(env, expert, s).metrics["control_cost"] for s in seeds}
-    rows = [("rg-mpc (reference)", reference)] + [(name, zero_action_costs(i, seeds)) for name, i in ANCHORS.items()]
+    reference = episode_costs("rg-mpc", seeds, args.workers)
+    rows = [("rg-mpc (reference)", reference)] + [(f"anchor:{name}", episode_costs(f"anchor:{name}", seeds, args.workers))
+                                                  for name in ANCHORS]
     lines = [f"Zero action of each anchor on {ENV_ID}, {len(seeds)} validation seeds "
              f"({seeds[0]}-{seeds[-1]}), full unmodified episodes:", "",
              "| policy | control cost | vs rg-mpc (paired) | worst seed vs rg-mpc |", "|---|---|---|---|"]

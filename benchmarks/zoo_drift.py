@@ -3,7 +3,7 @@
 The learned-agents table (README, docs/LEARNED.md) is built by ``lawn zoo build`` from the training
 runs, which live outside the repository; its per-episode costs are committed in
 ``docs/learned/episodes.csv``. This script re-evaluates, at the current code, what the repository
-holds: ``rg-mpc`` and ``epa`` on both envs and every shipped agent (``zoo:NAME``, the training seed
+holds: ``rg-mpc``, ``epa`` and the anchors (``anchor:NAME``) on both envs and every shipped agent (``zoo:NAME``, the training seed
 the table calls shipped) on the table's test seeds, and prints, per policy, the largest relative
 change of an episode's control cost against the committed row. A change of the code that moves
 them beyond the table's precision (three significant digits) means the table must be rebuilt
@@ -36,7 +36,8 @@ def main(argv=None) -> int:
     old = {(r["policy"], r["env"], int(r["seed"])): float(r["control_cost"])
            for r in csv.DictReader(open(ROOT / "docs" / "learned" / "episodes.csv"))}
     seeds = sorted({s for _, _, s in old})
-    pairs = [(name, env, name) for env in ("lawn/Comm-v0", "lawn/Joint-v0") for name in ("rg-mpc", "epa")]
+    fixed = sorted({(p, e) for p, e, _ in old if ":" not in p or p.startswith("anchor:")}, key=lambda x: (x[1], x[0]))
+    pairs = [(name, env, name) for name, env in fixed]  # the references and the anchors
     for agent in sorted((ROOT / "agents" / "zoo").glob("*/agent.json")):
         meta = json.loads(agent.read_text())
         name, env, shipped = meta["name"], meta["evaluated_on"], meta["shipped_seed"]

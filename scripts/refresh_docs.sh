@@ -14,6 +14,8 @@
 #                                                       trains them first, hours on 2 cores)
 #   README block zoo-drift                              benchmarks/zoo_drift.py (the table's shipped agents
 #                                                       and experts re-evaluated at the current code)
+#   README block leaderboard, docs/LEADERBOARD.md       lawn benchmark --suite (--only suite; about half
+#                                                       an hour on 2 cores)
 #   bash scripts/refresh_docs.sh [--train] [--only NAME ...]
 # Generated data goes to runs/ (not committed). Timed benchmarks are run one at a time.
 set -euo pipefail
@@ -25,7 +27,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --train) train=1 ;;
     --only) shift; while [ $# -gt 0 ] && [[ "$1" != --* ]]; do only+=("$1"); shift; done; continue ;;
-    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|qp|learned ...]" >&2; exit 2 ;;
+    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|qp|learned|suite ...]" >&2; exit 2 ;;
   esac
   shift
 done
@@ -90,5 +92,9 @@ if want learned; then
     echo "refresh_docs: the learned-agents table no longer holds at this code: rebuild it with --train" >&2
     exit 3
   fi
+fi
+if want suite; then
+  "$lawn" benchmark --suite --docs docs --out runs/suite --workers 2 --quiet | tee runs/suite-stdout.txt
+  splice leaderboard runs/suite/board.md "lawn benchmark --suite"
 fi
 echo "refresh_docs: done; review with git diff README.md docs/"

@@ -147,8 +147,9 @@ def _benchmark_protocol(args: argparse.Namespace) -> int:
         print(board)
         for (task, policy), why in skipped.items():
             print(f"  n/a {policy} on {task}: {why}")
-        (out / "leaderboard.md").write_text(board + "\n\n" + refs + "\n")
-        print(f"wrote {out}/episodes.csv and {out}/leaderboard.md")
+        (out / "board.md").write_text(board + "\n")
+        (out / "references.md").write_text(refs + "\n")
+        print(f"wrote {out}/episodes.csv, board.md (the scores) and references.md (the references' costs)")
         if args.docs:
             print(f"wrote {write_leaderboard(Path(args.docs) / 'LEADERBOARD.md', board, refs, skipped, episodes, seconds, args.workers)}")
         return 0

@@ -18,7 +18,7 @@ Behaviour cloning trains from such a dataset (``lawn train --algo bc --dataset I
 from __future__ import annotations
 
 import warnings
-from typing import Any, Iterator
+from typing import TYPE_CHECKING, Any, Iterator
 
 import gymnasium as gym
 import numpy as np
@@ -29,6 +29,9 @@ import lawn_env
 from lawn_env import ENV_IDS, presets
 
 from .provenance import provenance
+
+if TYPE_CHECKING:
+    import minari
 
 __all__ = ["create_dataset", "load_dataset", "episodes_of", "dataset_task", "DATA_EXTRA"]
 
@@ -60,7 +63,7 @@ def _step_data_callback():
 
 
 def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_id: str, task: str = "default",
-                   progress: bool = True, description: str | None = None):
+                   progress: bool = True, description: str | None = None) -> "minari.MinariDataset":
     """Record ``episodes`` seeded episodes of ``policy`` on ``env_id`` (the scenario of preset ``task``)
     as the Minari dataset ``dataset_id``; returns the ``MinariDataset``."""
     minari = _minari()
@@ -94,7 +97,7 @@ def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_i
     return dataset
 
 
-def load_dataset(dataset_id: str):
+def load_dataset(dataset_id: str) -> "minari.MinariDataset":
     """``minari.load_dataset`` with the extra's message when minari is missing and the valid ids
     when the id is unknown."""
     minari = _minari()
@@ -105,13 +108,13 @@ def load_dataset(dataset_id: str):
     return minari.load_dataset(dataset_id)
 
 
-def dataset_task(dataset) -> tuple[str, Any]:
+def dataset_task(dataset: "minari.MinariDataset") -> tuple[str, Any]:
     """The env id and the ``config`` argument the dataset's episodes were recorded with."""
     spec = dataset.spec.env_spec
     return spec.id, (spec.kwargs or {}).get("config", "default")
 
 
-def episodes_of(dataset) -> Iterator[tuple[int | None, np.ndarray, np.ndarray]]:
+def episodes_of(dataset: "minari.MinariDataset") -> Iterator[tuple[int | None, np.ndarray, np.ndarray]]:
     """(seed, observations (T, n) the actions were chosen from, actions (T, m)) per episode, in
     recorded order."""
     metadata = dataset.storage.get_episode_metadata(dataset.episode_indices)

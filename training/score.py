@@ -70,7 +70,8 @@ def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: 
 def scores_by_policy(rows: Iterable[Mapping], metric: str = "control_cost") -> dict[tuple[str, str, str], tuple]:
     """Scores of every (task, env, policy) of evaluation rows (``policy``, ``env``, ``seed``,
     ``metric`` and optionally ``task``, default ``""``), against the reference rows of the same task
-    and env. Groups without both references are left out."""
+    and env. Groups without both references, or whose references do not separate (EPA not costlier
+    than rg-mpc on average), are left out: no score is defined there."""
     costs: dict[tuple[str, str, str], dict[int, float]] = {}
     for row in rows:
         key = (str(row.get("task", "")), str(row["env"]), str(row["policy"]))
@@ -78,7 +79,7 @@ def scores_by_policy(rows: Iterable[Mapping], metric: str = "control_cost") -> d
     out = {}
     for (task, env, policy), cost in costs.items():
         low, high = costs.get((task, env, SCORE_LOW)), costs.get((task, env, SCORE_HIGH))
-        if low is None or high is None:
+        if low is None or high is None or not np.mean([low[s] - high[s] for s in low if s in high] or [0.0]) > 0:
             continue
         out[(task, env, policy)] = normalized_score(cost, low, high)
     return out

@@ -1,0 +1,234 @@
+"""The benchmark protocol: anchors, the normalized score, the learned protocol, the task suite,
+Minari datasets and behaviour cloning from them (issue #23)."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from agents import ANCHORS, AnchorPolicy, anchor_name, make_policy
+from lawn_env import ScenarioConfig, presets
+from training.evaluate import run_episode
+from training.score import normalized_score, scores_by_policy
+
+
+# ---------------------------------------------------------------------- normalized score
+def _rows(policy, costs, env="lawn/Joint-v0", task="default"):
+    return [{"policy": policy, "env": env, "task": task, "seed": s, "control_cost": c} for s, c in costs.items()]
+
+
+def test_score_is_zero_at_epa_and_one_hundred_at_rg_mpc():
+    epa = {0: 900.0, 1: 1500.0, 2: 700.0, 3: 1200.0}
+    rg = {0: 400.0, 1: 500.0, 2: 450.0, 3: 600.0}
+    assert normalized_score(epa, epa, rg)[0] == 0.0
+    assert normalized_score(rg, epa, rg)[0] == pytest.approx(100.0, abs=1e-12)
+    # halfway on every seed is 50; the mean gap (not a per-seed ratio) is the denominator
+    half = {s: (epa[s] + rg[s]) / 2 for s in epa}
+    assert normalized_score(half, epa, rg)[0] == pytest.approx(50.0, abs=1e-12)
+    better = {s: rg[s] - 0.1 * (epa[s] - rg[s]) for s in epa}
+    assert normalized_score(better, epa, rg)[0] == pytest.approx(110.0, abs=1e-9)
+    gap = np.mean([epa[s] - rg[s] for s in epa])
+    odd = {0: 650.0, 1: 1500.0, 2: 700.0, 3: 1200.0}  # only seed 0 moves
+    assert normalized_score(odd, epa, rg)[0] == pytest.approx(100 * 250.0 / 4 / gap)
+
+
+def test_score_interval_brackets_the_mean_and_is_seeded():
+    rng = np.random.default_rng(3)
+    epa = {s: float(v) for s, v in enumerate(rng.uniform(800, 2000, 30))}
+    rg = {s: float(v) for s, v in enumerate(rng.uniform(300, 600, 30))}
+    x = {s: rg[s] * float(rng.uniform(0.9, 1.4)) for s in rg}
+    score, lo, hi, n = normalized_score(x, epa, rg)
+    assert n == 30 and lo < score < hi
+    assert normalized_score(x, epa, rg) == (score, lo, hi, n)
+    assert math.isnan(normalized_score({0: 1.0, 1: 2.0}, {0: 3.0, 1: 4.0}, {0: 1.0, 1: 1.0})[1])
+
+
+def test_score_needs_references_that_separate_and_shared_seeds():
+    with pytest.raises(ValueError, match="do not separate"):
+        normalized_score({0: 5.0, 1: 5.0}, {0: 1.0, 1: 2.0}, {0: 3.0, 1: 3.0})
+    with pytest.raises(ValueError, match="no seed holds"):
+        normalized_score({7: 5.0}, {0: 1.0}, {0: 0.5})
+
+
+def test_scores_by_policy_pairs_within_task_and_env():
+    rows = (_rows("epa", {0: 10.0, 1: 12.0}) + _rows("rg-mpc", {0: 4.0, 1: 6.0}) + _rows("x", {0: 7.0, 1: 9.0})
+            + _rows("epa", {0: 100.0, 1: 100.0}, task="k8") + _rows("rg-mpc", {0: 50.0, 1: 50.0}, task="k8")
+            + _rows("x", {0: 50.0, 1: 50.0}, task="k8") + _rows("y", {0: 1.0}, env="lawn/Comm-v0"))
+    scores = scores_by_policy(rows)
+    assert scores[("default", "lawn/Joint-v0", "x")][0] == pytest.approx(50.0)
+    assert scores[("k8", "lawn/Joint-v0", "x")][0] == pytest.approx(100.0)
+    assert ("default", "lawn/Comm-v0", "y") not in scores  # no references on that env
+    # references that do not separate give no score instead of an error mid-table
+    rows = _rows("epa", {0: 1.0, 1: 1.0}, task="t") + _rows("rg-mpc", {0: 2.0, 1: 2.0}, task="t")
+    assert scores_by_policy(rows) == {}
+
+
+# ---------------------------------------------------------------------- anchors
+def _zero_action_cost(env_id, interface, seed):
+    """The zero action stepped directly through the interface (no policy, no v0 carry), full episode."""
+    iface = None if interface is None else {**interface, "reward": "cost", "termination_distance_m": None}
+    env = gym.make(env_id, interface=iface)
+    env.reset(seed=seed)
+    zero = np.zeros(env.action_space.shape, dtype=np.float32)
+    done = False
+    while not done:
+        _, _, terminated, truncated, info = env.step(zero)
+        done = terminated or truncated
+    return info["episode_metrics"]["control_cost"]
+
+
+@pytest.mark.parametrize("env_id", ["lawn/Comm-v0", "lawn/Joint-v0"])
+@pytest.mark.parametrize("name", list(ANCHORS))
+def test_anchor_rows_equal_a_direct_rollout_of_the_zero_action(env_id, name):
+    seed = 4
+    direct = _zero_action_cost(env_id, ANCHORS[name], seed)
+    row = run_episode(f"anchor:{name}", env_id, ScenarioConfig(), seed)
+    # the policy hands the env the float32 v0 action that carries out the zero action
+    assert row["control_cost"] == pytest.approx(direct, rel=1e-6)
+    assert row["policy"] == f"anchor:{name}"
+
+
+def test_anchor_names_and_errors():
+    assert anchor_name(None) == "anchor:hover"
+    assert anchor_name("rl") == "anchor:stake"
+    assert anchor_name({"base": "rl", "power_anchor": "distance", "drone_offset_m": 10.0}) == "anchor:distance"
+    assert isinstance(make_policy("anchor:stake", env_id="lawn/Comm-v0"), AnchorPolicy)
+    with pytest.raises(ValueError, match="unknown anchor 'nope'; valid: hover, distance, stake"):
+        make_policy("anchor:nope")
+    with pytest.raises(ValueError, match="takes no settings"):
+        make_policy("anchor:stake", tolerance=1.0)
+
+
+# ---------------------------------------------------------------------- the learned protocol
+def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    from training.leaderboard import learned_entries, run_learned_protocol
+
+    entries = learned_entries(["zoo:ppo-comm", "zoo:bc-comm"])
+    assert entries == [("rg-mpc", "lawn/Comm-v0"), ("epa", "lawn/Comm-v0"), ("anchor:distance", "lawn/Comm-v0"),
+                       ("anchor:stake", "lawn/Comm-v0"), ("zoo:ppo-comm", "lawn/Comm-v0"),
+                       ("zoo:bc-comm", "lawn/Comm-v0")]
+    table = run_learned_protocol(["zoo:ppo-comm"], tmp_path, episodes=3, workers=1, progress=False)
+    lines = table.splitlines()
+    assert "vs own anchor (paired)" in lines[0] and "score v1" in lines[0]
+    agent = next(line for line in lines if line.startswith("| zoo:ppo-comm "))
+    assert "| anchor:stake |" in agent
+    assert any(line.startswith("| anchor:stake | lawn/Comm-v0 |") for line in lines)
+    assert any(line.startswith("| rg-mpc | lawn/Comm-v0 | – |") and "| 100.0 |" in line for line in lines)
+    assert (tmp_path / "episodes.csv").exists() and "3 test seeds" in table
+
+
+# ---------------------------------------------------------------------- the task suite
+def test_suite_tasks_are_presets_with_their_own_scenarios():
+    configs = [presets.get(task) for task in presets.SUITE]
+    assert presets.SUITE[0] == "default" and len(set(map(repr, configs))) == len(configs)
+    assert presets.get("k8").num_agvs == 8 and presets.get("k3").num_agvs == 3
+    assert presets.get("imperfect-csi").channel.ce_error_var > 0
+    assert presets.get("short-blocklength").channel.blocklength < ScenarioConfig().channel.blocklength
+    assert presets.get("low-power").power_budget_dbw < ScenarioConfig().power_budget_dbw
+    env = gym.make("lawn/Comm-v0", config="k8")
+    assert env.unwrapped.config.num_agvs == 8 and env.spec.kwargs == {"config": "k8"}
+
+
+def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    from training.leaderboard import run_suite, suite_table
+
+    policies = ["anchor:stake", "zoo:ppo-comm"]
+    rows, skipped, _ = run_suite(policies, list(presets.SUITE), 1, tmp_path, workers=1, progress=False)
+    assert {r["task"] for r in rows} == set(presets.SUITE)
+    assert set(skipped) == {("k3", "zoo:ppo-comm"), ("k8", "zoo:ppo-comm")}
+    assert "expects observations of shape (335,)" in skipped[("k8", "zoo:ppo-comm")]
+    board, refs = suite_table(rows, policies, list(presets.SUITE), skipped)
+    agent = next(line for line in board.splitlines() if line.startswith("| zoo:ppo-comm"))
+    assert agent.count("n/a") == 2 and "(5 tasks)" in agent
+    assert all(f"| {task} |" in refs for task in presets.SUITE)
+
+
+# ---------------------------------------------------------------------- datasets
+@pytest.fixture
+def datasets_path(tmp_path, monkeypatch):
+    pytest.importorskip("minari")
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
+    return tmp_path / "minari"
+
+
+def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
+    import minari
+
+    from training.datasets import create_dataset
+
+    create_dataset("rg-mpc", "lawn/Comm-v0", episodes=2, seed=7, dataset_id="lawn/test/rg-mpc-v0", progress=False)
+    dataset = minari.load_dataset("lawn/test/rg-mpc-v0")
+    assert dataset.total_episodes == 2 and dataset.total_steps == 240
+    episodes = list(dataset.iterate_episodes())
+    for i, episode in enumerate(episodes):
+        assert episode.observations.shape == (121, 335) and episode.actions.shape == (120, 6)
+        assert episode.truncations[-1] and not episode.terminations.any()
+        assert set(episode.infos) >= {"stage_cost", "delivered", "power_w", "drone_position"}
+        expected = run_episode("rg-mpc", "lawn/Comm-v0", ScenarioConfig(), 7 + i)["control_cost"]
+        assert float(np.sum(episode.infos["stage_cost"][1:])) == pytest.approx(expected, rel=1e-12)
+        assert float(-np.sum(episode.rewards)) == pytest.approx(expected, rel=1e-12)
+    env = dataset.recover_environment()
+    assert env.spec.id == "lawn/Comm-v0"
+    obs, _ = env.reset(seed=7)
+    np.testing.assert_array_equal(obs, episodes[0].observations[0])
+    assert env.step(episodes[0].actions[0])[1] == pytest.approx(episodes[0].rewards[0])
+
+
+def test_dataset_errors_name_the_problem(datasets_path):
+    from training.datasets import create_dataset, load_dataset
+
+    with pytest.raises(ValueError, match="datasets record lawn/Joint-v0 or lawn/Comm-v0"):
+        create_dataset("rg-mpc", "lawn/CommRL-v0", 1, 0, "lawn/test/x-v0")
+    with pytest.raises(ValueError, match="unknown policy 'nope'"):
+        create_dataset("nope", "lawn/Comm-v0", 1, 0, "lawn/test/x-v0")
+    with pytest.raises(ValueError, match="unknown dataset 'lawn/test/none-v0'"):
+        load_dataset("lawn/test/none-v0")
+    create_dataset("epa", "lawn/Joint-v0", 1, 0, "lawn/test/epa-v0", progress=False)
+    with pytest.raises(ValueError, match="already exists"):
+        create_dataset("epa", "lawn/Joint-v0", 1, 0, "lawn/test/epa-v0", progress=False)
+
+
+def test_bc_data_from_a_dataset_equals_live_labelling(datasets_path):
+    from training.bc import collect, dataset_transitions
+    from training.datasets import create_dataset
+
+    create_dataset("rg-mpc", "lawn/Joint-v0", 2, 11, "lawn/test/live-v0", progress=False)
+    cfg = ScenarioConfig()
+    for interface in ("rl", {"base": "rl", "power_anchor": "distance"}, None):
+        obs, labels, costs = collect("lawn/Joint-v0", cfg, "rg-mpc", 200, 11, interface)
+        d_obs, d_labels, d_costs, seeds = dataset_transitions("lawn/test/live-v0", "lawn/Joint-v0", cfg, 200, interface)
+        assert seeds == [11, 12] and obs.shape == (200, 335) and labels.shape == (200, 14)
+        np.testing.assert_array_equal(d_obs, obs)
+        np.testing.assert_array_equal(d_labels, labels)
+    assert d_costs[0] == pytest.approx(costs[0], rel=1e-12)
+    with pytest.raises(ValueError, match="recorded with config 'default', not this run's scenario"):
+        dataset_transitions("lawn/test/live-v0", "lawn/Joint-v0", presets.get("k3"), 10, "rl")
+
+
+@pytest.mark.slow
+def test_bc_from_a_dataset_is_the_clone_of_live_labelling(datasets_path, tmp_path):
+    pytest.importorskip("stable_baselines3")
+    import torch
+    from stable_baselines3 import PPO
+
+    from training.datasets import create_dataset
+    from training.protocol import TRAIN_SEED_BASE
+    from training.train import train
+
+    create_dataset("rg-mpc", "lawn/Comm-v0", 1, TRAIN_SEED_BASE, "lawn/test/bc-v0", progress=False)
+    common = dict(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=0,
+                  hp_overrides={"epochs": 2}, progress=False)
+    train(out_dir=tmp_path / "live", **common)
+    train(out_dir=tmp_path / "data", dataset="lawn/test/bc-v0", **common)
+    live = PPO.load(str(tmp_path / "live" / "model.zip")).policy.state_dict()
+    data = PPO.load(str(tmp_path / "data" / "model.zip")).policy.state_dict()
+    assert all(torch.equal(live[k], data[k]) for k in live)
+    with pytest.raises(ValueError, match="holds episodes of lawn/Comm-v0; this run trains on lawn/Joint-v0"):
+        train(out_dir=tmp_path / "x", dataset="lawn/test/bc-v0", **{**common, "env_id": "lawn/Joint-v0"})
+    with pytest.raises(ValueError, match="only behaviour cloning"):
+        train(out_dir=tmp_path / "y", dataset="lawn/test/bc-v0", **{**common, "algo": "ppo"})
