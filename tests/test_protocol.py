@@ -232,3 +232,27 @@ def test_bc_from_a_dataset_is_the_clone_of_live_labelling(datasets_path, tmp_pat
         train(out_dir=tmp_path / "x", dataset="lawn/test/bc-v0", **{**common, "env_id": "lawn/Joint-v0"})
     with pytest.raises(ValueError, match="only behaviour cloning"):
         train(out_dir=tmp_path / "y", dataset="lawn/test/bc-v0", **{**common, "algo": "ppo"})
+
+
+def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    from training.train import train
+    from training.zoo import build_zoo
+
+    runs = tmp_path / "runs"
+    train(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=0,
+          out_dir=runs / "bc-comm" / "seed-0", hp_overrides={"epochs": 1}, progress=False)
+    table = build_zoo(runs, tmp_path / "docs" / "LEARNED.md", None, workers=1, progress=False, episodes=3,
+                      export=False)
+    from training.leaderboard import own_anchor
+
+    anchor = own_anchor(f"bc:{runs / 'bc-comm' / 'seed-0'}")  # the hyperparameter file's interface: anchor:stake
+    rows = table.splitlines()
+    assert "vs own anchor (paired)" in rows[0] and "score v1" in rows[0]
+    assert [r.split(" | ")[0] for r in rows[2:6]] == ["| rg-mpc", "| epa", f"| {anchor}",
+                                                      "| BC of rg-mpc (+4 DAgger rounds) (`zoo:bc-comm`, seed 0)"]
+    assert rows[5].split(" | ")[3] == anchor
+    doc = (tmp_path / "docs" / "LEARNED.md").read_text()
+    assert f"| `bc-comm` (shipped) | 0 | {anchor} |" in doc and "3 test seeds (0-2)" in doc
+    episodes = (tmp_path / "docs" / "learned" / "episodes.csv").read_text()
+    assert anchor in episodes and "stage_costs" not in episodes.splitlines()[0]

@@ -3,7 +3,10 @@
 Subcommands read their choices from the package registries (env ids, presets).
 ``lawn demo``: one seeded episode of ``lawn/Joint-v0`` under a scripted policy.
 ``lawn evaluate``: any registered policy on seeded episodes, one row per episode (CSV/JSON).
-``lawn benchmark``: the expert and the baselines on the same seeds, a table and a bar plot.
+``lawn benchmark``: the expert and the baselines on the same seeds, a table and a bar plot;
+``--protocol learned`` the learned agents beside their anchors on 100 test seeds, ``--suite`` the
+task suite's leaderboard (normalized scores, training/score.py).
+``lawn dataset create``: a policy's episodes as a Minari dataset.
 ``lawn gap``: per-slot optimality gap of planners against the global reference, and the AO's
 convergence at chosen slots.
 ``lawn train``: Stable-Baselines3 agents, behaviour cloning and multi-agent training (rl extra).

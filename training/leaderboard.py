@@ -27,6 +27,7 @@ import numpy as np
 from agents import make_policy
 from agents.anchors import anchor_name
 from agents.base import COMM, JOINT
+from agents.errors import MissingExtra
 from agents.learned import zoo_agents
 from agents.runs import read_run
 from lawn_env import ScenarioConfig, presets
@@ -156,7 +157,7 @@ def _applicable(policy: str, env: str, config: ScenarioConfig) -> str | None:
     """None when ``policy`` can act on ``env`` with ``config``, else why not (one line)."""
     try:
         make_policy(policy, config, env_id=env)
-    except ValueError as exc:
+    except (ValueError, MissingExtra) as exc:  # a network built for another K; torch not installed
         return str(exc)
     return None
 
