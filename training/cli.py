@@ -128,7 +128,14 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
 
 def _benchmark_protocol(args: argparse.Namespace) -> int:
     """``lawn benchmark --protocol learned`` and ``lawn benchmark --suite``."""
-    from .leaderboard import run_learned_protocol, run_suite, suite_policies, suite_table, write_leaderboard
+    from .leaderboard import (
+        run_learned_protocol,
+        run_suite,
+        skipped_summary,
+        suite_policies,
+        suite_table,
+        write_leaderboard,
+    )
     from .protocol import TEST_EPISODES
 
     if args.preset != "default" or args.set:
@@ -148,8 +155,8 @@ def _benchmark_protocol(args: argparse.Namespace) -> int:
         print(f"lawn benchmark --suite: {len(policies)} policies x {len(tasks)} tasks, {episodes} seeds each, "
               f"{seconds / 60:.1f} min; normalized score v1 [95 %] (0 = epa, 100 = rg-mpc)")
         print(board)
-        for (task, policy), why in skipped.items():
-            print(f"  n/a {policy} on {task}: {why}")
+        for line in skipped_summary(skipped):
+            print(f"  n/a {line}")
         (out / "board.md").write_text(board + "\n")
         (out / "references.md").write_text(refs + "\n")
         print(f"wrote {out}/episodes.csv, board.md (the scores) and references.md (the references' costs)")

@@ -38,7 +38,7 @@ from .score import SCORE_HIGH, SCORE_LOW, SCORE_VERSION, format_score, scores_by
 from .tables import fmt_num, fmt_paired, mean_ci, paired_difference
 
 __all__ = ["own_anchor", "policy_env", "costs_of", "learned_entries", "run_entries", "learned_table", "run_learned_protocol",
-           "SUITE_POLICIES", "suite_policies", "run_suite", "suite_table", "write_leaderboard"]
+           "SUITE_POLICIES", "suite_policies", "run_suite", "suite_table", "skipped_summary", "write_leaderboard"]
 
 #: Rows without a per-slot trace keep the saved tables small (100 seeds x many agents).
 _DROPPED = ("stage_costs",)
@@ -216,12 +216,20 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
     return "\n".join(lines), "\n".join(refs)
 
 
+def skipped_summary(skipped: Mapping[tuple[str, str], str]) -> list[str]:
+    """One line per task of the policies that cannot act there, with the first one's reason."""
+    by_task: dict[str, list[str]] = {}
+    for task, policy in skipped:
+        by_task.setdefault(task, []).append(policy)
+    return [f"on `{task}`: {', '.join(ps)} ({skipped[(task, ps[0])]})" for task, ps in by_task.items()]
+
+
 def write_leaderboard(path: Path, board: str, refs: str, skipped: Mapping[tuple[str, str], str], episodes: int,
                       seconds: float, workers: int) -> Path:
     """docs/LEADERBOARD.md: the protocol, the board, the references, what could not run."""
     from .provenance import provenance
 
-    reasons = sorted({f"{p}: {why}" for (_, p), why in skipped.items()})
+    reasons = skipped_summary(skipped)
     tasks = ", ".join(f"`{t}`" for t in presets.SUITE)
     text = f"""# Leaderboard: the task suite
 
@@ -241,7 +249,7 @@ seeds. Experts, baselines and anchors act on `lawn/Joint-v0`; each learned agent
 
 {board}
 
-n/a: the policy cannot act on the task. {'; '.join(reasons) if reasons else ''}
+n/a: the policy cannot act on the task{': ' + '; '.join(reasons) + '.' if reasons else '.'}
 
 The references, per task and env (mean control cost ± 95 % interval):
 
