@@ -35,7 +35,7 @@ from lawn_env import ScenarioConfig, presets
 from .evaluate import evaluate, write_rows
 from .protocol import TEST_EPISODES
 from .score import SCORE_HIGH, SCORE_LOW, SCORE_VERSION, format_score, scores_by_policy
-from .tables import fmt_num, fmt_paired, mean_ci, paired_difference
+from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci, paired_difference
 
 __all__ = ["own_anchor", "policy_env", "costs_of", "learned_entries", "run_entries", "learned_table", "run_learned_protocol",
            "SUITE_POLICIES", "suite_policies", "run_suite", "suite_table", "skipped_summary", "write_leaderboard"]
@@ -203,7 +203,8 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
         overall = f"{np.mean(means):.1f}" if len(means) == len(tasks) else f"{np.mean(means):.1f} ({len(means)} tasks)" \
             if means else "–"
         lines.append(f"| {p} | {env} | " + " | ".join(cells) + f" | {overall} |")
-    refs = ["| task | env | episodes | " + f"{SCORE_LOW} cost | {SCORE_HIGH} cost | " + "gap (mean) |", "|---|---|---|---|---|---|"]
+    refs = [f"| task | env | episodes | {SCORE_LOW} cost | {SCORE_HIGH} cost | gap (mean) | per-seed gap / {SCORE_HIGH} cost, "
+            f"min to max | seeds where {SCORE_LOW} costs no more |", "|" + "---|" * 8]
     for task in tasks:
         for env in dict.fromkeys(r["env"] for r in rows if r.get("task") == task):
             low, high = costs_of(rows, SCORE_LOW, env, task), costs_of(rows, SCORE_HIGH, env, task)
@@ -211,8 +212,10 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
                 continue
             lo, hi = mean_ci(low.values()), mean_ci(high.values())
             gap = lo[0] - hi[0]
+            per_seed = [(low[s] - high[s]) / high[s] for s in low if s in high]
             refs.append(f"| {task} | {env} | {len(low)} | {fmt_num(lo[0])} ± {fmt_num(lo[1])} "
-                        f"| {fmt_num(hi[0])} ± {fmt_num(hi[1])} | {fmt_num(gap)} |")
+                        f"| {fmt_num(hi[0])} ± {fmt_num(hi[1])} | {fmt_num(gap)} "
+                        f"| {fmt_pct(min(per_seed))} to {fmt_pct(max(per_seed))} | {sum(g <= 0 for g in per_seed)} |")
     return "\n".join(lines), "\n".join(refs)
 
 
