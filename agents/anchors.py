@@ -69,8 +69,8 @@ class AnchorPolicy(InterfacePolicy):
     def __init__(self, anchor: str, config: Any = None, env_id: str | None = None, seed: int | None = None):
         if anchor not in ANCHORS:
             raise ValueError(f"unknown anchor {anchor!r}; valid: {', '.join(ANCHORS)} (anchor:NAME)")
+        self.name = f"anchor:{anchor}"  # before the base class checks the env, so its errors name the anchor
         super().__init__(config, env_id or JOINT, ANCHORS[anchor], seed)
-        self.name = f"anchor:{anchor}"
         self._zero = np.zeros(self.scheme.size)
 
     def act(self, obs: np.ndarray) -> np.ndarray:

@@ -3,6 +3,7 @@ Minari datasets and behaviour cloning from them (issue #23)."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import gymnasium as gym
@@ -105,17 +106,26 @@ def test_anchor_names_and_errors():
 # ---------------------------------------------------------------------- the learned protocol
 def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     pytest.importorskip("stable_baselines3")
-    from training.leaderboard import learned_entries, run_learned_protocol
+    from training.leaderboard import costs_of, learned_entries, own_anchor, run_learned_protocol
+    from training.tables import fmt_paired, paired_difference, read_csv
 
-    entries = learned_entries(["zoo:ppo-comm", "zoo:bc-comm"])
-    assert entries == [("rg-mpc", "lawn/Comm-v0"), ("epa", "lawn/Comm-v0"), ("anchor:distance", "lawn/Comm-v0"),
-                       ("anchor:stake", "lawn/Comm-v0"), ("zoo:ppo-comm", "lawn/Comm-v0"),
-                       ("zoo:bc-comm", "lawn/Comm-v0")]
+    agents = ["zoo:ppo-comm", "zoo:bc-comm", "zoo:ppo-comm"]
+    anchors = sorted({own_anchor(a) for a in agents})
+    assert all(a.startswith("anchor:") for a in anchors)
+    entries = learned_entries(agents)  # a repeated agent is one row
+    assert entries == [("rg-mpc", "lawn/Comm-v0"), ("epa", "lawn/Comm-v0"), *[(a, "lawn/Comm-v0") for a in anchors],
+                       ("zoo:ppo-comm", "lawn/Comm-v0"), ("zoo:bc-comm", "lawn/Comm-v0")]
+    with pytest.raises(ValueError, match="unknown zoo agent 'nope'"):
+        run_learned_protocol(["zoo:nope"], tmp_path, episodes=3, workers=1, progress=False)
     table = run_learned_protocol(["zoo:ppo-comm"], tmp_path, episodes=3, workers=1, progress=False)
     lines = table.splitlines()
     assert "vs own anchor (paired)" in lines[0] and "score v1" in lines[0]
     agent = next(line for line in lines if line.startswith("| zoo:ppo-comm "))
-    assert "| anchor:stake |" in agent
+    anchor = own_anchor("zoo:ppo-comm")
+    assert f"| {anchor} |" in agent
+    rows = read_csv(tmp_path / "episodes.csv")
+    diff = paired_difference(costs_of(rows, "zoo:ppo-comm", "lawn/Comm-v0"), costs_of(rows, anchor, "lawn/Comm-v0"))
+    assert fmt_paired(*diff[:2]) in agent.split("|")[7]
     assert any(line.startswith("| anchor:stake | lawn/Comm-v0 |") for line in lines)
     assert any(line.startswith("| rg-mpc | lawn/Comm-v0 | – |") and "| 100.0 |" in line for line in lines)
     assert (tmp_path / "episodes.csv").exists() and "3 test seeds" in table
@@ -191,6 +201,9 @@ def test_dataset_errors_name_the_problem(datasets_path):
     create_dataset("epa", "lawn/Joint-v0", 1, 0, "lawn/test/epa-v0", progress=False)
     with pytest.raises(ValueError, match="already exists"):
         create_dataset("epa", "lawn/Joint-v0", 1, 0, "lawn/test/epa-v0", progress=False)
+    for bad in ("epa", "lawn/epa", "lawn/epa-v"):
+        with pytest.raises(ValueError, match=f"--dataset-id '{bad}': Minari ids have the form NAMESPACE/NAME-vN"):
+            create_dataset("epa", "lawn/Joint-v0", 1, 0, bad)
 
 
 def test_bc_data_from_a_dataset_equals_live_labelling(datasets_path):
@@ -201,8 +214,9 @@ def test_bc_data_from_a_dataset_equals_live_labelling(datasets_path):
     cfg = ScenarioConfig()
     for interface in ("rl", {"base": "rl", "power_anchor": "distance"}, None):
         obs, labels, costs = collect("lawn/Joint-v0", cfg, "rg-mpc", 200, 11, interface)
-        d_obs, d_labels, d_costs, seeds = dataset_transitions("lawn/test/live-v0", "lawn/Joint-v0", cfg, 200, interface)
-        assert seeds == [11, 12] and obs.shape == (200, 335) and labels.shape == (200, 14)
+        d_obs, d_labels, d_costs, seeds, recorded = dataset_transitions("lawn/test/live-v0", "lawn/Joint-v0", cfg, 200,
+                                                                        interface)
+        assert seeds == [11, 12] and obs.shape == (200, 335) and labels.shape == (200, 14) and recorded == "rg-mpc"
         np.testing.assert_array_equal(d_obs, obs)
         np.testing.assert_array_equal(d_labels, labels)
     assert d_costs[0] == pytest.approx(costs[0], rel=1e-12)
@@ -256,3 +270,81 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     assert f"| `bc-comm` (shipped) | 0 | {anchor} |" in doc and "3 test seeds (0-2)" in doc
     episodes = (tmp_path / "docs" / "learned" / "episodes.csv").read_text()
     assert anchor in episodes and "stage_costs" not in episodes.splitlines()[0]
+
+
+# ---------------------------------------------------------------------- the command line
+def test_evaluate_prints_the_score_beside_the_cost(tmp_path, capsys):
+    from training.cli import main
+    from training.tables import read_csv
+
+    out = tmp_path / "rows.csv"
+    common = ["--episodes", "3", "--set", "num_slots=15", "--workers", "1", "--quiet", "--out", str(out)]
+    assert main(["evaluate", "--policy", "pid", *common]) == 0
+    printed = capsys.readouterr().out
+    header = next(line for line in printed.splitlines() if line.startswith("| policy"))
+    row = next(line for line in printed.splitlines() if line.startswith("| pid "))
+    assert "score" in header and "(score: epa and rg-mpc on the same seeds)" in printed
+    cell = row.split("|")[header.split("|").index(next(c for c in header.split("|") if "score" in c))].strip()
+    assert math.isfinite(float(cell.split()[0]))
+    assert {r["policy"] for r in read_csv(out)} == {"pid"}  # references not written
+    assert main(["evaluate", "--policy", "pid", "--no-score", *common]) == 0
+    printed = capsys.readouterr().out
+    assert "score" not in next(line for line in printed.splitlines() if line.startswith("| policy"))
+    # a reference with other settings is another policy under the reference's name: no score against itself
+    assert main(["evaluate", "--policy", "rg-mpc", "--policy-arg", "psi_points=5", *common]) == 0
+    printed = capsys.readouterr().out
+    assert "no score: --policy-arg changes the reference rg-mpc itself" in printed
+
+
+def test_benchmark_protocol_flags_are_checked(tmp_path, capsys):
+    from training.cli import main
+
+    out = ["--out", str(tmp_path / "b"), "--quiet"]
+    cases = [(["--suite", "--protocol", "learned"], "--suite and --protocol learned are two protocols"),
+             (["--suite", "--seed", "5"], "--seed 5: --suite fixes the test seeds"),
+             (["--protocol", "learned", "--env", "lawn/Comm-v0"], "--env lawn/Comm-v0: --protocol learned runs each"),
+             (["--suite", "--preset", "k3"], "choose tasks with --tasks"),
+             (["--protocol", "learned", "--set", "num_slots=5"], "--protocol learned fixes the scenario"),
+             (["--tasks", "k3"], "--tasks and --docs belong to --suite"),
+             (["--suite", "--policies", "anchor:nope"], "unknown anchor 'nope'")]
+    for flags, message in cases:
+        assert main(["benchmark", *flags, *out]) == 2, flags
+        assert message in capsys.readouterr().err, flags
+
+
+def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
+    from training.cli import main
+
+    out, docs = tmp_path / "suite", tmp_path / "docs"
+    assert main(["benchmark", "--suite", "--tasks", "k3", "--policies", "anchor:stake", "--episodes", "3",
+                 "--workers", "1", "--quiet", "--out", str(out), "--docs", str(docs)]) == 0
+    printed = capsys.readouterr().out
+    assert "1 policies x 1 tasks, 3 seeds each" in printed
+    board = (out / "board.md").read_text()
+    assert board.splitlines()[0] == "| policy | env | k3 | mean over tasks |"
+    assert board.splitlines()[2].startswith("| anchor:stake | lawn/Joint-v0 | ")
+    page = (docs / "LEADERBOARD.md").read_text()
+    assert "This board runs `k3` only (`--tasks`)" in page and board.strip() in page
+    assert "| k3 | lawn/Joint-v0 | 3 |" in (out / "references.md").read_text()
+
+
+def test_dataset_command_and_bc_from_it(datasets_path, tmp_path, capsys):
+    pytest.importorskip("stable_baselines3")
+    from training.cli import main
+
+    assert main(["dataset", "create", "--policy", "epa", "--env", "lawn/Comm-v0", "--episodes", "1", "--seed", "3",
+                 "--dataset-id", "lawn/test/epa-v0", "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "--preset default --dataset lawn/test/epa-v0 --timesteps 120 --out runs/bc-epa-v0 --hp expert=epa" in printed
+    assert main(["dataset", "create", "--policy", "epa", "--env", "lawn/Comm-v0", "--episodes", "1",
+                 "--dataset-id", "epa", "--quiet"]) == 2
+    assert "--dataset-id 'epa': Minari ids have the form" in capsys.readouterr().err
+    common = ["train", "--algo", "bc", "--env", "lawn/Comm-v0", "--dataset", "lawn/test/epa-v0", "--timesteps", "60",
+              "--hp", "epochs=1", "--quiet"]
+    assert main([*common, "--hp", "dagger_iterations=1", "--out", str(tmp_path / "mixed")]) == 2
+    assert "holds episodes of epa, DAgger's expert is rg-mpc" in capsys.readouterr().err
+    assert main([*common, "--hp", "expert=epa", "--hp", "dagger_iterations=1", "--hp", "dagger_timesteps=60",
+                 "--out", str(tmp_path / "clone")]) == 0
+    run = json.loads((tmp_path / "clone" / "run.json").read_text())
+    hp = json.loads((tmp_path / "clone" / "hyperparams.json").read_text())
+    assert hp["expert"] == "epa" and run["dataset"] == {"id": "lawn/test/epa-v0", "episode_seeds": [3]}

@@ -348,7 +348,6 @@ def test_disturbance_mode_lockstep_with_the_single_env(env_id, interface, monkey
     both see the same draws (the single env's, in the order it draws them)."""
 
     config = lawn_env.presets.get("disturbed").override({"num_slots": 20})
-    comm = env_id == "lawn/Comm-v0"
     d = config.disturbance
     envs = _make(env_id=env_id, config=config, interface=interface)
     names = list(envs.unwrapped.sim.noise_shapes())

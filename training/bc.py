@@ -154,10 +154,11 @@ def fit(model: Any, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_siz
 
 
 def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, steps: int, interface: InterfaceLike
-                        ) -> tuple[np.ndarray, np.ndarray, list[float], list]:
+                        ) -> tuple[np.ndarray, np.ndarray, list[float], list, str | None]:
     """The first ``steps`` transitions of a Minari dataset (``lawn dataset create``) as
-    behaviour-cloning pairs (:func:`label_transitions`), with the costs of its whole episodes and
-    their seeds. The dataset must hold episodes of ``env_id`` with ``config``."""
+    behaviour-cloning pairs (:func:`label_transitions`), with the control costs and seeds of the
+    episodes they come from and the policy that recorded them (the dataset's ``algorithm_name``).
+    The dataset must hold episodes of ``env_id`` with ``config``."""
     from .datasets import dataset_task, episodes_of, load_dataset
 
     dataset = load_dataset(dataset_id)
@@ -167,16 +168,16 @@ def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, st
     if resolve_config(recorded_config) != config:
         raise ValueError(f"--dataset {dataset_id!r} was recorded with config {recorded_config!r}, not this run's "
                          "scenario: pass the same --preset/--set")
-    chosen, seeds, left = [], [], steps
-    for seed, obs, actions in episodes_of(dataset):
+    chosen, seeds, costs, left = [], [], [], steps
+    for (seed, obs, actions), episode in zip(episodes_of(dataset), dataset.iterate_episodes()):
         if left <= 0:
             break
         chosen.append((obs[:left], actions[:left]))
         seeds.append(seed)
+        costs.append(float(np.sum(episode.infos["stage_cost"][1:])))
         left -= len(actions)
-    costs = [float(np.sum(ep.infos["stage_cost"][1:])) for ep in dataset.iterate_episodes()]
     obs, labels = label_transitions(config, env_id, interface, chosen)
-    return obs, labels, costs, seeds
+    return obs, labels, costs, seeds, dataset.storage.metadata.get("algorithm_name")
 
 
 def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int, out_dir: Path,
@@ -219,8 +220,13 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     episode_seed = TRAIN_SEED_BASE + 1000 * seed  # expert episodes never use test or validation seeds
     if dataset is None:
         obs, actions, expert_costs = collect(env_id, config, expert, timesteps, episode_seed, interface)
-    else:  # the dataset's episodes are the expert data; DAgger rounds still ask the expert live
-        obs, actions, expert_costs, dataset_seeds = dataset_transitions(dataset, env_id, config, timesteps, interface)
+    else:  # the dataset's episodes are the expert data; DAgger rounds ask the same policy live
+        obs, actions, expert_costs, dataset_seeds, recorded = dataset_transitions(dataset, env_id, config, timesteps,
+                                                                                  interface)
+        if dagger_iterations and recorded != expert:  # relabelling by another policy would mix two experts
+            raise ValueError(f"--dataset {dataset!r} holds episodes of {recorded}, DAgger's expert is {expert}: "
+                             f"pass --hp expert={recorded} or --hp dagger_iterations=0")
+        expert = recorded or "unrecorded"  # the policy whose actions are cloned
     venv = VecNormalize(DummyVecEnv([lambda: gym.make(env_id, config=config, interface=interface)]),
                         norm_reward=False)
     venv.obs_rms = RunningMeanStd(shape=obs.shape[1:])

@@ -88,16 +88,19 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from .score import SCORE_HIGH, SCORE_LOW, scores_by_policy
 
     seeds = [args.seed + i for i in range(args.episodes)]
-    references = [] if args.no_score else [p for p in (SCORE_HIGH, SCORE_LOW) if p != args.policy]
+    # a reference run with --policy-arg is another policy under the reference's name: no score for it
+    scored = not args.no_score and not (kwargs and args.policy in (SCORE_HIGH, SCORE_LOW))
+    references = [p for p in (SCORE_HIGH, SCORE_LOW) if p != args.policy] if scored else []
     tasks = [(name, args.env, cfg, s, kwargs if name == args.policy else {}) for name in [args.policy, *references]
              for s in seeds]
     rows = evaluate(tasks, workers=args.workers, progress=not args.quiet, desc=args.policy)
     mine = [r for r in rows if r["policy"] == args.policy]
     write_rows(mine, out)
-    scores = None if args.no_score else {
+    scores = None if not scored else {
         p: score for (_, _, p), score in scores_by_policy(rows).items() if p == args.policy}
-    print(f"lawn evaluate: {args.policy} on {args.env}, {args.episodes} episodes from seed {args.seed}"
-          + ("" if args.no_score else f" (score: {SCORE_LOW} and {SCORE_HIGH} on the same seeds)"))
+    note = f" (score: {SCORE_LOW} and {SCORE_HIGH} on the same seeds)" if scored else \
+        "" if args.no_score else f" (no score: --policy-arg changes the reference {args.policy} itself)"
+    print(f"lawn evaluate: {args.policy} on {args.env}, {args.episodes} episodes from seed {args.seed}{note}")
     print(format_table(summarize(mine), scores=scores))
     print(f"wrote {len(mine)} rows to {out}")
     return 0
@@ -112,6 +115,8 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
         return _benchmark_protocol(args)
     if args.tasks or args.docs:
         raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
+    args.env = args.env or "lawn/Joint-v0"
+    args.seed = 0 if args.seed is None else args.seed
     cfg = _config(args)
     args.policies = list(args.policies or BENCHMARK_POLICIES) + _included(args.include)
     for name in args.policies:
@@ -138,9 +143,19 @@ def _benchmark_protocol(args: argparse.Namespace) -> int:
     )
     from .protocol import TEST_EPISODES
 
+    mode = "--suite" if args.suite else "--protocol learned"
+    if args.suite and args.protocol == "learned":
+        raise ValueError("--suite and --protocol learned are two protocols: give one (the suite already runs the "
+                         "shipped agents on the 100 test seeds of every task)")
     if args.preset != "default" or args.set:
-        raise ValueError("--protocol learned and --suite fix the scenario (the suite's tasks are presets): "
-                         "drop --preset/--set, or use --tasks")
+        hint = "choose tasks with --tasks" if args.suite else "it runs the default task; --suite runs the other tasks"
+        raise ValueError(f"{mode} fixes the scenario: drop --preset {args.preset} / --set ({hint})")
+    if args.seed is not None:
+        raise ValueError(f"--seed {args.seed}: {mode} fixes the test seeds (0 to --episodes - 1; validation and "
+                         "training seeds are disjoint from them)")
+    if args.env is not None:
+        raise ValueError(f"--env {args.env}: {mode} runs each policy on its own env (a learned agent on the env it "
+                         "was trained on, experts, baselines and anchors on lawn/Joint-v0)")
     episodes = args.episodes or TEST_EPISODES
     extra = _included(args.include)
     out = Path(args.out)
@@ -161,7 +176,7 @@ def _benchmark_protocol(args: argparse.Namespace) -> int:
         (out / "references.md").write_text(refs + "\n")
         print(f"wrote {out}/episodes.csv, board.md (the scores) and references.md (the references' costs)")
         if args.docs:
-            print(f"wrote {write_leaderboard(Path(args.docs) / 'LEADERBOARD.md', board, refs, skipped, episodes, seconds, args.workers)}")
+            print(f"wrote {write_leaderboard(Path(args.docs) / 'LEADERBOARD.md', board, refs, skipped, episodes, seconds, args.workers, tasks)}")
         return 0
     if args.tasks or args.docs:
         raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
@@ -288,8 +303,10 @@ def cmd_dataset(args: argparse.Namespace) -> int:
     steps = int(dataset.total_steps)
     print(f"lawn dataset create: {args.dataset_id}: {args.episodes} episodes (seeds {args.seed}-"
           f"{args.seed + args.episodes - 1}) of {args.policy} on {args.env}, task {args.task}, {steps} steps")
+    run = "".join(c if c.isalnum() or c in "-_." else "-" for c in args.dataset_id.rsplit("/", 1)[-1])
     print(f"load it with minari.load_dataset({args.dataset_id!r}); clone it with lawn train --algo bc --env {args.env} "
-          f"--dataset {args.dataset_id} --timesteps {steps} --out runs/bc-{args.policy.replace(':', '-')}")
+          f"--preset {args.task} --dataset {args.dataset_id} --timesteps {steps} --out runs/bc-{run}"
+          + ("" if args.policy == "rg-mpc" else f" --hp expert={args.policy} (DAgger relabels with the same policy)"))
     return 0
 
 
@@ -407,7 +424,8 @@ def build_parser() -> argparse.ArgumentParser:
     bm.add_argument("--policies", nargs="+", default=None, type=_policy_name,
                     help=f"{', '.join(policy_names())}, or {learned_name_forms(' / ')} (default: "
                          f"{' '.join(BENCHMARK_POLICIES)}; with --protocol learned every shipped agent with its "
-                         "anchor and the references; with --suite every expert, baseline, anchor and shipped agent)")
+                         "anchor and the references; with --suite every expert, baseline, shipped agent and the "
+                         "stake and distance anchors)")
     bm.add_argument("--protocol", choices=["paper", "learned"], default="paper",
                     help="paper (default): the policies on --episodes seeds of one scenario; learned: agents "
                          "beside rg-mpc, epa and their own anchors on the 100 test seeds, with the normalized score")
@@ -416,12 +434,15 @@ def build_parser() -> argparse.ArgumentParser:
     bm.add_argument("--tasks", nargs="+", default=None, choices=presets.names(), metavar="TASK",
                     help="--suite: only these tasks (presets)")
     bm.add_argument("--docs", default=None, metavar="DIR", help="--suite: also write DIR/LEADERBOARD.md")
-    bm.add_argument("--env", default="lawn/Joint-v0", choices=list(lawn_env.ENV_IDS))
+    bm.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
+                    help="the env of every policy (default: lawn/Joint-v0; --protocol learned and --suite run each "
+                         "policy on its own env)")
     bm.add_argument("--include", nargs="*", default=[], metavar="DIR",
                     help="trained run directories (lawn train) to add to the comparison")
     bm.add_argument("--episodes", type=_COUNT, default=None,
                     help="seeds from --seed (default: 20; 100 test seeds for --protocol learned and --suite)")
-    bm.add_argument("--seed", type=_SEED, default=0)
+    bm.add_argument("--seed", type=_SEED, default=None,
+                    help="first seed (default: 0; --protocol learned and --suite fix the test seeds 0..N-1)")
     bm.add_argument("--out", default="runs/benchmark", help="output directory (default: %(default)s)")
     bm.add_argument("--workers", type=_COUNT, default=workers_default, help="processes (default: %(default)s)")
     bm.add_argument("--quiet", action="store_true", help="no progress bar")

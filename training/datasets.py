@@ -12,7 +12,7 @@ per step; the first info of an episode is the reset's). The env is made from a p
 (steps 1..T) is the episode's control cost, which ``lawn evaluate`` reports for that seed.
 
 Behaviour cloning trains from such a dataset (``lawn train --algo bc --dataset ID``,
-:func:`transitions`). ``minari`` is in the ``data`` extra (``pip install -e '.[data]'``).
+:func:`training.bc.dataset_transitions`). ``minari`` is in the ``data`` extra (``pip install -e '.[data]'``).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from .provenance import provenance
 if TYPE_CHECKING:
     import minari
 
-__all__ = ["create_dataset", "load_dataset", "episodes_of", "dataset_task", "DATA_EXTRA"]
+__all__ = ["create_dataset", "check_dataset_id", "load_dataset", "episodes_of", "dataset_task", "DATA_EXTRA"]
 
 DATA_EXTRA = "datasets need the data extra (minari): pip install -e '.[data]' (bash scripts/setup.sh full installs it)"
 #: Policies act on these envs; the RL ids reshape the reward and end episodes early.
@@ -62,6 +62,19 @@ def _step_data_callback():
     return LawnStepData
 
 
+def check_dataset_id(dataset_id: str) -> None:
+    """ValueError naming ``--dataset-id`` unless the id has Minari's form ``(NAMESPACE/)NAME-vN``."""
+    from minari.utils import parse_dataset_id
+
+    try:
+        _, name, version = parse_dataset_id(dataset_id)
+    except (ValueError, TypeError):
+        name, version = None, None
+    if not name or version is None:
+        raise ValueError(f"--dataset-id {dataset_id!r}: Minari ids have the form NAMESPACE/NAME-vN (the namespace "
+                         "optional), e.g. lawn/comm/rg-mpc-v0")
+
+
 def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_id: str, task: str = "default",
                    progress: bool = True, description: str | None = None) -> "minari.MinariDataset":
     """Record ``episodes`` seeded episodes of ``policy`` on ``env_id`` (the scenario of preset ``task``)
@@ -77,6 +90,7 @@ def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_i
         raise ValueError(f"episodes={episodes}: must be >= 1")
     if seed < 0:
         raise ValueError(f"seed={seed}: must be >= 0")
+    check_dataset_id(dataset_id)
     config = presets.get(task)
     agent = make_policy(policy, config, env_id=env_id)  # fails fast on a bad name or a mismatched agent
     if dataset_id in minari.list_local_datasets():

@@ -10,14 +10,13 @@ the paired relative difference against ``rg-mpc`` and against the agent's own an
 learning adds is the last column.
 
 **Task suite** (``lawn benchmark --suite``, docs/LEADERBOARD.md): the presets of
-:data:`lawn_env.presets.SUITE`, every expert, baseline, anchor and shipped agent on each, scored
-against the references of the same task and env. Agents trained on the default task are run on
+:data:`lawn_env.presets.SUITE`, every expert, baseline, shipped agent and the stake and distance
+anchors on each, scored against the references of the same task and env. Agents trained on the default task are run on
 every task; where one cannot act (its network was built for K = 4) the table says so.
 """
 
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -26,7 +25,7 @@ import numpy as np
 
 from agents import make_policy
 from agents.anchors import anchor_name
-from agents.base import COMM, JOINT
+from agents.base import JOINT
 from agents.errors import MissingExtra
 from agents.learned import zoo_agents
 from agents.runs import read_run
@@ -37,7 +36,7 @@ from .protocol import TEST_EPISODES
 from .score import SCORE_HIGH, SCORE_LOW, SCORE_VERSION, format_score, scores_by_policy
 from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci, paired_difference
 
-__all__ = ["own_anchor", "policy_env", "costs_of", "learned_entries", "run_entries", "learned_table", "run_learned_protocol",
+__all__ = ["own_anchor", "policy_env", "costs_of", "paired", "protocol_cells", "learned_entries", "run_entries", "learned_table", "run_learned_protocol",
            "SUITE_POLICIES", "suite_policies", "run_suite", "suite_table", "skipped_summary", "write_leaderboard"]
 
 #: Rows without a per-slot trace keep the saved tables small (100 seeds x many agents).
@@ -74,7 +73,7 @@ def learned_entries(agents: Sequence[str], envs: Sequence[str] | None = None) ->
     """(policy, env) pairs of the learned protocol: per env, the two references, the anchors the
     env's agents act around, then the agents."""
     by_env: dict[str, list[str]] = {env: [] for env in (envs or ())}
-    for agent in agents:
+    for agent in dict.fromkeys(agents):  # a repeated agent is one row
         by_env.setdefault(policy_env(agent), []).append(agent)
     out: list[tuple[str, str]] = []
     for env, members in by_env.items():
@@ -97,8 +96,33 @@ def run_entries(entries: Sequence[tuple[str, str]], config: ScenarioConfig, seed
 
 
 def costs_of(rows: Sequence[Mapping], policy: str, env: str, task: str | None = None) -> dict[int, float]:
+    """Control cost per seed of ``policy`` on ``env`` (and ``task``, when given) in evaluation rows."""
     return {int(r["seed"]): float(r["control_cost"]) for r in rows
             if r["policy"] == policy and r["env"] == env and (task is None or r.get("task", "default") == task)}
+
+
+def paired(rows: Sequence[Mapping], policy: str, reference: str, env: str) -> tuple[float, float]:
+    """Mean per-seed relative difference of ``policy``'s cost against ``reference``'s and its 95 % half-width."""
+    mean, half, _ = paired_difference(costs_of(rows, policy, env), costs_of(rows, reference, env))
+    return mean, half
+
+
+def protocol_cells(rows: Sequence[Mapping], scores: Mapping, policy: str, env: str) -> dict[str, str]:
+    """The cells every learned-protocol table shows for ``policy`` on ``env``: its anchor, control
+    cost, score, paired difference against rg-mpc and against its own anchor, and its worst seed
+    against the anchor."""
+    cost = costs_of(rows, policy, env)
+    mean, half = mean_ci(cost.values())
+    anchor = own_anchor(policy)
+    cells = {"anchor": anchor or "–", "cost": f"{fmt_num(mean)} ± {fmt_num(half)}",
+             "score": format_score(scores.get(("default", env, policy))),
+             "vs_ref": "–" if policy == SCORE_HIGH else fmt_paired(*paired(rows, policy, SCORE_HIGH, env)),
+             "vs_anchor": "–", "worst": "–"}
+    if anchor is not None:
+        base = costs_of(rows, anchor, env)
+        cells["vs_anchor"] = fmt_paired(*paired(rows, policy, anchor, env))
+        cells["worst"] = fmt_pct(max((cost[s] - base[s]) / base[s] for s in cost if s in base))
+    return cells
 
 
 def learned_table(rows: Sequence[Mapping], entries: Sequence[tuple[str, str]],
@@ -109,19 +133,10 @@ def learned_table(rows: Sequence[Mapping], entries: Sequence[tuple[str, str]],
     lines = [f"| policy | env | acts around | control cost | score v{SCORE_VERSION} [95 %] | vs rg-mpc (paired) "
              f"| vs own anchor (paired) | worst seed vs own anchor |", "|" + "---|" * 8]
     for policy, env in entries:
-        cost = costs_of(rows, policy, env)
-        mean, half = mean_ci(cost.values())
-        anchor = own_anchor(policy)
-        vs_ref = "–" if policy == SCORE_HIGH else fmt_paired(*paired_difference(cost, costs_of(rows, SCORE_HIGH, env))[:2])
-        if anchor is None:
-            vs_anchor = worst = "–"
-        else:
-            base = costs_of(rows, anchor, env)
-            vs_anchor = fmt_paired(*paired_difference(cost, base)[:2])
-            worst = f"{max((cost[s] - base[s]) / base[s] for s in cost if s in base) * 100:+.1f} %"
+        c = protocol_cells(rows, scores, policy, env)
         name = (labels or {}).get(policy, policy)
-        lines.append(f"| {name} | {env} | {anchor or '–'} | {fmt_num(mean)} ± {fmt_num(half)} "
-                     f"| {format_score(scores.get(('default', env, policy)))} | {vs_ref} | {vs_anchor} | {worst} |")
+        lines.append(f"| {name} | {env} | {c['anchor']} | {c['cost']} | {c['score']} | {c['vs_ref']} "
+                     f"| {c['vs_anchor']} | {c['worst']} |")
     lines += ["", f"{seeds} test seeds; score v{SCORE_VERSION}: 0 = {SCORE_LOW}, 100 = {SCORE_HIGH} "
               "(training/score.py); paired columns: mean per-seed relative difference in control cost and its "
               "95 % t-interval."]
@@ -134,8 +149,11 @@ def run_learned_protocol(agents: Sequence[str], out_dir: Path, episodes: int = T
     ``episodes.csv`` and ``summary.md`` into ``out_dir`` and returns the table with its runtime."""
     start = time.perf_counter()
     agents = list(agents) or [f"zoo:{n}" for n in zoo_agents()]
-    entries = learned_entries(agents, envs=() if agents else (COMM, JOINT))
-    rows = run_entries(entries, config or ScenarioConfig(), range(episodes), workers, progress, desc="learned protocol")
+    config = config or ScenarioConfig()
+    entries = learned_entries(agents)
+    for policy, env in entries:
+        make_policy(policy, config, env_id=env)  # a bad name or a mismatched agent fails before any episode
+    rows = run_entries(entries, config, range(episodes), workers, progress, desc="learned protocol")
     table = learned_table(rows, entries) + f" Runtime {time.perf_counter() - start:.0f} s with {workers} workers."
     out_dir = Path(out_dir)
     write_rows(rows, out_dir / "episodes.csv")
@@ -149,12 +167,14 @@ SUITE_POLICIES = ("rg-mpc", "ao-mpc", "epa", "sf", "pid", "lqr", "heuristic", "a
 
 
 def suite_policies() -> list[str]:
-    """Every expert, baseline and anchor of :data:`SUITE_POLICIES` and every shipped agent."""
+    """The experts, baselines and anchors of :data:`SUITE_POLICIES` (``anchor:hover`` left out: its
+    cost is thousands of times rg-mpc's) and every shipped agent."""
     return list(SUITE_POLICIES) + [f"zoo:{n}" for n in zoo_agents()]
 
 
 def _applicable(policy: str, env: str, config: ScenarioConfig) -> str | None:
-    """None when ``policy`` can act on ``env`` with ``config``, else why not (one line)."""
+    """None when ``policy`` can act on ``env`` with ``config``, else why not (one line). Names are
+    checked on the default task first (by the caller), so a typo is an error, not an n/a."""
     try:
         make_policy(policy, config, env_id=env)
     except (ValueError, MissingExtra) as exc:  # a network built for another K; torch not installed
@@ -168,7 +188,10 @@ def run_suite(policies: Sequence[str], tasks: Sequence[str], episodes: int, out_
     writes ``episodes.csv``. Returns the rows, the (task, policy) pairs that cannot run with the
     reason, and the wall time."""
     start = time.perf_counter()
+    policies = list(dict.fromkeys(policies))
     envs = {p: policy_env(p) for p in policies}
+    for p in policies:  # unknown names and agents that cannot act on the default task are errors
+        make_policy(p, ScenarioConfig(), env_id=envs[p])
     rows: list[dict] = []
     skipped: dict[tuple[str, str], str] = {}
     for task in tasks:
@@ -196,7 +219,7 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
         for task in tasks:
             score = scores.get((task, env, p))
             if (task, p) in skipped or score is None:
-                cells.append("n/a")
+                cells.append("n/a" if (task, p) in skipped else "–")
                 continue
             cells.append(format_score(score))
             means.append(score[0])
@@ -228,18 +251,20 @@ def skipped_summary(skipped: Mapping[tuple[str, str], str]) -> list[str]:
 
 
 def write_leaderboard(path: Path, board: str, refs: str, skipped: Mapping[tuple[str, str], str], episodes: int,
-                      seconds: float, workers: int) -> Path:
-    """docs/LEADERBOARD.md: the protocol, the board, the references, what could not run."""
+                      seconds: float, workers: int, tasks: Sequence[str] = presets.SUITE) -> Path:
+    """docs/LEADERBOARD.md: the protocol, the board over ``tasks``, the references, what could not run."""
     from .provenance import provenance
 
     reasons = skipped_summary(skipped)
+    subset = "" if list(tasks) == list(presets.SUITE) else \
+        f" This board runs {', '.join(f'`{t}`' for t in tasks)} only (`--tasks`)."
     tasks = ", ".join(f"`{t}`" for t in presets.SUITE)
     text = f"""# Leaderboard: the task suite
 
 Generated by `lawn benchmark --suite --docs docs` (`bash scripts/refresh_docs.sh --only suite`) at
 {provenance()}, in {seconds / 60:.1f} min with {workers} workers.
 
-Suite v{presets.SUITE_VERSION} (`lawn_env.presets.SUITE`): {tasks}; each task is a preset,
+Suite v{presets.SUITE_VERSION} (`lawn_env.presets.SUITE`): {tasks};{subset} each task is a preset,
 `gym.make("lawn/Comm-v0", config="k8")` runs it. Every policy plays full 120-slot episodes of
 the unmodified scenario on the test seeds 0-{episodes - 1} of every task; learned agents were
 trained on `default` only, so the other tasks measure how they generalize.
@@ -252,7 +277,8 @@ seeds. Experts, baselines and anchors act on `lawn/Joint-v0`; each learned agent
 
 {board}
 
-n/a: the policy cannot act on the task{': ' + '; '.join(reasons) + '.' if reasons else '.'}
+n/a: the policy cannot act on the task{': ' + '; '.join(reasons) + '.' if reasons else '.'} –: no score
+(the references do not separate on that task's seeds, training/score.py).
 
 The references, per task and env (mean control cost ± 95 % interval):
 

@@ -27,10 +27,10 @@ from lawn_env import ScenarioConfig
 
 from .bc import VALIDATION_EPISODES as BC_VALIDATION_EPISODES
 from .evaluate import evaluate, pool_map, write_rows
-from .leaderboard import costs_of, learned_entries, own_anchor, run_entries
+from .leaderboard import costs_of, learned_entries, own_anchor, paired, protocol_cells, run_entries
 from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve
 from .score import SCORE_HIGH, SCORE_VERSION, format_score, scores_by_policy
-from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci, paired_difference
+from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci
 from .train import train_task
 
 __all__ = ["Recipe", "RECIPES", "train_recipes", "build_zoo", "format_zoo_list"]
@@ -156,7 +156,7 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
                 continue
             validation = [_best_validation(d) for d in dirs]
             chosen = dirs[int(np.argmin(validation))]
-            gains = [_paired(rows, run[d].policy_name, own_anchor(run[d].policy_name), env) for d in dirs]
+            gains = [paired(rows, run[d].policy_name, own_anchor(run[d].policy_name), env) for d in dirs]
             across = mean_ci(g[0] for g in gains)
             for d, best, gain in zip(dirs, validation, gains):
                 spec = run[d].record
@@ -167,7 +167,7 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
                 per_run.append(f"| `{r.name}`{' (shipped)' if d == chosen else ''} | {spec['seed']} | {own_anchor(policy)} "
                                f"| {fmt_num(best)} ({spec.get('eval_episodes', BC_VALIDATION_EPISODES)}) "
                                f"| {format_score(scores.get(('default', env, policy)))} "
-                               f"| {fmt_paired(*_paired(rows, policy, SCORE_HIGH, env))} | {fmt_paired(*gain)} "
+                               f"| {fmt_paired(*paired(rows, policy, SCORE_HIGH, env))} | {fmt_paired(*gain)} "
                                f"| {fmt_pct(worst)} | {spec['wall_time_s']:.0f} s |")
             specs = [run[d].record for d in dirs]
             algo = r.algo.upper() if r.algo != "bc" else "BC"
@@ -191,19 +191,11 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
     return text
 
 
-def _paired(rows, policy: str, reference: str, env: str) -> tuple[float, float]:
-    mean, half, _ = paired_difference(costs_of(rows, policy, env), costs_of(rows, reference, env))
-    return mean, half
-
-
 def _row(rows, scores, policy: str, env: str, label: str, how: str, across: str) -> str:
     """One row of the recipe table: an expert, an anchor or a recipe's shipped run."""
-    cost = mean_ci(costs_of(rows, policy, env).values())
-    anchor = own_anchor(policy)
-    vs_ref = "–" if policy == SCORE_HIGH else fmt_paired(*_paired(rows, policy, SCORE_HIGH, env))
-    vs_anchor = "–" if anchor is None else fmt_paired(*_paired(rows, policy, anchor, env))
-    return (f"| {label} | {env} | {how} | {anchor or '–'} | {fmt_num(cost[0])} ± {fmt_num(cost[1])} "
-            f"| {format_score(scores.get(('default', env, policy)))} | {vs_ref} | {vs_anchor} | {across} |")
+    c = protocol_cells(rows, scores, policy, env)
+    return (f"| {label} | {env} | {how} | {c['anchor']} | {c['cost']} | {c['score']} | {c['vs_ref']} "
+            f"| {c['vs_anchor']} | {across} |")
 
 
 def _plot_curves(found, reference: dict[str, float], path: Path) -> None:
@@ -248,8 +240,8 @@ def _export(r: Recipe, chosen: Path, specs, rows, scores, env: str, episodes: in
         "wall_time_s": [round(s["wall_time_s"], 1) for s in specs],
         "benchmark": {"test_seeds": f"0-{episodes - 1}", "reference": SCORE_HIGH, "anchor": anchor,
                       "score_version": SCORE_VERSION, "score": list(scores[("default", env, policy)][:3]),
-                      "shipped_vs_reference": list(_paired(rows, policy, SCORE_HIGH, env)),
-                      "shipped_vs_anchor": list(_paired(rows, policy, anchor, env)),
+                      "shipped_vs_reference": list(paired(rows, policy, SCORE_HIGH, env)),
+                      "shipped_vs_anchor": list(paired(rows, policy, anchor, env)),
                       "across_training_seeds_vs_anchor": list(across)},
     }
     target = ZOO_DIR / r.name
