@@ -7,5 +7,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh full
 runs="${1:-runs/agents}"
-.venv/bin/lawn zoo train --runs "$runs" --workers 3 --quiet
+.venv/bin/lawn zoo train --runs "$runs" --workers 2 --quiet
 .venv/bin/lawn zoo build --runs "$runs" --quiet

@@ -135,7 +135,7 @@ def test_resume_extends_finished_runs_only_when_asked_and_restarts_runs_without_
     assert latest_checkpoint(early) is None
     summary = resume(early, progress=False)
     assert summary["resumed_from"] is None and run_steps(early) == 256
-    assert _history(early)[:3] == (256, 2 * 2, [128, 256])  # 2 rollouts of 2 x 64 steps, 2 epochs each
+    assert _history(early)[:3] == (256, 2 * 2, [0, 128, 256])  # 2 rollouts of 2 x 64 steps, 2 epochs each
     # a damaged run directory names the file
     (early / "hyperparams.json").unlink()
     (early / "run.json").write_text(json.dumps({**json.loads((early / "run.json").read_text()), "num_timesteps": 0}))
@@ -209,14 +209,27 @@ def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_
     from training.evaluate import episode_row
     from training.train import VALIDATION_SEED_BASE
 
+    from training.protocol import read_learning_curve
+    from training.tables import paired_difference
+
     out, summary = _train(tmp_path, "ppo", "lawn/Comm-v0", steps=256, name="rl")
-    curve = (out / "learning_curve.csv").read_text().splitlines()
-    assert curve[0] == "timesteps,control_cost,control_cost_ci95" and len(curve) == 3  # at 128 and 256 steps
-    assert summary["best_validation_cost"] == min(float(line.split(",")[1]) for line in curve[1:])
+    curve = read_learning_curve(out)
+    header = (out / "learning_curve.csv").read_text().splitlines()[0]
+    assert header == "timesteps,control_cost,control_cost_ci95,vs_reference,vs_reference_ci95"
+    assert [r["timesteps"] for r in curve] == [0, 128, 256]  # the starting policy is validated too
+    # model selection minimizes the paired difference against rg-mpc on the same validation seeds
+    best = min(curve, key=lambda r: r["vs_reference"])
+    assert summary["best_validation_vs_reference"] == best["vs_reference"]
+    assert summary["best_validation_cost"] == best["control_cost"]
     policy = make_policy(f"sb3:{out}")
     assert policy.interface.action_scheme == "anchored" and policy.env_id == "lawn/Comm-v0"
-    row = episode_row(policy, "lawn/Comm-v0", SMALL, seed=VALIDATION_SEED_BASE)
-    assert row["slots"] == SMALL.num_slots  # no termination on the unmodified scenario
+    seeds = [VALIDATION_SEED_BASE]  # _train validates on one episode
+    rows = {s: episode_row(policy, "lawn/Comm-v0", SMALL, seed=s) for s in seeds}
+    assert all(r["slots"] == SMALL.num_slots for r in rows.values())  # no termination on the unmodified scenario
+    reference = {s: episode_row(make_policy("rg-mpc", SMALL, env_id="lawn/Comm-v0"), "lawn/Comm-v0", SMALL, s)
+                 ["control_cost"] for s in seeds}
+    selected = paired_difference({s: r["control_cost"] for s, r in rows.items()}, reference)[0]
+    assert best["vs_reference"] == pytest.approx(selected, rel=1e-9)  # sb3:DIR plays the selected model
 
 
 def test_plain_v0_interface_on_request(tmp_path):

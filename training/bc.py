@@ -34,8 +34,9 @@ from lawn_env.spaces import check_action
 
 __all__ = ["collect", "label_transitions", "fit", "train_bc_run", "BC_TARGETS", "VALIDATION_EPISODES"]
 
-#: Validation episodes of a cloned policy (one validation, after the fit).
-VALIDATION_EPISODES = 5
+#: Validation episodes of a cloned policy (one validation, after the fit; they select the shipped
+#: seed of a recipe, so as many as the PPO recipes').
+VALIDATION_EPISODES = 20
 
 #: The algorithms whose policy network behaviour cloning fits (the ``target`` hyperparameter).
 BC_TARGETS = ("ppo", "sac")
@@ -189,6 +190,7 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     from .protocol import (
         TRAIN_SEED_BASE,
         VALIDATION_SEED_BASE,
+        append_learning_curve,
         limit_torch_threads,
         versions,
         write_learning_curve,
@@ -265,8 +267,8 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     validation = ControlCostValidation(env_id, config, interface.to_dict(), episodes=VALIDATION_EPISODES, every=1,
                                        out_dir=out_dir, seed_base=VALIDATION_SEED_BASE)
     validation.model = model
-    mean, half = validation.validate()
-    (out_dir / "learning_curve.csv").write_text(f"timesteps,control_cost,control_cost_ci95\n{len(obs)},{mean},{half}\n")
+    (out_dir / "learning_curve.csv").unlink(missing_ok=True)
+    append_learning_curve(out_dir, len(obs), validation.validate())
     summary = write_learning_curve(out_dir, spec)
     summary.update(bc_loss_first=history[0]["losses"][0], bc_loss_last=history[-1]["losses"][-1])
     venv.close()

@@ -14,8 +14,7 @@ from lawn_env.interface import InterfaceLike
 
 from .checkpoints import write_checkpoint
 from .evaluate import episode_row
-from .protocol import append_learning_curve, read_learning_curve
-from .tables import mean_ci
+from .protocol import append_learning_curve, read_learning_curve, selection_key, validation_reference, validation_row
 
 __all__ = ["ControlCostValidation", "RunCheckpoint", "ActorWarmup"]
 
@@ -29,22 +28,28 @@ def _next_mark(steps: int, every: int) -> int:
 class ControlCostValidation(BaseCallback):
     """Every ``every`` environment steps, run the current policy (deterministic, through the same wrapper as
     ``sb3:DIR``) on ``episodes`` full episodes of the unmodified scenario with the validation
-    seeds ``seed_base + i``; append the mean realized control cost to ``learning_curve.csv`` and
-    keep the model with the lowest one as ``best_model.zip`` (+ ``best_vecnormalize.pkl``)."""
+    seeds ``seed_base + i``; append the mean realized control cost and the paired relative
+    difference against ``rg-mpc`` on the same seeds to ``learning_curve.csv``, and keep the model
+    with the lowest paired difference (:func:`~training.protocol.selection_key`) as
+    ``best_model.zip`` (+ ``best_vecnormalize.pkl``). A fresh run is validated before its first
+    step too, so selection can keep the starting policy (the clone a fine-tuning run starts from)
+    when training never beats it."""
 
     def __init__(self, env_id: str, config: ScenarioConfig, interface: InterfaceLike, episodes: int, every: int,
                  out_dir: Path, seed_base: int):
         super().__init__(verbose=0)
         self.env_id, self.config, self.interface = env_id, config, interface
         self.episodes, self.every, self.out_dir, self.seed_base = episodes, every, Path(out_dir), seed_base
-        self.best = float("inf")
         self._last = -1
         self._next = every
+        self._reference: dict[int, float] | None = None
         rows = read_learning_curve(self.out_dir)  # a resumed run: keep its history and its best
-        self.best = min((r["control_cost"] for r in rows), default=float("inf"))
+        self.best = min((selection_key(r) for r in rows), default=float("inf"))
         self._last = max((int(r["timesteps"]) for r in rows), default=-1)
 
     def _on_training_start(self) -> None:
+        if self._last < 0:  # a fresh run validates its starting policy (a clone it fine-tunes, or its anchor)
+            self._record()
         self._next = _next_mark(self.num_timesteps, self.every)
 
     def _policy(self):
@@ -53,12 +58,14 @@ class ControlCostValidation(BaseCallback):
             return MARLPolicy(self.model, self.config, self.interface, normalizer)
         return SB3Policy(self.model, self.config, self.env_id, self.interface, normalizer)
 
-    def validate(self) -> tuple[float, float]:
+    def validate(self) -> dict[str, float]:
+        """The learning-curve columns of the current policy (:func:`~training.protocol.validation_row`)."""
         policy = self._policy()
         env_id = "lawn/Joint-v0" if self.env_id == "lawn/Parallel-v0" else self.env_id
-        costs = [episode_row(policy, env_id, self.config, self.seed_base + i)["control_cost"]
-                 for i in range(self.episodes)]
-        return mean_ci(costs)
+        if self._reference is None:  # rg-mpc on the validation seeds, once per process (deterministic)
+            self._reference = validation_reference(env_id, self.config, self.episodes, self.seed_base)
+        costs = {s: float(episode_row(policy, env_id, self.config, s)["control_cost"]) for s in self._reference}
+        return validation_row(costs, self._reference)
 
     def _on_step(self) -> bool:
         if self.num_timesteps >= self._next:
@@ -72,11 +79,12 @@ class ControlCostValidation(BaseCallback):
 
     def _record(self) -> None:
         self._last = self.num_timesteps
-        mean, half = self.validate()
-        append_learning_curve(self.out_dir, self.num_timesteps, mean, half)
-        self.logger.record("validation/control_cost", mean)
-        if mean < self.best:
-            self.best = mean
+        row = self.validate()
+        append_learning_curve(self.out_dir, self.num_timesteps, row)
+        self.logger.record("validation/control_cost", row["control_cost"])
+        self.logger.record("validation/vs_reference", row["vs_reference"])
+        if selection_key(row) < self.best:
+            self.best = selection_key(row)
             self.model.save(str(self.out_dir / "best_model.zip"))
             venv = self.model.get_vec_normalize_env()
             if venv is not None:

@@ -18,12 +18,15 @@ from typing import Any, Mapping
 import numpy as np
 
 import lawn_env
+from agents import make_policy
 
+from .evaluate import episode_row
 from .provenance import provenance
-from .tables import read_csv
+from .tables import mean_ci, paired_difference, read_csv
 
-__all__ = ["TRAIN_SEED_BASE", "VALIDATION_SEED_BASE", "TEST_EPISODES", "limit_torch_threads", "versions", "read_learning_curve",
-           "append_learning_curve", "write_learning_curve"]
+__all__ = ["TRAIN_SEED_BASE", "VALIDATION_SEED_BASE", "TEST_EPISODES", "VALIDATION_REFERENCE", "CURVE_FIELDS",
+           "limit_torch_threads", "versions", "read_learning_curve", "selection_key", "validation_reference",
+           "validation_row", "append_learning_curve", "write_learning_curve"]
 
 #: Training environments of seed s start at TRAIN_SEED_BASE + 1000 s (disjoint from test seeds 0-19).
 TRAIN_SEED_BASE = 1_000_000
@@ -53,25 +56,56 @@ def versions() -> dict:
             "source": provenance()}
 
 
-#: The columns of ``learning_curve.csv``.
-CURVE_FIELDS = ("timesteps", "control_cost", "control_cost_ci95")
+#: The columns of ``learning_curve.csv``: the mean realized control cost on the validation seeds
+#: and the mean per-seed relative difference against ``rg-mpc`` on the same seeds (paired), each
+#: with its 95 % half-width.
+CURVE_FIELDS = ("timesteps", "control_cost", "control_cost_ci95", "vs_reference", "vs_reference_ci95")
+#: The policy whose costs on the validation seeds pair every validation.
+VALIDATION_REFERENCE = "rg-mpc"
 
 
 def read_learning_curve(run_dir: Path) -> list[dict[str, float]]:
     """The periodic validation of a run (``learning_curve.csv``): rows of :data:`CURVE_FIELDS` as
-    floats, in order (empty before the first validation)."""
+    floats, in order (empty before the first validation; runs made before the paired column
+    have only the first three)."""
     return [{k: float(v) for k, v in r.items()} for r in read_csv(Path(run_dir) / "learning_curve.csv")]
 
 
-def append_learning_curve(run_dir: Path, timesteps: int, mean: float, half: float) -> None:
-    """One validation appended to ``learning_curve.csv`` (its header first on a new file)."""
+def selection_key(row: Mapping[str, float]) -> float:
+    """What model selection minimizes over validations: the paired relative difference against
+    ``rg-mpc`` on the validation seeds. Pairing on the same seeds (the same fading draws) keeps a
+    seed that every policy finds hard from deciding the choice, which the mean cost lets one
+    heavy-tailed episode do. Runs recorded without it fall back to the mean cost."""
+    return float(row["vs_reference"]) if "vs_reference" in row else float(row["control_cost"])
+
+
+def validation_reference(env_id: str, config: Any, episodes: int, seed_base: int = VALIDATION_SEED_BASE
+                         ) -> dict[int, float]:
+    """``rg-mpc``'s control cost on the validation seeds ``seed_base + i`` of ``env_id``."""
+    policy = make_policy(VALIDATION_REFERENCE, config, env_id=env_id)
+    return {seed_base + i: float(episode_row(policy, env_id, config, seed_base + i)["control_cost"])
+            for i in range(episodes)}
+
+
+def validation_row(costs: Mapping[int, float], reference: Mapping[int, float]) -> dict[str, float]:
+    """The learning-curve columns of one validation: mean cost and paired difference against the
+    reference, each with its 95 % half-width."""
+    mean, half = mean_ci(list(costs.values()))
+    diff, diff_half, _ = paired_difference(costs, reference)
+    return {"control_cost": mean, "control_cost_ci95": half, "vs_reference": diff, "vs_reference_ci95": diff_half}
+
+
+def append_learning_curve(run_dir: Path, timesteps: int, row: Mapping[str, float]) -> None:
+    """One validation (:func:`validation_row`) appended to ``learning_curve.csv`` (its header
+    first on a new file; a file of an older run keeps its own columns)."""
     path = Path(run_dir) / "learning_curve.csv"
+    fields = list(CURVE_FIELDS) if not path.exists() else next(csv.reader(path.open()))
     new = not path.exists()
     with path.open("a", newline="") as fh:
-        writer = csv.writer(fh)
+        writer = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
         if new:
-            writer.writerow(CURVE_FIELDS)
-        writer.writerow([timesteps, mean, half])
+            writer.writeheader()
+        writer.writerow({"timesteps": timesteps, **row})
 
 
 def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict:
@@ -80,12 +114,13 @@ def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict:
     rows = read_learning_curve(out_dir)
     if rows:
         _plot_curve(rows, out_dir / "learning_curve.png", f"{spec['algo']} on {spec['env']}, seed {spec['seed']}")
-    best = min(rows, key=lambda r: r["control_cost"]) if rows else None
+    best = min(rows, key=selection_key) if rows else None
     summary = {
         "algo": spec["algo"], "env": spec["env"], "seed": spec["seed"], "timesteps": spec.get("num_timesteps"),
         "wall_time_s": spec.get("wall_time_s"), "interface": spec.get("interface"),
         "final_validation_cost": rows[-1]["control_cost"] if rows else None,
         "best_validation_cost": best["control_cost"] if best else None,
+        "best_validation_vs_reference": best.get("vs_reference") if best else None,
         "best_at_timesteps": int(best["timesteps"]) if best else None,
     }
     lines = [f"# {spec['algo']} on {spec['env']}", ""]
