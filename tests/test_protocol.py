@@ -131,6 +131,17 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     assert (tmp_path / "episodes.csv").exists() and "3 test seeds" in table
 
 
+def test_model_selection_is_paired_against_rg_mpc_on_the_validation_seeds():
+    from training.protocol import selection_key, validation_row
+
+    reference = {1: 100.0, 2: 1000.0}  # rg-mpc on two validation seeds, one of them hard
+    a = validation_row({1: 110.0, 2: 1000.0}, reference)  # +10 % on the easy seed: +5 % paired, mean 555
+    b = validation_row({1: 100.0, 2: 1080.0}, reference)  # +8 % on the hard seed: +4 % paired, mean 590
+    assert a["vs_reference"] == pytest.approx(0.05) and b["vs_reference"] == pytest.approx(0.04)
+    assert a["control_cost"] < b["control_cost"] and selection_key(b) < selection_key(a)
+    assert selection_key({"timesteps": 0.0, "control_cost": 3.0, "control_cost_ci95": 1.0}) == 3.0  # older runs
+
+
 # ---------------------------------------------------------------------- the task suite
 def test_suite_tasks_are_presets_with_their_own_scenarios():
     configs = [presets.get(task) for task in presets.SUITE]
@@ -251,7 +262,7 @@ def test_bc_from_a_dataset_is_the_clone_of_live_labelling(datasets_path, tmp_pat
 def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     pytest.importorskip("stable_baselines3")
     from training.train import train
-    from training.zoo import build_zoo
+    from training.zoo import RECIPES, build_zoo
 
     runs = tmp_path / "runs"
     train(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=0,
@@ -263,11 +274,13 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     anchor = own_anchor(f"bc:{runs / 'bc-comm' / 'seed-0'}")  # the hyperparameter file's interface: anchor:stake
     rows = table.splitlines()
     assert "vs own anchor (paired)" in rows[0] and "score v1" in rows[0]
+    label = next(r.label for r in RECIPES if r.name == "bc-comm")
     assert [r.split(" | ")[0] for r in rows[2:6]] == ["| rg-mpc", "| epa", f"| {anchor}",
-                                                      "| BC of rg-mpc (+4 DAgger rounds) (`zoo:bc-comm`, seed 0)"]
+                                                      f"| {label} (`zoo:bc-comm`, seed 0)"]
     assert rows[5].split(" | ")[3] == anchor
     doc = (tmp_path / "docs" / "LEARNED.md").read_text()
     assert f"| `bc-comm` (shipped) | 0 | {anchor} |" in doc and "3 test seeds (0-2)" in doc
+    assert "| selected validation: vs rg-mpc (cost, episodes) |" in doc
     episodes = (tmp_path / "docs" / "learned" / "episodes.csv").read_text()
     assert anchor in episodes and "stage_costs" not in episodes.splitlines()[0]
 

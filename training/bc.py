@@ -32,11 +32,7 @@ from lawn_env.presets import resolve_config
 from lawn_env.interface import ActionLayout, InterfaceLike, resolve_interface
 from lawn_env.spaces import check_action
 
-__all__ = ["collect", "label_transitions", "fit", "train_bc_run", "BC_TARGETS", "VALIDATION_EPISODES"]
-
-#: Validation episodes of a cloned policy (one validation, after the fit; they select the shipped
-#: seed of a recipe, so as many as the PPO recipes').
-VALIDATION_EPISODES = 20
+__all__ = ["collect", "label_transitions", "fit", "train_bc_run", "BC_TARGETS"]
 
 #: The algorithms whose policy network behaviour cloning fits (the ``target`` hyperparameter).
 BC_TARGETS = ("ppo", "sac")
@@ -182,7 +178,9 @@ def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, st
 
 
 def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int, out_dir: Path,
-                 params: Mapping[str, Any], version: int, progress: bool = True, dataset: str | None = None) -> dict:
+                 params: Mapping[str, Any], version: int, progress: bool = True, dataset: str | None = None,
+                 eval_episodes: int = 5) -> dict:
+    """Clone, DAgger, save; one validation of the clone on ``eval_episodes`` validation seeds."""
     from stable_baselines3.common.running_mean_std import RunningMeanStd
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
@@ -256,7 +254,7 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     spec = {"algo": target, "target": target, "trainer": "bc", "env": env_id, "seed": seed, "timesteps": timesteps,
             "interface": interface.to_dict(),
             "num_timesteps": int(len(obs)), "hyperparams_version": version, "wall_time_s": elapsed,
-            "eval_episodes": VALIDATION_EPISODES,
+            "eval_episodes": eval_episodes,
             "expert_mean_control_cost": float(np.mean(expert_costs)) if expert_costs else None,
             "dataset": None if dataset is None else {"id": dataset, "episode_seeds": dataset_seeds},
             "versions": versions()}
@@ -264,7 +262,7 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     (out_dir / "hyperparams.json").write_text(json.dumps(resolved, indent=2))
     (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
     (out_dir / "bc_losses.json").write_text(json.dumps(history, indent=2))
-    validation = ControlCostValidation(env_id, config, interface.to_dict(), episodes=VALIDATION_EPISODES, every=1,
+    validation = ControlCostValidation(env_id, config, interface.to_dict(), episodes=eval_episodes, every=1,
                                        out_dir=out_dir, seed_base=VALIDATION_SEED_BASE)
     validation.model = model
     (out_dir / "learning_curve.csv").unlink(missing_ok=True)

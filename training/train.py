@@ -159,7 +159,7 @@ def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: 
         from .bc import train_bc_run
 
         return train_bc_run(env_id, config, timesteps, seed, out_dir, params, version, progress=progress,
-                            dataset=dataset)
+                            dataset=dataset, eval_episodes=eval_episodes)
     if init_from is not None:
         source = read_run(init_from, "--init-from")
         if source.interface != params.get("interface"):

@@ -25,7 +25,6 @@ from agents.learned import ZOO_DIR, export_agent, zoo_agents
 from agents.runs import read_run
 from lawn_env import ScenarioConfig
 
-from .bc import VALIDATION_EPISODES as BC_VALIDATION_EPISODES
 from .evaluate import evaluate, pool_map, write_rows
 from .leaderboard import costs_of, learned_entries, own_anchor, paired, protocol_cells, run_entries
 from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selection_key
@@ -182,7 +181,7 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
                 cost = costs_of(rows, policy, env)
                 worst = max(cost[s] / anchor_costs[s] - 1.0 for s in cost)
                 per_run.append(f"| `{r.name}`{' (shipped)' if d == chosen else ''} | {spec['seed']} | {own_anchor(policy)} "
-                               f"| {_validation_cell(best, spec.get('eval_episodes', BC_VALIDATION_EPISODES))} "
+                               f"| {_validation_cell(best, spec.get('eval_episodes', '?'))} "
                                f"| {format_score(scores.get(('default', env, policy)))} "
                                f"| {fmt_paired(*paired(rows, policy, SCORE_HIGH, env))} | {fmt_paired(*gain)} "
                                f"| {fmt_pct(worst)} | {spec['wall_time_s']:.0f} s |")
