@@ -10,11 +10,13 @@ zero action on the same seeds, so the benchmark tables carry it as a row of its 
 ``anchor:hover``       the v0 interface's zero action: the drone hovers at its start, equal power
 ``anchor:distance``    the anchored scheme with the distance prior (d_k^2): equal outage on every link
 ``anchor:stake``       the anchored scheme with the stake prior: the RL interface's default
+``anchor:NAME-lqr``    either prior with the LQR baseline's increments under the Joint residual
+                       (``increment_anchor="lqr"``; on Comm-v0 the same as ``anchor:NAME``)
 =====================  ======================================================================
 
-The zero action of the anchored scheme depends on the scheme and the power prior only (the drone
-offset, the power range and the residual scale multiply the action), so these three names cover
-every interface an agent can be trained with (:func:`anchor_name`).
+The zero action of the anchored scheme depends on the scheme, the power prior and the increment
+anchor only (the drone offset, the power range and the residual scale multiply the action), so
+these names cover every interface an agent can be trained with (:func:`anchor_name`).
 """
 
 from __future__ import annotations
@@ -34,6 +36,8 @@ ANCHORS: dict[str, Any] = {
     "hover": None,
     "distance": {"base": "rl", "power_anchor": "distance"},
     "stake": {"base": "rl", "power_anchor": "stake"},
+    "distance-lqr": {"base": "rl", "power_anchor": "distance", "increment_anchor": "lqr"},
+    "stake-lqr": {"base": "rl", "power_anchor": "stake", "increment_anchor": "lqr"},
 }
 
 
@@ -79,11 +83,12 @@ class AnchorPolicy(InterfacePolicy):
 
 def anchor_name(interface: InterfaceLike) -> str:
     """The ``anchor:NAME`` policy that plays the zero action of ``interface`` (an agent's recorded
-    training interface): ``anchor:hover`` for the direct scheme, else the power prior's anchor."""
+    training interface): ``anchor:hover`` for the direct scheme, else the power prior's anchor
+    (``-lqr`` with the LQR increment anchor)."""
     iface = resolve_interface(interface)
     if iface.action_scheme == "direct":
         return "anchor:hover"
-    return f"anchor:{iface.power_anchor}"
+    return f"anchor:{iface.power_anchor}" + ("-lqr" if iface.increment_anchor == "lqr" else "")
 
 
 def load_anchor(name: str, config: Any = None, env_id: str | None = None, seed: int | None = None,

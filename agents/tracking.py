@@ -54,9 +54,8 @@ def pid_rollout(x_aug: np.ndarray, reference: np.ndarray, integral: np.ndarray, 
 
 
 def lqr_gain(model: PredictionModel) -> np.ndarray:
-    """The infinite-horizon gain of the DARE that gives Q3: ``(Q2 + B~'Q3B~)^-1 B~'Q3A~`` (2 x 6)."""
-    b, a, q3 = model.b_aug, model.a_aug, model.q3
-    return np.linalg.solve(model.q2 + b.T @ q3 @ b, b.T @ q3 @ a)
+    """The infinite-horizon LQR gain of the model (:attr:`lawn_env.dynamics.PredictionModel.lqr_gain`), 2 x 6."""
+    return model.lqr_gain
 
 
 def lqr_rollout(x_aug: np.ndarray, reference: np.ndarray, model: PredictionModel, gain: np.ndarray,

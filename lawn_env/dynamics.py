@@ -142,6 +142,13 @@ class PredictionModel:
     def num_inputs(self) -> int:
         return 2 * self.horizon
 
+    @functools.cached_property
+    def lqr_gain(self) -> np.ndarray:
+        """The infinite-horizon gain of the DARE that gives Q3: ``(Q2 + B~'Q3B~)^-1 B~'Q3A~`` (2 x 6):
+        the LQR baseline's (``agents.tracking``) and the RL interface's ``increment_anchor="lqr"``."""
+        b, a, q3 = self.b_aug, self.a_aug, self.q3
+        return np.linalg.solve(self.q2 + b.T @ q3 @ b, b.T @ q3 @ a)
+
     def residual(self, x_aug: np.ndarray, chi_ref: np.ndarray) -> np.ndarray:
         """r = C x~ - chi_ref per AGV: (..., K, 6) and (..., K, N_p+1, 6) -> (..., K, 6(N_p+1)) (one
         2-D product over all leading axes: numpy's stacked (B, K, 6) @ (6, m) is several times slower)."""

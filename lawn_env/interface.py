@@ -31,7 +31,8 @@ accelerating; single slots cost up to 1e7), so every environment also takes
     Increments (Joint): a residual ``a * residual_scale * Delta-a_max`` on the first increment
     of the outage-aware MPC at each link's planned success probability (the QP P3 that drives
     the AGVs of ``lawn/Comm-v0``, :class:`lawn_env.mpc.OutageAwareMPC`), clipped to the control
-    set. (A cheaper anchor, the unconstrained MPC's linear gain saturated afterwards, costs 20x
+    set; or, with ``increment_anchor="lqr"``, on the LQR baseline's first increment (no QP: the
+    from-scratch recipe's anchor, with the distance prior an interface without the expert's MPC). (A cheaper anchor, the unconstrained MPC's linear gain saturated afterwards, costs 20x
     the MPC even with perfect links: the reference paths ask for more than the AGVs' acceleration
     bounds at their corners, and only a controller that plans with the bounds takes them well.)
 
@@ -63,7 +64,9 @@ from pydantic.dataclasses import dataclass
 from . import spaces
 from .channel import LinkParams
 from .config import ScenarioConfig
+from .core import saturate_increment
 from .drone import move_drone, move_drones
+from .dynamics import PredictionModel
 from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
 
 __all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FLOOR", "resolve_interface", "ActionLayout",
@@ -96,6 +99,12 @@ class RLInterface:
     """Anchored power: weights ``prior exp(a * power_log_range)``; links differ at most by e^(2 range) from the prior."""
     residual_scale: PositiveFloat = 1.0
     """Anchored increments: residual ``a * residual_scale * Delta-a_max`` on the tracking controller."""
+    increment_anchor: Literal["mpc", "lqr"] = "mpc"
+    """Anchored increments (Joint): the tracking controller under the residual. ``mpc``: the
+    outage-aware MPC's first increment at each link's planned success probability; ``lqr``: the
+    LQR baseline's (the DARE gain of (A~, B~, Q1, Q2) with the reference's own increment as
+    feed-forward, saturated to the control set), which solves no QP: with
+    ``power_anchor="distance"`` decoding an action uses no MPC at all."""
 
     @model_validator(mode="after")
     def _check(self) -> "RLInterface":
@@ -245,8 +254,12 @@ class ActionLayout:
         if self.scheme == "anchored":
             self._link = LinkParams.from_config(config, planning=True)
             self._stake = self.interface.power_anchor == "stake"
-            if role == "joint" or self._stake:  # the residual's controller, and the stakes
+            self._lqr = self.interface.increment_anchor == "lqr"
+            if (role == "joint" and not self._lqr) or self._stake:  # the residual's controller, and the stakes
                 self.mpc = OutageAwareMPC.from_config(config, backend=mpc_backend)
+            if role == "joint" and self._lqr:
+                self._model = PredictionModel.from_config(config)
+                self._accel_max = config.control.accel_max_mps2
 
     def reset(self, which: np.ndarray | None = None) -> None:
         """Start an episode (the anchor MPC's warm starts are per episode, like the envs' MPC);
@@ -320,7 +333,7 @@ class ActionLayout:
         power = w * (self._pmax / w.sum(axis=-1, keepdims=True))
         if not self._inc_size:
             return Decision(None, power, drone_next)
-        increment = self._anchor_increment(data, power, d2)
+        increment = self._anchor_increment(data, power, d2, x_aug, reference)
         increment += a_increment.reshape(increment.shape) * (self.interface.residual_scale * self._inc_max)
         np.clip(increment, -self._inc_max, self._inc_max, out=increment)
         return Decision(increment, power, drone_next)
@@ -349,11 +362,21 @@ class ActionLayout:
         log_w = (np.log(stake) + m * np.log(d2)) / (m + 1.0)  # in logs: d^(2m) overflows for large m
         return np.exp(log_w - log_w.max(axis=-1, keepdims=True))
 
-    def _anchor_increment(self, data: SlotData, power_w: np.ndarray, d2: np.ndarray) -> np.ndarray:
-        """The tracking controller under the residual: the outage-aware MPC's first increment at each
-        link's planned success probability, (..., K, 2) m/s^2 (a new array; before the residual). With
-        the stake prior it starts from this slot's stake solve's working sets (the same QPs at psi = 1:
-        closer to these than the previous slot's)."""
+    def _anchor_increment(self, data: SlotData | None, power_w: np.ndarray, d2: np.ndarray, x_aug: np.ndarray,
+                          reference: np.ndarray | None) -> np.ndarray:
+        """The tracking controller under the residual, (..., K, 2) m/s^2 (a new array; before the
+        residual). ``increment_anchor="mpc"``: the outage-aware MPC's first increment at each link's
+        planned success probability (with the stake prior it starts from this slot's stake solve's
+        working sets: the same QPs at psi = 1, closer to these than the previous slot's).
+        ``"lqr"``: ``Delta-u_ref - K (x~ - x~_ref)`` saturated so that ``|u| <= a_max``, the first
+        increment of the LQR baseline's rollout."""
+        if self._lqr:
+            if reference is None:
+                raise ValueError("the anchored joint actions of this interface (increment_anchor='lqr') track the "
+                                 "reference: pass the reference window")
+            feedforward = reference[..., 1, 4:6] - reference[..., 0, 4:6]
+            free = feedforward - (x_aug - reference[..., 0, :]) @ self._model.lqr_gain.T
+            return saturate_increment(x_aug[..., 4:6], free, self._accel_max)
         start = "stakes" if self._stake else None
         psi = self._link.success_sq(power_w, d2)
         return self.mpc.solve_prepared(data, psi, start_from=start).increments[..., 0, :].copy()
@@ -386,7 +409,7 @@ class ActionLayout:
         a_power = np.clip(log_w / self.interface.power_log_range, -1.0, 1.0)
         parts = [a_power, a_drone]
         if self._inc_size:
-            anchor = self._anchor_increment(data, power, d2)
+            anchor = self._anchor_increment(data, power, d2, x_aug, reference)
             scale = self.interface.residual_scale * self._inc_max
             parts.insert(0, np.clip((np.asarray(decision.increment, dtype=float) - anchor) / scale, -1, 1).reshape(-1))
         return np.concatenate(parts).astype(np.float32)

@@ -10,6 +10,7 @@ import lawn_env
 from agents import make_policy
 from lawn_env import ScenarioConfig
 from lawn_env.interface import RL_INTERFACE, STAKE_FLOOR, ActionLayout, Decision, RLInterface, resolve_interface
+from lawn_env.dynamics import PredictionModel
 
 RL_IDS = list(lawn_env.RL_ENV_IDS)
 SHORT = ScenarioConfig(num_slots=30)
@@ -190,11 +191,40 @@ def test_stake_prior_is_the_linearized_slot_problems_power_split():
         layout.decode(np.zeros(layout.size), sim.x_obs, None, sim.drone_position)
 
 
+def test_lqr_increment_anchor_is_the_lqr_baselines_first_increment_and_solves_no_qp():
+    from agents.tracking import lqr_rollout
+
+    cfg = ScenarioConfig()
+    layout = ActionLayout(cfg, "joint", {"base": "rl", "power_anchor": "distance", "increment_anchor": "lqr"})
+    assert layout.mpc is None  # the distance prior and the LQR: decoding uses no MPC
+    env = gym.make("lawn/Joint-v0").unwrapped
+    env.reset(seed=3)
+    rng = np.random.default_rng(2)
+    model = PredictionModel.from_config(cfg)
+    ctl = cfg.control
+    for _ in range(15):
+        env.step(rng.uniform(-0.3, 0.3, env.action_space.shape).astype(np.float32))
+        sim = env.sim
+        window = sim.reference_window()
+        zero = layout.decode(np.zeros(layout.size), sim.x_obs, window, sim.drone_position)
+        lqr = lqr_rollout(sim.x_obs, window, model, model.lqr_gain, ctl.accel_max_mps2, ctl.accel_increment_max_mps2)
+        np.testing.assert_allclose(zero.increment, lqr[:, 0], rtol=1e-12, atol=1e-12)
+        batch = layout.decode_batch(np.zeros((1, layout.size)), sim.x_obs[None], window[None],
+                                    sim.drone_position[None])
+        np.testing.assert_array_equal(batch.increment[0], zero.increment)
+    with pytest.raises(ValueError, match="increment_anchor='lqr'.*pass the reference window"):
+        layout.decode(np.zeros(layout.size), sim.x_obs, None, sim.drone_position)
+    with pytest.raises(ValueError, match="increment_anchor"):
+        ActionLayout(cfg, "joint", {"base": "rl", "increment_anchor": "pid"})
+
+
 @pytest.mark.parametrize("role", ["joint", "comm"])
-@pytest.mark.parametrize("scheme", ["direct", "anchored"])
+@pytest.mark.parametrize("scheme", ["direct", "anchored", "anchored-lqr"])
 def test_encode_decode_round_trip(role, scheme):
     cfg = ScenarioConfig()
-    layout = ActionLayout(cfg, role, {"action_scheme": scheme})
+    fields = {"action_scheme": "anchored", "increment_anchor": "lqr"} if scheme == "anchored-lqr" else \
+        {"action_scheme": scheme}
+    layout = ActionLayout(cfg, role, fields)
     env = gym.make("lawn/Joint-v0").unwrapped
     env.reset(seed=2)
     rng = np.random.default_rng(1)

@@ -96,6 +96,7 @@ def test_anchor_names_and_errors():
     assert anchor_name(None) == "anchor:hover"
     assert anchor_name("rl") == "anchor:stake"
     assert anchor_name({"base": "rl", "power_anchor": "distance", "drone_offset_m": 10.0}) == "anchor:distance"
+    assert anchor_name({"base": "rl", "power_anchor": "distance", "increment_anchor": "lqr"}) == "anchor:distance-lqr"
     assert isinstance(make_policy("anchor:stake", env_id="lawn/Comm-v0"), AnchorPolicy)
     with pytest.raises(ValueError, match="unknown anchor 'nope'; valid: hover, distance, stake"):
         make_policy("anchor:nope")

@@ -80,6 +80,9 @@ _FINE_TUNE = {"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2
 _SCRATCH = {"interface": {"base": "rl", "power_anchor": "distance"}, "learning_rate": "lin_3e-4",
             "policy_kwargs": {"net_arch": [128, 128], "log_std_init": -1.0}}
 
+#: From scratch on Joint: the same, with the LQR baseline's increments under the residual.
+_SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_anchor": "lqr"}}
+
 #: The learned comparators. Training runs them in this order, the longest first (a recipe that
 #: starts from another runs in a second phase); the tables list them per env in this order.
 RECIPES: tuple[Recipe, ...] = (
@@ -88,6 +91,8 @@ RECIPES: tuple[Recipe, ...] = (
            hp=_BC_AT_SCALE),
     Recipe("ppo-comm-scratch", "PPO from the distance prior (no MPC in the action)", "ppo", "lawn/Comm-v0",
            1_000_000, hp=_SCRATCH, eval_every=100_000, vec="native"),
+    Recipe("ppo-joint-scratch", "PPO from the distance prior and the LQR (no MPC in the action)", "ppo",
+           "lawn/Joint-v0", 1_000_000, hp=_SCRATCH_JOINT, eval_every=100_000, vec="native"),
     Recipe("ppo-comm", "PPO (RL interface)", "ppo", "lawn/Comm-v0", 300_000, eval_every=50_000, vec="native"),
     Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v0", 300_000, eval_every=50_000,
            vec="native"),
