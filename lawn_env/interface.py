@@ -261,6 +261,12 @@ class ActionLayout:
                 self._model = PredictionModel.from_config(config)
                 self._accel_max = config.control.accel_max_mps2
 
+    @property
+    def needs_reference(self) -> bool:
+        """Whether decoding needs the reference window (the anchor plans with the MPC, or its
+        increments track the reference with the LQR)."""
+        return self.mpc is not None or (self.scheme == "anchored" and self._inc_size > 0 and self._lqr)
+
     def reset(self, which: np.ndarray | None = None) -> None:
         """Start an episode (the anchor MPC's warm starts are per episode, like the envs' MPC);
         ``which`` (a mask over a batch's scenarios) restarts only those scenarios."""

@@ -196,7 +196,7 @@ def test_lqr_increment_anchor_is_the_lqr_baselines_first_increment_and_solves_no
 
     cfg = ScenarioConfig()
     layout = ActionLayout(cfg, "joint", {"base": "rl", "power_anchor": "distance", "increment_anchor": "lqr"})
-    assert layout.mpc is None  # the distance prior and the LQR: decoding uses no MPC
+    assert layout.mpc is None and layout.needs_reference  # the distance prior and the LQR: no MPC, the reference
     env = gym.make("lawn/Joint-v0").unwrapped
     env.reset(seed=3)
     rng = np.random.default_rng(2)

@@ -261,14 +261,15 @@ def test_sb3_trains_on_the_native_vector_env(tmp_path):
               progress=False, vec="native")
 
 
-@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
-def test_rl_interface_lockstep_with_the_single_env(env_id, monkeypatch):
+@pytest.mark.parametrize("env_id, anchor", [("lawn/Joint-v0", {}), ("lawn/Comm-v0", {}),
+                                             ("lawn/Joint-v0", {"power_anchor": "distance", "increment_anchor": "lqr"})])
+def test_rl_interface_lockstep_with_the_single_env(env_id, anchor, monkeypatch):
     """With the RL interface (anchored actions, scaled reward, termination, clipped features) env i
     of the vector env equals the single RL env on seed s + i, to 1e-12, until its episode ends; an
     ended env restarts with next-step autoreset and reports its realized control cost."""
 
     config = ScenarioConfig(num_slots=30)
-    iface = {"base": "rl", "termination_distance_m": 4.0}  # tight, so that some env is terminated
+    iface = {"base": "rl", "termination_distance_m": 4.0, **anchor}  # tight, so that some env is terminated
     comm = env_id == "lawn/Comm-v0"
     rng = np.random.default_rng(3)
     size = (1 if comm else 3) * 4 + 2

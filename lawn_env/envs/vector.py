@@ -208,7 +208,7 @@ class JointVectorEnv(VectorEnv):
     def _decisions(self, a: np.ndarray):
         """The actions decoded under the env's action scheme (:meth:`ActionLayout.decode_batch`)."""
         sim = self.sim
-        windows = sim.reference_windows() if self.actions.mpc is not None else None  # the anchor plans with the MPC
+        windows = sim.reference_windows() if self.actions.needs_reference else None  # the anchor plans or tracks
         return self.actions.decode_batch(a, sim.x_obs, windows, sim.drone_position, sim.slot)
 
     def _extra_reset_info(self) -> dict:
