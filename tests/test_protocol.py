@@ -282,6 +282,8 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     doc = (tmp_path / "docs" / "LEARNED.md").read_text()
     assert f"| `bc-comm` (shipped) | 0 | {anchor} |" in doc and "3 test seeds (0-2)" in doc
     assert "| selected validation: vs rg-mpc (cost, episodes) |" in doc
+    assert f"`rg-mpc` itself against each anchor (the \"vs own anchor\" of a perfect clone of the expert): `{anchor}` on " \
+           "lawn/Comm-v0 " in table
     episodes = (tmp_path / "docs" / "learned" / "episodes.csv").read_text()
     assert anchor in episodes and "stage_costs" not in episodes.splitlines()[0]
 

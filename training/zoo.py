@@ -199,8 +199,11 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
             if export:
                 _export(r, chosen, specs, rows, scores, env, episodes, across)
     sources = sorted({rd.record.get("versions", {}).get("source", "not recorded") for rd in run.values()})
+    floor = [f"`{a}` on {env} {fmt_paired(*paired(rows, SCORE_HIGH, a, env))}" for a, env in entries
+             if a.startswith("anchor:")]
     text = "\n".join(table) + (f"\n\n{episodes} test seeds (0-{episodes - 1}); training runs made at: "
-                               + "; ".join(sources) + ".")
+                               + "; ".join(sources) + ". `rg-mpc` itself against each anchor (the \"vs own "
+                               "anchor\" of a perfect clone of the expert): " + "; ".join(floor) + ".")
     out_doc.parent.mkdir(parents=True, exist_ok=True)
     reference = {env: evaluate([("rg-mpc", env, ScenarioConfig(), VALIDATION_SEED_BASE + i, {}) for i in range(10)],
                                workers=workers, progress=False) for env in envs}
