@@ -73,7 +73,8 @@ ZOO_VALIDATION_EPISODES = 20
 #: +2.8 % of rg-mpc on the test seeds; at this budget +0.1 %, about 10 minutes a run on one core).
 _BC_AT_SCALE = {"dagger_iterations": 4, "dagger_timesteps": 10_000,
                 "policy_kwargs": {"net_arch": [256, 256], "log_std_init": -1.0}}
-_FINE_TUNE = {"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2.5, "actor_warmup_steps": 10_000}
+_FINE_TUNE = {"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2.5, "actor_warmup_steps": 10_000,
+              "policy_kwargs": {"net_arch": [256, 256], "log_std_init": -1.0}}  # the clone's network
 #: From scratch: the distance prior and the centroid drone (no MPC in the action; the Comm env's
 #: own MPC still drives the AGVs), and the exploration and step size a learner far from the
 #: optimum needs (log-std -1, 3e-4 decayed).
