@@ -32,7 +32,8 @@ accelerating; single slots cost up to 1e7), so every environment also takes
     of the outage-aware MPC at each link's planned success probability (the QP P3 that drives
     the AGVs of ``lawn/Comm-v0``, :class:`lawn_env.mpc.OutageAwareMPC`), clipped to the control
     set; or, with ``increment_anchor="lqr"``, on the LQR baseline's first increment (no QP: the
-    from-scratch recipe's anchor, with the distance prior an interface without the expert's MPC). (A cheaper anchor, the unconstrained MPC's linear gain saturated afterwards, costs 20x
+    from-scratch recipe's anchor, with the distance prior an interface without the expert's MPC).
+    (A cheaper anchor, the unconstrained MPC's linear gain saturated afterwards, costs 20x
     the MPC even with perfect links: the reference paths ask for more than the AGVs' acceleration
     bounds at their corners, and only a controller that plans with the bounds takes them well.)
 
@@ -251,21 +252,22 @@ class ActionLayout:
         self._reach = config.drone_reach_m
         self._area = tuple(config.area_m)
         self.mpc = None
+        self._lqr_model = None
         if self.scheme == "anchored":
             self._link = LinkParams.from_config(config, planning=True)
             self._stake = self.interface.power_anchor == "stake"
-            self._lqr = self.interface.increment_anchor == "lqr"
-            if (role == "joint" and not self._lqr) or self._stake:  # the residual's controller, and the stakes
+            lqr = role == "joint" and self.interface.increment_anchor == "lqr"
+            if (role == "joint" and not lqr) or self._stake:  # the residual's controller, and the stakes
                 self.mpc = OutageAwareMPC.from_config(config, backend=mpc_backend)
-            if role == "joint" and self._lqr:
-                self._model = PredictionModel.from_config(config)
+            if lqr:
+                self._lqr_model = PredictionModel.from_config(config)
                 self._accel_max = config.control.accel_max_mps2
 
     @property
     def needs_reference(self) -> bool:
         """Whether decoding needs the reference window (the anchor plans with the MPC, or its
         increments track the reference with the LQR)."""
-        return self.mpc is not None or (self.scheme == "anchored" and self._inc_size > 0 and self._lqr)
+        return self.mpc is not None or self._lqr_model is not None
 
     def reset(self, which: np.ndarray | None = None) -> None:
         """Start an episode (the anchor MPC's warm starts are per episode, like the envs' MPC);
@@ -376,12 +378,12 @@ class ActionLayout:
         working sets: the same QPs at psi = 1, closer to these than the previous slot's).
         ``"lqr"``: ``Delta-u_ref - K (x~ - x~_ref)`` saturated so that ``|u| <= a_max``, the first
         increment of the LQR baseline's rollout."""
-        if self._lqr:
+        if self._lqr_model is not None:
             if reference is None:
                 raise ValueError("the anchored joint actions of this interface (increment_anchor='lqr') track the "
                                  "reference: pass the reference window")
             feedforward = reference[..., 1, 4:6] - reference[..., 0, 4:6]
-            free = feedforward - (x_aug - reference[..., 0, :]) @ self._model.lqr_gain.T
+            free = feedforward - (x_aug - reference[..., 0, :]) @ self._lqr_model.lqr_gain.T
             return saturate_increment(x_aug[..., 4:6], free, self._accel_max)
         start = "stakes" if self._stake else None
         psi = self._link.success_sq(power_w, d2)

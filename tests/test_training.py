@@ -314,6 +314,10 @@ def test_critic_warmup_keeps_the_cloned_actor(tmp_path):
         assert np.array_equal(b[k].numpy(), a[k].numpy()), k
     assert any(not np.array_equal(b[k].numpy(), a[k].numpy()) for k in critic)
     assert float(a["log_std"].mean()) == pytest.approx(-2.5)
+    # a start whose network differs from the run's is named before any torch error
+    with pytest.raises(ValueError, match=r"--init-from .*net_arch=\[128, 128\], this run builds net_arch=\[32\]"):
+        _train(tmp_path, "ppo", "lawn/Comm-v0", steps=128, name="other", n_envs=2, init_from=out,
+               hp_overrides={"policy_kwargs": {"net_arch": [32]}})
 
 
 def test_zoo_command_lists_the_shipped_agents(capsys):

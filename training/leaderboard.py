@@ -11,8 +11,9 @@ learning adds is the last column.
 
 **Task suite** (``lawn benchmark --suite``, docs/LEADERBOARD.md): the presets of
 :data:`lawn_env.presets.SUITE`, every expert, baseline, shipped agent and the stake and distance
-anchors on each, scored against the references of the same task and env. Agents trained on the default task are run on
-every task; where one cannot act (its network was built for K = 4) the table says so.
+anchors on each, scored against the references of the same task and env. Agents trained on the
+default task are run on every task; where one cannot act (its network was built for K = 4) the
+table says so.
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ from .protocol import TEST_EPISODES
 from .score import SCORE_HIGH, SCORE_LOW, SCORE_VERSION, format_score, scores_by_policy
 from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci, paired_difference
 
-__all__ = ["own_anchor", "policy_env", "costs_of", "paired", "protocol_cells", "learned_entries", "run_entries", "learned_table", "run_learned_protocol",
+__all__ = ["own_anchor", "policy_env", "costs_of", "paired", "protocol_cells", "learned_entries", "run_entries",
+           "learned_table", "run_learned_protocol",
            "SUITE_POLICIES", "suite_policies", "run_suite", "suite_table", "skipped_summary", "write_leaderboard"]
 
 #: Rows without a per-slot trace keep the saved tables small (100 seeds x many agents).

@@ -165,6 +165,11 @@ def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: 
         if source.interface != params.get("interface"):
             raise ValueError(f"--init-from {init_from}: it was trained with interface {source.interface}, "
                              f"this run uses {params.get('interface')}; pass the same --interface")
+        hp_file = Path(init_from) / "hyperparams.json"
+        theirs = _net_arch(json.loads(hp_file.read_text())) if hp_file.exists() else None
+        if theirs is not None and theirs != _net_arch(params):
+            raise ValueError(f"--init-from {init_from}: its network is net_arch={theirs}, this run builds "
+                             f"net_arch={_net_arch(params)}; pass --hp 'policy_kwargs={{\"net_arch\": {theirs}}}'")
     spec = RunSpec(algo=algo, env=env_id, seed=seed, timesteps=timesteps, hyperparams_version=version,
                    interface=params.get("interface"),
                    eval_every=eval_every, eval_episodes=eval_episodes, checkpoint_every=checkpoint_every,
@@ -323,6 +328,11 @@ def train_seeds(seeds: list[int], out_dir: Path, workers: int = 1, progress: boo
               "wall_time_s": [s["wall_time_s"] for s in summaries]}
     (out_dir / "seeds.json").write_text(json.dumps(result, indent=2))
     return result
+
+
+def _net_arch(params: Mapping[str, Any]):
+    """The ``net_arch`` of a run's hyperparameters (None: SB3's default)."""
+    return (params.get("policy_kwargs") or {}).get("net_arch")
 
 
 def _init_from(model, source: Path, env) -> None:

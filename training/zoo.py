@@ -26,9 +26,9 @@ from agents.runs import read_run
 from lawn_env import ScenarioConfig
 
 from .evaluate import evaluate, pool_map, write_rows
-from .leaderboard import costs_of, learned_entries, own_anchor, paired, protocol_cells, run_entries
+from .leaderboard import learned_entries, own_anchor, paired, protocol_cells, run_entries
 from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selection_key
-from .score import SCORE_HIGH, SCORE_VERSION, format_score, scores_by_policy
+from .score import SCORE_HIGH, SCORE_VERSION, scores_by_policy
 from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci
 from .train import train_task
 
@@ -70,7 +70,7 @@ class Recipe:
 ZOO_VALIDATION_EPISODES = 20
 #: Imitation at scale: 100,000 labels of rg-mpc, then 4 DAgger rounds of 10,000 on the clone's own
 #: states, a 256 x 256 network (issue #24: at 12,000 + 4 x 4,800 labels and 128 x 128 the clone was
-#: +2.8 % of rg-mpc on the test seeds; at this budget +0.1 %, about 10 minutes a run on one core).
+#: +2.8 % of rg-mpc on the test seeds; at this budget +0.1 %, 13-14 minutes a run two side by side).
 _BC_AT_SCALE = {"dagger_iterations": 4, "dagger_timesteps": 10_000,
                 "policy_kwargs": {"net_arch": [256, 256], "log_std_init": -1.0}}
 _FINE_TUNE = {"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2.5, "actor_warmup_steps": 10_000,
@@ -180,17 +180,12 @@ def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, 
             chosen = dirs[int(np.argmin([selection_key(v) for v in validation]))]
             gains = [paired(rows, run[d].policy_name, own_anchor(run[d].policy_name), env) for d in dirs]
             across = mean_ci(g[0] for g in gains)
-            for d, best, gain in zip(dirs, validation, gains):
+            for d, best in zip(dirs, validation):
                 spec = run[d].record
-                policy = run[d].policy_name
-                anchor_costs = costs_of(rows, own_anchor(policy), env)
-                cost = costs_of(rows, policy, env)
-                worst = max(cost[s] / anchor_costs[s] - 1.0 for s in cost)
-                per_run.append(f"| `{r.name}`{' (shipped)' if d == chosen else ''} | {spec['seed']} | {own_anchor(policy)} "
-                               f"| {_validation_cell(best, spec.get('eval_episodes', '?'))} "
-                               f"| {format_score(scores.get(('default', env, policy)))} "
-                               f"| {fmt_paired(*paired(rows, policy, SCORE_HIGH, env))} | {fmt_paired(*gain)} "
-                               f"| {fmt_pct(worst)} | {spec['wall_time_s']:.0f} s |")
+                c = protocol_cells(rows, scores, run[d].policy_name, env)
+                per_run.append(f"| `{r.name}`{' (shipped)' if d == chosen else ''} | {spec['seed']} | {c['anchor']} "
+                               f"| {_validation_cell(best, spec.get('eval_episodes', '?'))} | {c['score']} "
+                               f"| {c['vs_ref']} | {c['vs_anchor']} | {c['worst']} | {spec['wall_time_s']:.0f} s |")
             specs = [run[d].record for d in dirs]
             algo = r.algo.upper() if r.algo != "bc" else "BC"
             budget = f"{algo}, {int(specs[0].get('num_timesteps', r.timesteps)):,} steps, {np.mean([s['wall_time_s'] for s in specs]):.0f} s"
