@@ -143,6 +143,25 @@ def test_model_selection_is_paired_against_rg_mpc_on_the_validation_seeds():
     assert selection_key({"timesteps": 0.0, "control_cost": 3.0, "control_cost_ci95": 1.0}) == 3.0  # older runs
 
 
+def test_selection_keeps_the_start_unless_a_validation_beats_it_significantly():
+    from training.protocol import selected_validation, validation_row
+
+    reference = {1: 100.0, 2: 100.0, 3: 100.0}
+    start_costs = {1: 110.0, 2: 110.0, 3: 110.0}
+    start = {"timesteps": 0, **validation_row(start_costs, reference, start_costs)}
+    assert start["vs_start"] == 0.0 and start["vs_start_ci95"] == 0.0
+    noisy = {"timesteps": 1, **validation_row({1: 90.0, 2: 130.0, 3: 95.0}, reference, start_costs)}
+    better = {"timesteps": 2, **validation_row({1: 104.0, 2: 105.0, 3: 106.0}, reference, start_costs)}
+    assert noisy["vs_reference"] < better["vs_reference"] < start["vs_reference"]  # noisy looks best on the mean
+    assert noisy["vs_start"] + noisy["vs_start_ci95"] > 0 > better["vs_start"] + better["vs_start_ci95"]
+    assert selected_validation([start, noisy]) is start  # the winner's curse is refused
+    assert selected_validation([start, noisy, better]) is better
+    bc_rows = [{"timesteps": 5, **validation_row({1: 120.0}, {1: 100.0})}, {"timesteps": 9, "control_cost": 101.0,
+                                                                           "vs_reference": 0.01}]
+    assert selected_validation(bc_rows) is bc_rows[1]  # no start to beat: the plain minimum
+    assert selected_validation([]) is None
+
+
 # ---------------------------------------------------------------------- the task suite
 def test_suite_tasks_are_presets_with_their_own_scenarios():
     configs = [presets.get(task) for task in presets.SUITE]

@@ -2,6 +2,7 @@
 
 import csv
 import json
+import math
 
 import gymnasium as gym
 import numpy as np
@@ -215,11 +216,14 @@ def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_
     out, summary = _train(tmp_path, "ppo", "lawn/Comm-v0", steps=256, name="rl")
     curve = read_learning_curve(out)
     header = (out / "learning_curve.csv").read_text().splitlines()[0]
-    assert header == "timesteps,control_cost,control_cost_ci95,vs_reference,vs_reference_ci95"
+    assert header == "timesteps,control_cost,control_cost_ci95,vs_reference,vs_reference_ci95,vs_start,vs_start_ci95"
     assert [r["timesteps"] for r in curve] == [0, 128, 256]  # the starting policy is validated too
-    # model selection minimizes the paired difference against rg-mpc on the same validation seeds
-    best = min(curve, key=lambda r: r["vs_reference"])
-    assert summary["best_validation_vs_reference"] == best["vs_reference"]
+    start = json.loads((out / "validation_start.json").read_text())
+    assert list(start) == [str(VALIDATION_SEED_BASE)] and float(start[str(VALIDATION_SEED_BASE)]) == curve[0]["control_cost"]
+    assert curve[0]["vs_start"] == 0.0 and all(math.isnan(r["vs_start_ci95"]) for r in curve[1:])
+    # on one validation seed no later policy is significantly better than the start: the start is kept
+    best = curve[0]
+    assert summary["best_at_timesteps"] == 0 and summary["best_validation_vs_reference"] == best["vs_reference"]
     assert summary["best_validation_cost"] == best["control_cost"]
     policy = make_policy(f"sb3:{out}")
     assert policy.interface.action_scheme == "anchored" and policy.env_id == "lawn/Comm-v0"

@@ -3,6 +3,7 @@ rollout boundaries, actor warm-up."""
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -14,7 +15,8 @@ from lawn_env.interface import InterfaceLike
 
 from .checkpoints import write_checkpoint
 from .evaluate import episode_row
-from .protocol import append_learning_curve, read_learning_curve, selection_key, validation_reference, validation_row
+from .protocol import (append_learning_curve, read_learning_curve, selected_validation, validation_reference,
+                       validation_row)
 
 __all__ = ["ControlCostValidation", "RunCheckpoint", "ActorWarmup"]
 
@@ -29,11 +31,12 @@ class ControlCostValidation(BaseCallback):
     """Every ``every`` environment steps, run the current policy (deterministic, through the same wrapper as
     ``sb3:DIR``) on ``episodes`` full episodes of the unmodified scenario with the validation
     seeds ``seed_base + i``; append the mean realized control cost and the paired relative
-    difference against ``rg-mpc`` on the same seeds to ``learning_curve.csv``, and keep the model
-    with the lowest paired difference (:func:`~training.protocol.selection_key`) as
-    ``best_model.zip`` (+ ``best_vecnormalize.pkl``). A fresh run is validated before its first
-    step too, so selection can keep the starting policy (the clone a fine-tuning run starts from)
-    when training never beats it."""
+    differences against ``rg-mpc`` and against the starting policy on the same seeds to
+    ``learning_curve.csv``, and keep the model :func:`~training.protocol.selected_validation`
+    chooses as ``best_model.zip`` (+ ``best_vecnormalize.pkl``). A fresh run is validated before
+    its first step (its per-seed costs kept in ``validation_start.json``), so selection keeps the
+    starting policy (the anchor, or the clone a fine-tuning run starts from) unless training
+    beats it significantly."""
 
     def __init__(self, env_id: str, config: ScenarioConfig, interface: InterfaceLike, episodes: int, every: int,
                  out_dir: Path, seed_base: int):
@@ -43,9 +46,10 @@ class ControlCostValidation(BaseCallback):
         self._last = -1
         self._next = every
         self._reference: dict[int, float] | None = None
-        rows = read_learning_curve(self.out_dir)  # a resumed run: keep its history and its best
-        self.best = min((selection_key(r) for r in rows), default=float("inf"))
+        rows = read_learning_curve(self.out_dir)  # a resumed run: keep its history and its start
         self._last = max((int(r["timesteps"]) for r in rows), default=-1)
+        start = self.out_dir / "validation_start.json"
+        self._start = {int(k): float(v) for k, v in json.loads(start.read_text()).items()} if start.exists() else None
 
     def _on_training_start(self) -> None:
         if self._last < 0:  # a fresh run validates its starting policy (a clone it fine-tunes, or its anchor)
@@ -58,14 +62,18 @@ class ControlCostValidation(BaseCallback):
             return MARLPolicy(self.model, self.config, self.interface, normalizer)
         return SB3Policy(self.model, self.config, self.env_id, self.interface, normalizer)
 
-    def validate(self) -> dict[str, float]:
-        """The learning-curve columns of the current policy (:func:`~training.protocol.validation_row`)."""
+    def validation_costs(self) -> dict[int, float]:
+        """The current policy's control cost on each validation seed."""
         policy = self._policy()
         env_id = "lawn/Joint-v0" if self.env_id == "lawn/Parallel-v0" else self.env_id
         if self._reference is None:  # rg-mpc on the validation seeds, once per process (deterministic)
             self._reference = validation_reference(env_id, self.config, self.episodes, self.seed_base)
-        costs = {s: float(episode_row(policy, env_id, self.config, s)["control_cost"]) for s in self._reference}
-        return validation_row(costs, self._reference)
+        return {s: float(episode_row(policy, env_id, self.config, s)["control_cost"]) for s in self._reference}
+
+    def validate(self) -> dict[str, float]:
+        """The learning-curve columns of the current policy (:func:`~training.protocol.validation_row`)."""
+        costs = self.validation_costs()
+        return validation_row(costs, self._reference, self._start)
 
     def _on_step(self) -> bool:
         if self.num_timesteps >= self._next:
@@ -78,13 +86,17 @@ class ControlCostValidation(BaseCallback):
             self._record()
 
     def _record(self) -> None:
+        fresh = self._last < 0
         self._last = self.num_timesteps
-        row = self.validate()
+        costs = self.validation_costs()
+        if fresh:  # the starting policy: what every later validation is paired against
+            self._start = costs
+            (self.out_dir / "validation_start.json").write_text(json.dumps({str(k): v for k, v in costs.items()}))
+        row = validation_row(costs, self._reference, self._start)
         append_learning_curve(self.out_dir, self.num_timesteps, row)
         self.logger.record("validation/control_cost", row["control_cost"])
         self.logger.record("validation/vs_reference", row["vs_reference"])
-        if selection_key(row) < self.best:
-            self.best = selection_key(row)
+        if selected_validation(read_learning_curve(self.out_dir))["timesteps"] == self.num_timesteps:
             self.model.save(str(self.out_dir / "best_model.zip"))
             venv = self.model.get_vec_normalize_env()
             if venv is not None:

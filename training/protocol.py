@@ -25,8 +25,8 @@ from .provenance import provenance
 from .tables import mean_ci, paired_difference, read_csv
 
 __all__ = ["TRAIN_SEED_BASE", "VALIDATION_SEED_BASE", "TEST_EPISODES", "VALIDATION_REFERENCE", "CURVE_FIELDS",
-           "limit_torch_threads", "versions", "read_learning_curve", "selection_key", "validation_reference",
-           "validation_row", "append_learning_curve", "write_learning_curve"]
+           "limit_torch_threads", "versions", "read_learning_curve", "selection_key", "selected_validation",
+           "validation_reference", "validation_row", "append_learning_curve", "write_learning_curve"]
 
 #: Training environments of seed s start at TRAIN_SEED_BASE + 1000 s (disjoint from test seeds 0-19).
 TRAIN_SEED_BASE = 1_000_000
@@ -56,19 +56,22 @@ def versions() -> dict:
             "source": provenance()}
 
 
-#: The columns of ``learning_curve.csv``: the mean realized control cost on the validation seeds
-#: and the mean per-seed relative difference against ``rg-mpc`` on the same seeds (paired), each
-#: with its 95 % half-width.
-CURVE_FIELDS = ("timesteps", "control_cost", "control_cost_ci95", "vs_reference", "vs_reference_ci95")
+#: The columns of ``learning_curve.csv``: the mean realized control cost on the validation seeds,
+#: the mean per-seed relative difference against ``rg-mpc`` on the same seeds (paired) and the one
+#: against the run's own starting policy (its first validation: the anchor, or the clone it
+#: fine-tunes), each with its 95 % half-width.
+CURVE_FIELDS = ("timesteps", "control_cost", "control_cost_ci95", "vs_reference", "vs_reference_ci95",
+                "vs_start", "vs_start_ci95")
 #: The policy whose costs on the validation seeds pair every validation.
 VALIDATION_REFERENCE = "rg-mpc"
 
 
 def read_learning_curve(run_dir: Path) -> list[dict[str, float]]:
     """The periodic validation of a run (``learning_curve.csv``): rows of :data:`CURVE_FIELDS` as
-    floats, in order (empty before the first validation; runs made before the paired column
-    have only the first three)."""
-    return [{k: float(v) for k, v in r.items()} for r in read_csv(Path(run_dir) / "learning_curve.csv")]
+    floats, in order (empty before the first validation); a column a row leaves empty (behaviour
+    cloning has no start to pair with) or a run made before it existed is absent from the row."""
+    return [{k: float(v) for k, v in r.items() if v not in ("", None)}
+            for r in read_csv(Path(run_dir) / "learning_curve.csv")]
 
 
 def selection_key(row: Mapping[str, float]) -> float:
@@ -79,6 +82,19 @@ def selection_key(row: Mapping[str, float]) -> float:
     return float(row["vs_reference"]) if "vs_reference" in row else float(row["control_cost"])
 
 
+def selected_validation(rows: list[Mapping[str, float]]) -> Mapping[str, float] | None:
+    """The validation model selection keeps: the lowest :func:`selection_key` among the run's
+    starting policy (the first row) and the validations significantly better than it (the upper
+    end of the paired 95 % interval against the start below zero). With a handful of validations
+    on 20 seeds, the plain minimum picks a policy that only looks better by chance about as often
+    as not (the winner's curse), and ships a learner worse than the start it never improved on; the
+    gate keeps that start instead. Rows without the ``vs_start`` column (behaviour cloning, which
+    has no start to beat, and older runs) are all eligible. ``None`` for no rows."""
+    eligible = [r for i, r in enumerate(rows)
+                if i == 0 or "vs_start" not in r or float(r["vs_start"]) + float(r["vs_start_ci95"]) < 0]
+    return min(eligible, key=selection_key, default=None)
+
+
 def validation_reference(env_id: str, config: Any, episodes: int, seed_base: int = VALIDATION_SEED_BASE
                          ) -> dict[int, float]:
     """``rg-mpc``'s control cost on the validation seeds ``seed_base + i`` of ``env_id``."""
@@ -87,12 +103,17 @@ def validation_reference(env_id: str, config: Any, episodes: int, seed_base: int
             for i in range(episodes)}
 
 
-def validation_row(costs: Mapping[int, float], reference: Mapping[int, float]) -> dict[str, float]:
+def validation_row(costs: Mapping[int, float], reference: Mapping[int, float],
+                   start: Mapping[int, float] | None = None) -> dict[str, float]:
     """The learning-curve columns of one validation: mean cost and paired difference against the
-    reference, each with its 95 % half-width."""
+    reference, and against the run's starting policy when ``start`` (its costs on the same seeds)
+    is given, each with its 95 % half-width."""
     mean, half = mean_ci(list(costs.values()))
     diff, diff_half, _ = paired_difference(costs, reference)
-    return {"control_cost": mean, "control_cost_ci95": half, "vs_reference": diff, "vs_reference_ci95": diff_half}
+    row = {"control_cost": mean, "control_cost_ci95": half, "vs_reference": diff, "vs_reference_ci95": diff_half}
+    if start is not None:
+        row["vs_start"], row["vs_start_ci95"], _ = paired_difference(costs, start)
+    return row
 
 
 def append_learning_curve(run_dir: Path, timesteps: int, row: Mapping[str, float]) -> None:
@@ -114,7 +135,7 @@ def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict:
     rows = read_learning_curve(out_dir)
     if rows:
         _plot_curve(rows, out_dir / "learning_curve.png", f"{spec['algo']} on {spec['env']}, seed {spec['seed']}")
-    best = min(rows, key=selection_key) if rows else None
+    best = selected_validation(rows)
     summary = {
         "algo": spec["algo"], "env": spec["env"], "seed": spec["seed"], "timesteps": spec.get("num_timesteps"),
         "wall_time_s": spec.get("wall_time_s"), "interface": spec.get("interface"),

@@ -27,7 +27,7 @@ from lawn_env import ScenarioConfig
 
 from .evaluate import evaluate, pool_map, write_rows
 from .leaderboard import learned_entries, own_anchor, paired, protocol_cells, run_entries
-from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selection_key
+from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
 from .score import SCORE_HIGH, SCORE_VERSION, scores_by_policy
 from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci
 from .train import train_task
@@ -246,8 +246,8 @@ def _plot_curves(found, reference: dict[str, float], path: Path) -> None:
 
 
 def _best_validation(run_dir: Path) -> dict[str, float]:
-    """The run's selected validation (:func:`~training.protocol.selection_key`)."""
-    return min(read_learning_curve(run_dir), key=selection_key, default={"control_cost": math.inf})
+    """The run's selected validation (:func:`~training.protocol.selected_validation`)."""
+    return selected_validation(read_learning_curve(run_dir)) or {"control_cost": math.inf}
 
 
 def _validation_cell(best: dict[str, float], episodes: int) -> str:
