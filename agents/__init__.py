@@ -3,7 +3,8 @@ scripted heuristic, and wrappers for learned policies. ``make_policy(name, confi
 of them; ``POLICIES`` is the registry; ``rollout(env, policy, seed)`` runs one episode."""
 
 from .anchors import ANCHORS, AnchorPolicy, anchor_name
-from .ao import AOSettings, AOSolver, Plan, expected_cost
+from .ao import AOSettings, AOSolver, expected_cost
+from .problem import Plan
 from .base import Planner
 from .policies import BENCHMARK_POLICIES, PAPER_POLICIES, POLICIES, Policy, make_policy, policy_names
 from .reduced import GlobalPlanner, ReducedGradientPlanner

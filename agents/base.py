@@ -13,7 +13,7 @@ from lawn_env.core import Snapshot
 from lawn_env.presets import ConfigLike, resolve_config
 
 if TYPE_CHECKING:
-    from .ao import Plan
+    from .problem import Plan
 
 __all__ = ["Policy", "Planner", "JOINT", "COMM"]
 

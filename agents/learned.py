@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from lawn_env import ScenarioConfig
+from lawn_env import PARALLEL_ENV_ID, ScenarioConfig
 from lawn_env.interface import InterfaceLike
 
 from .anchors import InterfacePolicy, load_anchor
@@ -163,7 +163,7 @@ class MARLPolicy(InterfacePolicy):
                  seed: int | None = None) -> MARLPolicy:
         path = Path(path)
         run = read_run(path, require_model=True)
-        if run.env != "lawn/Parallel-v0":
+        if run.env != PARALLEL_ENV_ID:
             raise ValueError(f"{path} was trained on {run.env}, not the multi-agent env; use sb3:{path}")
         if env_id not in (None, JOINT):
             raise ValueError(f"{path} is a multi-agent policy; it drives {JOINT}, not {env_id}")
@@ -231,7 +231,7 @@ def _load_zoo(name: str, config=None, env_id=None, seed=None) -> Policy:
     network = network_class.load(str(ZOO_DIR / name / "policy.zip"), device="cpu")
     cfg = config if config is not None else ScenarioConfig.from_dict(record["config"])
     normalizer = ObsNormalizer.load(ZOO_DIR / name / "normalizer.npz")
-    if record["env"] == "lawn/Parallel-v0":
+    if record["env"] == PARALLEL_ENV_ID:
         if env_id not in (None, JOINT):
             raise ValueError(f"zoo:{name} is a multi-agent policy; it drives {JOINT}, not {env_id}")
         return MARLPolicy(network, cfg, record["interface"], normalizer, seed, label=f"zoo:{name}")

@@ -34,7 +34,8 @@ from lawn_env.drone import move_drone
 from lawn_env.dynamics import command_mask, planning_period
 from lawn_env.presets import ConfigLike, resolve_config
 
-from .ao import AOSettings, AOSolver, Plan
+from .ao import AOSettings, AOSolver
+from .problem import Plan
 from .base import JOINT, Policy
 from .learned import LOADERS, learned_name_forms
 from .reduced import GlobalPlanner, GlobalSettings, ReducedGradientPlanner, ReducedSettings

@@ -43,7 +43,7 @@ from lawn_env.core import Snapshot
 from lawn_env.dynamics import cost_coefficients
 from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
 
-from .ao import Plan, SlotProblem
+from .problem import Plan, SlotProblem
 from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
 
 __all__ = ["ReducedProblem", "ValueTable", "ReducedSettings", "ReducedGradientPlanner", "GlobalPlanner",

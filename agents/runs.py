@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from lawn_env import ScenarioConfig
+from lawn_env import PARALLEL_ENV_ID, ScenarioConfig
 
 from .errors import MissingExtra
 
@@ -92,7 +92,7 @@ class RunDir:
     def kind(self) -> str:
         """The prefix of its policy name: ``marl`` (the parallel env), ``bc`` (behaviour cloning)
         or ``sb3``."""
-        if self.record.get("env") == "lawn/Parallel-v0":
+        if self.record.get("env") == PARALLEL_ENV_ID:
             return "marl"
         return "bc" if self.record.get("trainer") == "bc" else "sb3"
 

@@ -31,6 +31,19 @@ RL_ENV_IDS = {
     "lawn/CommRL-v0": "lawn/Comm-v0",
 }
 
+#: The multi-agent environment's id (PettingZoo has no registry; :func:`lawn_env.parallel_env` builds
+#: it) and the central environment each multi-agent id mirrors: its episodes are that env's under
+#: the same decisions, and learned multi-agent policies are evaluated on it.
+PARALLEL_ENV_ID = "lawn/Parallel-v0"
+PARALLEL_ENV_IDS = {PARALLEL_ENV_ID: "lawn/Joint-v0"}
+
+
+def central_env_id(env_id: str) -> str:
+    """The Gymnasium id an env id is evaluated on: the central env a multi-agent id mirrors, else
+    the id itself."""
+    return PARALLEL_ENV_IDS.get(env_id, env_id)
+
+
 #: No registered time limit: the envs end their episodes themselves at ``num_slots`` (truncation),
 #: and a made env's ``spec.max_episode_steps`` reports that length (``LawnEnvBase.spec``). A
 #: registered limit could only disagree with a caller's ``num_slots``, and Gymnasium's native
@@ -51,6 +64,9 @@ for _env_id, _base in RL_ENV_IDS.items():
 __all__ = [
     "ENV_IDS",
     "RL_ENV_IDS",
+    "PARALLEL_ENV_ID",
+    "PARALLEL_ENV_IDS",
+    "central_env_id",
     "RLInterface",
     "RL_INTERFACE",
     "ActionLayout",

@@ -130,6 +130,7 @@ def test_accepted_edge_configs_run():
         PredictionModel.from_config(cfg)
         env = gym.make("lawn/Joint-v0", config=cfg)
         obs, _ = env.reset(seed=0)
+        env.action_space.seed(0)
         for _ in range(5):
             obs, reward, *_ = env.step(env.action_space.sample())
         assert np.all(np.isfinite(obs)) and np.isfinite(reward)

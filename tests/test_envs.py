@@ -194,6 +194,7 @@ def test_snapshot_contents():
 def test_observation_decodes_to_snapshot(env_id):
     env = gym.make(env_id).unwrapped
     obs, _ = env.reset(seed=3)
+    env.action_space.seed(3)
     for _ in range(9):
         obs, *_ = env.step(env.action_space.sample())
     dec = env.layout.decode(obs)
@@ -216,12 +217,13 @@ def test_observation_is_order_one_under_a_reasonable_policy():
         a = np.concatenate([np.zeros(4), np.clip((np.array([100.0, 100.0]) - q) / 7.5, -1, 1)])
         obs, *_ = env.step(a)
         worst = max(worst, np.abs(obs).max())
-    assert worst < 10
+    assert worst < 4  # measured: 2.84 (a feature far above one would dominate a network's input)
 
 
 def test_comm_env_applies_the_mpc_first_increment():
     env = gym.make("lawn/Comm-v0").unwrapped
     env.reset(seed=6)
+    env.action_space.seed(6)
     from lawn_env.mpc import OutageAwareMPC
 
     independent = OutageAwareMPC.from_config(env.config, backend="osqp")
@@ -268,6 +270,7 @@ def test_render_rgb_array(env_id):
 def test_k32_random_paths_runs():
     env = gym.make("lawn/Joint-v0", config="k32")
     obs, _ = env.reset(seed=0)
+    env.action_space.seed(0)
     assert obs.shape == env.observation_space.shape
     for _ in range(5):
         obs, r, *_ = env.step(env.action_space.sample())

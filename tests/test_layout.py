@@ -143,3 +143,28 @@ def test_every_public_function_is_annotated():
     missing = {name: _unannotated(ast.parse(path.read_text())) for name, path in _modules().items()}
     assert {name: funcs for name, funcs in missing.items() if funcs} == {}
     assert _unannotated(ast.parse("def f(x): pass\nclass C:\n    def g(self, y: int): pass")) == ["f", "C.g"]
+
+
+def _env_id_literals(tree: ast.Module) -> list[str]:
+    """String constants that are a lawn environment id (``lawn/...-vN``), docstrings aside."""
+    docstrings = {id(n.body[0].value) for n in ast.walk(tree)
+                  if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and n.body
+                  and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant)}
+    return [n.value for n in ast.walk(tree) if isinstance(n, ast.Constant) and isinstance(n.value, str)
+            and id(n) not in docstrings and n.value.startswith("lawn/") and n.value[-3:-1] == "-v"]
+
+
+def test_the_multi_agent_id_is_named_in_one_place():
+    import lawn_env
+
+    where = {name: _env_id_literals(ast.parse(path.read_text())) for name, path in _modules().items()}
+    assert [name for name, ids in where.items() if lawn_env.PARALLEL_ENV_ID in ids] == ["lawn_env"]
+    assert lawn_env.central_env_id(lawn_env.PARALLEL_ENV_ID) == "lawn/Joint-v0"
+    assert lawn_env.central_env_id("lawn/Comm-v0") == "lawn/Comm-v0"
+    assert _env_id_literals(ast.parse('"""lawn/Parallel-v0 in a docstring"""\nx = "lawn/Parallel-v0"')) == [
+        "lawn/Parallel-v0"]
+
+
+def test_the_experts_share_their_problem_from_a_module_of_their_own():
+    assert "agents.problem" in EDGES["agents.ao"] and "agents.problem" in EDGES["agents.reduced"]
+    assert "agents.ao" not in EDGES["agents.reduced"]

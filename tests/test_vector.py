@@ -386,3 +386,133 @@ def test_disturbance_mode_lockstep_with_the_single_env(env_id, interface, monkey
             np.testing.assert_allclose(reward[i], s_reward, rtol=1e-12, atol=1e-12)
             np.testing.assert_allclose(obs[i], s_obs, rtol=1e-6, atol=1e-6)
     assert steps >= 10
+
+
+# ---------------------------------------------------------------------- gaps a test audit found
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+def test_seeding_a_list_of_the_wrong_length_and_none(env_id):
+    envs = _make(env_id=env_id, config=ScenarioConfig(num_slots=6))
+    with pytest.raises(ValueError, match=f"a list of 3 seeds for {N} envs"):
+        envs.reset(seed=[1, 2, 3])
+    twin = _make(env_id=env_id, config=ScenarioConfig(num_slots=6))
+    zero = np.zeros(envs.action_space.shape, dtype=np.float32)
+    for e in (envs, twin):  # a seeded reset, then unseeded resets continue from its generator
+        e.reset(seed=4)
+        e.step(zero)
+    a, _ = envs.reset(seed=None)
+    b, _ = twin.reset(seed=None)
+    np.testing.assert_array_equal(a, b)
+    assert envs.observation_space.contains(a)
+    fresh = [_make(env_id=env_id).reset()[0] for _ in range(2)]  # never seeded: the OS's entropy
+    assert not np.array_equal(fresh[0], fresh[1])
+
+
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+def test_step_and_render_before_reset_are_refused(env_id):
+    envs = _make(env_id=env_id, render_mode="rgb_array")
+    with pytest.raises(RuntimeError, match="reset"):
+        envs.step(np.zeros(envs.action_space.shape, dtype=np.float32))
+    with pytest.raises(RuntimeError, match="reset"):
+        envs.render()
+    single = gym.make(env_id, render_mode="rgb_array")
+    with pytest.raises(RuntimeError, match="reset"):
+        single.unwrapped.step(np.zeros(single.action_space.shape, dtype=np.float32))
+    with pytest.raises(RuntimeError, match="reset"):
+        single.unwrapped.render()
+
+
+def _comm_reset_psi(envs, i):
+    """What Comm's info reports as ``success_probability_planned`` at the start of env i's
+    episode: psi of the planning link at equal power from the drone's start."""
+    sim, cfg = envs.unwrapped.sim, envs.unwrapped.config
+    link = channel.LinkParams.from_config(cfg, planning=True)
+    power = np.full(cfg.num_agvs, cfg.power_budget_w / cfg.num_agvs)
+    return link.success_sq(power, link.distance_sq(np.asarray(cfg.drone.start_m, float), sim.x_aug[i, :, 0:2]))
+
+
+def test_comm_info_on_the_next_step_autoreset_describes_the_new_episode():
+    envs = _make(env_id="lawn/Comm-v0", config=ScenarioConfig(num_slots=3))
+    envs.reset(seed=2)
+    rng = np.random.default_rng(2)
+    for _ in range(3):
+        _, _, _, truncated, info = envs.step(rng.uniform(-1, 1, envs.action_space.shape).astype(np.float32))
+    assert truncated.all() and (info["mpc_iterations"] > 0).any()
+    _, reward, _, _, info = envs.step(rng.uniform(-1, 1, envs.action_space.shape).astype(np.float32))
+    assert (reward == 0).all() and (info["slot"] == 0).all()
+    assert (info["mpc_iterations"] == 0).all() and (info["mpc_fallbacks"] == 0).all()
+    for i in range(N):
+        np.testing.assert_allclose(info["success_probability_planned"][i], _comm_reset_psi(envs, i), rtol=1e-12)
+
+
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+def test_same_step_autoreset_on_termination_and_for_comm(env_id):
+    """SameStep: the step that ends an episode, by truncation or by the RL interface's
+    termination, returns the new episode's first observation, the final one in info, and infos
+    (Comm's MPC keys included) describing the step that ended it."""
+    from lawn_env.envs.vector import CommVectorEnv, JointVectorEnv
+
+    cls = CommVectorEnv if env_id == "lawn/Comm-v0" else JointVectorEnv
+    iface = {"base": "rl", "termination_distance_m": 3.0}  # the 3 m offsets end some episodes at once
+    envs = cls(8, config=ScenarioConfig(num_slots=4), interface=iface, autoreset_mode="SameStep")
+    envs.reset(seed=0)
+    zero = np.zeros(envs.action_space.shape, dtype=np.float32)
+    ended_by = {"terminated": 0, "truncated": 0}
+    for _ in range(8):
+        obs, reward, terminated, truncated, info = envs.step(zero)
+        ended = terminated | truncated
+        assert not (terminated & truncated).any()
+        ended_by["terminated"] += int(terminated.sum())
+        ended_by["truncated"] += int(truncated.sum())
+        if ended.any():
+            np.testing.assert_array_equal(info["_final_obs"], ended)
+            assert (obs[ended, -1] == 0.0).all() and (info["final_obs"][ended, -1] > 0.0).all()
+            assert (info["slot"][ended] > 0).all()  # the info is the ending step's
+            assert (reward[terminated] < envs.interface.reward_floor).all()  # the floor of the slots not played
+            if env_id == "lawn/Comm-v0":
+                assert (info["mpc_iterations"][ended] > 0).any()
+    assert ended_by["terminated"] > 0 and ended_by["truncated"] > 0
+
+
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+@pytest.mark.parametrize("config", [ScenarioConfig(num_slots=8), ScenarioConfig(num_agvs=5, num_slots=8),
+                                    ScenarioConfig(num_slots=8).override(**{"disturbance.wind_gust_std_mps": 1.0,
+                                               "disturbance.process_noise_position_m": 0.1,
+                                               "disturbance.measurement_noise_position_m": 0.2})],
+                         ids=["paper-paths", "random-paths", "disturbed"])
+def test_the_same_seed_gives_the_same_episodes_from_the_envs_own_generators(env_id, config):
+    """Determinism with nothing replaced: the vector env's and the single env's own seeded
+    generators, twice, give bitwise the same observations, rewards and infos (autoresets included)."""
+    rng = np.random.default_rng(1)
+    actions = rng.uniform(-1, 1, (12, N, (1 if env_id == "lawn/Comm-v0" else 3) * config.num_agvs + 2))
+    actions = actions.astype(np.float32)
+
+    def vector_run():
+        envs = _make(env_id=env_id, config=config)
+        out = [envs.reset(seed=9)]
+        out += [envs.step(a) for a in actions]
+        return out
+
+    def single_run():
+        env = gym.make(env_id, config=config)
+        out = [env.reset(seed=9)]
+        for a in actions[:, 0]:
+            step = env.step(a)
+            out.append(step)
+            if step[2] or step[3]:
+                out.append(env.reset())
+        return out
+
+    for run in (vector_run, single_run):
+        first, second = run(), run()
+        assert len(first) == len(second)
+        for x, y in zip(first, second, strict=True):
+            for u, v in zip(x, y, strict=True):
+                if isinstance(u, dict):
+                    assert u.keys() == v.keys()
+                    for key in u:
+                        if isinstance(u[key], dict):
+                            assert u[key] == v[key]
+                        else:
+                            np.testing.assert_array_equal(u[key], v[key], err_msg=key)
+                else:
+                    np.testing.assert_array_equal(u, v)

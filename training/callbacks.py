@@ -10,7 +10,7 @@ from pathlib import Path
 from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.learned import MARLPolicy, ObsNormalizer, SB3Policy
-from lawn_env import ScenarioConfig
+from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
 from lawn_env.interface import InterfaceLike
 
 from .checkpoints import write_checkpoint
@@ -58,14 +58,14 @@ class ControlCostValidation(BaseCallback):
 
     def _policy(self):
         normalizer = ObsNormalizer.from_vecnormalize(self.model.get_vec_normalize_env())
-        if self.env_id == "lawn/Parallel-v0":
+        if self.env_id == PARALLEL_ENV_ID:
             return MARLPolicy(self.model, self.config, self.interface, normalizer)
         return SB3Policy(self.model, self.config, self.env_id, self.interface, normalizer)
 
     def validation_costs(self) -> dict[int, float]:
         """The current policy's control cost on each validation seed."""
         policy = self._policy()
-        env_id = "lawn/Joint-v0" if self.env_id == "lawn/Parallel-v0" else self.env_id
+        env_id = central_env_id(self.env_id)
         if self._reference is None:  # rg-mpc on the validation seeds, once per process (deterministic)
             self._reference = validation_reference(env_id, self.config, self.episodes, self.seed_base)
         return {s: float(episode_row(policy, env_id, self.config, s)["control_cost"]) for s in self._reference}

@@ -30,7 +30,7 @@ from agents.base import JOINT
 from agents.errors import MissingExtra
 from agents.learned import zoo_agents
 from agents.runs import read_run
-from lawn_env import ScenarioConfig, presets
+from lawn_env import ScenarioConfig, central_env_id, presets
 
 from .evaluate import evaluate, write_rows
 from .protocol import TEST_EPISODES
@@ -56,7 +56,7 @@ def policy_env(policy: str) -> str:
         return agents[rest]["evaluated_on"]
     if prefix in ("sb3", "bc", "marl"):
         env = read_run(rest).env
-        return JOINT if env == "lawn/Parallel-v0" else env
+        return central_env_id(env)
     return JOINT
 
 

@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from agents.runs import ALGORITHMS, algorithm_class, read_json, read_run
-from lawn_env import ScenarioConfig
+from lawn_env import ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig
 from lawn_env.interface import InterfaceLike, resolve_interface
 
 from .checkpoints import Checkpoint, clear_history, latest_checkpoint, restore_history
@@ -55,7 +55,7 @@ __all__ = ["ALGOS", "TRAIN_ENV_IDS", "load_hyperparams", "train", "train_seeds",
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: Environment ids ``lawn train`` accepts; ``lawn/Parallel-v0`` is the PettingZoo env (parameter sharing).
-TRAIN_ENV_IDS = ("lawn/Joint-v0", "lawn/Comm-v0", "lawn/Parallel-v0", "CartPole-v1")
+TRAIN_ENV_IDS = (*ENV_IDS, PARALLEL_ENV_ID, "CartPole-v1")
 
 
 #: The algorithm names ``lawn train`` accepts (``bc`` is behaviour cloning, training/bc.py).
@@ -107,7 +107,7 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
             raise ValueError(f"--vec native runs {', '.join(NATIVE_ENV_IDS)} (got {env_id}); pass --vec dummy")
         venv = VecMonitor(NativeVecEnv(config, n_envs, env_id, interface=interface))
         venv.seed(seed)
-    elif env_id == "lawn/Parallel-v0":
+    elif env_id == PARALLEL_ENV_ID:
         from .marl import make_marl_vec_env
 
         venv = make_marl_vec_env(config, n_envs, seed, interface=interface)
@@ -267,7 +267,7 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
         if start.replay_buffer is not None:
             model.load_replay_buffer(str(start.replay_buffer))
     else:
-        model = cls(policy, env, seed=seed if spec["env"] != "lawn/Parallel-v0" else None, verbose=0,
+        model = cls(policy, env, seed=seed if spec["env"] != PARALLEL_ENV_ID else None, verbose=0,
                     tensorboard_log=str(out_dir / "tb"), **params)
         if spec.get("init_from"):
             _init_from(model, Path(spec["init_from"]), env)

@@ -23,7 +23,7 @@ import numpy as np
 
 from agents.learned import ZOO_DIR, export_agent, zoo_agents
 from agents.runs import read_run
-from lawn_env import ScenarioConfig
+from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
 
 from .evaluate import evaluate, pool_map, write_rows
 from .leaderboard import learned_entries, own_anchor, paired, protocol_cells, run_entries
@@ -53,7 +53,7 @@ class Recipe:
 
     @property
     def evaluated_on(self) -> str:
-        return "lawn/Joint-v0" if self.env_id == "lawn/Parallel-v0" else self.env_id
+        return central_env_id(self.env_id)
 
     def command(self) -> str:
         parts = [f"lawn train --algo {self.algo} --env {self.env_id} --timesteps {self.timesteps}",
@@ -98,7 +98,7 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v0", 300_000, eval_every=50_000,
            vec="native"),
     Recipe("sac-comm", "SAC (RL interface)", "sac", "lawn/Comm-v0", 20_000, eval_every=5_000),
-    Recipe("ppo-marl", "PPO multi-agent, shared weights", "ppo", "lawn/Parallel-v0", 150_000, eval_every=25_000),
+    Recipe("ppo-marl", "PPO multi-agent, shared weights", "ppo", PARALLEL_ENV_ID, 150_000, eval_every=25_000),
     Recipe("ppo-comm-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Comm-v0", 60_000, init_from="bc-comm",
            hp=_FINE_TUNE, eval_every=10_000),
     Recipe("ppo-joint-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Joint-v0", 60_000, init_from="bc-joint",
