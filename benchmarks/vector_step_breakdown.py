@@ -18,7 +18,7 @@ import timeit
 import gymnasium as gym
 
 import lawn_env  # noqa: F401  (registers the ids)
-from lawn_env.envs.vector import check_actions
+from lawn_env.spaces import check_action
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     for _ in range(5):
         envs.step(action)
     sim, link = env.sim, env.sim.single.link
-    checked = check_actions(action, env.num_envs, env.single_action_space.shape[0])
+    checked = check_action(action, env.single_action_space.shape[0], "action", env.num_envs)
     decision = env._decisions(checked)  # the parts of step, timed one by one
     fading = env._draw_fading()
     state = (sim.x_aug, sim.tracking_error, sim.x_obs, sim.error_obs, sim.drone_position, sim.slot.copy(),
@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     x = link.outage_argument_sq(decision.power_w, d2)
     parts = [
         ("whole step (its autoresets included)", lambda: envs.step(action)),
-        ("check the actions", lambda: check_actions(action, env.num_envs, env.single_action_space.shape[0])),
+        ("check the actions", lambda: check_action(action, env.single_action_space.shape[0], "action", env.num_envs)),
         ("decode the actions", lambda: env._decisions(checked)),
         ("draw the fading", env._draw_fading),
         ("simulation step", sim_step),

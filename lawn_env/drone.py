@@ -2,42 +2,149 @@
 
 Per slot the drone moves at most V_max * Delta-tau and stays inside the area D:
 ``||q[n] - q[n-1]|| <= V_max Delta-tau`` and ``q[n] in D`` (paper, constraints of P1).
+
+One rule for one drone and for a batch of them: :func:`move_drone` takes positions and
+velocities with any leading axes, (2,) or (B, 2), and runs one compiled loop. Its arithmetic is
+the scalar rule the environments were first written with (CPython's ``math.hypot`` for the speed,
+``v * V_max / speed`` for the radial clip, then the area box), so every episode recorded with that
+rule replays bit for bit; :func:`hypot` is CPython's two-argument ``math.hypot`` (3.11), which a
+test checks against ``math.hypot`` itself.
 """
 
 from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
-__all__ = ["move_drone", "move_drones"]
+__all__ = ["move_drone", "toward", "hypot"]
+
+
+@numba.njit(cache=True, inline="always")
+def _split(x):  # pragma: no cover - compiled
+    """Veltkamp's split: x = hi + lo exactly, each half with 26 significant bits."""
+    t = x * 134217729.0  # 2^27 + 1
+    hi = t - (t - x)
+    return hi, x - hi
+
+
+@numba.njit(cache=True, inline="always")
+def _mul(x, y):  # pragma: no cover - compiled
+    """Dekker's exact product: x * y = hi + lo, hi the rounded product."""
+    xh, xl = _split(x)
+    yh, yl = _split(y)
+    hi = x * y
+    lo = ((xh * yh - hi) + xh * yl + xl * yh) + xl * yl
+    return hi, lo
+
+
+@numba.njit(cache=True)
+def hypot(a: float, b: float) -> float:  # pragma: no cover - compiled
+    """``math.hypot(a, b)`` exactly as CPython computes it (``vector_norm`` of Modules/mathmodule.c:
+    lossless scaling, exact squares and sums, one differential correction), so compiled code
+    reproduces the interpreter's value to the last bit whenever the larger magnitude is a normal
+    number (when both are subnormal, to a subnormal's last place or two)."""
+    x0, x1 = abs(a), abs(b)
+    found_nan = x0 != x0 or x1 != x1
+    top = 0.0
+    if x0 == x0 and x0 > top:
+        top = x0
+    if x1 == x1 and x1 > top:
+        top = x1
+    if math.isinf(top):
+        return top
+    if found_nan:
+        return math.nan
+    if top == 0.0:
+        return top
+    tiny = 2.2250738585072014e-308  # DBL_MIN
+    if math.frexp(top)[1] < -1023:  # subnormal: lift to normal numbers, as CPython does
+        return tiny * hypot(x0 / tiny, x1 / tiny)
+    scale = math.ldexp(1.0, -math.frexp(top)[1])
+    csum, frac1, frac2 = 1.0, 0.0, 0.0
+    for v in (x0, x1):
+        x = v * scale
+        p_hi, p_lo = _mul(x, x)
+        s_hi = csum + p_hi
+        s_lo = (csum - s_hi) + p_hi
+        csum = s_hi
+        frac1 += p_lo
+        frac2 += s_lo
+    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
+    p_hi, p_lo = _mul(-h, h)
+    s_hi = csum + p_hi
+    s_lo = (csum - s_hi) + p_hi
+    csum = s_hi
+    frac1 += p_lo
+    frac2 += s_lo
+    x = csum - 1.0 + (frac1 + frac2)
+    h += x / (2.0 * h)
+    return h / scale
+
+
+@numba.njit(cache=True, inline="always")
+def _clip(v, lo, hi):  # pragma: no cover - compiled
+    """Python's ``min(max(v, lo), hi)``, signed zeros and all."""
+    if lo > v:
+        v = lo
+    if hi < v:
+        v = hi
+    return v
+
+
+@numba.njit(cache=True)
+def _move(position, velocity, max_speed, slot_s, x0, x1, y0, y1, out):  # pragma: no cover - compiled
+    for i in range(position.shape[0]):
+        vx, vy = velocity[i, 0], velocity[i, 1]
+        speed = hypot(vx, vy)
+        if speed > max_speed:
+            vx, vy = vx * max_speed / speed, vy * max_speed / speed
+        out[i, 0] = _clip(position[i, 0] + vx * slot_s, x0, x1)
+        out[i, 1] = _clip(position[i, 1] + vy * slot_s, y0, y1)
+
+
+@numba.njit(cache=True)
+def _toward(position, target, max_speed, slot_s, x0, x1, y0, y1, out):  # pragma: no cover - compiled
+    reach = max_speed * slot_s
+    velocity = np.empty((position.shape[0], 2))
+    for i in range(position.shape[0]):
+        sx, sy = target[i, 0] - position[i, 0], target[i, 1] - position[i, 1]
+        dist = hypot(sx, sy)
+        if dist <= reach:
+            velocity[i, 0], velocity[i, 1] = sx / slot_s, sy / slot_s
+        else:
+            velocity[i, 0], velocity[i, 1] = sx * (max_speed / dist), sy * (max_speed / dist)
+    _move(position, velocity, max_speed, slot_s, x0, x1, y0, y1, out)
+
+
+def _rows(position_m, other, name: str) -> tuple[np.ndarray, np.ndarray]:
+    p = np.asarray(position_m, dtype=np.float64)
+    v = np.asarray(other, dtype=np.float64)
+    if p.shape[-1:] != (2,) or v.shape != p.shape:
+        raise ValueError(f"position {p.shape} and {name} {v.shape}: expected the same shape (..., 2)")
+    return np.ascontiguousarray(p.reshape(-1, 2)), np.ascontiguousarray(v.reshape(-1, 2))
 
 
 def move_drone(position_m: np.ndarray, velocity_mps: np.ndarray, max_speed_mps: float, slot_s: float,
                area_m: tuple[float, float, float, float]) -> np.ndarray:
-    """Next drone position: the commanded velocity clipped to V_max (radially), integrated over
-    one slot, then clipped into the area box. Clipping into the box only shortens the move, so
-    the speed limit still holds. (Scalar arithmetic: this runs every env step.)"""
-    vx, vy = velocity_mps
-    vx, vy = float(vx), float(vy)
-    speed = math.hypot(vx, vy)
-    if speed > max_speed_mps:
-        vx, vy = vx * max_speed_mps / speed, vy * max_speed_mps / speed
-    x0, x1, y0, y1 = area_m
-    px, py = position_m.tolist() if isinstance(position_m, np.ndarray) else map(float, position_m)
-    qx = min(max(px + vx * slot_s, x0), x1)
-    qy = min(max(py + vy * slot_s, y0), y1)
-    return np.array([qx, qy])
+    """Next drone positions: each commanded velocity clipped to V_max (radially), integrated over
+    one slot, then clipped into the area box (which only shortens the move, so the speed limit
+    still holds). Positions and velocities (..., 2), one drone or a batch; a new array of their shape."""
+    p, v = _rows(position_m, velocity_mps, "velocity")
+    out = np.empty_like(p)
+    x0, x1, y0, y1 = map(float, area_m)
+    _move(p, v, float(max_speed_mps), float(slot_s), x0, x1, y0, y1, out)
+    return out.reshape(np.shape(position_m))
 
 
-def move_drones(position_m: np.ndarray, velocity_mps: np.ndarray, max_speed_mps: float, slot_s: float,
-                area_m: tuple[float, float, float, float]) -> np.ndarray:
-    """:func:`move_drone` over a batch: positions and velocities (B, 2) -> next positions (B, 2).
-    The same rule (radial speed clip, integrate, clip into the box); a test checks the two agree."""
-    velocity = np.asarray(velocity_mps, dtype=float)
-    speed = np.sqrt((velocity * velocity).sum(axis=-1, keepdims=True))
-    velocity = velocity * np.minimum(1.0, max_speed_mps / np.maximum(speed, 1e-300))
-    x0, x1, y0, y1 = area_m
-    nxt = np.asarray(position_m, dtype=float) + velocity * slot_s
-    np.clip(nxt, (x0, y0), (x1, y1), out=nxt)
-    return nxt
+def toward(position_m: np.ndarray, target_m: np.ndarray, max_speed_mps: float, slot_s: float,
+           area_m: tuple[float, float, float, float]) -> np.ndarray:
+    """Next drone positions flying toward ``target_m`` (..., 2): straight there when it is within
+    one slot's reach V_max Delta-tau, else the full reach along the way (then :func:`move_drone`'s
+    rule)."""
+    p, t = _rows(position_m, target_m, "target")
+    out = np.empty_like(p)
+    x0, x1, y0, y1 = map(float, area_m)
+    _toward(p, t, float(max_speed_mps), float(slot_s), x0, x1, y0, y1, out)
+    return out.reshape(np.shape(position_m))

@@ -66,7 +66,7 @@ from . import spaces
 from .channel import LinkParams
 from .config import ScenarioConfig
 from .core import saturate_increment
-from .drone import move_drone, move_drones
+from .drone import move_drone, toward
 from .dynamics import PredictionModel
 from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
 
@@ -275,50 +275,28 @@ class ActionLayout:
         if self.mpc is not None:
             self.mpc.reset(which)
 
-    def decode_batch(self, actions: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
-                     drone_position: np.ndarray, slot: np.ndarray | None = None) -> Decision:
-        """:meth:`decode` over a batch of B scenarios: checked actions (B, size), states (B, K, 6),
-        reference windows (B, K, N_p+1, 6), drone positions (B, 2); the Decision's arrays get a
-        leading B axis; ``slot`` (B,) the scenarios' slots (move blocking with a control period)."""
-        a = actions
+    def decode(self, actions: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
+               drone_position: np.ndarray, slot: int | np.ndarray | None = None) -> Decision:
+        """The decisions of checked actions: one scenario (action (size,), states (K, 6), reference
+        window (K, N_p+1, 6), drone position (2,), slot) or a batch of B (the same with a leading B
+        axis, ``slot`` (B,): the scenarios' slots, for move blocking with a control period); the
+        Decision's arrays have the same leading axes."""
+        a = np.asarray(actions)
+        if a.ndim == 1:  # one scenario: the batch of one
+            ref = None if reference is None else reference[None]
+            d = self.decode(a[None], x_aug[None], ref, np.asarray(drone_position)[None],
+                            None if slot is None else np.asarray(slot).reshape(1))
+            return Decision(None if d.increment is None else d.increment[0], d.power_w[0], d.drone_next[0])
         k = self.num_agvs
         comm = a[:, self._inc_size :]
         if self.scheme == "direct":
             power = spaces.decode_power(comm[:, :k], self._pmax)
-            drone_next = move_drones(drone_position, comm[:, k:] * self._vmax, self._vmax, self._dt, self._area)
+            drone_next = move_drone(drone_position, comm[:, k:] * self._vmax, self._vmax, self._dt, self._area)
             increment = a[:, : 2 * k].reshape(-1, k, 2) * self._inc_max if self._inc_size else None
             return Decision(increment, power, drone_next)
         target = x_aug[..., 0:2].mean(axis=-2) + comm[:, k:] * self.interface.drone_offset_m
-        step = target - drone_position
-        dist = np.hypot(step[:, 0], step[:, 1])[:, None]
-        reach = self._reach
-        velocity = np.where(dist <= reach, step / self._dt, step * (self._vmax / np.maximum(dist, reach)))
-        drone_next = move_drones(drone_position, velocity, self._vmax, self._dt, self._area)
+        drone_next = toward(drone_position, target, self._vmax, self._dt, self._area)
         return self._anchored(a[:, : 2 * k], comm[:, :k], x_aug, reference, slot, drone_next)
-
-    # ------------------------------------------------------------------ decode
-    def decode(self, action: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
-               drone_position: np.ndarray, slot: int | None = None) -> Decision:
-        a = action
-        k = self.num_agvs
-        comm = a[self._inc_size :]
-        if self.scheme == "direct":
-            power = spaces.decode_power(comm[:k], self._pmax)
-            vx, vy = comm[k:].tolist()
-            drone_next = move_drone(drone_position, (vx * self._vmax, vy * self._vmax), self._vmax, self._dt,
-                                    self._area)
-            increment = a[: 2 * k].reshape(k, 2) * self._inc_max if self._inc_size else None
-            return Decision(increment, power, drone_next)
-        drone_next = self._anchored_drone(comm[k:], x_aug, drone_position)
-        return self._anchored(a[: 2 * k], comm[:k], x_aug, reference, slot, drone_next)
-
-    def _anchored_drone(self, a: np.ndarray, x_aug: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
-        target = x_aug[:, 0:2].mean(axis=0) + a * self.interface.drone_offset_m
-        step = target - drone_position
-        dist = math.hypot(*step.tolist())
-        reach = self._reach
-        velocity = step / self._dt if dist <= reach else step * (self._vmax / dist)
-        return move_drone(drone_position, velocity, self._vmax, self._dt, self._area)
 
     def _prepare(self, x_aug: np.ndarray, reference: np.ndarray | None, slot: int | np.ndarray | None
                  ) -> SlotData | None:

@@ -45,29 +45,31 @@ POSITION_ERROR_SCALE_M = 10.0
 VELOCITY_SCALE_MPS = 5.0
 
 
-def check_action(action: Any, size: int, name: str = "action") -> np.ndarray:
-    """Validate a normalized action as Gymnasium's ``Box.contains`` would: real numbers (a float or
-    integer array, or a flat list of numbers) of shape exactly ``(size,)``, finite, inside [-1, 1].
-    Complex, boolean, string and object inputs and other shapes raise ``ValueError`` naming
-    ``name``, the expected shape and dtype. Returns float64."""
+def check_action(action: Any, size: int, name: str = "action", num_envs: int | None = None) -> np.ndarray:
+    """Validate normalized actions as Gymnasium's ``Box.contains`` would: real numbers (a float or
+    integer array, or a list of numbers) of shape exactly ``(size,)``, or ``(num_envs, size)`` for
+    a batch, finite, inside [-1, 1]. Complex, boolean, string and object inputs and other shapes
+    raise ``ValueError`` naming ``name``, the expected shape and dtype; a bad entry is named by its
+    index (and, in a batch, its env's). Returns float64."""
+    shape = (size,) if num_envs is None else (num_envs, size)
+    expected = f"({size},)" if num_envs is None else f"({num_envs}, {size})"
     try:
         a = np.asarray(action)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a real array of shape ({size},), float32: {exc}") from None
+        raise ValueError(f"{name} must be a real array of shape {expected}, float32: {exc}") from None
     if a.dtype.kind not in "fiu":
         raise ValueError(f"{name} has dtype {a.dtype} ({type(action).__name__}); expected real numbers of shape "
-                         f"({size},), float32 (complex, boolean and string actions are not accepted)")
-    if a.shape != (size,):
-        raise ValueError(f"{name} has shape {a.shape}; expected ({size},), float32, with entries in [-1, 1]")
+                         f"{expected}, float32 (complex, boolean and string actions are not accepted)")
+    if a.shape != shape:
+        raise ValueError(f"{name} has shape {a.shape}; expected {expected}, float32, with entries in [-1, 1]")
     a = a.astype(np.float64, copy=False)
-    values = a.tolist()  # Python min/max/sum beat numpy reductions on a few dozen floats
-    total = sum(values)
-    if total != total or max(values) > 1.0 or min(values) < -1.0:  # total is NaN if any entry is
-        bad = np.flatnonzero(~((a >= -1.0) & (a <= 1.0)))
-        raise ValueError(
-            f"{name} entries {bad.tolist()[:8]} = {a[bad].tolist()[:8]} are outside [-1, 1] or not finite; "
-            "actions are normalized (see the environment's Action Space)"
-        )
+    ok = (a >= -1.0) & (a <= 1.0)  # False for NaN
+    if not ok.all():
+        bad = np.argwhere(~ok)
+        where = (f"env {bad[0, 0]}: {name} entry {bad[0, 1]} = {a[tuple(bad[0])]!r} is" if num_envs is not None
+                 else f"{name} entries {bad[:8, 0].tolist()} = {a[bad[:8, 0]].tolist()} are")
+        raise ValueError(f"{where} outside [-1, 1] or not finite; actions are normalized (see the environment's "
+                         "Action Space)")
     return a
 
 
@@ -82,12 +84,9 @@ def encode_increments(du: np.ndarray, accel_increment_max: float) -> np.ndarray:
 
 def decode_power(a: np.ndarray, power_budget_w: float) -> np.ndarray:
     """(..., K) normalized -> powers in W with sum <= P_max: ``w = (a + 1) / 2``,
-    ``p = P_max w / max(1, sum w)``."""
-    k = a.shape[-1]
-    if a.ndim == 1:  # one scenario: Python sums beat numpy reductions on a few floats (hot path)
-        total = 0.5 * (sum(a.tolist()) + k)
-        return (a + 1.0) * (0.5 * power_budget_w / max(total, 1.0))
-    total = 0.5 * (a.sum(axis=-1, keepdims=True) + k)
+    ``p = P_max w / max(1, sum w)``. The sum runs left to right (a cumulative sum), the order
+    Python's ``sum`` takes, whatever K and the batch."""
+    total = 0.5 * (np.cumsum(a, axis=-1)[..., -1:] + a.shape[-1])
     return (a + 1.0) * (0.5 * power_budget_w / np.maximum(total, 1.0))
 
 

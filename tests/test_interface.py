@@ -209,7 +209,7 @@ def test_lqr_increment_anchor_is_the_lqr_baselines_first_increment_and_solves_no
         zero = layout.decode(np.zeros(layout.size), sim.x_obs, window, sim.drone_position)
         lqr = lqr_rollout(sim.x_obs, window, model, model.lqr_gain, ctl.accel_max_mps2, ctl.accel_increment_max_mps2)
         np.testing.assert_allclose(zero.increment, lqr[:, 0], rtol=1e-12, atol=1e-12)
-        batch = layout.decode_batch(np.zeros((1, layout.size)), sim.x_obs[None], window[None],
+        batch = layout.decode(np.zeros((1, layout.size)), sim.x_obs[None], window[None],
                                     sim.drone_position[None])
         np.testing.assert_array_equal(batch.increment[0], zero.increment)
     with pytest.raises(ValueError, match="increment_anchor='lqr'.*pass the reference window"):

@@ -7,7 +7,6 @@ import pytest
 
 import lawn_env
 from lawn_env import ScenarioConfig, channel
-from lawn_env.drone import move_drone, move_drones
 
 N = 4
 
@@ -177,15 +176,6 @@ def test_unsupported_settings_are_refused_not_ignored():
         _make(interface="fast")
     with pytest.raises(ValueError, match="num_envs"):
         _make(num_envs=0)
-
-
-def test_batched_drone_moves_equal_the_single_rule():
-    rng = np.random.default_rng(1)
-    pos = rng.uniform(-20, 220, (500, 2)).clip(0, 200)
-    vel = rng.uniform(-40, 40, (500, 2))
-    batched = move_drones(pos, vel, 15.0, 0.5, (0.0, 200.0, 0.0, 200.0))
-    single = np.array([move_drone(p, v, 15.0, 0.5, (0.0, 200.0, 0.0, 200.0)) for p, v in zip(pos, vel)])
-    np.testing.assert_allclose(batched, single, rtol=1e-14, atol=1e-12)
 
 
 @pytest.mark.parametrize("obs_clip", [None, 10.0, 0.3])

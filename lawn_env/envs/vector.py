@@ -46,29 +46,9 @@ from ..core import link_success
 from ..interface import ActionLayout, resolve_interface
 from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
-from ..spaces import ObservationLayout
+from ..spaces import ObservationLayout, check_action
 
-__all__ = ["CommVectorEnv", "JointVectorEnv", "check_actions"]
-
-
-def check_actions(actions: Any, num_envs: int, size: int) -> np.ndarray:
-    """Validate a batch of normalized actions: real numbers of shape exactly (num_envs, size),
-    finite, inside [-1, 1]; a ``ValueError`` names the first bad env index. Returns float64."""
-    try:
-        a = np.asarray(actions)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"actions must be a real array of shape ({num_envs}, {size}), float32: {exc}") from None
-    if a.dtype.kind not in "fiu":
-        raise ValueError(f"actions have dtype {a.dtype}; expected real numbers of shape ({num_envs}, {size}), float32")
-    if a.shape != (num_envs, size):
-        raise ValueError(f"actions have shape {a.shape}; expected ({num_envs}, {size}), float32, entries in [-1, 1]")
-    a = a.astype(np.float64, copy=False)
-    ok = (a >= -1.0) & (a <= 1.0)  # False for NaN
-    if not ok.all():
-        env, entry = np.argwhere(~ok)[0].tolist()
-        raise ValueError(f"env {env}: action entry {entry} = {a[env, entry]!r} is outside [-1, 1] or not finite; "
-                         "actions are normalized (see the environment's Action Space)")
-    return a
+__all__ = ["CommVectorEnv", "JointVectorEnv"]
 
 
 class JointVectorEnv(VectorEnv):
@@ -153,7 +133,7 @@ class JointVectorEnv(VectorEnv):
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if not self._started:
             raise RuntimeError("call reset() before step()")
-        a = check_actions(actions, self.num_envs, self.single_action_space.shape[0])
+        a = check_action(actions, self.single_action_space.shape[0], "action", self.num_envs)
         sim = self.sim
         increment, power, drone_next, extra = self._decide(a)
         same_step = self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
@@ -206,10 +186,10 @@ class JointVectorEnv(VectorEnv):
         return d.increment, d.power_w, d.drone_next, {}
 
     def _decisions(self, a: np.ndarray):
-        """The actions decoded under the env's action scheme (:meth:`ActionLayout.decode_batch`)."""
+        """The actions decoded under the env's action scheme (:meth:`ActionLayout.decode`)."""
         sim = self.sim
         windows = sim.reference_windows() if self.actions.needs_reference else None  # the anchor plans or tracks
-        return self.actions.decode_batch(a, sim.x_obs, windows, sim.drone_position, sim.slot)
+        return self.actions.decode(a, sim.x_obs, windows, sim.drone_position, sim.slot)
 
     def _extra_reset_info(self) -> dict:
         return {}
