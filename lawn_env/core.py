@@ -1,31 +1,42 @@
-"""The simulation core shared by every environment (one model, several views of it).
+"""The one simulation core every environment runs: B scenarios of one config at once.
 
-:class:`Simulation` holds the state (augmented AGV states, drone position, slot index,
-references) and advances it one slot given the decisions of that slot: the acceleration
-increments to send, the power split and the drone's next position. It samples the links,
-applies delivered commands, computes the realized stage cost and accumulates the episode
-metrics of MODEL.md §6. It knows nothing about action or observation encodings; the
-environments do (see :mod:`lawn_env.spaces`).
+* :class:`SimParams`: everything fixed by the config (links, packed matrices, the area, the fixed
+  path set's reference table, the disturbance mode), built once, frozen.
+* :class:`SimState`: the episode state of B scenarios as plain arrays with a leading batch axis
+  (augmented AGV states, drone positions, slots, references, the last slot's links, the episode's
+  running sums for the metrics of MODEL.md §6).
+* :func:`draw_slot`: a slot's randomness for B scenarios from one generator, in one documented
+  order; :func:`reset` (new episodes for chosen rows, each drawing from its own generator) and
+  :func:`step` (one slot of every scenario: ``step(params, state, decisions, draws)`` returns the
+  new state and the slot's record, its arguments untouched).
+* :class:`Simulation`: the params and the state of B scenarios together, for the environments:
+  the single environments and the PettingZoo env are its B = 1 views, the native vector envs its
+  B = N views; :meth:`Simulation.row` is one scenario's state as single-scenario arrays.
+
+The slot's equations (saturation, links, transition, disturbance, measurement, stage cost) are
+the functions below, shape-generic over leading axes; the planners call them too. It knows
+nothing about action or observation encodings; the environments do (:mod:`lawn_env.spaces`,
+:mod:`lawn_env.interface`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
 from . import channel, drone, references
-from .config import ScenarioConfig
+from .config import DisturbanceConfig, ScenarioConfig
 from .dynamics import PredictionModel, packed_step_matrices
 
-__all__ = ["Simulation", "Snapshot", "SlotRecord", "initial_state", "saturate_increment", "link_outage", "link_success",
-           "apply_wind", "disturb", "measure", "transmit", "stage_terms"]
+__all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Snapshot", "Simulation", "ScenarioView", "Trail",
+           "draw_slot", "reset", "step", "episode_metrics", "initial_state", "saturate_increment", "link_outage",
+           "link_success", "apply_wind", "disturb", "measure", "transmit", "stage_terms"]
 
 
 # ---------------------------------------------------------------------- the slot's equations
-# Shape-generic over leading axes: (K, ...) for one scenario, (B, K, ...) for a batch of them
-# (lawn_env.batch). Every view of the simulation calls these.
+# Shape-generic over leading axes: (K, ...) for one scenario, (B, K, ...) for a batch of them.
 def initial_state(reference_start: np.ndarray, offsets: np.ndarray, area_lo: np.ndarray,
                   area_hi: np.ndarray) -> np.ndarray:
     """Augmented AGV states at slot 0: the reference start position plus ``offsets`` (kept in
@@ -126,11 +137,324 @@ def _rows_matmul(a: np.ndarray, m: np.ndarray) -> np.ndarray:
     return (a.reshape(-1, a.shape[-1]) @ m).reshape(a.shape[:-1] + m.shape[1:])
 
 
+def _row_sums(x: np.ndarray) -> np.ndarray:
+    """Sums over the last axis, left to right (a cumulative sum: the order Python's ``sum``
+    takes, whatever the length), (...,)."""
+    return np.cumsum(x, axis=-1)[..., -1]
+
+
+# ---------------------------------------------------------------------- parameters, state, draws
+@dataclass(frozen=True, eq=False)
+class SimParams:
+    """What the config fixes for every episode: sizes, the links (true and planning), the packed
+    transition and cost matrices, the area, the fixed path set's reference table (None for random
+    paths), the disturbance mode. Build with :meth:`from_config`."""
+
+    config: ScenarioConfig
+    num_agvs: int
+    num_slots: int
+    horizon: int
+    steps: int  # reference slots per episode: num_slots + horizon + 1
+    slot_s: float
+    model: PredictionModel
+    link: channel.LinkParams
+    planning_link: channel.LinkParams
+    packed_t: np.ndarray  # (8, 8): [x~, du] rows -> [x~[n+1], du]
+    packed_w: np.ndarray  # (8, 2): squared packed error -> (e' Q1 e, du' Q2 du)
+    accel_effect_t: np.ndarray  # (2, 4): A~'s u[n-1] columns (the actuator lag's correction)
+    area: tuple[float, float, float, float]
+    area_lo: np.ndarray
+    area_hi: np.ndarray
+    accel_max: float
+    max_speed: float
+    power_budget_w: float
+    drone_start: np.ndarray  # (2,)
+    envelope: references.Envelope
+    fixed_paths: list | None
+    fixed_reference: np.ndarray | None  # (K, T, 6) of the fixed path set
+    fixed_packed: np.ndarray | None  # (T, K, 8) [reference, 0, 0], slot-major (one gather per step)
+    disturbance: DisturbanceConfig
+    disturbed: bool
+    lag_alpha: float | None  # exp(-slot / lag) under actuator lag, else None
+
+    @classmethod
+    def from_config(cls, config: ScenarioConfig) -> SimParams:
+        if not isinstance(config, ScenarioConfig):
+            raise TypeError(f"config must be a ScenarioConfig, got {type(config).__name__}")
+        k, horizon, slots = config.num_agvs, config.control.horizon, config.num_slots
+        steps = slots + horizon + 1
+        model = PredictionModel.from_config(config)
+        q1 = np.asarray(config.control.q1_diag, dtype=float)
+        q2 = np.asarray(config.control.q2_diag, dtype=float)
+        packed_t, packed_w = packed_step_matrices(model.a_aug, model.b_aug, q1, q2)
+        area = tuple(float(v) for v in config.area_m)
+        envelope = references.Envelope.from_config(config, steps)
+        fixed_paths = references.paper_paths(k, area, envelope) if config.uses_paper_paths else None
+        fixed = references.reference_table(fixed_paths, steps, config.slot_s) if fixed_paths is not None else None
+        fixed_packed = None
+        if fixed is not None:
+            fixed_packed = np.ascontiguousarray(np.concatenate([fixed, np.zeros((k, steps, 2))], axis=2)
+                                                .transpose(1, 0, 2))
+        d = config.disturbance
+        return cls(
+            config=config, num_agvs=k, num_slots=slots, horizon=horizon, steps=steps, slot_s=config.slot_s,
+            model=model, link=channel.LinkParams.from_config(config),
+            planning_link=channel.LinkParams.from_config(config, planning=True),
+            packed_t=packed_t, packed_w=packed_w,
+            accel_effect_t=np.ascontiguousarray(model.a_aug[0:4, 4:6].T),
+            area=area, area_lo=np.array([area[0], area[2]]), area_hi=np.array([area[1], area[3]]),
+            accel_max=config.control.accel_max_mps2, max_speed=config.drone.max_speed_mps,
+            power_budget_w=config.power_budget_w, drone_start=np.array(config.drone.start_m, dtype=float),
+            envelope=envelope, fixed_paths=fixed_paths, fixed_reference=fixed, fixed_packed=fixed_packed,
+            disturbance=d, disturbed=d.active,
+            lag_alpha=float(np.exp(-config.slot_s / d.actuator_lag_s)) if d.actuator_lag_s > 0 else None,
+        )
+
+    @property
+    def measurement_noise(self) -> bool:
+        d = self.disturbance
+        return self.disturbed and (d.measurement_noise_position_m > 0 or d.measurement_noise_velocity_mps > 0)
+
+
+class SlotDraws(NamedTuple):
+    """A slot's randomness for B scenarios: the fading m|h|^2 of every link (B, K) and, in the
+    disturbance mode, the wind gust (B, 2) and the process and measurement noise (B, K, 2) each;
+    None where the config has none."""
+
+    fading: np.ndarray
+    gust: np.ndarray | None = None
+    process_position: np.ndarray | None = None
+    process_velocity: np.ndarray | None = None
+    measurement_position: np.ndarray | None = None
+    measurement_velocity: np.ndarray | None = None
+
+
+def draw_slot(rng: np.random.Generator, params: SimParams, num: int = 1) -> SlotDraws:
+    """One slot's randomness for ``num`` scenarios from ``rng``, in this order: the wind gust
+    N(0, gust std) (num, 2), the fading Gamma(m, 1) (num, K), the process noise on positions, then
+    on velocities (num, K, 2) each, the measurement noise on positions, then on velocities; a term
+    the config does not have is not drawn. With ``num = 1`` these are the draws, in the order, that
+    one scenario's environment has always made from its generator."""
+    k, d = params.num_agvs, params.disturbance
+    gust = rng.normal(0.0, d.wind_gust_std_mps, (num, 2)) if params.disturbed and d.wind_gust_std_mps > 0 else None
+    fading = channel.sample_normalized_fading(rng, params.link.m, (num, k))
+    if not params.disturbed:
+        return SlotDraws(fading)
+    pos = rng.normal(0.0, d.process_noise_position_m, (num, k, 2)) if d.process_noise_position_m > 0 else None
+    vel = rng.normal(0.0, d.process_noise_velocity_mps, (num, k, 2)) if d.process_noise_velocity_mps > 0 else None
+    meas = (None, None)
+    if params.measurement_noise:
+        meas = (rng.normal(0.0, d.measurement_noise_position_m, (num, k, 2)),
+                rng.normal(0.0, d.measurement_noise_velocity_mps, (num, k, 2)))
+    return SlotDraws(fading, gust, pos, vel, *meas)
+
+
+class Decisions(NamedTuple):
+    """A slot's decisions for B scenarios: increments to send (B, K, 2) m/s^2 (saturated by the
+    step), feasible powers (B, K) W, the drone's next positions (B, 2) m."""
+
+    increment: np.ndarray
+    power_w: np.ndarray
+    drone_next: np.ndarray
+
+
+@dataclass(eq=False)
+class SimState:
+    """The episode state of B scenarios, every array with a leading batch axis. ``x_obs`` and
+    ``error_obs`` are what the policies observe (the true ``x_aug`` and ``tracking_error``
+    without measurement noise); ``reference`` (B, K, T, 6) is a broadcast view of the fixed path
+    set's table when there is one (``reference_packed`` is then None); ``totals`` holds the
+    episode's running sums (:func:`episode_metrics`)."""
+
+    x_aug: np.ndarray  # (B, K, 6) [x, y, v_x, v_y, u_x[n-1], u_y[n-1]]
+    tracking_error: np.ndarray  # (B, K, 6) x~ - x~_ref at slot n
+    x_obs: np.ndarray
+    error_obs: np.ndarray
+    applied: np.ndarray  # (B, K, 2) the applied accelerations (actuator lag)
+    drone_position: np.ndarray  # (B, 2) q[n-1], where the drone moves from
+    slot: np.ndarray  # (B,) int64
+    last_power_w: np.ndarray  # (B, K)
+    last_delivered: np.ndarray  # (B, K) bool
+    last_outage_probability: np.ndarray  # (B, K)
+    reference: np.ndarray  # (B, K, T, 6)
+    reference_packed: np.ndarray | None  # (B, K, T, 8) for random paths
+    paths: list  # per scenario, its K paths
+    totals: dict[str, np.ndarray]
+
+    @property
+    def num_envs(self) -> int:
+        return self.x_aug.shape[0]
+
+
+_TOTALS = (("tracking", ()), ("effort", ()), ("sq_error", ("k",)), ("outages", ("k",)), ("outage_p", ()),
+           ("power", ("k",)), ("path", ()))
+
+
+def empty_state(params: SimParams, num: int) -> SimState:
+    """B scenarios before their first reset (zeros; :func:`reset` starts them)."""
+    k, steps = params.num_agvs, params.steps
+    fixed = params.fixed_reference
+    reference = np.broadcast_to(fixed, (num,) + fixed.shape) if fixed is not None else np.zeros((num, k, steps, 6))
+    x = np.zeros((num, k, 6))
+    return SimState(
+        x_aug=x, tracking_error=np.zeros((num, k, 6)), x_obs=x, error_obs=np.zeros((num, k, 6)),
+        applied=np.zeros((num, k, 2)), drone_position=np.zeros((num, 2)), slot=np.zeros(num, dtype=np.int64),
+        last_power_w=np.zeros((num, k)), last_delivered=np.ones((num, k), dtype=bool),
+        last_outage_probability=np.zeros((num, k)), reference=reference,
+        reference_packed=None if fixed is not None else np.zeros((num, k, steps, 8)),
+        paths=[params.fixed_paths] * num,
+        totals={name: np.zeros((num, k) if shape else num) for name, shape in _TOTALS},
+    )
+
+
+def reset(params: SimParams, state: SimState, rngs: Sequence[np.random.Generator],
+          which: np.ndarray | None = None) -> None:
+    """New episodes for the scenarios ``which`` (a mask; all when None), scenario i drawing from
+    ``rngs[i]``: its random paths (for a random path set), its initial offsets N(0, offset std)
+    (K, 2), then, under measurement noise, the noise of its first observation. Writes those rows of
+    ``state`` in place (the reference tables are large); the other rows are untouched."""
+    num, k, steps = state.num_envs, params.num_agvs, params.steps
+    idx = np.arange(num) if which is None else np.flatnonzero(which)
+    cfg = params.config
+    for name in ("tracking_error", "applied", "drone_position", "slot", "last_power_w", "last_delivered",
+                 "last_outage_probability"):  # new arrays: records and infos keep the old ones
+        setattr(state, name, getattr(state, name).copy())
+    if params.fixed_reference is None:  # every restarting scenario's paths drawn together, one table call
+        paths = references.sample_paths([rngs[i] for i in idx.tolist()], k, cfg.reference.families, params.area,
+                                        duration_s=(steps - 1) * params.slot_s, envelope=params.envelope)
+        tables = references.reference_table([p for row in paths for p in row], steps, params.slot_s)
+        state.reference[idx] = tables.reshape(idx.size, k, steps, 6)
+        state.reference_packed[idx, :, :, 0:6] = state.reference[idx]
+        for j, i in enumerate(idx.tolist()):
+            state.paths[i] = paths[j]
+    offsets = np.empty((idx.size, k, 2))
+    for j, i in enumerate(idx.tolist()):  # after its paths, from the scenario's own generator
+        offsets[j] = rngs[i].normal(0.0, cfg.reference.initial_offset_std_m, size=(k, 2))
+    start = state.reference[idx, :, 0]
+    x_aug = state.x_aug.copy()
+    x_aug[idx] = initial_state(start, offsets, params.area_lo, params.area_hi)
+    state.x_aug = x_aug
+    state.tracking_error[idx] = x_aug[idx] - start
+    state.applied[idx] = x_aug[idx, :, 4:6]
+    if params.measurement_noise:
+        state.x_obs, state.error_obs = state.x_obs.copy(), state.error_obs.copy()
+        d = params.disturbance
+        for i in idx.tolist():  # after the offsets, from the scenario's generator
+            pos = rngs[i].normal(0.0, d.measurement_noise_position_m, (k, 2))
+            vel = rngs[i].normal(0.0, d.measurement_noise_velocity_mps, (k, 2))
+            state.x_obs[i], state.error_obs[i] = measure(x_aug[i], state.tracking_error[i], pos, vel)
+    else:
+        state.x_obs, state.error_obs = state.x_aug, state.tracking_error
+    state.drone_position[idx] = params.drone_start
+    state.slot[idx] = 0
+    state.last_power_w[idx] = params.power_budget_w / k
+    state.last_delivered[idx] = True
+    state.last_outage_probability[idx] = link_outage(x_aug[idx], state.drone_position[idx], state.last_power_w[idx],
+                                                     params.link)[1]
+    for total in state.totals.values():
+        total[idx] = 0
+
+
+class SlotRecord(NamedTuple):
+    """What one slot produced for B scenarios (per AGV arrays (B, K))."""
+
+    tracking_cost: np.ndarray  # e' Q1 e at slot n+1 (e: augmented tracking error)
+    effort_cost: np.ndarray  # Delta-u' Q2 Delta-u of the delivered increment
+    delivered: np.ndarray  # bool
+    outage_probability: np.ndarray  # closed form at (p, q[n]) for the true link
+    applied_increment: np.ndarray  # (B, K, 2) after saturation and delivery, m/s^2
+    power_w: np.ndarray  # (B, K)
+    drone_position: np.ndarray  # q[n], (B, 2), after the wind
+    tracking_total: np.ndarray  # (B,) the slot's tracking cost summed over AGVs (left to right)
+    effort_total: np.ndarray  # (B,)
+
+
+def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDraws) -> tuple[SimState, SlotRecord]:
+    """Advance every scenario one slot: a new state and the slot's record; ``state`` and the
+    arguments are not modified. Commands are saturated to the acceleration bound and sent from the
+    drone's next position q[n] to the AGVs at their slot-n positions; they arrive with the drawn
+    fading. The disturbance mode (MODEL.md §7) runs through the same equations: wind moves the
+    drone after its planned move, commands go out only every ``control_period_slots``, the applied
+    acceleration lags the commanded one, process noise perturbs the AGVs and measurement noise
+    what the policies observe."""
+    d = params.disturbance
+    drone_next = decisions.drone_next
+    if params.disturbed:
+        wind = np.asarray(d.wind_mps, dtype=float)
+        if draws.gust is not None:
+            wind = wind + draws.gust
+        drone_next = apply_wind(drone_next, wind, params.slot_s, params.area_lo, params.area_hi)
+    x_aug = state.x_aug
+    du = saturate_increment(x_aug[..., 4:6], decisions.increment, params.accel_max)
+    if params.disturbed and d.control_period_slots > 1:
+        du[state.slot % d.control_period_slots != 0] = 0.0  # no command this slot: nothing is sent
+    packed, delivered, outage_p = transmit(x_aug, du, decisions.power_w, drone_next, draws.fading, params.link,
+                                           params.packed_t)
+    applied = state.applied
+    if params.disturbed:
+        applied = disturb(packed, x_aug[..., 4:6] + packed[..., 6:8], applied, params.lag_alpha,
+                          params.accel_effect_t, draws.process_position, draws.process_velocity)
+    slot = state.slot + 1
+    if params.fixed_packed is not None:  # one path set: gather from its (T, K, 8) table
+        reference = params.fixed_packed[slot]
+    else:
+        reference = state.reference_packed[np.arange(slot.size), :, slot]
+    err, terms = stage_terms(packed, reference, params.packed_w)
+    x_next, error = packed[..., 0:6], err[..., 0:6]
+    x_obs, error_obs = x_next, error
+    if draws.measurement_position is not None:
+        x_obs, error_obs = measure(x_next, error, draws.measurement_position, draws.measurement_velocity)
+    tracking, effort = terms[..., 0], terms[..., 1]
+    tracking_total, effort_total = _row_sums(tracking), _row_sums(effort)
+    totals = state.totals
+    step_len = drone_next - state.drone_position
+    totals = {
+        "tracking": totals["tracking"] + tracking_total,
+        "effort": totals["effort"] + effort_total,
+        "sq_error": totals["sq_error"] + (err[..., 0:2] ** 2).sum(axis=-1),
+        "outages": totals["outages"] + ~delivered,
+        "outage_p": totals["outage_p"] + _row_sums(outage_p),
+        "power": totals["power"] + decisions.power_w,
+        "path": totals["path"] + np.sqrt((step_len * step_len).sum(axis=-1)),
+    }
+    new = SimState(x_aug=x_next, tracking_error=error, x_obs=x_obs, error_obs=error_obs, applied=applied,
+                   drone_position=drone_next, slot=slot, last_power_w=decisions.power_w, last_delivered=delivered,
+                   last_outage_probability=outage_p, reference=state.reference,
+                   reference_packed=state.reference_packed, paths=state.paths, totals=totals)
+    record = SlotRecord(tracking, effort, delivered, outage_p, packed[..., 6:8], decisions.power_w, drone_next,
+                        tracking_total, effort_total)
+    return new, record
+
+
+def episode_metrics(params: SimParams, state: SimState, i: int) -> dict:
+    """Metrics of MODEL.md §6 over the slots scenario ``i`` has run in its episode (the decision
+    time is the caller's)."""
+    n, k = int(state.slot[i]), params.num_agvs
+    if n == 0:
+        raise RuntimeError("no slot has been simulated yet")
+    t = {name: v[i] for name, v in state.totals.items()}
+    tracking, effort = float(t["tracking"]), float(t["effort"])
+    return {
+        "slots": n,
+        "control_cost": tracking + effort,
+        "tracking_cost": tracking,
+        "effort_cost": effort,
+        "rmse_m": float(np.sqrt(t["sq_error"].sum() / (n * k))),
+        "rmse_per_agv_m": np.sqrt(t["sq_error"] / n).tolist(),
+        "outage_rate": float(t["outages"].sum() / (n * k)),
+        "outage_rate_predicted": float(t["outage_p"] / (n * k)),
+        "outage_rate_per_agv": (t["outages"] / n).tolist(),
+        "mean_power_w": (t["power"] / n).tolist(),
+        "drone_path_length_m": float(t["path"]),
+    }
+
+
+# ---------------------------------------------------------------------- the environments' object
 @dataclass(frozen=True)
 class Snapshot:
     """The full system state an external planner needs at the start of a slot.
 
-    ``x_aug`` (K, 6): augmented AGV states [x, y, v_x, v_y, u_x[n-1], u_y[n-1]];
+    ``x_aug`` (K, 6): augmented AGV states [x, y, v_x, v_y, u_x[n-1], u_y[n-1]] (as measured);
     ``reference`` (K, N_p+1, 6): reference augmented states [x, y, v_x, v_y, a_x, a_y] at slots
     n..n+N_p; ``drone_position`` (2,): q[n-1], the position the drone moves from; ``slot``: n;
     ``config``: the scenario. Arrays are copies.
@@ -144,100 +468,106 @@ class Snapshot:
     last_power_w: np.ndarray | None = None  # the powers of slot n-1 (warm starts); None when unknown
 
 
-class SlotRecord(NamedTuple):
-    """What one slot produced (arrays are per AGV); ``Simulation.history`` is a list of these."""
-
-    tracking_cost: np.ndarray  # e' Q1 e at slot n+1 (e: augmented tracking error)
-    effort_cost: np.ndarray  # Delta-u' Q2 Delta-u of the delivered increment
-    delivered: np.ndarray  # bool
-    outage_probability: np.ndarray  # closed form at (p, q[n]) for the true link
-    applied_increment: np.ndarray  # (K, 2) after saturation and delivery, m/s^2
-    power_w: np.ndarray  # (K,)
-    drone_position: np.ndarray  # q[n], (2,)
-    agv_position: np.ndarray  # (K, 2) at slot n+1
-
-
 class Simulation:
-    """One scenario's dynamics, channel and bookkeeping.
+    """B scenarios of one config (``num_envs``, 1 for the single environments): the frozen
+    :class:`SimParams` and the current :class:`SimState`, advanced by :func:`step` and restarted
+    by :func:`reset`. The state's arrays read as attributes (``sim.x_aug`` (B, K, 6), ...)."""
 
-    ``reset(rng)`` draws the references (for random path sets) and the initial offsets from
-    ``rng``; ``step`` draws the fading from the same generator, so one seed fixes an episode.
-    """
-
-    def __init__(self, config: ScenarioConfig):
-        if not isinstance(config, ScenarioConfig):
-            raise TypeError(f"config must be a ScenarioConfig, got {type(config).__name__}")
+    def __init__(self, config: ScenarioConfig, num_envs: int = 1):
+        if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
+            raise ValueError(f"num_envs={num_envs!r}: must be an integer >= 1")
+        self.params = SimParams.from_config(config)
         self.config = config
-        self.num_agvs = config.num_agvs
-        self.num_slots = config.num_slots
-        self.horizon = config.control.horizon
-        self.slot_s = config.slot_s
-        self.model = PredictionModel.from_config(config)
-        self.link = channel.LinkParams.from_config(config)
-        self.planning_link = channel.LinkParams.from_config(config, planning=True)
-        self._disturbed = config.disturbance.active
-        lag = config.disturbance.actuator_lag_s
-        self._lag_alpha = float(np.exp(-config.slot_s / lag)) if lag > 0 else 0.0
-        self.power_budget_w = config.power_budget_w
-        self.accel_max = config.control.accel_max_mps2
-        self.max_speed = config.drone.max_speed_mps
-        self.area = tuple(config.area_m)
-        self._area_lo = np.array([self.area[0], self.area[2]])
-        self._area_hi = np.array([self.area[1], self.area[3]])
-        self._q1 = np.asarray(config.control.q1_diag, dtype=float)
-        self._q2 = np.asarray(config.control.q2_diag, dtype=float)
-        self._packed_t, self._packed_w = packed_step_matrices(self.model.a_aug, self.model.b_aug, self._q1, self._q2)
-        self._a_aug_t = np.ascontiguousarray(self.model.a_aug.T)
-        # effect of a slot's acceleration on [position, velocity]: A~'s u[n-1] columns (the lag's correction)
-        self._accel_effect_t = np.ascontiguousarray(self.model.a_aug[0:4, 4:6].T)
-        self._b_aug_t = np.ascontiguousarray(self.model.b_aug.T)
-        self._envelope = references.Envelope.from_config(config, self.num_slots + self.horizon + 1)
-        self._paper_paths = (references.paper_paths(self.num_agvs, self.area, self._envelope)
-                             if config.uses_paper_paths else None)
-        self._paper_table = (
-            references.reference_table(self._paper_paths, self.num_slots + self.horizon + 1, self.slot_s)
-            if self._paper_paths is not None else None
-        )
-        self.paths = None
-        self.reference = None
-        self.x_aug = None
-        self.drone_position = None
-        self.slot = 0
+        self.num_envs = int(num_envs)
+        self.num_agvs, self.num_slots, self.horizon = config.num_agvs, config.num_slots, config.control.horizon
+        self.state = empty_state(self.params, self.num_envs)
+        self.started = False
+        self._window = np.arange(self.horizon + 1)
 
-    # ------------------------------------------------------------------ episode
-    def reset(self, rng: np.random.Generator) -> None:
-        cfg = self.config
-        k = self.num_agvs
-        steps = self.num_slots + self.horizon + 1
-        if self._paper_paths is not None:
-            self.paths = self._paper_paths
-            self.reference = self._paper_table
-        else:
-            self.paths = references.random_paths(
-                rng, k, cfg.reference.families, self.area, duration_s=(steps - 1) * self.slot_s,
-                envelope=self._envelope,
-            )
-            self.reference = references.reference_table(self.paths, steps, self.slot_s)
-        self._reference_packed = np.concatenate([self.reference, np.zeros(self.reference.shape[:2] + (2,))], axis=2)
-        self.rng = rng
-        offsets = rng.normal(0.0, cfg.reference.initial_offset_std_m, size=(k, 2))
-        x_aug = initial_state(self.reference[:, 0], offsets, self._area_lo, self._area_hi)
-        self.x_aug = x_aug
-        self.tracking_error = x_aug - self.reference[:, 0]
-        self._applied = x_aug[:, 4:6].copy()
-        self.x_obs, self.error_obs = self.x_aug, self.tracking_error
-        if self._disturbed:
-            self._observe()
-        self.drone_position = np.array(cfg.drone.start_m, dtype=float)
-        self.slot = 0
-        self.last_power_w = np.full(k, self.power_budget_w / k)
-        self.last_delivered = np.ones(k, dtype=bool)
-        self.last_outage_probability = self.outage_probability(self.last_power_w, self.drone_position)
-        self.history: list[SlotRecord] = []
-        self._start_drone = self.drone_position.copy()
-        self._start_agv = x_aug[:, 0:2].copy()
+    def __getattr__(self, name: str):  # the state's arrays
+        if name in SimState.__dataclass_fields__ and name != "totals":
+            return getattr(self.__dict__["state"], name)
+        raise AttributeError(name)
 
-    # ------------------------------------------------------------------ channel helpers
+    def reset(self, rngs: Sequence[np.random.Generator], which: np.ndarray | None = None) -> None:
+        """New episodes for the scenarios ``which`` (all when None), scenario i from ``rngs[i]``."""
+        if not self.started and which is not None and not np.all(which):
+            raise RuntimeError("the first reset must start every scenario")
+        reset(self.params, self.state, rngs, which)
+        self.started = True
+
+    def draw(self, rng: np.random.Generator) -> SlotDraws:
+        """This slot's randomness for every scenario (:func:`draw_slot`)."""
+        return draw_slot(rng, self.params, self.num_envs)
+
+    def step(self, decisions: Decisions, draws: SlotDraws) -> SlotRecord:
+        """One slot of every scenario (:func:`step`); the new state replaces the old."""
+        self.state, record = step(self.params, self.state, decisions, draws)
+        return record
+
+    def keep(self, before: SimState, rows: np.ndarray) -> None:
+        """Put the scenarios ``rows`` (a mask) back to ``before``, the state a :meth:`step` started
+        from (a vector env's restarted scenarios, whose slot did not happen). The current state's
+        arrays are the step's own (new ones), so ``before`` is unchanged."""
+        state = self.state
+        for name in ("x_aug", "tracking_error", "x_obs", "error_obs", "applied", "drone_position", "slot",
+                     "last_power_w", "last_delivered", "last_outage_probability"):
+            new, old = getattr(state, name), getattr(before, name)
+            if new is not old:
+                new[rows] = old[rows]
+        for name, total in state.totals.items():
+            total[rows] = before.totals[name][rows]
+
+    def reference_windows(self) -> np.ndarray:
+        """Reference augmented states at slots n..n+N_p of every scenario: (B, K, N_p+1, 6)."""
+        state = self.state
+        if state.slot.size == 1:  # one scenario: a view
+            n = int(state.slot[0])
+            return state.reference[:, :, n : n + self.horizon + 1]
+        idx = state.slot[:, None] + self._window[None, :]
+        return state.reference[np.arange(state.slot.size)[:, None], :, idx].transpose(0, 2, 1, 3)
+
+    def episode_metrics(self, i: int = 0) -> dict:
+        return episode_metrics(self.params, self.state, i)
+
+    def row(self, i: int = 0) -> ScenarioView:
+        return ScenarioView(self, i)
+
+
+class ScenarioView:
+    """Scenario ``i`` of a :class:`Simulation` as single-scenario arrays (views of row i): what
+    the renderer, the planners' snapshots and the single environments' accessors read."""
+
+    def __init__(self, sim: Simulation, i: int):
+        self._sim, self.i = sim, int(i)
+        p = sim.params
+        self.config, self.area, self.num_agvs, self.num_slots, self.horizon = (
+            p.config, p.area, p.num_agvs, p.num_slots, p.horizon)
+        self.link, self.planning_link, self.model = p.link, p.planning_link, p.model
+
+    def __getattr__(self, name: str):
+        if name in SimState.__dataclass_fields__ and name not in ("totals", "paths"):
+            return getattr(self._sim.state, name)[self.i]
+        raise AttributeError(name)
+
+    @property
+    def slot(self) -> int:
+        return int(self._sim.state.slot[self.i])
+
+    @property
+    def paths(self) -> list:
+        return self._sim.state.paths[self.i]
+
+    @property
+    def done(self) -> bool:
+        """True once ``num_slots`` slots have run (the episode truncates)."""
+        return self.slot >= self.num_slots
+
+    def reference_window(self) -> np.ndarray:
+        """Reference augmented states at slots n..n+N_p: (K, N_p+1, 6) (a view)."""
+        n = self.slot
+        return self._sim.state.reference[self.i, :, n : n + self.horizon + 1]
+
     def outage_probability(self, power_w: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
         """Closed-form outage of the true link at the current AGV positions."""
         return link_outage(self.x_aug, np.asarray(drone_position, dtype=float), power_w, self.link)[1]
@@ -248,15 +578,8 @@ class Simulation:
 
     def drone_target(self, velocity_mps: np.ndarray) -> np.ndarray:
         """Next drone position for a commanded velocity (speed-limited, kept in the area)."""
-        return drone.move_drone(self.drone_position, velocity_mps, self.max_speed, self.slot_s, self.area)
-
-    def reference_window(self) -> np.ndarray:
-        """Reference augmented states at slots n..n+N_p: (K, N_p+1, 6) (a view)."""
-        return self.reference[:, self.slot : self.slot + self.horizon + 1]
-
-    def saturate_increment(self, du: np.ndarray) -> np.ndarray:
-        """Clip increments so that |u[n-1] + du| <= a_max per axis (the control set, by saturation)."""
-        return saturate_increment(self.x_aug[:, 4:6], du, self.accel_max)
+        p = self._sim.params
+        return drone.move_drone(self.drone_position, velocity_mps, p.max_speed, p.slot_s, p.area)
 
     def snapshot(self) -> Snapshot:
         return Snapshot(
@@ -268,122 +591,31 @@ class Simulation:
             last_power_w=self.last_power_w.copy(),
         )
 
-    # ------------------------------------------------------------------ one slot
-    def step(self, increment: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray) -> SlotRecord:
-        """Advance one slot.
-
-        ``increment`` (K, 2): the Delta-u to send (saturated here to the acceleration bound);
-        ``power_w`` (K,): feasible powers (p >= 0, sum <= P_max); ``drone_next`` (2,): q[n], a
-        feasible next drone position (use :meth:`drone_target`); the simulator keeps references to
-        ``power_w`` and ``drone_next``, so pass fresh arrays. Commands are sent from q[n]
-        to the AGVs at their slot-n positions and arrive with the sampled fading.
-
-        One path for the nominal model and the disturbance mode (MODEL.md §7): when it is on, wind
-        moves the drone after its planned move, commands go out only every
-        ``control_period_slots``, the applied AGV acceleration lags the commanded one, the AGV
-        state takes process noise and what the policies observe takes measurement noise; the
-        channel, the transition and the costs are the same equations either way.
-        """
-        disturbed = self._disturbed
-        d = self.config.disturbance
-        rng = self.rng
-        if disturbed:
-            wind = np.asarray(d.wind_mps, dtype=float)
-            if d.wind_gust_std_mps > 0:
-                wind = wind + rng.normal(0.0, d.wind_gust_std_mps, 2)
-            drone_next = apply_wind(np.asarray(drone_next, dtype=float), wind, self.slot_s, self._area_lo,
-                                    self._area_hi)
-        x_aug = self.x_aug
-        du = saturate_increment(x_aug[:, 4:6], increment, self.accel_max)
-        if disturbed and self.slot % d.control_period_slots:
-            du[:] = 0.0  # no command this slot (reduced control rate): nothing is sent
-        fading = channel.sample_normalized_fading(rng, self.link.m, self.num_agvs)
-        packed, delivered, outage_p = transmit(x_aug, du, power_w, drone_next, fading, self.link,
-                                               self._packed_t)
-        du = packed[:, 6:8]
-        if disturbed:
-            self._disturb(packed, x_aug[:, 4:6] + du)
-        self.slot += 1
-        err, terms = stage_terms(packed, self._reference_packed[:, self.slot], self._packed_w)
-        tracking, effort = terms[:, 0], terms[:, 1]
-        x_next = packed[:, 0:6]
-        self.x_aug = self.x_obs = x_next
-        self.tracking_error = self.error_obs = err[:, 0:6]
-        if disturbed:
-            self._observe()
-        return self._record(SlotRecord(tracking, effort, delivered, outage_p, du, power_w, drone_next, x_next[:, 0:2]))
-
-    def _disturb(self, packed: np.ndarray, commanded: np.ndarray) -> None:
-        """:func:`disturb` with this episode's process noise (drawn position first, then velocity)."""
-        d, k = self.config.disturbance, self.num_agvs
-        pos = self.rng.normal(0.0, d.process_noise_position_m, (k, 2)) if d.process_noise_position_m > 0 else None
-        vel = self.rng.normal(0.0, d.process_noise_velocity_mps, (k, 2)) if d.process_noise_velocity_mps > 0 else None
-        lag = self._lag_alpha if d.actuator_lag_s > 0 else None
-        self._applied = disturb(packed, commanded, self._applied, lag, self._accel_effect_t, pos, vel)
-
-    def _record(self, record: SlotRecord) -> SlotRecord:
-        """The slot's bookkeeping (the AGV state is already updated)."""
-        self.drone_position = record.drone_position
-        self.last_power_w = record.power_w
-        self.last_delivered = record.delivered
-        self.last_outage_probability = record.outage_probability
-        self.history.append(record)
-        return record
-
-    def _observe(self) -> None:
-        """What the policies see: the state with measurement noise (the true state without it)."""
-        d = self.config.disturbance
-        if d.measurement_noise_position_m <= 0 and d.measurement_noise_velocity_mps <= 0:
-            self.x_obs, self.error_obs = self.x_aug, self.tracking_error
-            return
-        pos = self.rng.normal(0.0, d.measurement_noise_position_m, (self.num_agvs, 2))
-        vel = self.rng.normal(0.0, d.measurement_noise_velocity_mps, (self.num_agvs, 2))
-        self.x_obs, self.error_obs = measure(self.x_aug, self.tracking_error, pos, vel)
-
-    @property
-    def done(self) -> bool:
-        """True once ``num_slots`` slots have run (the episode truncates)."""
-        return self.slot >= self.num_slots
-
-    def trajectories(self) -> dict:
-        """The episode so far as arrays: drone (n+1, 2), AGVs (n+1, K, 2), reference positions (n+1, K, 2),
-        and the per-slot records stacked (n, K) each."""
-        hist = self.history
-        drone_xy = np.vstack([self._start_drone] + [r.drone_position for r in hist])
-        agv_xy = np.stack([self._start_agv] + [r.agv_position for r in hist])
-        out = {
-            "drone_position": drone_xy,
-            "agv_position": agv_xy,
-            "reference_position": np.swapaxes(self.reference[:, : len(hist) + 1, 0:2], 0, 1),
-        }
-        for name in ("tracking_cost", "effort_cost", "delivered", "outage_probability", "power_w"):
-            out[name] = np.array([getattr(r, name) for r in hist])
-        return out
-
-    # ------------------------------------------------------------------ metrics
     def episode_metrics(self) -> dict:
         """Metrics of MODEL.md §6 over the slots run so far (decision time is the caller's)."""
-        n = self.slot
-        k = self.num_agvs
-        if n == 0:
-            raise RuntimeError("no slot has been simulated yet")
-        traj = self.trajectories()
-        tracking = float(traj["tracking_cost"].sum())
-        effort = float(traj["effort_cost"].sum())
-        pos_err = traj["agv_position"][1:] - traj["reference_position"][1:]
-        sq_err = (pos_err**2).sum(axis=(0, 2))
-        outages = n - traj["delivered"].sum(axis=0)
-        drone_steps = np.diff(traj["drone_position"], axis=0)
-        return {
-            "slots": n,
-            "control_cost": tracking + effort,
-            "tracking_cost": tracking,
-            "effort_cost": effort,
-            "rmse_m": float(np.sqrt(sq_err.sum() / (n * k))),
-            "rmse_per_agv_m": np.sqrt(sq_err / n).tolist(),
-            "outage_rate": float(outages.sum() / (n * k)),
-            "outage_rate_predicted": float(traj["outage_probability"].mean()),
-            "outage_rate_per_agv": (outages / n).tolist(),
-            "mean_power_w": traj["power_w"].mean(axis=0).tolist(),
-            "drone_path_length_m": float(np.sqrt((drone_steps**2).sum(axis=1)).sum()),
-        }
+        return self._sim.episode_metrics(self.i)
+
+
+class Trail:
+    """The positions of one scenario's current episode, slot by slot: what the renderer draws
+    behind the drone and the AGVs, and the paths a figure plots. ``restart`` at reset, ``record``
+    after every step."""
+
+    def __init__(self, view: ScenarioView):
+        self.view = view
+        self._drone: list[np.ndarray] = []
+        self._agv: list[np.ndarray] = []
+
+    def restart(self) -> None:
+        self._drone, self._agv = [], []
+        self.record()
+
+    def record(self) -> None:
+        self._drone.append(self.view.drone_position.copy())
+        self._agv.append(self.view.x_aug[:, 0:2].copy())
+
+    def trajectories(self) -> dict:
+        """Drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions of slots 0..n."""
+        n = len(self._drone)
+        return {"drone_position": np.array(self._drone), "agv_position": np.array(self._agv),
+                "reference_position": np.swapaxes(self.view.reference[:, :n, 0:2], 0, 1)}

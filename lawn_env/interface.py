@@ -126,11 +126,7 @@ class RLInterface:
         costs = np.asarray(costs, dtype=float)
         return -costs if self.reward == "cost" else -np.minimum(costs, self.cost_clip) / self.cost_scale
 
-    def reward_from_cost(self, cost: float) -> float:
-        """The slot's reward for a realized stage cost (:meth:`rewards_from_costs` of one)."""
-        return float(self.rewards_from_costs(cost))
-
-    def terminates_batch(self, position_error_m: np.ndarray) -> np.ndarray:
+    def terminates(self, position_error_m: np.ndarray) -> np.ndarray:
         """Per scenario: termination is on and some AGV's position error exceeds the bound;
         position errors (B, K, 2) -> (B,) bool."""
         position_error_m = np.asarray(position_error_m, dtype=float)
@@ -139,18 +135,10 @@ class RLInterface:
         d2 = (position_error_m * position_error_m).sum(axis=-1)
         return d2.max(axis=-1) > self.termination_distance_m**2
 
-    def terminates(self, position_error_m: np.ndarray) -> bool:
-        """:meth:`terminates_batch` of one scenario, position errors (K, 2)."""
-        return bool(self.terminates_batch(np.asarray(position_error_m)[None])[0])
-
     def terminal_penalties(self, remaining_slots: np.ndarray) -> np.ndarray:
         """Added to the reward of a terminating step: the floor for every slot not played (any shape)."""
         remaining = np.asarray(remaining_slots)
         return np.where(remaining > 0, np.maximum(remaining, 1) * self.reward_floor, 0.0)
-
-    def terminal_penalty(self, remaining_slots: int) -> float:
-        """:meth:`terminal_penalties` of one step."""
-        return float(self.terminal_penalties(remaining_slots))
 
     @property
     def obs_bound(self) -> float:

@@ -13,12 +13,13 @@ import numpy as np
 
 if TYPE_CHECKING:
     from .config import ScenarioConfig
-    from .core import Simulation
+    from .core import ScenarioView, Trail
+    from .envs.base import LawnEnvBase
 
 __all__ = ["Renderer", "plot_episode"]
 
 
-def _draw(ax, sim, *, links: bool = True, trails: bool = True, title: str | None = None):
+def _draw(ax, sim, trail, *, links: bool = True, trails: bool = True, title: str | None = None):
     from matplotlib import cm, colors
 
     x0, x1, y0, y1 = sim.area
@@ -33,7 +34,7 @@ def _draw(ax, sim, *, links: bool = True, trails: bool = True, title: str | None
     ref = sim.reference[:, : sim.num_slots + 1]
     for i in range(k):
         ax.plot(ref[i, :, 0], ref[i, :, 1], "--", color=palette[i], lw=0.8, alpha=0.6)
-    traj = sim.trajectories()
+    traj = trail.trajectories()
     agv = traj["agv_position"]
     if trails and len(agv) > 1:
         for i in range(k):
@@ -72,8 +73,9 @@ class Renderer:
             self.canvas = FigureCanvasAgg(self.fig)
             self.ax = self.fig.add_subplot(111)
 
-    def draw(self, sim: Simulation) -> np.ndarray | None:
-        _draw(self.ax, sim)
+    def draw(self, sim: ScenarioView, trail: Trail) -> np.ndarray | None:
+        """One frame of a scenario (a :class:`~lawn_env.core.ScenarioView`: state row i) with its trail."""
+        _draw(self.ax, sim, trail)
         if self.human:
             self.fig.canvas.draw_idle()
             self._plt.pause(0.001)
@@ -86,15 +88,16 @@ class Renderer:
             self._plt.close(self.fig)
 
 
-def plot_episode(sim: Simulation, path: str | Path, title: str | None = None) -> None:
-    """Save a PNG (or any matplotlib format, by extension) of a finished or running episode."""
+def plot_episode(env: LawnEnvBase, path: str | Path, title: str | None = None) -> None:
+    """Save a PNG (or any matplotlib format, by extension) of a single env's finished or running
+    episode (its scenario and trail)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(7, 7), dpi=110)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(111)
-    _draw(ax, sim, title=title)
+    _draw(ax, env.sim, env.trail, title=title)
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path)

@@ -22,7 +22,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from .batch import BatchSimulation
     from .config import ScenarioConfig
     from .core import Simulation
 
@@ -109,11 +108,6 @@ def encode_drone(next_position: np.ndarray, position: np.ndarray, max_speed_mps:
     return np.clip(v, -1.0, 1.0)
 
 
-def _clipped(x: np.ndarray, bound: float | None) -> np.ndarray:
-    """``x`` clipped to ``[-bound, bound]`` (a new array; ``x`` itself when ``bound`` is None)."""
-    return x if bound is None else np.clip(x, -bound, bound)
-
-
 class ObservationLayout:
     """The observation vector of the central environments, and its inverse.
 
@@ -157,14 +151,6 @@ class ObservationLayout:
         self._state_shift = np.concatenate([self.center, np.zeros(4)])
         self._state_shift_scaled = self._state_shift * self._state_scale
         self._inv_half = 1.0 / self.half_extent
-        # encode_batch's row products: [x~ | e] -> [state (6), error (6), position / half-extent (2)]
-        self._dyn_state = np.zeros((6, 14))
-        self._dyn_state[np.arange(6), np.arange(6)] = self._state_scale
-        self._dyn_state[[0, 1], [12, 13]] = self._state_scale[0:2]
-        self._dyn_error = np.zeros((6, 14))
-        self._dyn_error[np.arange(6), np.arange(6, 12)] = self._ref_scale
-        self._dyn_shift = np.zeros(14)
-        self._dyn_shift[[0, 1, 12, 13]] = np.tile(self._state_shift_scaled[0:2], 2)
         self._inv_power = 1.0 / self.power_budget_w
         w0 = 12
         w1 = w0 + 6 * self.window
@@ -177,39 +163,7 @@ class ObservationLayout:
             "delivered": w1 + 3,
             "power": w1 + 4,
         }
-        self._ref_source = None
-        self._windows = None
-        self._chunk_start = self._chunk_end = 0
-        self._batch_template_key = self._batch_template_rows = None
-        self._buffer = np.zeros(self.size)
-        self._views = self._make_views()
-
-    def _make_views(self) -> tuple:
-        """Views into ``_buffer`` that :meth:`encode` fills (rebuilt after a copy or unpickling:
-        a copied view would no longer write into the copied buffer)."""
-        k = self.num_agvs
-        g0 = k * self.agv_features
-        w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
-        blocks = self._buffer[:g0].reshape(k, self.agv_features)
-        return (
-            blocks[:, 0:6],  # state
-            blocks[:, 6:12],  # tracking error
-            blocks[:, w0:w1],  # reference window
-            blocks[:, w1 : w1 + 2],  # relative to the drone
-            blocks[:, w1 + 2],  # outage probability
-            blocks[:, w1 + 3],  # delivered
-            blocks[:, w1 + 4],  # power
-            self._buffer[g0 : g0 + 2],  # drone position
-        )
-
-    def __getstate__(self) -> dict:
-        state = self.__dict__.copy()
-        del state["_views"]
-        return state
-
-    def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
-        self._views = self._make_views()
+        self._table_key = self._table = None
 
     def feature_names(self) -> list[str]:
         """Human-readable names of the per-AGV block, then of the globals."""
@@ -219,10 +173,7 @@ class ObservationLayout:
         names += ["rel_drone_x", "rel_drone_y", "outage_prob", "delivered", "power_frac"]
         return names + ["drone_x", "drone_y", "time_frac"]
 
-    #: Reference windows are precomputed for this many slots at a time (memory K x 256 x 6 (N_p+1)
-    #: floats, whatever the episode length).
-    window_chunk = 256
-    #: :meth:`encode_batch` precomputes a fixed path set's windows for the whole episode up to this
+    #: :meth:`encode` precomputes a fixed path set's windows for the whole episode up to this
     #: size (float32 bytes), and gathers them per step beyond it.
     batch_window_table_bytes = 64 << 20
 
@@ -244,85 +195,44 @@ class ObservationLayout:
         return win.reshape(win.shape[:-2] + (-1,))
 
     def encode(self, sim: Simulation) -> np.ndarray:
-        """Observation of a :class:`~lawn_env.core.Simulation` at its current slot (a new array).
-
-        Filled into a persistent float64 buffer through fixed views, then cast once: this runs
-        every env step, so the reference windows are precomputed, ``window_chunk`` slots at a time.
-        """
-        n = sim.slot
-        if sim.reference is not self._ref_source or not self._chunk_start <= n < self._chunk_end:
-            self._ref_source = sim.reference
-            self._chunk_start = n
-            self._windows = self.reference_windows(sim.reference, n, n + self.window_chunk)
-            self._chunk_end = n + self._windows.shape[1]
-        v_state, v_err, v_ref, v_rel, v_out, v_del, v_pow, v_drone = self._views
-        q = sim.drone_position
-        np.multiply(sim.x_obs, self._state_scale, out=v_state)
-        v_state -= self._state_shift_scaled
-        np.multiply(sim.error_obs, self._ref_scale, out=v_err)
-        v_ref[:] = self._windows[:, n - self._chunk_start]
-        np.subtract(q, self.center, out=v_drone)
-        v_drone *= self._inv_half
-        np.subtract(v_state[:, 0:2], v_drone, out=v_rel)  # (pos - q) / half-extent
-        v_out[:] = sim.last_outage_probability
-        v_del[:] = sim.last_delivered
-        np.multiply(sim.last_power_w, self._inv_power, out=v_pow)
-        self._buffer[-1] = sim.slot / self.num_slots
-        return self._buffer.astype(np.float32)
-
-    def encode_batch(self, bsim: BatchSimulation, bound: float | None = None) -> np.ndarray:
-        """Observations of a :class:`~lawn_env.batch.BatchSimulation`: (B, size) float32, row i
-        equal to :meth:`encode` of scenario i up to float32 rounding (the same features and
-        scalings, batched), every feature clipped to ``[-bound, bound]`` when ``bound`` is given
-        (as :meth:`RLInterface.observe` clips an observation: clipping before the float32 cast
-        gives the same numbers).
-
-        A fixed path set shares one precomputed float32 table of the observation's slot-dependent
-        part (the reference windows and slot n / N, clipped) while it stays under
-        ``batch_window_table_bytes``: a step gathers one table row per scenario and writes the
-        state-dependent features over it."""
-        b, k, f = bsim.num_envs, self.num_agvs, self.agv_features
+        """Observations of every scenario of a :class:`~lawn_env.core.Simulation` at its current
+        slot: (B, size) float32, each feature computed in float64 and rounded once (unclipped:
+        :meth:`RLInterface.observe <lawn_env.interface.RLInterface.observe>` bounds them). A fixed
+        path set shares one precomputed float32 table of the slot-dependent features (the
+        reference windows and slot n / N) while it stays under ``batch_window_table_bytes``: a step
+        gathers one table row per scenario and writes the state-dependent features over it."""
+        b, k, f = sim.num_envs, self.num_agvs, self.agv_features
         w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
-        template = self._batch_template(bsim.shared_reference, bound)
+        template = self._slot_table(sim.params.fixed_reference)
         if template is not None:
-            out = template[bsim.slot]  # a new array
+            out = template[sim.slot]  # a new array
             blocks = out[:, : k * f].reshape(b, k, f)
         else:
             out = np.empty((b, self.size), dtype=np.float32)
             blocks = out[:, : k * f].reshape(b, k, f)
-            blocks[..., w0:w1] = _clipped(self.scaled_windows(bsim.reference_windows()), bound)
-            out[:, -1] = _clipped(bsim.slot / self.num_slots, bound)
-        # state (6), tracking error (6) and position relative to the drone (2) of every AGV as two
-        # row products (numpy's broadcasting over 6-wide rows is several times slower): the scalings
-        # are diagonal, so every entry is the one product encode() computes, then the shifts
-        drone = (bsim.drone_position - self.center) * self._inv_half
-        dyn = bsim.x_obs.reshape(-1, 6) @ self._dyn_state
-        dyn += bsim.error_obs.reshape(-1, 6) @ self._dyn_error
-        shift = np.empty((b, 1, 14))
-        shift[:] = self._dyn_shift
-        shift[:, 0, 12:14] += drone  # position relative to the drone
-        dyn = dyn.reshape(b, k, 14)
-        dyn -= shift
-        dyn = _clipped(dyn, bound)
-        blocks[..., 0:12] = dyn[..., 0:12]
-        blocks[..., w1 : w1 + 2] = dyn[..., 12:14]
-        # the remaining features lie in [-1, 1] (up to rounding): clipped only under a tighter bound
-        small = bound if bound is not None and bound < 2.0 else None
-        blocks[..., w1 + 2] = _clipped(bsim.last_outage_probability, small)
-        blocks[..., w1 + 3] = _clipped(bsim.last_delivered, small)
-        blocks[..., w1 + 4] = _clipped(bsim.last_power_w * self._inv_power, small)
-        out[:, -3:-1] = _clipped(drone, small)
+            blocks[..., w0:w1] = self.scaled_windows(sim.reference_windows())
+            out[:, -1] = sim.slot / self.num_slots
+        state = sim.x_obs * self._state_scale
+        state -= self._state_shift_scaled
+        blocks[..., 0:6] = state
+        blocks[..., 6:12] = sim.error_obs * self._ref_scale
+        drone = sim.drone_position - self.center
+        drone *= self._inv_half
+        blocks[..., w1 : w1 + 2] = state[..., 0:2] - drone[:, None, :]  # (pos - q) / half-extent
+        blocks[..., w1 + 2] = sim.last_outage_probability
+        blocks[..., w1 + 3] = sim.last_delivered
+        blocks[..., w1 + 4] = sim.last_power_w * self._inv_power
+        out[:, k * f : k * f + 2] = drone
         return out
 
-    def _batch_template(self, shared: np.ndarray | None, bound: float | None) -> np.ndarray | None:
+    def _slot_table(self, shared: np.ndarray | None) -> np.ndarray | None:
         """(slots, size) float32 rows holding the features that depend only on the slot for the
-        fixed path set ``shared`` (K, T, 6): reference windows and slot n / N, clipped to ``bound``;
-        None for per-scenario paths or when over ``batch_window_table_bytes``."""
+        fixed path set ``shared`` (K, T, 6): reference windows and slot n / N; None for random
+        paths or when over ``batch_window_table_bytes``."""
         if shared is None:
             return None
-        key = self._batch_template_key
-        if key is not None and key[0] is shared and key[1] == bound:
-            return self._batch_template_rows
+        if self._table_key is shared:
+            return self._table
         slots = shared.shape[1] - self.window + 1
         if slots * self.size * 4 > self.batch_window_table_bytes:
             return None
@@ -330,9 +240,9 @@ class ObservationLayout:
         rows = np.zeros((slots, self.size), dtype=np.float32)
         k, f = self.num_agvs, self.agv_features
         w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
-        rows[:, : k * f].reshape(slots, k, f)[..., w0:w1] = _clipped(windows.transpose(1, 0, 2), bound)
-        rows[:, -1] = _clipped(np.arange(slots) / self.num_slots, bound)
-        self._batch_template_key, self._batch_template_rows = (shared, bound), rows
+        rows[:, : k * f].reshape(slots, k, f)[..., w0:w1] = windows.transpose(1, 0, 2)
+        rows[:, -1] = np.arange(slots) / self.num_slots
+        self._table_key, self._table = shared, rows
         return rows
 
     def agv_blocks(self, obs: np.ndarray) -> np.ndarray:

@@ -117,24 +117,27 @@ def test_the_disturbed_slot_is_the_nominal_transition_plus_the_lag_and_noise():
     """The disturbance mode runs through the simulator's one step path (issue #13): checked here
     against the double integrator written out with the lagged acceleration, for the true state."""
     from lawn_env import DisturbanceConfig
-    from lawn_env.core import Simulation
+    from lawn_env.core import Decisions, Simulation
 
     cfg = ScenarioConfig(num_slots=20, disturbance=DisturbanceConfig(actuator_lag_s=0.3, wind_mps=(1.0, -2.0)))
     sim = Simulation(cfg)
-    sim.reset(np.random.default_rng(4))
+    view = sim.row(0)
+    draws = np.random.default_rng(4)
+    sim.reset([draws])
     alpha, dt = np.exp(-cfg.slot_s / 0.3), cfg.slot_s
-    applied = sim.x_aug[:, 4:6].copy()
+    applied = view.x_aug[:, 4:6].copy()
     rng = np.random.default_rng(9)
     for _ in range(cfg.num_slots):
-        x = sim.x_aug.copy()
-        record = sim.step(rng.uniform(-1, 1, (cfg.num_agvs, 2)), np.full(cfg.num_agvs, 0.25), sim.drone_target(np.zeros(2)))
-        commanded = x[:, 4:6] + record.applied_increment
+        x, q = view.x_aug.copy(), view.drone_position.copy()
+        decisions = Decisions(rng.uniform(-1, 1, (1, cfg.num_agvs, 2)), np.full((1, cfg.num_agvs), 0.25),
+                              view.drone_target(np.zeros(2))[None])
+        record = sim.step(decisions, sim.draw(draws))
+        commanded = x[:, 4:6] + record.applied_increment[0]
         applied = alpha * applied + (1 - alpha) * commanded
         expected = np.hstack([x[:, 0:2] + x[:, 2:4] * dt + 0.5 * applied * dt * dt, x[:, 2:4] + applied * dt, commanded])
-        np.testing.assert_allclose(sim.x_aug, expected, rtol=1e-12, atol=1e-12)
-        err = expected - sim.reference[:, sim.slot]
-        tracking, effort = dynamics.stage_cost(err, record.applied_increment, np.ones(6), np.ones(2))
-        np.testing.assert_allclose(record.tracking_cost, tracking, rtol=1e-12)
-        np.testing.assert_allclose(record.effort_cost, effort, rtol=1e-12)
-    assert np.allclose(record.drone_position, np.clip(sim.history[-2].drone_position + np.array([1.0, -2.0]) * dt,
-                                                      0, 200))  # the wind moved the hovering drone
+        np.testing.assert_allclose(view.x_aug, expected, rtol=1e-12, atol=1e-12)
+        err = expected - view.reference[:, view.slot]
+        tracking, effort = dynamics.stage_cost(err, record.applied_increment[0], np.ones(6), np.ones(2))
+        np.testing.assert_allclose(record.tracking_cost[0], tracking, rtol=1e-12)
+        np.testing.assert_allclose(record.effort_cost[0], effort, rtol=1e-12)
+    assert np.allclose(record.drone_position[0], np.clip(q + np.array([1.0, -2.0]) * dt, 0, 200))  # the wind moved the hovering drone

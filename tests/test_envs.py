@@ -137,7 +137,7 @@ def test_episode_accounting_and_metrics():
     assert m["tracking_cost"] == pytest.approx(-tracking) and m["effort_cost"] == pytest.approx(-effort)
     assert 0 <= m["outage_rate"] <= 1 and 0 <= m["outage_rate_predicted"] <= 1
     assert m["rmse_m"] > 0 and len(m["rmse_per_agv_m"]) == 4
-    traj = env.unwrapped.sim.trajectories()
+    traj = env.unwrapped.trajectories()
     steps_m = np.linalg.norm(np.diff(traj["drone_position"], axis=0), axis=1)
     assert steps_m.max() <= 15.0 * 0.5 + 1e-9  # speed limit
     assert m["drone_path_length_m"] == pytest.approx(steps_m.sum())

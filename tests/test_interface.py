@@ -74,7 +74,7 @@ def test_termination_fires_exactly_past_the_bound_and_never_pays():
     remaining = env.sim.num_slots - env.sim.slot
     assert remaining > 0 and "episode_metrics" in info
     floor = -iface.cost_clip / iface.cost_scale
-    own = iface.reward_from_cost(info["stage_cost"])
+    own = float(iface.rewards_from_costs(info["stage_cost"]))
     assert reward == pytest.approx(own + remaining * floor)
     # continuing would have earned at least the floor on every remaining slot: ending never pays
     assert reward <= own + remaining * floor + 1e-12

@@ -38,8 +38,8 @@ def test_paper_paths_respect_the_envelope_and_keep_sharp_turns_and_variable_spee
     from lawn_env.core import Simulation
 
     sim = Simulation(ScenarioConfig(num_agvs=k))
-    sim.reset(np.random.default_rng(0))
-    table = sim.reference
+    sim.reset([np.random.default_rng(0)])
+    table = sim.row(0).reference
     assert table.shape == (k, CFG.num_slots + CFG.control.horizon + 1, 6) and _in_area(table)
     assert _feasible(table)
     speed = np.linalg.norm(table[..., 2:4], axis=-1)

@@ -443,7 +443,7 @@ def _path_rows(cases, quick: bool) -> list[dict]:
         cfg = presets.get(preset).override(num_slots=30 if quick else 120)
         env = gym.make("lawn/Joint-v0", config=cfg).unwrapped
         cost = rollout(env, make_policy(policy, cfg), 0).metrics["control_cost"]
-        traj = env.sim.trajectories()
+        traj = env.trajectories()
         for n in range(traj["drone_position"].shape[0]):
             base = {"case": label, "preset": preset, "policy": policy, "slot": n, "control_cost": cost}
             rows.append({**base, "who": "drone", "x": traj["drone_position"][n, 0], "y": traj["drone_position"][n, 1]})

@@ -1,117 +1,258 @@
-"""What the central environments share: config resolution, spaces, reset, info, render."""
+"""What every environment runs: the one env-step template over the one simulation core.
+
+:class:`Engine` holds B scenarios (:class:`~lawn_env.core.Simulation`), the observation layout, the
+interface and the role, and does a step's work for all of them: decode the actions, let the role
+decide what it decides (:class:`JointRole`: the actions decide everything; :class:`CommRole`: the
+outage-aware MPC decides the increments), advance the core with the slot's draws, then the
+rewards and termination (:meth:`Engine.outcome`, the one place for reward, termination and the
+terminal penalty), the info (:meth:`Engine.info`, the one info builder) and the observations.
+``lawn/Joint-v0``, ``lawn/Comm-v0`` and the PettingZoo env are its B = 1 views (:class:`LawnEnvBase`,
+:class:`~lawn_env.envs.parallel.LawnParallelEnv`); the native vector envs its B = N views.
+"""
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, Sequence
 
 import gymnasium as gym
 import numpy as np
 
-from ..core import Simulation, Snapshot
-from ..interface import V0_INTERFACE, ActionLayout, InterfaceLike, RLInterface, resolve_interface
+from ..core import Decisions, ScenarioView, Simulation, SlotDraws, SlotRecord, Snapshot, Trail, link_success
+from ..config import ScenarioConfig
+from ..interface import ActionLayout, Decision, InterfaceLike, RLInterface, resolve_interface
+from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
-from ..spaces import ObservationLayout
+from ..spaces import ObservationLayout, check_action
 
-__all__ = ["SimulationView", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS", "slot_info"]
+__all__ = ["Engine", "JointRole", "CommRole", "ROLES", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS", "row"]
 
 
 #: The info keys every step and reset of the central environments (and the parallel env's "drone")
 #: carry, with fixed shapes and numpy dtypes; ``lawn/Comm-v0`` adds its MPC's keys
-#: (``COMM_INFO_KEYS``); the last step alone adds ``episode_metrics`` (a dict of MODEL.md §6).
+#: (``COMM_INFO_KEYS``); the step that ends an episode adds ``episode_metrics`` (a dict of MODEL.md §6).
 INFO_KEYS = ("slot", "stage_cost", "reward_tracking", "reward_effort", "delivered",
              "outage_probability", "power_w", "drone_position", "applied_increment")
 COMM_INFO_KEYS = ("mpc_iterations", "mpc_fallbacks", "success_probability_planned")
 
 
-def slot_info(slot: int, cost_tracking: float, cost_effort: float, delivered: np.ndarray,
-              outage_probability: np.ndarray, power_w: np.ndarray, drone_position: np.ndarray,
-              applied_increment: np.ndarray) -> dict[str, Any]:
-    """One slot's info dict (``INFO_KEYS``, flat: TorchRL's readers turn every value into a tensor):
-    ``slot`` int64, ``stage_cost`` and its split ``reward_tracking`` + ``reward_effort`` (negated)
-    float64, ``delivered`` (K,) bool,
-    ``outage_probability`` and ``power_w`` (K,) float64, ``drone_position`` (2,), ``applied_increment``
-    (K, 2) float64."""
-    tracking, effort = -float(cost_tracking), -float(cost_effort)
-    return {
-        "slot": np.int64(slot),
-        "stage_cost": np.float64(float(cost_tracking) + float(cost_effort)),
-        "reward_tracking": np.float64(tracking),
-        "reward_effort": np.float64(effort),
-        "delivered": np.asarray(delivered, dtype=bool),
-        "outage_probability": np.asarray(outage_probability, dtype=np.float64),
-        "power_w": np.asarray(power_w, dtype=np.float64),
-        "drone_position": np.asarray(drone_position, dtype=np.float64),
-        "applied_increment": np.asarray(applied_increment, dtype=np.float64),
-    }
+def row(batch: dict[str, Any], i: int = 0) -> dict[str, Any]:
+    """Row ``i`` of a batched info dict: (B,) arrays become numpy scalars, (B, ...) arrays their row."""
+    return {key: value[i] for key, value in batch.items()}
+
+
+class JointRole:
+    """``lawn/Joint-v0``'s role: the actions decide the increments, the powers and the drone."""
+
+    name = "joint"
+    info_keys: tuple[str, ...] = ()
+
+    def __init__(self, config: ScenarioConfig, qp_backend: str = DEFAULT_BACKEND):
+        del config, qp_backend  # nothing to build
+
+    def reset(self, which: np.ndarray | None = None) -> None:
+        """New episodes for the scenarios ``which`` (all when None)."""
+
+    def decide(self, engine: Engine, decision: Decision, windows: np.ndarray | None) -> tuple[Decisions, dict]:
+        """The slot's decisions for the decoded actions, and the role's info keys."""
+        return Decisions(decision.increment, decision.power_w, decision.drone_next), {}
+
+    def reset_info(self, engine: Engine) -> dict:
+        return {}
+
+
+class CommRole:
+    """``lawn/Comm-v0``'s role: the actions decide the powers and the drone; every AGV's increment
+    is the first one of the outage-aware MPC (QP P3) at its link's planned success probability,
+    solved for all B x K links at once (the compiled exact solver, warm-started per scenario)."""
+
+    name = "comm"
+    info_keys = COMM_INFO_KEYS
+
+    def __init__(self, config: ScenarioConfig, qp_backend: str = DEFAULT_BACKEND):
+        self.mpc = OutageAwareMPC.from_config(config, backend=qp_backend)
+        self.last_solve_time_s = float("nan")
+
+    def reset(self, which: np.ndarray | None = None) -> None:
+        self.mpc.reset(which)  # a new episode starts without the old one's warm starts
+
+    def decide(self, engine: Engine, decision: Decision, windows: np.ndarray | None) -> tuple[Decisions, dict]:
+        sim = engine.sim
+        psi = link_success(sim.x_aug, decision.drone_next, decision.power_w, sim.params.planning_link)
+        solution = self.mpc.solve(sim.x_aug, windows, psi, sim.slot)
+        self.last_solve_time_s = solution.solve_time_s  # not in info: infos must be deterministic
+        extra = {"mpc_iterations": solution.iterations.astype(np.int64),
+                 "mpc_fallbacks": np.count_nonzero(solution.status, axis=-1).astype(np.int64),
+                 "success_probability_planned": np.asarray(psi, dtype=np.float64)}
+        return Decisions(solution.increments[..., 0, :], decision.power_w, decision.drone_next), extra
+
+    def reset_info(self, engine: Engine) -> dict:
+        sim = engine.sim
+        b, k = sim.num_envs, sim.num_agvs
+        return {"mpc_iterations": np.zeros((b, k), dtype=np.int64), "mpc_fallbacks": np.zeros(b, dtype=np.int64),
+                "success_probability_planned": link_success(sim.x_aug, sim.drone_position, sim.last_power_w,
+                                                            sim.params.planning_link)}
+
+
+ROLES = {"joint": JointRole, "comm": CommRole}
+
+
+class Engine:
+    """B scenarios of one config, one role and one interface, stepped together (module docstring)."""
+
+    def __init__(self, config: ScenarioConfig, role: str, interface: InterfaceLike = None, num_envs: int = 1,
+                 qp_backend: str = DEFAULT_BACKEND):
+        if role not in ROLES:
+            raise ValueError(f"role={role!r}; valid: {', '.join(ROLES)}")
+        self.config = config
+        self.interface: RLInterface = resolve_interface(interface)
+        self.sim = Simulation(config, num_envs)
+        self.num_envs = self.sim.num_envs
+        self.layout = ObservationLayout(config)
+        self.actions = ActionLayout(config, role, self.interface, mpc_backend=qp_backend)
+        self.role = ROLES[role](config, qp_backend)
+        self._windows = role == "comm" or self.actions.needs_reference
+
+    def reset(self, rngs: Sequence[np.random.Generator], which: np.ndarray | None = None) -> None:
+        """New episodes for the scenarios ``which`` (all when None), scenario i from ``rngs[i]``."""
+        self.sim.reset(rngs, which)
+        self.actions.reset(which)
+        self.role.reset(which)
+
+    def check(self, actions: Any, name: str = "action") -> np.ndarray:
+        """The batch's actions checked (:func:`~lawn_env.spaces.check_action`), (B, size) float64."""
+        return check_action(actions, self.actions.size, name, self.num_envs)
+
+    def step(self, actions: np.ndarray, draws: SlotDraws) -> tuple[SlotRecord, dict]:
+        """One slot of every scenario for checked actions (B, size): the record and the role's info."""
+        sim = self.sim
+        windows = sim.reference_windows() if self._windows else None
+        decision = self.actions.decode(actions, sim.x_obs, windows, sim.drone_position, sim.slot)
+        decisions, extra = self.role.decide(self, decision, windows)
+        return sim.step(decisions, draws), extra
+
+    def outcome(self, costs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rewards for the slot's stage costs (B, M) (M = 1 for the central envs, 1 + K for the
+        multi-agent one) and which scenarios terminate (B,) (the RL interface's tracking-error
+        bound), the reward floor of the slots not played added to every reward of a terminating
+        scenario."""
+        iface, sim = self.interface, self.sim
+        reward = iface.rewards_from_costs(costs)
+        terminated = iface.terminates(sim.tracking_error[..., 0:2])
+        if terminated.any():
+            reward[terminated] += iface.terminal_penalties(sim.num_slots - sim.slot[terminated])[:, None]
+        return reward, terminated
+
+    def info(self, record: SlotRecord | None = None, extra: dict | None = None) -> dict[str, np.ndarray]:
+        """The info keys (``INFO_KEYS`` and the role's) of every scenario with a leading B axis:
+        ``slot`` int64, ``stage_cost`` and its split ``reward_tracking`` + ``reward_effort``
+        (negated) float64, ``delivered`` (K,) bool, ``outage_probability`` and ``power_w`` (K,),
+        ``drone_position`` (2,), ``applied_increment`` (K, 2) float64 per scenario; zero costs and
+        increments (and the role's reset values) without a record."""
+        sim = self.sim
+        if record is None:
+            tracking = effort = np.zeros(self.num_envs)
+            applied = np.zeros((self.num_envs, sim.num_agvs, 2))
+            extra = self.role.reset_info(self)
+        else:
+            tracking, effort, applied = record.tracking_total, record.effort_total, record.applied_increment
+        info = {
+            "slot": sim.slot.copy(),
+            "stage_cost": tracking + effort,
+            "reward_tracking": -tracking,
+            "reward_effort": -effort,
+            "delivered": sim.last_delivered,
+            "outage_probability": sim.last_outage_probability,
+            "power_w": np.asarray(sim.last_power_w, dtype=np.float64),
+            "drone_position": np.asarray(sim.drone_position, dtype=np.float64),
+            "applied_increment": applied,
+        }
+        info.update(extra or {})
+        return info
+
+    def observe(self) -> np.ndarray:
+        """Every scenario's observation as the agent sees it (B, size) float32."""
+        return self.interface.observe(self.layout.encode(self.sim))
 
 
 class SimulationView:
-    """What every view of a :class:`~lawn_env.core.Simulation` shares (the Gymnasium envs and the
-    PettingZoo env): config resolution, the core, the observation layout, snapshot, render, close."""
+    """What the B = 1 views of the engine share (the Gymnasium envs and the PettingZoo env): config
+    resolution, the engine, the scenario's accessors (``sim``), the trail, snapshot, render, close."""
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 4}
 
-    def _setup_view(self, config, render_mode, overrides, interface=None, role: str = "joint") -> None:
+    def _setup_view(self, config, render_mode, overrides, interface=None, role: str = "joint",
+                    qp_backend: str = DEFAULT_BACKEND) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode={render_mode!r}; valid: {self.metadata['render_modes']} or None")
         self.config = resolve_config(config, **overrides)
         self.render_mode = render_mode
-        self.sim = Simulation(self.config)
-        self.layout = ObservationLayout(self.config)
-        self.interface: RLInterface = resolve_interface(interface)
-        self.actions = ActionLayout(self.config, role, self.interface)
-        self._plain = self.interface == V0_INTERFACE
+        self.engine = Engine(self.config, role, interface, 1, qp_backend)
+        self.sim: ScenarioView = self.engine.sim.row(0)
+        self.layout = self.engine.layout
+        self.interface = self.engine.interface
+        self.actions = self.engine.actions
+        self.trail = Trail(self.sim)
         self._renderer = None
 
-    def _decide(self, action: np.ndarray):
-        """The slot's physical decisions (:class:`~lawn_env.interface.Decision`) for a checked action."""
-        sim = self.sim
-        return self.actions.decode(action, sim.x_obs, sim.reference_window(), sim.drone_position, sim.slot)
+    def _restart(self, rng: np.random.Generator) -> None:
+        self.engine.reset([rng])
+        self.trail.restart()
 
-    def _rewards_and_termination(self, costs) -> tuple[list[float], bool]:
-        """Rewards for the given stage costs and whether the episode terminates (RL interface),
-        the terminal penalty included in every reward of a terminating step."""
-        iface, sim = self.interface, self.sim
-        rewards = [iface.reward_from_cost(c) for c in costs]
-        terminated = iface.terminates(sim.tracking_error[:, 0:2])
-        if terminated:
-            penalty = iface.terminal_penalty(sim.num_slots - sim.slot)
-            rewards = [r + penalty for r in rewards]
-        return rewards, terminated
+    def _advance(self, action: np.ndarray) -> tuple[SlotRecord, dict]:
+        """One slot for a checked action (size,), the slot's draws from the env's own generator."""
+        engine = self.engine
+        record, extra = engine.step(action[None], engine.sim.draw(self.np_random))
+        self.trail.record()
+        return record, extra
 
     def snapshot(self) -> Snapshot:
         """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
-        if self.sim.x_aug is None:
+        if not self.engine.sim.started:
             raise RuntimeError("call reset() before snapshot()")
         return self.sim.snapshot()
+
+    def trajectories(self) -> dict:
+        """The current episode's drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions."""
+        return self.trail.trajectories()
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
             return None
-        if self.sim.x_aug is None:
+        if not self.engine.sim.started:
             raise RuntimeError("call reset() before render()")
         if self._renderer is None:
             from ..render import Renderer
 
             self._renderer = Renderer(self.config, human=self.render_mode == "human")
-        return self._renderer.draw(self.sim)
+        return self._renderer.draw(self.sim, self.trail)
 
     def close(self) -> None:
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
 
+    @property
+    def last_mpc_solve_time_s(self) -> float:
+        """Wall-clock time of the last step's MPC solve (``lawn/Comm-v0``; NaN otherwise)."""
+        return getattr(self.engine.role, "last_solve_time_s", float("nan"))
+
+    @property
+    def mpc(self) -> OutageAwareMPC | None:
+        """The MPC that drives the AGVs (``lawn/Comm-v0``; None otherwise)."""
+        return getattr(self.engine.role, "mpc", None)
+
 
 class LawnEnvBase(SimulationView, gym.Env):
-    """Common machinery of ``lawn/Joint-v0`` and ``lawn/Comm-v0`` (not registered itself)."""
+    """Common machinery of ``lawn/Joint-v0`` and ``lawn/Comm-v0`` (not registered itself): the
+    engine with B = 1."""
 
     role = "joint"
 
     def __init__(self, config: ConfigLike = None, render_mode: str | None = None,
-                 interface: InterfaceLike = None, **overrides: Any):
-        self._setup_view(config, render_mode, overrides, interface, self.role)
+                 interface: InterfaceLike = None, qp_backend: str = DEFAULT_BACKEND, **overrides: Any):
+        self._setup_view(config, render_mode, overrides, interface, self.role, qp_backend)
         self.num_agvs = self.config.num_agvs
         self.observation_space = self.interface.observation_space(self.layout.size)
         self.action_space = self.actions.space
@@ -133,50 +274,27 @@ class LawnEnvBase(SimulationView, gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
-        self.sim.reset(self.np_random)
-        self.actions.reset()
+        self._restart(self.np_random)
         self._done = False
-        self._on_reset()
         if self.render_mode == "human":
             self.render()
-        sim = self.sim
-        k = sim.num_agvs
-        info = slot_info(sim.slot, 0.0, 0.0, sim.last_delivered, sim.last_outage_probability, sim.last_power_w,
-                         sim.drone_position, np.zeros((k, 2)))
-        info.update(self._extra_reset_info())
-        return self.interface.observe(self.layout.encode(sim)), info
+        return self.engine.observe()[0], row(self.engine.info())
 
-    def _extra_reset_info(self) -> dict:
-        """The env-specific info keys at reset, with the shapes and dtypes ``step`` gives them."""
-        return {}
-
-    def _on_reset(self) -> None:
-        """Hook for subclasses (e.g. solver workspaces)."""
-
-    def _check_running(self) -> None:
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._done:
             raise RuntimeError("the episode has ended (or reset() was never called); call reset() before step()")
-
-    def _finish_step(self, record, extra: dict | None = None):
-        cost_tracking = sum(record.tracking_cost.tolist())  # tolist + sum: cheaper than ndarray.sum for small K
-        cost_effort = sum(record.effort_cost.tolist())
-        cost = cost_tracking + cost_effort
-        info = slot_info(self.sim.slot, cost_tracking, cost_effort, record.delivered, record.outage_probability,
-                         record.power_w, record.drone_position, record.applied_increment)
-        if extra:
-            info.update(extra)
-        sim = self.sim
-        if self._plain:  # the benchmark's hot path
-            reward, terminated = -cost, False
-        else:
-            (reward,), terminated = self._rewards_and_termination([cost])
-        truncated = sim.slot >= sim.num_slots and not terminated
+        engine = self.engine
+        record, extra = self._advance(check_action(action, self.actions.size))
+        reward, terminated = engine.outcome((record.tracking_total + record.effort_total)[:, None])
+        terminated = bool(terminated[0])
+        truncated = self.sim.slot >= self.config.num_slots and not terminated
+        info = row(engine.info(record, extra))
         if truncated or terminated:
             self._done = True
             info["episode_metrics"] = self.sim.episode_metrics()
         if self.render_mode == "human":
             self.render()
-        return self.interface.observe(self.layout.encode(self.sim)), reward, terminated, truncated, info
+        return engine.observe()[0], float(reward[0, 0]), terminated, truncated, info
 
     # ------------------------------------------------------------------ extras
     def episode_metrics(self) -> dict:

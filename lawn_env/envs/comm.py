@@ -2,14 +2,6 @@
 
 from __future__ import annotations
 
-from typing import Any
-
-import numpy as np
-
-from ..interface import InterfaceLike
-from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
-from ..presets import ConfigLike
-from ..spaces import check_action
 from .base import LawnEnvBase
 
 __all__ = ["CommEnv"]
@@ -78,31 +70,3 @@ class CommEnv(LawnEnvBase):
     """
 
     role = "comm"
-
-    def __init__(self, config: ConfigLike = None, render_mode: str | None = None,
-                 qp_backend: str = DEFAULT_BACKEND, interface: InterfaceLike = None, **overrides: Any):
-        super().__init__(config, render_mode, interface, **overrides)
-        self.mpc = OutageAwareMPC.from_config(self.config, backend=qp_backend)
-        self.last_mpc_solve_time_s = float("nan")
-
-    def _extra_reset_info(self) -> dict:
-        sim = self.sim
-        return {"mpc_iterations": np.zeros(sim.num_agvs, dtype=np.int64), "mpc_fallbacks": np.int64(0),
-                "success_probability_planned": sim.planning_success(sim.last_power_w, sim.drone_position)}
-
-    def _on_reset(self) -> None:
-        self.mpc.reset()  # episodes are independent of one another, warm starts included
-
-    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        self._check_running()
-        _, power, drone_next = self._decide(check_action(action, self.actions.size))
-        psi = self.sim.planning_success(power, drone_next)
-        solution = self.mpc.solve(self.sim.x_aug, self.sim.reference_window(), psi, self.sim.slot)
-        record = self.sim.step(solution.increments[:, 0, :], power, drone_next)
-        self.last_mpc_solve_time_s = solution.solve_time_s  # not in info: infos must be deterministic
-        extra = {
-            "mpc_iterations": solution.iterations.astype(np.int64),
-            "mpc_fallbacks": np.int64(solution.num_fallbacks),
-            "success_probability_planned": np.asarray(psi, dtype=np.float64),
-        }
-        return self._finish_step(record, extra)

@@ -2,11 +2,6 @@
 
 from __future__ import annotations
 
-from typing import Any
-
-import numpy as np
-
-from ..spaces import check_action
 from .base import LawnEnvBase
 
 __all__ = ["JointEnv"]
@@ -91,8 +86,3 @@ class JointEnv(LawnEnvBase):
       bound); ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` gives the native
       vector env (:mod:`lawn_env.envs.vector`); the dynamics and rewards are unchanged.
     """
-
-    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        self._check_running()
-        increment, power, drone_next = self._decide(check_action(action, self.actions.size))
-        return self._finish_step(self.sim.step(increment, power, drone_next))

@@ -13,7 +13,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from ..interface import InterfaceLike
 from ..presets import ConfigLike
 from ..spaces import check_action
-from .base import SimulationView, slot_info
+from .base import SimulationView, row
 
 __all__ = ["LawnParallelEnv", "parallel_env", "raw_env", "env"]
 
@@ -91,6 +91,7 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         }
         self.state_space = self._observation_spaces["drone"]
         self._np_random, _ = seeding.np_random()
+        self._agv_terms = (np.zeros(k), np.zeros(k))
 
     def observation_space(self, agent: str) -> gym.spaces.Box:
         return self._lookup(self._observation_spaces, agent)
@@ -110,29 +111,38 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         if seed is not None:
             self._np_random, _ = seeding.np_random(seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
-        self.sim.reset(self._np_random)
-        self.actions.reset()
+        self._restart(self._np_random)
+        self._agv_terms = (np.zeros(self.config.num_agvs), np.zeros(self.config.num_agvs))
         self.agents = list(self.possible_agents)
         observations = self._observations()
         if self.render_mode == "human":
             self.render()
-        sim = self.sim
-        k = sim.num_agvs
-        zero = np.zeros(k)
-        return observations, self._infos(zero, zero, sim.last_delivered, sim.last_outage_probability,
-                                         sim.last_power_w, np.zeros((k, 2)))
+        return observations, self._infos(self.engine.info())
 
-    def _infos(self, tracking, effort, delivered, outage, power, applied) -> dict:
+    @property
+    def np_random(self) -> np.random.Generator:
+        """The env's generator (seeded by ``reset(seed=...)``): every draw of an episode."""
+        return self._np_random
+
+    def _infos(self, info: dict) -> dict:
         """Per-agent infos with the same keys, shapes and dtypes at reset and at every step: the
         drone's are the central environments' (``INFO_KEYS``); each AGV's the same keys for its own
-        link, as scalars (``applied_increment`` (2,))."""
-        slot = self.sim.slot
-        infos = {"drone": slot_info(slot, tracking.sum(), effort.sum(), delivered, outage, power,
-                                    self.sim.drone_position, applied)}
+        link, as scalars (``applied_increment`` (2,)) and its own stage cost."""
+        central = row(info)
+        infos = {"drone": central}
+        terms = self._agv_terms
         for agent, i in self._agv_index.items():
-            info = slot_info(slot, tracking[i], effort[i], delivered[i], outage[i], power[i], self.sim.drone_position,
-                             applied[i])
-            infos[agent] = info
+            infos[agent] = {
+                "slot": central["slot"],
+                "stage_cost": np.float64(terms[0][i] + terms[1][i]),
+                "reward_tracking": np.float64(-terms[0][i]),
+                "reward_effort": np.float64(-terms[1][i]),
+                "delivered": np.asarray(central["delivered"][i], dtype=bool),
+                "outage_probability": np.asarray(central["outage_probability"][i], dtype=np.float64),
+                "power_w": np.asarray(central["power_w"][i], dtype=np.float64),
+                "drone_position": central["drone_position"],
+                "applied_increment": central["applied_increment"][i],
+            }
         return infos
 
     def step(self, actions: dict[str, np.ndarray]) -> tuple[dict, dict, dict, dict, dict]:
@@ -150,16 +160,16 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         joint[2 * k :] = check_action(actions["drone"], k + 2, name="actions['drone']")
         for agent, i in self._agv_index.items():
             joint[2 * i : 2 * i + 2] = check_action(actions[agent], 2, name=f"actions[{agent!r}]")
-        increment, power, drone_next = self._decide(joint)
-        record = self.sim.step(increment, power, drone_next)
-
-        per_agv = record.tracking_cost + record.effort_cost
-        agent_rewards, terminated = self._rewards_and_termination([float(per_agv.sum())] + per_agv.tolist())
-        rewards = {"drone": agent_rewards[0]}
+        record, extra = self._advance(joint)
+        per_agv = record.tracking_cost[0] + record.effort_cost[0]
+        costs = np.concatenate([record.tracking_total + record.effort_total, per_agv])[None]
+        agent_rewards, terminated = self.engine.outcome(costs)
+        terminated = bool(terminated[0])
+        rewards = {"drone": float(agent_rewards[0, 0])}
         for agent, i in self._agv_index.items():
-            rewards[agent] = agent_rewards[i + 1]
-        infos = self._infos(record.tracking_cost, record.effort_cost, record.delivered, record.outage_probability,
-                            record.power_w, record.applied_increment)
+            rewards[agent] = float(agent_rewards[0, i + 1])
+        self._agv_terms = (record.tracking_cost[0], record.effort_cost[0])
+        infos = self._infos(self.engine.info(record, extra))
         observations = self._observations()
         truncated = self.sim.done and not terminated
         terminations = {a: terminated for a in self.agents}
@@ -171,7 +181,7 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         return observations, rewards, terminations, truncations, infos
 
     def _observations(self) -> dict:
-        central = self.interface.observe(self.layout.encode(self.sim))
+        central = self.engine.observe()[0]
         blocks = self.layout.agv_blocks(central)
         glob = central[-self.layout.global_features :]
         obs = {"drone": central}
@@ -182,9 +192,9 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
     # ------------------------------------------------------------------ extras
     def state(self) -> np.ndarray:
         """Global state: the central observation (an element of ``state_space``)."""
-        if self.sim.x_aug is None:
+        if not self.engine.sim.started:
             raise RuntimeError("call reset() before state()")
-        return self.interface.observe(self.layout.encode(self.sim))
+        return self.engine.observe()[0]
 
     def episode_metrics(self) -> dict:
         """MODEL.md §6's metrics of the episode so far (the central envs put them in the last info)."""

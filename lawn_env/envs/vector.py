@@ -1,8 +1,8 @@
 """Native vector environments: ``gym.make_vec("lawn/Joint-v0", num_envs=N,
 vectorization_mode="vector_entry_point")`` and the same for ``lawn/Comm-v0``.
 
-One :class:`~lawn_env.batch.BatchSimulation` advances all N scenarios per call, through the
-slot functions every lawn env shares, instead of N Python-level env copies. Conventions are
+One :class:`~lawn_env.envs.base.Engine` of N scenarios, the step template of the single envs
+(their B = 1 views), advances all N per call instead of N Python-level env copies. Conventions are
 Gymnasium's vector ones (as ``CartPoleVectorEnv``):
 
 * batched spaces (``single_observation_space``, ``single_action_space`` are the single env's);
@@ -12,11 +12,14 @@ Gymnasium's vector ones (as ``CartPoleVectorEnv``):
   new first observation and the final one in ``info["final_obs"]`` (mask ``_final_obs``);
 * ``reset(seed=s)`` seeds scenario i from ``s + i`` (as ``SyncVectorEnv`` seeds its copies), so
   its references and initial state equal ``gym.make(...).reset(seed=s + i)``'s; a list of N
-  seeds sets them one by one. The fading of all scenarios comes from one batched generator,
-  seeded from ``s``;
+  seeds sets them one by one; ``reset()`` without a seed continues every scenario's generator, as
+  the single env's ``reset()`` does. Each slot's randomness for all N scenarios
+  (:func:`lawn_env.core.draw_slot`) comes from scenario 0's generator, the env's ``np_random``:
+  with N = 1 an episode is bitwise the single env's with the same seed and actions;
 * ``info`` holds arrays with a leading N axis for every key of the single env's info
-  (``lawn_env.envs.base.INFO_KEYS``), and ``episode_control_cost`` with its mask
-  ``_episode_control_cost`` on the step an episode ends.
+  (``lawn_env.envs.base.INFO_KEYS``); on the step an episode ends, ``episode_metrics`` (an object
+  array of N, the single env's dict where an episode ended, else None) with its mask
+  ``_episode_metrics``, and ``episode_control_cost`` with its mask ``_episode_control_cost``.
 
 ``lawn/Comm-v0``'s N x K outage-aware MPC QPs of a step are solved together
 (:class:`CommVectorEnv`); its info adds ``mpc_iterations`` (N, K),
@@ -28,7 +31,7 @@ Gymnasium's vector ones (as ``CartPoleVectorEnv``):
 Joint anchor's MPC solved by the batched QP solver), the scaled reward, termination with its
 penalty, clipped observations. The disturbance mode runs as in the single env (wind on the drone,
 a reduced control rate, actuator lag, process and measurement noise); its per-slot draws come
-from the batched generator like the fading.
+with the fading, in :func:`lawn_env.core.draw_slot`'s order.
 """
 
 from __future__ import annotations
@@ -40,66 +43,56 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..batch import BatchSimulation
-from ..channel import LinkParams
-from ..core import link_success
-from ..interface import ActionLayout, resolve_interface
+from ..core import SlotDraws, Trail
+from ..interface import InterfaceLike
 from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
-from ..spaces import ObservationLayout, check_action
+from .base import Engine
 
 __all__ = ["CommVectorEnv", "JointVectorEnv"]
 
 
 class JointVectorEnv(VectorEnv):
-    """N copies of ``lawn/Joint-v0`` (any interface) in one batched simulation."""
+    """N copies of ``lawn/Joint-v0`` (any interface) in one engine."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 4}
     role = "joint"
 
     def __init__(self, num_envs: int, config: ConfigLike = None,
-                 render_mode: str | None = None, interface: Any = None,
+                 render_mode: str | None = None, interface: InterfaceLike = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_env: int = 0,
-                 **overrides: Any):
+                 qp_backend: str = DEFAULT_BACKEND, **overrides: Any):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode={render_mode!r}; valid: 'rgb_array' (one env, render_env) or None")
-        self.interface = resolve_interface(interface)
         modes = {m.value: m for m in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)}
         mode = modes.get(autoreset_mode.value if isinstance(autoreset_mode, AutoresetMode) else autoreset_mode)
         if mode is None:
             raise ValueError(f"autoreset_mode={autoreset_mode!r}; valid: {', '.join(modes)}")
         self.metadata = dict(self.metadata, autoreset_mode=mode)
         self.config = resolve_config(config, **overrides)
-        self.sim = BatchSimulation(self.config, num_envs)
+        self.engine = Engine(self.config, self.role, interface, num_envs, qp_backend)
+        self.sim = self.engine.sim
+        self.interface, self.layout, self.actions = self.engine.interface, self.engine.layout, self.engine.actions
         self.num_envs = self.sim.num_envs
         if not (isinstance(render_env, (int, np.integer)) and 0 <= render_env < self.num_envs):
             raise ValueError(f"render_env={render_env!r}: the index of the env to render, in [0, {self.num_envs - 1}]")
         self.render_mode = render_mode
         self.render_env = int(render_env)
-        self._view = _EnvView(self.sim, self.render_env) if render_mode else None
+        self.trail = Trail(self.sim.row(self.render_env)) if render_mode else None
         self._renderer = None
-        self.layout = ObservationLayout(self.config)
-        k = self.config.num_agvs
-        self.num_agvs = k
+        self.num_agvs = self.config.num_agvs
         self.single_observation_space = self.interface.observation_space(self.layout.size)
-        self.actions = ActionLayout(self.config, self.role, self.interface)
         self.single_action_space = self.actions.space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._rngs: list[np.random.Generator] = []
         self._done = np.zeros(self.num_envs, dtype=bool)
-        self._cost = np.zeros(self.num_envs)
         self._started = False
 
-    # ------------------------------------------------------------------ fading (tests inject draws here)
-    def _draw_fading(self) -> np.ndarray:
-        """m|h|^2 of every link of every scenario for this slot, (N, K), from the batched generator."""
-        return self.np_random.standard_gamma(self.sim.single.link.m, (self.num_envs, self.num_agvs))
-
-    def _draw_noise(self) -> dict:
-        """The disturbance mode's other draws of this slot (gust, process and measurement noise;
-        :meth:`BatchSimulation.noise_shapes`), from the batched generator; empty without it."""
-        return {name: self.np_random.normal(0.0, std, shape) for name, (shape, std) in self.sim.noise_shapes().items()}
+    # ------------------------------------------------------------------ randomness (tests inject draws here)
+    def _draw(self) -> SlotDraws:
+        """This slot's randomness for every scenario, from the env's generator (scenario 0's)."""
+        return self.sim.draw(self.np_random)
 
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | list[int] | None = None,
@@ -108,98 +101,77 @@ class JointVectorEnv(VectorEnv):
             if len(seed) != self.num_envs:
                 raise ValueError(f"seed: a list of {len(seed)} seeds for {self.num_envs} envs")
             seeds = [int(s) for s in seed]
-            super().reset(seed=seeds[0])
+        elif seed is not None:
+            seeds = [int(seed) + i for i in range(self.num_envs)]
         else:
-            super().reset(seed=seed)
-            base = seed if seed is not None else int(self.np_random.integers(2**62))
-            seeds = [base + i for i in range(self.num_envs)]
-        self._rngs = [np.random.default_rng(s) for s in seeds]  # = gymnasium's seeding.np_random(s)
-        self.sim.reset(self._rngs)
-        self._on_reset()
-        if self._view is not None:
-            self._view.restart()
+            seeds = None
+        if seeds is not None:  # scenario 0's generator is the env's own (= gymnasium's seeding.np_random(s))
+            super().reset(seed=seeds[0])
+            self._rngs = [self.np_random] + [np.random.default_rng(s) for s in seeds[1:]]
+        elif not self._rngs:  # never seeded: the OS's entropy, through the env's generator
+            self._rngs = [self.np_random] + [np.random.default_rng(int(self.np_random.integers(2**62)))
+                                             for _ in range(self.num_envs - 1)]
+        self.engine.reset(self._rngs)
+        if self.trail is not None:
+            self.trail.restart()
         self._done[:] = False
-        self._cost[:] = 0.0
         self._started = True
-        return self._observe(), dict(self._info(), **self._extra_reset_info())
-
-    def _on_reset(self) -> None:
-        """A new batch of episodes starts (the anchored actions' MPC forgets its warm starts)."""
-        self.actions.reset()
-
-    def _observe(self) -> np.ndarray:
-        return self.layout.encode_batch(self.sim, bound=self.interface.obs_bound)
+        return self.engine.observe(), self.engine.info()
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if not self._started:
             raise RuntimeError("call reset() before step()")
-        a = check_action(actions, self.single_action_space.shape[0], "action", self.num_envs)
-        sim = self.sim
-        increment, power, drone_next, extra = self._decide(a)
+        engine, sim = self.engine, self.sim
+        a = engine.check(actions)
         same_step = self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
         restart = np.zeros(self.num_envs, dtype=bool) if same_step else self._done.copy()
-        record = sim.step(increment, power, drone_next, self._draw_fading(), self._draw_noise())
-        cost_tracking = record["tracking_cost"].sum(axis=1)
-        cost_effort = record["effort_cost"].sum(axis=1)
-        applied = record["applied_increment"].copy()
-        if self._view is not None:
-            self._view.record()
-        if restart.any():  # next-step autoreset: these scenarios start over; their action was ignored
+        zeros = np.zeros(self.num_envs, dtype=bool)
+        if restart.any():  # next-step autoreset: new episodes first, from their generators; their action is ignored
             self._restart(restart)
-            cost_tracking[restart] = cost_effort[restart] = 0.0
-            applied[restart] = 0.0
-        cost = cost_tracking + cost_effort
-        self._cost += cost
-        iface = self.interface
-        reward = iface.rewards_from_costs(cost)
-        terminated = iface.terminates_batch(sim.tracking_error[..., 0:2]) & ~restart
-        if terminated.any():  # the reward floor of every slot not played (RL interface)
-            reward[terminated] += iface.terminal_penalties(sim.num_slots - sim.slot[terminated])
-        reward[restart] = 0.0
-        truncated = (sim.slot >= sim.num_slots) & ~terminated
-        info = self._info(cost_tracking, cost_effort, applied)  # restarted rows describe their new episode
-        if extra:
-            if restart.any():  # restarted rows describe their new episode here too
-                fresh = self._extra_reset_info()
-                extra = {key: np.where(restart.reshape((-1,) + (1,) * (v.ndim - 1)), fresh[key], v)
-                         for key, v in extra.items()}
-            info.update(extra)
+        if restart.all():  # no slot this step: every scenario is at its first observation
+            self._done = zeros
+            return engine.observe(), np.zeros(self.num_envs), zeros, zeros.copy(), engine.info()
+        before = sim.state
+        record, extra = engine.step(a, self._draw())
+        if restart.any():  # the restarted scenarios stay at their first slot, their warm starts cold
+            sim.keep(before, restart)
+            engine.actions.reset(restart)
+            engine.role.reset(restart)
+        if self.trail is not None and not restart[self.render_env]:
+            self.trail.record()
+        reward, terminated = engine.outcome((record.tracking_total + record.effort_total)[:, None])
+        reward, terminated = reward[:, 0], terminated & ~restart
+        truncated = (sim.slot >= self.config.num_slots) & ~terminated & ~restart
         ended = truncated | terminated
-        info["episode_control_cost"] = np.where(ended, self._cost, 0.0)
-        info["_episode_control_cost"] = ended
-        self._cost[ended] = 0.0
-        self._done = ended.copy()  # info holds ended itself
-        obs = self._observe()
+        info = engine.info(record, extra)
+        if restart.any():  # restarted rows describe their new episode
+            fresh = engine.info()
+            for key, value in fresh.items():
+                info[key] = np.where(restart.reshape((-1,) + (1,) * (value.ndim - 1)), value, info[key])
+            reward[restart] = 0.0
+        if ended.any():
+            metrics = np.full(self.num_envs, None, dtype=object)
+            for i in np.flatnonzero(ended).tolist():
+                metrics[i] = sim.episode_metrics(i)
+            info["episode_metrics"], info["_episode_metrics"] = metrics, ended
+            totals = sim.state.totals
+            info["episode_control_cost"] = np.where(ended, totals["tracking"] + totals["effort"], 0.0)
+            info["_episode_control_cost"] = ended
+        self._done = ended
+        obs = engine.observe()
         if same_step and ended.any():  # same-step autoreset: the final observation goes to info
             info["final_obs"] = obs
             info["_final_obs"] = ended
             self._restart(ended)  # info keeps describing the step that ended them
-            obs = self._observe()
-            self._done = np.zeros(self.num_envs, dtype=bool)
+            obs = engine.observe()
+            self._done = zeros
         return obs, reward, terminated, truncated, info
-
-    # ------------------------------------------------------------------ the role's decisions
-    def _decide(self, a: np.ndarray):
-        """Increments (N, K, 2), powers (N, K), next drone positions (N, 2) and the role's extra
-        info for a batch of checked actions."""
-        d = self._decisions(a)
-        return d.increment, d.power_w, d.drone_next, {}
-
-    def _decisions(self, a: np.ndarray):
-        """The actions decoded under the env's action scheme (:meth:`ActionLayout.decode`)."""
-        sim = self.sim
-        windows = sim.reference_windows() if self.actions.needs_reference else None  # the anchor plans or tracks
-        return self.actions.decode(a, sim.x_obs, windows, sim.drone_position, sim.slot)
-
-    def _extra_reset_info(self) -> dict:
-        return {}
 
     def _restart(self, which: np.ndarray) -> None:
         """New episodes for the envs ``which`` (autoreset), each from its own generator."""
-        self.sim.reset(self._rngs, which)
-        self.actions.reset(which)
-        if self._view is not None and which[self.render_env]:
-            self._view.restart()
+        self.engine.reset(self._rngs, which)
+        if self.trail is not None and which[self.render_env]:
+            self.trail.restart()
 
     def render(self) -> np.ndarray | None:
         """An RGB frame (H, W, 3) of env ``render_env``: area, references, trails, links colored by
@@ -213,108 +185,29 @@ class JointVectorEnv(VectorEnv):
             from ..render import Renderer
 
             self._renderer = Renderer(self.config)
-        return self._renderer.draw(self._view)
+        return self._renderer.draw(self.trail.view, self.trail)
 
     def close_extras(self, **kwargs: Any) -> None:
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
 
-    def _info(self, cost_tracking=None, cost_effort=None, applied=None) -> dict:
-        """The single env's info keys (``INFO_KEYS``) with a leading env axis; zero costs and
-        increments at reset."""
-        sim, b = self.sim, self.num_envs
-        tracking = np.zeros(b) if cost_tracking is None else cost_tracking
-        effort = np.zeros(b) if cost_effort is None else cost_effort
-        return {
-            "slot": sim.slot.copy(),
-            "stage_cost": tracking + effort,
-            "reward_tracking": -tracking,
-            "reward_effort": -effort,
-            "delivered": sim.last_delivered.copy(),
-            "outage_probability": np.array(sim.last_outage_probability, dtype=np.float64),
-            "power_w": np.array(sim.last_power_w, dtype=np.float64),
-            "drone_position": np.array(sim.drone_position, dtype=np.float64),
-            "applied_increment": np.zeros((b, self.num_agvs, 2)) if applied is None else np.array(applied),
-        }
+    @property
+    def last_mpc_solve_time_s(self) -> float:
+        """Wall-clock time of the last step's MPC solves (``lawn/Comm-v0``; NaN otherwise)."""
+        return getattr(self.engine.role, "last_solve_time_s", float("nan"))
+
+    @property
+    def mpc(self) -> OutageAwareMPC | None:
+        """The MPC that drives the AGVs of every scenario (``lawn/Comm-v0``; None otherwise)."""
+        return getattr(self.engine.role, "mpc", None)
 
 
 class CommVectorEnv(JointVectorEnv):
-    """N copies of ``lawn/Comm-v0`` (any interface) in one batched simulation: the actions set
-    powers and the drone, and the N x K outage-aware MPC QPs of a step are solved together
-    (the compiled solver of :mod:`lawn_env.qp`, warm-started per scenario; problems it cannot
-    settle go to DAQP one by one and are counted in ``info["mpc_fallbacks"]``). ``qp_backend``
-    names a reference backend instead (``"daqp"``, ``"osqp"``, ``"qpsolvers:<name>"``: one QP at a
-    time through Python)."""
+    """N copies of ``lawn/Comm-v0`` (any interface) in one engine: the actions set powers and the
+    drone, and the N x K outage-aware MPC QPs of a step are solved together (the compiled solver of
+    :mod:`lawn_env.qp`, warm-started per scenario; problems it cannot settle go to DAQP one by one
+    and are counted in ``info["mpc_fallbacks"]``). ``qp_backend`` names a reference backend
+    instead (``"daqp"``, ``"osqp"``, ``"qpsolvers:<name>"``: one QP at a time through Python)."""
 
     role = "comm"
-
-    def __init__(self, num_envs: int, config: ConfigLike = None,
-                 render_mode: str | None = None, interface: Any = None, qp_backend: str = DEFAULT_BACKEND,
-                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_env: int = 0,
-                 **overrides: Any):
-        super().__init__(num_envs, config, render_mode, interface, autoreset_mode, render_env, **overrides)
-        self.mpc = OutageAwareMPC.from_config(self.config, backend=qp_backend)
-        self._planning_link = LinkParams.from_config(self.config, planning=True)
-        self.last_mpc_solve_time_s = float("nan")
-
-    def _on_reset(self) -> None:
-        super()._on_reset()
-        self.mpc.reset()
-
-    def _restart(self, which: np.ndarray) -> None:
-        super()._restart(which)
-        self.mpc.reset(which)  # a new episode starts without the old one's warm starts
-
-    def _decide(self, a: np.ndarray):
-        sim = self.sim
-        _, power, drone_next = self._decisions(a)
-        psi = link_success(sim.x_aug, drone_next, power, self._planning_link)
-        solution = self.mpc.solve(sim.x_aug, sim.reference_windows(), psi, sim.slot)
-        increments, iterations, status = solution.increments[:, :, 0, :], solution.iterations, solution.status
-        self.last_mpc_solve_time_s = solution.solve_time_s
-        extra = {"mpc_iterations": iterations.astype(np.int64),
-                 "mpc_fallbacks": np.count_nonzero(status, axis=1).astype(np.int64),
-                 "success_probability_planned": np.asarray(psi, dtype=np.float64)}
-        return increments, power, drone_next, extra
-
-    def _extra_reset_info(self) -> dict:
-        sim = self.sim
-        return {"mpc_iterations": np.zeros((self.num_envs, self.num_agvs), dtype=np.int64),
-                "mpc_fallbacks": np.zeros(self.num_envs, dtype=np.int64),
-                "success_probability_planned": link_success(sim.x_aug, sim.drone_position, sim.last_power_w,
-                                                            self._planning_link)}
-
-
-class _EnvView:
-    """One env of a batch as :mod:`lawn_env.render` reads a ``Simulation``: its state, references
-    and the trails of its current episode (recorded only for this env)."""
-
-    def __init__(self, bsim: BatchSimulation, index: int):
-        self.bsim, self.i = bsim, index
-        s = bsim.single
-        self.area, self.num_agvs, self.num_slots = s.area, s.num_agvs, s.num_slots
-        self._drone: list[np.ndarray] = []
-        self._agv: list[np.ndarray] = []
-
-    def restart(self) -> None:
-        self._drone, self._agv = [], []
-        self.record()
-
-    def record(self) -> None:
-        self._drone.append(self.drone_position.copy())
-        self._agv.append(self.x_aug[:, 0:2].copy())
-
-    _ROWS = ("reference", "x_aug", "drone_position", "last_outage_probability")
-
-    def __getattr__(self, name: str):  # the batch's arrays, row i
-        if name in _EnvView._ROWS:
-            return getattr(self.bsim, name)[self.i]
-        raise AttributeError(name)
-
-    @property
-    def slot(self) -> int:
-        return int(self.bsim.slot[self.i])
-
-    def trajectories(self) -> dict:
-        return {"drone_position": np.array(self._drone), "agv_position": np.array(self._agv)}
