@@ -24,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
+import numba
 import numpy as np
 
 from . import channel, drone, references
@@ -143,6 +144,80 @@ def _row_sums(x: np.ndarray) -> np.ndarray:
     return np.cumsum(x, axis=-1)[..., -1]
 
 
+@numba.njit(cache=True)
+def _send(x_aug, increment, send, power, drone_next, accel_max, altitude_sq, c_d, c_ce):  # pragma: no cover
+    """:func:`saturate_increment` of the increments (zero where ``send`` is False: no command this
+    slot) and the links' outage argument x (:meth:`LinkParams.outage_argument_sq` at the squared
+    distances :meth:`LinkParams.distance_sq`), element by element as those functions compute them."""
+    num, k = x_aug.shape[0], x_aug.shape[1]
+    du = np.empty((num, k, 2))
+    x = np.empty((num, k))
+    for b in range(num):
+        for i in range(k):
+            for a in range(2):
+                u_prev = x_aug[b, i, 4 + a]
+                u = u_prev + increment[b, i, a]
+                u = max(u, -accel_max)
+                u = min(u, accel_max)
+                du[b, i, a] = u - u_prev if send[b % send.shape[0]] else 0.0
+            ex = x_aug[b, i, 0] - drone_next[b, 0]
+            ey = x_aug[b, i, 1] - drone_next[b, 1]
+            d2 = (ex * ex + ey * ey) + altitude_sq
+            x[b, i] = d2 * c_d / (power[b, i] + 1e-300)
+            if c_ce != 0.0:
+                x[b, i] = x[b, i] + c_ce
+    return du, x
+
+
+@numba.njit(cache=True)
+def _rows(x_aug, du, fading, x):  # pragma: no cover - compiled
+    """The rows [x~, du delivered] (B K, 8) the transition multiplies, and ``delivered``."""
+    num, k = x_aug.shape[0], x_aug.shape[1]
+    rows = np.empty((num * k, 8))
+    delivered = np.empty((num, k), dtype=np.bool_)
+    for b in range(num):
+        for i in range(k):
+            ok = fading[b, i] >= x[b, i]
+            delivered[b, i] = ok
+            r = b * k + i
+            for j in range(6):
+                rows[r, j] = x_aug[b, i, j]
+            rows[r, 6] = du[b, i, 0] * (1.0 if ok else 0.0)
+            rows[r, 7] = du[b, i, 1] * (1.0 if ok else 0.0)
+    return rows, delivered
+
+
+@numba.njit(cache=True)
+def _slot_sums(terms, err, delivered, outage_p, power, drone_next, drone_prev, tracking, effort, sq_error, outages,
+               outage_sum, power_sum, path):  # pragma: no cover - compiled
+    """The slot's stage costs summed over AGVs (left to right) and the episode's running sums
+    (:func:`episode_metrics`) advanced by the slot: new arrays."""
+    num, k = terms.shape[0], terms.shape[1]
+    t_total, e_total = np.empty(num), np.empty(num)
+    tracking, effort, sq_error = tracking.copy(), effort.copy(), sq_error.copy()
+    outages, outage_sum, power_sum, path = outages.copy(), outage_sum.copy(), power_sum.copy(), path.copy()
+    for b in range(num):
+        t = terms[b, 0, 0]
+        e = terms[b, 0, 1]
+        o = outage_p[b, 0]
+        for i in range(1, k):
+            t += terms[b, i, 0]
+            e += terms[b, i, 1]
+            o += outage_p[b, i]
+        t_total[b], e_total[b] = t, e
+        tracking[b] += t
+        effort[b] += e
+        outage_sum[b] += o
+        for i in range(k):
+            sq_error[b, i] += err[b, i, 0] ** 2 + err[b, i, 1] ** 2
+            outages[b, i] += 0.0 if delivered[b, i] else 1.0
+            power_sum[b, i] += power[b, i]
+        sx = drone_next[b, 0] - drone_prev[b, 0]
+        sy = drone_next[b, 1] - drone_prev[b, 1]
+        path[b] += np.sqrt(sx * sx + sy * sy)
+    return t_total, e_total, tracking, effort, sq_error, outages, outage_sum, power_sum, path
+
+
 # ---------------------------------------------------------------------- parameters, state, draws
 @dataclass(frozen=True, eq=False)
 class SimParams:
@@ -176,6 +251,7 @@ class SimParams:
     disturbance: DisturbanceConfig
     disturbed: bool
     lag_alpha: float | None  # exp(-slot / lag) under actuator lag, else None
+    always: np.ndarray = None  # (1,) True: every slot sends its commands (no disturbance mode)
 
     @classmethod
     def from_config(cls, config: ScenarioConfig) -> SimParams:
@@ -208,6 +284,7 @@ class SimParams:
             envelope=envelope, fixed_paths=fixed_paths, fixed_reference=fixed, fixed_packed=fixed_packed,
             disturbance=d, disturbed=d.active,
             lag_alpha=float(np.exp(-config.slot_s / d.actuator_lag_s)) if d.actuator_lag_s > 0 else None,
+            always=np.ones(1, dtype=bool),
         )
 
     @property
@@ -385,11 +462,14 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
             wind = wind + draws.gust
         drone_next = apply_wind(drone_next, wind, params.slot_s, params.area_lo, params.area_hi)
     x_aug = state.x_aug
-    du = saturate_increment(x_aug[..., 4:6], decisions.increment, params.accel_max)
-    if params.disturbed and d.control_period_slots > 1:
-        du[state.slot % d.control_period_slots != 0] = 0.0  # no command this slot: nothing is sent
-    packed, delivered, outage_p = transmit(x_aug, du, decisions.power_w, drone_next, draws.fading, params.link,
-                                           params.packed_t)
+    send = state.slot % d.control_period_slots == 0 if params.disturbed else params.always
+    link = params.link
+    c_d, c_ce = link.coefficients
+    du, x = _send(x_aug, decisions.increment, send, decisions.power_w, drone_next, params.accel_max,
+                  link.altitude_sq, c_d, c_ce)
+    outage_p = link.outage_at(x)
+    rows, delivered = _rows(x_aug, du, draws.fading, x)
+    packed = (rows @ params.packed_t).reshape(x_aug.shape[:-1] + (8,))
     applied = state.applied
     if params.disturbed:
         applied = disturb(packed, x_aug[..., 4:6] + packed[..., 6:8], applied, params.lag_alpha,
@@ -404,19 +484,12 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     x_obs, error_obs = x_next, error
     if draws.measurement_position is not None:
         x_obs, error_obs = measure(x_next, error, draws.measurement_position, draws.measurement_velocity)
+    t = state.totals
+    sums = _slot_sums(terms, err, delivered, outage_p, decisions.power_w, drone_next, state.drone_position,
+                      t["tracking"], t["effort"], t["sq_error"], t["outages"], t["outage_p"], t["power"], t["path"])
+    tracking_total, effort_total = sums[0], sums[1]
+    totals = dict(zip(("tracking", "effort", "sq_error", "outages", "outage_p", "power", "path"), sums[2:]))
     tracking, effort = terms[..., 0], terms[..., 1]
-    tracking_total, effort_total = _row_sums(tracking), _row_sums(effort)
-    totals = state.totals
-    step_len = drone_next - state.drone_position
-    totals = {
-        "tracking": totals["tracking"] + tracking_total,
-        "effort": totals["effort"] + effort_total,
-        "sq_error": totals["sq_error"] + (err[..., 0:2] ** 2).sum(axis=-1),
-        "outages": totals["outages"] + ~delivered,
-        "outage_p": totals["outage_p"] + _row_sums(outage_p),
-        "power": totals["power"] + decisions.power_w,
-        "path": totals["path"] + np.sqrt((step_len * step_len).sum(axis=-1)),
-    }
     new = SimState(x_aug=x_next, tracking_error=error, x_obs=x_obs, error_obs=error_obs, applied=applied,
                    drone_position=drone_next, slot=slot, last_power_w=decisions.power_w, last_delivered=delivered,
                    last_outage_probability=outage_p, reference=state.reference,

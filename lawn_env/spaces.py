@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+import numba
 import numpy as np
 
 if TYPE_CHECKING:
@@ -106,6 +107,30 @@ def encode_drone(next_position: np.ndarray, position: np.ndarray, max_speed_mps:
     """Normalized drone action that moves from ``position`` to the feasible ``next_position``."""
     v = (np.asarray(next_position, dtype=float) - np.asarray(position, dtype=float)) / (slot_s * max_speed_mps)
     return np.clip(v, -1.0, 1.0)
+
+
+@numba.njit(cache=True)
+def _encode_rows(out, x_obs, error_obs, drone, outage, delivered, power, state_scale, state_shift, ref_scale, center,
+                 inv_half, inv_power, features, w1):  # pragma: no cover - compiled
+    """The state-dependent features of every observation row, each computed in float64 as
+    :meth:`ObservationLayout.encode` documents and rounded once to float32."""
+    num, k = x_obs.shape[0], x_obs.shape[1]
+    g = k * features
+    for b in range(num):
+        dx = (drone[b, 0] - center[0]) * inv_half[0]
+        dy = (drone[b, 1] - center[1]) * inv_half[1]
+        for i in range(k):
+            base = i * features
+            for j in range(6):
+                out[b, base + j] = x_obs[b, i, j] * state_scale[j] - state_shift[j]
+                out[b, base + 6 + j] = error_obs[b, i, j] * ref_scale[j]
+            out[b, base + w1] = (x_obs[b, i, 0] * state_scale[0] - state_shift[0]) - dx
+            out[b, base + w1 + 1] = (x_obs[b, i, 1] * state_scale[1] - state_shift[1]) - dy
+            out[b, base + w1 + 2] = outage[b, i]
+            out[b, base + w1 + 3] = 1.0 if delivered[b, i] else 0.0
+            out[b, base + w1 + 4] = power[b, i] * inv_power
+        out[b, g] = dx
+        out[b, g + 1] = dy
 
 
 class ObservationLayout:
@@ -205,24 +230,17 @@ class ObservationLayout:
         w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
         template = self._slot_table(sim.params.fixed_reference)
         if template is not None:
-            out = template[sim.slot]  # a new array
+            out = template[sim.state.slot]  # a new array
             blocks = out[:, : k * f].reshape(b, k, f)
         else:
             out = np.empty((b, self.size), dtype=np.float32)
             blocks = out[:, : k * f].reshape(b, k, f)
             blocks[..., w0:w1] = self.scaled_windows(sim.reference_windows())
-            out[:, -1] = sim.slot / self.num_slots
-        state = sim.x_obs * self._state_scale
-        state -= self._state_shift_scaled
-        blocks[..., 0:6] = state
-        blocks[..., 6:12] = sim.error_obs * self._ref_scale
-        drone = sim.drone_position - self.center
-        drone *= self._inv_half
-        blocks[..., w1 : w1 + 2] = state[..., 0:2] - drone[:, None, :]  # (pos - q) / half-extent
-        blocks[..., w1 + 2] = sim.last_outage_probability
-        blocks[..., w1 + 3] = sim.last_delivered
-        blocks[..., w1 + 4] = sim.last_power_w * self._inv_power
-        out[:, k * f : k * f + 2] = drone
+            out[:, -1] = sim.state.slot / self.num_slots
+        st = sim.state
+        _encode_rows(out, st.x_obs, st.error_obs, st.drone_position, st.last_outage_probability, st.last_delivered,
+                     st.last_power_w, self._state_scale, self._state_shift_scaled, self._ref_scale, self.center,
+                     self._inv_half, self._inv_power, f, w1)
         return out
 
     def _slot_table(self, shared: np.ndarray | None) -> np.ndarray | None:
