@@ -24,8 +24,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
+import llvmlite.binding
 import numba
 import numpy as np
+from numba.extending import get_cython_function_address
 
 from . import channel, drone, references
 from .config import DisturbanceConfig, ScenarioConfig
@@ -144,78 +146,81 @@ def _row_sums(x: np.ndarray) -> np.ndarray:
     return np.cumsum(x, axis=-1)[..., -1]
 
 
-@numba.njit(cache=True)
-def _send(x_aug, increment, send, power, drone_next, accel_max, altitude_sq, c_d, c_ce):  # pragma: no cover
-    """:func:`saturate_increment` of the increments (zero where ``send`` is False: no command this
-    slot) and the links' outage argument x (:meth:`LinkParams.outage_argument_sq` at the squared
-    distances :meth:`LinkParams.distance_sq`), element by element as those functions compute them."""
-    num, k = x_aug.shape[0], x_aug.shape[1]
-    du = np.empty((num, k, 2))
-    x = np.empty((num, k))
-    for b in range(num):
-        for i in range(k):
-            for a in range(2):
-                u_prev = x_aug[b, i, 4 + a]
-                u = u_prev + increment[b, i, a]
-                u = max(u, -accel_max)
-                u = min(u, accel_max)
-                du[b, i, a] = u - u_prev if send[b % send.shape[0]] else 0.0
-            ex = x_aug[b, i, 0] - drone_next[b, 0]
-            ey = x_aug[b, i, 1] - drone_next[b, 1]
-            d2 = (ex * ex + ey * ey) + altitude_sq
-            x[b, i] = d2 * c_d / (power[b, i] + 1e-300)
-            if c_ce != 0.0:
-                x[b, i] = x[b, i] + c_ce
-    return du, x
+# scipy's own compiled gammainc(a, x) (the function its ufunc calls, so the same values), named as
+# a symbol the compiled kernels link against: a cached kernel refers to it by name, not address.
+llvmlite.binding.add_symbol("lawn_scipy_gammainc",
+                            get_cython_function_address("scipy.special.cython_special", "gammainc"))
+_GAMMAINC = numba.types.ExternalFunction("lawn_scipy_gammainc", numba.types.float64(numba.types.float64,
+                                                                                       numba.types.float64))
 
 
 @numba.njit(cache=True)
-def _rows(x_aug, du, fading, x):  # pragma: no cover - compiled
-    """The rows [x~, du delivered] (B K, 8) the transition multiplies, and ``delivered``."""
+def _links(x_aug, increment, send, power, drone_next, fading, accel_max, altitude_sq, c_d, c_ce,
+           m):  # pragma: no cover - compiled
+    """One slot's links, element by element as the shape-generic functions above compute them:
+    :func:`saturate_increment` of the increments (zero where ``send`` is False: no command this
+    slot), the outage argument x at the squared distances (:meth:`LinkParams.outage_argument_sq`),
+    the outage probability gammainc(m, x) (scipy's own compiled function, the value its ufunc
+    gives), ``delivered`` = m|h|^2 >= x, and the rows [x~, du delivered] (B K, 8) the transition
+    multiplies."""
     num, k = x_aug.shape[0], x_aug.shape[1]
     rows = np.empty((num * k, 8))
     delivered = np.empty((num, k), dtype=np.bool_)
+    outage = np.empty((num, k))
     for b in range(num):
+        sending = send[b % send.shape[0]]
         for i in range(k):
-            ok = fading[b, i] >= x[b, i]
-            delivered[b, i] = ok
             r = b * k + i
+            ex = x_aug[b, i, 0] - drone_next[b, 0]
+            ey = x_aug[b, i, 1] - drone_next[b, 1]
+            x = ((ex * ex + ey * ey) + altitude_sq) * c_d / (power[b, i] + 1e-300)
+            if c_ce != 0.0:
+                x = x + c_ce
+            outage[b, i] = _GAMMAINC(m, x)
+            ok = fading[b, i] >= x
+            delivered[b, i] = ok
             for j in range(6):
                 rows[r, j] = x_aug[b, i, j]
-            rows[r, 6] = du[b, i, 0] * (1.0 if ok else 0.0)
-            rows[r, 7] = du[b, i, 1] * (1.0 if ok else 0.0)
-    return rows, delivered
+            for a in range(2):
+                u_prev = x_aug[b, i, 4 + a]
+                u = max(u_prev + increment[b, i, a], -accel_max)
+                u = min(u, accel_max)
+                rows[r, 6 + a] = ((u - u_prev) if sending else 0.0) * (1.0 if ok else 0.0)
+    return rows, delivered, outage
+
+
+#: The columns of ``SimState.totals`` (B, 4 + 3K): the episode's running sums of the tracking
+#: and effort costs, the predicted outage probabilities, the drone's path length, then per AGV the
+#: squared position errors, the lost commands and the powers.
+TOTALS = ("tracking", "effort", "outage_p", "path", "sq_error", "outages", "power")
 
 
 @numba.njit(cache=True)
-def _slot_sums(terms, err, delivered, outage_p, power, drone_next, drone_prev, tracking, effort, sq_error, outages,
-               outage_sum, power_sum, path):  # pragma: no cover - compiled
-    """The slot's stage costs summed over AGVs (left to right) and the episode's running sums
-    (:func:`episode_metrics`) advanced by the slot: new arrays."""
-    num, k = terms.shape[0], terms.shape[1]
+def _slot_sums(terms, err, delivered, outage_p, power, drone_next, drone_prev, totals):  # pragma: no cover
+    """The slot's stage costs summed over AGVs (left to right, (B,) each) and the episode's running
+    sums (:data:`TOTALS`) advanced by the slot (a new array)."""
+    num, k = delivered.shape[0], delivered.shape[1]
     t_total, e_total = np.empty(num), np.empty(num)
-    tracking, effort, sq_error = tracking.copy(), effort.copy(), sq_error.copy()
-    outages, outage_sum, power_sum, path = outages.copy(), outage_sum.copy(), power_sum.copy(), path.copy()
+    out = totals.copy()
     for b in range(num):
-        t = terms[b, 0, 0]
-        e = terms[b, 0, 1]
-        o = outage_p[b, 0]
+        r = b * k
+        t, e, o = terms[r, 0], terms[r, 1], outage_p[b, 0]
         for i in range(1, k):
-            t += terms[b, i, 0]
-            e += terms[b, i, 1]
+            t += terms[r + i, 0]
+            e += terms[r + i, 1]
             o += outage_p[b, i]
         t_total[b], e_total[b] = t, e
-        tracking[b] += t
-        effort[b] += e
-        outage_sum[b] += o
-        for i in range(k):
-            sq_error[b, i] += err[b, i, 0] ** 2 + err[b, i, 1] ** 2
-            outages[b, i] += 0.0 if delivered[b, i] else 1.0
-            power_sum[b, i] += power[b, i]
+        out[b, 0] += t
+        out[b, 1] += e
+        out[b, 2] += o
         sx = drone_next[b, 0] - drone_prev[b, 0]
         sy = drone_next[b, 1] - drone_prev[b, 1]
-        path[b] += np.sqrt(sx * sx + sy * sy)
-    return t_total, e_total, tracking, effort, sq_error, outages, outage_sum, power_sum, path
+        out[b, 3] += np.sqrt(sx * sx + sy * sy)
+        for i in range(k):
+            out[b, 4 + i] += err[r + i, 0] ** 2 + err[r + i, 1] ** 2
+            out[b, 4 + k + i] += 0.0 if delivered[b, i] else 1.0
+            out[b, 4 + 2 * k + i] += power[b, i]
+    return t_total, e_total, out
 
 
 # ---------------------------------------------------------------------- parameters, state, draws
@@ -252,6 +257,10 @@ class SimParams:
     disturbed: bool
     lag_alpha: float | None  # exp(-slot / lag) under actuator lag, else None
     always: np.ndarray = None  # (1,) True: every slot sends its commands (no disturbance mode)
+    altitude_sq: float = 0.0  # the link's H^2, c_d, c_ce and m (outage argument x = c_d d^2 / p + c_ce)
+    c_d: float = 0.0
+    c_ce: float = 0.0
+    m: float = 0.0
 
     @classmethod
     def from_config(cls, config: ScenarioConfig) -> SimParams:
@@ -272,9 +281,10 @@ class SimParams:
             fixed_packed = np.ascontiguousarray(np.concatenate([fixed, np.zeros((k, steps, 2))], axis=2)
                                                 .transpose(1, 0, 2))
         d = config.disturbance
+        link = channel.LinkParams.from_config(config)
         return cls(
             config=config, num_agvs=k, num_slots=slots, horizon=horizon, steps=steps, slot_s=config.slot_s,
-            model=model, link=channel.LinkParams.from_config(config),
+            model=model, link=link,
             planning_link=channel.LinkParams.from_config(config, planning=True),
             packed_t=packed_t, packed_w=packed_w,
             accel_effect_t=np.ascontiguousarray(model.a_aug[0:4, 4:6].T),
@@ -285,6 +295,7 @@ class SimParams:
             disturbance=d, disturbed=d.active,
             lag_alpha=float(np.exp(-config.slot_s / d.actuator_lag_s)) if d.actuator_lag_s > 0 else None,
             always=np.ones(1, dtype=bool),
+            altitude_sq=link.altitude_sq, c_d=link.coefficients[0], c_ce=link.coefficients[1], m=float(link.m),
         )
 
     @property
@@ -356,15 +367,11 @@ class SimState:
     reference: np.ndarray  # (B, K, T, 6)
     reference_packed: np.ndarray | None  # (B, K, T, 8) for random paths
     paths: list  # per scenario, its K paths
-    totals: dict[str, np.ndarray]
+    totals: np.ndarray  # (B, 4 + 3K), columns TOTALS
 
     @property
     def num_envs(self) -> int:
         return self.x_aug.shape[0]
-
-
-_TOTALS = (("tracking", ()), ("effort", ()), ("sq_error", ("k",)), ("outages", ("k",)), ("outage_p", ()),
-           ("power", ("k",)), ("path", ()))
 
 
 def empty_state(params: SimParams, num: int) -> SimState:
@@ -380,7 +387,7 @@ def empty_state(params: SimParams, num: int) -> SimState:
         last_outage_probability=np.zeros((num, k)), reference=reference,
         reference_packed=None if fixed is not None else np.zeros((num, k, steps, 8)),
         paths=[params.fixed_paths] * num,
-        totals={name: np.zeros((num, k) if shape else num) for name, shape in _TOTALS},
+        totals=np.zeros((num, 4 + 3 * k)),
     )
 
 
@@ -428,8 +435,8 @@ def reset(params: SimParams, state: SimState, rngs: Sequence[np.random.Generator
     state.last_delivered[idx] = True
     state.last_outage_probability[idx] = link_outage(x_aug[idx], state.drone_position[idx], state.last_power_w[idx],
                                                      params.link)[1]
-    for total in state.totals.values():
-        total[idx] = 0
+    state.totals = state.totals.copy()
+    state.totals[idx] = 0.0
 
 
 class SlotRecord(NamedTuple):
@@ -463,32 +470,30 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
         drone_next = apply_wind(drone_next, wind, params.slot_s, params.area_lo, params.area_hi)
     x_aug = state.x_aug
     send = state.slot % d.control_period_slots == 0 if params.disturbed else params.always
-    link = params.link
-    c_d, c_ce = link.coefficients
-    du, x = _send(x_aug, decisions.increment, send, decisions.power_w, drone_next, params.accel_max,
-                  link.altitude_sq, c_d, c_ce)
-    outage_p = link.outage_at(x)
-    rows, delivered = _rows(x_aug, du, draws.fading, x)
-    packed = (rows @ params.packed_t).reshape(x_aug.shape[:-1] + (8,))
+    rows, delivered, outage_p = _links(x_aug, decisions.increment, send, decisions.power_w, drone_next, draws.fading,
+                                       params.accel_max, params.altitude_sq, params.c_d, params.c_ce, params.m)
+    packed = rows @ params.packed_t
     applied = state.applied
     if params.disturbed:
+        packed = packed.reshape(x_aug.shape[:-1] + (8,))
         applied = disturb(packed, x_aug[..., 4:6] + packed[..., 6:8], applied, params.lag_alpha,
                           params.accel_effect_t, draws.process_position, draws.process_velocity)
+        packed = packed.reshape(-1, 8)
     slot = state.slot + 1
     if params.fixed_packed is not None:  # one path set: gather from its (T, K, 8) table
         reference = params.fixed_packed[slot]
     else:
         reference = state.reference_packed[np.arange(slot.size), :, slot]
-    err, terms = stage_terms(packed, reference, params.packed_w)
+    err = packed - reference.reshape(-1, 8)
+    terms = (err * err) @ params.packed_w
+    tracking_total, effort_total, totals = _slot_sums(terms, err, delivered, outage_p, decisions.power_w, drone_next,
+                                                      state.drone_position, state.totals)
+    shape = x_aug.shape[:-1]
+    packed, err, terms = packed.reshape(shape + (8,)), err.reshape(shape + (8,)), terms.reshape(shape + (2,))
     x_next, error = packed[..., 0:6], err[..., 0:6]
     x_obs, error_obs = x_next, error
     if draws.measurement_position is not None:
         x_obs, error_obs = measure(x_next, error, draws.measurement_position, draws.measurement_velocity)
-    t = state.totals
-    sums = _slot_sums(terms, err, delivered, outage_p, decisions.power_w, drone_next, state.drone_position,
-                      t["tracking"], t["effort"], t["sq_error"], t["outages"], t["outage_p"], t["power"], t["path"])
-    tracking_total, effort_total = sums[0], sums[1]
-    totals = dict(zip(("tracking", "effort", "sq_error", "outages", "outage_p", "power", "path"), sums[2:]))
     tracking, effort = terms[..., 0], terms[..., 1]
     new = SimState(x_aug=x_next, tracking_error=error, x_obs=x_obs, error_obs=error_obs, applied=applied,
                    drone_position=drone_next, slot=slot, last_power_w=decisions.power_w, last_delivered=delivered,
@@ -505,20 +510,21 @@ def episode_metrics(params: SimParams, state: SimState, i: int) -> dict:
     n, k = int(state.slot[i]), params.num_agvs
     if n == 0:
         raise RuntimeError("no slot has been simulated yet")
-    t = {name: v[i] for name, v in state.totals.items()}
-    tracking, effort = float(t["tracking"]), float(t["effort"])
+    t = state.totals[i]
+    tracking, effort = float(t[0]), float(t[1])
+    sq_error, outages, power = t[4 : 4 + k], t[4 + k : 4 + 2 * k], t[4 + 2 * k :]
     return {
         "slots": n,
         "control_cost": tracking + effort,
         "tracking_cost": tracking,
         "effort_cost": effort,
-        "rmse_m": float(np.sqrt(t["sq_error"].sum() / (n * k))),
-        "rmse_per_agv_m": np.sqrt(t["sq_error"] / n).tolist(),
-        "outage_rate": float(t["outages"].sum() / (n * k)),
-        "outage_rate_predicted": float(t["outage_p"] / (n * k)),
-        "outage_rate_per_agv": (t["outages"] / n).tolist(),
-        "mean_power_w": (t["power"] / n).tolist(),
-        "drone_path_length_m": float(t["path"]),
+        "rmse_m": float(np.sqrt(sq_error.sum() / (n * k))),
+        "rmse_per_agv_m": np.sqrt(sq_error / n).tolist(),
+        "outage_rate": float(outages.sum() / (n * k)),
+        "outage_rate_predicted": float(t[2] / (n * k)),
+        "outage_rate_per_agv": (outages / n).tolist(),
+        "mean_power_w": (power / n).tolist(),
+        "drone_path_length_m": float(t[3]),
     }
 
 
@@ -588,8 +594,7 @@ class Simulation:
             new, old = getattr(state, name), getattr(before, name)
             if new is not old:
                 new[rows] = old[rows]
-        for name, total in state.totals.items():
-            total[rows] = before.totals[name][rows]
+        state.totals[rows] = before.totals[rows]
 
     def reference_windows(self) -> np.ndarray:
         """Reference augmented states at slots n..n+N_p of every scenario: (B, K, N_p+1, 6)."""
@@ -684,8 +689,11 @@ class Trail:
         self.record()
 
     def record(self) -> None:
-        self._drone.append(self.view.drone_position.copy())
-        self._agv.append(self.view.x_aug[:, 0:2].copy())
+        # views, not copies: a step replaces the state's arrays (it never writes into them), and a
+        # reset writes into copies of them
+        state, i = self.view._sim.state, self.view.i
+        self._drone.append(state.drone_position[i])
+        self._agv.append(state.x_aug[i, :, 0:2])
 
     def trajectories(self) -> dict:
         """Drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions of slots 0..n."""

@@ -118,12 +118,12 @@ def _toward(position, target, max_speed, slot_s, x0, x1, y0, y1, out):  # pragma
     _move(position, velocity, max_speed, slot_s, x0, x1, y0, y1, out)
 
 
-def _rows(position_m, other, name: str) -> tuple[np.ndarray, np.ndarray]:
+def _pair(position_m: np.ndarray, other: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
     p = np.asarray(position_m, dtype=np.float64)
     v = np.asarray(other, dtype=np.float64)
-    if p.shape[-1:] != (2,) or v.shape != p.shape:
+    if p.shape != v.shape or p.shape[-1:] != (2,):
         raise ValueError(f"position {p.shape} and {name} {v.shape}: expected the same shape (..., 2)")
-    return np.ascontiguousarray(p.reshape(-1, 2)), np.ascontiguousarray(v.reshape(-1, 2))
+    return p, v
 
 
 def move_drone(position_m: np.ndarray, velocity_mps: np.ndarray, max_speed_mps: float, slot_s: float,
@@ -131,11 +131,11 @@ def move_drone(position_m: np.ndarray, velocity_mps: np.ndarray, max_speed_mps: 
     """Next drone positions: each commanded velocity clipped to V_max (radially), integrated over
     one slot, then clipped into the area box (which only shortens the move, so the speed limit
     still holds). Positions and velocities (..., 2), one drone or a batch; a new array of their shape."""
-    p, v = _rows(position_m, velocity_mps, "velocity")
-    out = np.empty_like(p)
-    x0, x1, y0, y1 = map(float, area_m)
-    _move(p, v, float(max_speed_mps), float(slot_s), x0, x1, y0, y1, out)
-    return out.reshape(np.shape(position_m))
+    p, v = _pair(position_m, velocity_mps, "velocity")
+    out = np.empty(p.shape)
+    x0, x1, y0, y1 = area_m
+    _move(p.reshape(-1, 2), v.reshape(-1, 2), max_speed_mps, slot_s, x0, x1, y0, y1, out.reshape(-1, 2))
+    return out
 
 
 def toward(position_m: np.ndarray, target_m: np.ndarray, max_speed_mps: float, slot_s: float,
@@ -143,8 +143,8 @@ def toward(position_m: np.ndarray, target_m: np.ndarray, max_speed_mps: float, s
     """Next drone positions flying toward ``target_m`` (..., 2): straight there when it is within
     one slot's reach V_max Delta-tau, else the full reach along the way (then :func:`move_drone`'s
     rule)."""
-    p, t = _rows(position_m, target_m, "target")
-    out = np.empty_like(p)
-    x0, x1, y0, y1 = map(float, area_m)
-    _toward(p, t, float(max_speed_mps), float(slot_s), x0, x1, y0, y1, out)
-    return out.reshape(np.shape(position_m))
+    p, t = _pair(position_m, target_m, "target")
+    out = np.empty(p.shape)
+    x0, x1, y0, y1 = area_m
+    _toward(p.reshape(-1, 2), t.reshape(-1, 2), max_speed_mps, slot_s, x0, x1, y0, y1, out.reshape(-1, 2))
+    return out

@@ -62,10 +62,9 @@ def check_action(action: Any, size: int, name: str = "action", num_envs: int | N
                          f"{expected}, float32 (complex, boolean and string actions are not accepted)")
     if a.shape != shape:
         raise ValueError(f"{name} has shape {a.shape}; expected {expected}, float32, with entries in [-1, 1]")
-    a = a.astype(np.float64, copy=False)
-    ok = (a >= -1.0) & (a <= 1.0)  # False for NaN
-    if not ok.all():
-        bad = np.argwhere(~ok)
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    if _first_outside(a) >= 0:
+        bad = np.argwhere(~((a >= -1.0) & (a <= 1.0)))
         where = (f"env {bad[0, 0]}: {name} entry {bad[0, 1]} = {a[tuple(bad[0])]!r} is" if num_envs is not None
                  else f"{name} entries {bad[:8, 0].tolist()} = {a[bad[:8, 0]].tolist()} are")
         raise ValueError(f"{where} outside [-1, 1] or not finite; actions are normalized (see the environment's "
@@ -84,10 +83,35 @@ def encode_increments(du: np.ndarray, accel_increment_max: float) -> np.ndarray:
 
 def decode_power(a: np.ndarray, power_budget_w: float) -> np.ndarray:
     """(..., K) normalized -> powers in W with sum <= P_max: ``w = (a + 1) / 2``,
-    ``p = P_max w / max(1, sum w)``. The sum runs left to right (a cumulative sum), the order
-    Python's ``sum`` takes, whatever K and the batch."""
-    total = 0.5 * (np.cumsum(a, axis=-1)[..., -1:] + a.shape[-1])
-    return (a + 1.0) * (0.5 * power_budget_w / np.maximum(total, 1.0))
+    ``p = P_max w / max(1, sum w)``. The sum runs left to right, the order Python's ``sum`` takes,
+    whatever K and the batch."""
+    a = np.asarray(a, dtype=np.float64)
+    out = np.empty(a.shape)
+    _decode_power(a.reshape(-1, a.shape[-1]), float(power_budget_w), out.reshape(-1, a.shape[-1]))
+    return out
+
+
+@numba.njit(cache=True)
+def _decode_power(a, budget, out):  # pragma: no cover - compiled
+    k = a.shape[1]
+    for b in range(a.shape[0]):
+        total = a[b, 0]
+        for i in range(1, k):
+            total += a[b, i]
+        total = 0.5 * (total + k)
+        scale = 0.5 * budget / (total if total >= 1.0 else 1.0)
+        for i in range(k):
+            out[b, i] = (a[b, i] + 1.0) * scale
+
+
+@numba.njit(cache=True)
+def _first_outside(a):  # pragma: no cover - compiled
+    """The flat index of the first entry outside [-1, 1] or NaN, -1 when there is none."""
+    flat = a.ravel()
+    for i in range(flat.size):
+        if not (flat[i] >= -1.0 and flat[i] <= 1.0):
+            return i
+    return -1
 
 
 def encode_power(power_w: np.ndarray, power_budget_w: float) -> np.ndarray:

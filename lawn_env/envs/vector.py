@@ -155,7 +155,7 @@ class JointVectorEnv(VectorEnv):
                 metrics[i] = sim.episode_metrics(i)
             info["episode_metrics"], info["_episode_metrics"] = metrics, ended
             totals = sim.state.totals
-            info["episode_control_cost"] = np.where(ended, totals["tracking"] + totals["effort"], 0.0)
+            info["episode_control_cost"] = np.where(ended, totals[:, 0] + totals[:, 1], 0.0)
             info["_episode_control_cost"] = ended
         self._done = ended
         obs = engine.observe()
