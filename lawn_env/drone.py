@@ -18,7 +18,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["move_drone", "toward", "hypot"]
+__all__ = ["move_drone", "toward", "hypot", "move_rows"]
 
 
 @numba.njit(cache=True, inline="always")
@@ -94,7 +94,9 @@ def _clip(v, lo, hi):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _move(position, velocity, max_speed, slot_s, x0, x1, y0, y1, out):  # pragma: no cover - compiled
+def move_rows(position, velocity, max_speed, slot_s, x0, x1, y0, y1, out):  # pragma: no cover - compiled
+    """The compiled rule of :func:`move_drone` on rows: positions and velocities (B, 2), the next
+    positions written to ``out`` (B, 2); other kernels call it."""
     for i in range(position.shape[0]):
         vx, vy = velocity[i, 0], velocity[i, 1]
         speed = hypot(vx, vy)
@@ -115,7 +117,7 @@ def _toward(position, target, max_speed, slot_s, x0, x1, y0, y1, out):  # pragma
             velocity[i, 0], velocity[i, 1] = sx / slot_s, sy / slot_s
         else:
             velocity[i, 0], velocity[i, 1] = sx * (max_speed / dist), sy * (max_speed / dist)
-    _move(position, velocity, max_speed, slot_s, x0, x1, y0, y1, out)
+    move_rows(position, velocity, max_speed, slot_s, x0, x1, y0, y1, out)
 
 
 def _pair(position_m: np.ndarray, other: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -134,7 +136,7 @@ def move_drone(position_m: np.ndarray, velocity_mps: np.ndarray, max_speed_mps: 
     p, v = _pair(position_m, velocity_mps, "velocity")
     out = np.empty(p.shape)
     x0, x1, y0, y1 = area_m
-    _move(p.reshape(-1, 2), v.reshape(-1, 2), max_speed_mps, slot_s, x0, x1, y0, y1, out.reshape(-1, 2))
+    move_rows(p.reshape(-1, 2), v.reshape(-1, 2), max_speed_mps, slot_s, x0, x1, y0, y1, out.reshape(-1, 2))
     return out
 
 

@@ -238,7 +238,7 @@ class ActionLayout:
         self._vmax = config.drone.max_speed_mps
         self._dt = config.slot_s
         self._reach = config.drone_reach_m
-        self._area = tuple(config.area_m)
+        self._area = tuple(float(v) for v in config.area_m)
         self.mpc = None
         self._lqr_model = None
         if self.scheme == "anchored":
@@ -278,10 +278,10 @@ class ActionLayout:
         k = self.num_agvs
         comm = a[:, self._inc_size :]
         if self.scheme == "direct":
-            power = spaces.decode_power(comm[:, :k], self._pmax)
-            drone_next = move_drone(drone_position, comm[:, k:] * self._vmax, self._vmax, self._dt, self._area)
-            increment = a[:, : 2 * k].reshape(-1, k, 2) * self._inc_max if self._inc_size else None
-            return Decision(increment, power, drone_next)
+            increment, power, drone_next = spaces.direct_rows(
+                np.ascontiguousarray(a, dtype=np.float64), self._inc_size, k, self._inc_max, self._pmax, self._vmax,
+                self._dt, *self._area, np.ascontiguousarray(drone_position, dtype=np.float64))
+            return Decision(increment if self._inc_size else None, power, drone_next)
         target = x_aug[..., 0:2].mean(axis=-2) + comm[:, k:] * self.interface.drone_offset_m
         drone_next = toward(drone_position, target, self._vmax, self._dt, self._area)
         return self._anchored(a[:, : 2 * k], comm[:, :k], x_aug, reference, slot, drone_next)

@@ -22,6 +22,8 @@ from typing import TYPE_CHECKING, Any
 import numba
 import numpy as np
 
+from .drone import move_rows
+
 if TYPE_CHECKING:
     from .config import ScenarioConfig
     from .core import Simulation
@@ -29,6 +31,8 @@ if TYPE_CHECKING:
 __all__ = [
     "ObservationLayout",
     "check_action",
+    "power_rows",
+    "direct_rows",
     "decode_increments",
     "encode_increments",
     "decode_power",
@@ -87,12 +91,13 @@ def decode_power(a: np.ndarray, power_budget_w: float) -> np.ndarray:
     whatever K and the batch."""
     a = np.asarray(a, dtype=np.float64)
     out = np.empty(a.shape)
-    _decode_power(a.reshape(-1, a.shape[-1]), float(power_budget_w), out.reshape(-1, a.shape[-1]))
+    power_rows(a.reshape(-1, a.shape[-1]), float(power_budget_w), out.reshape(-1, a.shape[-1]))
     return out
 
 
 @numba.njit(cache=True)
-def _decode_power(a, budget, out):  # pragma: no cover - compiled
+def power_rows(a, budget, out):  # pragma: no cover - compiled
+    """The compiled rule of :func:`decode_power` on rows (B, K), written to ``out``."""
     k = a.shape[1]
     for b in range(a.shape[0]):
         total = a[b, 0]
@@ -102,6 +107,27 @@ def _decode_power(a, budget, out):  # pragma: no cover - compiled
         scale = 0.5 * budget / (total if total >= 1.0 else 1.0)
         for i in range(k):
             out[b, i] = (a[b, i] + 1.0) * scale
+
+
+@numba.njit(cache=True)
+def direct_rows(a, inc_size, k, inc_max, budget, max_speed, slot_s, x0, x1, y0, y1, position):  # pragma: no cover
+    """The direct scheme's decisions of checked actions (B, size): increments (B, K, 2) (none when
+    ``inc_size`` is 0: a (B, 0, 2) array), powers (:func:`power_rows`), the drone's next positions
+    (:func:`lawn_env.drone.move_rows` at the velocities ``a * V_max``)."""
+    num = a.shape[0]
+    increment = np.empty((num, k if inc_size else 0, 2))
+    velocity = np.empty((num, 2))
+    for b in range(num):
+        for i in range(increment.shape[1]):
+            increment[b, i, 0] = a[b, 2 * i] * inc_max
+            increment[b, i, 1] = a[b, 2 * i + 1] * inc_max
+        velocity[b, 0] = a[b, inc_size + k] * max_speed
+        velocity[b, 1] = a[b, inc_size + k + 1] * max_speed
+    power = np.empty((num, k))
+    power_rows(a[:, inc_size : inc_size + k], budget, power)
+    drone_next = np.empty((num, 2))
+    move_rows(position, velocity, max_speed, slot_s, x0, x1, y0, y1, drone_next)
+    return increment, power, drone_next
 
 
 @numba.njit(cache=True)

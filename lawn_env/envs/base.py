@@ -25,7 +25,7 @@ from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
 from ..spaces import ObservationLayout, check_action
 
-__all__ = ["Engine", "JointRole", "CommRole", "ROLES", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS", "row"]
+__all__ = ["Engine", "JointRole", "CommRole", "ROLES", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS"]
 
 
 #: The info keys every step and reset of the central environments (and the parallel env's "drone")
@@ -34,11 +34,6 @@ __all__ = ["Engine", "JointRole", "CommRole", "ROLES", "LawnEnvBase", "INFO_KEYS
 INFO_KEYS = ("slot", "stage_cost", "reward_tracking", "reward_effort", "delivered",
              "outage_probability", "power_w", "drone_position", "applied_increment")
 COMM_INFO_KEYS = ("mpc_iterations", "mpc_fallbacks", "success_probability_planned")
-
-
-def row(batch: dict[str, Any], i: int = 0) -> dict[str, Any]:
-    """Row ``i`` of a batched info dict: (B,) arrays become numpy scalars, (B, ...) arrays their row."""
-    return {key: value[i] for key, value in batch.items()}
 
 
 class JointRole:
@@ -112,6 +107,7 @@ class Engine:
         self.actions = ActionLayout(config, role, self.interface, mpc_backend=qp_backend)
         self.role = ROLES[role](config, qp_backend)
         self._windows = role == "comm" or self.actions.needs_reference
+        self._never = np.zeros(self.num_envs, dtype=bool)
 
     def reset(self, rngs: Sequence[np.random.Generator], which: np.ndarray | None = None) -> None:
         """New episodes for the scenarios ``which`` (all when None), scenario i from ``rngs[i]``."""
@@ -138,36 +134,40 @@ class Engine:
         scenario."""
         iface, sim = self.interface, self.sim
         reward = iface.rewards_from_costs(costs)
-        terminated = iface.terminates(sim.tracking_error[..., 0:2])
+        if iface.termination_distance_m is None:
+            return reward, self._never
+        terminated = iface.terminates(sim.state.tracking_error[..., 0:2])
         if terminated.any():
-            reward[terminated] += iface.terminal_penalties(sim.num_slots - sim.slot[terminated])[:, None]
+            reward[terminated] += iface.terminal_penalties(sim.num_slots - sim.state.slot[terminated])[:, None]
         return reward, terminated
 
-    def info(self, record: SlotRecord | None = None, extra: dict | None = None) -> dict[str, np.ndarray]:
-        """The info keys (``INFO_KEYS`` and the role's) of every scenario with a leading B axis:
-        ``slot`` int64, ``stage_cost`` and its split ``reward_tracking`` + ``reward_effort``
-        (negated) float64, ``delivered`` (K,) bool, ``outage_probability`` and ``power_w`` (K,),
-        ``drone_position`` (2,), ``applied_increment`` (K, 2) float64 per scenario; zero costs and
-        increments (and the role's reset values) without a record."""
-        sim = self.sim
+    def info(self, record: SlotRecord | None = None, extra: dict | None = None, i: int | None = None) -> dict:
+        """The info keys (``INFO_KEYS`` and the role's) of every scenario with a leading B axis, or
+        of scenario ``i`` alone: ``slot`` int64, ``stage_cost`` and its split ``reward_tracking`` +
+        ``reward_effort`` (negated) float64, ``delivered`` (K,) bool, ``outage_probability`` and
+        ``power_w`` (K,), ``drone_position`` (2,), ``applied_increment`` (K, 2) float64 per scenario;
+        zero costs and increments (and the role's reset values) without a record."""
+        st = self.sim.state
         if record is None:
             tracking = effort = np.zeros(self.num_envs)
-            applied = np.zeros((self.num_envs, sim.num_agvs, 2))
+            applied = np.zeros((self.num_envs, self.sim.num_agvs, 2))
             extra = self.role.reset_info(self)
         else:
             tracking, effort, applied = record.tracking_total, record.effort_total, record.applied_increment
+        at = slice(None) if i is None else i
         info = {
-            "slot": sim.slot.copy(),
-            "stage_cost": tracking + effort,
-            "reward_tracking": -tracking,
-            "reward_effort": -effort,
-            "delivered": sim.last_delivered,
-            "outage_probability": sim.last_outage_probability,
-            "power_w": np.asarray(sim.last_power_w, dtype=np.float64),
-            "drone_position": np.asarray(sim.drone_position, dtype=np.float64),
-            "applied_increment": applied,
+            "slot": st.slot.copy() if i is None else st.slot[i],
+            "stage_cost": tracking[at] + effort[at],
+            "reward_tracking": -tracking[at],
+            "reward_effort": -effort[at],
+            "delivered": st.last_delivered[at],
+            "outage_probability": st.last_outage_probability[at],
+            "power_w": st.last_power_w[at],
+            "drone_position": st.drone_position[at],
+            "applied_increment": applied[at],
         }
-        info.update(extra or {})
+        for key, value in (extra or {}).items():
+            info[key] = value[at]
         return info
 
     def observe(self) -> np.ndarray:
@@ -278,7 +278,7 @@ class LawnEnvBase(SimulationView, gym.Env):
         self._done = False
         if self.render_mode == "human":
             self.render()
-        return self.engine.observe()[0], row(self.engine.info())
+        return self.engine.observe()[0], self.engine.info(i=0)
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._done:
@@ -288,7 +288,7 @@ class LawnEnvBase(SimulationView, gym.Env):
         reward, terminated = engine.outcome((record.tracking_total + record.effort_total)[:, None])
         terminated = bool(terminated[0])
         truncated = self.sim.slot >= self.config.num_slots and not terminated
-        info = row(engine.info(record, extra))
+        info = engine.info(record, extra, i=0)
         if truncated or terminated:
             self._done = True
             info["episode_metrics"] = self.sim.episode_metrics()

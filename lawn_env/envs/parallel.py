@@ -13,7 +13,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from ..interface import InterfaceLike
 from ..presets import ConfigLike
 from ..spaces import check_action
-from .base import SimulationView, row
+from .base import SimulationView
 
 __all__ = ["LawnParallelEnv", "parallel_env", "raw_env", "env"]
 
@@ -117,7 +117,7 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         observations = self._observations()
         if self.render_mode == "human":
             self.render()
-        return observations, self._infos(self.engine.info())
+        return observations, self._infos(self.engine.info(i=0))
 
     @property
     def np_random(self) -> np.random.Generator:
@@ -128,7 +128,7 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         """Per-agent infos with the same keys, shapes and dtypes at reset and at every step: the
         drone's are the central environments' (``INFO_KEYS``); each AGV's the same keys for its own
         link, as scalars (``applied_increment`` (2,)) and its own stage cost."""
-        central = row(info)
+        central = info
         infos = {"drone": central}
         terms = self._agv_terms
         for agent, i in self._agv_index.items():
@@ -169,7 +169,7 @@ class LawnParallelEnv(SimulationView, ParallelEnv):
         for agent, i in self._agv_index.items():
             rewards[agent] = float(agent_rewards[0, i + 1])
         self._agv_terms = (record.tracking_cost[0], record.effort_cost[0])
-        infos = self._infos(self.engine.info(record, extra))
+        infos = self._infos(self.engine.info(record, extra, i=0))
         observations = self._observations()
         truncated = self.sim.done and not terminated
         terminations = {a: terminated for a in self.agents}
