@@ -66,7 +66,7 @@ from . import spaces
 from .channel import LinkParams
 from .config import ScenarioConfig
 from .core import saturate_increment
-from .drone import move_drone, toward
+from .drone import toward
 from .dynamics import PredictionModel
 from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
 
