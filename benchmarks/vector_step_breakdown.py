@@ -1,9 +1,9 @@
 """Where a native vector env step spends its time (issue #13): each part of
 ``JointVectorEnv.step`` timed on its own at N envs, beside the whole step, in one run.
 
-Parts: checking the actions, decoding them, the fading draws, the simulation step
-(``BatchSimulation.step``) and, inside it, the links' outage probabilities (scipy's regularized
-incomplete gamma function on N K links), and the observation (``ObservationLayout.encode_batch``).
+Parts: checking the actions, decoding them, the slot's draws, the simulation step
+(:func:`lawn_env.core.step`, pure: the same slot every call), and the observation
+(``ObservationLayout.encode``).
 Each figure is the best of ``--repeats`` timings of ``--number`` calls, in microseconds per
 batched step, with the env-steps/s the part alone would allow.
 
@@ -18,6 +18,7 @@ import timeit
 import gymnasium as gym
 
 import lawn_env  # noqa: F401  (registers the ids)
+from lawn_env import core
 from lawn_env.spaces import check_action
 
 
@@ -37,29 +38,23 @@ def main(argv: list[str] | None = None) -> int:
     action = envs.action_space.sample()
     for _ in range(5):
         envs.step(action)
-    sim, link = env.sim, env.sim.single.link
+    engine, sim = env.engine, env.sim
     checked = check_action(action, env.single_action_space.shape[0], "action", env.num_envs)
-    decision = env._decisions(checked)  # the parts of step, timed one by one
-    fading = env._draw_fading()
-    state = (sim.x_aug, sim.tracking_error, sim.x_obs, sim.error_obs, sim.drone_position, sim.slot.copy(),
-             sim.last_power_w, sim.last_delivered, sim.last_outage_probability)
+    state = sim.state
 
-    def sim_step() -> None:  # one slot, then the state put back (the same slot every call)
-        sim.step(decision.increment, decision.power_w, decision.drone_next, fading, {})
-        (sim.x_aug, sim.tracking_error, sim.x_obs, sim.error_obs, sim.drone_position, slot,
-         sim.last_power_w, sim.last_delivered, sim.last_outage_probability) = state
-        sim.slot[:] = slot
+    def decode():
+        return engine.actions.decode(checked, state.x_obs, None, state.drone_position, state.slot)
 
-    d2 = link.distance_sq(decision.drone_next[:, None, :], sim.x_aug[..., 0:2])
-    x = link.outage_argument_sq(decision.power_w, d2)
+    decision = decode()  # the parts of step, timed one by one
+    decisions = core.Decisions(decision.increment, decision.power_w, decision.drone_next)
+    draws = env._draw()
     parts = [
         ("whole step (its autoresets included)", lambda: envs.step(action)),
         ("check the actions", lambda: check_action(action, env.single_action_space.shape[0], "action", env.num_envs)),
-        ("decode the actions", lambda: env._decisions(checked)),
-        ("draw the fading", env._draw_fading),
-        ("simulation step", sim_step),
-        ("  of which: outage probabilities (gammainc)", lambda: link.outage_at(x)),
-        ("observation (encode_batch)", lambda: env.layout.encode_batch(sim, bound=env.interface.obs_bound)),
+        ("decode the actions", decode),
+        ("draw the slot's randomness", env._draw),
+        ("simulation step", lambda: core.step(sim.params, state, decisions, draws)),
+        ("observation (encode)", lambda: engine.observe()),
     ]
     print(f"lawn/Joint-v0 vector env, N = {args.num_envs}, K = {args.num_agvs}: microseconds per batched step")
     print(f"{'part':45s} {'us/step':>10s} {'env-steps/s alone':>18s}")
