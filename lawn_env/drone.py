@@ -94,7 +94,8 @@ def _clip(v, lo, hi):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def move_rows(position, velocity, max_speed, slot_s, x0, x1, y0, y1, out):  # pragma: no cover - compiled
+def move_rows(position: np.ndarray, velocity: np.ndarray, max_speed: float, slot_s: float, x0: float, x1: float,
+              y0: float, y1: float, out: np.ndarray) -> None:  # pragma: no cover - compiled
     """The compiled rule of :func:`move_drone` on rows: positions and velocities (B, 2), the next
     positions written to ``out`` (B, 2); other kernels call it."""
     for i in range(position.shape[0]):

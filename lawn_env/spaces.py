@@ -96,7 +96,7 @@ def decode_power(a: np.ndarray, power_budget_w: float) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def power_rows(a, budget, out):  # pragma: no cover - compiled
+def power_rows(a: np.ndarray, budget: float, out: np.ndarray) -> None:  # pragma: no cover - compiled
     """The compiled rule of :func:`decode_power` on rows (B, K), written to ``out``."""
     k = a.shape[1]
     for b in range(a.shape[0]):
@@ -110,7 +110,9 @@ def power_rows(a, budget, out):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def direct_rows(a, inc_size, k, inc_max, budget, max_speed, slot_s, x0, x1, y0, y1, position):  # pragma: no cover
+def direct_rows(a: np.ndarray, inc_size: int, k: int, inc_max: float, budget: float, max_speed: float, slot_s: float,
+                x0: float, x1: float, y0: float, y1: float,
+                position: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """The direct scheme's decisions of checked actions (B, size): increments (B, K, 2) (none when
     ``inc_size`` is 0: a (B, 0, 2) array), powers (:func:`power_rows`), the drone's next positions
     (:func:`lawn_env.drone.move_rows` at the velocities ``a * V_max``)."""

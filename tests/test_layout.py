@@ -168,3 +168,41 @@ def test_the_multi_agent_id_is_named_in_one_place():
 def test_the_experts_share_their_problem_from_a_module_of_their_own():
     assert "agents.problem" in EDGES["agents.ao"] and "agents.problem" in EDGES["agents.reduced"]
     assert "agents.ao" not in EDGES["agents.reduced"]
+
+
+def _private_reads(tree: ast.Module) -> list[str]:
+    """``obj._name`` reads where ``obj`` is not ``self``/``cls`` and no ``_name`` is defined in the
+    module itself (as an attribute, function, class or global): a private attribute of another
+    module's class."""
+    own = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            own.add(node.name)
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
+            own.add(node.attr)
+        elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            own.add(node.id)
+        elif isinstance(node, ast.arg):
+            own.add(node.arg)
+    modules = {alias.asname or alias.name for node in ast.walk(tree) if isinstance(node, ast.Import)
+               for alias in node.names}  # a module's documented underscore names (os._exit) are not a class's
+    return sorted({f"{node.value.id}.{node.attr}" for node in ast.walk(tree)
+                   if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                   and node.value.id not in ("self", "cls", *modules) and node.attr.startswith("_")
+                   and not node.attr.startswith("__") and node.attr not in own})
+
+
+def test_one_simulation_core_no_batch_twins_no_private_reads():
+    lawn_modules = {name: path for name, path in _modules().items() if name.startswith("lawn_env")}
+    classes = [f"{name}.{node.name}" for name, path in lawn_modules.items()
+               for node in ast.walk(ast.parse(path.read_text())) if isinstance(node, ast.ClassDef)
+               and "Simulation" in node.name]
+    assert classes == ["lawn_env.core.Simulation"]
+    twins = [f"{name}.{node.name}" for name, path in _modules().items()
+             for node in ast.walk(ast.parse(path.read_text()))
+             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.name.endswith("_batch")]
+    assert twins == []
+    reads = {name: _private_reads(ast.parse(path.read_text())) for name, path in _modules().items()}
+    assert {name: r for name, r in reads.items() if r} == {}
+    assert _private_reads(ast.parse("def f(o):\n    return o._hidden, self._own\nclass C:\n    _x = 1\nC._x")) == [
+        "o._hidden"]

@@ -175,7 +175,7 @@ class Engine:
         return self.interface.observe(self.layout.encode(self.sim))
 
 
-class SimulationView:
+class EngineView:
     """What the B = 1 views of the engine share (the Gymnasium envs and the PettingZoo env): config
     resolution, the engine, the scenario's accessors (``sim``), the trail, snapshot, render, close."""
 
@@ -244,7 +244,7 @@ class SimulationView:
         return getattr(self.engine.role, "mpc", None)
 
 
-class LawnEnvBase(SimulationView, gym.Env):
+class LawnEnvBase(EngineView, gym.Env):
     """Common machinery of ``lawn/Joint-v0`` and ``lawn/Comm-v0`` (not registered itself): the
     engine with B = 1."""
 

@@ -13,12 +13,12 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from ..interface import InterfaceLike
 from ..presets import ConfigLike
 from ..spaces import check_action
-from .base import SimulationView
+from .base import EngineView
 
 __all__ = ["LawnParallelEnv", "parallel_env", "raw_env", "env"]
 
 
-class LawnParallelEnv(SimulationView, ParallelEnv):
+class LawnParallelEnv(EngineView, ParallelEnv):
     """
     ## Description
 
