@@ -162,15 +162,22 @@ def encode_drone(next_position: np.ndarray, position: np.ndarray, max_speed_mps:
 
 
 @numba.njit(cache=True)
-def _encode_rows(out, x_obs, error_obs, drone, outage, delivered, power, state_scale, state_shift, ref_scale, center,
-                 inv_half, inv_power, features, w1):  # pragma: no cover - compiled
-    """The state-dependent features of every observation row, each computed in float64 as
-    :meth:`ObservationLayout.encode` documents and rounded once to float32."""
+def _encode_rows(out, table, slot, x_obs, error_obs, drone, outage, delivered, power, scales, features, w1,
+                 bound):  # pragma: no cover - compiled
+    """Every observation row: the slot's row of the fixed path set's ``table`` (when it has rows),
+    then the state-dependent features, each computed in float64 as :meth:`ObservationLayout.encode`
+    documents and rounded once to float32, then every feature clipped to ``bound`` in float32.
+    ``scales`` rows: state scale, state shift (scaled), reference scale (6 each), then the area
+    center, the inverse half-extent and the inverse power budget."""
     num, k = x_obs.shape[0], x_obs.shape[1]
     g = k * features
+    state_scale, state_shift, ref_scale = scales[0], scales[1], scales[2]
+    b32 = np.float32(bound)
     for b in range(num):
-        dx = (drone[b, 0] - center[0]) * inv_half[0]
-        dy = (drone[b, 1] - center[1]) * inv_half[1]
+        if table.shape[0] > 1:
+            out[b, :] = table[slot[b]]
+        dx = (drone[b, 0] - scales[3, 0]) * scales[3, 2]
+        dy = (drone[b, 1] - scales[3, 1]) * scales[3, 3]
         for i in range(k):
             base = i * features
             for j in range(6):
@@ -180,9 +187,15 @@ def _encode_rows(out, x_obs, error_obs, drone, outage, delivered, power, state_s
             out[b, base + w1 + 1] = (x_obs[b, i, 1] * state_scale[1] - state_shift[1]) - dy
             out[b, base + w1 + 2] = outage[b, i]
             out[b, base + w1 + 3] = 1.0 if delivered[b, i] else 0.0
-            out[b, base + w1 + 4] = power[b, i] * inv_power
+            out[b, base + w1 + 4] = power[b, i] * scales[3, 4]
         out[b, g] = dx
         out[b, g + 1] = dy
+        for j in range(out.shape[1]):
+            v = out[b, j]
+            if v > b32:
+                out[b, j] = b32
+            elif v < -b32:
+                out[b, j] = -b32
 
 
 class ObservationLayout:
@@ -241,6 +254,10 @@ class ObservationLayout:
             "power": w1 + 4,
         }
         self._table_key = self._table = None
+        self._no_table = np.zeros((1, self.size), dtype=np.float32)
+        self._scales = np.zeros((4, 6))
+        self._scales[0], self._scales[1], self._scales[2] = self._state_scale, self._state_shift_scaled, self._ref_scale
+        self._scales[3, 0:2], self._scales[3, 2:4], self._scales[3, 4] = self.center, self._inv_half, self._inv_power
 
     def feature_names(self) -> list[str]:
         """Human-readable names of the per-AGV block, then of the globals."""
@@ -271,28 +288,26 @@ class ObservationLayout:
         win *= self._ref_scale
         return win.reshape(win.shape[:-2] + (-1,))
 
-    def encode(self, sim: Simulation) -> np.ndarray:
+    def encode(self, sim: Simulation, bound: float | None = None) -> np.ndarray:
         """Observations of every scenario of a :class:`~lawn_env.core.Simulation` at its current
-        slot: (B, size) float32, each feature computed in float64 and rounded once (unclipped:
-        :meth:`RLInterface.observe <lawn_env.interface.RLInterface.observe>` bounds them). A fixed
-        path set shares one precomputed float32 table of the slot-dependent features (the
-        reference windows and slot n / N) while it stays under ``batch_window_table_bytes``: a step
-        gathers one table row per scenario and writes the state-dependent features over it."""
+        slot: (B, size) float32, each feature computed in float64 and rounded once, then, with
+        ``bound``, clipped to ``[-bound, bound]`` in float32 (what
+        :meth:`RLInterface.observe <lawn_env.interface.RLInterface.observe>` does to an
+        observation). A fixed path set shares one precomputed float32 table of the slot-dependent
+        features (the reference windows and slot n / N) while it stays under
+        ``batch_window_table_bytes``: a step copies one table row per scenario and writes the
+        state-dependent features over it, in one compiled loop."""
         b, k, f = sim.num_envs, self.num_agvs, self.agv_features
         w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
-        template = self._slot_table(sim.params.fixed_reference)
-        if template is not None:
-            out = template[sim.state.slot]  # a new array
-            blocks = out[:, : k * f].reshape(b, k, f)
-        else:
-            out = np.empty((b, self.size), dtype=np.float32)
-            blocks = out[:, : k * f].reshape(b, k, f)
-            blocks[..., w0:w1] = self.scaled_windows(sim.reference_windows())
-            out[:, -1] = sim.state.slot / self.num_slots
         st = sim.state
-        _encode_rows(out, st.x_obs, st.error_obs, st.drone_position, st.last_outage_probability, st.last_delivered,
-                     st.last_power_w, self._state_scale, self._state_shift_scaled, self._ref_scale, self.center,
-                     self._inv_half, self._inv_power, f, w1)
+        template = self._slot_table(sim.params.fixed_reference)
+        out = np.empty((b, self.size), dtype=np.float32)
+        if template is None:
+            out[:, : k * f].reshape(b, k, f)[..., w0:w1] = self.scaled_windows(sim.reference_windows())
+            out[:, -1] = st.slot / self.num_slots
+            template = self._no_table
+        _encode_rows(out, template, st.slot, st.x_obs, st.error_obs, st.drone_position, st.last_outage_probability,
+                     st.last_delivered, st.last_power_w, self._scales, f, w1, np.inf if bound is None else bound)
         return out
 
     def _slot_table(self, shared: np.ndarray | None) -> np.ndarray | None:

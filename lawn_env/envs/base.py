@@ -172,7 +172,7 @@ class Engine:
 
     def observe(self) -> np.ndarray:
         """Every scenario's observation as the agent sees it (B, size) float32."""
-        return self.interface.observe(self.layout.encode(self.sim))
+        return self.layout.encode(self.sim, self.interface.obs_bound)
 
 
 class EngineView:
