@@ -382,3 +382,19 @@ def test_recipe_commands_parse_as_lawn_train():
         assert tuple(args.seeds) == recipe.seeds and args.vec == recipe.vec
         assert _parse_overrides(args.hp, "--hp") == recipe.hp
     assert any(r.vec == "native" for r in RECIPES)
+
+
+@pytest.mark.parametrize("algo", ["sac", "ppo"])
+def test_start_at_anchor_makes_the_untrained_policy_play_the_zero_action(algo):
+    from training.train import _start_at_anchor, algorithm_class
+
+    env = gym.make("lawn/CommRL-v0", num_slots=4)
+    model = algorithm_class(algo)("MlpPolicy", env, seed=0, **({"learning_starts": 10} if algo == "sac" else {}))
+    obs, _ = env.reset(seed=0)
+    before, _ = model.predict(obs, deterministic=True)
+    assert np.abs(before).max() > 1e-3  # SB3's init acts away from zero (SAC's by far)
+    _start_at_anchor(model, algo)
+    after, _ = model.predict(obs, deterministic=True)
+    np.testing.assert_array_equal(after, np.zeros_like(after))
+    with pytest.raises(ValueError, match="start_at_anchor: supported for sac, ppo, not 'td3'"):
+        _start_at_anchor(model, "td3")

@@ -228,6 +228,23 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
     return summary
 
 
+def _start_at_anchor(model: Any, algo: str) -> None:
+    """``start_at_anchor``: the policy's output layer starts at zero weights and bias, so that its
+    deterministic action is the zero action: the run starts at its interface's anchor, and model
+    selection, which validates the start, compares what training finds against the anchor itself.
+    SB3's SAC initializes its mean layer like any other (its untrained policy acts far from zero);
+    PPO's orthogonal init with gain 0.01 is near zero already."""
+    import torch
+
+    layers = {"sac": lambda: model.actor.mu, "ppo": lambda: model.policy.action_net}
+    if algo not in layers:
+        raise ValueError(f"start_at_anchor: supported for {', '.join(layers)}, not {algo!r}")
+    layer = layers[algo]()
+    with torch.no_grad():
+        layer.weight.zero_()
+        layer.bias.zero_()
+
+
 def _lr_schedule(value):
     """``lin_3e-4`` (rl-zoo's notation): linear decay from 3e-4 to 0 over the run; numbers as they are."""
     if isinstance(value, str) and value.startswith("lin_"):
@@ -251,6 +268,7 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
     interface = params.pop("interface", None)
     warmup = int(params.pop("actor_warmup_steps", 0))
     init_log_std = params.pop("init_log_std", None)
+    at_anchor = bool(params.pop("start_at_anchor", False))
     for key in ("learning_rate", "clip_range"):
         if key in params:
             params[key] = _lr_schedule(params[key])
@@ -271,6 +289,8 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
                     tensorboard_log=str(out_dir / "tb"), **params)
         if spec.get("init_from"):
             _init_from(model, Path(spec["init_from"]), env)
+        if at_anchor and not spec.get("init_from"):
+            _start_at_anchor(model, spec["algo"])
         if init_log_std is not None:  # exploration noise of a fine-tuned policy (after the cloned weights)
             import torch
 
