@@ -1,6 +1,9 @@
 """Short-packet drone-to-AGV link with Nakagami-m fading (MODEL.md §2).
 
-Pure numpy functions, vectorized over any leading shape. All functions take *linear*
+Functions vectorized over any leading shape; the link's two scalar equations (the squared
+distance, the outage argument) are compiled once (:func:`link_distance_sq`, :func:`link_argument`)
+and used both by the simulation's slot kernel and, as ufuncs, by every array function here. All
+functions take *linear*
 quantities (power in W, gain as a ratio); the config's dB values are converted by
 :class:`LinkParams`. Distances are 3-D drone–AGV distances in m.
 
@@ -26,6 +29,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import numba
 import numpy as np
 import numpy.typing as npt
 from scipy import optimize, special
@@ -53,6 +57,8 @@ __all__ = [
     "sample_delivery",
     "distance_sq",
     "POWER_FLOOR_W",
+    "link_distance_sq",
+    "link_argument",
 ]
 
 LOG2E = 1.0 / math.log(2.0)
@@ -218,30 +224,45 @@ class LinkParams:
         )
 
 
-_ONES2 = np.ones(2)
-
-
 def distance_sq(drone_xy: np.ndarray, agv_xy: np.ndarray, altitude_m: float) -> np.ndarray:
     """Squared 3-D distance d^2 = ||q - c||^2 + H^2, m^2 (broadcasts over leading axes)."""
     return _distance_sq(drone_xy, agv_xy, altitude_m * altitude_m)
 
 
 def _distance_sq(drone_xy: npt.ArrayLike, agv_xy: npt.ArrayLike, altitude_sq: float) -> np.ndarray:
-    return _squared_norms(np.asarray(agv_xy, dtype=float) - drone_xy) + altitude_sq
-
-
-def _squared_norms(diff: np.ndarray) -> np.ndarray:
-    """||v||^2 of the 2-vectors ``diff`` (..., 2): the same two-term sums as a reduction over the
-    last axis, as a product with ones (faster, and one 2-D product for any leading axes)."""
-    sq = diff * diff
-    if sq.ndim <= 2:
-        return sq @ _ONES2
-    return (sq.reshape(-1, 2) @ _ONES2).reshape(sq.shape[:-1])
+    diff = np.asarray(agv_xy, dtype=float) - drone_xy
+    return _distance_sq_ufunc(diff[..., 0], diff[..., 1], altitude_sq)
 
 
 #: Powers are floored here before dividing; gammainc(m, x) is exactly 1.0 in double precision
 #: at that floor for any geometry, so p = 0 means outage probability 1 without inf/NaN.
 POWER_FLOOR_W = 1e-300
+
+
+@numba.njit(cache=True)
+def link_distance_sq(dx: float, dy: float, altitude_sq: float) -> float:  # pragma: no cover - compiled
+    """d^2 = (dx^2 + dy^2) + H^2 for the horizontal offset (dx, dy) m between drone and AGV: the
+    one place of this equation (the slot kernel calls it; :func:`distance_sq` is its ufunc)."""
+    return (dx * dx + dy * dy) + altitude_sq
+
+
+@numba.njit(cache=True)
+def link_argument(distance_sq_m2: float, power_w: float, c_d: float, c_ce: float) -> float:  # pragma: no cover
+    """The outage argument x = c_d d^2 / (p + POWER_FLOOR_W) + c_ce of one link: the one place of this
+    equation (the slot kernel calls it; :func:`outage_argument_sq` is its ufunc). The floor keeps
+    p = 0 finite: x ~ 1e295, gammainc(m, x) == 1.0 exactly."""
+    x = distance_sq_m2 * c_d / (power_w + POWER_FLOOR_W)
+    return x + c_ce if c_ce != 0.0 else x
+
+
+@numba.vectorize(["float64(float64, float64, float64)"], cache=True)
+def _distance_sq_ufunc(dx, dy, altitude_sq):  # pragma: no cover - compiled
+    return link_distance_sq(dx, dy, altitude_sq)
+
+
+@numba.vectorize(["float64(float64, float64, float64, float64)"], cache=True)
+def _argument_ufunc(distance_sq_m2, power_w, c_d, c_ce):  # pragma: no cover - compiled
+    return link_argument(distance_sq_m2, power_w, c_d, c_ce)
 
 
 def _outage_coefficients(snr_threshold, alpha0, noise_power_w, m, ce_error_var):
@@ -261,9 +282,7 @@ def outage_argument_sq(power_w: npt.ArrayLike, distance_sq_m2: npt.ArrayLike, *,
 
 
 def _outage_argument(power_w, distance_sq_m2, c_d: float, c_ce: float):
-    # the floor keeps p = 0 finite: x ~ 1e295, gammainc(m, x) == 1.0 exactly
-    x = distance_sq_m2 * c_d / (power_w + POWER_FLOOR_W)
-    return x + c_ce if c_ce else x
+    return _argument_ufunc(distance_sq_m2, power_w, c_d, c_ce)
 
 
 def outage_argument(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float,
@@ -311,7 +330,7 @@ def success_and_gradients(power_w: npt.ArrayLike, drone_xy: npt.ArrayLike, agv_x
     dx/d(d^2) = (x - x_ce)/d^2. At p = 0 (floored at ``POWER_FLOOR_W``) psi and both derivatives are 0.
     """
     diff = np.asarray(drone_xy, dtype=float) - np.asarray(agv_xy, dtype=float)
-    d2 = _squared_norms(diff) + link.altitude_sq
+    d2 = _distance_sq_ufunc(diff[..., 0], diff[..., 1], link.altitude_sq)
     p = np.maximum(power_w, POWER_FLOOR_W)
     x = link.outage_argument_sq(p, d2)
     g = link.success_slope_term(x)

@@ -35,7 +35,7 @@ from .dynamics import PredictionModel, packed_step_matrices
 
 __all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Snapshot", "Simulation", "ScenarioView", "Trail",
            "draw_slot", "reset", "step", "episode_metrics", "initial_state", "saturate_increment", "link_outage",
-           "link_success", "apply_wind", "disturb", "measure", "transmit", "stage_terms"]
+           "link_success", "apply_wind", "measure", "saturate", "outage_from_argument", "TOTALS"]
 
 
 # ---------------------------------------------------------------------- the slot's equations
@@ -51,14 +51,19 @@ def initial_state(reference_start: np.ndarray, offsets: np.ndarray, area_lo: np.
     return x_aug
 
 
-def saturate_increment(u_prev: np.ndarray, du: np.ndarray, accel_max: float) -> np.ndarray:
-    """Increments clipped so that |u[n-1] + du| <= a_max per axis (the control set, by
-    saturation): a new array."""
-    u = u_prev + du
-    np.maximum(u, -accel_max, out=u)
-    np.minimum(u, accel_max, out=u)
-    u -= u_prev
-    return u
+@numba.njit(cache=True)
+def saturate(u_prev: float, du: float, accel_max: float) -> float:  # pragma: no cover - compiled
+    """The increment ``du`` clipped so that |u[n-1] + du| <= a_max (the control set, by saturation):
+    the one place of this equation (the slot kernel calls it; :func:`saturate_increment` is its ufunc)."""
+    u = max(u_prev + du, -accel_max)
+    u = min(u, accel_max)
+    return u - u_prev
+
+
+@numba.vectorize(["float64(float64, float64, float64)"], cache=True)
+def saturate_increment(u_prev: float, du: float, accel_max: float) -> float:  # pragma: no cover - compiled
+    """:func:`saturate` over arrays (a ufunc: broadcasting, a new array)."""
+    return saturate(u_prev, du, accel_max)
 
 
 def link_outage(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray,
@@ -83,24 +88,6 @@ def apply_wind(drone_next: np.ndarray, wind_mps: np.ndarray, slot_s: float, area
     return np.clip(drone_next + wind_mps * slot_s, area_lo, area_hi)
 
 
-def disturb(packed: np.ndarray, commanded: np.ndarray, applied: np.ndarray, lag_alpha: float | None,
-            accel_effect_t: np.ndarray, position_noise: np.ndarray | None,
-            velocity_noise: np.ndarray | None) -> np.ndarray:
-    """The disturbance mode's changes to the transition, in place on the packed rows (..., K, 8):
-    the actuator lag (``lag_alpha``, None without lag) moves the AGV with the applied acceleration
-    instead of the commanded u[n] (the difference enters through A~'s acceleration column, the
-    same model), and process noise (..., K, 2) perturbs position and velocity. Returns the new
-    applied accelerations."""
-    if lag_alpha is not None:
-        applied = lag_alpha * applied + (1.0 - lag_alpha) * commanded
-        packed[..., 0:4] += _rows_matmul(applied - commanded, accel_effect_t)
-    if position_noise is not None:
-        packed[..., 0:2] += position_noise
-    if velocity_noise is not None:
-        packed[..., 2:4] += velocity_noise
-    return applied
-
-
 def measure(x_aug: np.ndarray, tracking_error: np.ndarray, position_noise: np.ndarray,
             velocity_noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """What the policies observe under measurement noise (..., K, 2) on positions and velocities:
@@ -109,41 +96,6 @@ def measure(x_aug: np.ndarray, tracking_error: np.ndarray, position_noise: np.nd
     noise[..., 0:2] = position_noise
     noise[..., 2:4] = velocity_noise
     return x_aug + noise, tracking_error + noise
-
-
-def transmit(x_aug: np.ndarray, du: np.ndarray, power_w: np.ndarray, drone_next: np.ndarray,
-             normalized_fading: np.ndarray, link: channel.LinkParams,
-             packed_t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One slot's links and transition: the commands go from the drone at ``drone_next`` (..., 2)
-    to the AGVs (x_aug (..., K, 6)) with powers (..., K); those whose fading m|h|^2 reaches the
-    outage argument arrive. Returns the packed rows [x~[n+1], du] (..., K, 8) of the delivered
-    increments (dynamics.packed_step_matrices), ``delivered`` and the outage probabilities."""
-    x, outage_p = link_outage(x_aug, drone_next, power_w, link)
-    delivered = channel.delivered_from_fading(normalized_fading, x)
-    du = du * delivered[..., None]
-    return _rows_matmul(np.concatenate((x_aug, du), axis=-1), packed_t), delivered, outage_p
-
-
-def stage_terms(packed: np.ndarray, reference_packed: np.ndarray,
-                packed_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The packed error [x~[n+1] - x~_ref[n+1], du] and the stage cost's two terms per AGV
-    (e' Q1 e, du' Q2 du): (..., K, 8) and (..., K, 2)."""
-    err = packed - reference_packed
-    return err, _rows_matmul(err * err, packed_w)
-
-
-def _rows_matmul(a: np.ndarray, m: np.ndarray) -> np.ndarray:
-    """``a @ m`` for rows ``a`` (..., n) with any leading axes, as one 2-D product: numpy's
-    stacked matmul over a (B, K, n) batch is several times slower than the same rows flattened."""
-    if a.ndim <= 2:
-        return a @ m
-    return (a.reshape(-1, a.shape[-1]) @ m).reshape(a.shape[:-1] + m.shape[1:])
-
-
-def _row_sums(x: np.ndarray) -> np.ndarray:
-    """Sums over the last axis, left to right (a cumulative sum: the order Python's ``sum``
-    takes, whatever the length), (...,)."""
-    return np.cumsum(x, axis=-1)[..., -1]
 
 
 # scipy's own compiled gammainc(a, x) (the function its ufunc calls, so the same values), named as
@@ -155,38 +107,12 @@ _GAMMAINC = numba.types.ExternalFunction("lawn_scipy_gammainc", numba.types.floa
 
 
 @numba.njit(cache=True)
-def _links(x_aug, increment, send, power, drone_next, fading, accel_max, altitude_sq, c_d, c_ce,
-           m):  # pragma: no cover - compiled
-    """One slot's links, element by element as the shape-generic functions above compute them:
-    :func:`saturate_increment` of the increments (zero where ``send`` is False: no command this
-    slot), the outage argument x at the squared distances (:meth:`LinkParams.outage_argument_sq`),
-    the outage probability gammainc(m, x) (scipy's own compiled function, the value its ufunc
-    gives), ``delivered`` = m|h|^2 >= x, and the rows [x~, du delivered] (B K, 8) the transition
-    multiplies."""
-    num, k = x_aug.shape[0], x_aug.shape[1]
-    rows = np.empty((num * k, 8))
-    delivered = np.empty((num, k), dtype=np.bool_)
-    outage = np.empty((num, k))
-    for b in range(num):
-        sending = send[b % send.shape[0]]
-        for i in range(k):
-            r = b * k + i
-            ex = x_aug[b, i, 0] - drone_next[b, 0]
-            ey = x_aug[b, i, 1] - drone_next[b, 1]
-            x = ((ex * ex + ey * ey) + altitude_sq) * c_d / (power[b, i] + 1e-300)
-            if c_ce != 0.0:
-                x = x + c_ce
-            outage[b, i] = _GAMMAINC(m, x)
-            ok = fading[b, i] >= x
-            delivered[b, i] = ok
-            for j in range(6):
-                rows[r, j] = x_aug[b, i, j]
-            for a in range(2):
-                u_prev = x_aug[b, i, 4 + a]
-                u = max(u_prev + increment[b, i, a], -accel_max)
-                u = min(u, accel_max)
-                rows[r, 6 + a] = ((u - u_prev) if sending else 0.0) * (1.0 if ok else 0.0)
-    return rows, delivered, outage
+def outage_from_argument(m: float, x: float) -> float:  # pragma: no cover - compiled
+    """The outage probability gammainc(m, x) at the outage argument x, in compiled code: scipy's
+    own compiled function, so bit for bit the value of ``scipy.special.gammainc`` (and of
+    :meth:`~lawn_env.channel.LinkParams.outage_at`) for every m and x (a test checks m = 1..100 and
+    x from 1e-300 to 1e3)."""
+    return _GAMMAINC(m, x)
 
 
 #: The columns of ``SimState.totals`` (B, 4 + 3K): the episode's running sums of the tracking
@@ -196,31 +122,102 @@ TOTALS = ("tracking", "effort", "outage_p", "path", "sq_error", "outages", "powe
 
 
 @numba.njit(cache=True)
-def _slot_sums(terms, err, delivered, outage_p, power, drone_next, drone_prev, totals):  # pragma: no cover
-    """The slot's stage costs summed over AGVs (left to right, (B,) each) and the episode's running
-    sums (:data:`TOTALS`) advanced by the slot (a new array)."""
-    num, k = delivered.shape[0], delivered.shape[1]
-    t_total, e_total = np.empty(num), np.empty(num)
-    out = totals.copy()
+def _slot(x_aug, increment, send, power, drone_next, fading, reference, slot, applied, process_position,
+          process_velocity, drone_prev, totals, packed_t, packed_w, accel_effect_t, lag_alpha, accel_max, altitude_sq,
+          c_d, c_ce, m, packed, err, terms, delivered, outage, applied_next, costs, totals_next):  # pragma: no cover
+    """One slot of B scenarios (see :func:`step`), in this order:
+
+    1. the links: the increments saturated (:func:`saturate`; zero where ``send`` is False: no
+       command this slot), the outage argument x at the drone's next position
+       (:func:`~lawn_env.channel.link_distance_sq`, :func:`~lawn_env.channel.link_argument`), the
+       outage probability gammainc(m, x) (scipy's own compiled function, the value its ufunc
+       gives), ``delivered`` = m|h|^2 >= x;
+    2. the transition: the packed rows [x~[n+1], du] = [x~, du delivered] @ packed_t (BLAS, as
+       numpy's ``@``);
+    3. the disturbance mode's changes (``lag_alpha`` >= 0: the actuator lag moves the AGV with the
+       applied acceleration instead of the commanded u[n], the difference entering through A~'s
+       acceleration columns; process noise on positions and velocities where the arrays are not
+       empty);
+    4. the packed error against the reference at slot n+1 and the stage terms (e' Q1 e, du' Q2 du)
+       = err^2 @ packed_w;
+    5. the slot's stage costs summed over AGVs (left to right) and the episode's running sums
+       (:data:`TOTALS`) advanced.
+
+    Writes the outputs (the last eight arguments, new arrays the caller allocates: a compiled
+    function's returned arrays cost more to hand back than these to allocate): ``packed``
+    [x~[n+1], du delivered] and ``err`` [x~[n+1] - x~_ref[n+1], du] (B, K, 8), ``terms`` (B, K, 2),
+    ``delivered``, ``outage`` (B, K), ``applied_next`` (B, K, 2; only under lag), ``costs`` (B, 3)
+    (the slot's tracking, effort and stage cost) and ``totals_next``.
+    """
+    num, k = x_aug.shape[0], x_aug.shape[1]
+    n = num * k
+    rows = np.empty((n, 8))
     for b in range(num):
-        r = b * k
-        t, e, o = terms[r, 0], terms[r, 1], outage_p[b, 0]
+        sending = send[b % send.shape[0]]
+        for i in range(k):
+            r = b * k + i
+            d2 = channel.link_distance_sq(x_aug[b, i, 0] - drone_next[b, 0], x_aug[b, i, 1] - drone_next[b, 1],
+                                          altitude_sq)
+            x = channel.link_argument(d2, power[b, i], c_d, c_ce)
+            outage[b, i] = outage_from_argument(m, x)
+            ok = fading[b, i] >= x
+            delivered[b, i] = ok
+            for j in range(6):
+                rows[r, j] = x_aug[b, i, j]
+            for a in range(2):
+                du = saturate(x_aug[b, i, 4 + a], increment[b, i, a], accel_max) if sending else 0.0
+                rows[r, 6 + a] = du * (1.0 if ok else 0.0)
+    flat = packed.reshape((n, 8))
+    np.dot(rows, packed_t, flat)
+    if lag_alpha >= 0.0:
+        gap = np.empty((n, 2))
+        for b in range(num):
+            for i in range(k):
+                r = b * k + i
+                for a in range(2):
+                    commanded = x_aug[b, i, 4 + a] + flat[r, 6 + a]
+                    applied_next[b, i, a] = lag_alpha * applied[b, i, a] + (1.0 - lag_alpha) * commanded
+                    gap[r, a] = applied_next[b, i, a] - commanded
+        correction = gap @ accel_effect_t
+        for r in range(n):
+            for j in range(4):
+                flat[r, j] += correction[r, j]
+    for b in range(process_position.shape[0]):
+        for i in range(k):
+            for a in range(2):
+                packed[b, i, a] += process_position[b, i, a]
+    for b in range(process_velocity.shape[0]):
+        for i in range(k):
+            for a in range(2):
+                packed[b, i, 2 + a] += process_velocity[b, i, a]
+    squares = np.empty((n, 8))
+    for b in range(num):
+        s = slot[b] + 1
+        for i in range(k):
+            r = b * k + i
+            for j in range(8):
+                e = packed[b, i, j] - reference[b, i, s, j] if j < 6 else packed[b, i, j]
+                err[b, i, j] = e
+                squares[r, j] = e * e
+    np.dot(squares, packed_w, terms.reshape((n, 2)))
+    totals_next[:] = totals
+    for b in range(num):
+        t, e, o = terms[b, 0, 0], terms[b, 0, 1], outage[b, 0]
         for i in range(1, k):
-            t += terms[r + i, 0]
-            e += terms[r + i, 1]
-            o += outage_p[b, i]
-        t_total[b], e_total[b] = t, e
-        out[b, 0] += t
-        out[b, 1] += e
-        out[b, 2] += o
+            t += terms[b, i, 0]
+            e += terms[b, i, 1]
+            o += outage[b, i]
+        costs[b, 0], costs[b, 1], costs[b, 2] = t, e, t + e
+        totals_next[b, 0] += t
+        totals_next[b, 1] += e
+        totals_next[b, 2] += o
         sx = drone_next[b, 0] - drone_prev[b, 0]
         sy = drone_next[b, 1] - drone_prev[b, 1]
-        out[b, 3] += np.sqrt(sx * sx + sy * sy)
+        totals_next[b, 3] += np.sqrt(sx * sx + sy * sy)
         for i in range(k):
-            out[b, 4 + i] += err[r + i, 0] ** 2 + err[r + i, 1] ** 2
-            out[b, 4 + k + i] += 0.0 if delivered[b, i] else 1.0
-            out[b, 4 + 2 * k + i] += power[b, i]
-    return t_total, e_total, out
+            totals_next[b, 4 + i] += err[b, i, 0] ** 2 + err[b, i, 1] ** 2
+            totals_next[b, 4 + k + i] += 0.0 if delivered[b, i] else 1.0
+            totals_next[b, 4 + 2 * k + i] += power[b, i]
 
 
 # ---------------------------------------------------------------------- parameters, state, draws
@@ -252,10 +249,9 @@ class SimParams:
     envelope: references.Envelope
     fixed_paths: list | None
     fixed_reference: np.ndarray | None  # (K, T, 6) of the fixed path set
-    fixed_packed: np.ndarray | None  # (T, K, 8) [reference, 0, 0], slot-major (one gather per step)
     disturbance: DisturbanceConfig
     disturbed: bool
-    lag_alpha: float | None  # exp(-slot / lag) under actuator lag, else None
+    lag_alpha: float  # exp(-slot / lag) under actuator lag, else -1.0 (no lag)
     always: np.ndarray = None  # (1,) True: every slot sends its commands (no disturbance mode)
     altitude_sq: float = 0.0  # the link's H^2, c_d, c_ce and m (outage argument x = c_d d^2 / p + c_ce)
     c_d: float = 0.0
@@ -276,10 +272,6 @@ class SimParams:
         envelope = references.Envelope.from_config(config, steps)
         fixed_paths = references.paper_paths(k, area, envelope) if config.uses_paper_paths else None
         fixed = references.reference_table(fixed_paths, steps, config.slot_s) if fixed_paths is not None else None
-        fixed_packed = None
-        if fixed is not None:
-            fixed_packed = np.ascontiguousarray(np.concatenate([fixed, np.zeros((k, steps, 2))], axis=2)
-                                                .transpose(1, 0, 2))
         d = config.disturbance
         link = channel.LinkParams.from_config(config)
         return cls(
@@ -291,9 +283,9 @@ class SimParams:
             area=area, area_lo=np.array([area[0], area[2]]), area_hi=np.array([area[1], area[3]]),
             accel_max=config.control.accel_max_mps2, max_speed=config.drone.max_speed_mps,
             power_budget_w=config.power_budget_w, drone_start=np.array(config.drone.start_m, dtype=float),
-            envelope=envelope, fixed_paths=fixed_paths, fixed_reference=fixed, fixed_packed=fixed_packed,
+            envelope=envelope, fixed_paths=fixed_paths, fixed_reference=fixed,
             disturbance=d, disturbed=d.active,
-            lag_alpha=float(np.exp(-config.slot_s / d.actuator_lag_s)) if d.actuator_lag_s > 0 else None,
+            lag_alpha=float(np.exp(-config.slot_s / d.actuator_lag_s)) if d.actuator_lag_s > 0 else -1.0,
             always=np.ones(1, dtype=bool),
             altitude_sq=link.altitude_sq, c_d=link.coefficients[0], c_ce=link.coefficients[1], m=float(link.m),
         )
@@ -339,19 +331,21 @@ def draw_slot(rng: np.random.Generator, params: SimParams, num: int = 1) -> Slot
 
 class Decisions(NamedTuple):
     """A slot's decisions for B scenarios: increments to send (B, K, 2) m/s^2 (saturated by the
-    step), feasible powers (B, K) W, the drone's next positions (B, 2) m."""
+    step), feasible powers (B, K) W, the drone's next positions (B, 2) m; or one scenario's, the same
+    without the B axis. An action decoded for ``lawn/Comm-v0``'s role has ``increment`` None (the
+    MPC decides it: :class:`lawn_env.envs.base.CommRole`)."""
 
-    increment: np.ndarray
+    increment: np.ndarray | None
     power_w: np.ndarray
     drone_next: np.ndarray
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, slots=True)
 class SimState:
     """The episode state of B scenarios, every array with a leading batch axis. ``x_obs`` and
     ``error_obs`` are what the policies observe (the true ``x_aug`` and ``tracking_error``
     without measurement noise); ``reference`` (B, K, T, 6) is a broadcast view of the fixed path
-    set's table when there is one (``reference_packed`` is then None); ``totals`` holds the
+    set's table when there is one; ``totals`` holds the
     episode's running sums (:func:`episode_metrics`)."""
 
     x_aug: np.ndarray  # (B, K, 6) [x, y, v_x, v_y, u_x[n-1], u_y[n-1]]
@@ -365,7 +359,6 @@ class SimState:
     last_delivered: np.ndarray  # (B, K) bool
     last_outage_probability: np.ndarray  # (B, K)
     reference: np.ndarray  # (B, K, T, 6)
-    reference_packed: np.ndarray | None  # (B, K, T, 8) for random paths
     paths: list  # per scenario, its K paths
     totals: np.ndarray  # (B, 4 + 3K), columns TOTALS
 
@@ -385,7 +378,6 @@ def empty_state(params: SimParams, num: int) -> SimState:
         applied=np.zeros((num, k, 2)), drone_position=np.zeros((num, 2)), slot=np.zeros(num, dtype=np.int64),
         last_power_w=np.zeros((num, k)), last_delivered=np.ones((num, k), dtype=bool),
         last_outage_probability=np.zeros((num, k)), reference=reference,
-        reference_packed=None if fixed is not None else np.zeros((num, k, steps, 8)),
         paths=[params.fixed_paths] * num,
         totals=np.zeros((num, 4 + 3 * k)),
     )
@@ -408,7 +400,6 @@ def reset(params: SimParams, state: SimState, rngs: Sequence[np.random.Generator
                                         duration_s=(steps - 1) * params.slot_s, envelope=params.envelope)
         tables = references.reference_table([p for row in paths for p in row], steps, params.slot_s)
         state.reference[idx] = tables.reshape(idx.size, k, steps, 6)
-        state.reference_packed[idx, :, :, 0:6] = state.reference[idx]
         for j, i in enumerate(idx.tolist()):
             state.paths[i] = paths[j]
     offsets = np.empty((idx.size, k, 2))
@@ -440,17 +431,43 @@ def reset(params: SimParams, state: SimState, rngs: Sequence[np.random.Generator
 
 
 class SlotRecord(NamedTuple):
-    """What one slot produced for B scenarios (per AGV arrays (B, K))."""
+    """What one slot produced for B scenarios."""
 
-    tracking_cost: np.ndarray  # e' Q1 e at slot n+1 (e: augmented tracking error)
-    effort_cost: np.ndarray  # Delta-u' Q2 Delta-u of the delivered increment
-    delivered: np.ndarray  # bool
-    outage_probability: np.ndarray  # closed form at (p, q[n]) for the true link
+    terms: np.ndarray  # (B, K, 2) per AGV: e' Q1 e at slot n+1 (e: augmented tracking error), du' Q2 du delivered
+    delivered: np.ndarray  # (B, K) bool
+    outage_probability: np.ndarray  # (B, K) closed form at (p, q[n]) for the true link
     applied_increment: np.ndarray  # (B, K, 2) after saturation and delivery, m/s^2
     power_w: np.ndarray  # (B, K)
     drone_position: np.ndarray  # q[n], (B, 2), after the wind
-    tracking_total: np.ndarray  # (B,) the slot's tracking cost summed over AGVs (left to right)
-    effort_total: np.ndarray  # (B,)
+    costs: np.ndarray  # (B, 3) the slot's tracking, effort and stage cost, summed over AGVs left to right
+
+    @property
+    def tracking_cost(self) -> np.ndarray:
+        """Per AGV e' Q1 e (B, K)."""
+        return self.terms[..., 0]
+
+    @property
+    def effort_cost(self) -> np.ndarray:
+        """Per AGV du' Q2 du (B, K)."""
+        return self.terms[..., 1]
+
+    @property
+    def tracking_total(self) -> np.ndarray:
+        """The slot's tracking cost (B,)."""
+        return self.costs[:, 0]
+
+    @property
+    def effort_total(self) -> np.ndarray:
+        """The slot's effort cost (B,)."""
+        return self.costs[:, 1]
+
+    @property
+    def stage_cost(self) -> np.ndarray:
+        """The slot's stage cost, tracking + effort, as a column (B, 1)."""
+        return self.costs[:, 2:3]
+
+
+_NO_NOISE = np.zeros((0, 0, 2))  # the slot kernel's "no process noise"
 
 
 def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDraws) -> tuple[SimState, SlotRecord]:
@@ -470,37 +487,26 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
         drone_next = apply_wind(drone_next, wind, params.slot_s, params.area_lo, params.area_hi)
     x_aug = state.x_aug
     send = state.slot % d.control_period_slots == 0 if params.disturbed else params.always
-    rows, delivered, outage_p = _links(x_aug, decisions.increment, send, decisions.power_w, drone_next, draws.fading,
-                                       params.accel_max, params.altitude_sq, params.c_d, params.c_ce, params.m)
-    packed = rows @ params.packed_t
-    applied = state.applied
-    if params.disturbed:
-        packed = packed.reshape(x_aug.shape[:-1] + (8,))
-        applied = disturb(packed, x_aug[..., 4:6] + packed[..., 6:8], applied, params.lag_alpha,
-                          params.accel_effect_t, draws.process_position, draws.process_velocity)
-        packed = packed.reshape(-1, 8)
-    slot = state.slot + 1
-    if params.fixed_packed is not None:  # one path set: gather from its (T, K, 8) table
-        reference = params.fixed_packed[slot]
-    else:
-        reference = state.reference_packed[np.arange(slot.size), :, slot]
-    err = packed - reference.reshape(-1, 8)
-    terms = (err * err) @ params.packed_w
-    tracking_total, effort_total, totals = _slot_sums(terms, err, delivered, outage_p, decisions.power_w, drone_next,
-                                                      state.drone_position, state.totals)
-    shape = x_aug.shape[:-1]
-    packed, err, terms = packed.reshape(shape + (8,)), err.reshape(shape + (8,)), terms.reshape(shape + (2,))
-    x_next, error = packed[..., 0:6], err[..., 0:6]
+    process_position = _NO_NOISE if draws.process_position is None else draws.process_position
+    process_velocity = _NO_NOISE if draws.process_velocity is None else draws.process_velocity
+    num, k = x_aug.shape[0], x_aug.shape[1]
+    packed, err, terms = np.empty((num, k, 8)), np.empty((num, k, 8)), np.empty((num, k, 2))
+    delivered, outage_p = np.empty((num, k), dtype=np.bool_), np.empty((num, k))
+    applied = state.applied if params.lag_alpha < 0.0 else np.empty((num, k, 2))
+    costs, totals = np.empty((num, 3)), np.empty(state.totals.shape)
+    _slot(x_aug, decisions.increment, send, decisions.power_w, drone_next, draws.fading, state.reference, state.slot,
+          state.applied, process_position, process_velocity, state.drone_position, state.totals, params.packed_t,
+          params.packed_w, params.accel_effect_t, params.lag_alpha, params.accel_max, params.altitude_sq, params.c_d,
+          params.c_ce, params.m, packed, err, terms, delivered, outage_p, applied, costs, totals)
+    x_next, error, applied_increment, slot = packed[..., 0:6], err[..., 0:6], packed[..., 6:8], state.slot + 1
     x_obs, error_obs = x_next, error
     if draws.measurement_position is not None:
         x_obs, error_obs = measure(x_next, error, draws.measurement_position, draws.measurement_velocity)
-    tracking, effort = terms[..., 0], terms[..., 1]
     new = SimState(x_aug=x_next, tracking_error=error, x_obs=x_obs, error_obs=error_obs, applied=applied,
-                   drone_position=drone_next, slot=slot, last_power_w=decisions.power_w, last_delivered=delivered,
-                   last_outage_probability=outage_p, reference=state.reference,
-                   reference_packed=state.reference_packed, paths=state.paths, totals=totals)
-    record = SlotRecord(tracking, effort, delivered, outage_p, packed[..., 6:8], decisions.power_w, drone_next,
-                        tracking_total, effort_total)
+                   drone_position=drone_next, slot=slot, last_power_w=decisions.power_w,
+                   last_delivered=delivered, last_outage_probability=outage_p, reference=state.reference,
+                   paths=state.paths, totals=totals)
+    record = SlotRecord(terms, delivered, outage_p, applied_increment, decisions.power_w, drone_next, costs)
     return new, record
 
 
@@ -563,11 +569,6 @@ class Simulation:
         self.started = False
         self._window = np.arange(self.horizon + 1)
 
-    def __getattr__(self, name: str):  # the state's arrays
-        if name in SimState.__dataclass_fields__ and name != "totals":
-            return getattr(self.__dict__["state"], name)
-        raise AttributeError(name)
-
     def reset(self, rngs: Sequence[np.random.Generator], which: np.ndarray | None = None) -> None:
         """New episodes for the scenarios ``which`` (all when None), scenario i from ``rngs[i]``."""
         if not self.started and which is not None and not np.all(which):
@@ -623,11 +624,6 @@ class ScenarioView:
             p.config, p.area, p.num_agvs, p.num_slots, p.horizon)
         self.link, self.planning_link, self.model = p.link, p.planning_link, p.model
 
-    def __getattr__(self, name: str):
-        if name in SimState.__dataclass_fields__ and name not in ("totals", "paths"):
-            return getattr(self._sim.state, name)[self.i]
-        raise AttributeError(name)
-
     @property
     def slot(self) -> int:
         return int(self._sim.state.slot[self.i])
@@ -674,6 +670,28 @@ class ScenarioView:
         return self._sim.episode_metrics(self.i)
 
 
+#: The state's arrays a :class:`Simulation` reads as attributes (``sim.x_aug`` (B, K, 6), ...) and a
+#: :class:`ScenarioView` as its row's arrays (``view.x_aug`` (K, 6), ...): properties, not a
+#: ``__getattr__`` (a failed attribute lookup costs a step microseconds).
+STATE_ARRAYS = ("x_aug", "tracking_error", "x_obs", "error_obs", "applied", "drone_position", "last_power_w",
+                "last_delivered", "last_outage_probability", "reference")
+
+
+def _state_array(name: str) -> property:
+    return property(lambda sim: getattr(sim.state, name), doc=f"``state.{name}`` of every scenario.")
+
+
+def _row_array(name: str) -> property:
+    return property(lambda view: getattr(view._sim.state, name)[view.i], doc=f"``state.{name}`` of this scenario.")
+
+
+for _name in STATE_ARRAYS:
+    setattr(Simulation, _name, _state_array(_name))
+    setattr(ScenarioView, _name, _row_array(_name))
+Simulation.slot = _state_array("slot")
+Simulation.paths = _state_array("paths")
+
+
 class Trail:
     """The positions of one scenario's current episode, slot by slot: what the renderer draws
     behind the drone and the AGVs, and the paths a figure plots. ``restart`` at reset, ``record``
@@ -681,22 +699,20 @@ class Trail:
 
     def __init__(self, view: ScenarioView):
         self.view = view
-        self._drone: list[np.ndarray] = []
-        self._agv: list[np.ndarray] = []
+        self._states: list[SimState] = []
 
     def restart(self) -> None:
-        self._drone, self._agv = [], []
+        self._states = []
         self.record()
 
     def record(self) -> None:
-        # views, not copies: a step replaces the state's arrays (it never writes into them), and a
-        # reset writes into copies of them
-        state, i = self.view._sim.state, self.view.i
-        self._drone.append(state.drone_position[i])
-        self._agv.append(state.x_aug[i, :, 0:2])
+        # the state itself, not copies: a step makes a new state (it never writes into the old
+        # one's arrays); a reset writes into the current one, after which the trail restarts
+        self._states.append(self.view._sim.state)
 
     def trajectories(self) -> dict:
         """Drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions of slots 0..n."""
-        n = len(self._drone)
-        return {"drone_position": np.array(self._drone), "agv_position": np.array(self._agv),
+        i, n = self.view.i, len(self._states)
+        return {"drone_position": np.array([s.drone_position[i] for s in self._states]),
+                "agv_position": np.array([s.x_aug[i, :, 0:2] for s in self._states]),
                 "reference_position": np.swapaxes(self.view.reference[:, :n, 0:2], 0, 1)}

@@ -55,7 +55,7 @@ control cost of full episodes of the unmodified scenario.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Mapping, NamedTuple
+from typing import Annotated, Any, Literal, Mapping
 
 import gymnasium as gym
 import numpy as np
@@ -65,7 +65,7 @@ from pydantic.dataclasses import dataclass
 from . import spaces
 from .channel import LinkParams
 from .config import ScenarioConfig
-from .core import saturate_increment
+from .core import Decisions, saturate_increment
 from .drone import toward
 from .dynamics import PredictionModel
 from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
@@ -196,13 +196,9 @@ def resolve_interface(interface: InterfaceLike) -> RLInterface:
     raise TypeError(f"interface must be an RLInterface, a dict, 'v0', 'rl' or None; got {type(interface).__name__}")
 
 
-class Decision(NamedTuple):
-    """The physical decisions of one slot: increments (K, 2) m/s^2 (None when an MPC decides
-    them), powers (K,) W, the drone's next position (2,) m."""
-
-    increment: np.ndarray | None
-    power_w: np.ndarray
-    drone_next: np.ndarray
+#: The decisions an action decodes to: :class:`lawn_env.core.Decisions` (the one type; this name
+#: stays for code that imported it from here).
+Decision = Decisions
 
 
 #: What an action of each role decides: ``joint`` (increments, power, drone: Joint-v0),
@@ -276,12 +272,12 @@ class ActionLayout:
                             None if slot is None else np.asarray(slot).reshape(1))
             return Decision(None if d.increment is None else d.increment[0], d.power_w[0], d.drone_next[0])
         k = self.num_agvs
-        comm = a[:, self._inc_size :]
         if self.scheme == "direct":
             increment, power, drone_next = spaces.direct_rows(
                 np.ascontiguousarray(a, dtype=np.float64), self._inc_size, k, self._inc_max, self._pmax, self._vmax,
                 self._dt, *self._area, np.ascontiguousarray(drone_position, dtype=np.float64))
             return Decision(increment if self._inc_size else None, power, drone_next)
+        comm = a[:, self._inc_size :]
         target = x_aug[..., 0:2].mean(axis=-2) + comm[:, k:] * self.interface.drone_offset_m
         drone_next = toward(drone_position, target, self._vmax, self._dt, self._area)
         return self._anchored(a[:, : 2 * k], comm[:, :k], x_aug, reference, slot, drone_next)

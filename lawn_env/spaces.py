@@ -56,16 +56,15 @@ def check_action(action: Any, size: int, name: str = "action", num_envs: int | N
     raise ``ValueError`` naming ``name``, the expected shape and dtype; a bad entry is named by its
     index (and, in a batch, its env's). Returns float64."""
     shape = (size,) if num_envs is None else (num_envs, size)
-    expected = f"({size},)" if num_envs is None else f"({num_envs}, {size})"
     try:
         a = np.asarray(action)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a real array of shape {expected}, float32: {exc}") from None
+        raise ValueError(f"{name} must be a real array of shape {shape}, float32: {exc}") from None
     if a.dtype.kind not in "fiu":
         raise ValueError(f"{name} has dtype {a.dtype} ({type(action).__name__}); expected real numbers of shape "
-                         f"{expected}, float32 (complex, boolean and string actions are not accepted)")
+                         f"{shape}, float32 (complex, boolean and string actions are not accepted)")
     if a.shape != shape:
-        raise ValueError(f"{name} has shape {a.shape}; expected {expected}, float32, with entries in [-1, 1]")
+        raise ValueError(f"{name} has shape {a.shape}; expected {shape}, float32, with entries in [-1, 1]")
     a = np.ascontiguousarray(a, dtype=np.float64)
     if _first_outside(a) >= 0:
         bad = np.argwhere(~((a >= -1.0) & (a <= 1.0)))
@@ -298,16 +297,17 @@ class ObservationLayout:
         ``batch_window_table_bytes``: a step copies one table row per scenario and writes the
         state-dependent features over it, in one compiled loop."""
         b, k, f = sim.num_envs, self.num_agvs, self.agv_features
-        w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
+        window = self.slices["reference"]
         st = sim.state
         template = self._slot_table(sim.params.fixed_reference)
         out = np.empty((b, self.size), dtype=np.float32)
         if template is None:
-            out[:, : k * f].reshape(b, k, f)[..., w0:w1] = self.scaled_windows(sim.reference_windows())
+            out[:, : k * f].reshape(b, k, f)[..., window] = self.scaled_windows(sim.reference_windows())
             out[:, -1] = st.slot / self.num_slots
             template = self._no_table
         _encode_rows(out, template, st.slot, st.x_obs, st.error_obs, st.drone_position, st.last_outage_probability,
-                     st.last_delivered, st.last_power_w, self._scales, f, w1, np.inf if bound is None else bound)
+                     st.last_delivered, st.last_power_w, self._scales, f, window.stop,
+                     np.inf if bound is None else bound)
         return out
 
     def _slot_table(self, shared: np.ndarray | None) -> np.ndarray | None:

@@ -194,3 +194,34 @@ def test_ce_error_floor_at_the_default_rate_threshold():
     for rho, low, high in ((1e-3, 0.68, 0.70), (1e-2, 1 - 1e-8, 1.0)):
         link = LinkParams.from_config(presets.get("default").override(**{"channel.ce_error_var": rho}))
         assert low <= channel.outage_probability(1.0, 50.0, **link.kwargs) <= high
+
+
+def test_compiled_outage_equals_scipy_over_the_whole_range():
+    """The slot kernel's outage probability (:func:`lawn_env.core.outage_from_argument`) is
+    scipy's gammainc bit for bit: integer m = 1..100 (and non-integer m), x = 0 and 1e-300..1e3."""
+    from lawn_env.core import outage_from_argument
+
+    xs = np.concatenate([[0.0], np.logspace(-300, 3, 400), [5e-324, 1e295]])
+    for m in [*range(1, 101), 0.5, 1.5, 2.75, 37.3]:
+        expected = special.gammainc(m, xs)
+        got = np.array([outage_from_argument(float(m), float(x)) for x in xs])
+        np.testing.assert_array_equal(got, expected, err_msg=f"m={m}")
+    assert outage_from_argument(2.0, 1e295) == 1.0 and outage_from_argument(2.0, 0.0) == 0.0
+
+
+def test_compiled_link_equations_equal_the_array_forms():
+    """The link's scalar equations (one source, compiled: the kernel's and the ufuncs') give the
+    array formulas' values bit for bit: d^2 = (dx^2 + dy^2) + H^2 and x = d^2 c_d / (p + floor) + c_ce."""
+    rng = np.random.default_rng(0)
+    drone, agv = rng.uniform(-300, 300, (50, 2)), rng.uniform(-300, 300, (50, 4, 2))
+    d2 = channel.distance_sq(drone[:, None], agv, 50.0)
+    diff = agv - drone[:, None]
+    np.testing.assert_array_equal(d2, (diff[..., 0] ** 2 + diff[..., 1] ** 2) + 2500.0)
+    np.testing.assert_array_equal(d2[3, 1], channel.link_distance_sq(diff[3, 1, 0], diff[3, 1, 1], 2500.0))
+    power = np.concatenate([rng.uniform(0, 1, 199), [0.0]])
+    for c_ce in (0.0, 0.37):
+        x = channel._outage_argument(power, d2.ravel()[:200], 3.1e-5, c_ce)
+        reference = d2.ravel()[:200] * 3.1e-5 / (power + channel.POWER_FLOOR_W) + c_ce
+        np.testing.assert_array_equal(x, reference)
+        assert channel.link_argument(d2.ravel()[7], power[7], 3.1e-5, c_ce) == x[7]
+    assert np.isfinite(x[-1]) and special.gammainc(2.0, x[-1]) == 1.0  # p = 0: outage 1, no inf/NaN

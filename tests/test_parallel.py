@@ -24,12 +24,15 @@ def test_spaces_are_stable_objects():
 
 
 def test_lockstep_with_joint_env():
-    """Two views of one core: the same seed and decisions give the same trajectory and rewards."""
+    """Two views of one core: the same seed and decisions give bit for bit the same observations,
+    drone reward and drone infos as ``lawn/Joint-v0``, and AGV rewards that sum to it."""
     par = lawn_env.parallel_env()
     joint = gym.make("lawn/Joint-v0").unwrapped
-    obs, _ = par.reset(seed=21)
-    jobs, _ = joint.reset(seed=21)
+    obs, infos = par.reset(seed=21)
+    jobs, jinfo = joint.reset(seed=21)
     assert np.array_equal(obs["drone"], jobs)
+    assert infos["drone"].keys() == jinfo.keys()
+    assert all(np.array_equal(infos["drone"][key], jinfo[key]) for key in jinfo)
     rng = np.random.default_rng(0)
     k = 4
     while par.agents:
@@ -38,7 +41,10 @@ def test_lockstep_with_joint_env():
         obs, rewards, terms, truncs, infos = par.step(actions)
         jobs, jr, _, jtrunc, jinfo = joint.step(a)
         assert np.array_equal(obs["drone"], jobs)
-        assert rewards["drone"] == pytest.approx(jr)
+        assert rewards["drone"] == jr
+        # the same keys, but episode_metrics: the parallel env's infos keep fixed keys (TorchRL's wrapper)
+        assert infos["drone"].keys() == jinfo.keys() - {"episode_metrics"}
+        assert all(np.array_equal(infos["drone"][key], jinfo[key]) for key in infos["drone"])
         assert sum(rewards[f"agv_{i}"] for i in range(k)) == pytest.approx(jr)
         blocks = joint.layout.agv_blocks(jobs)
         for i in range(k):

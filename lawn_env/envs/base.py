@@ -20,7 +20,7 @@ import numpy as np
 
 from ..core import Decisions, ScenarioView, Simulation, SlotDraws, SlotRecord, Snapshot, Trail, link_success
 from ..config import ScenarioConfig
-from ..interface import ActionLayout, Decision, InterfaceLike, RLInterface, resolve_interface
+from ..interface import ActionLayout, InterfaceLike, RLInterface, resolve_interface
 from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
 from ..spaces import ObservationLayout, check_action
@@ -48,9 +48,9 @@ class JointRole:
     def reset(self, which: np.ndarray | None = None) -> None:
         """New episodes for the scenarios ``which`` (all when None)."""
 
-    def decide(self, engine: Engine, decision: Decision, windows: np.ndarray | None) -> tuple[Decisions, dict]:
-        """The slot's decisions for the decoded actions, and the role's info keys."""
-        return Decisions(decision.increment, decision.power_w, decision.drone_next), {}
+    def decide(self, engine: Engine, decision: Decisions, windows: np.ndarray | None) -> tuple[Decisions, dict]:
+        """The slot's decisions for the decoded actions (they are), and the role's info keys."""
+        return decision, {}
 
     def reset_info(self, engine: Engine) -> dict:
         return {}
@@ -71,7 +71,7 @@ class CommRole:
     def reset(self, which: np.ndarray | None = None) -> None:
         self.mpc.reset(which)  # a new episode starts without the old one's warm starts
 
-    def decide(self, engine: Engine, decision: Decision, windows: np.ndarray | None) -> tuple[Decisions, dict]:
+    def decide(self, engine: Engine, decision: Decisions, windows: np.ndarray | None) -> tuple[Decisions, dict]:
         sim = engine.sim
         psi = link_success(sim.x_aug, decision.drone_next, decision.power_w, sim.params.planning_link)
         solution = self.mpc.solve(sim.x_aug, windows, psi, sim.slot)
@@ -149,17 +149,17 @@ class Engine:
         zero costs and increments (and the role's reset values) without a record."""
         st = self.sim.state
         if record is None:
-            tracking = effort = np.zeros(self.num_envs)
+            costs = np.zeros((self.num_envs, 3))
             applied = np.zeros((self.num_envs, self.sim.num_agvs, 2))
             extra = self.role.reset_info(self)
         else:
-            tracking, effort, applied = record.tracking_total, record.effort_total, record.applied_increment
+            costs, applied = record.costs, record.applied_increment
         at = slice(None) if i is None else i
         info = {
             "slot": st.slot.copy() if i is None else st.slot[i],
-            "stage_cost": tracking[at] + effort[at],
-            "reward_tracking": -tracking[at],
-            "reward_effort": -effort[at],
+            "stage_cost": costs[at, 2],
+            "reward_tracking": -costs[at, 0],
+            "reward_effort": -costs[at, 1],
             "delivered": st.last_delivered[at],
             "outage_probability": st.last_outage_probability[at],
             "power_w": st.last_power_w[at],
@@ -285,7 +285,7 @@ class LawnEnvBase(EngineView, gym.Env):
             raise RuntimeError("the episode has ended (or reset() was never called); call reset() before step()")
         engine = self.engine
         record, extra = self._advance(check_action(action, self.actions.size))
-        reward, terminated = engine.outcome((record.tracking_total + record.effort_total)[:, None])
+        reward, terminated = engine.outcome(record.stage_cost)
         terminated = bool(terminated[0])
         truncated = self.sim.slot >= self.config.num_slots and not terminated
         info = engine.info(record, extra, i=0)

@@ -67,6 +67,9 @@ class CommEnv(LawnEnvBase):
       bound); the dynamics and rewards are unchanged.
     * v0 (later): the MPC's QPs are solved by the compiled exact solver (``qp_backend="compiled"``,
       the default; issue #22): the same decisions up to the solvers' rounding.
+    * v0 (later, issue #25): one compiled simulation core under every view, as ``lawn/Joint-v0``'s
+      history says: this env's episodes bit for bit as before, ``episode_metrics`` summed slot by
+      slot (within 1e-15 relative), the native vector env's slot randomness from one generator.
     """
 
     role = "comm"

@@ -139,7 +139,7 @@ class JointVectorEnv(VectorEnv):
             engine.role.reset(restart)
         if self.trail is not None and not restart[self.render_env]:
             self.trail.record()
-        reward, terminated = engine.outcome((record.tracking_total + record.effort_total)[:, None])
+        reward, terminated = engine.outcome(record.stage_cost)
         reward, terminated = reward[:, 0], terminated & ~restart
         truncated = (sim.slot >= self.config.num_slots) & ~terminated & ~restart
         ended = truncated | terminated
