@@ -123,8 +123,8 @@ TOTALS = ("tracking", "effort", "outage_p", "path", "sq_error", "outages", "powe
 
 @numba.njit(cache=True)
 def _slot(x_aug, increment, send, power, drone_next, fading, reference, slot, applied, process_position,
-          process_velocity, drone_prev, totals, packed_t, packed_w, accel_effect_t, lag_alpha, accel_max, altitude_sq,
-          c_d, c_ce, m, packed, err, terms, delivered, outage, applied_next, costs, totals_next):  # pragma: no cover
+          process_velocity, drone_prev, totals, packed_t, packed_w, accel_effect_t, constants, rows_out, terms,
+          delivered, outage, applied_next, costs, totals_next):  # pragma: no cover - compiled
     """One slot of B scenarios (see :func:`step`), in this order:
 
     1. the links: the increments saturated (:func:`saturate`; zero where ``send`` is False: no
@@ -143,12 +143,16 @@ def _slot(x_aug, increment, send, power, drone_next, fading, reference, slot, ap
     5. the slot's stage costs summed over AGVs (left to right) and the episode's running sums
        (:data:`TOTALS`) advanced.
 
-    Writes the outputs (the last eight arguments, new arrays the caller allocates: a compiled
-    function's returned arrays cost more to hand back than these to allocate): ``packed``
-    [x~[n+1], du delivered] and ``err`` [x~[n+1] - x~_ref[n+1], du] (B, K, 8), ``terms`` (B, K, 2),
+    ``constants``: :attr:`SimParams.constants` (lag_alpha, a_max, H^2, c_d, c_ce, m). Writes the
+    outputs (the last seven arguments, new arrays the caller allocates: a compiled function's
+    returned arrays cost more to hand back than these to allocate): ``rows_out`` (2, B, K, 8), the
+    packed rows [x~[n+1], du delivered] and the packed error [x~[n+1] - x~_ref[n+1], du], ``terms`` (B, K, 2),
     ``delivered``, ``outage`` (B, K), ``applied_next`` (B, K, 2; only under lag), ``costs`` (B, 3)
     (the slot's tracking, effort and stage cost) and ``totals_next``.
     """
+    lag_alpha, accel_max, altitude_sq, c_d, c_ce, m = (constants[0], constants[1], constants[2], constants[3],
+                                                       constants[4], constants[5])
+    packed, err = rows_out[0], rows_out[1]
     num, k = x_aug.shape[0], x_aug.shape[1]
     n = num * k
     rows = np.empty((n, 8))
@@ -253,10 +257,9 @@ class SimParams:
     disturbed: bool
     lag_alpha: float  # exp(-slot / lag) under actuator lag, else -1.0 (no lag)
     always: np.ndarray = None  # (1,) True: every slot sends its commands (no disturbance mode)
-    altitude_sq: float = 0.0  # the link's H^2, c_d, c_ce and m (outage argument x = c_d d^2 / p + c_ce)
-    c_d: float = 0.0
-    c_ce: float = 0.0
-    m: float = 0.0
+    #: the slot kernel's scalars: lag_alpha, accel_max and the link's H^2, c_d, c_ce and m (the
+    #: outage argument x = c_d d^2 / p + c_ce), one array (a compiled call's arguments each cost)
+    constants: np.ndarray = None
 
     @classmethod
     def from_config(cls, config: ScenarioConfig) -> SimParams:
@@ -274,6 +277,7 @@ class SimParams:
         fixed = references.reference_table(fixed_paths, steps, config.slot_s) if fixed_paths is not None else None
         d = config.disturbance
         link = channel.LinkParams.from_config(config)
+        lag_alpha = float(np.exp(-config.slot_s / d.actuator_lag_s)) if d.actuator_lag_s > 0 else -1.0
         return cls(
             config=config, num_agvs=k, num_slots=slots, horizon=horizon, steps=steps, slot_s=config.slot_s,
             model=model, link=link,
@@ -285,9 +289,10 @@ class SimParams:
             power_budget_w=config.power_budget_w, drone_start=np.array(config.drone.start_m, dtype=float),
             envelope=envelope, fixed_paths=fixed_paths, fixed_reference=fixed,
             disturbance=d, disturbed=d.active,
-            lag_alpha=float(np.exp(-config.slot_s / d.actuator_lag_s)) if d.actuator_lag_s > 0 else -1.0,
+            lag_alpha=lag_alpha,
             always=np.ones(1, dtype=bool),
-            altitude_sq=link.altitude_sq, c_d=link.coefficients[0], c_ce=link.coefficients[1], m=float(link.m),
+            constants=np.array([lag_alpha, config.control.accel_max_mps2, link.altitude_sq, *link.coefficients,
+                                float(link.m)]),
         )
 
     @property
@@ -490,48 +495,46 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     process_position = _NO_NOISE if draws.process_position is None else draws.process_position
     process_velocity = _NO_NOISE if draws.process_velocity is None else draws.process_velocity
     num, k = x_aug.shape[0], x_aug.shape[1]
-    packed, err, terms = np.empty((num, k, 8)), np.empty((num, k, 8)), np.empty((num, k, 2))
-    delivered, outage_p = np.empty((num, k), dtype=np.bool_), np.empty((num, k))
+    rows, terms = np.empty((2, num, k, 8)), np.empty((num, k, 2))
+    delivered, outage_p = np.empty((num, k), np.bool_), np.empty((num, k))
     applied = state.applied if params.lag_alpha < 0.0 else np.empty((num, k, 2))
     costs, totals = np.empty((num, 3)), np.empty(state.totals.shape)
     _slot(x_aug, decisions.increment, send, decisions.power_w, drone_next, draws.fading, state.reference, state.slot,
           state.applied, process_position, process_velocity, state.drone_position, state.totals, params.packed_t,
-          params.packed_w, params.accel_effect_t, params.lag_alpha, params.accel_max, params.altitude_sq, params.c_d,
-          params.c_ce, params.m, packed, err, terms, delivered, outage_p, applied, costs, totals)
-    x_next, error, applied_increment, slot = packed[..., 0:6], err[..., 0:6], packed[..., 6:8], state.slot + 1
+          params.packed_w, params.accel_effect_t, params.constants, rows, terms, delivered, outage_p, applied, costs,
+          totals)
+    packed, err = rows[0], rows[1]
+    x_next, error, applied_increment, slot = packed[:, :, 0:6], err[:, :, 0:6], packed[:, :, 6:8], state.slot + 1
     x_obs, error_obs = x_next, error
     if draws.measurement_position is not None:
         x_obs, error_obs = measure(x_next, error, draws.measurement_position, draws.measurement_velocity)
-    new = SimState(x_aug=x_next, tracking_error=error, x_obs=x_obs, error_obs=error_obs, applied=applied,
-                   drone_position=drone_next, slot=slot, last_power_w=decisions.power_w,
-                   last_delivered=delivered, last_outage_probability=outage_p, reference=state.reference,
-                   paths=state.paths, totals=totals)
+    new = SimState(x_next, error, x_obs, error_obs, applied, drone_next, slot, decisions.power_w, delivered, outage_p,
+                   state.reference, state.paths, totals)  # SimState's field order
     record = SlotRecord(terms, delivered, outage_p, applied_increment, decisions.power_w, drone_next, costs)
     return new, record
 
 
-def episode_metrics(params: SimParams, state: SimState, i: int) -> dict:
-    """Metrics of MODEL.md §6 over the slots scenario ``i`` has run in its episode (the decision
-    time is the caller's)."""
-    n, k = int(state.slot[i]), params.num_agvs
-    if n == 0:
+def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np.ndarray) -> list[dict]:
+    """Metrics of MODEL.md §6 over the slots each scenario of ``rows`` has run in its episode (the
+    decision time is the caller's), one dict per row: ``slots``, ``control_cost`` (tracking +
+    effort), ``tracking_cost``, ``effort_cost``, ``rmse_m``, ``rmse_per_agv_m``, ``outage_rate``,
+    ``outage_rate_predicted``, ``outage_rate_per_agv``, ``mean_power_w``, ``drone_path_length_m``."""
+    rows = np.asarray(rows, dtype=np.int64).reshape(-1)
+    n, k = state.slot[rows], params.num_agvs
+    if np.any(n == 0):
         raise RuntimeError("no slot has been simulated yet")
-    t = state.totals[i]
-    tracking, effort = float(t[0]), float(t[1])
-    sq_error, outages, power = t[4 : 4 + k], t[4 + k : 4 + 2 * k], t[4 + 2 * k :]
-    return {
-        "slots": n,
-        "control_cost": tracking + effort,
-        "tracking_cost": tracking,
-        "effort_cost": effort,
-        "rmse_m": float(np.sqrt(sq_error.sum() / (n * k))),
-        "rmse_per_agv_m": np.sqrt(sq_error / n).tolist(),
-        "outage_rate": float(outages.sum() / (n * k)),
-        "outage_rate_predicted": float(t[2] / (n * k)),
-        "outage_rate_per_agv": (outages / n).tolist(),
-        "mean_power_w": (power / n).tolist(),
-        "drone_path_length_m": float(t[3]),
-    }
+    t = state.totals[rows]
+    nk, per = n * k, n[:, None]
+    sq_error, outages, power = t[:, 4 : 4 + k], t[:, 4 + k : 4 + 2 * k], t[:, 4 + 2 * k :]
+    columns = zip(n.tolist(), (t[:, 0] + t[:, 1]).tolist(), t[:, 0].tolist(), t[:, 1].tolist(),
+                  np.sqrt(sq_error.sum(axis=1) / nk).tolist(), np.sqrt(sq_error / per).tolist(),
+                  (outages.sum(axis=1) / nk).tolist(), (t[:, 2] / nk).tolist(), (outages / per).tolist(),
+                  (power / per).tolist(), t[:, 3].tolist())
+    return [dict(zip(_METRICS, values)) for values in columns]
+
+
+_METRICS = ("slots", "control_cost", "tracking_cost", "effort_cost", "rmse_m", "rmse_per_agv_m", "outage_rate",
+            "outage_rate_predicted", "outage_rate_per_agv", "mean_power_w", "drone_path_length_m")
 
 
 # ---------------------------------------------------------------------- the environments' object
@@ -607,7 +610,12 @@ class Simulation:
         return state.reference[np.arange(state.slot.size)[:, None], :, idx].transpose(0, 2, 1, 3)
 
     def episode_metrics(self, i: int = 0) -> dict:
-        return episode_metrics(self.params, self.state, i)
+        """:func:`episode_metrics` of scenario ``i``."""
+        return episode_metrics(self.params, self.state, [i])[0]
+
+    def episodes_metrics(self, rows: np.ndarray) -> list[dict]:
+        """:func:`episode_metrics` of the scenarios ``rows`` (indices), computed together."""
+        return episode_metrics(self.params, self.state, rows)
 
     def row(self, i: int = 0) -> ScenarioView:
         return ScenarioView(self, i)

@@ -201,6 +201,8 @@ def resolve_interface(interface: InterfaceLike) -> RLInterface:
 Decision = Decisions
 
 
+_NO_INCREMENT = np.empty((0, 0, 2))  # direct_rows' increment output of a role without increments
+
 #: What an action of each role decides: ``joint`` (increments, power, drone: Joint-v0),
 #: ``comm`` (power and drone: Comm-v0 and the parallel env's drone).
 ROLES = ("joint", "comm")
@@ -273,10 +275,13 @@ class ActionLayout:
             return Decision(None if d.increment is None else d.increment[0], d.power_w[0], d.drone_next[0])
         k = self.num_agvs
         if self.scheme == "direct":
-            increment, power, drone_next = spaces.direct_rows(
-                np.ascontiguousarray(a, dtype=np.float64), self._inc_size, k, self._inc_max, self._pmax, self._vmax,
-                self._dt, *self._area, np.ascontiguousarray(drone_position, dtype=np.float64))
-            return Decision(increment if self._inc_size else None, power, drone_next)
+            num = a.shape[0]
+            increment = np.empty((num, k, 2)) if self._inc_size else None
+            power, drone_next = np.empty((num, k)), np.empty((num, 2))
+            spaces.direct_rows(np.ascontiguousarray(a, dtype=np.float64), self._inc_size, k, self._inc_max, self._pmax,
+                               self._vmax, self._dt, *self._area, np.ascontiguousarray(drone_position, dtype=np.float64),
+                               _NO_INCREMENT if increment is None else increment, power, drone_next)
+            return Decision(increment, power, drone_next)
         comm = a[:, self._inc_size :]
         target = x_aug[..., 0:2].mean(axis=-2) + comm[:, k:] * self.interface.drone_offset_m
         drone_next = toward(drone_position, target, self._vmax, self._dt, self._area)

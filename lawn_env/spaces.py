@@ -110,25 +110,23 @@ def power_rows(a: np.ndarray, budget: float, out: np.ndarray) -> None:  # pragma
 
 @numba.njit(cache=True)
 def direct_rows(a: np.ndarray, inc_size: int, k: int, inc_max: float, budget: float, max_speed: float, slot_s: float,
-                x0: float, x1: float, y0: float, y1: float,
-                position: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
-    """The direct scheme's decisions of checked actions (B, size): increments (B, K, 2) (none when
-    ``inc_size`` is 0: a (B, 0, 2) array), powers (:func:`power_rows`), the drone's next positions
-    (:func:`lawn_env.drone.move_rows` at the velocities ``a * V_max``)."""
+                x0: float, x1: float, y0: float, y1: float, position: np.ndarray, increment: np.ndarray,
+                power: np.ndarray, drone_next: np.ndarray) -> None:  # pragma: no cover - compiled
+    """The direct scheme's decisions of checked actions (B, size), written to ``increment``
+    (B, K, 2) (nothing when ``inc_size`` is 0), ``power`` (B, K) (:func:`power_rows`) and
+    ``drone_next`` (B, 2) (:func:`lawn_env.drone.move_rows` at the velocities ``a * V_max``): arrays
+    the caller allocates (cheaper than a compiled function's returned arrays)."""
     num = a.shape[0]
-    increment = np.empty((num, k if inc_size else 0, 2))
     velocity = np.empty((num, 2))
     for b in range(num):
-        for i in range(increment.shape[1]):
-            increment[b, i, 0] = a[b, 2 * i] * inc_max
-            increment[b, i, 1] = a[b, 2 * i + 1] * inc_max
+        if inc_size:
+            for i in range(k):
+                increment[b, i, 0] = a[b, 2 * i] * inc_max
+                increment[b, i, 1] = a[b, 2 * i + 1] * inc_max
         velocity[b, 0] = a[b, inc_size + k] * max_speed
         velocity[b, 1] = a[b, inc_size + k + 1] * max_speed
-    power = np.empty((num, k))
     power_rows(a[:, inc_size : inc_size + k], budget, power)
-    drone_next = np.empty((num, 2))
     move_rows(position, velocity, max_speed, slot_s, x0, x1, y0, y1, drone_next)
-    return increment, power, drone_next
 
 
 @numba.njit(cache=True)
@@ -162,12 +160,13 @@ def encode_drone(next_position: np.ndarray, position: np.ndarray, max_speed_mps:
 
 @numba.njit(cache=True)
 def _encode_rows(out, table, slot, x_obs, error_obs, drone, outage, delivered, power, scales, features, w1,
-                 bound):  # pragma: no cover - compiled
+                 bound, clip_rest):  # pragma: no cover - compiled
     """Every observation row: the slot's row of the fixed path set's ``table`` (when it has rows),
     then the state-dependent features, each computed in float64 as :meth:`ObservationLayout.encode`
-    documents and rounded once to float32, then every feature clipped to ``bound`` in float32.
-    ``scales`` rows: state scale, state shift (scaled), reference scale (6 each), then the area
-    center, the inverse half-extent and the inverse power budget."""
+    documents, rounded once to float32 and clipped to ``bound`` in float32; with ``clip_rest`` the
+    row's other features (the table's or the caller's) are clipped too. ``scales`` rows: state
+    scale, state shift (scaled), reference scale (6 each), then the area center, the inverse
+    half-extent and the inverse power budget."""
     num, k = x_obs.shape[0], x_obs.shape[1]
     g = k * features
     state_scale, state_shift, ref_scale = scales[0], scales[1], scales[2]
@@ -175,26 +174,33 @@ def _encode_rows(out, table, slot, x_obs, error_obs, drone, outage, delivered, p
     for b in range(num):
         if table.shape[0] > 1:
             out[b, :] = table[slot[b]]
+        if clip_rest:
+            for j in range(out.shape[1]):
+                out[b, j] = _clip32(out[b, j], b32)
         dx = (drone[b, 0] - scales[3, 0]) * scales[3, 2]
         dy = (drone[b, 1] - scales[3, 1]) * scales[3, 3]
         for i in range(k):
             base = i * features
             for j in range(6):
-                out[b, base + j] = x_obs[b, i, j] * state_scale[j] - state_shift[j]
-                out[b, base + 6 + j] = error_obs[b, i, j] * ref_scale[j]
-            out[b, base + w1] = (x_obs[b, i, 0] * state_scale[0] - state_shift[0]) - dx
-            out[b, base + w1 + 1] = (x_obs[b, i, 1] * state_scale[1] - state_shift[1]) - dy
-            out[b, base + w1 + 2] = outage[b, i]
-            out[b, base + w1 + 3] = 1.0 if delivered[b, i] else 0.0
-            out[b, base + w1 + 4] = power[b, i] * scales[3, 4]
-        out[b, g] = dx
-        out[b, g + 1] = dy
-        for j in range(out.shape[1]):
-            v = out[b, j]
-            if v > b32:
-                out[b, j] = b32
-            elif v < -b32:
-                out[b, j] = -b32
+                out[b, base + j] = _clip32(np.float32(x_obs[b, i, j] * state_scale[j] - state_shift[j]), b32)
+                out[b, base + 6 + j] = _clip32(np.float32(error_obs[b, i, j] * ref_scale[j]), b32)
+            out[b, base + w1] = _clip32(np.float32((x_obs[b, i, 0] * state_scale[0] - state_shift[0]) - dx), b32)
+            out[b, base + w1 + 1] = _clip32(np.float32((x_obs[b, i, 1] * state_scale[1] - state_shift[1]) - dy), b32)
+            out[b, base + w1 + 2] = _clip32(np.float32(outage[b, i]), b32)
+            out[b, base + w1 + 3] = _clip32(np.float32(1.0 if delivered[b, i] else 0.0), b32)
+            out[b, base + w1 + 4] = _clip32(np.float32(power[b, i] * scales[3, 4]), b32)
+        out[b, g] = _clip32(np.float32(dx), b32)
+        out[b, g + 1] = _clip32(np.float32(dy), b32)
+
+
+@numba.njit(cache=True, inline="always")
+def _clip32(v, b32):  # pragma: no cover - compiled
+    """A float32 feature clipped to [-b32, b32]."""
+    if v > b32:
+        return b32
+    if v < -b32:
+        return -b32
+    return v
 
 
 class ObservationLayout:
@@ -253,6 +259,7 @@ class ObservationLayout:
             "power": w1 + 4,
         }
         self._table_key = self._table = None
+        self._table_peak = 0.0
         self._no_table = np.zeros((1, self.size), dtype=np.float32)
         self._scales = np.zeros((4, 6))
         self._scales[0], self._scales[1], self._scales[2] = self._state_scale, self._state_shift_scaled, self._ref_scale
@@ -299,15 +306,18 @@ class ObservationLayout:
         b, k, f = sim.num_envs, self.num_agvs, self.agv_features
         window = self.slices["reference"]
         st = sim.state
-        template = self._slot_table(sim.params.fixed_reference)
-        out = np.empty((b, self.size), dtype=np.float32)
+        shared = sim.params.fixed_reference
+        template = self._table if shared is not None and shared is self._table_key else self._slot_table(shared)
+        out = np.empty((b, self.size), np.float32)
         if template is None:
             out[:, : k * f].reshape(b, k, f)[..., window] = self.scaled_windows(sim.reference_windows())
             out[:, -1] = st.slot / self.num_slots
             template = self._no_table
+        # the table's features need clipping only where they exceed the bound (it is built once)
+        clip_rest = bound is not None and (template is self._no_table or self._table_peak > bound)
         _encode_rows(out, template, st.slot, st.x_obs, st.error_obs, st.drone_position, st.last_outage_probability,
                      st.last_delivered, st.last_power_w, self._scales, f, window.stop,
-                     np.inf if bound is None else bound)
+                     np.inf if bound is None else bound, clip_rest)
         return out
 
     def _slot_table(self, shared: np.ndarray | None) -> np.ndarray | None:
@@ -327,7 +337,7 @@ class ObservationLayout:
         w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
         rows[:, : k * f].reshape(slots, k, f)[..., w0:w1] = windows.transpose(1, 0, 2)
         rows[:, -1] = np.arange(slots) / self.num_slots
-        self._table_key, self._table = shared, rows
+        self._table_key, self._table, self._table_peak = shared, rows, float(np.abs(rows).max())
         return rows
 
     def agv_blocks(self, obs: np.ndarray) -> np.ndarray:

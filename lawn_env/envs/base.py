@@ -287,7 +287,7 @@ class LawnEnvBase(EngineView, gym.Env):
         record, extra = self._advance(check_action(action, self.actions.size))
         reward, terminated = engine.outcome(record.stage_cost)
         terminated = bool(terminated[0])
-        truncated = self.sim.slot >= self.config.num_slots and not terminated
+        truncated = not terminated and self.sim.done
         info = engine.info(record, extra, i=0)
         if truncated or terminated:
             self._done = True

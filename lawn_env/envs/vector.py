@@ -151,8 +151,9 @@ class JointVectorEnv(VectorEnv):
             reward[restart] = 0.0
         if ended.any():
             metrics = np.full(self.num_envs, None, dtype=object)
-            for i in np.flatnonzero(ended).tolist():
-                metrics[i] = sim.episode_metrics(i)
+            rows = np.flatnonzero(ended)
+            for i, values in zip(rows.tolist(), sim.episodes_metrics(rows)):
+                metrics[i] = values
             info["episode_metrics"], info["_episode_metrics"] = metrics, ended
             totals = sim.state.totals
             info["episode_control_cost"] = np.where(ended, totals[:, 0] + totals[:, 1], 0.0)
