@@ -230,8 +230,15 @@ def distance_sq(drone_xy: np.ndarray, agv_xy: np.ndarray, altitude_m: float) -> 
 
 
 def _distance_sq(drone_xy: npt.ArrayLike, agv_xy: npt.ArrayLike, altitude_sq: float) -> np.ndarray:
-    diff = np.asarray(agv_xy, dtype=float) - drone_xy
-    return _distance_sq_ufunc(diff[..., 0], diff[..., 1], altitude_sq)
+    return _offsets_distance_sq(np.asarray(agv_xy, dtype=float) - drone_xy, altitude_sq)
+
+
+def _offsets_distance_sq(diff: np.ndarray, altitude_sq: float) -> np.ndarray:
+    """:func:`link_distance_sq` of every horizontal offset of ``diff`` (..., 2) (a new array, so
+    contiguous), in one compiled loop; a float for one offset."""
+    out = np.empty(diff.shape[:-1])
+    _distance_rows(diff.reshape(-1, 2), altitude_sq, out.reshape(-1))
+    return out if out.ndim else out[()]
 
 
 #: Powers are floored here before dividing; gammainc(m, x) is exactly 1.0 in double precision
@@ -242,7 +249,7 @@ POWER_FLOOR_W = 1e-300
 @numba.njit(cache=True)
 def link_distance_sq(dx: float, dy: float, altitude_sq: float) -> float:  # pragma: no cover - compiled
     """d^2 = (dx^2 + dy^2) + H^2 for the horizontal offset (dx, dy) m between drone and AGV: the
-    one place of this equation (the slot kernel calls it; :func:`distance_sq` is its ufunc)."""
+    one place of this equation (the slot kernel calls it; :func:`distance_sq` runs it over arrays)."""
     return (dx * dx + dy * dy) + altitude_sq
 
 
@@ -255,14 +262,18 @@ def link_argument(distance_sq_m2: float, power_w: float, c_d: float, c_ce: float
     return x + c_ce if c_ce != 0.0 else x
 
 
-@numba.vectorize(["float64(float64, float64, float64)"], cache=True)
-def _distance_sq_ufunc(dx, dy, altitude_sq):  # pragma: no cover - compiled
-    return link_distance_sq(dx, dy, altitude_sq)
+@numba.njit(cache=True)
+def _distance_rows(diff, altitude_sq, out):  # pragma: no cover - compiled
+    for i in range(diff.shape[0]):
+        out[i] = link_distance_sq(diff[i, 0], diff[i, 1], altitude_sq)
 
 
 @numba.vectorize(["float64(float64, float64, float64, float64)"], cache=True)
-def _argument_ufunc(distance_sq_m2, power_w, c_d, c_ce):  # pragma: no cover - compiled
+def _argument_dufunc(distance_sq_m2, power_w, c_d, c_ce):  # pragma: no cover - compiled
     return link_argument(distance_sq_m2, power_w, c_d, c_ce)
+
+
+_argument_ufunc = _argument_dufunc.ufunc  # numpy's ufunc of the compiled loop (numba's wrapper dispatches slower)
 
 
 def _outage_coefficients(snr_threshold, alpha0, noise_power_w, m, ce_error_var):
@@ -330,7 +341,7 @@ def success_and_gradients(power_w: npt.ArrayLike, drone_xy: npt.ArrayLike, agv_x
     dx/d(d^2) = (x - x_ce)/d^2. At p = 0 (floored at ``POWER_FLOOR_W``) psi and both derivatives are 0.
     """
     diff = np.asarray(drone_xy, dtype=float) - np.asarray(agv_xy, dtype=float)
-    d2 = _distance_sq_ufunc(diff[..., 0], diff[..., 1], link.altitude_sq)
+    d2 = _offsets_distance_sq(diff, link.altitude_sq)
     p = np.maximum(power_w, POWER_FLOOR_W)
     x = link.outage_argument_sq(p, d2)
     g = link.success_slope_term(x)

@@ -25,7 +25,7 @@ from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
 from ..spaces import ObservationLayout, check_action
 
-__all__ = ["Engine", "JointRole", "CommRole", "ROLES", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS"]
+__all__ = ["Engine", "EngineAccess", "JointRole", "CommRole", "ROLES", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS"]
 
 
 #: The info keys every step and reset of the central environments (and the parallel env's "drone")
@@ -175,7 +175,30 @@ class Engine:
         return self.layout.encode(self.sim, self.interface.obs_bound)
 
 
-class EngineView:
+class EngineAccess:
+    """What every env over an :class:`Engine` (``self.engine``) exposes of it, single and vector
+    alike: the MPC of ``lawn/Comm-v0``'s role, its last solve time, and closing the renderer."""
+
+    engine: Engine
+    _renderer: Any
+
+    @property
+    def last_mpc_solve_time_s(self) -> float:
+        """Wall-clock time of the last step's MPC solves (``lawn/Comm-v0``; NaN otherwise)."""
+        return getattr(self.engine.role, "last_solve_time_s", float("nan"))
+
+    @property
+    def mpc(self) -> OutageAwareMPC | None:
+        """The MPC that drives the AGVs of every scenario (``lawn/Comm-v0``; None otherwise)."""
+        return getattr(self.engine.role, "mpc", None)
+
+    def _close_renderer(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+class EngineView(EngineAccess):
     """What the B = 1 views of the engine share (the Gymnasium envs and the PettingZoo env): config
     resolution, the engine, the scenario's accessors (``sim``), the trail, snapshot, render, close."""
 
@@ -229,19 +252,7 @@ class EngineView:
         return self._renderer.draw(self.sim, self.trail)
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-
-    @property
-    def last_mpc_solve_time_s(self) -> float:
-        """Wall-clock time of the last step's MPC solve (``lawn/Comm-v0``; NaN otherwise)."""
-        return getattr(self.engine.role, "last_solve_time_s", float("nan"))
-
-    @property
-    def mpc(self) -> OutageAwareMPC | None:
-        """The MPC that drives the AGVs (``lawn/Comm-v0``; None otherwise)."""
-        return getattr(self.engine.role, "mpc", None)
+        self._close_renderer()
 
 
 class LawnEnvBase(EngineView, gym.Env):

@@ -45,14 +45,14 @@ from gymnasium.vector.utils import batch_space
 
 from ..core import SlotDraws, Trail
 from ..interface import InterfaceLike
-from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
+from ..mpc import DEFAULT_BACKEND
 from ..presets import ConfigLike, resolve_config
-from .base import Engine
+from .base import Engine, EngineAccess
 
 __all__ = ["CommVectorEnv", "JointVectorEnv"]
 
 
-class JointVectorEnv(VectorEnv):
+class JointVectorEnv(EngineAccess, VectorEnv):
     """N copies of ``lawn/Joint-v0`` (any interface) in one engine."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 4}
@@ -189,19 +189,7 @@ class JointVectorEnv(VectorEnv):
         return self._renderer.draw(self.trail.view, self.trail)
 
     def close_extras(self, **kwargs: Any) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-
-    @property
-    def last_mpc_solve_time_s(self) -> float:
-        """Wall-clock time of the last step's MPC solves (``lawn/Comm-v0``; NaN otherwise)."""
-        return getattr(self.engine.role, "last_solve_time_s", float("nan"))
-
-    @property
-    def mpc(self) -> OutageAwareMPC | None:
-        """The MPC that drives the AGVs of every scenario (``lawn/Comm-v0``; None otherwise)."""
-        return getattr(self.engine.role, "mpc", None)
+        self._close_renderer()
 
 
 class CommVectorEnv(JointVectorEnv):
