@@ -259,12 +259,12 @@ class ScenarioConfig:
                 f"reference.path_set='paper' is defined for num_agvs 3 or 4, got num_agvs={self.num_agvs}; "
                 "use path_set='random' or 'auto'"
             )
-        from . import channel  # the link's SNR threshold must exist for these rate, blocklength and BLER
+        from .rate import snr_threshold  # it must exist for these rate, blocklength and BLER
 
         ch = self.channel
         if not ch.infinite_blocklength:
             try:
-                channel.snr_threshold(ch.rate_threshold_bps_hz, ch.blocklength, ch.bler, ch.paper_rate_form)
+                snr_threshold(ch.rate_threshold_bps_hz, ch.blocklength, ch.bler, ch.paper_rate_form)
             except (ValueError, RuntimeError, OverflowError, ZeroDivisionError) as exc:
                 raise ValueError(
                     f"channel.rate_threshold_bps_hz={ch.rate_threshold_bps_hz}, channel.blocklength={ch.blocklength}, "

@@ -10,16 +10,14 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
 from scipy import linalg
 
-if TYPE_CHECKING:
-    from .config import ScenarioConfig
-
 __all__ = [
+    "ScenarioSettings",
     "agv_matrices",
     "augmented_matrices",
     "terminal_weight",
@@ -33,6 +31,15 @@ __all__ = [
     "expected_cost_coefficients",
     "cost_coefficients",
 ]
+
+
+class ScenarioSettings(Protocol):
+    """What this module reads of a scenario's config (a :class:`lawn_env.config.ScenarioConfig`,
+    which validates itself with this module: a protocol, so the two do not import each other)."""
+
+    slot_s: float
+    control: Any  # horizon, q1_diag, q2_diag
+    disturbance: Any  # control_period_slots, period_aware_planning
 
 
 def agv_matrices(slot_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -102,7 +109,7 @@ def command_mask(slot: int, horizon: int, period: int) -> np.ndarray:
     return (slot + np.arange(horizon)) % period == 0
 
 
-def planning_period(config: ScenarioConfig) -> int:
+def planning_period(config: ScenarioSettings) -> int:
     """The control period the planners plan with: ``disturbance.control_period_slots`` when
     ``disturbance.period_aware_planning`` (the default), else 1 (the unaware ablation)."""
     d = config.disturbance
@@ -134,7 +141,7 @@ class PredictionModel:
     q1_tiled: np.ndarray  # diag(Q1) repeated N_p times: Q4's diagonal blocks, (6 N_p,)
 
     @classmethod
-    def from_config(cls, config: ScenarioConfig) -> PredictionModel:
+    def from_config(cls, config: ScenarioSettings) -> PredictionModel:
         ctl = config.control
         return _build_model(float(config.slot_s), int(ctl.horizon), tuple(ctl.q1_diag), tuple(ctl.q2_diag))
 

@@ -14,7 +14,6 @@ import numpy as np
 if TYPE_CHECKING:
     from .config import ScenarioConfig
     from .core import ScenarioView, Trail
-    from .envs.base import LawnEnvBase
 
 __all__ = ["Renderer", "plot_episode"]
 
@@ -88,16 +87,16 @@ class Renderer:
             self._plt.close(self.fig)
 
 
-def plot_episode(env: LawnEnvBase, path: str | Path, title: str | None = None) -> None:
-    """Save a PNG (or any matplotlib format, by extension) of a single env's finished or running
-    episode (its scenario and trail)."""
+def plot_episode(sim: ScenarioView, trail: Trail, path: str | Path, title: str | None = None) -> None:
+    """Save a PNG (or any matplotlib format, by extension) of one scenario's finished or running
+    episode: a single env's ``env.unwrapped.sim`` and ``env.unwrapped.trail``."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(7, 7), dpi=110)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(111)
-    _draw(ax, env.sim, env.trail, title=title)
+    _draw(ax, sim, trail, title=title)
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path)

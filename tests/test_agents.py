@@ -263,7 +263,10 @@ def test_project_budget_is_the_euclidean_projection(rng):
             assert np.all(p >= 0) and p.sum() <= total * (1 + 1e-12)
             pos = p > 0
             theta = (v - p)[pos]
-            assert np.allclose(theta, theta[0], atol=1e-12) if pos.any() else True
+            if pos.any():  # one threshold for every positive entry
+                assert np.allclose(theta, theta[0], atol=1e-12)
+            else:  # all zero: every entry at or below the threshold max(v)
+                assert np.all(v <= max(v.max(), 0.0))
             theta = theta[0] if pos.any() else max(v.max(), 0.0)
             assert theta >= -1e-12
             assert np.allclose(p, np.maximum(v - theta, 0), atol=1e-12)

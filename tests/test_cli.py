@@ -66,10 +66,11 @@ def test_evaluate_rejects_bad_inputs(tmp_path, capsys):
 def test_parallel_evaluation_matches_serial(tmp_path):
     a, b = tmp_path / "a.json", tmp_path / "b.json"
     args = ["evaluate", "--policy", "ao-mpc", "--episodes", "3", "--set", "num_slots=10", "--quiet"]
-    main(args + ["--out", str(a), "--workers", "1"])
-    main(args + ["--out", str(b), "--workers", "2"])
+    assert main(args + ["--out", str(a), "--workers", "1"]) == 0
+    assert main(args + ["--out", str(b), "--workers", "2"]) == 0
     ra, rb = json.loads(a.read_text()), json.loads(b.read_text())
-    for x, y in zip(ra, rb):
+    assert len(ra) == len(rb) == 3 and [x["seed"] for x in ra] == [0, 1, 2]
+    for x, y in zip(ra, rb, strict=True):
         for key in ("seed", "control_cost", "rmse_m", "outage_rate", "mean_power_w"):
             assert x[key] == y[key]
 

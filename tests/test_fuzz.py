@@ -297,6 +297,7 @@ def test_random_parallel_actions_name_the_agent():
     par = parallel_env(ScenarioConfig(num_slots=400))
     par.reset(seed=0)
     agents = list(par.agents)
+    outcomes = {"taken": 0, "refused": 0}
 
     @examples(100, 3000)
     @seed(4)
@@ -313,12 +314,15 @@ def test_random_parallel_actions_name_the_agent():
         except (ValueError, TypeError) as exc:
             assert not (valid and as_dict), f"a valid action was refused: {exc}"
             assert (agent in str(exc)) if as_dict else ("dict" in str(exc)), str(exc)
+            outcomes["refused"] += 1
             return
         assert valid and as_dict, f"an invalid action was taken: {action!r}"
+        outcomes["taken"] += 1
         if not par.agents:
             par.reset(seed=1)
 
     fuzz()
+    assert outcomes["taken"] > 5 and outcomes["refused"] > 5, outcomes  # both branches exercised
 
 
 # ------------------------------------------------------------------------------ command line

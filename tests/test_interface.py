@@ -288,3 +288,45 @@ def test_rl_interface_determinism_and_parallel_lockstep():
         assert terms["drone"] == jterm and truncs["drone"] == jtrunc
         assert all(-RL_INTERFACE.cost_clip / RL_INTERFACE.cost_scale - 1e-12 <= rewards[f"agv_{i}"] <= 0 or terms["drone"]
                    for i in range(k))
+
+
+def test_the_stake_split_minimizes_the_expected_loss_it_claims_to():
+    """The stake prior's split (the RL interface's zero action) is the exact minimizer of
+    sum_k w_k (d_k^2 / p_k)^m over splits of P_max (the high-SNR outage its docstring derives it from),
+    checked against a numerical minimization; on the true outage gammainc its loss lies between the
+    numerical optimum and the equal split's (measured: 3-22 % above the optimum, the equal split
+    33-190 %)."""
+    from scipy import optimize, special
+
+    env = gym.make("lawn/CommRL-v0").unwrapped
+    budget = env.config.power_budget_w
+    for seed in range(3):
+        env.reset(seed=seed)
+        for _ in range(5):
+            env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+        sim, layout = env.sim, env.actions
+        window = sim.reference_window()
+        decision = layout.decode(np.zeros(layout.size), sim.x_obs, window, sim.drone_position, sim.slot)
+        w = layout.mpc.command_stakes(layout.mpc.prepare(sim.x_obs, window, sim.slot))
+        w = np.maximum(w, STAKE_FLOOR * w.mean())
+        link, k = sim.link, w.size
+        d2 = link.distance_sq(decision.drone_next, sim.x_obs[:, 0:2])
+
+        def split(z):
+            return budget * np.exp(z) / np.exp(z).sum()
+
+        def best(loss):
+            res = optimize.minimize(lambda z: loss(split(z)), np.zeros(k), method="Nelder-Mead",
+                                    options={"xatol": 1e-10, "fatol": 1e-16, "maxiter": 20000})
+            return loss(split(res.x))
+
+        def surrogate(p):
+            return np.sum(w * (d2 / p) ** link.m)
+
+        def expected_loss(p):
+            return np.sum(w * special.gammainc(link.m, link.outage_argument_sq(p, d2)))
+
+        assert decision.power_w.sum() == pytest.approx(budget, rel=1e-12)
+        assert surrogate(decision.power_w) <= best(surrogate) * (1 + 1e-9)
+        optimum, equal = best(expected_loss), expected_loss(np.full(k, budget / k))
+        assert optimum * (1 - 1e-9) <= expected_loss(decision.power_w) < equal

@@ -1,7 +1,7 @@
-"""The package's layering (README, Layout): training -> agents -> lawn_env, no import cycles
-between modules (function-level imports included; imports for annotations only, under
-``if TYPE_CHECKING:``, aside), no module importing another's private names, and every public
-function annotated."""
+"""The package's layering (README, Layout): training -> agents -> lawn_env at run time (imports for
+annotations only, under ``if TYPE_CHECKING:``, aside), no import cycles between modules of any
+kind (function-level and annotation-only imports included), no module importing another's private
+names, and every public function annotated."""
 
 import ast
 from pathlib import Path
@@ -21,25 +21,28 @@ def _modules() -> dict[str, Path]:
     return mods
 
 
-def _runtime_nodes(tree: ast.Module):
-    """Every node except those under ``if TYPE_CHECKING:`` (imports for annotations only)."""
+def _runtime_nodes(tree: ast.Module, annotations: bool = False):
+    """Every node except, unless ``annotations``, those under ``if TYPE_CHECKING:`` (imports for
+    annotations only)."""
     stack = [tree]
     while stack:
         node = stack.pop()
         yield node
         for child in ast.iter_child_nodes(node):
-            if isinstance(child, ast.If) and isinstance(child.test, ast.Name) and child.test.id == "TYPE_CHECKING":
+            if (not annotations and isinstance(child, ast.If) and isinstance(child.test, ast.Name)
+                    and child.test.id == "TYPE_CHECKING"):
                 stack.extend(child.orelse)
                 continue
             stack.append(child)
 
 
-def _imports(mods: dict[str, Path]):
-    """module -> set of modules it imports at run time, and the (module, from, name) private imports."""
+def _imports(mods: dict[str, Path], annotations: bool = False):
+    """module -> set of modules it imports at run time (with ``annotations``: also those it imports
+    for annotations only), and the (module, from, name) private imports."""
     edges, private = {m: set() for m in mods}, []
     for m, f in mods.items():
         package = m.split(".") if f.name == "__init__.py" else m.split(".")[:-1]
-        for node in _runtime_nodes(ast.parse(f.read_text())):
+        for node in _runtime_nodes(ast.parse(f.read_text()), annotations):
             if isinstance(node, ast.ImportFrom):
                 target = node.module
                 if node.level:
@@ -89,10 +92,11 @@ def _cycles(edges: dict[str, set]) -> list[list[str]]:
 
 
 EDGES, PRIVATE = _imports(_modules())
+ALL_EDGES, _ = _imports(_modules(), annotations=True)
 
 
-def test_no_import_cycles():
-    assert _cycles(EDGES) == []
+def test_no_import_cycles_of_any_kind():
+    assert _cycles(ALL_EDGES) == []
 
 
 def test_no_private_names_imported_across_modules():
@@ -119,6 +123,9 @@ def test_the_checker_sees_cycles_private_imports_and_skips_annotation_imports(tm
     assert _cycles(edges) == [["pkg.a", "pkg.b", "pkg.c"]]
     assert private == [("pkg.c", "pkg.a", "_hidden")]
     assert edges["pkg.d"] == set() and edges["pkg.e"] == {"pkg.d"}
+    (pkg / "a.py").write_text("from .d import y\n")  # a cycle through an annotation-only import
+    all_edges, _ = _imports(mods, annotations=True)
+    assert _cycles(_imports(mods)[0]) == [] and _cycles(all_edges) == [["pkg.a", "pkg.d"]]
 
 
 def _unannotated(tree: ast.Module) -> list[str]:
@@ -206,3 +213,17 @@ def test_one_simulation_core_no_batch_twins_no_private_reads():
     assert {name: r for name, r in reads.items() if r} == {}
     assert _private_reads(ast.parse("def f(o):\n    return o._hidden, self._own\nclass C:\n    _x = 1\nC._x")) == [
         "o._hidden"]
+
+
+def _long_functions(tree: ast.Module, limit: int) -> list[str]:
+    return [f"{n.name} ({n.end_lineno - n.lineno + 1} lines)" for n in ast.walk(tree)
+            if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.end_lineno - n.lineno + 1 > limit]
+
+
+def test_the_training_package_keeps_small_modules_and_functions():
+    """No module of ``training/`` over 400 lines, no function of it over 60."""
+    training = {name: path for name, path in _modules().items() if name.startswith("training")}
+    assert {name: n for name, path in training.items() if (n := len(path.read_text().splitlines())) > 400} == {}
+    long = {name: _long_functions(ast.parse(path.read_text()), 60) for name, path in training.items()}
+    assert {name: fs for name, fs in long.items() if fs} == {}
+    assert _long_functions(ast.parse("def f():\n" + "    x = 1\n" * 61), 60) == ["f (62 lines)"]

@@ -3,6 +3,7 @@ Minari datasets and behaviour cloning from them (issue #23)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -288,13 +289,13 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     train(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=0,
           out_dir=runs / "bc-comm" / "seed-0", hp_overrides={"epochs": 1}, progress=False)
     table = build_zoo(runs, tmp_path / "docs" / "LEARNED.md", None, workers=1, progress=False, episodes=3,
-                      export=False)
+                      target=tmp_path / "zoo")
     from training.leaderboard import own_anchor
 
     anchor = own_anchor(f"bc:{runs / 'bc-comm' / 'seed-0'}")  # the hyperparameter file's interface: anchor:stake
     rows = table.splitlines()
     assert "vs own anchor (paired)" in rows[0] and "score v1" in rows[0]
-    label = next(r.label for r in RECIPES if r.name == "bc-comm")
+    label = RECIPES["bc-comm"].label
     assert [r.split(" | ")[0] for r in rows[2:6]] == ["| rg-mpc", "| epa", f"| {anchor}",
                                                       f"| {label} (`zoo:bc-comm`, seed 0)"]
     assert rows[5].split(" | ")[3] == anchor
@@ -305,6 +306,38 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
            "lawn/Comm-v0 " in table
     episodes = (tmp_path / "docs" / "learned" / "episodes.csv").read_text()
     assert anchor in episodes and "stage_costs" not in episodes.splitlines()[0]
+    assert (tmp_path / "docs" / "learned" / "curves.png").stat().st_size > 5000
+    record = json.loads((tmp_path / "zoo" / "bc-comm" / "agent.json").read_text())  # the export stage
+    assert record["shipped_seed"] == 0 and record["benchmark"]["test_seeds"] == "0-2"
+    assert record["benchmark"]["anchor"] == anchor and record["command"] == RECIPES["bc-comm"].command()
+
+
+def test_zoo_stages_on_a_recorded_run(tmp_path):
+    """The zoo's stages one by one: finished runs, evaluation, table rows, render, export."""
+    pytest.importorskip("stable_baselines3")
+    from training.train import train
+    from training.zoo import RECIPES, evaluate_zoo, export_zoo, finished_runs, render_zoo, zoo_tables
+
+    runs = tmp_path / "runs"
+    with pytest.raises(ValueError, match="no finished recipe runs"):
+        finished_runs(runs)
+    tiny = {"bc-comm": dataclasses.replace(RECIPES["bc-comm"], seeds=(0, 1), timesteps=120)}
+    for s in (0, 1):
+        train(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=s,
+              out_dir=runs / "bc-comm" / f"seed-{s}", hp_overrides={"epochs": 1}, progress=False)
+    found = finished_runs(runs, tiny)
+    assert [(r.name, [d.name for d in dirs]) for r, dirs in found] == [("bc-comm", ["seed-0", "seed-1"])]
+    ev = evaluate_zoo(found, episodes=2, workers=1, progress=False)
+    assert ev.envs == ["lawn/Comm-v0"] and {r["seed"] for r in ev.rows} == {0, 1}
+    tables = zoo_tables(ev)
+    assert [row["label"] for row in tables.recipe_rows][:2] == ["rg-mpc", "epa"]
+    assert len(tables.run_rows) == 2 and sum("(shipped)" in row["recipe"] for row in tables.run_rows) == 1
+    assert len(tables.shipped) == 1 and tables.shipped[0].run_dir in found[0][1]
+    table, per_run = render_zoo(tables)
+    assert table.count("\n| ") == len(tables.recipe_rows) + 1 and "2 test seeds (0-1)" in table
+    assert per_run.count("\n") == len(tables.run_rows) + 1
+    [exported] = export_zoo(tables, ev, tmp_path / "zoo")
+    assert exported == tmp_path / "zoo" / "bc-comm" and (exported / "agent.json").exists()
 
 
 # ---------------------------------------------------------------------- the command line
@@ -383,3 +416,46 @@ def test_dataset_command_and_bc_from_it(datasets_path, tmp_path, capsys):
     run = json.loads((tmp_path / "clone" / "run.json").read_text())
     hp = json.loads((tmp_path / "clone" / "hyperparams.json").read_text())
     assert hp["expert"] == "epa" and run["dataset"] == {"id": "lawn/test/epa-v0", "episode_seeds": [3]}
+
+
+def test_train_recipes_skips_finished_runs_restarts_unfinished_ones_and_trains_fine_tunes_second(tmp_path, monkeypatch):
+    """``lawn zoo train``: a finished run is kept, an unfinished one deleted and trained again, and a
+    recipe that starts from another trains in a second phase from that recipe's run of the same seed."""
+    import training.recipes as recipes_module
+    from training.recipes import Recipe, finished, train_recipes
+
+    tiny = {"clone": Recipe("clone", "BC", "bc", "lawn/Comm-v0", 100, seeds=(0, 1)),
+            "tune": Recipe("tune", "PPO from the clone", "ppo", "lawn/Comm-v0", 50, seeds=(0, 1), init_from="clone")}
+    monkeypatch.setattr(recipes_module, "RECIPES", tiny)
+    runs = tmp_path / "runs"
+    done0 = runs / "clone" / "seed-0"
+    done0.mkdir(parents=True)
+    (done0 / "run.json").write_text(json.dumps({"trainer": "bc", "num_timesteps": 100, "algo": "ppo",
+                                                 "env": "lawn/Comm-v0", "seed": 0}))
+    half = runs / "clone" / "seed-1"
+    half.mkdir(parents=True)
+    (half / "model.zip").write_text("an interrupted run's leftovers")
+    phases = []
+
+    def fake_pool_map(fn, tasks, workers, progress, desc=""):
+        assert fn is recipes_module.train_task
+        phases.append([(t["out_dir"].parent.name, t["seed"], t["init_from"]) for t in tasks])
+        for t in tasks:  # the unfinished run was deleted before its task was made
+            assert not t["out_dir"].exists()
+            t["out_dir"].mkdir(parents=True)
+            (t["out_dir"] / "run.json").write_text(json.dumps({"trainer": "bc" if t["algo"] == "bc" else "sb3",
+                                                                "num_timesteps": t["timesteps"], "algo": "ppo",
+                                                                "env": t["env_id"], "seed": t["seed"]}))
+        return []
+
+    monkeypatch.setattr(recipes_module, "pool_map", fake_pool_map)
+    dirs = train_recipes(runs, workers=1, progress=False)
+    assert phases == [[("clone", 1, None)],
+                      [("tune", 0, runs / "clone" / "seed-0"), ("tune", 1, runs / "clone" / "seed-1")]]
+    assert dirs == [done0, half, runs / "tune" / "seed-0", runs / "tune" / "seed-1"]
+    assert all(finished(d, 50) for d in dirs)
+    phases.clear()
+    train_recipes(runs, workers=1, progress=False)  # everything finished: nothing to train
+    assert phases == [[], []]
+    with pytest.raises(ValueError, match="unknown recipe 'nope'; valid: clone, tune"):
+        train_recipes(runs, ["nope"])

@@ -156,3 +156,15 @@ def test_paper_ao_is_no_better_than_epa_per_slot_where_rg_mpc_is():
         obs, _, _, _, _ = env.step(driver.act(obs))
     assert max(ratios_ao) > 1.0 + 1e-6
     assert max(ratios_rg) <= 1.0 + 1e-6 and np.median(ratios_rg) < np.median(ratios_ao)
+
+
+def test_rg_mpc_refinement_never_ends_worse_than_its_start():
+    """The projected-gradient refinement accepts only decreasing steps (Armijo): the plan's
+    objective is at most the best starting point's (the grid search, the previous slot's plan)."""
+    rg = ReducedGradientPlanner(CFG)
+    for snap in _snapshots(8, seed=16):  # consecutive slots: the previous plan is a start too
+        plan = rg.plan(snap)
+        starts = plan.info["start_values"]
+        assert plan.info["start"] in starts and plan.objective <= min(starts.values()) * (1 + 1e-12)
+        assert plan.objective == pytest.approx(expected_cost(snap, plan.increments, plan.power_w,
+                                                             plan.drone_position), rel=1e-10)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from lawn_env import DisturbanceConfig, ScenarioConfig
-from training.figures import EXPERIMENTS, make_figures
+from training.experiments import EXPERIMENTS, make_figures
 from training.sweep import SweepTableError, load_spec, read_rows, read_table, run_sweep
 
 SPEC = {"name": "t", "env": "lawn/Joint-v0", "preset": "default", "set": {"num_slots": 8},
@@ -124,13 +124,18 @@ def test_quick_figures_are_built_from_their_tables(tmp_path):
     assert all((tmp_path / f"{name}.png").exists() for name in EXPERIMENTS)
     with pytest.raises(ValueError, match="unknown figures"):
         make_figures(["fig9"], tmp_path)
-    from training.figures import check_claims, format_claims, write_reproduction
+    from training.experiments import check_claims, format_claims, read_claims, write_claims
+    from training.reproduction import write_reproduction
 
+    with pytest.raises(FileNotFoundError, match="run `lawn figures"):
+        write_reproduction(tmp_path, tmp_path / "docs")  # the page reads the claims' results, not the tables
     claims = check_claims(tmp_path)
     assert {c.figure for c in claims} == set(EXPERIMENTS)
     assert all(c.verdict in ("holds", "differs", "not significant") and c.value for c in claims)
     assert len({c.key for c in claims}) == len(claims)
     assert format_claims(claims).count("\n") == len(claims) + 1
+    write_claims(claims, tmp_path)
+    assert read_claims(tmp_path) == claims and (tmp_path / "claims.md").read_text().startswith("| figure |")
     doc = write_reproduction(tmp_path, tmp_path / "docs", explanations={"ce.": "a tested reason"}).read_text()
     assert "commit" in doc and "lawn " in doc  # provenance
     assert "a tested reason" in doc or all(c.verdict == "holds" for c in claims if c.key.startswith("ce."))
@@ -140,7 +145,7 @@ def test_quick_figures_are_built_from_their_tables(tmp_path):
 
 
 def test_paired_claims_use_the_same_seeds_and_their_intervals():
-    from training.figures import _claim
+    from training.experiments.base import multi_claim, paired_claim
     from training.tables import paired_difference, verdict
 
     a = {0: 90.0, 1: 180.0, 2: 95.0, 3: 9.0}
@@ -152,8 +157,12 @@ def test_paired_claims_use_the_same_seeds_and_their_intervals():
     assert verdict(mean, float("nan"), "negative") == "n/a"
     assert verdict(0.001, 0.002, "tie") == "holds" and verdict(0.05, 0.01, "tie") == "differs"
     assert verdict(0.0, 0.05, "tie") == "not significant"
-    c = _claim("f", "k", "a beats b", "cost", a, b, "negative")
+    c = paired_claim("f", "k", "a beats b", "cost", a, b, "negative")
     assert c.verdict == "holds" and c.seeds == 3 and c.value.startswith("-8.3 %")
+    both = multi_claim("f", "k", "a beats b twice", "cost", [("x", a, b), ("y", {0: 1.0, 1: 2.0}, {0: 1.5, 1: 2.5})],
+                       "negative")
+    assert both.seeds == 2 and both.verdict == "not significant"  # the fewest seeds; y's 2 seeds cannot resolve it
+    assert both.value.startswith("x: -8.3 %")
 
 
 def test_disturbance_mode():
@@ -263,3 +272,53 @@ def test_sweep_killed_twenty_times_then_resumed_equals_the_clean_table(tmp_path)
         return [[v for i, v in enumerate(row) if i not in timing] for row in csv.reader(lines)]
 
     assert without_timing(table) == without_timing(clean)
+
+
+def test_sweep_drops_a_row_whose_config_does_not_match_its_hash_and_reruns_it(tmp_path):
+    small = dict(SPEC, grid={"channel.blocklength": [256]}, policies=["epa"], seeds=2)
+    table = tmp_path / "t.csv"
+    rows = run_sweep(small, table, progress=False)
+    text = table.read_text()
+    tampered = text.replace('"num_slots": 8', '"num_slots": 7', 1)
+    assert tampered != text
+    table.write_text(tampered)
+    with pytest.warns(UserWarning, match="dropped 1 unusable rows.*its config does not match its config_hash"):
+        again = run_sweep(small, table, progress=False)
+    assert [r["control_cost"] for r in again] == [r["control_cost"] for r in rows]  # rerun: the same episode
+
+
+def test_sweep_refuses_an_unknown_backend(tmp_path):
+    with pytest.raises(ValueError, match="unknown backend 'slurm'; valid: process, ray"):
+        run_sweep(dict(SPEC, seeds=1, policies=["epa"]), tmp_path / "b.csv", backend="slurm", progress=False)
+
+
+def test_sweep_reruns_when_policy_arguments_or_the_version_change(tmp_path, monkeypatch):
+    import lawn_env
+
+    small = dict(SPEC, grid={"channel.blocklength": [256]}, policies=["ao-mpc"], seeds=1)
+    table = tmp_path / "t.csv"
+    first = run_sweep(small, table, progress=False)
+    tuned = dict(small, policy_args={"ao-mpc": {"tolerance": 1e-3}})
+    with pytest.raises(SweepTableError, match="holds 1 rows"):
+        run_sweep(tuned, table, progress=False)  # another policy argument: not this sweep's row
+    both = run_sweep(tuned, table, progress=False, extend=True)
+    assert sorted(r["policy_args"] for r in both) == ['{"tolerance": 0.001}', "{}"]
+    monkeypatch.setattr(lawn_env, "__version__", "99.0.0")
+    with pytest.raises(SweepTableError, match="another lawn version than 99.0.0"):
+        run_sweep(small, table, progress=False)
+    newer = run_sweep(small, table, progress=False, extend=True)
+    assert sorted(r["lawn_version"] for r in newer) == sorted([first[0]["lawn_version"]] * 2 + ["99.0.0"])
+
+
+def test_summarize_sweep_gives_the_mean_and_interval_per_point_and_policy():
+    from training.sweep import summarize_sweep
+    from training.tables import mean_ci
+
+    rows = [{"g": g, "policy": p, "control_cost": c, "rmse_m": 1.0, "outage_rate": 0.0}
+            for g, p, c in [(1, "a", 10.0), (1, "a", 14.0), (1, "b", 3.0), (2, "a", 5.0), (2, "a", 7.0)]]
+    lines = summarize_sweep(rows, ["g"]).splitlines()
+    assert lines[0] == "| g | policy | runs | control_cost | rmse_m | outage_rate |" and lines[1] == "|---|" * 1 + "---|" * 5
+    mean, half = mean_ci([10.0, 14.0])
+    assert lines[2] == f"| 1 | a | 2 | {mean:.4g} ± {half:.2g} | 1 ± 0 | 0 ± 0 |"
+    assert lines[3] == "| 1 | b | 1 | 3 ± nan | 1 ± nan | 0 ± nan |"  # one run: no interval
+    assert lines[4].startswith("| 2 | a | 2 | 6 ± ") and len(lines) == 5

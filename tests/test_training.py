@@ -371,17 +371,18 @@ def test_recipe_commands_parse_as_lawn_train():
     vector env and hyperparameters (shell-quoted JSON) exactly as the recipe trains them."""
     import shlex
 
-    from training.cli import _parse_overrides, build_parser
+    from training.cli import build_parser
+    from training.cli.common import parse_overrides
     from training.zoo import RECIPES
 
-    for recipe in RECIPES:
+    for recipe in RECIPES.values():
         argv = shlex.split(recipe.command().replace("<s>", "0"))
         assert argv[:2] == ["lawn", "train"]
         args = build_parser().parse_args(argv[1:])
         assert (args.algo, args.env, args.timesteps) == (recipe.algo, recipe.env_id, recipe.timesteps)
         assert tuple(args.seeds) == recipe.seeds and args.vec == recipe.vec
-        assert _parse_overrides(args.hp, "--hp") == recipe.hp
-    assert any(r.vec == "native" for r in RECIPES)
+        assert parse_overrides(args.hp, "--hp") == recipe.hp
+    assert any(r.vec == "native" for r in RECIPES.values())
 
 
 @pytest.mark.parametrize("algo", ["sac", "ppo"])

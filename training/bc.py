@@ -15,6 +15,7 @@ bc:DIR`` and ``lawn train --algo ppo --init-from DIR`` use it directly.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -29,7 +30,7 @@ from agents.rollouts import Actor
 from agents.runs import algorithm_class
 from lawn_env import ObservationLayout, ScenarioConfig
 from lawn_env.presets import resolve_config
-from lawn_env.interface import ActionLayout, InterfaceLike, resolve_interface
+from lawn_env.interface import ActionLayout, InterfaceLike, RLInterface, resolve_interface
 from lawn_env.spaces import check_action
 
 __all__ = ["collect", "label_transitions", "fit", "train_bc_run", "BC_TARGETS"]
@@ -177,13 +178,90 @@ def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, st
     return obs, labels, costs, seeds, dataset.storage.metadata.get("algorithm_name")
 
 
+@dataclasses.dataclass(frozen=True)
+class _Settings:
+    """A BC run's hyperparameters, resolved (:func:`_settings`)."""
+
+    expert: str
+    target: str
+    interface: RLInterface
+    epochs: int
+    batch_size: int
+    learning_rate: float
+    dagger_iterations: int
+    dagger_timesteps: int
+    policy_kwargs: dict
+
+    def to_dict(self) -> dict:
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        out["interface"] = self.interface.to_dict()
+        return out
+
+
+def _settings(params: Mapping[str, Any]) -> _Settings:
+    """The hyperparameters of a BC run, with a clear error for an unknown one."""
+    p = dict(params)
+    p.pop("n_envs", None)  # expert rollouts run in one environment
+    target = p.pop("target", "ppo")
+    if target not in BC_TARGETS:
+        raise ValueError(f"bc target {target!r}; valid: {', '.join(BC_TARGETS)}")
+    policy_kwargs = p.pop("policy_kwargs", {})
+    if target == "sac":
+        policy_kwargs = {k: v for k, v in policy_kwargs.items() if k != "log_std_init"}
+    st = _Settings(target=target, expert=p.pop("expert", "rg-mpc"), epochs=int(p.pop("epochs", 30)),
+                   batch_size=int(p.pop("batch_size", 256)), learning_rate=float(p.pop("learning_rate", 1e-3)),
+                   dagger_iterations=int(p.pop("dagger_iterations", 0)),
+                   dagger_timesteps=int(p.pop("dagger_timesteps", 1200)),
+                   interface=resolve_interface(p.pop("interface", "v0")), policy_kwargs=policy_kwargs)
+    if p:
+        raise ValueError(f"unknown bc hyperparameters {sorted(p)}; valid: expert, target, interface, epochs, "
+                         "batch_size, learning_rate, dagger_iterations, dagger_timesteps, policy_kwargs")
+    return st
+
+
+def _write_records(out_dir: Path, config: ScenarioConfig, st: _Settings, spec: dict, history: list) -> None:
+    """config.json, hyperparams.json, run.json and bc_losses.json of a BC run."""
+    (out_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
+    (out_dir / "hyperparams.json").write_text(json.dumps(st.to_dict(), indent=2))
+    (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
+    (out_dir / "bc_losses.json").write_text(json.dumps(history, indent=2))
+
+
+def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: _Settings, expert: str, obs: np.ndarray,
+                       actions: np.ndarray, seed: int, episode_seed: int):
+    """Fit the clone to the expert's transitions, then the DAgger rounds (the clone drives, the
+    expert labels); the normalizing env (its statistics fixed from the expert's observations), the
+    model, every observation and the losses of every round."""
+    from stable_baselines3.common.running_mean_std import RunningMeanStd
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make(env_id, config=config, interface=st.interface)]),
+                        norm_reward=False)
+    venv.obs_rms = RunningMeanStd(shape=obs.shape[1:])
+    venv.obs_rms.update(obs.astype(np.float64))
+    venv.training = False
+    model = algorithm_class(st.target)("MlpPolicy", venv, seed=seed, policy_kwargs=st.policy_kwargs, verbose=0,
+                                       device="cpu")
+
+    def normalized(o):
+        return venv.normalize_obs(o).astype(np.float32)
+
+    history = [{"round": 0, "samples": len(obs), "losses": fit(model, normalized(obs), actions, st.epochs,
+                                                                st.batch_size, st.learning_rate, seed)}]
+    for it in range(1, st.dagger_iterations + 1):
+        actor = SB3Policy(model, config, env_id, st.interface, ObsNormalizer.from_vecnormalize(venv))
+        new_obs, new_act, _ = collect(env_id, config, expert, st.dagger_timesteps, episode_seed + 100 * it,
+                                      st.interface, actor=actor)
+        obs, actions = np.concatenate([obs, new_obs]), np.concatenate([actions, new_act])
+        history.append({"round": it, "samples": len(obs), "losses": fit(model, normalized(obs), actions, st.epochs,
+                                                                         st.batch_size, st.learning_rate, seed + it)})
+    return venv, model, obs, history
+
+
 def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int, out_dir: Path,
                  params: Mapping[str, Any], version: int, progress: bool = True, dataset: str | None = None,
                  eval_episodes: int = 5) -> dict:
     """Clone, DAgger, save; one validation of the clone on ``eval_episodes`` validation seeds."""
-    from stable_baselines3.common.running_mean_std import RunningMeanStd
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
-
     from .callbacks import ControlCostValidation
     from .protocol import (
         TRAIN_SEED_BASE,
@@ -197,23 +275,8 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     limit_torch_threads()
     if env_id not in ("lawn/Joint-v0", "lawn/Comm-v0"):
         raise ValueError(f"behaviour cloning runs on lawn/Joint-v0 or lawn/Comm-v0, not {env_id!r}")
-    p = dict(params)
-    p.pop("n_envs", None)  # expert rollouts run in one environment
-    target = p.pop("target", "ppo")
-    if target not in BC_TARGETS:
-        raise ValueError(f"bc target {target!r}; valid: {', '.join(BC_TARGETS)}")
-    expert = p.pop("expert", "rg-mpc")
-    epochs, batch_size = int(p.pop("epochs", 30)), int(p.pop("batch_size", 256))
-    lr = float(p.pop("learning_rate", 1e-3))
-    dagger_iterations = int(p.pop("dagger_iterations", 0))
-    dagger_steps = int(p.pop("dagger_timesteps", 1200))
-    interface = resolve_interface(p.pop("interface", "v0"))
-    policy_kwargs = p.pop("policy_kwargs", {})
-    if target == "sac":
-        policy_kwargs = {k: v for k, v in policy_kwargs.items() if k != "log_std_init"}
-    if p:
-        raise ValueError(f"unknown bc hyperparameters {sorted(p)}; valid: expert, target, interface, epochs, "
-                         "batch_size, learning_rate, dagger_iterations, dagger_timesteps, policy_kwargs")
+    st = _settings(params)
+    target, expert, interface = st.target, st.expert, st.interface
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
@@ -223,34 +286,14 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
     else:  # the dataset's episodes are the expert data; DAgger rounds ask the same policy live
         obs, actions, expert_costs, dataset_seeds, recorded = dataset_transitions(dataset, env_id, config, timesteps,
                                                                                   interface)
-        if dagger_iterations and recorded != expert:  # relabelling by another policy would mix two experts
+        if st.dagger_iterations and recorded != expert:  # relabelling by another policy would mix two experts
             raise ValueError(f"--dataset {dataset!r} holds episodes of {recorded}, DAgger's expert is {expert}: "
                              f"pass --hp expert={recorded} or --hp dagger_iterations=0")
         expert = recorded or "unrecorded"  # the policy whose actions are cloned
-    venv = VecNormalize(DummyVecEnv([lambda: gym.make(env_id, config=config, interface=interface)]),
-                        norm_reward=False)
-    venv.obs_rms = RunningMeanStd(shape=obs.shape[1:])
-    venv.obs_rms.update(obs.astype(np.float64))
-    venv.training = False
-    model = algorithm_class(target)("MlpPolicy", venv, seed=seed, policy_kwargs=policy_kwargs, verbose=0, device="cpu")
-
-    def normalized(o):
-        return venv.normalize_obs(o).astype(np.float32)
-
-    history = [{"round": 0, "samples": len(obs), "losses": fit(model, normalized(obs), actions, epochs, batch_size,
-                                                                lr, seed)}]
-    for it in range(1, dagger_iterations + 1):
-        actor = SB3Policy(model, config, env_id, interface, ObsNormalizer.from_vecnormalize(venv))
-        new_obs, new_act, _ = collect(env_id, config, expert, dagger_steps, episode_seed + 100 * it, interface,
-                                      actor=actor)
-        obs, actions = np.concatenate([obs, new_obs]), np.concatenate([actions, new_act])
-        history.append({"round": it, "samples": len(obs),
-                        "losses": fit(model, normalized(obs), actions, epochs, batch_size, lr, seed + it)})
+    venv, model, obs, history = _clone_with_dagger(env_id, config, st, expert, obs, actions, seed, episode_seed)
     elapsed = time.perf_counter() - start
     model.save(str(out_dir / "model.zip"))
     venv.save(str(out_dir / "vecnormalize.pkl"))
-    resolved = {"expert": expert, "target": target, "interface": interface.to_dict(), "epochs": epochs, "batch_size": batch_size, "learning_rate": lr,
-                "dagger_iterations": dagger_iterations, "dagger_timesteps": dagger_steps, "policy_kwargs": policy_kwargs}
     spec = {"algo": target, "target": target, "trainer": "bc", "env": env_id, "seed": seed, "timesteps": timesteps,
             "interface": interface.to_dict(),
             "num_timesteps": int(len(obs)), "hyperparams_version": version, "wall_time_s": elapsed,
@@ -258,10 +301,7 @@ def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int,
             "expert_mean_control_cost": float(np.mean(expert_costs)) if expert_costs else None,
             "dataset": None if dataset is None else {"id": dataset, "episode_seeds": dataset_seeds},
             "versions": versions()}
-    (out_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
-    (out_dir / "hyperparams.json").write_text(json.dumps(resolved, indent=2))
-    (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
-    (out_dir / "bc_losses.json").write_text(json.dumps(history, indent=2))
+    _write_records(out_dir, config, dataclasses.replace(st, expert=expert), spec, history)
     validation = ControlCostValidation(env_id, config, interface.to_dict(), episodes=eval_episodes, every=1,
                                        out_dir=out_dir, seed_base=VALIDATION_SEED_BASE)
     validation.model = model

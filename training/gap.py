@@ -27,8 +27,8 @@ from lawn_env import ScenarioConfig
 
 from .evaluate import write_rows
 
-__all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "convergence", "plot_gaps",
-           "plot_convergence"]
+__all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "global_power_shares", "format_gap_table",
+           "convergence", "format_convergence", "plot_gaps", "plot_convergence", "write_gap_outputs"]
 
 
 def gap_episode(policies: Sequence[str], driver: str, config: ScenarioConfig, seed: int, every: int,
@@ -225,6 +225,20 @@ def plot_convergence(rows: list[dict], path: Path) -> None:
             bottom.set_ylabel("excess over global (%)")
     fig.tight_layout()
     fig.savefig(path)
+
+
+def format_convergence(conv_rows: list[dict], slots: Sequence[int]) -> str:
+    """The AO's distance above the global reference after its first and its last iteration, and
+    rg-mpc's, at each slot of :func:`convergence`'s rows (one line per slot)."""
+    lines = ["convergence (paper's AO, 20 iterations, no early stop): J^ above the global reference"]
+    for slot in slots:
+        sel = [r for r in conv_rows if r["slot"] == slot]
+        if sel:
+            first = next(r for r in sel if r["block"] == "drone")
+            lines.append(f"  slot {slot}: after iteration 1 {first['objective'] / first['global_objective'] - 1:+.2%}, "
+                         f"after 20 {sel[-1]['objective'] / sel[-1]['global_objective'] - 1:+.2%}, "
+                         f"rg-mpc {sel[-1]['rg_mpc_objective'] / sel[-1]['global_objective'] - 1:+.3%}")
+    return "\n".join(lines)
 
 
 def write_gap_outputs(rows: list[dict], summary: list[dict], conv_rows: list[dict], out_dir: Path) -> None:

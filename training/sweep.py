@@ -49,7 +49,8 @@ class SweepSpec(dict):
 _SPEC_KEYS = {"name", "env", "preset", "set", "grid", "policies", "seeds", "policy_args"}
 
 
-def load_spec(spec: str | Path | Mapping[str, Any]) -> SweepSpec:
+def _read_spec(spec: str | Path | Mapping[str, Any]) -> tuple[Any, str]:
+    """The spec's document (a YAML or JSON file, or the mapping itself) and how errors name it."""
     source = "the sweep spec"
     if not isinstance(spec, (Mapping, str, os.PathLike)):
         raise TypeError(f"spec must be a mapping or the path of a YAML/JSON file; got {type(spec).__name__}")
@@ -72,6 +73,26 @@ def load_spec(spec: str | Path | Mapping[str, Any]) -> SweepSpec:
             mark = getattr(exc, "problem_mark", None)
             where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
             raise ValueError(f"{source} is not valid YAML{where}: {getattr(exc, 'problem', None) or exc}") from None
+    return spec, source
+
+
+def _seed_list(seeds: Any, source: str) -> list[int]:
+    """A spec's ``seeds``: a count (seeds 0..n-1) or a list of seeds >= 0."""
+    if isinstance(seeds, bool) or not (isinstance(seeds, int) or isinstance(seeds, (list, tuple))):
+        raise ValueError(f"{source}: seeds must be a count >= 1 or a non-empty list of seeds >= 0; got {seeds!r}")
+    if isinstance(seeds, int):
+        if seeds < 1:
+            raise ValueError(f"{source}: seeds={seeds} must be >= 1 (a count) or a non-empty list of seeds >= 0")
+        return list(range(seeds))
+    if not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
+        raise ValueError(f"{source}: seeds={seeds!r} must be a non-empty list of integers >= 0")
+    return [int(s) for s in seeds]
+
+
+def load_spec(spec: str | Path | Mapping[str, Any]) -> SweepSpec:
+    """A sweep spec (a mapping or a YAML/JSON file) validated: its keys, grid, policies, seeds and env, and
+    every grid point's config and policy built once, so a bad spec fails before any episode runs."""
+    spec, source = _read_spec(spec)
     if not isinstance(spec, Mapping):
         raise ValueError(f"{source} must be a mapping of {', '.join(sorted(_SPEC_KEYS))}; got "
                          f"{type(spec).__name__ if spec is not None else 'an empty document'}")
@@ -91,17 +112,7 @@ def load_spec(spec: str | Path | Mapping[str, Any]) -> SweepSpec:
                     preset=spec.get("preset", "default"), set=dict(spec.get("set", {})),
                     grid={k: list(v) for k, v in dict(spec.get("grid", {})).items()},
                     policies=list(spec.get("policies", ["rg-mpc"])), policy_args=dict(spec.get("policy_args", {})))
-    seeds = spec.get("seeds", 5)
-    if isinstance(seeds, bool) or not (isinstance(seeds, int) or isinstance(seeds, (list, tuple))):
-        raise ValueError(f"{source}: seeds must be a count >= 1 or a non-empty list of seeds >= 0; got {seeds!r}")
-    if isinstance(seeds, int):
-        if seeds < 1:
-            raise ValueError(f"{source}: seeds={seeds} must be >= 1 (a count) or a non-empty list of seeds >= 0")
-        out["seeds"] = list(range(seeds))
-    else:
-        if not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
-            raise ValueError(f"{source}: seeds={seeds!r} must be a non-empty list of integers >= 0")
-        out["seeds"] = [int(s) for s in seeds]
+    out["seeds"] = _seed_list(spec.get("seeds", 5), source)
     if out["env"] not in lawn_env.ENV_IDS:
         raise ValueError(f"sweep env {out['env']!r}; valid: {', '.join(lawn_env.ENV_IDS)}")
     from agents import make_policy

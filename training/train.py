@@ -259,8 +259,6 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
            progress: bool, callbacks: list | None = None) -> dict:
     from stable_baselines3.common.utils import set_random_seed
 
-    from .callbacks import ActorWarmup, ControlCostValidation, RunCheckpoint
-
     limit_torch_threads()
     cls = algorithm_class(spec["algo"])
     params = dict(params)
@@ -282,33 +280,10 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
     env = make_train_env(spec["env"], config, n_envs, env_seed, normalize, out_dir / "monitor",
                          vecnormalize_path=start.vecnormalize if start else None, interface=interface,
                          append_monitor=start is not None, vec=spec.get("vec", "dummy"))
-    if start:
-        model = cls.load(str(start.model), env=env, tensorboard_log=str(out_dir / "tb"))
-        if start.replay_buffer is not None:
-            model.load_replay_buffer(str(start.replay_buffer))
-    else:
-        model = cls(policy, env, seed=seed if spec["env"] != PARALLEL_ENV_ID else None, verbose=0,
-                    tensorboard_log=str(out_dir / "tb"), **params)
-        if spec.get("init_from"):
-            _init_from(model, Path(spec["init_from"]), env)
-        if at_anchor and not spec.get("init_from"):
-            _start_at_anchor(model, spec["algo"])
-        if init_log_std is not None:  # exploration noise of a fine-tuned policy (after the cloned weights)
-            import torch
-
-            with torch.no_grad():
-                model.policy.log_std.fill_(float(init_log_std))
+    model = _model(cls, spec, env, start, out_dir, policy, params, at_anchor, init_log_std)
     remaining = int(spec["timesteps"]) - model.num_timesteps
     wall_before = float(spec.get("wall_time_s", 0.0))
-    hooks = []
-    if spec["env"] != "CartPole-v1":
-        hooks.append(ControlCostValidation(
-            spec["env"], config, interface, episodes=int(spec["eval_episodes"]),
-            every=max(int(spec["eval_every"]), 1), out_dir=out_dir, seed_base=VALIDATION_SEED_BASE))
-    hooks.append(RunCheckpoint(out_dir, max(int(spec["checkpoint_every"]), 1), wall_time_before=wall_before))
-    if warmup > 0:
-        hooks.append(ActorWarmup(warmup))
-    hooks += list(callbacks or [])
+    hooks = _hooks(spec, config, interface, out_dir, wall_before, warmup) + list(callbacks or [])
     began = time.perf_counter()
     if remaining > 0:
         model.learn(total_timesteps=remaining, callback=hooks, reset_num_timesteps=start is None,
@@ -327,6 +302,44 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
     summary = write_learning_curve(out_dir, spec_out)
     env.close()
     return summary
+
+
+def _model(cls, spec: RunSpec, env, start: Checkpoint | None, out_dir: Path, policy: str, params: dict,
+           at_anchor: bool, init_log_std: float | None):
+    """The model a run trains: its checkpoint's, or a new one (from a cloned run's weights, at the
+    anchor, with the fine-tuning's exploration noise as the spec asks)."""
+    if start:
+        model = cls.load(str(start.model), env=env, tensorboard_log=str(out_dir / "tb"))
+        if start.replay_buffer is not None:
+            model.load_replay_buffer(str(start.replay_buffer))
+        return model
+    model = cls(policy, env, seed=int(spec["seed"]) if spec["env"] != PARALLEL_ENV_ID else None, verbose=0,
+                tensorboard_log=str(out_dir / "tb"), **params)
+    if spec.get("init_from"):
+        _init_from(model, Path(spec["init_from"]), env)
+    if at_anchor and not spec.get("init_from"):
+        _start_at_anchor(model, spec["algo"])
+    if init_log_std is not None:  # exploration noise of a fine-tuned policy (after the cloned weights)
+        import torch
+
+        with torch.no_grad():
+            model.policy.log_std.fill_(float(init_log_std))
+    return model
+
+
+def _hooks(spec: RunSpec, config: ScenarioConfig, interface, out_dir: Path, wall_before: float, warmup: int) -> list:
+    """The run's callbacks: validation on the real objective, checkpoints, the actor warm-up."""
+    from .callbacks import ActorWarmup, ControlCostValidation, RunCheckpoint
+
+    hooks = []
+    if spec["env"] != "CartPole-v1":
+        hooks.append(ControlCostValidation(
+            spec["env"], config, interface, episodes=int(spec["eval_episodes"]),
+            every=max(int(spec["eval_every"]), 1), out_dir=out_dir, seed_base=VALIDATION_SEED_BASE))
+    hooks.append(RunCheckpoint(out_dir, max(int(spec["checkpoint_every"]), 1), wall_time_before=wall_before))
+    if warmup > 0:
+        hooks.append(ActorWarmup(warmup))
+    return hooks
 
 
 def train_task(task: dict) -> dict:

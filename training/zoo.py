@@ -1,224 +1,197 @@
-"""The shipped learned agents: how each is trained, how it compares, what is exported.
-
-:data:`RECIPES` is the one list of learned comparators. ``lawn zoo train`` trains every recipe
-for each of its training seeds into ``RUNS/<name>/seed-<s>`` (a process pool; finished runs are
-kept); ``lawn zoo build`` evaluates every run by the learned protocol (:mod:`training.leaderboard`:
-full 120-slot episodes of the unmodified scenario on 100 test seeds, realized control cost,
-paired with ``rg-mpc`` and with the agent's own anchor on the same seeds, normalized score), exports the run selected on the validation seeds as ``agents/zoo/<name>`` (policy
-weights and observation statistics only) and writes the learned-agents table into
-``docs/LEARNED.md`` and the README. ``lawn zoo list`` shows the shipped agents.
-``scripts/train_agents.sh`` runs both steps.
-"""
+"""The shipped learned agents: how they compare and what is exported, in four stages a test can
+call one by one: :func:`evaluate_zoo` (every finished run of every recipe of
+:mod:`training.recipes` by the learned protocol, :mod:`training.leaderboard`: full 120-slot
+episodes of the unmodified scenario on 100 test seeds, realized control cost, paired with
+``rg-mpc`` and with the agent's own anchor on the same seeds, normalized score), :func:`zoo_tables`
+(the table cells and the run each recipe ships, selected on the validation seeds),
+:func:`render_zoo` (Markdown; :func:`plot_curves` the learning curves) and :func:`export_zoo`
+(``agents/zoo/<name>``: policy weights and observation statistics only). ``lawn zoo build``
+(:func:`build_zoo`) runs them and writes ``docs/LEARNED.md`` and the README's table; ``lawn zoo
+train`` trains the recipes (:func:`training.recipes.train_recipes`); ``lawn zoo list`` shows the
+shipped agents; ``scripts/train_agents.sh`` runs train and build."""
 
 from __future__ import annotations
 
-import json
 import math
-import shlex
 import shutil
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 
 from agents.learned import ZOO_DIR, export_agent, zoo_agents
-from agents.runs import read_run
-from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
+from agents.runs import RunDir, read_run
+from lawn_env import ScenarioConfig
 
-from .evaluate import evaluate, pool_map, write_rows
+from .evaluate import evaluate, write_rows
 from .leaderboard import learned_entries, own_anchor, paired, protocol_cells, run_entries
 from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
 from .score import SCORE_HIGH, SCORE_VERSION, scores_by_policy
+from .recipes import RECIPES, Recipe, finished, recipe, train_recipes
 from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci
-from .train import train_task
 
-__all__ = ["Recipe", "RECIPES", "train_recipes", "build_zoo", "format_zoo_list"]
+__all__ = ["Recipe", "RECIPES", "recipe", "train_recipes", "finished_runs", "evaluate_zoo", "zoo_tables", "render_zoo",
+           "plot_curves", "export_zoo", "build_zoo", "format_zoo_list", "ZooEvaluation", "ZooTables", "Shipped"]
 
 
 
-@dataclass(frozen=True)
-class Recipe:
-    """One learned comparator: ``lawn train`` arguments, its training seeds and its table label."""
+@dataclass
+class ZooEvaluation:
+    """Stage 1 (:func:`evaluate_zoo`): the finished runs of every recipe and their episodes by the
+    learned protocol, beside the references and each agent's anchor on the same test seeds."""
 
-    name: str
-    label: str
-    algo: str
-    env_id: str
-    timesteps: int
-    seeds: tuple[int, ...] = (0, 1, 2)
-    hp: dict = field(default_factory=dict)
-    init_from: str | None = None  # another recipe's name: seed s starts from that recipe's seed s
-    eval_every: int = 25_000
-    vec: str = "dummy"  # lawn train --vec: "native" trains on lawn's batched vector env
+    found: list[tuple[Recipe, list[Path]]]
+    runs: dict[Path, RunDir]
+    entries: list[tuple[str, str]]
+    rows: list[dict]
+    scores: dict
+    episodes: int
 
     @property
-    def evaluated_on(self) -> str:
-        return central_env_id(self.env_id)
-
-    def command(self) -> str:
-        parts = [f"lawn train --algo {self.algo} --env {self.env_id} --timesteps {self.timesteps}",
-                 f"--seeds {' '.join(map(str, self.seeds))}", f"--out RUNS/{self.name}"]
-        parts += [f"--hp {shlex.quote(f'{k}={json.dumps(v)}')}" for k, v in self.hp.items()]
-        if self.vec != "dummy":
-            parts.append(f"--vec {self.vec}")
-        if self.init_from:
-            parts.append(f"--init-from RUNS/{self.init_from}/seed-<s>")
-        return " ".join(parts)
+    def envs(self) -> list[str]:
+        return list(dict.fromkeys(env for _, env in self.entries))
 
 
-#: Validation episodes of every zoo run (model selection; the test seeds are never used).
-ZOO_VALIDATION_EPISODES = 20
-#: Imitation at scale: 100,000 labels of rg-mpc, then 4 DAgger rounds of 10,000 on the clone's own
-#: states, a 256 x 256 network (issue #24: at 12,000 + 4 x 4,800 labels and 128 x 128 the clone was
-#: +2.8 % of rg-mpc on the test seeds; at this budget +0.1 %, 13-14 minutes a run two side by side).
-_BC_AT_SCALE = {"dagger_iterations": 4, "dagger_timesteps": 10_000,
-                "policy_kwargs": {"net_arch": [256, 256], "log_std_init": -1.0}}
-_FINE_TUNE = {"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2.5, "actor_warmup_steps": 10_000,
-              "policy_kwargs": {"net_arch": [256, 256], "log_std_init": -1.0}}  # the clone's network
-#: From scratch: the distance prior and the centroid drone (no MPC in the action; the Comm env's
-#: own MPC still drives the AGVs), and the exploration and step size a learner far from the
-#: optimum needs (log-std -1, 3e-4 decayed).
-_SCRATCH = {"interface": {"base": "rl", "power_anchor": "distance"}, "learning_rate": "lin_3e-4",
-            "policy_kwargs": {"net_arch": [128, 128], "log_std_init": -1.0}}
+@dataclass
+class Shipped:
+    """A recipe's run selected on the validation seeds, with what its export records."""
 
-#: From scratch on Joint: the same, with the LQR baseline's increments under the residual.
-_SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_anchor": "lqr"}}
-
-#: The learned comparators. Training runs them in this order, the longest first (a recipe that
-#: starts from another runs in a second phase); the tables list them per env in this order.
-RECIPES: tuple[Recipe, ...] = (
-    Recipe("bc-comm", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Comm-v0", 100_000, hp=_BC_AT_SCALE),
-    Recipe("bc-joint", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Joint-v0", 100_000,
-           hp=_BC_AT_SCALE),
-    Recipe("ppo-comm-scratch", "PPO from the distance prior (no MPC in the action)", "ppo", "lawn/Comm-v0",
-           1_000_000, hp=_SCRATCH, eval_every=100_000, vec="native"),
-    Recipe("ppo-joint-scratch", "PPO from the distance prior and the LQR (no MPC in the action)", "ppo",
-           "lawn/Joint-v0", 1_000_000, hp=_SCRATCH_JOINT, eval_every=100_000, vec="native"),
-    Recipe("ppo-comm", "PPO (RL interface)", "ppo", "lawn/Comm-v0", 300_000, eval_every=50_000, vec="native"),
-    Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v0", 300_000, eval_every=50_000,
-           vec="native"),
-    Recipe("sac-comm", "SAC (RL interface)", "sac", "lawn/Comm-v0", 20_000, eval_every=5_000),
-    Recipe("ppo-marl", "PPO multi-agent, shared weights", "ppo", PARALLEL_ENV_ID, 150_000, eval_every=25_000),
-    Recipe("ppo-comm-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Comm-v0", 60_000, init_from="bc-comm",
-           hp=_FINE_TUNE, eval_every=10_000),
-    Recipe("ppo-joint-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Joint-v0", 60_000, init_from="bc-joint",
-           hp=_FINE_TUNE, eval_every=10_000),
-)
+    recipe: Recipe
+    run_dir: Path
+    specs: list[dict]
+    env: str
+    across: tuple[float, float]  # mean and 95 % half-width of vs-own-anchor across training seeds
 
 
-def _recipe(name: str) -> Recipe:
-    for r in RECIPES:
-        if r.name == name:
-            return r
-    raise ValueError(f"unknown recipe {name!r}; valid: {', '.join(r.name for r in RECIPES)}")
+@dataclass
+class ZooTables:
+    """Stage 2 (:func:`zoo_tables`): the cells of the recipe table (experts, anchors, each recipe's
+    shipped run) and of the per-run table, and the run each recipe ships."""
+
+    recipe_rows: list[dict[str, str]]
+    run_rows: list[dict[str, str]]
+    shipped: list[Shipped]
+    sources: list[str]
+    floor: list[str]
+    episodes: int
 
 
-def _finished(run_dir: Path, timesteps: int) -> bool:
-    if not (run_dir / "run.json").exists():
-        return False
-    data = read_run(run_dir).record
-    return int(data.get("num_timesteps", 0)) >= (timesteps if data.get("trainer") != "bc" else 1)
-
-
-def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, progress: bool = True) -> list[Path]:
-    """Train the missing runs of the chosen recipes (all by default); returns the run directories.
-    Runs that start from another recipe wait for it (two phases)."""
-    runs = Path(runs)
-    chosen = [_recipe(n) for n in names] if names else list(RECIPES)
-    done: list[Path] = []
-    for phase in (False, True):
-        tasks = []
-        for r in chosen:
-            if bool(r.init_from) != phase:
-                continue
-            for s in r.seeds:
-                out = runs / r.name / f"seed-{s}"
-                done.append(out)
-                if _finished(out, r.timesteps):
-                    continue
-                if out.exists():
-                    shutil.rmtree(out)  # an unfinished run: start it again from scratch
-                tasks.append(dict(algo=r.algo, env_id=r.env_id, config=ScenarioConfig(), timesteps=r.timesteps, seed=s,
-                                  out_dir=out, hp_overrides=dict(r.hp), eval_every=r.eval_every,
-                                  eval_episodes=ZOO_VALIDATION_EPISODES,
-                                  progress=False, vec=r.vec,
-                                  init_from=runs / r.init_from / f"seed-{s}" if r.init_from else None))
-        pool_map(train_task, tasks, workers, progress, desc="training runs")
-    return done
-
-
-def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, progress: bool = True,
-              episodes: int = TEST_EPISODES, export: bool = True) -> str:
-    """Evaluate every finished recipe run by the learned protocol (:mod:`training.leaderboard`: test
-    seeds 0..episodes-1 beside rg-mpc, epa and each agent's own anchor), export the
-    validation-selected seed of each recipe, write the tables; returns the recipe table (Markdown)."""
-    runs = Path(runs)
-    found = [(r, [runs / r.name / f"seed-{s}" for s in r.seeds if _finished(runs / r.name / f"seed-{s}", r.timesteps)])
-             for r in RECIPES]
+def finished_runs(runs: Path, recipes: Mapping[str, Recipe] | None = None) -> list[tuple[Recipe, list[Path]]]:
+    """Every recipe with at least one finished run in ``runs``, with those runs' directories."""
+    recipes = RECIPES if recipes is None else recipes
+    found = [(r, [runs / r.name / f"seed-{s}" for s in r.seeds if finished(runs / r.name / f"seed-{s}", r.timesteps)])
+             for r in recipes.values()]
     found = [(r, dirs) for r, dirs in found if dirs]
     if not found:
         raise ValueError(f"{runs}: no finished recipe runs (lawn zoo train --runs {runs} trains them)")
+    return found
+
+
+def evaluate_zoo(found: list[tuple[Recipe, list[Path]]], episodes: int = TEST_EPISODES, workers: int = 2,
+                 progress: bool = True) -> ZooEvaluation:
+    """Stage 1: every run by the learned protocol on test seeds 0..episodes-1 (:mod:`training.leaderboard`)."""
     run = {d: read_run(d) for _, dirs in found for d in dirs}
     entries = learned_entries([run[d].policy_name for _, dirs in found for d in dirs])
     rows = run_entries(entries, ScenarioConfig(), range(episodes), workers, progress, desc="zoo benchmark")
-    write_rows(rows, out_doc.parent / "learned" / "episodes.csv")
-    scores = scores_by_policy(rows)
-    envs = list(dict.fromkeys(env for _, env in entries))
-    table = [f"| agent | env | algorithm, budget per run | acts around | control cost | score v{SCORE_VERSION} [95 %] "
-             "| vs rg-mpc (paired) | vs own anchor (paired) | vs own anchor, mean over training seeds |", "|" + "---|" * 9]
-    per_run = [f"| recipe | training seed | acts around | selected validation: vs rg-mpc (cost, episodes) "
-               f"| score v{SCORE_VERSION} "
-               "| vs rg-mpc (paired) | vs own anchor (paired) | worst test seed vs own anchor | wall time |",
-               "|" + "---|" * 9]
-    for env in envs:
-        for policy, _ in [e for e in entries if e[1] == env and not e[0].startswith(("sb3:", "bc:", "marl:"))]:
-            table.append(_row(rows, scores, policy, env, policy, "expert" if ":" not in policy else "zero action", "–"))
-        for r, dirs in found:
+    return ZooEvaluation(found, run, entries, rows, scores_by_policy(rows), episodes)
+
+
+def zoo_tables(ev: ZooEvaluation) -> ZooTables:
+    """Stage 2: the table cells, per env: the experts and anchors, then each recipe's shipped run
+    (the seed whose selected validation is lowest); every run in the per-run table."""
+    recipe_rows, run_rows, shipped = [], [], []
+    for env in ev.envs:
+        for policy, _ in [e for e in ev.entries if e[1] == env and not e[0].startswith(("sb3:", "bc:", "marl:"))]:
+            how = "expert" if ":" not in policy else "zero action"
+            recipe_rows.append(_cells(ev, policy, env, policy, how, "–"))
+        for r, dirs in ev.found:
             if r.evaluated_on != env:
                 continue
             validation = [_best_validation(d) for d in dirs]
             chosen = dirs[int(np.argmin([selection_key(v) for v in validation]))]
-            gains = [paired(rows, run[d].policy_name, own_anchor(run[d].policy_name), env) for d in dirs]
+            gains = [paired(ev.rows, ev.runs[d].policy_name, own_anchor(ev.runs[d].policy_name), env) for d in dirs]
             across = mean_ci(g[0] for g in gains)
-            for d, best in zip(dirs, validation):
-                spec = run[d].record
-                c = protocol_cells(rows, scores, run[d].policy_name, env)
-                per_run.append(f"| `{r.name}`{' (shipped)' if d == chosen else ''} | {spec['seed']} | {c['anchor']} "
-                               f"| {_validation_cell(best, spec.get('eval_episodes', '?'))} | {c['score']} "
-                               f"| {c['vs_ref']} | {c['vs_anchor']} | {c['worst']} | {spec['wall_time_s']:.0f} s |")
-            specs = [run[d].record for d in dirs]
+            run_rows += [_run_cells(ev, r, d, best, d == chosen, env) for d, best in zip(dirs, validation)]
+            specs = [ev.runs[d].record for d in dirs]
             algo = r.algo.upper() if r.algo != "bc" else "BC"
-            budget = f"{algo}, {int(specs[0].get('num_timesteps', r.timesteps)):,} steps, {np.mean([s['wall_time_s'] for s in specs]):.0f} s"
-            table.append(_row(rows, scores, run[chosen].policy_name, env,
-                              f"{r.label} (`zoo:{r.name}`, seed {run[chosen].record['seed']})", budget,
-                              f"{fmt_paired(*across)} ({len(dirs)} seeds)"))
-            if export:
-                _export(r, chosen, specs, rows, scores, env, episodes, across)
-    sources = sorted({rd.record.get("versions", {}).get("source", "not recorded") for rd in run.values()})
-    floor = [f"`{a}` on {env} {fmt_paired(*paired(rows, SCORE_HIGH, a, env))}" for a, env in entries
+            budget = (f"{algo}, {int(specs[0].get('num_timesteps', r.timesteps)):,} steps, "
+                      f"{np.mean([s['wall_time_s'] for s in specs]):.0f} s")
+            label = f"{r.label} (`zoo:{r.name}`, seed {ev.runs[chosen].record['seed']})"
+            recipe_rows.append(_cells(ev, ev.runs[chosen].policy_name, env, label, budget,
+                                      f"{fmt_paired(*across)} ({len(dirs)} seeds)"))
+            shipped.append(Shipped(r, chosen, specs, env, across))
+    sources = sorted({rd.record.get("versions", {}).get("source", "not recorded") for rd in ev.runs.values()})
+    floor = [f"`{a}` on {env} {fmt_paired(*paired(ev.rows, SCORE_HIGH, a, env))}" for a, env in ev.entries
              if a.startswith("anchor:")]
-    text = "\n".join(table) + (f"\n\n{episodes} test seeds (0-{episodes - 1}); training runs made at: "
-                               + "; ".join(sources) + ". `rg-mpc` itself against each anchor (the \"vs own "
-                               "anchor\" of a perfect clone of the expert): " + "; ".join(floor) + ".")
+    return ZooTables(recipe_rows, run_rows, shipped, sources, floor, ev.episodes)
+
+
+_RECIPE_COLUMNS = ("label", "env", "how", "anchor", "cost", "score", "vs_ref", "vs_anchor", "across")
+_RUN_COLUMNS = ("recipe", "seed", "anchor", "validation", "score", "vs_ref", "vs_anchor", "worst", "wall_time")
+
+
+def _cells(ev: ZooEvaluation, policy: str, env: str, label: str, how: str, across: str) -> dict[str, str]:
+    """One row of the recipe table: an expert, an anchor or a recipe's shipped run."""
+    return {"label": label, "env": env, "how": how, **protocol_cells(ev.rows, ev.scores, policy, env), "across": across}
+
+
+def _run_cells(ev: ZooEvaluation, r: Recipe, run_dir: Path, best: dict, chosen: bool, env: str) -> dict[str, str]:
+    """One row of the per-run table."""
+    spec = ev.runs[run_dir].record
+    c = protocol_cells(ev.rows, ev.scores, ev.runs[run_dir].policy_name, env)
+    return {"recipe": f"`{r.name}`{' (shipped)' if chosen else ''}", "seed": str(spec["seed"]),
+            "anchor": c["anchor"], "validation": _validation_cell(best, spec.get("eval_episodes", "?")),
+            "score": c["score"], "vs_ref": c["vs_ref"], "vs_anchor": c["vs_anchor"], "worst": c["worst"],
+            "wall_time": f"{spec['wall_time_s']:.0f} s"}
+
+
+def render_zoo(tables: ZooTables) -> tuple[str, str]:
+    """Stage 3: the recipe table (with its note on seeds, sources and the expert against each
+    anchor) and the per-run table, as Markdown."""
+    head = [f"| agent | env | algorithm, budget per run | acts around | control cost | score v{SCORE_VERSION} [95 %] "
+            "| vs rg-mpc (paired) | vs own anchor (paired) | vs own anchor, mean over training seeds |", "|" + "---|" * 9]
+    runs_head = [f"| recipe | training seed | acts around | selected validation: vs rg-mpc (cost, episodes) "
+                 f"| score v{SCORE_VERSION} | vs rg-mpc (paired) | vs own anchor (paired) | worst test seed vs own "
+                 "anchor | wall time |", "|" + "---|" * 9]
+    lines = head + ["| " + " | ".join(row[k] for k in _RECIPE_COLUMNS) + " |" for row in tables.recipe_rows]
+    n = tables.episodes
+    table = "\n".join(lines) + (f"\n\n{n} test seeds (0-{n - 1}); training runs made at: " + "; ".join(tables.sources)
+                                + ". `rg-mpc` itself against each anchor (the \"vs own anchor\" of a perfect clone of "
+                                "the expert): " + "; ".join(tables.floor) + ".")
+    per_run = runs_head + ["| " + " | ".join(row[k] for k in _RUN_COLUMNS) + " |" for row in tables.run_rows]
+    return table, "\n".join(per_run)
+
+
+def export_zoo(tables: ZooTables, ev: ZooEvaluation, target: Path = ZOO_DIR) -> list[Path]:
+    """Stage 4: each recipe's shipped run as ``target/<name>`` (policy weights, statistics, agent.json)."""
+    return [_export(s, ev, Path(target)) for s in tables.shipped]
+
+
+def build_zoo(runs: Path, out_doc: Path, readme: Path | None, workers: int = 2, progress: bool = True,
+              episodes: int = TEST_EPISODES, export: bool = True, target: Path = ZOO_DIR) -> str:
+    """Evaluate every finished recipe run by the learned protocol, write the tables (``out_doc``,
+    its learning-curve plot, the README block), export each recipe's validation-selected run into
+    ``target``; returns the recipe table (Markdown). The four stages: :func:`evaluate_zoo`,
+    :func:`zoo_tables`, :func:`render_zoo` (and :func:`plot_curves`), :func:`export_zoo`."""
+    ev = evaluate_zoo(finished_runs(Path(runs)), episodes, workers, progress)
+    write_rows(ev.rows, out_doc.parent / "learned" / "episodes.csv")
+    tables = zoo_tables(ev)
+    table, per_run = render_zoo(tables)
     out_doc.parent.mkdir(parents=True, exist_ok=True)
     reference = {env: evaluate([("rg-mpc", env, ScenarioConfig(), VALIDATION_SEED_BASE + i, {}) for i in range(10)],
-                               workers=workers, progress=False) for env in envs}
-    _plot_curves(found, {env: float(np.mean([r["control_cost"] for r in rs])) for env, rs in reference.items()},
-                 out_doc.parent / "learned" / "curves.png")
-    out_doc.write_text(_document(text, "\n".join(per_run), episodes))
+                               workers=workers, progress=False) for env in ev.envs}
+    plot_curves(ev.found, {env: float(np.mean([r["control_cost"] for r in rs])) for env, rs in reference.items()},
+                out_doc.parent / "learned" / "curves.png")
+    out_doc.write_text(_document(table, per_run, episodes))
     if readme is not None:
-        _replace_block(readme, text)
-    return text
+        _replace_block(readme, table)
+    if export:
+        export_zoo(tables, ev, target)
+    return table
 
 
-def _row(rows, scores, policy: str, env: str, label: str, how: str, across: str) -> str:
-    """One row of the recipe table: an expert, an anchor or a recipe's shipped run."""
-    c = protocol_cells(rows, scores, policy, env)
-    return (f"| {label} | {env} | {how} | {c['anchor']} | {c['cost']} | {c['score']} | {c['vs_ref']} "
-            f"| {c['vs_anchor']} | {across} |")
-
-
-def _plot_curves(found, reference: dict[str, float], path: Path) -> None:
+def plot_curves(found: list[tuple[Recipe, list[Path]]], reference: dict[str, float], path: Path) -> None:
     """Validation cost against training steps, every seed of every recipe, with rg-mpc's cost on
     the same validation seeds."""
 
@@ -255,26 +228,28 @@ def _validation_cell(best: dict[str, float], episodes: int) -> str:
     return f"{vs} ({fmt_num(best['control_cost'])}, {episodes})"
 
 
-def _export(r: Recipe, chosen: Path, specs, rows, scores, env: str, episodes: int, across) -> None:
-    policy = read_run(chosen).policy_name
+def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
+    r, run = s.recipe, ev.runs[s.run_dir]
+    policy, episodes = run.policy_name, ev.episodes
     anchor = own_anchor(policy)
     record = {
-        "name": r.name, "label": r.label, "trained_on": r.env_id, "evaluated_on": env,
-        "command": r.command(), "budget_steps": int(specs[0].get("num_timesteps", r.timesteps)),
-        "training_seeds": [s["seed"] for s in specs], "shipped_seed": read_run(chosen).record["seed"],
+        "name": r.name, "label": r.label, "trained_on": r.env_id, "evaluated_on": s.env,
+        "command": r.command(), "budget_steps": int(s.specs[0].get("num_timesteps", r.timesteps)),
+        "training_seeds": [spec["seed"] for spec in s.specs], "shipped_seed": run.record["seed"],
         "selected_on": "lowest paired relative difference against rg-mpc on the validation seeds (500000 + i), "
                        "never the test seeds",
-        "wall_time_s": [round(s["wall_time_s"], 1) for s in specs],
+        "wall_time_s": [round(spec["wall_time_s"], 1) for spec in s.specs],
         "benchmark": {"test_seeds": f"0-{episodes - 1}", "reference": SCORE_HIGH, "anchor": anchor,
-                      "score_version": SCORE_VERSION, "score": list(scores[("default", env, policy)][:3]),
-                      "shipped_vs_reference": list(paired(rows, policy, SCORE_HIGH, env)),
-                      "shipped_vs_anchor": list(paired(rows, policy, anchor, env)),
-                      "across_training_seeds_vs_anchor": list(across)},
+                      "score_version": SCORE_VERSION, "score": list(ev.scores[("default", s.env, policy)][:3]),
+                      "shipped_vs_reference": list(paired(ev.rows, policy, SCORE_HIGH, s.env)),
+                      "shipped_vs_anchor": list(paired(ev.rows, policy, anchor, s.env)),
+                      "across_training_seeds_vs_anchor": list(s.across)},
     }
-    target = ZOO_DIR / r.name
+    target = target_dir / r.name
     if target.exists():
         shutil.rmtree(target)
-    export_agent(chosen, target, record)
+    export_agent(s.run_dir, target, record)
+    return target
 
 
 def _document(table: str, per_run: str, episodes: int) -> str:

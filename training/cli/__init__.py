@@ -1,0 +1,106 @@
+"""The ``lawn`` command line: one module per subcommand (its parser builder ``add`` and its
+``run``), the shared flags as parent parsers and one policy-name type (:mod:`.common`).
+
+``lawn demo``: one seeded episode of ``lawn/Joint-v0`` under a scripted policy.
+``lawn evaluate``: any registered policy on seeded episodes, one row per episode (CSV/JSON).
+``lawn benchmark``: the expert and the baselines on the same seeds, a table and a bar plot;
+``--protocol learned`` the learned agents beside their anchors on 100 test seeds, ``--suite`` the
+task suite's leaderboard (normalized scores, training/score.py).
+``lawn dataset create``: a policy's episodes as a Minari dataset.
+``lawn gap``: per-slot optimality gap of planners against the global reference, and the AO's
+convergence at chosen slots.
+``lawn train``: Stable-Baselines3 agents, behaviour cloning and multi-agent training (rl extra).
+``lawn zoo``: the shipped learned agents (list, train their recipes, build the table).
+``lawn sweep``: a grid of config fields x policies x seeds into a tidy, resumable table.
+``lawn figures``: the paper's experiments from tables (running missing sweeps).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+import lawn_env
+from agents.errors import MissingExtra
+
+from . import benchmark, dataset, demo, evaluate, figures, gap, sweep, train, zoo
+from .common import Parents
+
+__all__ = ["main", "build_parser", "COMMANDS"]
+
+#: The subcommands in the order ``lawn --help`` lists them.
+COMMANDS = (demo, evaluate, benchmark, train, zoo, dataset, sweep, figures, gap)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="lawn", description="Wireless predictive control over low-altitude networks.")
+    parser.add_argument("--version", action="version", version=f"lawn {lawn_env.__version__}")
+    parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
+    sub = parser.add_subparsers(dest="command", required=True)
+    parents = Parents()
+    for command in COMMANDS:
+        command.add(sub, parents)
+    return parser
+
+
+#: Commands whose --out is a file (its folder must be writable) or a folder, checked before any work.
+_FILE_OUT = ("evaluate", "sweep")
+_DIR_OUT = ("demo", "benchmark", "gap", "figures")
+
+
+def _check_out(command: str, out: str | None) -> None:
+    """``--out`` must be writable before hours are spent computing what goes there."""
+    if out is None or command not in _FILE_OUT + _DIR_OUT:
+        return
+    path = Path(out)
+    folder = path.parent if command in _FILE_OUT else path
+    if command in _FILE_OUT and path.is_dir():
+        raise ValueError(f"--out {str(path)!r} is a directory; give a file")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".lawn-write-test-{os.getpid()}"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise ValueError(f"--out {str(path)!r}: cannot write to {str(folder)!r} ({exc.strerror or exc})") from None
+
+
+def _one_line(exc: BaseException) -> str:
+    """A config validation error as ``field: message (got value)``, several joined by ``; ``."""
+    from pydantic import ValidationError
+
+    if isinstance(exc, ValidationError):
+        parts = []
+        for err in exc.errors():
+            field = ".".join(str(p) for p in err["loc"]) or exc.title
+            parts.append(f"{field}: {err['msg']} (got {err['input']!r})" if "input" in err else f"{field}: {err['msg']}")
+        return f"invalid {exc.title}: " + "; ".join(parts)
+    return " ".join(str(exc).split("\n")) if str(exc) else type(exc).__name__
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The ``lawn`` command. Errors print one line and exit non-zero (2: bad input, 3: a missing
+    extra, 130: interrupted, 1: anything else, which is a bug); ``--debug`` shows the traceback."""
+    args = build_parser().parse_args(argv)
+    try:
+        _check_out(args.command, getattr(args, "out", None))
+        return args.func(args)
+    except BaseException as exc:
+        if args.debug or isinstance(exc, SystemExit):
+            raise
+        if isinstance(exc, KeyboardInterrupt):
+            print(f"lawn {args.command}: interrupted", file=sys.stderr)
+            return 130
+        if isinstance(exc, MissingExtra):
+            print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
+            return 3
+        if isinstance(exc, (ValueError, TypeError, OSError)):  # bad values, names, files: one clear line
+            print(f"lawn {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+            return 2
+        if isinstance(exc, Exception):
+            print(f"lawn {args.command}: internal error: {type(exc).__name__}: {exc} "
+                  "(rerun with --debug for the traceback, and please report it)", file=sys.stderr)
+            return 1
+        raise

@@ -1,0 +1,7 @@
+"""``python -m training.cli``: the ``lawn`` command."""
+
+import sys
+
+from . import main
+
+sys.exit(main())

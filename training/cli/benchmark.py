@@ -1,0 +1,128 @@
+"""``lawn benchmark``: the expert and the baselines on the same seeds, a table and a bar plot;
+``--protocol learned``: the learned agents beside their anchors on the 100 test seeds; ``--suite``:
+the task suite's leaderboard (normalized scores, :mod:`training.score`)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import lawn_env
+from lawn_env import presets
+
+from .common import Parents, config_of, count, included, policy_help, policy_name
+
+
+def add(sub: argparse._SubParsersAction, p: Parents) -> None:
+    from agents import BENCHMARK_POLICIES
+
+    bm = sub.add_parser("benchmark", parents=p("workers", "quiet", "seed", "config"),
+                        help="the expert and the baselines on the same seeded episodes; --protocol learned and "
+                             "--suite: the learned agents' protocol and the task suite's leaderboard",
+                        epilog="--protocol learned and --suite fix the test seeds (0..N-1) and the scenario; "
+                               "--seed, --preset, --set and --env belong to the paper protocol.")
+    bm.add_argument("--policies", nargs="+", default=None, type=policy_name,
+                    help=policy_help() + f" (default: {' '.join(BENCHMARK_POLICIES)}; with --protocol learned every "
+                         "shipped agent with its anchor and the references; with --suite every expert, baseline, "
+                         "shipped agent and the stake and distance anchors)")
+    bm.add_argument("--protocol", choices=["paper", "learned"], default="paper",
+                    help="paper (default): the policies on --episodes seeds of one scenario; learned: agents "
+                         "beside rg-mpc, epa and their own anchors on the 100 test seeds, with the normalized score")
+    bm.add_argument("--suite", action="store_true",
+                    help="the task suite (lawn_env.presets.SUITE): normalized score of every policy on every task")
+    bm.add_argument("--tasks", nargs="+", default=None, choices=presets.names(), metavar="TASK",
+                    help="--suite: only these tasks (presets)")
+    bm.add_argument("--docs", default=None, metavar="DIR", help="--suite: also write DIR/LEADERBOARD.md")
+    bm.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
+                    help="the env of every policy (default: lawn/Joint-v0; --protocol learned and --suite run each "
+                         "policy on its own env)")
+    bm.add_argument("--include", nargs="*", default=[], metavar="DIR",
+                    help="trained run directories (lawn train) to add to the comparison")
+    bm.add_argument("--episodes", type=count, default=None,
+                    help="seeds from --seed (default: 20; 100 test seeds for --protocol learned and --suite)")
+    bm.add_argument("--out", default="runs/benchmark", help="output directory (default: %(default)s)")
+    bm.set_defaults(func=run, seed=None)  # None: the paper protocol's 0, refused by the other protocols
+
+
+def run(args: argparse.Namespace) -> int:
+    from agents import BENCHMARK_POLICIES, make_policy
+
+    from ..benchmark import run_benchmark
+
+    if args.suite or args.protocol == "learned":
+        _check_fixed_protocol(args)
+        return _suite(args) if args.suite else _learned(args)
+    if args.tasks or args.docs:
+        raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
+    args.env = args.env or "lawn/Joint-v0"
+    args.seed = 0 if args.seed is None else args.seed
+    cfg = config_of(args)
+    args.policies = list(args.policies or BENCHMARK_POLICIES) + included(args.include)
+    for name in args.policies:
+        make_policy(name, cfg, env_id=args.env)  # fail fast
+    args.episodes = args.episodes or 20
+    run_benchmark(args.policies, args.env, cfg, args.episodes, args.seed, Path(args.out), workers=args.workers,
+                  progress=not args.quiet)
+    print(f"lawn benchmark: {args.env}, preset {args.preset}, K={cfg.num_agvs}, {args.episodes} seeds from "
+          f"{args.seed}; mean ± 95 % interval")
+    print((Path(args.out) / "summary.md").read_text().rstrip())
+    print(f"wrote {args.out}/episodes.csv, summary.csv, summary.md, benchmark.png")
+    return 0
+
+
+def _check_fixed_protocol(args: argparse.Namespace) -> None:
+    """``--protocol learned`` and ``--suite`` fix the scenario, the seeds and each policy's env."""
+    mode = "--suite" if args.suite else "--protocol learned"
+    if args.suite and args.protocol == "learned":
+        raise ValueError("--suite and --protocol learned are two protocols: give one (the suite already runs the "
+                         "shipped agents on the 100 test seeds of every task)")
+    if args.preset != "default" or args.set:
+        hint = "choose tasks with --tasks" if args.suite else "it runs the default task; --suite runs the other tasks"
+        raise ValueError(f"{mode} fixes the scenario: drop --preset {args.preset} / --set ({hint})")
+    if args.seed is not None:
+        raise ValueError(f"--seed {args.seed}: {mode} fixes the test seeds (0 to --episodes - 1; validation and "
+                         "training seeds are disjoint from them)")
+    if args.env is not None:
+        raise ValueError(f"--env {args.env}: {mode} runs each policy on its own env (a learned agent on the env it "
+                         "was trained on, experts, baselines and anchors on lawn/Joint-v0)")
+    if not args.suite and (args.tasks or args.docs):
+        raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
+
+
+def _suite(args: argparse.Namespace) -> int:
+    from lawn_env.presets import SUITE
+
+    from ..leaderboard import run_suite, skipped_summary, suite_policies, suite_table, write_leaderboard
+    from ..protocol import TEST_EPISODES
+
+    episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
+    tasks = args.tasks or list(SUITE)
+    policies = list(args.policies or suite_policies()) + included(args.include)
+    rows, skipped, seconds = run_suite(policies, tasks, episodes, out, workers=args.workers, progress=not args.quiet)
+    board, refs = suite_table(rows, policies, tasks, skipped)
+    print(f"lawn benchmark --suite: {len(policies)} policies x {len(tasks)} tasks, {episodes} seeds each, "
+          f"{seconds / 60:.1f} min; normalized score v1 [95 %] (0 = epa, 100 = rg-mpc)")
+    print(board)
+    for line in skipped_summary(skipped):
+        print(f"  n/a {line}")
+    (out / "board.md").write_text(board + "\n")
+    (out / "references.md").write_text(refs + "\n")
+    print(f"wrote {out}/episodes.csv, board.md (the scores) and references.md (the references' costs)")
+    if args.docs:
+        doc = write_leaderboard(Path(args.docs) / "LEADERBOARD.md", board, refs, skipped, episodes, seconds,
+                                args.workers, tasks)
+        print(f"wrote {doc}")
+    return 0
+
+
+def _learned(args: argparse.Namespace) -> int:
+    from ..leaderboard import run_learned_protocol
+    from ..protocol import TEST_EPISODES
+
+    episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
+    table = run_learned_protocol(list(args.policies or []) + included(args.include), out, episodes,
+                                 workers=args.workers, progress=not args.quiet)
+    print(f"lawn benchmark --protocol learned: test seeds 0-{episodes - 1}, full unmodified episodes")
+    print(table)
+    print(f"wrote {out}/episodes.csv and {out}/summary.md")
+    return 0

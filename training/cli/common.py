@@ -1,0 +1,111 @@
+"""What every ``lawn`` subcommand shares: the parent parsers of the shared flags (``--workers``,
+``--quiet``, ``--seed``, ``--preset``/``--set``, ``--debug``), the argument types (counts, seeds,
+policy names: one type for every subcommand), ``KEY=VALUE`` overrides and the config they make."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from typing import Callable
+
+import lawn_env
+from agents.runs import read_run
+from lawn_env import presets
+
+__all__ = ["Parents", "parents", "count", "seed", "policy_name", "parse_overrides", "config_of", "included"]
+
+
+def _int_at_least(low: int) -> Callable[[str], int]:
+    """argparse type: an integer >= ``low``, with the bound in the message."""
+
+    def parse(value: str) -> int:
+        try:
+            number = int(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{value!r} is not an integer") from None
+        if number < low:
+            raise argparse.ArgumentTypeError(f"{number} must be >= {low}")
+        return number
+
+    parse.__name__ = f"integer >= {low}"
+    return parse
+
+
+#: argparse types: a count (>= 1) and a seed (>= 0).
+count, seed = _int_at_least(1), _int_at_least(0)
+
+
+def policy_name(value: str) -> str:
+    """argparse type: a registered policy or a learned agent's name (``zoo:``, ``sb3:``, ...)."""
+    from agents.learned import learned_name_forms
+    from agents.policies import is_policy_name, policy_names
+
+    if not is_policy_name(value):
+        raise argparse.ArgumentTypeError(
+            f"unknown policy {value!r}; valid: {', '.join(policy_names())}, or {learned_name_forms()}")
+    return value
+
+
+def policy_help(prefix: str = "") -> str:
+    """The policy names a ``--policy`` flag takes, for its help."""
+    from agents import policy_names
+    from agents.learned import learned_name_forms
+
+    return f"{prefix}{', '.join(policy_names())}, or {learned_name_forms(' / ')} for learned agents"
+
+
+class Parents:
+    """The parent parsers of the shared flags (argparse ``parents=``), built once per parser."""
+
+    def __init__(self) -> None:
+        self.debug = argparse.ArgumentParser(add_help=False)  # --debug also after the subcommand
+        self.debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                                help="on an error, show the traceback")
+        self.workers = argparse.ArgumentParser(add_help=False)
+        self.workers.add_argument("--workers", type=count, default=min(2, os.cpu_count() or 1),
+                                  help="processes (default: %(default)s)")
+        self.quiet = argparse.ArgumentParser(add_help=False)
+        self.quiet.add_argument("--quiet", action="store_true", help="no progress bar")
+        self.seed = argparse.ArgumentParser(add_help=False)
+        self.seed.add_argument("--seed", type=seed, default=0,
+                               help="first seed; episode i uses seed + i (default: 0)")
+        self.config = argparse.ArgumentParser(add_help=False)
+        self.config.add_argument("--preset", default="default", choices=presets.names(),
+                                 help="scenario preset (default: %(default)s)")
+        self.config.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                                 help="config override with a dotted key, e.g. --set channel.blocklength=256 "
+                                      "(repeatable)")
+
+    def __call__(self, *names: str) -> list[argparse.ArgumentParser]:
+        """``--debug`` and the named shared flags' parents (``"workers"``, ``"quiet"``, ``"seed"``, ``"config"``)."""
+        return [self.debug] + [getattr(self, n) for n in names]
+
+
+def parents() -> Parents:
+    return Parents()
+
+
+def parse_overrides(items: list[str], flag: str = "--set") -> dict:
+    """``key=value`` pairs with dotted keys; values parsed as JSON when possible."""
+    out = {}
+    for item in items:
+        key, _, raw = item.partition("=")
+        if not _ or not key.strip():
+            raise ValueError(f"{flag} expects KEY=VALUE (e.g. channel.blocklength=256), got {item!r}")
+        try:
+            out[key] = json.loads(raw)
+        except json.JSONDecodeError:
+            out[key] = raw
+    return out
+
+
+def config_of(args: argparse.Namespace) -> lawn_env.ScenarioConfig:
+    """The scenario of ``--preset`` with the ``--set`` overrides."""
+    cfg = presets.get(args.preset)
+    return cfg.override(parse_overrides(args.set)) if args.set else cfg
+
+
+def included(paths: list[str]) -> list[str]:
+    """Policy names for trained run directories: marl:, bc: or sb3: by what run.json says."""
+    return [read_run(path, "--include").policy_name for path in paths]

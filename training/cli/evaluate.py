@@ -1,0 +1,58 @@
+"""``lawn evaluate``: any registered policy on seeded episodes, one row per episode (CSV/JSON),
+with its normalized score."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import lawn_env
+
+from .common import Parents, config_of, count, parse_overrides, policy_help, policy_name
+
+
+def add(sub: argparse._SubParsersAction, p: Parents) -> None:
+    ev = sub.add_parser("evaluate", parents=p("workers", "quiet", "seed", "config"),
+                        help="run a policy on seeded episodes and write one row per episode")
+    ev.add_argument("--policy", required=True, type=policy_name, help=policy_help())
+    ev.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
+                    help="default: lawn/Joint-v0, or the env a trained agent was trained on")
+    ev.add_argument("--episodes", type=count, default=10)
+    ev.add_argument("--out", required=True, help="rows file, .csv or .json")
+    ev.add_argument("--policy-arg", action="append", default=[], metavar="KEY=VALUE",
+                    help="policy setting, e.g. --policy-arg tolerance=1e-3 (repeatable)")
+    ev.add_argument("--no-score", action="store_true",
+                    help="skip the normalized score (which runs epa and rg-mpc on the same seeds)")
+    ev.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from agents import make_policy
+
+    from ..evaluate import evaluate, format_table, summarize, write_rows
+    from ..score import SCORE_HIGH, SCORE_LOW, scores_by_policy
+
+    cfg = config_of(args)
+    out = Path(args.out)
+    if out.suffix.lower() not in (".csv", ".json"):
+        raise ValueError(f"--out {args.out!r}: the extension must be .csv or .json")
+    kwargs = parse_overrides(args.policy_arg, "--policy-arg")
+    policy = make_policy(args.policy, cfg, env_id=args.env, **kwargs)  # fail fast on bad names and settings
+    args.env = args.env or policy.env_id
+    seeds = [args.seed + i for i in range(args.episodes)]
+    # a reference run with --policy-arg is another policy under the reference's name: no score for it
+    scored = not args.no_score and not (kwargs and args.policy in (SCORE_HIGH, SCORE_LOW))
+    references = [p for p in (SCORE_HIGH, SCORE_LOW) if p != args.policy] if scored else []
+    tasks = [(name, args.env, cfg, s, kwargs if name == args.policy else {}) for name in [args.policy, *references]
+             for s in seeds]
+    rows = evaluate(tasks, workers=args.workers, progress=not args.quiet, desc=args.policy)
+    mine = [r for r in rows if r["policy"] == args.policy]
+    write_rows(mine, out)
+    scores = None if not scored else {
+        p: score for (_, _, p), score in scores_by_policy(rows).items() if p == args.policy}
+    note = f" (score: {SCORE_LOW} and {SCORE_HIGH} on the same seeds)" if scored else \
+        "" if args.no_score else f" (no score: --policy-arg changes the reference {args.policy} itself)"
+    print(f"lawn evaluate: {args.policy} on {args.env}, {args.episodes} episodes from seed {args.seed}{note}")
+    print(format_table(summarize(mine), scores=scores))
+    print(f"wrote {len(mine)} rows to {out}")
+    return 0

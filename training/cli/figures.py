@@ -1,0 +1,46 @@
+"""``lawn figures``: the paper's experiments from tidy tables (running missing sweeps), their
+claims' results, and with ``--docs`` the reproduction page."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from .common import Parents
+
+
+def add(sub: argparse._SubParsersAction, p: Parents) -> None:
+    from ..experiments import EXPERIMENTS
+
+    fg = sub.add_parser("figures", parents=p("workers", "quiet"),
+                        help="the paper's experiments from tidy tables (running missing sweeps)")
+    fg.add_argument("names", nargs="*", choices=[[]] + list(EXPERIMENTS), metavar="NAME",
+                    help=f"figures to make (default: all): {', '.join(EXPERIMENTS)}")
+    fg.add_argument("--out", default="runs/figures", help="output directory (default: %(default)s)")
+    fg.add_argument("--quick", action="store_true", help="reduced seeds, grids and episode length (tests)")
+    fg.add_argument("--docs", default=None, metavar="DIR",
+                    help="also write DIR/REPRODUCTION.md and copy the figures to DIR/figures/reproduction/")
+    fg.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..experiments import check_claims, format_claims, make_figures, write_claims
+
+    if args.docs and args.quick:
+        raise ValueError("--docs writes the published reproduction; it takes the full set, not --quick")
+    start = time.perf_counter()
+    out = Path(args.out)
+    timings = make_figures(args.names, out, quick=args.quick, workers=args.workers, progress=not args.quiet)
+    for name, seconds in timings.items():
+        print(f"  {name:<12}{seconds:8.1f} s   {args.out}/{name}.png, .pdf, data/{name}.csv")
+    print(f"lawn figures: {len(timings)} figures in {time.perf_counter() - start:.1f} s"
+          + (" (--quick)" if args.quick else ""))
+    claims = check_claims(out)  # every experiment whose tables are in OUT: what the reproduction page reads
+    write_claims(claims, out)
+    print(format_claims([c for c in claims if not args.names or c.figure in args.names]))
+    if args.docs:
+        from ..reproduction import write_reproduction
+
+        print(f"wrote {write_reproduction(out, Path(args.docs))}")
+    return 0

@@ -1,0 +1,104 @@
+"""``lawn train``: Stable-Baselines3 agents, behaviour cloning and multi-agent training (rl extra)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from agents.errors import MissingExtra
+
+from .common import Parents, config_of, count, parse_overrides, seed
+
+
+def add(sub: argparse._SubParsersAction, p: Parents) -> None:
+    from ..train import ALGOS, TRAIN_ENV_IDS
+
+    tr = sub.add_parser("train", parents=p("workers", "quiet", "seed", "config"),
+                        help="train a Stable-Baselines3 agent (or behaviour cloning) on a lawn env")
+    tr.add_argument("--algo", choices=ALGOS)
+    tr.add_argument("--env", choices=TRAIN_ENV_IDS, help="lawn/Parallel-v0 is the multi-agent PettingZoo env")
+    tr.add_argument("--timesteps", type=count, help="environment steps (for bc: expert transitions)")
+    tr.add_argument("--seeds", type=seed, nargs="+", metavar="SEED",
+                    help="train one run per seed into OUT/seed-<s> (process pool, --workers) and summarize across seeds")
+    tr.add_argument("--backend", choices=["process", "ray"], default="process",
+                    help="where --seeds runs go: a process pool (default) or Ray, as lawn sweep")
+    tr.add_argument("--interface", default=None, choices=["rl", "v0"],
+                    help="the RL interface (default: the hyperparameter file's, rl) or the plain v0 interface")
+    tr.add_argument("--out", help="run directory")
+    tr.add_argument("--n-envs", type=count, default=None, help="parallel environments (default: the hyperparameter file)")
+    tr.add_argument("--hp", action="append", default=[], metavar="KEY=VALUE",
+                    help="hyperparameter override, e.g. --hp learning_rate=1e-4 (repeatable)")
+    tr.add_argument("--eval-every", type=count, default=10000,
+                    help="steps between validations (full unmodified episodes, realized control cost)")
+    tr.add_argument("--eval-episodes", type=count, default=5, help="validation episodes (seeds 500000 + i)")
+    tr.add_argument("--checkpoint-every", type=count, default=10000, help="steps between checkpoints")
+    tr.add_argument("--init-from", metavar="DIR", help="start from a behaviour-cloned run of the same algorithm")
+    tr.add_argument("--resume", metavar="DIR", help="continue an interrupted run from its last checkpoint")
+    tr.add_argument("--vec", choices=["dummy", "native"], default="dummy",
+                    help="SB3 DummyVecEnv of single envs (default) or lawn's batched vector env (Joint-v0, "
+                         "Comm-v0 and their RL ids, any --interface)")
+    tr.add_argument("--dataset", metavar="ID", help="bc: clone the episodes of this Minari dataset (lawn dataset create) "
+                                                     "instead of live expert rollouts; --timesteps caps the transitions")
+    tr.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        import stable_baselines3  # noqa: F401
+        import supersuit  # noqa: F401
+    except ImportError as exc:
+        raise MissingExtra(f"training needs the rl extra ({exc.name} is missing): bash scripts/setup.sh full, "
+                           "or pip install torch==2.13.0 && pip install -e '.[rl]'") from None
+    if args.resume:
+        return _resume(args)
+    missing = [flag for flag, value in (("--algo", args.algo), ("--env", args.env), ("--out", args.out)) if not value]
+    if missing:
+        raise ValueError(f"lawn train needs {', '.join(missing)} (or --resume DIR)")
+    if args.timesteps is None:
+        raise ValueError("lawn train needs --timesteps")
+    kwargs = dict(algo=args.algo, env_id=args.env, config=config_of(args), timesteps=args.timesteps,
+                  hp_overrides=parse_overrides(args.hp, "--hp"), n_envs=args.n_envs, eval_every=args.eval_every,
+                  eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every,
+                  init_from=Path(args.init_from) if args.init_from else None, interface=args.interface,
+                  vec=args.vec, dataset=args.dataset)
+    if args.seeds:
+        return _seeds(args, kwargs)
+    from ..train import train
+
+    _report(train(seed=args.seed, out_dir=Path(args.out), progress=not args.quiet, **kwargs), args.out)
+    return 0
+
+
+def _resume(args: argparse.Namespace) -> int:
+    from ..train import resume
+
+    summary = resume(Path(args.resume), timesteps=args.timesteps, progress=not args.quiet)
+    start = summary["resumed_from"]
+    print(f"lawn train: resumed {args.resume} from its checkpoint at {start} steps" if start is not None else
+          f"lawn train: {args.resume} had no checkpoint; trained it again from the start")
+    _report(summary, args.resume)
+    return 0
+
+
+def _seeds(args: argparse.Namespace, kwargs: dict) -> int:
+    from ..train import train_seeds
+
+    result = train_seeds(args.seeds, Path(args.out), workers=args.workers, progress=not args.quiet,
+                         backend=args.backend, **kwargs)
+    print(f"lawn train: {args.algo} on {args.env}, seeds {args.seeds}")
+    for r in result["runs"]:
+        print(f"  seed {r['seed']}: best validation cost {r['best_validation_cost']:.6g} "
+              f"at {r['best_at_timesteps']} steps, {r['timesteps']} steps in {r['wall_time_s']:.0f} s")
+    print(f"  across seeds: {result['best_validation_cost_mean']:.6g} ± "
+          f"{result['best_validation_cost_ci95']:.3g} (95 % interval)")
+    print(f"wrote {args.out}/seed-*/ and {args.out}/seeds.json")
+    return 0
+
+
+def _report(summary: dict, out: str) -> None:
+    print(f"lawn train: {summary['algo']} on {summary['env']}, seed {summary['seed']}, "
+          f"{summary['timesteps']} steps in {summary['wall_time_s']:.1f} s")
+    for key in ("final_validation_cost", "best_validation_cost", "best_at_timesteps", "bc_loss_first", "bc_loss_last"):
+        if summary.get(key) is not None:
+            print(f"  {key:<24}{summary[key]:.6g}")
+    print(f"wrote {out}/ (model.zip, run.json, config.json, hyperparams.json, learning curve, summary.md)")

@@ -1,0 +1,45 @@
+"""``lawn zoo``: the shipped learned agents: list them, train their recipes, benchmark and export."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from agents.errors import MissingExtra
+
+from .common import Parents
+
+#: Where ``lawn zoo build`` exports the agents.
+ZOO_HINT = "agents/zoo/<name>/ (policy.zip, normalizer.npz, agent.json)"
+
+
+def add(sub: argparse._SubParsersAction, p: Parents) -> None:
+    zo = sub.add_parser("zoo", parents=p("workers", "quiet"),
+                        help="shipped learned agents: list them, train their recipes, benchmark and export")
+    zo.add_argument("action", nargs="?", default="list", choices=["list", "train", "build"])
+    zo.add_argument("--runs", default="runs/agents", help="training runs, one folder per recipe (default: %(default)s)")
+    zo.add_argument("--only", nargs="+", metavar="NAME", help="train only these recipes")
+    zo.add_argument("--doc", default="docs/LEARNED.md", help="build: the table's document (default: %(default)s)")
+    zo.add_argument("--readme", default="README.md", help="build: README whose learned-agents block is replaced")
+    zo.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..zoo import build_zoo, format_zoo_list, train_recipes
+
+    if args.action == "list":
+        print(format_zoo_list())
+        return 0
+    try:
+        import stable_baselines3  # noqa: F401
+    except ImportError:
+        raise MissingExtra("lawn zoo train/build need the rl extra: bash scripts/setup.sh full") from None
+    if args.action == "train":
+        dirs = train_recipes(Path(args.runs), args.only, workers=args.workers, progress=not args.quiet)
+        print(f"lawn zoo train: {len(dirs)} runs in {args.runs}")
+        return 0
+    table = build_zoo(Path(args.runs), Path(args.doc), Path(args.readme) if args.readme else None,
+                      workers=args.workers, progress=not args.quiet)
+    print(table)
+    print(f"wrote {args.doc}" + (f", the table in {args.readme}" if args.readme else "") + f" and {ZOO_HINT}")
+    return 0

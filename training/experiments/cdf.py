@@ -1,0 +1,100 @@
+"""The CDF of tracking RMSE over seeds under power budgets (the paper's CDF figure)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..tables import fmt_paired, paired_difference, verdict
+from .base import (
+    EXPERTS,
+    QUICK_SET,
+    Claim,
+    Experiment,
+    by_seed,
+    cell,
+    label_axes,
+    new_figure,
+    paired_claim,
+    pick,
+    save,
+    seeds,
+    spec,
+    values,
+)
+
+
+def _cdf_sweeps(quick):
+    return {
+        "cdf": spec(
+            "cdf",
+            {"power_budget_dbw": pick(quick, [-30.0, -25.0, -20.0, -15.0], [-30.0, -15.0])},
+            EXPERTS,
+            seeds(quick),
+            preset="paper-nominal",
+            set_=QUICK_SET if quick else {},
+        )
+    }
+
+
+def _cdf_plot(tables, path: Path) -> None:
+    rows = tables["cdf"]
+    fig = new_figure()
+    ax = fig.add_subplot(111)
+    for i, p in enumerate(values(rows, "power_budget_dbw")):
+        for policy in EXPERTS:
+            vals = np.sort(
+                [cell(r, "rmse_m") for r in rows if r["policy"] == policy and float(r["power_budget_dbw"]) == p]
+            )
+            if vals.size:
+                ax.step(
+                    vals,
+                    np.arange(1, vals.size + 1) / vals.size,
+                    where="post",
+                    color=f"C{i}",
+                    ls="-" if policy == "rg-mpc" else "--",
+                    label=f"{policy}, {p:g} dBW",
+                )
+    label_axes(ax, "CDF of RMSE under power budgets (R_th = 1)", "tracking RMSE (m)", "CDF over seeds")
+    save(fig, path)
+
+
+def _cdf_claims(tables) -> list[Claim]:
+    rows = tables["cdf"]
+    budgets = values(rows, "power_budget_dbw")
+    out = []
+    for e in EXPERTS:
+        parts = [
+            (
+                f"{b:g} vs {a:g} dBW",
+                by_seed(rows, "rmse_m", policy=e, power_budget_dbw=b),
+                by_seed(rows, "rmse_m", policy=e, power_budget_dbw=a),
+            )
+            for a, b in zip(budgets, budgets[1:])
+        ]
+        overall = paired_claim("cdf", "", "", "", parts[-1][1], parts[0][2], "negative")
+        steps = [verdict(*paired_difference(a, b)[:2], "negative") for _, a, b in parts]
+        cells = "; ".join(f"{label}: {fmt_paired(*paired_difference(a, b)[:2])}" for label, a, b in parts)
+        v = overall.verdict if overall.verdict != "holds" else ("holds" if "differs" not in steps else "differs")
+        out.append(
+            Claim(
+                "cdf",
+                f"cdf.power.{e}",
+                f"{e}: a higher power budget gives a lower RMSE",
+                "RMSE, paired per seed",
+                f"{budgets[-1]:g} vs {budgets[0]:g} dBW: {overall.value} ({cells})",
+                v,
+                overall.seeds,
+            )
+        )
+    return out
+
+
+EXPERIMENT = Experiment(
+    "cdf",
+    "`paper-nominal`, P_max ∈ {−30, −25, −20, −15} dBW, rg-mpc and ao-mpc, 40 seeds",
+    sweeps=_cdf_sweeps,
+    plot=_cdf_plot,
+    claims=_cdf_claims,
+)

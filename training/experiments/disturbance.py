@@ -1,0 +1,160 @@
+"""The disturbance mode (MODEL.md §7): the experts against EPA with and without disturbances, and the control-period ablation."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..tables import mean_ci, parse_bool
+from .base import (
+    EXPERTS,
+    QUICK_SET,
+    STYLE,
+    Claim,
+    Experiment,
+    by_seed,
+    cell,
+    curve,
+    label_axes,
+    multi_claim,
+    new_figure,
+    paired_claim,
+    pick,
+    save,
+    seeds,
+    spec,
+    values,
+)
+from .traces import plot_traces, trace_rows
+
+DIST_CASES = [
+    ("nominal", "default", "rg-mpc"),
+    ("nominal", "default", "epa"),
+    ("disturbed", "disturbed", "rg-mpc"),
+    ("disturbed", "disturbed", "epa"),
+]
+
+
+def _disturbance_sweeps(quick):
+    q = QUICK_SET if quick else {}
+    return {
+        "disturbance-costs": spec(
+            "disturbance-costs", {"preset": ["default", "disturbed"]}, EXPERTS + ("epa",), seeds(quick), set_=q
+        ),
+        "disturbance-period": spec(
+            "disturbance-period",
+            {
+                "disturbance.control_period_slots": pick(quick, [1, 2, 3], [2]),
+                "disturbance.period_aware_planning": [True, False],
+            },
+            ("rg-mpc", "epa"),
+            seeds(quick),
+            preset="disturbed",
+            set_=q,
+        ),
+    }
+
+
+def _disturbance_plot(tables, path: Path) -> None:
+    fig = new_figure(ncols=3, width=4.0)
+    rows = tables["disturbance-costs"]
+    variants = list(dict.fromkeys(r["preset"] for r in rows))
+    policies = list(dict.fromkeys(r["policy"] for r in rows))
+    width = 0.8 / len(policies)
+    for j, metric in enumerate(("control_cost", "rmse_m")):
+        ax = fig.add_subplot(1, 3, j + 1)
+        for i, policy in enumerate(policies):
+            st = [
+                mean_ci([cell(r, metric) for r in rows if r["policy"] == policy and r["preset"] == v]) for v in variants
+            ]
+            ax.bar(
+                np.arange(len(variants)) + i * width,
+                [m for m, _ in st],
+                width,
+                yerr=[h if math.isfinite(h) else 0.0 for _, h in st],
+                color=STYLE.get(policy, ("k",))[0],
+                capsize=3,
+                label=policy,
+            )
+        ax.set_xticks(np.arange(len(variants)) + 0.4 - width / 2, variants)
+        ax.set_title(metric.replace("_", " "), fontsize=9)
+        if j == 0:
+            ax.legend(fontsize=8)
+    ax = fig.add_subplot(1, 3, 3)
+    per = tables["disturbance-period"]
+    for aware, ls in ((True, "-"), (False, ":")):
+        sub = [r for r in per if parse_bool(r["disturbance.period_aware_planning"]) == aware]
+        for policy in dict.fromkeys(r["policy"] for r in sub):
+            curve(
+                ax,
+                sub,
+                "disturbance.control_period_slots",
+                "control_cost",
+                policy,
+                label=f"{policy}, {'plans with' if aware else 'ignores'} the period",
+                ls=ls,
+            )
+    ax.set_yscale("log")
+    label_axes(ax, "disturbed: control period (ablation)", "commands every P slots", "control cost")
+    save(fig, path)
+    plot_traces(tables["disturbance"], path.with_name(path.name + "-paths"), DIST_CASES)
+
+
+def _disturbance_claims(tables) -> list[Claim]:
+    rows = tables["disturbance-costs"]
+    out = []
+    for variant in ("default", "disturbed"):
+        for e in EXPERTS:
+            out.append(
+                paired_claim(
+                    "disturbance",
+                    f"disturbance.beats-epa.{variant}.{e}",
+                    f"{variant}: {e} beats EPA"
+                    + (" (the same trend under disturbances)" if variant != "default" else ""),
+                    "episode control cost, paired per seed",
+                    by_seed(rows, "control_cost", policy=e, preset=variant),
+                    by_seed(rows, "control_cost", policy="epa", preset=variant),
+                    "negative",
+                )
+            )
+    per = tables["disturbance-period"]
+    periods = [int(p) for p in values(per, "disturbance.control_period_slots") if p > 1]
+    for policy in dict.fromkeys(r["policy"] for r in per):
+        parts = []
+        for p in periods:
+
+            def get(aware, p=p):
+                return {
+                    int(r["seed"]): cell(r, "control_cost")
+                    for r in per
+                    if r["policy"] == policy
+                    and int(float(r["disturbance.control_period_slots"])) == p
+                    and parse_bool(r["disturbance.period_aware_planning"]) == aware
+                }
+
+            parts.append((f"P={p}", get(True), get(False)))
+        if parts:
+            out.append(
+                multi_claim(
+                    "disturbance",
+                    f"disturbance.period-aware.{policy}",
+                    f"{policy} (project's check): planning with the control period beats ignoring it",
+                    "episode control cost, paired per seed",
+                    parts,
+                    "negative",
+                )
+            )
+    return out
+
+
+EXPERIMENT = Experiment(
+    "disturbance",
+    "default vs `disturbed` (wind, gusts, actuator lag, noise, commands every 2 slots), "
+    "rg-mpc, ao-mpc, epa, 40 seeds; control period 1–3 with and without period-aware planning, 40 seeds",
+    sweeps=_disturbance_sweeps,
+    builders={"disturbance": lambda out, quick: trace_rows(DIST_CASES, quick)},
+    plot=_disturbance_plot,
+    claims=_disturbance_claims,
+)

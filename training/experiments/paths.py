@@ -1,0 +1,78 @@
+"""The drone's and AGVs' paths (the paper's trajectory figure) and the path-length and RMSE claims about them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .base import EXPERTS, QUICK_SET, Claim, Experiment, by_seed, paired_claim, seeds, spec
+from .traces import plot_traces, trace_rows
+
+PATH_CASES = [
+    ("K=3", "k3", "rg-mpc"),
+    ("K=3", "k3", "ao-mpc"),
+    ("K=4", "default", "rg-mpc"),
+    ("K=4", "default", "ao-mpc"),
+    ("K=4", "default", "epa"),
+]
+
+
+def _paths_sweeps(quick):
+    n_seeds, q = seeds(quick), QUICK_SET if quick else {}
+    return {
+        "paths-k3": spec("paths-k3", {}, EXPERTS, n_seeds, preset="k3", set_=q),
+        "paths-k4": spec("paths-k4", {}, EXPERTS + ("epa",), n_seeds, set_=q),
+    }
+
+
+def _paths_plot(tables, path: Path) -> None:
+    plot_traces(tables["paths"], path, PATH_CASES)
+
+
+def _paths_claims(tables) -> list[Claim]:
+    k3, k4 = tables["paths-k3"], tables["paths-k4"]
+    out = []
+    for e in EXPERTS:
+        out.append(
+            paired_claim(
+                "paths",
+                f"paths.k3-shorter.{e}",
+                f"{e}: with K = 3 the drone flies a shorter path than with K = 4",
+                "drone path length, paired per seed",
+                by_seed(k3, "drone_path_length_m", policy=e),
+                by_seed(k4, "drone_path_length_m", policy=e),
+                "negative",
+            )
+        )
+        out.append(
+            paired_claim(
+                "paths",
+                f"paths.epa-longer.{e}",
+                f"EPA's drone flies a longer path than {e}'s (K = 4)",
+                "drone path length, paired per seed",
+                by_seed(k4, "drone_path_length_m", policy="epa"),
+                by_seed(k4, "drone_path_length_m", policy=e),
+                "positive",
+            )
+        )
+        out.append(
+            paired_claim(
+                "paths",
+                f"paths.epa-worse.{e}",
+                f"EPA tracks worse than {e} (K = 4)",
+                "RMSE, paired per seed",
+                by_seed(k4, "rmse_m", policy="epa"),
+                by_seed(k4, "rmse_m", policy=e),
+                "positive",
+            )
+        )
+    return out
+
+
+EXPERIMENT = Experiment(
+    "paths",
+    "`k3` (rg-mpc, ao-mpc) and default (rg-mpc, ao-mpc, epa): paths of seed 0, path lengths and RMSE over 40 seeds",
+    sweeps=_paths_sweeps,
+    builders={"paths": lambda out, quick: trace_rows(PATH_CASES, quick)},
+    plot=_paths_plot,
+    claims=_paths_claims,
+)

@@ -1,0 +1,131 @@
+"""Run any experiment: its tables (missing sweep rows run, builders for the rest), its plot, its
+claims checked on the tables; the claims' results go to ``OUT/claims.json`` and ``OUT/claims.md``,
+which is all the reproduction page reads (:func:`training.reproduction.write_reproduction`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+from typing import Sequence
+
+from .base import Claim, Experiment
+from .registry import EXPERIMENTS
+
+__all__ = ["tables_of", "make_figures", "check_claims", "write_claims", "read_claims", "format_claims", "tally"]
+
+
+def tables_of(
+    exp: Experiment, out: Path, quick: bool = False, workers: int = 1, progress: bool = False, run: bool = True
+) -> dict[str, list[dict]]:
+    """The experiment's tables in ``out/data`` (with ``run``: their missing rows run first)."""
+    from ..evaluate import write_rows
+    from ..sweep import SweepTableError, read_rows, read_table, run_sweep
+
+    tables = {}
+    for name, spec in exp.sweeps(quick).items():
+        path = out / "data" / f"{name}.csv"
+        if run:
+            try:
+                run_sweep(spec, path, workers=workers, progress=progress)
+            except SweepTableError as exc:
+                raise SweepTableError(
+                    f"{exc}. For `lawn figures`: delete {path} or choose another --out "
+                    "(the figure's table was written by another spec or version)"
+                ) from None
+        tables[name] = read_rows(path)[0]
+    for name, build in exp.builders.items():
+        path = out / "data" / f"{name}.csv"
+        if run and not path.exists():
+            write_rows(build(out, quick), path)
+        tables[name] = read_table(path)
+    return tables
+
+
+def make_figures(
+    names: Sequence[str], out: Path, quick: bool = False, workers: int = 1, progress: bool = True
+) -> dict[str, float]:
+    """Build the named figures (all when ``names`` is empty): run the missing table rows, plot;
+    returns seconds per figure and records, in ``out/timings.json``, the time of every figure whose
+    rows were run (what building it from scratch takes)."""
+    names = list(names) or list(EXPERIMENTS)
+    unknown = [n for n in names if n not in EXPERIMENTS]
+    if unknown:
+        raise ValueError(f"unknown figures {unknown}; valid: {', '.join(EXPERIMENTS)}")
+    out = Path(out)
+    (out / "data").mkdir(parents=True, exist_ok=True)
+    timings = {}
+    record = out / "timings.json"
+    computed = json.loads(record.read_text()) if record.exists() else {}
+    for name in names:
+        start = time.perf_counter()
+        exp = EXPERIMENTS[name]
+        paths = [out / "data" / f"{t}.csv" for t in exp.table_names(quick)]
+        before = [p.stat().st_mtime_ns if p.exists() else None for p in paths]
+        exp.plot(tables_of(exp, out, quick, workers, progress), out / name)
+        timings[name] = time.perf_counter() - start
+        if [p.stat().st_mtime_ns if p.exists() else None for p in paths] != before:
+            computed[name] = timings[name]
+    record.write_text(json.dumps(computed, indent=2) + "\n")
+    return timings
+
+
+def check_claims(out: Path, names: Sequence[str] = ()) -> list[Claim]:
+    """The claims of the named experiments (all whose tables exist when ``names`` is empty),
+    checked on the tables in ``out/data``."""
+    out = Path(out)
+    claims = []
+    for name, exp in EXPERIMENTS.items():
+        if names and name not in names:
+            continue
+        if not all((out / "data" / f"{t}.csv").exists() for t in exp.table_names()):
+            continue
+        claims += exp.claims(tables_of(exp, out, run=False))
+    return claims
+
+
+def write_claims(claims: Sequence[Claim], out: Path) -> Path:
+    """The claims' results as ``out/claims.json`` (what the reproduction page reads) and their
+    table as ``out/claims.md``."""
+    out = Path(out)
+    (out / "claims.md").write_text(format_claims(claims) + "\n")
+    path = out / "claims.json"
+    path.write_text(json.dumps([dataclasses.asdict(c) for c in claims], indent=1) + "\n")
+    return path
+
+
+def read_claims(out: Path) -> list[Claim]:
+    """The claims :func:`write_claims` wrote to ``out/claims.json``."""
+    path = Path(out) / "claims.json"
+    if not path.exists():
+        raise FileNotFoundError(f"{path} does not exist: run `lawn figures --out {out}` first")
+    return [Claim(**c) for c in json.loads(path.read_text())]
+
+
+def tally(claims: Sequence[Claim]) -> str:
+    """One sentence counting the verdicts of the paper's claims and of the project's own checks."""
+    paper = [c for c in claims if "project's check" not in c.claim]
+    own = [c for c in claims if "project's check" in c.claim]
+
+    def count(cs):
+        return ", ".join(f"{sum(c.verdict == v for c in cs)} {v}" for v in ("holds", "not significant", "differs"))
+
+    return (
+        f"Of the paper's {len(paper)} claims checked here: {count(paper)}. Of the project's own {len(own)} "
+        f"checks: {count(own)}."
+    )
+
+
+def format_claims(claims: Sequence[Claim]) -> str:
+    """The claims as a Markdown table."""
+    lines = [
+        "| figure | claim | checked on | project's number (paired mean ± 95 % interval) | seeds | verdict |",
+        "|---|---|---|---|---|---|",
+    ]
+    for c in claims:
+        v = {"holds": "holds", "differs": "**differs**", "not significant": "*not significant*"}.get(
+            c.verdict, c.verdict
+        )
+        lines.append(f"| {c.figure} | {c.claim} | {c.metric} | {c.value} | {c.seeds or '–'} | {v} |")
+    return "\n".join(lines)

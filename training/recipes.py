@@ -1,0 +1,131 @@
+"""The recipes of the shipped learned agents (:data:`RECIPES`, keyed by name): how each is trained
+(``lawn train`` arguments, training seeds, hyperparameters, the recipe it starts from), and
+``lawn zoo train`` (:func:`train_recipes`), which trains the missing runs of each."""
+
+from __future__ import annotations
+
+import json
+import shlex
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from agents.runs import read_run
+from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
+
+from .evaluate import pool_map
+from .train import train_task
+
+__all__ = ["Recipe", "RECIPES", "recipe", "finished", "train_recipes", "ZOO_VALIDATION_EPISODES"]
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """One learned comparator: ``lawn train`` arguments, its training seeds and its table label."""
+
+    name: str
+    label: str
+    algo: str
+    env_id: str
+    timesteps: int
+    seeds: tuple[int, ...] = (0, 1, 2)
+    hp: dict = field(default_factory=dict)
+    init_from: str | None = None  # another recipe's name: seed s starts from that recipe's seed s
+    eval_every: int = 25_000
+    vec: str = "dummy"  # lawn train --vec: "native" trains on lawn's batched vector env
+
+    @property
+    def evaluated_on(self) -> str:
+        return central_env_id(self.env_id)
+
+    def command(self) -> str:
+        parts = [f"lawn train --algo {self.algo} --env {self.env_id} --timesteps {self.timesteps}",
+                 f"--seeds {' '.join(map(str, self.seeds))}", f"--out RUNS/{self.name}"]
+        parts += [f"--hp {shlex.quote(f'{k}={json.dumps(v)}')}" for k, v in self.hp.items()]
+        if self.vec != "dummy":
+            parts.append(f"--vec {self.vec}")
+        if self.init_from:
+            parts.append(f"--init-from RUNS/{self.init_from}/seed-<s>")
+        return " ".join(parts)
+
+
+#: Validation episodes of every zoo run (model selection; the test seeds are never used).
+ZOO_VALIDATION_EPISODES = 20
+#: Imitation at scale: 100,000 labels of rg-mpc, then 4 DAgger rounds of 10,000 on the clone's own
+#: states, a 256 x 256 network (issue #24: at 12,000 + 4 x 4,800 labels and 128 x 128 the clone was
+#: +2.8 % of rg-mpc on the test seeds; at this budget +0.1 %, 13-14 minutes a run two side by side).
+_BC_AT_SCALE = {"dagger_iterations": 4, "dagger_timesteps": 10_000,
+                "policy_kwargs": {"net_arch": [256, 256], "log_std_init": -1.0}}
+_FINE_TUNE = {"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2.5, "actor_warmup_steps": 10_000,
+              "policy_kwargs": {"net_arch": [256, 256], "log_std_init": -1.0}}  # the clone's network
+#: From scratch: the distance prior and the centroid drone (no MPC in the action; the Comm env's
+#: own MPC still drives the AGVs), and the exploration and step size a learner far from the
+#: optimum needs (log-std -1, 3e-4 decayed).
+_SCRATCH = {"interface": {"base": "rl", "power_anchor": "distance"}, "learning_rate": "lin_3e-4",
+            "policy_kwargs": {"net_arch": [128, 128], "log_std_init": -1.0}}
+
+#: From scratch on Joint: the same, with the LQR baseline's increments under the residual.
+_SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_anchor": "lqr"}}
+
+#: The learned comparators. Training runs them in this order, the longest first (a recipe that
+#: starts from another runs in a second phase); the tables list them per env in this order.
+RECIPES: dict[str, Recipe] = {r.name: r for r in (
+    Recipe("bc-comm", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Comm-v0", 100_000, hp=_BC_AT_SCALE),
+    Recipe("bc-joint", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Joint-v0", 100_000,
+           hp=_BC_AT_SCALE),
+    Recipe("ppo-comm-scratch", "PPO from the distance prior (no MPC in the action)", "ppo", "lawn/Comm-v0",
+           1_000_000, hp=_SCRATCH, eval_every=100_000, vec="native"),
+    Recipe("ppo-joint-scratch", "PPO from the distance prior and the LQR (no MPC in the action)", "ppo",
+           "lawn/Joint-v0", 1_000_000, hp=_SCRATCH_JOINT, eval_every=100_000, vec="native"),
+    Recipe("ppo-comm", "PPO (RL interface)", "ppo", "lawn/Comm-v0", 300_000, eval_every=50_000, vec="native"),
+    Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v0", 300_000, eval_every=50_000,
+           vec="native"),
+    Recipe("sac-comm", "SAC (RL interface)", "sac", "lawn/Comm-v0", 20_000, eval_every=5_000),
+    Recipe("ppo-marl", "PPO multi-agent, shared weights", "ppo", PARALLEL_ENV_ID, 150_000, eval_every=25_000),
+    Recipe("ppo-comm-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Comm-v0", 60_000, init_from="bc-comm",
+           hp=_FINE_TUNE, eval_every=10_000),
+    Recipe("ppo-joint-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Joint-v0", 60_000, init_from="bc-joint",
+           hp=_FINE_TUNE, eval_every=10_000),
+)}
+
+
+def recipe(name: str) -> Recipe:
+    """The recipe called ``name`` (a clear error naming the recipes otherwise)."""
+    if name not in RECIPES:
+        raise ValueError(f"unknown recipe {name!r}; valid: {', '.join(RECIPES)}")
+    return RECIPES[name]
+
+
+def finished(run_dir: Path, timesteps: int) -> bool:
+    """The run in ``run_dir`` has its run.json and its budget (a BC run: any)."""
+    if not (run_dir / "run.json").exists():
+        return False
+    data = read_run(run_dir).record
+    return int(data.get("num_timesteps", 0)) >= (timesteps if data.get("trainer") != "bc" else 1)
+
+
+def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, progress: bool = True) -> list[Path]:
+    """Train the missing runs of the chosen recipes (all by default); returns the run directories.
+    Runs that start from another recipe wait for it (two phases)."""
+    runs = Path(runs)
+    chosen = [recipe(n) for n in names] if names else list(RECIPES.values())
+    done: list[Path] = []
+    for phase in (False, True):
+        tasks = []
+        for r in chosen:
+            if bool(r.init_from) != phase:
+                continue
+            for s in r.seeds:
+                out = runs / r.name / f"seed-{s}"
+                done.append(out)
+                if finished(out, r.timesteps):
+                    continue
+                if out.exists():
+                    shutil.rmtree(out)  # an unfinished run: start it again from scratch
+                tasks.append(dict(algo=r.algo, env_id=r.env_id, config=ScenarioConfig(), timesteps=r.timesteps, seed=s,
+                                  out_dir=out, hp_overrides=dict(r.hp), eval_every=r.eval_every,
+                                  eval_episodes=ZOO_VALIDATION_EPISODES,
+                                  progress=False, vec=r.vec,
+                                  init_from=runs / r.init_from / f"seed-{s}" if r.init_from else None))
+        pool_map(train_task, tasks, workers, progress, desc="training runs")
+    return done
