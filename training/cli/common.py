@@ -56,30 +56,42 @@ def policy_help(prefix: str = "") -> str:
 
 
 class Parents:
-    """The parent parsers of the shared flags (argparse ``parents=``), built once per parser."""
+    """The parent parsers of the shared flags (argparse ``parents=``). Each call builds new ones:
+    argparse shares a parent's actions with every subcommand built from it, so one subcommand's
+    ``set_defaults`` would otherwise change the others' defaults."""
 
-    def __init__(self) -> None:
-        self.debug = argparse.ArgumentParser(add_help=False)  # --debug also after the subcommand
-        self.debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                                help="on an error, show the traceback")
-        self.workers = argparse.ArgumentParser(add_help=False)
-        self.workers.add_argument("--workers", type=count, default=min(2, os.cpu_count() or 1),
-                                  help="processes (default: %(default)s)")
-        self.quiet = argparse.ArgumentParser(add_help=False)
-        self.quiet.add_argument("--quiet", action="store_true", help="no progress bar")
-        self.seed = argparse.ArgumentParser(add_help=False)
-        self.seed.add_argument("--seed", type=seed, default=0,
-                               help="first seed; episode i uses seed + i (default: 0)")
-        self.config = argparse.ArgumentParser(add_help=False)
-        self.config.add_argument("--preset", default="default", choices=presets.names(),
-                                 help="scenario preset (default: %(default)s)")
-        self.config.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                                 help="config override with a dotted key, e.g. --set channel.blocklength=256 "
-                                      "(repeatable)")
+    @staticmethod
+    def _debug(p: argparse.ArgumentParser) -> None:  # --debug also after the subcommand
+        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="on an error, show the traceback")
+
+    @staticmethod
+    def _workers(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--workers", type=count, default=min(2, os.cpu_count() or 1),
+                       help="processes (default: %(default)s)")
+
+    @staticmethod
+    def _quiet(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    @staticmethod
+    def _seed(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--seed", type=seed, default=0, help="first seed; episode i uses seed + i (default: 0)")
+
+    @staticmethod
+    def _config(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--preset", default="default", choices=presets.names(), help="scenario preset (default: %(default)s)")
+        p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                       help="config override with a dotted key, e.g. --set channel.blocklength=256 (repeatable)")
 
     def __call__(self, *names: str) -> list[argparse.ArgumentParser]:
-        """``--debug`` and the named shared flags' parents (``"workers"``, ``"quiet"``, ``"seed"``, ``"config"``)."""
-        return [self.debug] + [getattr(self, n) for n in names]
+        """New parent parsers of ``--debug`` and the named shared flags (``"workers"``, ``"quiet"``,
+        ``"seed"``, ``"config"``)."""
+        out = []
+        for name in ("debug",) + names:
+            parent = argparse.ArgumentParser(add_help=False)
+            getattr(self, f"_{name}")(parent)
+            out.append(parent)
+        return out
 
 
 def parents() -> Parents:
