@@ -7,27 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from ..tables import fmt_paired, paired_difference
-from .base import (
-    EXPERTS,
-    QUICK_SET,
-    REPORT_SLOT,
-    STYLE,
-    Claim,
-    Experiment,
-    by_seed,
-    cell,
-    curve,
-    label_axes,
-    multi_claim,
-    new_figure,
-    paired_claim,
-    pick,
-    save,
-    seeds,
-    slot_cost,
-    spec,
-    values,
-)
+from .base import (EXPERTS, QUICK_SET, REPORT_SLOT, STYLE, Claim, Experiment, by_seed, cell, curve, label_axes,
+                   multi_claim, new_figure, paired_claim, pick, save, seeds, slot_cost, spec, values)
 
 BLOCK_POLICIES = EXPERTS + ("epa", "sf")
 

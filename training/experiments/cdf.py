@@ -7,22 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from ..tables import fmt_paired, paired_difference, verdict
-from .base import (
-    EXPERTS,
-    QUICK_SET,
-    Claim,
-    Experiment,
-    by_seed,
-    cell,
-    label_axes,
-    new_figure,
-    paired_claim,
-    pick,
-    save,
-    seeds,
-    spec,
-    values,
-)
+from .base import (EXPERTS, QUICK_SET, Claim, Experiment, by_seed, cell, label_axes, new_figure, paired_claim, pick,
+                   save, seeds, spec, values)
 
 
 def _cdf_sweeps(quick):

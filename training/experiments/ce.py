@@ -4,25 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .base import (
-    BASELINES,
-    EXPERTS,
-    QUICK_SET,
-    REPORT_SLOT,
-    Claim,
-    Experiment,
-    by_seed,
-    curve,
-    label_axes,
-    multi_claim,
-    new_figure,
-    pick,
-    save,
-    seeds,
-    slot_cost,
-    spec,
-    values,
-)
+from .base import (BASELINES, EXPERTS, QUICK_SET, REPORT_SLOT, Claim, Experiment, by_seed, curve, label_axes,
+                   multi_claim, new_figure, pick, save, seeds, slot_cost, spec, values)
 
 CE_BUDGET_DBW = -30.0
 

@@ -30,41 +30,18 @@ def _paths_plot(tables, path: Path) -> None:
 
 def _paths_claims(tables) -> list[Claim]:
     k3, k4 = tables["paths-k3"], tables["paths-k4"]
+    length, rmse = "drone_path_length_m", "rmse_m"
     out = []
-    for e in EXPERTS:
-        out.append(
-            paired_claim(
-                "paths",
-                f"paths.k3-shorter.{e}",
-                f"{e}: with K = 3 the drone flies a shorter path than with K = 4",
-                "drone path length, paired per seed",
-                by_seed(k3, "drone_path_length_m", policy=e),
-                by_seed(k4, "drone_path_length_m", policy=e),
-                "negative",
-            )
-        )
-        out.append(
-            paired_claim(
-                "paths",
-                f"paths.epa-longer.{e}",
-                f"EPA's drone flies a longer path than {e}'s (K = 4)",
-                "drone path length, paired per seed",
-                by_seed(k4, "drone_path_length_m", policy="epa"),
-                by_seed(k4, "drone_path_length_m", policy=e),
-                "positive",
-            )
-        )
-        out.append(
-            paired_claim(
-                "paths",
-                f"paths.epa-worse.{e}",
-                f"EPA tracks worse than {e} (K = 4)",
-                "RMSE, paired per seed",
-                by_seed(k4, "rmse_m", policy="epa"),
-                by_seed(k4, "rmse_m", policy=e),
-                "positive",
-            )
-        )
+    for e in EXPERTS:  # (key, claim, metric, a, b, expected sign of a - b)
+        for key, claim, metric, a, b, expect in (
+            ("k3-shorter", f"{e}: with K = 3 the drone flies a shorter path than with K = 4", "drone path length",
+             by_seed(k3, length, policy=e), by_seed(k4, length, policy=e), "negative"),
+            ("epa-longer", f"EPA's drone flies a longer path than {e}'s (K = 4)", "drone path length",
+             by_seed(k4, length, policy="epa"), by_seed(k4, length, policy=e), "positive"),
+            ("epa-worse", f"EPA tracks worse than {e} (K = 4)", "RMSE",
+             by_seed(k4, rmse, policy="epa"), by_seed(k4, rmse, policy=e), "positive"),
+        ):
+            out.append(paired_claim("paths", f"paths.{key}.{e}", claim, f"{metric}, paired per seed", a, b, expect))
     return out
 
 

@@ -5,24 +5,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from .base import (
-    EXPERTS,
-    QUICK_SET,
-    REPORT_SLOT,
-    Claim,
-    Experiment,
-    by_seed,
-    curve,
-    label_axes,
-    multi_claim,
-    new_figure,
-    pick,
-    save,
-    seeds,
-    slot_cost,
-    spec,
-    values,
-)
+from .base import (EXPERTS, QUICK_SET, REPORT_SLOT, Claim, Experiment, by_seed, curve, label_axes, multi_claim,
+                   new_figure, pick, save, seeds, slot_cost, spec, values)
 
 
 def _rate_sweeps(quick):
