@@ -1,5 +1,7 @@
 import json
 
+import pytest
+
 from training.cli import main
 
 
@@ -144,3 +146,63 @@ def test_an_unwritable_out_fails_before_any_episode(tmp_path, capsys, monkeypatc
     assert main(["sweep", "docs/sweeps/control-period.yml", "--out", str(tmp_path), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert err.count("--out") == 3 and "cannot write to" in err and "is a directory; give a file" in err
+
+
+def _help(argv, capsys) -> str:
+    with pytest.raises(SystemExit) as exit_:
+        main(argv + ["--help"])
+    assert exit_.value.code == 0
+    return capsys.readouterr().out
+
+
+def test_every_help_text_names_its_flags_defaults_and_choices(capsys):
+    """``lawn --help`` lists every subcommand with its one-line help; each subcommand's help shows
+    every flag with a help text, the shared flags from the one parent parser, and the registries'
+    choices (presets, policies, env ids, figures)."""
+    import lawn_env
+    from agents import policy_names
+    from lawn_env import presets
+    from training.cli import COMMANDS, build_parser
+    from training.experiments import EXPERIMENTS
+
+    root = _help([], capsys)
+    names = [c.__name__.rsplit(".", 1)[-1] for c in COMMANDS]
+    assert all(f"    {n}" in root for n in names) and "--version" in root
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    for name, parser in sub.choices.items():
+        text = _help([name], capsys)
+        flags = [o for a in parser._actions for o in a.option_strings if o.startswith("--")]
+        assert all(f in text for f in flags), name
+        assert [a.option_strings for a in parser._actions if a.option_strings and not a.help] == [], name
+    shared = {"evaluate": ("--workers", "--quiet", "--seed", "--preset", "--set"), "gap": ("--workers", "--seed"),
+              "figures": ("--workers", "--quiet"), "sweep": ("--workers", "--quiet"), "demo": ("--seed", "--set")}
+    for name, flags in shared.items():
+        text = _help([name], capsys)
+        assert all(f in text for f in flags), name
+        if "--workers" in flags:
+            assert "processes (default: " in text
+    evaluate = _help(["evaluate"], capsys)
+    policy_flag = next(a for a in sub.choices["evaluate"]._actions if a.dest == "policy").help  # before wrapping
+    assert all(p in policy_flag for p in policy_names()) and "zoo:NAME" in evaluate
+    assert all(p in evaluate for p in presets.names()) and all(e in evaluate for e in lawn_env.ENV_IDS)
+    assert "default: %" not in evaluate and "default: None" not in evaluate
+    assert "first seed; episode i uses seed + i (default: 0)" in evaluate
+    assert all(e in _help(["figures"], capsys) for e in EXPERIMENTS)
+    assert "--protocol learned and --suite fix the test seeds" in _help(["benchmark"], capsys)
+
+
+def test_shared_flags_keep_each_subcommand_s_defaults():
+    """A subcommand's own default of a shared flag (benchmark's --seed: None, the paper protocol's 0)
+    does not leak into the others (argparse shares a parent parser's actions)."""
+    from training.cli import build_parser
+
+    parser = build_parser()
+    assert parser.parse_args(["benchmark"]).seed is None
+    assert parser.parse_args(["evaluate", "--policy", "epa", "--out", "x.csv"]).seed == 0
+    assert parser.parse_args(["gap"]).seed == 0 and parser.parse_args(["demo"]).seed == 0
+
+
+def test_gap_compares_planners_only(tmp_path, capsys):
+    assert main(["gap", "--policies", "anchor:stake", "--out", str(tmp_path / "g"), "--episodes", "1",
+                 "--convergence-slots", "--set", "num_slots=4", "--quiet"]) == 2
+    assert "--policies anchor:stake: the gap compares planners' per-slot plans" in capsys.readouterr().err

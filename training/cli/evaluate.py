@@ -17,7 +17,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     ev.add_argument("--policy", required=True, type=policy_name, help=policy_help())
     ev.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
                     help="default: lawn/Joint-v0, or the env a trained agent was trained on")
-    ev.add_argument("--episodes", type=count, default=10)
+    ev.add_argument("--episodes", type=count, default=10, help="episodes, seeds --seed.. (default: %(default)s)")
     ev.add_argument("--out", required=True, help="rows file, .csv or .json")
     ev.add_argument("--policy-arg", action="append", default=[], metavar="KEY=VALUE",
                     help="policy setting, e.g. --policy-arg tolerance=1e-3 (repeatable)")

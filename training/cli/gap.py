@@ -20,7 +20,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
                     help=f"planners to compare: {', '.join(policy_names())} (default: ao-mpc rg-mpc)")
     gp.add_argument("--driver", default="ao-mpc", type=policy_name, metavar="POLICY",
                     help=policy_help("policy that runs the episodes (default: ao-mpc): ") + " too")
-    gp.add_argument("--episodes", type=count, default=5)
+    gp.add_argument("--episodes", type=count, default=5, help="episodes of the driver, seeds --seed.. (default: %(default)s)")
     gp.add_argument("--every", type=count, default=3, help="compare at every n-th slot (default: %(default)s)")
     gp.add_argument("--convergence-slots", type=int, nargs="*", default=list(CONVERGENCE_SLOTS),
                     help="slots of the first episode for the AO convergence figure (none to skip)")
