@@ -121,7 +121,26 @@ def outage_from_argument(m: float, x: float) -> float:  # pragma: no cover - com
 TOTALS = ("tracking", "effort", "outage_p", "path", "sq_error", "outages", "power")
 
 
-@numba.njit(cache=True)
+def _array(dtype, ndim: int, out: bool = False, layout: str = "A") -> numba.types.Array:
+    """An argument type of the slot kernel: inputs read-only in any layout (a step's states are
+    views of the last step's rows), the parameters' matrices and the outputs C-contiguous."""
+    return numba.types.Array(dtype, ndim, "C" if out else layout, readonly=not out)
+
+
+_F, _B, _I = numba.types.float64, numba.types.boolean, numba.types.int64
+#: The slot kernel's one signature: every caller (single, parallel and vector envs; fixed and random
+#: paths; any role) converts to it, so the kernel compiles once (cold, ~3 s) instead of once per
+#: argument layout (12 variants otherwise).
+_SLOT_SIGNATURE = numba.types.none(
+    _array(_F, 3), _array(_F, 3), _array(_B, 1), _array(_F, 2), _array(_F, 2), _array(_F, 2), _array(_F, 4),
+    _array(_I, 1), _array(_F, 3), _array(_F, 3), _array(_F, 3), _array(_F, 2), _array(_F, 2),
+    _array(_F, 2, layout="C"), _array(_F, 2, layout="C"), _array(_F, 2, layout="C"), _array(_F, 1, layout="C"),
+    _array(_F, 4, out=True), _array(_F, 3, out=True),
+    _array(_B, 2, out=True), _array(_F, 2, out=True), _array(_F, 3, out=True), _array(_F, 2, out=True),
+    _array(_F, 2, out=True))
+
+
+@numba.njit([_SLOT_SIGNATURE], cache=True)
 def _slot(x_aug, increment, send, power, drone_next, fading, reference, slot, applied, process_position,
           process_velocity, drone_prev, totals, packed_t, packed_w, accel_effect_t, constants, rows_out, terms,
           delivered, outage, applied_next, costs, totals_next):  # pragma: no cover - compiled
@@ -282,7 +301,7 @@ class SimParams:
             config=config, num_agvs=k, num_slots=slots, horizon=horizon, steps=steps, slot_s=config.slot_s,
             model=model, link=link,
             planning_link=channel.LinkParams.from_config(config, planning=True),
-            packed_t=packed_t, packed_w=packed_w,
+            packed_t=np.ascontiguousarray(packed_t), packed_w=np.ascontiguousarray(packed_w),
             accel_effect_t=np.ascontiguousarray(model.a_aug[0:4, 4:6].T),
             area=area, area_lo=np.array([area[0], area[2]]), area_hi=np.array([area[1], area[3]]),
             accel_max=config.control.accel_max_mps2, max_speed=config.drone.max_speed_mps,

@@ -135,8 +135,10 @@ class AxisPencils:
         (M,) int slot phase) from the working sets ``active`` (M, 2, 2N_p) int8, updated in place.
         Returns ``z`` (M, 2N_p), ``objective`` (M,) (``1/2 z'Pz + q'z``), ``iterations`` (M,),
         ``settled`` (M,) bool."""
-        return solve_stack(s, q, lower, upper, phase, self.free, self.num_free, self.group_end, self.w, self.lam,
-                           self.g, self.p0, self.p1, active, tol, max_iter)
+        c = np.ascontiguousarray  # one argument layout: the solver compiles once, not once per caller's views
+        return solve_stack(c(s, dtype=np.float64), c(q, dtype=np.float64), c(lower, dtype=np.float64),
+                           c(upper, dtype=np.float64), c(phase, dtype=np.int64), self.free, self.num_free,
+                           self.group_end, self.w, self.lam, self.g, self.p0, self.p1, active, float(tol), int(max_iter))
 
 
 @numba.njit(cache=True, error_model="numpy")
