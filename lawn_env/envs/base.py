@@ -127,19 +127,21 @@ class Engine:
         decisions, extra = self.role.decide(self, decision, windows)
         return sim.step(decisions, draws), extra
 
-    def outcome(self, costs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def outcome(self, costs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rewards for the slot's stage costs (B, M) (M = 1 for the central envs, 1 + K for the
-        multi-agent one) and which scenarios terminate (B,) (the RL interface's tracking-error
-        bound), the reward floor of the slots not played added to every reward of a terminating
-        scenario."""
+        multi-agent one), which scenarios terminate (B,) (the RL interface's tracking-error bound)
+        and which are truncated (B,) (``num_slots`` slots run, not terminated); the reward floor of
+        the slots not played is added to every reward of a terminating scenario. The one place of
+        reward, termination and truncation for every env."""
         iface, sim = self.interface, self.sim
         reward = iface.rewards_from_costs(costs)
+        ended = sim.state.slot >= sim.num_slots
         if iface.termination_distance_m is None:
-            return reward, self._never
+            return reward, self._never, ended
         terminated = iface.terminates(sim.state.tracking_error[..., 0:2])
         if terminated.any():
             reward[terminated] += iface.terminal_penalties(sim.num_slots - sim.state.slot[terminated])[:, None]
-        return reward, terminated
+        return reward, terminated, ended & ~terminated
 
     def info(self, record: SlotRecord | None = None, extra: dict | None = None, i: int | None = None) -> dict:
         """The info keys (``INFO_KEYS`` and the role's) of every scenario with a leading B axis, or
@@ -296,9 +298,8 @@ class LawnEnvBase(EngineView, gym.Env):
             raise RuntimeError("the episode has ended (or reset() was never called); call reset() before step()")
         engine = self.engine
         record, extra = self._advance(check_action(action, self.actions.size))
-        reward, terminated = engine.outcome(record.stage_cost)
-        terminated = bool(terminated[0])
-        truncated = not terminated and self.sim.done
+        reward, terminated, truncated = engine.outcome(record.stage_cost)
+        terminated, truncated = bool(terminated[0]), bool(truncated[0])
         info = engine.info(record, extra, i=0)
         if truncated or terminated:
             self._done = True

@@ -162,16 +162,15 @@ class LawnParallelEnv(EngineView, ParallelEnv):
             joint[2 * i : 2 * i + 2] = check_action(actions[agent], 2, name=f"actions[{agent!r}]")
         record, extra = self._advance(joint)
         per_agv = record.tracking_cost[0] + record.effort_cost[0]
-        costs = np.concatenate([record.tracking_total + record.effort_total, per_agv])[None]
-        agent_rewards, terminated = self.engine.outcome(costs)
-        terminated = bool(terminated[0])
+        costs = np.concatenate([record.costs[:, 2], per_agv])[None]
+        agent_rewards, terminated, truncated = self.engine.outcome(costs)
+        terminated, truncated = bool(terminated[0]), bool(truncated[0])
         rewards = {"drone": float(agent_rewards[0, 0])}
         for agent, i in self._agv_index.items():
             rewards[agent] = float(agent_rewards[0, i + 1])
         self._agv_terms = (record.tracking_cost[0], record.effort_cost[0])
         infos = self._infos(self.engine.info(record, extra, i=0))
         observations = self._observations()
-        truncated = self.sim.done and not terminated
         terminations = {a: terminated for a in self.agents}
         truncations = {a: truncated for a in self.agents}
         if truncated or terminated:

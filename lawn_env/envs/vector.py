@@ -139,9 +139,8 @@ class JointVectorEnv(EngineAccess, VectorEnv):
             engine.role.reset(restart)
         if self.trail is not None and not restart[self.render_env]:
             self.trail.record()
-        reward, terminated = engine.outcome(record.stage_cost)
-        reward, terminated = reward[:, 0], terminated & ~restart
-        truncated = (sim.slot >= self.config.num_slots) & ~terminated & ~restart
+        reward, terminated, truncated = engine.outcome(record.stage_cost)
+        reward, terminated, truncated = reward[:, 0], terminated & ~restart, truncated & ~restart
         ended = truncated | terminated
         info = engine.info(record, extra)
         if restart.any():  # restarted rows describe their new episode
