@@ -53,7 +53,7 @@ def initial_state(reference_start: np.ndarray, offsets: np.ndarray, area_lo: np.
 
 @numba.njit(cache=True)
 def saturate(u_prev: float, du: float, accel_max: float) -> float:  # pragma: no cover - compiled
-    """The increment ``du`` clipped so that |u[n-1] + du| <= a_max (the control set, by saturation):
+    """The increment ``du`` clipped so that ``|u[n-1] + du| <= a_max`` (the control set, by saturation):
     the one place of this equation (the slot kernel calls it; :func:`saturate_increment` is its ufunc)."""
     u = max(u_prev + du, -accel_max)
     u = min(u, accel_max)
@@ -150,7 +150,7 @@ def _slot(x_aug, increment, send, power, drone_next, fading, reference, slot, ap
        command this slot), the outage argument x at the drone's next position
        (:func:`~lawn_env.channel.link_distance_sq`, :func:`~lawn_env.channel.link_argument`), the
        outage probability gammainc(m, x) (scipy's own compiled function, the value its ufunc
-       gives), ``delivered`` = m|h|^2 >= x;
+       gives), ``delivered`` = ``m|h|^2 >= x``;
     2. the transition: the packed rows [x~[n+1], du] = [x~, du delivered] @ packed_t (BLAS, as
        numpy's ``@``);
     3. the disturbance mode's changes (``lag_alpha`` >= 0: the actuator lag moves the AGV with the
@@ -321,7 +321,7 @@ class SimParams:
 
 
 class SlotDraws(NamedTuple):
-    """A slot's randomness for B scenarios: the fading m|h|^2 of every link (B, K) and, in the
+    """A slot's randomness for B scenarios: the fading ``m|h|^2`` of every link (B, K) and, in the
     disturbance mode, the wind gust (B, 2) and the process and measurement noise (B, K, 2) each;
     None where the config has none."""
 
@@ -658,6 +658,12 @@ class ScenarioView:
     @property
     def paths(self) -> list:
         return self._sim.state.paths[self.i]
+
+    @property
+    def control_cost(self) -> float:
+        """The episode's control cost so far: the running sums of its tracking and effort costs."""
+        totals = self._sim.state.totals[self.i]
+        return float(totals[TOTALS.index("tracking")] + totals[TOTALS.index("effort")])
 
     @property
     def done(self) -> bool:

@@ -1,7 +1,8 @@
 """Matplotlib rendering of a simulation: area, reference paths, AGVs, drone, links.
 
-Links are colored by their outage probability (log scale, 1e-6 .. 1). ``rgb_array`` draws on
-an off-screen Agg canvas; ``human`` opens a pyplot window and refreshes it.
+Links are colored by their outage probability (log scale, 1e-6 .. 1, with a colour bar); the title
+shows the slot and the control cost so far. ``rgb_array`` draws on an off-screen Agg canvas;
+``human`` opens a pyplot window and refreshes it.
 """
 
 from __future__ import annotations
@@ -18,8 +19,31 @@ if TYPE_CHECKING:
 __all__ = ["Renderer", "plot_episode"]
 
 
+#: The links' colour scale: outage probability on a log scale, green (rare) to red (likely).
+_OUTAGE_RANGE = (1e-6, 1.0)
+_OUTAGE_CMAP = "RdYlGn_r"
+
+
+def _outage_scale():
+    from matplotlib import colormaps, colors
+
+    return colors.LogNorm(*_OUTAGE_RANGE), colormaps[_OUTAGE_CMAP]
+
+
+def _axes(fig):
+    """The scene's axes and, beside them, the links' colour bar, at fixed places (a frame depends
+    on the state it shows alone, not on the frames drawn before it)."""
+    from matplotlib.cm import ScalarMappable
+
+    ax = fig.add_axes((0.1, 0.09, 0.68, 0.84))
+    norm, cmap = _outage_scale()
+    fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=fig.add_axes((0.84, 0.16, 0.03, 0.7)),
+                 label="link outage probability")
+    return ax
+
+
 def _draw(ax, sim, trail, *, links: bool = True, trails: bool = True, title: str | None = None):
-    from matplotlib import cm, colors
+    from matplotlib import cm
 
     x0, x1, y0, y1 = sim.area
     ax.clear()
@@ -46,12 +70,11 @@ def _draw(ax, sim, trail, *, links: bool = True, trails: bool = True, title: str
         ax.plot(trail[:, 0], trail[:, 1], "-", color="k", lw=1.0, alpha=0.7)
     ax.scatter([q[0]], [q[1]], marker="^", c="k", s=80, zorder=4, label="drone")
     if links:
-        norm = colors.LogNorm(vmin=1e-6, vmax=1.0)
-        cmap = cm.get_cmap("viridis_r") if hasattr(cm, "get_cmap") else cm.viridis_r
-        outage = np.clip(sim.last_outage_probability, 1e-6, 1.0)
+        norm, cmap = _outage_scale()
+        outage = np.clip(sim.last_outage_probability, *_OUTAGE_RANGE)
         for i in range(k):
-            ax.plot([q[0], pos[i, 0]], [q[1], pos[i, 1]], color=cmap(norm(outage[i])), lw=1.5, zorder=2)
-    ax.set_title(title or f"slot {sim.slot}/{sim.num_slots}")
+            ax.plot([q[0], pos[i, 0]], [q[1], pos[i, 1]], color=cmap(norm(outage[i])), lw=2.0, zorder=2)
+    ax.set_title(title or f"slot {sim.slot}/{sim.num_slots}, control cost so far {sim.control_cost:,.1f}")
     return ax
 
 
@@ -63,14 +86,15 @@ class Renderer:
 
             self._plt = plt
             plt.ion()
-            self.fig, self.ax = plt.subplots(figsize=(6, 6))
+            self.fig = plt.figure(figsize=(6.4, 5.6))
+            self.ax = _axes(self.fig)
         else:
             from matplotlib.backends.backend_agg import FigureCanvasAgg
             from matplotlib.figure import Figure
 
-            self.fig = Figure(figsize=(6, 6), dpi=80)
+            self.fig = Figure(figsize=(6.4, 5.6), dpi=80)
             self.canvas = FigureCanvasAgg(self.fig)
-            self.ax = self.fig.add_subplot(111)
+            self.ax = _axes(self.fig)
 
     def draw(self, sim: ScenarioView, trail: Trail) -> np.ndarray | None:
         """One frame of a scenario (a :class:`~lawn_env.core.ScenarioView`: state row i) with its trail."""
@@ -93,10 +117,9 @@ def plot_episode(sim: ScenarioView, trail: Trail, path: str | Path, title: str |
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(7, 7), dpi=110)
+    fig = Figure(figsize=(7.6, 7), dpi=110)
     FigureCanvasAgg(fig)
-    ax = fig.add_subplot(111)
+    ax = _axes(fig)
     _draw(ax, sim, trail, title=title)
     ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
     fig.savefig(path)

@@ -25,13 +25,13 @@ from pathlib import Path
 import lawn_env
 from agents.errors import MissingExtra
 
-from . import benchmark, dataset, demo, evaluate, figures, gap, sweep, train, zoo
+from . import benchmark, dataset, demo, evaluate, figures, gap, render, sweep, train, zoo
 from .common import Parents
 
 __all__ = ["main", "build_parser", "COMMANDS"]
 
 #: The subcommands in the order ``lawn --help`` lists them.
-COMMANDS = (demo, evaluate, benchmark, train, zoo, dataset, sweep, figures, gap)
+COMMANDS = (demo, render, evaluate, benchmark, train, zoo, dataset, sweep, figures, gap)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -46,7 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Commands whose --out is a file (its folder must be writable) or a folder, checked before any work.
-_FILE_OUT = ("evaluate", "sweep")
+_FILE_OUT = ("evaluate", "sweep", "render")
 _DIR_OUT = ("demo", "benchmark", "gap", "figures")
 
 

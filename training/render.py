@@ -1,0 +1,82 @@
+"""Animations of one episode (``lawn render``): the env's own ``rgb_array`` frames, one per slot,
+written by imageio (GIF through Pillow, MP4 through imageio-ffmpeg)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import lawn_env
+from agents import make_policy, rollout
+from lawn_env import ScenarioConfig
+
+__all__ = ["FORMATS", "record_frames", "write_animation", "render_episode"]
+
+#: Animation formats by file extension.
+FORMATS = (".gif", ".mp4")
+
+
+def record_frames(policy: str, env_id: str | None, seed: int, config: ScenarioConfig | str | None = None,
+                  every: int = 1, **policy_args: Any) -> tuple[list[np.ndarray], dict, str]:
+    """Play one seeded episode of ``env_id`` (default: the policy's own env) under ``policy`` and
+    keep the env's ``rgb_array`` frame of the start and of every ``every``-th slot (and the last).
+    Returns the frames, the episode's metrics (MODEL.md §6) and the env id it ran on."""
+    if not isinstance(every, (int, np.integer)) or every < 1:
+        raise ValueError(f"every={every!r}: must be a positive integer (keep every n-th slot's frame)")
+    actor = make_policy(policy, config, env_id=env_id, **policy_args)
+    env_id = env_id or actor.env_id
+    env = gym.make(env_id, config=actor.config if config is None else config, render_mode="rgb_array")
+    frames: list[np.ndarray] = []
+    last = env.unwrapped.config.num_slots
+
+    def keep(step) -> None:
+        slot = step.slot + 1  # the slot the frame shows
+        if slot % every == 0 or slot == last:
+            frames.append(env.render())
+
+    # the start's frame: the reset rollout() does gives the same state for the same seed
+    env.reset(seed=seed)
+    frames.append(env.render())
+    episode = rollout(env, actor, seed, on_step=keep)
+    env.close()
+    return frames, dict(episode.metrics), env_id
+
+
+def write_animation(frames: list[np.ndarray], out: Path, fps: float = 8.0) -> Path:
+    """Write ``frames`` (H x W x 3 uint8) as an animation, its format by ``out``'s extension
+    (:data:`FORMATS`); a GIF loops forever."""
+    import imageio.v3 as iio
+
+    out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix not in FORMATS:
+        raise ValueError(f"--out {str(out)!r}: the extension must be one of {', '.join(FORMATS)}")
+    if not (fps > 0 and np.isfinite(fps)):
+        raise ValueError(f"fps={fps!r}: must be a positive number")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    stack = np.stack(frames)
+    if suffix == ".gif":
+        iio.imwrite(out, stack, extension=".gif", duration=1000.0 / fps, loop=0)
+    else:
+        try:
+            import imageio_ffmpeg  # noqa: F401
+        except ImportError:
+            raise ValueError("MP4 output needs imageio-ffmpeg: pip install -e \".[video]\"; "
+                             "or write a .gif") from None
+        iio.imwrite(out, stack, extension=".mp4", plugin="FFMPEG", fps=fps, macro_block_size=1)
+    return out
+
+
+def render_episode(policy: str, out: Path, env_id: str | None = None, seed: int = 0,
+                   config: ScenarioConfig | str | None = None, fps: float = 8.0, every: int = 1,
+                   **policy_args: Any) -> dict:
+    """One seeded episode of ``env_id`` under ``policy`` as an animation at ``out`` (GIF or MP4);
+    returns the episode's metrics with the env id, frame count and file."""
+    if env_id is not None and env_id not in lawn_env.ENV_IDS and env_id not in lawn_env.RL_ENV_IDS:
+        raise ValueError(f"env {env_id!r}: unknown; valid: {', '.join([*lawn_env.ENV_IDS, *lawn_env.RL_ENV_IDS])}")
+    frames, metrics, env_id = record_frames(policy, env_id, seed, config, every, **policy_args)
+    path = write_animation(frames, out, fps)
+    return {**metrics, "env_id": env_id, "frames": len(frames), "out": str(path)}
