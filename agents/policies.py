@@ -7,16 +7,16 @@ line and SB3's ``evaluate_policy`` treat them all alike. Planners also offer ``p
 
 Registered names (``make_policy(name, config)``):
 
-=============  =========================================================================
-``rg-mpc``     the package's best expert: the reduced problem over (p, q) solved directly
-``ao-mpc``     the paper's joint optimization (AO of control QPs, Algorithm 1, SCA)
-``epa``        equal power allocation; MPC control and drone optimization as the expert
-``sf``         straight flight at a seeded random speed; MPC control and PGD power
-``pid``        predictive PID tracking law; power and drone optimized on its predictions
-``lqr``        predictive LQR (the DARE gain); power and drone optimized likewise
-``heuristic``  scripted PD tracking, distance-proportional power, centroid-seeking drone
-``global-mpc`` the global reference for optimality gaps (fine search; seconds per slot)
-=============  =========================================================================
+===============  =========================================================================
+``rg-mpc``       the package's best expert: the reduced problem over (p, q) solved directly
+``ao-mpc``       the paper's joint optimization (AO of control QPs, Algorithm 1, SCA)
+``epa``          equal power allocation; MPC control and drone optimization as the expert
+``sf``           straight flight at a seeded random speed; MPC control and PGD power
+``pid``          predictive PID tracking law; power and drone optimized on its predictions
+``lqr``          predictive LQR (the DARE gain); power and drone optimized likewise
+``heuristic``    scripted PD tracking, distance-proportional power, centroid-seeking drone
+``global-mpc``   the global reference for optimality gaps (fine search; seconds per slot)
+===============  =========================================================================
 """
 
 from __future__ import annotations

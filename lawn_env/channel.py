@@ -219,7 +219,7 @@ def outage_argument_sq(power_w: npt.ArrayLike, distance_sq_m2: npt.ArrayLike, *,
                        noise_power_w: float, m: float, ce_error_var: float = 0.0) -> np.ndarray:
     """x of Prop. 1 from the squared distance: x = m G_th (rho + d^2 sigma^2 / (alpha0 p)) / (1 - rho).
 
-    Pr(outage) = Pr(|h|^2 < x / m) = gammainc(m, x) since m |h|^2 ~ Gamma(m, 1).
+    ``Pr(outage) = Pr(|h|^2 < x / m) = gammainc(m, x)`` since ``m |h|^2 ~ Gamma(m, 1)``.
     """
     c_d, c_ce = _outage_coefficients(snr_threshold, alpha0, noise_power_w, m, ce_error_var)
     return _outage_argument(power_w, distance_sq_m2, c_d, c_ce)
@@ -283,18 +283,18 @@ def success_and_gradients(power_w: npt.ArrayLike, drone_xy: npt.ArrayLike, agv_x
 
 def realized_snr(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, fading: npt.ArrayLike, *, alpha0: float,
                  noise_power_w: float, ce_error_var: float = 0.0) -> np.ndarray:
-    """Effective SNR for fading power gains ``fading`` = |h|^2 (MMSE CE error as noise)."""
+    """Effective SNR for fading power gains ``fading`` = ``|h|^2`` (MMSE CE error as noise)."""
     beta_p = alpha0 / np.square(distance_m) * np.asarray(power_w, dtype=float)
     return (1.0 - ce_error_var) * beta_p * fading / (ce_error_var * beta_p + noise_power_w)
 
 
 def sample_fading(rng: np.random.Generator, m: float, size: int | tuple[int, ...]) -> np.ndarray:
-    """Nakagami-m power gains |h|^2 ~ Gamma(shape m, scale 1/m) (unit mean)."""
+    """Nakagami-m power gains ``|h|^2 ~ Gamma(shape m, scale 1/m)`` (unit mean)."""
     return rng.standard_gamma(m, size) / m
 
 
 def sample_normalized_fading(rng: np.random.Generator, m: float, size: int | tuple[int, ...]) -> np.ndarray:
-    """m |h|^2 ~ Gamma(m, 1): the fading on the scale of the outage argument x.
+    """``m |h|^2 ~ Gamma(m, 1)``: the fading on the scale of the outage argument x.
 
     The same draws as :func:`sample_fading` times m (one generator call, one fewer operation)."""
     return rng.standard_gamma(m, size)

@@ -32,7 +32,7 @@ __all__ = [
     "REFERENCE_FAMILIES",
 ]
 
-_PYDANTIC = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
+_PYDANTIC = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True, use_attribute_docstrings=True)
 
 class UnknownConfigKeyError(TypeError, ValueError):
     """A configuration key (a keyword of ``gym.make``, a dotted override, a dict key) that the
@@ -153,7 +153,7 @@ class ReferenceConfig:
     """Std of the initial AGV position offset from the reference start, per axis, m *(decided)*."""
     envelope_fraction: Annotated[float, Field(gt=0, le=1)] | None = 0.9
     """Feasibility *(decided, MODEL.md §1)*: every path is slowed down (uniform time scaling) until
-    |a_ref| <= f a_max and |a_ref[n+1] - a_ref[n]| <= f Delta-a_max per axis at every slot. None
+    ``|a_ref| <= f a_max`` and ``|a_ref[n+1] - a_ref[n]| <= f Delta-a_max`` per axis at every slot. None
     keeps the raw paths: the stress variant (preset ``stress-paths``), where the paper-like set
     demands up to ~4 a_max at its corners."""
 

@@ -28,6 +28,7 @@ accelerating; single slots cost up to 1e7), so every environment also takes
       prior does not give it (on 20 validation seeds the zero action costs +4.6 % of ``rg-mpc``,
       paired per seed, worst seed +45 %, against +44 % and +453 % with the distance prior;
       ``python benchmarks/anchors.py``).
+
     Increments (Joint): a residual ``a * residual_scale * Delta-a_max`` on the first increment
     of the outage-aware MPC at each link's planned success probability (the QP P3 that drives
     the AGVs of ``lawn/Comm-v0``, :class:`lawn_env.mpc.OutageAwareMPC`), clipped to the control

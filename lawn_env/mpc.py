@@ -1,7 +1,7 @@
 """The outage-aware MPC of each AGV: problem P3 of the paper (MODEL.md §3, §4 step 1).
 
 For a fixed success probability psi_k the control block is one convex QP per AGV in
-z = Delta-mu_k (2 N_p increments):
+z = Delta-mu_k (2 N_p increments)::
 
     min_z  z' G z + H z + M,   G = psi^2 F'Q4F + Q5,  H = 2 psi (C x~ - chi_ref)' Q4 F
     s.t.   |z| <= Delta-a_max                 (increment bound, simple bounds)
@@ -425,7 +425,7 @@ class OutageAwareMPC:
 
     def _fallback_solve(self, i: int, s: float, q: np.ndarray, lower: np.ndarray, upper: np.ndarray):
         """A problem the backend did not settle: a cold DAQP solve, then a cold OSQP solve, then the
-        zero sequence (feasible whenever |u[n-1]| <= a_max, which the simulator keeps). Returns
+        zero sequence (feasible whenever ``|u[n-1]| <= a_max``, which the simulator keeps). Returns
         (z, objective, iterations, status 1 or 2)."""
         p = self.hessian(s)
         for name in ("daqp", "osqp"):
@@ -440,7 +440,7 @@ class OutageAwareMPC:
         """What delivering each AGV's command is worth this slot: ``V_k(0) - V_k(1)`` >= 0, the QP's
         optimal value when the command is sure to be lost minus when it is sure to arrive (any
         leading batch axes, (..., K)). At psi = 0 the increments never act, so zero is optimal
-        (feasible, since the simulator keeps |u[n-1]| <= a_max) and ``V_k(0) = r' Q4 r`` is the
+        (feasible, since the simulator keeps ``|u[n-1]| <= a_max``) and ``V_k(0) = r' Q4 r`` is the
         prepared constant; ``V_k(1)`` is one solve."""
         delivered = self.solve_prepared(data, np.ones(data.constant.shape), warm_key="stakes").value
         return np.maximum(data.constant - delivered, 0.0)

@@ -31,7 +31,7 @@ meets the acceleration bound exactly, a_max being an integer multiple of Delta-a
   first step. Any start gives the same minimizer (the problem is strictly convex); a good one
   saves steps.
 * **Cheap steps.** The Cholesky factor of the working set's dual Hessian grows by one row when a
-  constraint joins and is downdated in O(|W|^2) when one leaves; the constraint values come from
+  constraint joins and is downdated in ``O(|W|^2)`` when one leaves; the constraint values come from
   the rows' structure (increments and their running sums), not a matrix product.
 * **Exact answers.** A problem ends when its multipliers are non-negative and every constraint holds
   to ``tol`` (relative to the bound): its KKT conditions hold to rounding. A problem that reaches the

@@ -16,8 +16,8 @@ equations are written once, over a leading path axis; ``path.evaluate`` is its o
 
 Feasibility (MODEL.md §1, decided): a reference the AGV cannot follow makes tracking error
 unavoidable. :func:`fit_envelope` slows a path down (a uniform time scaling, so the path keeps its
-shape, its sharp turns and its variable speed) until, at every slot, |a_ref| <= f a_max per axis and
-|a_ref[n+1] - a_ref[n]| <= f Delta-a_max per axis (f = ``reference.envelope_fraction``, 0.9).
+shape, its sharp turns and its variable speed) until, at every slot, ``|a_ref| <= f a_max`` per axis and
+``|a_ref[n+1] - a_ref[n]| <= f Delta-a_max`` per axis (f = ``reference.envelope_fraction``, 0.9).
 Both path sets are fitted by default; ``envelope=None`` keeps the raw paths (the named stress
 variant: the paper-like set then demands up to ~4x a_max at its corners).
 """
@@ -306,7 +306,7 @@ class Envelope:
 
 
 def envelope_violation(table: np.ndarray, accel_max: float, increment_max: float) -> float:
-    """max over slots and axes of |a_ref| / accel_max and |a_ref[n+1] - a_ref[n]| / increment_max for a
+    """max over slots and axes of ``|a_ref| / accel_max`` and ``|a_ref[n+1] - a_ref[n]| / increment_max`` for a
     reference table (..., T, 6); <= 1 means the reference is inside the envelope."""
     acc = np.asarray(table)[..., 4:6]
     ratio = np.abs(acc).max() / accel_max

@@ -2,26 +2,26 @@
 
 One run directory holds everything needed to reload, evaluate, resume or audit the agent:
 
-=====================  ==========================================================
-``model.zip``          the SB3 model (final)
-``vecnormalize.pkl``   observation/reward normalization statistics (if used)
-``best_model.zip``     the model selected on the validation seeds (lowest paired difference
-                       against rg-mpc among the start and the validations significantly better
-                       than it: :func:`training.protocol.selected_validation`), and
-``best_vecnormalize.pkl`` its statistics; ``sb3:DIR`` loads these when present
-``run.json``           algorithm, env id, seed, timesteps, interface, versions, hyperparameter file version
-``config.json``        the exact scenario config
-``hyperparams.json``   the resolved hyperparameters (file + command-line overrides)
-``learning_curve.csv`` periodic validation: timesteps, mean realized control cost of full
-                       episodes of the unmodified scenario on the validation seeds, paired
-                       differences against rg-mpc and against the start
-``validation_start.json`` the starting policy's cost on each validation seed
-``learning_curve.png`` the same, plotted
-``summary.md``         a short human-readable summary
-``checkpoints/<N>/``   the newest checkpoint (model, normalization, replay buffer, selected model,
-                       history lengths; :mod:`training.checkpoints`), used by ``--resume``
-``tb/``                TensorBoard logs
-=====================  ==========================================================
+=========================  ==========================================================
+``model.zip``              the SB3 model (final)
+``vecnormalize.pkl``       observation/reward normalization statistics (if used)
+``best_model.zip``         the model selected on the validation seeds (lowest paired difference
+                           against rg-mpc among the start and the validations significantly better
+                           than it: :func:`training.protocol.selected_validation`), and
+``best_vecnormalize.pkl``  its statistics; ``sb3:DIR`` loads these when present
+``run.json``               algorithm, env id, seed, timesteps, interface, versions, hyperparameter file version
+``config.json``            the exact scenario config
+``hyperparams.json``       the resolved hyperparameters (file + command-line overrides)
+``learning_curve.csv``     periodic validation: timesteps, mean realized control cost of full
+                           episodes of the unmodified scenario on the validation seeds, paired
+                           differences against rg-mpc and against the start
+``validation_start.json``  the starting policy's cost on each validation seed
+``learning_curve.png``     the same, plotted
+``summary.md``             a short human-readable summary
+``checkpoints/<N>/``       the newest checkpoint (model, normalization, replay buffer, selected model,
+                           history lengths; :mod:`training.checkpoints`), used by ``--resume``
+``tb/``                    TensorBoard logs
+=========================  ==========================================================
 
 Hyperparameters come from ``training/hyperparams/<algo>.yml`` (versioned, per env id, in the
 spirit of rl-baselines3-zoo) and can be overridden with ``--hp key=value``. Each entry names the

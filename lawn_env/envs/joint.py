@@ -24,7 +24,7 @@ class JointEnv(LawnEnvBase):
 
     | index        | meaning                              | scaling                                              |
     |--------------|--------------------------------------|------------------------------------------------------|
-    | 0 .. 2K-1    | increment Delta-u of AGV k (x, y)    | ``a * Delta-a_max`` m/s^2, then saturated so |u| <= a_max |
+    | 0 .. 2K-1    | increment Delta-u of AGV k (x, y)    | ``a * Delta-a_max`` m/s^2, then saturated so ``abs(u) <= a_max`` |
     | 2K .. 3K-1   | power weight of link k               | ``w = (a+1)/2``, ``p = P_max w / max(1, sum w)``      |
     | 3K .. 3K+1   | drone velocity (x, y)                | ``a * V_max`` m/s, clipped to norm V_max, kept in area |
 
