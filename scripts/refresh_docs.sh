@@ -1,21 +1,24 @@
 #!/usr/bin/env bash
-# Regenerate every figure and table of the README and docs/ from the current code, each stamped with
-# the package version and git commit it came from (training/provenance.py):
+# Regenerate every figure and table of the README and the docs pages (docs/) from the current code, each
+# stamped with the package version and git commit it came from (training/provenance.py). A generated
+# block lives in one page (README.md or docs/*.md); `python -m training.readme NAME FILE` finds it:
 #   docs/REPRODUCTION.md, docs/figures/reproduction/   lawn figures (the paper's experiments)
-#   README blocks benchmark, benchmark-nominal          lawn benchmark (+ docs/figures/benchmark.png)
-#   README block gap                                    lawn gap (+ docs/figures/gap.png, convergence.png)
-#   README blocks expert-speed, env-throughput, train-throughput, vector-step   benchmarks/*.py --markdown
-#   README blocks numba-jit, qp-speed, speedups (--only qp)   benchmarks/{numba_jit,qp_speed,speedups}.py
+#   blocks benchmark (README), benchmark-nominal        lawn benchmark (+ docs/figures/benchmark.png)
+#   block gap (docs/experts.md)                         lawn gap (+ docs/figures/gap.png, convergence.png)
+#   blocks expert-speed, env-throughput, train-throughput, vector-step   benchmarks/*.py --markdown
+#   blocks numba-jit, qp-speed, speedups (--only qp)      benchmarks/{numba_jit,qp_speed,speedups}.py
 #                                                       (speedups: side by side with the commit before
 #                                                       the compiled solver, in a git worktree ../before)
-#   README block anchors (with learned)                 benchmarks/anchors.py --markdown
-#   README block learned-agents, docs/LEARNED.md        lawn zoo build (needs the training runs in
+#   block anchors (docs/rl.md; with learned)            benchmarks/anchors.py --markdown
+#   block learned-agents (docs/training.md), LEARNED.md  lawn zoo build (needs the training runs in
 #                                                       runs/agents: with --train, scripts/train_agents.sh
 #                                                       trains them first, hours on 2 cores)
-#   README block zoo-drift                              benchmarks/zoo_drift.py (the table's shipped agents
+#   block zoo-drift (docs/training.md)                  benchmarks/zoo_drift.py (the table's shipped agents
 #                                                       and experts re-evaluated at the current code)
-#   README block leaderboard, docs/LEADERBOARD.md       lawn benchmark --suite (--only suite; about half
+#   docs/LEADERBOARD.md, block leaderboard              lawn benchmark --suite (--only suite; about half
 #                                                       an hour on 2 cores)
+#   docs/figures/episodes/*.gif                         lawn render (--only render): the README's animation
+#                                                       (rg-mpc, default task), a learned agent, the disturbed preset
 #   bash scripts/refresh_docs.sh [--train] [--only NAME ...]
 # Generated data goes to runs/ (not committed). Timed benchmarks are run one at a time.
 set -euo pipefail
@@ -27,7 +30,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --train) train=1 ;;
     --only) shift; while [ $# -gt 0 ] && [[ "$1" != --* ]]; do only+=("$1"); shift; done; continue ;;
-    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|qp|learned|suite ...]" >&2; exit 2 ;;
+    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|qp|learned|suite|render ...]" >&2; exit 2 ;;
   esac
   shift
 done
@@ -96,5 +99,12 @@ fi
 if want suite; then
   "$lawn" benchmark --suite --docs docs --out runs/suite --workers 2 --quiet | tee runs/suite-stdout.txt
   splice leaderboard runs/suite/board.md "lawn benchmark --suite"
+fi
+if want render; then
+  mkdir -p docs/figures/episodes
+  "$lawn" render --policy rg-mpc --env lawn/Joint-v0 --seed 0 --every 2 --out docs/figures/episodes/rg-mpc.gif
+  "$lawn" render --policy zoo:ppo-comm --env lawn/Comm-v0 --seed 0 --every 2 --out docs/figures/episodes/zoo-comm.gif
+  "$lawn" render --policy rg-mpc --env lawn/Joint-v0 --preset disturbed --seed 0 --every 2 \
+    --out docs/figures/episodes/rg-mpc-disturbed.gif
 fi
 echo "refresh_docs: done; review with git diff README.md docs/"

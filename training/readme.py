@@ -1,9 +1,10 @@
-"""Generated blocks of the README: ``<!-- NAME:begin -->`` ... ``<!-- NAME:end -->``.
+"""Generated blocks of README.md and the docs pages: ``<!-- NAME:begin -->`` ... ``<!-- NAME:end -->``.
 
-Every table of the README that a command produces lives in such a block, written only by
-:func:`replace_block` with the command that produced it and the package version and git commit
-(:func:`training.provenance.provenance`). ``python -m training.readme NAME FILE --source CMD``
-splices FILE (Markdown) into block NAME; ``scripts/refresh_docs.sh`` regenerates them all.
+Every table of the README and of the pages under ``docs/`` that a command produces lives in such a
+block, written only by :func:`replace_block` with the command that produced it and the package
+version and git commit (:func:`training.provenance.provenance`). Each block name occurs in exactly
+one page (:func:`find_block`). ``python -m training.readme NAME FILE --source CMD`` splices FILE
+(Markdown) into block NAME wherever it lives; ``scripts/refresh_docs.sh`` regenerates them all.
 """
 
 from __future__ import annotations
@@ -15,9 +16,11 @@ from pathlib import Path
 
 from .provenance import provenance
 
-__all__ = ["replace_block", "block_names", "README"]
+__all__ = ["replace_block", "block_names", "find_block", "pages", "README", "DOCS"]
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+ROOT = Path(__file__).resolve().parent.parent
+README = ROOT / "README.md"
+DOCS = ROOT / "docs"
 
 
 def _markers(name: str) -> tuple[str, str]:
@@ -25,8 +28,25 @@ def _markers(name: str) -> tuple[str, str]:
 
 
 def block_names(text: str) -> list[str]:
-    """Names of the generated blocks in ``text``, in order."""
-    return re.findall(r"<!-- ([\w.-]+):begin -->", text)
+    """Names of the generated blocks in ``text``, in order (a marker is a line of its own: a page
+    that quotes a marker, as MyST's ``{include}`` options do, holds no block)."""
+    return re.findall(r"^<!-- ([\w.-]+):begin -->$", text, flags=re.MULTILINE)
+
+
+def pages(root: Path = ROOT) -> list[Path]:
+    """README.md and every Markdown page of the docs site (``docs/**/*.md``), in a fixed order."""
+    return [root / "README.md", *sorted((root / "docs").rglob("*.md"))]
+
+
+def find_block(name: str, root: Path = ROOT) -> Path:
+    """The page holding generated block ``name``. Raises ``ValueError`` naming the pages when no
+    page or more than one holds it."""
+    holders = [p for p in pages(root) if name in block_names(p.read_text())]
+    if len(holders) != 1:
+        known = sorted({n for p in pages(root) for n in block_names(p.read_text())})
+        where = ", ".join(str(p.relative_to(root)) for p in holders) or "no page"
+        raise ValueError(f"generated block {name!r} must be in exactly one page, found in {where}; blocks: {known}")
+    return holders[0]
 
 
 def replace_block(path: Path, name: str, content: str, source: str | None = None) -> None:
@@ -36,7 +56,8 @@ def replace_block(path: Path, name: str, content: str, source: str | None = None
     path = Path(path)
     text = path.read_text()
     begin, end = _markers(name)
-    i, j = text.find(begin), text.find(end)
+    found = [re.search(f"^{re.escape(m)}$", text, flags=re.MULTILINE) for m in (begin, end)]
+    i, j = (m.start() if m else -1 for m in found)
     if i < 0 or j < i:
         raise ValueError(f"{path}: no generated block {name!r} ({begin} ... {end}); blocks: {block_names(text)}")
     body = content.strip()
@@ -46,14 +67,16 @@ def replace_block(path: Path, name: str, content: str, source: str | None = None
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="splice a Markdown file into a generated README block")
-    parser.add_argument("name")
-    parser.add_argument("file")
+    parser = argparse.ArgumentParser(description="splice a Markdown file into a generated block of the docs")
+    parser.add_argument("name", help="the block's name (<!-- NAME:begin -->)")
+    parser.add_argument("file", help="the Markdown to splice in")
     parser.add_argument("--source", required=True, help="the command that produced FILE")
-    parser.add_argument("--readme", default=str(README))
+    parser.add_argument("--page", default=None,
+                        help="the page holding the block (default: the one page of README.md and docs/ that has it)")
     args = parser.parse_args(argv)
     try:
-        replace_block(Path(args.readme), args.name, Path(args.file).read_text(), args.source)
+        page = Path(args.page) if args.page else find_block(args.name)
+        replace_block(page, args.name, Path(args.file).read_text(), args.source)
     except (OSError, ValueError) as exc:
         print(f"training.readme: {exc}", file=sys.stderr)
         return 2

@@ -31,7 +31,7 @@ lawn figures rate blocklength --out runs/figures    # some of them
 lawn figures --quick --out runs/quick               # reduced seeds, grids and episodes (the tests run it)
 ```
 
-(`bash scripts/refresh_docs.sh` runs it together with every other generated table of the README.)
+(`bash scripts/refresh_docs.sh` runs it together with every other generated table of the README and the docs.)
 Each experiment (`training/experiments/<name>.py`, one `Experiment` record per figure) is a set of tidy tables
 (`runs/figures/data/<table>.csv`: one row per episode with its config, the metrics of MODEL.md §6,
 the realized stage cost of every slot and the software version), a plot that reads only those
@@ -66,7 +66,7 @@ MODEL.md §4's safeguard), but it stops on a slow descent far above the optimum:
 descent on strongly coupled blocks, where each power or drone step can raise ψ only a little before
 the next QP. The reduced-problem expert reaches the global reference at the same slots (the value
 in brackets). Tested by `tests/test_reduced.py::test_rg_mpc_is_never_worse_than_the_paper_ao_on_sampled_slots`;
-measured over 200 slots by `lawn gap` (README).""",
+measured over 200 slots by `lawn gap` (the optimality-gap page, docs/experts.md).""",
     "convergence.few-iterations": """At this slot the descent is slow enough that Algorithm 2's rule
 (relative decrease per iteration below 1e-2) needs more than ten iterations; see the row above for
 how far from the optimum it still is.""",
