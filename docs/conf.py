@@ -25,6 +25,7 @@ exclude_patterns = ["_build", "sweeps", "learned/*.csv"]
 
 myst_enable_extensions = ["colon_fence", "dollarmath"]
 myst_heading_anchors = 3  # `page.md#a-heading` links
+smartquotes = False  # "--set" stays two hyphens, quotes stay straight (command lines are quoted as written)
 
 # each object documented where it is defined (a package's re-exports are not documented twice)
 autodoc_default_options = {"members": True, "undoc-members": False, "show-inheritance": False,

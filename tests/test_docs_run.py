@@ -40,7 +40,8 @@ def python_blocks(page: Path) -> list[Block]:
             continue
         unknown = set(words[1:]) - OPTIONS
         if unknown:
-            raise ValueError(f"{page}:{token.map[0] + 1}: unknown fence option(s) {sorted(unknown)}; valid: {sorted(OPTIONS)}")
+            raise ValueError(f"{page}:{token.map[0] + 1}: unknown fence option(s) {sorted(unknown)}; "
+                             f"valid: {sorted(OPTIONS)}")
         blocks.append(Block(page, token.map[0] + 1, token.content, "slow" in words[1:]))
     return blocks
 
@@ -115,3 +116,38 @@ def test_page_runs(page, tmp_path):
 @pytest.mark.parametrize("page", SLOW_PAGES, ids=_ids(SLOW_PAGES))
 def test_page_runs_with_its_slow_blocks(page, tmp_path):
     assert run_page(page, with_slow=True, workdir=tmp_path) == len(python_blocks(page))
+
+
+def lawn_commands(page: Path) -> list[tuple[int, str]]:
+    """The ``lawn ...`` command lines of a page's shell fences (continuation lines joined)."""
+    found = []
+    for token in MarkdownIt("commonmark").parse(page.read_text()):
+        if token.type != "fence" or token.info.split()[:1] not in (["bash"], ["sh"], ["console"]):
+            continue
+        text = token.content.replace("\\\n", " ")
+        for offset, line in enumerate(text.splitlines()):
+            if line.strip().startswith("lawn "):
+                found.append((token.map[0] + 2 + offset, line.strip()))
+    return found
+
+
+def test_every_lawn_command_of_the_docs_parses():
+    """Every ``lawn`` command a page shows is one the command line accepts as written (flags,
+    choices, policy names, counts): a renamed flag cannot leave a stale page behind."""
+    import contextlib
+    import io
+    import shlex
+
+    from training.cli import build_parser
+
+    parser, bad, seen = build_parser(), [], 0
+    for page in pages(ROOT):
+        for line, command in lawn_commands(page):
+            seen += 1
+            err = io.StringIO()
+            try:
+                with contextlib.redirect_stderr(err):
+                    parser.parse_args(shlex.split(command, comments=True)[1:])
+            except SystemExit:
+                bad.append(f"{_label(page)}:{line}: {command}: {err.getvalue().strip().splitlines()[-1]}")
+    assert seen >= 20 and not bad, bad

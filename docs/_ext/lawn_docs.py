@@ -67,7 +67,8 @@ def parallel_page() -> str:
     cls = type(par)
     rows = [
         ("Agents", ", ".join(f"`{a}`" for a in par.possible_agents)),
-        ("Action spaces", f"`drone`: {_space(par.action_space('drone'))}; `agv_k`: {_space(par.action_space('agv_0'))}"),
+        ("Action spaces", f"`drone`: {_space(par.action_space('drone'))}; "
+                          f"`agv_k`: {_space(par.action_space('agv_0'))}"),
         ("Observation spaces", f"`drone`: shape {par.observation_space('drone').shape}; "
                                f"`agv_k`: shape {par.observation_space('agv_0').shape}"),
         ("State space", f"shape {par.state_space.shape} (the central observation)"),

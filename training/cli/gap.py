@@ -23,7 +23,8 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     gp.add_argument("--episodes", type=count, default=5, help="episodes of the driver, seeds --seed.. (default: %(default)s)")
     gp.add_argument("--every", type=count, default=3, help="compare at every n-th slot (default: %(default)s)")
     gp.add_argument("--convergence-slots", type=int, nargs="*", default=list(CONVERGENCE_SLOTS),
-                    help="slots of the first episode for the AO convergence figure (none to skip)")
+                    help="slots of the first episode for the AO convergence figure "
+                         "(none to skip; default: %(default)s)")
     gp.add_argument("--global-arg", action="append", default=[], metavar="KEY=VALUE",
                     help="resolution of the global reference, e.g. --global-arg drone_spacing_m=0.25")
     gp.add_argument("--out", default="runs/gap", help="output directory (default: %(default)s)")

@@ -29,9 +29,12 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     tr.add_argument("--hp", action="append", default=[], metavar="KEY=VALUE",
                     help="hyperparameter override, e.g. --hp learning_rate=1e-4 (repeatable)")
     tr.add_argument("--eval-every", type=count, default=10000,
-                    help="steps between validations (full unmodified episodes, realized control cost)")
-    tr.add_argument("--eval-episodes", type=count, default=5, help="validation episodes (seeds 500000 + i)")
-    tr.add_argument("--checkpoint-every", type=count, default=10000, help="steps between checkpoints")
+                    help="steps between validations (full unmodified episodes, realized control cost; "
+                         "default: %(default)s)")
+    tr.add_argument("--eval-episodes", type=count, default=5,
+                    help="validation episodes (seeds 500000 + i; default: %(default)s)")
+    tr.add_argument("--checkpoint-every", type=count, default=10000,
+                    help="steps between checkpoints (default: %(default)s)")
     tr.add_argument("--init-from", metavar="DIR", help="start from a behaviour-cloned run of the same algorithm")
     tr.add_argument("--resume", metavar="DIR", help="continue an interrupted run from its last checkpoint")
     tr.add_argument("--vec", choices=["dummy", "native"], default="dummy",

@@ -16,7 +16,8 @@ ZOO_HINT = "agents/zoo/<name>/ (policy.zip, normalizer.npz, agent.json)"
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     zo = sub.add_parser("zoo", parents=p("workers", "quiet"),
                         help="shipped learned agents: list them, train their recipes, benchmark and export")
-    zo.add_argument("action", nargs="?", default="list", choices=["list", "train", "build"])
+    zo.add_argument("action", nargs="?", default="list", choices=["list", "train", "build"],
+                    help="list the shipped agents (default), train their recipes, or build the zoo from the runs")
     zo.add_argument("--runs", default="runs/agents", help="training runs, one folder per recipe (default: %(default)s)")
     zo.add_argument("--only", nargs="+", metavar="NAME", help="train only these recipes")
     zo.add_argument("--doc", default="docs/LEARNED.md", help="build: the table's document (default: %(default)s)")
