@@ -8,7 +8,9 @@ replaced by Markdown made from the installed package, so these parts never go st
 * ``parallel``: the same for the PettingZoo environment;
 * ``config``: one table per configuration section from the config dataclasses' field docstrings
   (pydantic's ``use_attribute_docstrings``) and their validated bounds;
-* ``presets``: every preset with what it changes from the default scenario.
+* ``presets``: every preset with what it changes from the default scenario;
+* ``api PACKAGE``: the API reference of every module of a package (found by walking it, so a new
+  module is never left out), one section per module.
 """
 
 from __future__ import annotations
@@ -143,7 +145,20 @@ def presets_table() -> str:
     return "\n".join(rows) + "\n"
 
 
-GENERATORS = {"env": env_page, "parallel": parallel_page, "config": config_page, "presets": presets_table}
+def api_page(package: str) -> str:
+    import importlib
+    import pkgutil
+
+    if package not in ("lawn_env", "agents", "training"):
+        raise ValueError(f"lawn-docs api {package!r}: valid packages: lawn_env, agents, training")
+    root = importlib.import_module(package)
+    names = [package] + sorted(m.name for m in pkgutil.walk_packages(root.__path__, package + ".")
+                               if not m.name.endswith("__main__"))
+    return "\n".join(f"## `{name}`\n\n```{{eval-rst}}\n.. automodule:: {name}\n```\n" for name in names)
+
+
+GENERATORS = {"env": env_page, "parallel": parallel_page, "config": config_page, "presets": presets_table,
+              "api": api_page}
 
 
 def _expand(match: re.Match) -> str:

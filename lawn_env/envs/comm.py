@@ -70,6 +70,8 @@ class CommEnv(LawnEnvBase):
     * v0 (later, issue #25): one compiled simulation core under every view, as ``lawn/Joint-v0``'s
       history says: this env's episodes bit for bit as before, ``episode_metrics`` summed slot by
       slot (within 1e-15 relative), the native vector env's slot randomness from one generator.
+    * v0 (later, issue #27): ``render()`` frames as ``lawn/Joint-v0``'s history says (a colour bar,
+      the running control cost, 512 x 448 pixels); episodes are unchanged.
     """
 
     role = "comm"

@@ -92,4 +92,8 @@ class JointEnv(LawnEnvBase):
       scenario's slot randomness from one generator (the env's, scenario 0's), so with N > 1 its
       episodes differ from before for the same seed (N = 1 equals this env bit for bit), and its
       infos gain ``episode_metrics`` on the step an episode ends.
+    * v0 (later, issue #27): ``render()`` frames (every view) gain a colour bar of the links' outage
+      probability (now green to red) and the episode's control cost so far in the title, at
+      512 x 448 pixels (480 x 480 before); ``lawn render`` writes an episode of them as an
+      animation. Episodes are unchanged.
     """
