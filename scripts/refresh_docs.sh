@@ -10,12 +10,12 @@
 #                                                       (speedups: side by side with the commit before
 #                                                       the compiled solver, in a git worktree ../before)
 #   block anchors (docs/rl.md; with learned)            benchmarks/anchors.py --markdown
-#   block learned-agents (docs/training.md), LEARNED.md  lawn zoo build (needs the training runs in
+#   docs/LEARNED.md                                     lawn zoo build (needs the training runs in
 #                                                       runs/agents: with --train, scripts/train_agents.sh
 #                                                       trains them first, hours on 2 cores)
 #   block zoo-drift (docs/training.md)                  benchmarks/zoo_drift.py (the table's shipped agents
 #                                                       and experts re-evaluated at the current code)
-#   docs/LEADERBOARD.md, block leaderboard              lawn benchmark --suite (--only suite; about half
+#   docs/LEADERBOARD.md                                 lawn benchmark --suite (--only suite; about half
 #                                                       an hour on 2 cores)
 #   docs/figures/episodes/*.gif                         lawn render (--only render): the README's animation
 #                                                       (rg-mpc, default task), a learned agent, the disturbed preset
@@ -98,7 +98,6 @@ if want learned; then
 fi
 if want suite; then
   "$lawn" benchmark --suite --docs docs --out runs/suite --workers 2 --quiet | tee runs/suite-stdout.txt
-  splice leaderboard runs/suite/board.md "lawn benchmark --suite"
 fi
 if want render; then
   mkdir -p docs/figures/episodes

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Train every learned comparator of training/zoo.py (RECIPES: fixed budgets, training seeds 0-2),
+# Train every learned comparator of training/recipes.py (RECIPES: fixed budgets, training seeds 0-2),
 # benchmark each run on the test seeds beside rg-mpc, export the validation-selected run of each
-# recipe to agents/zoo/ and regenerate docs/LEARNED.md and the README's learned-agents table.
+# recipe to agents/zoo/ and regenerate docs/LEARNED.md (about 70 minutes of 2 cores).
 #   bash scripts/train_agents.sh [RUNS_DIR]   (default: runs/agents; finished runs are kept)
 set -euo pipefail
 cd "$(dirname "$0")/.."

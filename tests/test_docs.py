@@ -14,8 +14,7 @@ from training.readme import block_names, find_block, pages, replace_block
 ROOT = Path(__file__).resolve().parent.parent
 #: Every generated block and the page that holds it.
 BLOCKS = {"benchmark": "README.md", "benchmark-nominal": "docs/policies.md", "gap": "docs/experts.md",
-          "expert-speed": "docs/experts.md", "leaderboard": "docs/benchmark.md", "anchors": "docs/rl.md",
-          "learned-agents": "docs/training.md", "zoo-drift": "docs/training.md",
+          "expert-speed": "docs/experts.md", "anchors": "docs/rl.md", "zoo-drift": "docs/training.md",
           "train-throughput": "docs/training.md", "env-throughput": "docs/performance.md",
           "vector-step": "docs/performance.md", "numba-jit": "docs/performance.md",
           "qp-speed": "docs/performance.md", "speedups": "docs/performance.md"}
@@ -85,6 +84,15 @@ def test_relative_links_and_images_of_every_page_resolve():
             if not path.exists():
                 broken.append(f"{page.relative_to(ROOT)}: {target}")
     assert not broken, broken
+
+
+def test_the_model_specification_is_the_projects():
+    """docs/MODEL.md, which the pages cite as MODEL.md §N, is the project's specification as it stands
+    beside the repository (shared/MODEL.md, where a checkout has it)."""
+    shared = ROOT.parent / "shared" / "MODEL.md"
+    if not shared.exists():
+        pytest.skip("no shared/MODEL.md beside this checkout to compare with")
+    assert (ROOT / "docs" / "MODEL.md").read_text() == shared.read_text()
 
 
 def test_reproduction_document_is_generated_and_explains_every_miss():

@@ -288,7 +288,7 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     runs = tmp_path / "runs"
     train(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=0,
           out_dir=runs / "bc-comm" / "seed-0", hp_overrides={"epochs": 1, "dagger_iterations": 0}, progress=False)
-    table = build_zoo(runs, tmp_path / "docs" / "LEARNED.md", None, workers=1, progress=False, episodes=3,
+    table = build_zoo(runs, tmp_path / "docs" / "LEARNED.md", workers=1, progress=False, episodes=3,
                       target=tmp_path / "zoo")
     from training.leaderboard import own_anchor
 

@@ -6,7 +6,7 @@ episodes of the unmodified scenario on 100 test seeds, realized control cost, pa
 (the table cells and the run each recipe ships, selected on the validation seeds),
 :func:`render_zoo` (Markdown; :func:`plot_curves` the learning curves) and :func:`export_zoo`
 (``agents/zoo/<name>``: policy weights and observation statistics only). ``lawn zoo build``
-(:func:`build_zoo`) runs them and writes ``docs/LEARNED.md`` and the learned-agents table of ``docs/training.md``; ``lawn zoo
+(:func:`build_zoo`) runs them and writes ``docs/LEARNED.md``; ``lawn zoo
 train`` trains the recipes (:func:`training.recipes.train_recipes`); ``lawn zoo list`` shows the
 shipped agents; ``scripts/train_agents.sh`` runs train and build."""
 
@@ -168,10 +168,10 @@ def export_zoo(tables: ZooTables, ev: ZooEvaluation, target: Path = ZOO_DIR) -> 
     return [_export(s, ev, Path(target)) for s in tables.shipped]
 
 
-def build_zoo(runs: Path, out_doc: Path, page: Path | None, workers: int = 2, progress: bool = True,
+def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True,
               episodes: int = TEST_EPISODES, export: bool = True, target: Path = ZOO_DIR) -> str:
     """Evaluate every finished recipe run by the learned protocol, write the tables (``out_doc``,
-    its learning-curve plot, the learned-agents block of ``page``), export each recipe's validation-selected run into
+    and its learning-curve plot), export each recipe's validation-selected run into
     ``target``; returns the recipe table (Markdown). The four stages: :func:`evaluate_zoo`,
     :func:`zoo_tables`, :func:`render_zoo` (and :func:`plot_curves`), :func:`export_zoo`."""
     ev = evaluate_zoo(finished_runs(Path(runs)), episodes, workers, progress)
@@ -184,8 +184,6 @@ def build_zoo(runs: Path, out_doc: Path, page: Path | None, workers: int = 2, pr
     plot_curves(ev.found, {env: float(np.mean([r["control_cost"] for r in rs])) for env, rs in reference.items()},
                 out_doc.parent / "learned" / "curves.png")
     out_doc.write_text(_document(table, per_run, episodes))
-    if page is not None:
-        _replace_block(page, table)
     if export:
         export_zoo(tables, ev, target)
     return table
@@ -288,11 +286,6 @@ validation seeds):
 ![learning curves](learned/curves.png)
 """
 
-
-def _replace_block(page: Path, table: str) -> None:
-    from .readme import replace_block
-
-    replace_block(page, "learned-agents", table, source="lawn zoo build")
 
 
 def format_zoo_list() -> str:

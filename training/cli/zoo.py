@@ -21,8 +21,6 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     zo.add_argument("--runs", default="runs/agents", help="training runs, one folder per recipe (default: %(default)s)")
     zo.add_argument("--only", nargs="+", metavar="NAME", help="train only these recipes")
     zo.add_argument("--doc", default="docs/LEARNED.md", help="build: the table's document (default: %(default)s)")
-    zo.add_argument("--page", default="docs/training.md",
-                    help="build: the docs page whose learned-agents block is replaced (default: %(default)s)")
     zo.set_defaults(func=run)
 
 
@@ -40,8 +38,7 @@ def run(args: argparse.Namespace) -> int:
         dirs = train_recipes(Path(args.runs), args.only, workers=args.workers, progress=not args.quiet)
         print(f"lawn zoo train: {len(dirs)} runs in {args.runs}")
         return 0
-    table = build_zoo(Path(args.runs), Path(args.doc), Path(args.page) if args.page else None,
-                      workers=args.workers, progress=not args.quiet)
+    table = build_zoo(Path(args.runs), Path(args.doc), workers=args.workers, progress=not args.quiet)
     print(table)
-    print(f"wrote {args.doc}" + (f", the table in {args.page}" if args.page else "") + f" and {ZOO_HINT}")
+    print(f"wrote {args.doc} and {ZOO_HINT}")
     return 0
