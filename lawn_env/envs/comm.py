@@ -54,8 +54,8 @@ class CommEnv(LawnEnvBase):
     **overrides)``; ``qp_backend`` is ``"compiled"`` (the exact compiled solver of
     :mod:`lawn_env.qp`) or a reference, ``"daqp"``, ``"osqp"`` or ``"qpsolvers:<name>"`` (:mod:`lawn_env.mpc`);
     ``interface`` as for ``lawn/Joint-v0`` (``lawn/CommRL-v0`` is this env with
-    ``interface="rl"``: power ``p_k ∝ d_k^2 exp(2 a_k)`` spending the budget, drone toward the
-    AGVs' centroid ``+ a * 50 m``).
+    ``interface="rl"``: power ``p_k ∝ prior_k exp(2 a_k)`` spending the budget, with the stake
+    prior, by what each command is worth (:mod:`lawn_env.interface`), drone toward the AGVs' centroid ``+ a * 50 m``).
 
     ## Version History
 

@@ -31,7 +31,9 @@ class JointEnv(LawnEnvBase):
     Actions outside [-1, 1], NaN, or of the wrong size raise ``ValueError``. With
     ``interface="rl"`` (or ``RLInterface(action_scheme="anchored")``) the same box is measured
     from a safe anchor: increments are a residual ``a * Delta-a_max`` on the outage-aware MPC's
-    first increment, power ``p_k ∝ d_k^2 exp(2 a_k)`` spends the budget, the drone flies toward
+    first increment, power ``p_k ∝ prior_k exp(2 a_k)`` spends the budget (the prior: the stake prior,
+    by what each command is worth, with ``interface="rl"``; ``d_k^2`` with ``power_anchor="distance"``,
+    a bare ``RLInterface``'s default), the drone flies toward
     the AGVs' centroid ``+ a * 50 m`` (:mod:`lawn_env.interface`); the zero action is then a
     sound policy.
 
