@@ -62,6 +62,16 @@ class LawnParallelEnv(EngineView, ParallelEnv):
     observation, in ``state_space``. Infos have the same keys, shapes and dtypes at reset and at
     every step (``lawn_env.envs.base.INFO_KEYS``, flat, as TorchRL's PettingZoo wrapper needs);
     ``episode_metrics()`` gives MODEL.md §6's metrics of the episode so far.
+
+    ## Version History
+
+    * v0: initial version; the ``interface`` keyword (opt-in) added later.
+    * v0 (later): infos share one flat schema at reset and every step (``reward_tracking`` and
+      ``reward_effort`` replace the nested ``reward_terms``), as TorchRL's PettingZoo wrapper needs.
+    * v0 (later, issue #25): the one simulation core of the central environments; under the same
+      decisions the drone's observations, rewards and infos equal ``lawn/Joint-v0``'s bit for bit.
+    * v0 (later, issue #27): ``render()`` frames as ``lawn/Joint-v0``'s history says (a colour bar,
+      the running control cost, 512 x 448 pixels).
     """
 
     metadata = {"name": "lawn_v0", "render_modes": ["human", "rgb_array"], "render_fps": 4, "is_parallelizable": True}
