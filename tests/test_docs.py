@@ -127,3 +127,13 @@ def test_the_site_builds_in_strict_mode(tmp_path):
     assert "rg-mpc.gif" in (site / "index.html").read_text() and "Two commands" in text("index.html")
     assert (site / "_images").is_dir() and any(p.suffix == ".gif" for p in (site / "_images").iterdir())
     shutil.rmtree(site)
+
+
+def test_the_clients_page_names_tests_that_exist_and_every_client():
+    page = (ROOT / "docs" / "clients.md").read_text()
+    tests = (ROOT / "tests" / "test_clients.py").read_text()
+    named = set(re.findall(r"`(test_\w+)`", page))
+    assert len(named) >= 6 and all(f"def {name}(" in tests for name in named), named
+    for client in ("Stable-Baselines3", "rl-zoo3", "CleanRL", "TorchRL", "Tianshou", "PettingZoo", "SuperSuit",
+                   "RLlib"):
+        assert f"| {client}" in page, client
