@@ -59,3 +59,16 @@ def test_bad_arguments_are_clear_errors(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["render", "--out", str(tmp_path / "e.gif"), "--policy", "nope"])
     assert "unknown policy 'nope'" in capsys.readouterr().err
+
+
+def test_a_missing_mp4_writer_is_refused_before_the_episode(tmp_path, monkeypatch):
+    import sys
+
+    import training.render as render
+
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # as if not installed
+    played = []
+    monkeypatch.setattr(render, "record_frames", lambda *a, **k: played.append(1))
+    with pytest.raises(ValueError, match=r"MP4 output needs imageio-ffmpeg: pip install -e \"\.\[video\]\""):
+        render_episode("epa", tmp_path / "e.mp4")
+    assert not played

@@ -13,7 +13,7 @@ import lawn_env
 from agents import make_policy, rollout
 from lawn_env import ScenarioConfig
 
-__all__ = ["FORMATS", "record_frames", "write_animation", "render_episode"]
+__all__ = ["FORMATS", "check_output", "record_frames", "write_animation", "render_episode"]
 
 #: Animation formats by file extension.
 FORMATS = (".gif", ".mp4")
@@ -45,27 +45,34 @@ def record_frames(policy: str, env_id: str | None, seed: int, config: ScenarioCo
     return frames, dict(episode.metrics), env_id
 
 
+def check_output(out: Path, fps: float = 8.0) -> None:
+    """``ValueError`` unless ``out`` names a format of :data:`FORMATS` whose writer is installed and
+    ``fps`` is a positive number: checked before an episode is played."""
+    suffix = Path(out).suffix.lower()
+    if suffix not in FORMATS:
+        raise ValueError(f"--out {str(out)!r}: the extension must be one of {', '.join(FORMATS)}")
+    if not (fps > 0 and np.isfinite(fps)):
+        raise ValueError(f"fps={fps!r}: must be a positive number")
+    if suffix == ".mp4":
+        try:
+            import imageio_ffmpeg  # noqa: F401
+        except ImportError:
+            raise ValueError("MP4 output needs imageio-ffmpeg: pip install -e \".[video]\"; "
+                             "or write a .gif") from None
+
+
 def write_animation(frames: list[np.ndarray], out: Path, fps: float = 8.0) -> Path:
     """Write ``frames`` (H x W x 3 uint8) as an animation, its format by ``out``'s extension
     (:data:`FORMATS`); a GIF loops forever."""
     import imageio.v3 as iio
 
     out = Path(out)
-    suffix = out.suffix.lower()
-    if suffix not in FORMATS:
-        raise ValueError(f"--out {str(out)!r}: the extension must be one of {', '.join(FORMATS)}")
-    if not (fps > 0 and np.isfinite(fps)):
-        raise ValueError(f"fps={fps!r}: must be a positive number")
+    check_output(out, fps)
     out.parent.mkdir(parents=True, exist_ok=True)
     stack = np.stack(frames)
-    if suffix == ".gif":
+    if out.suffix.lower() == ".gif":
         iio.imwrite(out, stack, extension=".gif", duration=1000.0 / fps, loop=0)
     else:
-        try:
-            import imageio_ffmpeg  # noqa: F401
-        except ImportError:
-            raise ValueError("MP4 output needs imageio-ffmpeg: pip install -e \".[video]\"; "
-                             "or write a .gif") from None
         iio.imwrite(out, stack, extension=".mp4", plugin="FFMPEG", fps=fps, macro_block_size=1)
     return out
 
@@ -77,6 +84,7 @@ def render_episode(policy: str, out: Path, env_id: str | None = None, seed: int 
     returns the episode's metrics with the env id, frame count and file."""
     if env_id is not None and env_id not in lawn_env.ENV_IDS and env_id not in lawn_env.RL_ENV_IDS:
         raise ValueError(f"env {env_id!r}: unknown; valid: {', '.join([*lawn_env.ENV_IDS, *lawn_env.RL_ENV_IDS])}")
+    check_output(Path(out), fps)
     frames, metrics, env_id = record_frames(policy, env_id, seed, config, every, **policy_args)
     path = write_animation(frames, out, fps)
     return {**metrics, "env_id": env_id, "frames": len(frames), "out": str(path)}

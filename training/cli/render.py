@@ -36,10 +36,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..render import FORMATS, render_episode
-
-    if Path(args.out).suffix.lower() not in FORMATS:
-        raise ValueError(f"--out {args.out!r}: the extension must be one of {', '.join(FORMATS)}")
+    from ..render import render_episode
     result = render_episode(args.policy, Path(args.out), env_id=args.env, seed=args.seed,
                             config=config_of(args), fps=args.fps, every=args.every,
                             **parse_overrides(args.policy_arg, "--policy-arg"))
