@@ -55,3 +55,12 @@ def _independent_qp(config, x, ref, psi, blocked=None):
 def independent_qp():
     """``independent_qp(config, x_aug_k, reference_k, psi_k, blocked=None) -> (value, z)`` (see above)."""
     return _independent_qp
+
+
+#: The suite's longest tests (tens of seconds each): started first, so that on two xdist workers
+#: they run beside the many short ones instead of after them (the suite's wall time is its tail).
+LONG_FIRST = ("test_quick_figures_are_built_from_their_tables", "test_the_site_builds_in_strict_mode")
+
+
+def pytest_collection_modifyitems(config, items):
+    items.sort(key=lambda item: item.originalname not in LONG_FIRST)  # stable: the rest keep their order
