@@ -34,7 +34,7 @@ from .config import DisturbanceConfig, ScenarioConfig
 from .dynamics import PredictionModel, packed_step_matrices
 
 __all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Snapshot", "Simulation", "ScenarioView", "Trail",
-           "draw_slot", "reset", "step", "episode_metrics", "initial_state", "saturate_increment", "link_outage",
+           "draw_slot", "reset", "step", "episode_metrics", "control_costs", "initial_state", "saturate_increment", "link_outage",
            "link_success", "apply_wind", "measure", "saturate", "outage_from_argument", "TOTALS"]
 
 
@@ -533,6 +533,11 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     return new, record
 
 
+def control_costs(state: SimState) -> np.ndarray:
+    """Every scenario's control cost so far (B,): the running sums of its tracking and effort costs."""
+    return state.totals[:, 0] + state.totals[:, 1]
+
+
 def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np.ndarray) -> list[dict]:
     """Metrics of MODEL.md §6 over the slots each scenario of ``rows`` has run in its episode (the
     decision time is the caller's), one dict per row: ``slots``, ``control_cost`` (tracking +
@@ -545,7 +550,7 @@ def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np
     t = state.totals[rows]
     nk, per = n * k, n[:, None]
     sq_error, outages, power = t[:, 4 : 4 + k], t[:, 4 + k : 4 + 2 * k], t[:, 4 + 2 * k :]
-    columns = zip(n.tolist(), (t[:, 0] + t[:, 1]).tolist(), t[:, 0].tolist(), t[:, 1].tolist(),
+    columns = zip(n.tolist(), control_costs(state)[rows].tolist(), t[:, 0].tolist(), t[:, 1].tolist(),
                   np.sqrt(sq_error.sum(axis=1) / nk).tolist(), np.sqrt(sq_error / per).tolist(),
                   (outages.sum(axis=1) / nk).tolist(), (t[:, 2] / nk).tolist(), (outages / per).tolist(),
                   (power / per).tolist(), t[:, 3].tolist())
@@ -661,9 +666,8 @@ class ScenarioView:
 
     @property
     def control_cost(self) -> float:
-        """The episode's control cost so far: the running sums of its tracking and effort costs."""
-        totals = self._sim.state.totals[self.i]
-        return float(totals[TOTALS.index("tracking")] + totals[TOTALS.index("effort")])
+        """The episode's control cost so far (:func:`control_costs` of this scenario)."""
+        return float(control_costs(self._sim.state)[self.i])
 
     @property
     def done(self) -> bool:

@@ -24,17 +24,21 @@ MARKER = re.compile(r"^<!-- lawn-docs: (?P<kind>[\w-]+)(?: (?P<arg>\S+))? -->$",
 
 
 def _md_docstring(doc: str) -> str:
-    """A class docstring written in Gymnasium's Markdown, with its reST roles made MyST roles and
-    its headings one level below the page title."""
+    """A class docstring written in Gymnasium's Markdown, with its reST roles made MyST roles."""
     import inspect
 
-    text = inspect.cleandoc(doc)
-    text = re.sub(r":(\w+):`", r"{\1}`", text)  # :class:`x` -> {class}`x`
-    return text
+    return re.sub(r":(\w+):`", r"{\1}`", inspect.cleandoc(doc))  # :class:`x` -> {class}`x`
 
 
 def _space(space: Any) -> str:
     return f"`{space!r}`".replace("\n", " ")
+
+
+def _summary(rows: list[tuple[str, str]], cls: type, num_agvs: int) -> str:
+    """The page body: the summary table (Gymnasium's env pages open with one), then the docstring."""
+    table = [f"| | (default scenario: K = {num_agvs}) |", "|---|---|",
+             *(f"| {a} | {b} |" for a, b in [*rows, ("Class", f"{{class}}`{cls.__module__}.{cls.__name__}`")])]
+    return "\n".join(table) + f"\n\n{_md_docstring(cls.__doc__)}\n"
 
 
 def env_page(env_id: str) -> str:
@@ -46,27 +50,25 @@ def env_page(env_id: str) -> str:
         raise ValueError(f"lawn-docs env {env_id!r}: unknown; valid: {', '.join(lawn_env.ENV_IDS)}")
     env = gym.make(env_id)
     rl = gym.make(next(k for k, v in lawn_env.RL_ENV_IDS.items() if v == env_id))
-    cls = type(env.unwrapped)
     rows = [
         ("Action Space", _space(env.action_space)),
-        ("Observation Space", f"`Box(-1e6, 1e6, {env.observation_space.shape}, float32)`"),
-        ("RL interface id", f"`{rl.spec.id}`: actions `{rl.action_space!r}`, observations within ±10"),
+        ("Observation Space", _space(env.observation_space)),
+        ("RL interface id", f"`{rl.spec.id}`: actions {_space(rl.action_space)}, observations within "
+                            f"±{float(rl.observation_space.high.max()):g}"),
         ("Episode length", f"`max_episode_steps = {env.spec.max_episode_steps}` (`num_slots`; truncation)"),
         ("Native vector env", f"`gym.make_vec(\"{env_id}\", num_envs=N, vectorization_mode=\"vector_entry_point\")`"),
         ("Import", f"`import lawn_env; gym.make(\"{env_id}\")` or `gym.make(\"lawn_env:{env_id}\")`"),
-        ("Class", f"{{class}}`{cls.__module__}.{cls.__name__}`"),
     ]
+    page = _summary(rows, type(env.unwrapped), env.unwrapped.config.num_agvs)
     env.close()
     rl.close()
-    table = "| | (default scenario: K = 4) |\n|---|---|\n" + "\n".join(f"| {a} | {b} |" for a, b in rows)
-    return f"{table}\n\n{_md_docstring(cls.__doc__)}\n"
+    return page
 
 
 def parallel_page() -> str:
     import lawn_env
 
     par = lawn_env.parallel_env()
-    cls = type(par)
     rows = [
         ("Agents", ", ".join(f"`{a}`" for a in par.possible_agents)),
         ("Action spaces", f"`drone`: {_space(par.action_space('drone'))}; "
@@ -74,14 +76,13 @@ def parallel_page() -> str:
         ("Observation spaces", f"`drone`: shape {par.observation_space('drone').shape}; "
                                f"`agv_k`: shape {par.observation_space('agv_0').shape}"),
         ("State space", f"shape {par.state_space.shape} (the central observation)"),
-        ("Episode length", "`max_cycles` = `num_slots` (120)"),
+        ("Episode length", f"`max_cycles` = `num_slots` ({par.config.num_slots})"),
         ("Import", "`lawn_env.parallel_env()` (parallel API), `lawn_env.env()` (AEC API)"),
         ("Id", f"`{lawn_env.PARALLEL_ENV_ID}` (mirrors `{lawn_env.PARALLEL_ENV_IDS[lawn_env.PARALLEL_ENV_ID]}`)"),
-        ("Class", f"{{class}}`{cls.__module__}.{cls.__name__}`"),
     ]
+    page = _summary(rows, type(par), par.config.num_agvs)
     par.close()
-    table = "| | (default scenario: K = 4) |\n|---|---|\n" + "\n".join(f"| {a} | {b} |" for a, b in rows)
-    return f"{table}\n\n{_md_docstring(cls.__doc__)}\n"
+    return page
 
 
 def _bounds(info: Any) -> str:
