@@ -16,11 +16,9 @@ from pathlib import Path
 
 from .provenance import provenance
 
-__all__ = ["replace_block", "block_names", "find_block", "pages", "README", "DOCS"]
+__all__ = ["replace_block", "block_names", "find_block", "pages"]
 
 ROOT = Path(__file__).resolve().parent.parent
-README = ROOT / "README.md"
-DOCS = ROOT / "docs"
 
 
 def _markers(name: str) -> tuple[str, str]:
@@ -71,11 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("name", help="the block's name (<!-- NAME:begin -->)")
     parser.add_argument("file", help="the Markdown to splice in")
     parser.add_argument("--source", required=True, help="the command that produced FILE")
-    parser.add_argument("--page", default=None,
-                        help="the page holding the block (default: the one page of README.md and docs/ that has it)")
     args = parser.parse_args(argv)
     try:
-        page = Path(args.page) if args.page else find_block(args.name)
+        page = find_block(args.name)
         replace_block(page, args.name, Path(args.file).read_text(), args.source)
     except (OSError, ValueError) as exc:
         print(f"training.readme: {exc}", file=sys.stderr)

@@ -17,23 +17,23 @@ from lawn_env import RL_ENV_IDS
 
 __all__ = ["hyperparams", "zoo_hyperparams"]
 
-#: Keys of lawn's hyperparameter files that rl-zoo3 does not take.
-LAWN_ONLY = ("interface", "actor_warmup_steps")
-
-
 def zoo_hyperparams(algo: str = "ppo") -> dict[str, dict[str, Any]]:
     """rl-zoo3's hyperparameters of ``algo`` for every RL id whose base env's entry in lawn's file
     trains on the RL interface."""
     from .recipes import RECIPES
-    from .train import load_hyperparams
+    from .train import LAWN_KEYS, load_hyperparams
 
-    budgets = {r.env_id: r.timesteps for r in RECIPES.values() if r.algo == algo and not r.hp and r.init_from is None}
+    plain = [r for r in RECIPES.values() if r.algo == algo and not r.hp and r.init_from is None]
+    budgets = {r.env_id: r.timesteps for r in plain}
+    if len(budgets) != len(plain):
+        raise ValueError(f"more than one plain {algo} recipe per env: {[r.name for r in plain]}")
+    zoo_keys = {"n_envs", "normalize", "policy"}  # rl-zoo3 reads these three itself
     out = {}
     for rl_id, base in RL_ENV_IDS.items():
         params, _ = load_hyperparams(algo, base)
         if params.get("interface", "rl") != "rl":
             continue
-        zoo = {k: v for k, v in params.items() if k not in LAWN_ONLY}
+        zoo = {k: v for k, v in params.items() if k in zoo_keys or k not in LAWN_KEYS}
         if base in budgets:
             zoo["n_timesteps"] = budgets[base]
         for key in ("normalize", "policy_kwargs"):

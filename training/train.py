@@ -79,6 +79,10 @@ def load_hyperparams(algo: str, env_id: str, overrides: Mapping[str, Any] | None
     return params, int(data["version"])
 
 
+#: Hyperparameter keys that ``lawn train`` reads itself (the rest go to the SB3 algorithm).
+LAWN_KEYS = ("n_envs", "normalize", "policy", "interface", "actor_warmup_steps", "init_log_std", "start_at_anchor")
+
+
 def _check_algo_kwargs(cls, kwargs: Mapping[str, Any]) -> None:
     valid = set(inspect.signature(cls.__init__).parameters) - {"self", "env", "policy"}
     unknown = sorted(set(kwargs) - valid)

@@ -49,11 +49,11 @@ def run(args: argparse.Namespace) -> int:
 
     from ..benchmark import run_benchmark
 
+    if not args.suite and (args.tasks or args.docs):
+        raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
     if args.suite or args.protocol == "learned":
         _check_fixed_protocol(args)
         return _suite(args) if args.suite else _learned(args)
-    if args.tasks or args.docs:
-        raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
     args.env = args.env or "lawn/Joint-v0"
     args.seed = 0 if args.seed is None else args.seed
     cfg = config_of(args)
@@ -85,8 +85,6 @@ def _check_fixed_protocol(args: argparse.Namespace) -> None:
     if args.env is not None:
         raise ValueError(f"--env {args.env}: {mode} runs each policy on its own env (a learned agent on the env it "
                          "was trained on, experts, baselines and anchors on lawn/Joint-v0)")
-    if not args.suite and (args.tasks or args.docs):
-        raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
 
 
 def _suite(args: argparse.Namespace) -> int:

@@ -13,7 +13,7 @@ import lawn_env
 from agents.runs import read_run
 from lawn_env import presets
 
-__all__ = ["Parents", "parents", "count", "seed", "policy_name", "parse_overrides", "config_of", "included"]
+__all__ = ["Parents", "count", "seed", "policy_name", "policy_help", "parse_overrides", "config_of", "included"]
 
 
 def _int_at_least(low: int) -> Callable[[str], int]:
@@ -83,19 +83,20 @@ class Parents:
         p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                        help="config override with a dotted key, e.g. --set channel.blocklength=256 (repeatable)")
 
+    @staticmethod
+    def _policy_arg(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--policy-arg", action="append", default=[], metavar="KEY=VALUE",
+                       help="policy setting, e.g. --policy-arg tolerance=1e-3 (repeatable)")
+
     def __call__(self, *names: str) -> list[argparse.ArgumentParser]:
         """New parent parsers of ``--debug`` and the named shared flags (``"workers"``, ``"quiet"``,
-        ``"seed"``, ``"config"``)."""
+        ``"seed"``, ``"config"``, ``"policy_arg"``)."""
         out = []
         for name in ("debug",) + names:
             parent = argparse.ArgumentParser(add_help=False)
             getattr(self, f"_{name}")(parent)
             out.append(parent)
         return out
-
-
-def parents() -> Parents:
-    return Parents()
 
 
 def parse_overrides(items: list[str], flag: str = "--set") -> dict:

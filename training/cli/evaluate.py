@@ -12,15 +12,13 @@ from .common import Parents, config_of, count, parse_overrides, policy_help, pol
 
 
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
-    ev = sub.add_parser("evaluate", parents=p("workers", "quiet", "seed", "config"),
+    ev = sub.add_parser("evaluate", parents=p("workers", "quiet", "seed", "config", "policy_arg"),
                         help="run a policy on seeded episodes and write one row per episode")
     ev.add_argument("--policy", required=True, type=policy_name, help=policy_help())
     ev.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
                     help="default: lawn/Joint-v0, or the env a trained agent was trained on")
     ev.add_argument("--episodes", type=count, default=10, help="episodes, seeds --seed.. (default: %(default)s)")
     ev.add_argument("--out", required=True, help="rows file, .csv or .json")
-    ev.add_argument("--policy-arg", action="append", default=[], metavar="KEY=VALUE",
-                    help="policy setting, e.g. --policy-arg tolerance=1e-3 (repeatable)")
     ev.add_argument("--no-score", action="store_true",
                     help="skip the normalized score (which runs epa and rg-mpc on the same seeds)")
     ev.set_defaults(func=run)

@@ -10,28 +10,16 @@ import lawn_env
 from .common import Parents, config_of, count, parse_overrides, policy_help, policy_name
 
 
-def _fps(value: str) -> float:
-    try:
-        fps = float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{value!r} is not a number") from None
-    if not 0 < fps <= 60:
-        raise argparse.ArgumentTypeError(f"{fps} must be in (0, 60] frames per second")
-    return fps
-
-
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
-    re = sub.add_parser("render", parents=p("seed", "config"),
+    re = sub.add_parser("render", parents=p("seed", "config", "policy_arg"),
                         help="one seeded episode of a policy as an animation (drone, AGVs, reference paths, "
                              "links coloured by outage probability)")
     re.add_argument("--policy", default="rg-mpc", type=policy_name, help=policy_help("default: rg-mpc; "))
     re.add_argument("--env", default=None, choices=[*lawn_env.ENV_IDS, *lawn_env.RL_ENV_IDS],
                     help="default: lawn/Joint-v0, or the env a trained agent was trained on")
     re.add_argument("--out", required=True, help="the animation: FILE.gif or FILE.mp4 (MP4 needs the video extra)")
-    re.add_argument("--fps", type=_fps, default=8.0, help="frames per second (default: %(default)s; a slot is 0.5 s)")
+    re.add_argument("--fps", type=float, default=8.0, help="frames per second (default: %(default)s; a slot is 0.5 s)")
     re.add_argument("--every", type=count, default=1, help="keep every n-th slot's frame (default: %(default)s)")
-    re.add_argument("--policy-arg", action="append", default=[], metavar="KEY=VALUE",
-                    help="policy setting, e.g. --policy-arg tolerance=1e-3 (repeatable)")
     re.set_defaults(func=run)
 
 

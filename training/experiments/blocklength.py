@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..tables import fmt_paired, paired_difference
-from .base import (EXPERTS, QUICK_SET, REPORT_SLOT, STYLE, Claim, Experiment, by_seed, cell, curve, label_axes,
+from .base import (SEEDS, EXPERTS, QUICK_SET, REPORT_SLOT, STYLE, Claim, Experiment, by_seed, cell, curve, label_axes,
                    multi_claim, new_figure, paired_claim, pick, save, seeds, slot_cost, spec, values)
 
 BLOCK_POLICIES = EXPERTS + ("epa", "sf")
@@ -85,7 +85,7 @@ def _blocklength_claims(tables) -> list[Claim]:
 
 EXPERIMENT = Experiment(
     "blocklength",
-    "default, l ∈ {128, 256, 1024, 4096} and IBL, rg-mpc, ao-mpc, epa, sf, 40 seeds",
+    f"default, l ∈ {{128, 256, 1024, 4096}} and IBL, rg-mpc, ao-mpc, epa, sf, {SEEDS} seeds",
     sweeps=_blocklength_sweeps,
     plot=_blocklength_plot,
     claims=_blocklength_claims,

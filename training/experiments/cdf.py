@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..tables import fmt_paired, paired_difference, verdict
-from .base import (EXPERTS, QUICK_SET, Claim, Experiment, by_seed, cell, label_axes, new_figure, paired_claim, pick,
+from .base import (SEEDS, EXPERTS, QUICK_SET, Claim, Experiment, by_seed, cell, label_axes, new_figure, paired_claim, pick,
                    save, seeds, spec, values)
 
 
@@ -79,7 +79,7 @@ def _cdf_claims(tables) -> list[Claim]:
 
 EXPERIMENT = Experiment(
     "cdf",
-    "`paper-nominal`, P_max ∈ {−30, −25, −20, −15} dBW, rg-mpc and ao-mpc, 40 seeds",
+    f"`paper-nominal`, P_max ∈ {{−30, −25, −20, −15}} dBW, rg-mpc and ao-mpc, {SEEDS} seeds",
     sweeps=_cdf_sweeps,
     plot=_cdf_plot,
     claims=_cdf_claims,

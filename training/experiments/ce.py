@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .base import (BASELINES, EXPERTS, QUICK_SET, REPORT_SLOT, Claim, Experiment, by_seed, curve, label_axes,
+from .base import (SEEDS, BASELINES, EXPERTS, QUICK_SET, REPORT_SLOT, Claim, Experiment, by_seed, curve, label_axes,
                    multi_claim, new_figure, pick, save, seeds, slot_cost, spec, values)
 
 CE_BUDGET_DBW = -30.0
@@ -77,7 +77,7 @@ def _ce_claims(tables) -> list[Claim]:
 EXPERIMENT = Experiment(
     "ce",
     f"`paper-nominal` (R_th = 1) at P_max = {CE_BUDGET_DBW:g} dBW, ρ ∈ {{0, 0.01, 0.05, 0.1}}, "
-    "rg-mpc, ao-mpc, epa, pid, lqr, 40 seeds; the 0 dBW floor panel at ρ ∈ {0, 0.1}, 40 seeds",
+    f"rg-mpc, ao-mpc, epa, pid, lqr, {SEEDS} seeds; the 0 dBW floor panel at ρ ∈ {{0, 0.1}}, {SEEDS} seeds",
     sweeps=_ce_sweeps,
     plot=_ce_plot,
     claims=_ce_claims,

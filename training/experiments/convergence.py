@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .base import Claim, Experiment
+from .base import QUICK_SET, Claim, Experiment
 
 
 def _convergence_table(out: Path, quick: bool) -> list[dict]:
@@ -12,7 +12,7 @@ def _convergence_table(out: Path, quick: bool) -> list[dict]:
 
     from ..gap import CONVERGENCE_SLOTS, convergence
 
-    cfg = ScenarioConfig(num_slots=30) if quick else ScenarioConfig()
+    cfg = ScenarioConfig(**QUICK_SET) if quick else ScenarioConfig()
     slots = CONVERGENCE_SLOTS[:2] if quick else CONVERGENCE_SLOTS
     glob = {"psi_points": 41, "drone_spacing_m": 2.5, "power_levels": 40} if quick else {}
     return convergence(cfg, slots, seed=0, driver="ao-mpc", iterations=20, global_settings=glob)

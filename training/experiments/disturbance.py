@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..tables import mean_ci, parse_bool
-from .base import (EXPERTS, QUICK_SET, STYLE, Claim, Experiment, by_seed, cell, curve, label_axes, multi_claim,
+from .base import (SEEDS, EXPERTS, QUICK_SET, STYLE, Claim, Experiment, by_seed, cell, curve, label_axes, multi_claim,
                    new_figure, paired_claim, pick, save, seeds, spec, values)
 from .traces import plot_traces, trace_rows
 
@@ -135,7 +135,7 @@ def _disturbance_claims(tables) -> list[Claim]:
 EXPERIMENT = Experiment(
     "disturbance",
     "default vs `disturbed` (wind, gusts, actuator lag, noise, commands every 2 slots), "
-    "rg-mpc, ao-mpc, epa, 40 seeds; control period 1–3 with and without period-aware planning, 40 seeds",
+    f"rg-mpc, ao-mpc, epa, {SEEDS} seeds; control period 1–3 with and without period-aware planning, {SEEDS} seeds",
     sweeps=_disturbance_sweeps,
     builders={"disturbance": lambda out, quick: trace_rows(DIST_CASES, quick)},
     plot=_disturbance_plot,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .base import EXPERTS, QUICK_SET, Claim, Experiment, by_seed, paired_claim, seeds, spec
+from .base import SEEDS, EXPERTS, QUICK_SET, Claim, Experiment, by_seed, paired_claim, seeds, spec
 from .traces import plot_traces, trace_rows
 
 PATH_CASES = [
@@ -47,7 +47,7 @@ def _paths_claims(tables) -> list[Claim]:
 
 EXPERIMENT = Experiment(
     "paths",
-    "`k3` (rg-mpc, ao-mpc) and default (rg-mpc, ao-mpc, epa): paths of seed 0, path lengths and RMSE over 40 seeds",
+    f"`k3` (rg-mpc, ao-mpc) and default (rg-mpc, ao-mpc, epa): paths of seed 0, path lengths and RMSE over {SEEDS} seeds",
     sweeps=_paths_sweeps,
     builders={"paths": lambda out, quick: trace_rows(PATH_CASES, quick)},
     plot=_paths_plot,

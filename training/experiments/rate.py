@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from .base import (EXPERTS, QUICK_SET, REPORT_SLOT, Claim, Experiment, by_seed, curve, label_axes, multi_claim,
+from .base import (SEEDS, EXPERTS, QUICK_SET, REPORT_SLOT, Claim, Experiment, by_seed, curve, label_axes, multi_claim,
                    new_figure, pick, save, seeds, slot_cost, spec, values)
 
 
@@ -95,7 +95,7 @@ def _rate_claims(tables) -> list[Claim]:
 
 EXPERIMENT = Experiment(
     "rate",
-    "default, R_th ∈ {6, 8, 10}, P_max ∈ {−3, 0, 3} dBW, rg-mpc and ao-mpc, 40 seeds",
+    f"default, R_th ∈ {{6, 8, 10}}, P_max ∈ {{−3, 0, 3}} dBW, rg-mpc and ao-mpc, {SEEDS} seeds",
     sweeps=_rate_sweeps,
     plot=_rate_plot,
     claims=_rate_claims,

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
-from .base import new_figure, save
+from .base import QUICK_SET, new_figure, save
 
 __all__ = ["trace_rows", "plot_traces"]
 
@@ -20,7 +20,7 @@ def trace_rows(cases: Sequence[tuple[str, str, str]], quick: bool) -> list[dict]
 
     rows = []
     for label, preset, policy in cases:
-        cfg = presets.get(preset).override(num_slots=30 if quick else 120)
+        cfg = presets.get(preset).override(QUICK_SET) if quick else presets.get(preset)
         env = gym.make("lawn/Joint-v0", config=cfg).unwrapped
         cost = rollout(env, make_policy(policy, cfg), 0).metrics["control_cost"]
         traj = env.trajectories()
