@@ -294,8 +294,7 @@ def test_the_stake_split_minimizes_the_expected_loss_it_claims_to():
     """The stake prior's split (the RL interface's zero action) is the exact minimizer of
     sum_k w_k (d_k^2 / p_k)^m over splits of P_max (the high-SNR outage its docstring derives it from),
     checked against a numerical minimization; on the true outage gammainc its loss lies between the
-    numerical optimum and the equal split's (measured: 3-22 % above the optimum, the equal split
-    33-190 %)."""
+    numerical optimum and the equal split's."""
     from scipy import optimize, special
 
     env = gym.make("lawn/CommRL-v0").unwrapped

@@ -15,7 +15,8 @@ def test_render_writes_a_gif_of_the_episode(tmp_path, capsys):
     assert main(["render", "--policy", "epa", "--seed", "2", "--every", "2", "--set", "num_slots=7",
                  "--out", str(out)]) == 0
     frames = iio.imread(out, index=None)
-    assert frames.shape[0] == 1 + 3 + 1  # the start, slots 2, 4, 6 and the last (7)
+    assert frames.shape[0] == 1 + 3 + 1  # the start, slots 2, 4, 6 and the last (7): kept by the episode's
+    # length, not num_slots, so an episode the RL interface ends early keeps its last frame too
     assert frames.shape[1] > 300 and frames.shape[2] > 300
     assert not np.array_equal(frames[0], frames[-1])  # the scene moves
     printed = capsys.readouterr().out
@@ -72,3 +73,4 @@ def test_a_missing_mp4_writer_is_refused_before_the_episode(tmp_path, monkeypatc
     with pytest.raises(ValueError, match=r"MP4 output needs imageio-ffmpeg: pip install -e \"\.\[video\]\""):
         render_episode("epa", tmp_path / "e.mp4")
     assert not played
+

@@ -30,17 +30,17 @@ def record_frames(policy: str, env_id: str | None, seed: int, config: ScenarioCo
     env_id = env_id or actor.env_id
     env = gym.make(env_id, config=actor.config if config is None else config, render_mode="rgb_array")
     frames: list[np.ndarray] = []
-    last = env.unwrapped.config.num_slots
 
     def keep(step) -> None:
-        slot = step.slot + 1  # the slot the frame shows
-        if slot % every == 0 or slot == last:
+        if (step.slot + 1) % every == 0:  # the frame shows slot n + 1
             frames.append(env.render())
 
     # the start's frame: the reset rollout() does gives the same state for the same seed
     env.reset(seed=seed)
     frames.append(env.render())
     episode = rollout(env, actor, seed, on_step=keep)
+    if episode.length % every:  # the episode's last slot (at num_slots, or earlier if it terminated)
+        frames.append(env.render())
     env.close()
     return frames, dict(episode.metrics), env_id
 

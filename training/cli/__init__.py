@@ -2,6 +2,7 @@
 ``run``), the shared flags as parent parsers and one policy-name type (:mod:`.common`).
 
 ``lawn demo``: one seeded episode of ``lawn/Joint-v0`` under a scripted policy.
+``lawn render``: one seeded episode of any policy as an animation (GIF or MP4).
 ``lawn evaluate``: any registered policy on seeded episodes, one row per episode (CSV/JSON).
 ``lawn benchmark``: the expert and the baselines on the same seeds, a table and a bar plot;
 ``--protocol learned`` the learned agents beside their anchors on 100 test seeds, ``--suite`` the
