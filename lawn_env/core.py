@@ -22,7 +22,7 @@ nothing about action or observation encodings; the environments do (:mod:`lawn_e
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from typing import Any, NamedTuple, Sequence
 
 import llvmlite.binding
 import numba
@@ -61,9 +61,13 @@ def saturate(u_prev: float, du: float, accel_max: float) -> float:  # pragma: no
 
 
 @numba.vectorize(["float64(float64, float64, float64)"], cache=True)
-def saturate_increment(u_prev: float, du: float, accel_max: float) -> float:  # pragma: no cover - compiled
-    """:func:`saturate` over arrays (a ufunc: broadcasting, a new array)."""
+def _saturate_dufunc(u_prev: float, du: float, accel_max: float) -> float:  # pragma: no cover - compiled
     return saturate(u_prev, du, accel_max)
+
+
+#: :func:`saturate` over arrays (broadcasting, a new array): numpy's ufunc of the compiled loop
+#: (numba's wrapper dispatches about 3x slower; the RL interface's LQR anchor calls it every step).
+saturate_increment = _saturate_dufunc.ufunc
 
 
 def link_outage(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray,
@@ -265,7 +269,6 @@ class SimParams:
     area: tuple[float, float, float, float]
     area_lo: np.ndarray
     area_hi: np.ndarray
-    accel_max: float
     max_speed: float
     power_budget_w: float
     drone_start: np.ndarray  # (2,)
@@ -274,7 +277,7 @@ class SimParams:
     fixed_reference: np.ndarray | None  # (K, T, 6) of the fixed path set
     disturbance: DisturbanceConfig
     disturbed: bool
-    lag_alpha: float  # exp(-slot / lag) under actuator lag, else -1.0 (no lag)
+    lag_alpha: float  # exp(-slot / lag) under actuator lag, else -1.0 (no lag); packed in constants[0] too
     always: np.ndarray = None  # (1,) True: every slot sends its commands (no disturbance mode)
     #: the slot kernel's scalars: lag_alpha, accel_max and the link's H^2, c_d, c_ce and m (the
     #: outage argument x = c_d d^2 / p + c_ce), one array (a compiled call's arguments each cost)
@@ -304,7 +307,7 @@ class SimParams:
             packed_t=np.ascontiguousarray(packed_t), packed_w=np.ascontiguousarray(packed_w),
             accel_effect_t=np.ascontiguousarray(model.a_aug[0:4, 4:6].T),
             area=area, area_lo=np.array([area[0], area[2]]), area_hi=np.array([area[1], area[3]]),
-            accel_max=config.control.accel_max_mps2, max_speed=config.drone.max_speed_mps,
+            max_speed=config.drone.max_speed_mps,
             power_budget_w=config.power_budget_w, drone_start=np.array(config.drone.start_m, dtype=float),
             envelope=envelope, fixed_paths=fixed_paths, fixed_reference=fixed,
             disturbance=d, disturbed=d.active,
@@ -476,16 +479,6 @@ class SlotRecord(NamedTuple):
         return self.terms[..., 1]
 
     @property
-    def tracking_total(self) -> np.ndarray:
-        """The slot's tracking cost (B,)."""
-        return self.costs[:, 0]
-
-    @property
-    def effort_total(self) -> np.ndarray:
-        """The slot's effort cost (B,)."""
-        return self.costs[:, 1]
-
-    @property
     def stage_cost(self) -> np.ndarray:
         """The slot's stage cost, tracking + effort, as a column (B, 1)."""
         return self.costs[:, 2:3]
@@ -501,9 +494,11 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     fading. The disturbance mode (MODEL.md §7) runs through the same equations: wind moves the
     drone after its planned move, commands go out only every ``control_period_slots``, the applied
     acceleration lags the commanded one, process noise perturbs the AGVs and measurement noise
-    what the policies observe."""
+    what the policies observe. The decisions may come in any real dtype (the kernel's is float64)."""
     d = params.disturbance
-    drone_next = decisions.drone_next
+    increment = np.asarray(decisions.increment, dtype=np.float64)
+    power = np.asarray(decisions.power_w, dtype=np.float64)
+    drone_next = np.asarray(decisions.drone_next, dtype=np.float64)
     if params.disturbed:
         wind = np.asarray(d.wind_mps, dtype=float)
         if draws.gust is not None:
@@ -518,7 +513,7 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     delivered, outage_p = np.empty((num, k), np.bool_), np.empty((num, k))
     applied = state.applied if params.lag_alpha < 0.0 else np.empty((num, k, 2))
     costs, totals = np.empty((num, 3)), np.empty(state.totals.shape)
-    _slot(x_aug, decisions.increment, send, decisions.power_w, drone_next, draws.fading, state.reference, state.slot,
+    _slot(x_aug, increment, send, power, drone_next, draws.fading, state.reference, state.slot,
           state.applied, process_position, process_velocity, state.drone_position, state.totals, params.packed_t,
           params.packed_w, params.accel_effect_t, params.constants, rows, terms, delivered, outage_p, applied, costs,
           totals)
@@ -527,15 +522,16 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     x_obs, error_obs = x_next, error
     if draws.measurement_position is not None:
         x_obs, error_obs = measure(x_next, error, draws.measurement_position, draws.measurement_velocity)
-    new = SimState(x_next, error, x_obs, error_obs, applied, drone_next, slot, decisions.power_w, delivered, outage_p,
+    new = SimState(x_next, error, x_obs, error_obs, applied, drone_next, slot, power, delivered, outage_p,
                    state.reference, state.paths, totals)  # SimState's field order
-    record = SlotRecord(terms, delivered, outage_p, applied_increment, decisions.power_w, drone_next, costs)
+    record = SlotRecord(terms, delivered, outage_p, applied_increment, power, drone_next, costs)
     return new, record
 
 
-def control_costs(state: SimState) -> np.ndarray:
-    """Every scenario's control cost so far (B,): the running sums of its tracking and effort costs."""
-    return state.totals[:, 0] + state.totals[:, 1]
+def control_costs(state: SimState, rows: Any = slice(None)) -> np.ndarray:
+    """The control cost so far of the scenarios ``rows`` (default: all, (B,)): the running sums of
+    their tracking and effort costs."""
+    return state.totals[rows, 0] + state.totals[rows, 1]
 
 
 def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np.ndarray) -> list[dict]:
@@ -550,7 +546,7 @@ def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np
     t = state.totals[rows]
     nk, per = n * k, n[:, None]
     sq_error, outages, power = t[:, 4 : 4 + k], t[:, 4 + k : 4 + 2 * k], t[:, 4 + 2 * k :]
-    columns = zip(n.tolist(), control_costs(state)[rows].tolist(), t[:, 0].tolist(), t[:, 1].tolist(),
+    columns = zip(n.tolist(), control_costs(state, rows).tolist(), t[:, 0].tolist(), t[:, 1].tolist(),
                   np.sqrt(sq_error.sum(axis=1) / nk).tolist(), np.sqrt(sq_error / per).tolist(),
                   (outages.sum(axis=1) / nk).tolist(), (t[:, 2] / nk).tolist(), (outages / per).tolist(),
                   (power / per).tolist(), t[:, 3].tolist())
@@ -617,8 +613,7 @@ class Simulation:
         from (a vector env's restarted scenarios, whose slot did not happen). The current state's
         arrays are the step's own (new ones), so ``before`` is unchanged."""
         state = self.state
-        for name in ("x_aug", "tracking_error", "x_obs", "error_obs", "applied", "drone_position", "slot",
-                     "last_power_w", "last_delivered", "last_outage_probability"):
+        for name in (*STATE_ARRAYS, "slot"):  # the reference is never a step's own: skipped below
             new, old = getattr(state, name), getattr(before, name)
             if new is not old:
                 new[rows] = old[rows]
@@ -633,12 +628,9 @@ class Simulation:
         idx = state.slot[:, None] + self._window[None, :]
         return state.reference[np.arange(state.slot.size)[:, None], :, idx].transpose(0, 2, 1, 3)
 
-    def episode_metrics(self, i: int = 0) -> dict:
-        """:func:`episode_metrics` of scenario ``i``."""
-        return episode_metrics(self.params, self.state, [i])[0]
-
-    def episodes_metrics(self, rows: np.ndarray) -> list[dict]:
-        """:func:`episode_metrics` of the scenarios ``rows`` (indices), computed together."""
+    def episode_metrics(self, rows: Sequence[int] | np.ndarray = (0,)) -> list[dict]:
+        """:func:`episode_metrics` of the scenarios ``rows`` (indices; a single env's is row 0),
+        computed together."""
         return episode_metrics(self.params, self.state, rows)
 
     def row(self, i: int = 0) -> ScenarioView:
@@ -667,7 +659,7 @@ class ScenarioView:
     @property
     def control_cost(self) -> float:
         """The episode's control cost so far (:func:`control_costs` of this scenario)."""
-        return float(control_costs(self._sim.state)[self.i])
+        return float(control_costs(self._sim.state, self.i))
 
     @property
     def done(self) -> bool:
@@ -704,7 +696,7 @@ class ScenarioView:
 
     def episode_metrics(self) -> dict:
         """Metrics of MODEL.md §6 over the slots run so far (decision time is the caller's)."""
-        return self._sim.episode_metrics(self.i)
+        return self._sim.episode_metrics([self.i])[0]
 
 
 #: The state's arrays a :class:`Simulation` reads as attributes (``sim.x_aug`` (B, K, 6), ...) and a

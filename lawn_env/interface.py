@@ -213,7 +213,7 @@ class ActionLayout:
     """Decode and encode the normalized actions of one role under one scheme.
 
     ``decode(action, x_aug, reference, drone_position)`` turns a checked action in [-1, 1]
-    into a :class:`Decision`; ``encode(decision, x_aug, reference, drone_position)`` is its
+    into a :class:`Decisions`; ``encode(decision, x_aug, reference, drone_position)`` is its
     inverse (exact for decisions the scheme can express; otherwise the nearest action, clipped).
     The state arguments are the measured augmented states (K, 6), the reference window
     (K, N_p+1, 6) and the drone's current position (2,); :class:`~lawn_env.core.Snapshot` and
@@ -263,17 +263,17 @@ class ActionLayout:
             self.mpc.reset(which)
 
     def decode(self, actions: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
-               drone_position: np.ndarray, slot: int | np.ndarray | None = None) -> Decision:
+               drone_position: np.ndarray, slot: int | np.ndarray | None = None) -> Decisions:
         """The decisions of checked actions: one scenario (action (size,), states (K, 6), reference
         window (K, N_p+1, 6), drone position (2,), slot) or a batch of B (the same with a leading B
         axis, ``slot`` (B,): the scenarios' slots, for move blocking with a control period); the
-        Decision's arrays have the same leading axes."""
+        Decisions's arrays have the same leading axes."""
         a = np.asarray(actions)
         if a.ndim == 1:  # one scenario: the batch of one
             ref = None if reference is None else reference[None]
             d = self.decode(a[None], x_aug[None], ref, np.asarray(drone_position)[None],
                             None if slot is None else np.asarray(slot).reshape(1))
-            return Decision(None if d.increment is None else d.increment[0], d.power_w[0], d.drone_next[0])
+            return Decisions(None if d.increment is None else d.increment[0], d.power_w[0], d.drone_next[0])
         k = self.num_agvs
         if self.scheme == "direct":
             num = a.shape[0]
@@ -282,7 +282,7 @@ class ActionLayout:
             spaces.direct_rows(np.ascontiguousarray(a, dtype=np.float64), self._inc_size, k, self._inc_max, self._pmax,
                                self._vmax, self._dt, *self._area, np.ascontiguousarray(drone_position, dtype=np.float64),
                                _NO_INCREMENT if increment is None else increment, power, drone_next)
-            return Decision(increment, power, drone_next)
+            return Decisions(increment, power, drone_next)
         comm = a[:, self._inc_size :]
         target = x_aug[..., 0:2].mean(axis=-2) + comm[:, k:] * self.interface.drone_offset_m
         drone_next = toward(drone_position, target, self._vmax, self._dt, self._area)
@@ -299,7 +299,7 @@ class ActionLayout:
         return self.mpc.prepare(x_aug, reference, slot)
 
     def _anchored(self, a_increment: np.ndarray, a_power: np.ndarray, x_aug: np.ndarray,
-                  reference: np.ndarray | None, slot: int | np.ndarray | None, drone_next: np.ndarray) -> Decision:
+                  reference: np.ndarray | None, slot: int | np.ndarray | None, drone_next: np.ndarray) -> Decisions:
         """The anchored decision once the drone's next position is known (single or batched): the
         power split around the prior and, for Joint, the residual on the anchor MPC's increments,
         within the increment bound."""
@@ -308,11 +308,11 @@ class ActionLayout:
         w = self._prior(d2, data) * np.exp(a_power * self.interface.power_log_range)
         power = w * (self._pmax / w.sum(axis=-1, keepdims=True))
         if not self._inc_size:
-            return Decision(None, power, drone_next)
+            return Decisions(None, power, drone_next)
         increment = self._anchor_increment(data, power, d2, x_aug, reference)
         increment += a_increment.reshape(increment.shape) * (self.interface.residual_scale * self._inc_max)
         np.clip(increment, -self._inc_max, self._inc_max, out=increment)
-        return Decision(increment, power, drone_next)
+        return Decisions(increment, power, drone_next)
 
     def _distance_sq(self, x_aug: np.ndarray, drone_next: np.ndarray) -> np.ndarray:
         """d_k^2 from the drone's next position to the AGVs, (..., K)."""
@@ -358,7 +358,7 @@ class ActionLayout:
         return self.mpc.solve_prepared(data, psi, start_from=start).increments[..., 0, :].copy()
 
     # ------------------------------------------------------------------ encode
-    def encode(self, decision: Decision, x_aug: np.ndarray, reference: np.ndarray | None,
+    def encode(self, decision: Decisions, x_aug: np.ndarray, reference: np.ndarray | None,
                drone_position: np.ndarray, slot: int | None = None) -> np.ndarray:
         """The action (float32) that decodes to ``decision`` (nearest one, clipped, otherwise)."""
         power = np.asarray(decision.power_w, dtype=float)

@@ -141,3 +141,24 @@ def test_the_disturbed_slot_is_the_nominal_transition_plus_the_lag_and_noise():
         np.testing.assert_allclose(record.tracking_cost[0], tracking, rtol=1e-12)
         np.testing.assert_allclose(record.effort_cost[0], effort, rtol=1e-12)
     assert np.allclose(record.drone_position[0], np.clip(q + np.array([1.0, -2.0]) * dt, 0, 200))  # the wind moved the hovering drone
+
+
+def test_the_step_takes_decisions_of_any_real_dtype():
+    """``Simulation.step`` converts the decisions to the kernel's float64: float32 or integer arrays
+    give the slot that their float64 values give (they raised numba's no-matching-definition error)."""
+    from lawn_env.core import Decisions, Simulation
+
+    cfg = ScenarioConfig(num_slots=5)
+    records = []
+    for cast in (np.float64, np.float32, np.int64):
+        sim = Simulation(cfg)
+        sim.reset([np.random.default_rng(3)])
+        view, draws = sim.row(0), np.random.default_rng(5)
+        decisions = Decisions(np.ones((1, cfg.num_agvs, 2), cast), np.full((1, cfg.num_agvs), 0.25).astype(cast)
+                              if cast is not np.int64 else np.zeros((1, cfg.num_agvs), cast),
+                              np.round(view.drone_target(np.zeros(2)))[None].astype(cast))
+        records.append(sim.step(decisions, sim.draw(draws)))
+    assert np.array_equal(records[0].terms, records[1].terms)  # 1.0, 0.25 and whole metres are exact in float32
+    # integer zero power: every link in outage, no command arrives, the increments applied are zero
+    assert (records[2].outage_probability == 1.0).all() and not records[2].delivered.any()
+    assert not records[2].applied_increment.any() and records[2].power_w.dtype == np.float64

@@ -9,7 +9,8 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 import lawn_env
 from agents import make_policy
 from lawn_env import ScenarioConfig
-from lawn_env.interface import RL_INTERFACE, STAKE_FLOOR, ActionLayout, Decision, RLInterface, resolve_interface
+from lawn_env.core import Decisions
+from lawn_env.interface import RL_INTERFACE, STAKE_FLOOR, ActionLayout, RLInterface, resolve_interface
 from lawn_env.dynamics import PredictionModel
 
 RL_IDS = list(lawn_env.RL_ENV_IDS)
@@ -259,7 +260,7 @@ def test_planner_decisions_survive_both_schemes():
     for _ in range(30):
         expert.act(obs)
         plan, snap = expert.last_plan, env.snapshot()
-        decision = Decision(plan.increments[:, 0], plan.power_w, plan.drone_position)
+        decision = Decisions(plan.increments[:, 0], plan.power_w, plan.drone_position)
         args = (snap.x_aug, snap.reference, snap.drone_position)
         out = anchored.decode(anchored.encode(decision, *args).astype(np.float64), *args)
         centroid = snap.x_aug[:, 0:2].mean(axis=0)

@@ -43,7 +43,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..core import SlotDraws, Trail
+from ..core import SlotDraws, Trail, control_costs
 from ..interface import InterfaceLike
 from ..mpc import DEFAULT_BACKEND
 from ..presets import ConfigLike, resolve_config
@@ -151,11 +151,10 @@ class JointVectorEnv(EngineAccess, VectorEnv):
         if ended.any():
             metrics = np.full(self.num_envs, None, dtype=object)
             rows = np.flatnonzero(ended)
-            for i, values in zip(rows.tolist(), sim.episodes_metrics(rows)):
+            for i, values in zip(rows.tolist(), sim.episode_metrics(rows)):
                 metrics[i] = values
             info["episode_metrics"], info["_episode_metrics"] = metrics, ended
-            totals = sim.state.totals
-            info["episode_control_cost"] = np.where(ended, totals[:, 0] + totals[:, 1], 0.0)
+            info["episode_control_cost"] = np.where(ended, control_costs(sim.state), 0.0)
             info["_episode_control_cost"] = ended
         self._done = ended
         obs = engine.observe()
