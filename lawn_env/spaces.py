@@ -159,24 +159,38 @@ def encode_drone(next_position: np.ndarray, position: np.ndarray, max_speed_mps:
 
 
 @numba.njit(cache=True)
-def _encode_rows(out, table, slot, x_obs, error_obs, drone, outage, delivered, power, scales, features, w1,
-                 bound, clip_rest):  # pragma: no cover - compiled
-    """Every observation row: the slot's row of the fixed path set's ``table`` (when it has rows),
-    then the state-dependent features, each computed in float64 as :meth:`ObservationLayout.encode`
-    documents, rounded once to float32 and clipped to ``bound`` in float32; with ``clip_rest`` the
-    row's other features (the table's or the caller's) are clipped too. ``scales`` rows: state
-    scale, state shift (scaled), reference scale (6 each), then the area center, the inverse
-    half-extent and the inverse power budget."""
+def _encode_rows(out, table, slot, x_obs, error_obs, drone, outage, delivered, power, reference, num_slots, scales,
+                 features, w0, bound, clip_table):  # pragma: no cover - compiled
+    """Every observation row, each feature computed in float64 as :meth:`ObservationLayout.encode`
+    documents, rounded once to float32 and clipped to ``bound`` in float32. The slot-dependent
+    features (the reference windows, slot n / N) are the slot's row of the fixed path set's
+    ``table`` when it has rows (clipped too with ``clip_table``), else computed here from each
+    scenario's ``reference`` (B, K, T, 6) as :meth:`ObservationLayout.scaled_windows` does.
+    ``scales`` rows: state scale, state shift (scaled), reference scale (6 each), then the area
+    center, the inverse half-extent and the inverse power budget."""
     num, k = x_obs.shape[0], x_obs.shape[1]
     g = k * features
+    window = (features - 17) // 6
+    w1 = w0 + 6 * window
     state_scale, state_shift, ref_scale = scales[0], scales[1], scales[2]
     b32 = np.float32(bound)
     for b in range(num):
+        n = slot[b]
         if table.shape[0] > 1:
-            out[b, :] = table[slot[b]]
-        if clip_rest:
-            for j in range(out.shape[1]):
-                out[b, j] = _clip32(out[b, j], b32)
+            out[b, :] = table[n]
+            if clip_table:
+                for j in range(out.shape[1]):
+                    out[b, j] = _clip32(out[b, j], b32)
+        else:
+            for i in range(k):
+                col = i * features + w0
+                for w in range(window):
+                    for j in range(6):
+                        r = reference[b, i, n + w, j]
+                        if j < 2:
+                            r = r - reference[b, i, n, j]
+                        out[b, col + 6 * w + j] = _clip32(np.float32(r * ref_scale[j]), b32)
+            out[b, g + 2] = _clip32(np.float32(n / num_slots), b32)
         dx = (drone[b, 0] - scales[3, 0]) * scales[3, 2]
         dy = (drone[b, 1] - scales[3, 1]) * scales[3, 3]
         for i in range(k):
@@ -302,22 +316,19 @@ class ObservationLayout:
         observation). A fixed path set shares one precomputed float32 table of the slot-dependent
         features (the reference windows and slot n / N) while it stays under
         ``batch_window_table_bytes``: a step copies one table row per scenario and writes the
-        state-dependent features over it, in one compiled loop."""
-        b, k, f = sim.num_envs, self.num_agvs, self.agv_features
-        window = self.slices["reference"]
+        state-dependent features over it; otherwise (random paths) the compiled loop computes the
+        windows from each scenario's reference as :meth:`scaled_windows` does (its oracle)."""
         st = sim.state
         shared = sim.params.fixed_reference
-        template = self._table if shared is not None and shared is self._table_key else self._slot_table(shared)
-        out = np.empty((b, self.size), np.float32)
-        if template is None:
-            out[:, : k * f].reshape(b, k, f)[..., window] = self.scaled_windows(sim.reference_windows())
-            out[:, -1] = st.slot / self.num_slots
-            template = self._no_table
+        table = self._table if shared is not None and shared is self._table_key else self._slot_table(shared)
+        if table is None:
+            table = self._no_table  # the windows are computed in the compiled loop
+        out = np.empty((sim.num_envs, self.size), np.float32)
         # the table's features need clipping only where they exceed the bound (it is built once)
-        clip_rest = bound is not None and (template is self._no_table or self._table_peak > bound)
-        _encode_rows(out, template, st.slot, st.x_obs, st.error_obs, st.drone_position, st.last_outage_probability,
-                     st.last_delivered, st.last_power_w, self._scales, f, window.stop,
-                     np.inf if bound is None else bound, clip_rest)
+        _encode_rows(out, table, st.slot, st.x_obs, st.error_obs, st.drone_position, st.last_outage_probability,
+                     st.last_delivered, st.last_power_w, st.reference, self.num_slots, self._scales, self.agv_features,
+                     self.slices["reference"].start, np.inf if bound is None else bound,
+                     bound is not None and self._table_peak > bound)
         return out
 
     def _slot_table(self, shared: np.ndarray | None) -> np.ndarray | None:

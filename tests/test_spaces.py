@@ -43,3 +43,40 @@ def test_check_action_messages():
         spaces.check_action(np.zeros((2, 2)), 3)
     with pytest.raises(ValueError, match=r"shape \(1, 3\); expected \(3,\)"):
         spaces.check_action(np.zeros((1, 3)), 3)  # no silent reshape
+
+
+@pytest.mark.parametrize("num_agvs", [4, 6])  # the fixed path set (a precomputed table) and random paths
+@pytest.mark.parametrize("bound", [None, 0.5])
+def test_encode_equals_its_numpy_oracle_bit_for_bit(num_agvs, bound):
+    """The compiled encode (a table row for a fixed path set, windows computed in the loop otherwise)
+    equals the observation written out with ``scaled_windows`` and float32 rounding, clipped to the
+    bound, for a batch of scenarios at different slots; and with the table switched off, the same."""
+    from lawn_env import ObservationLayout, ScenarioConfig
+    from lawn_env.core import Decisions, Simulation
+
+    cfg = ScenarioConfig(num_agvs=num_agvs, num_slots=30)
+    sim = Simulation(cfg, 5)
+    sim.reset([np.random.default_rng(s) for s in range(5)])
+    draws = np.random.default_rng(0)
+    for t in range(7):
+        decisions = Decisions(draws.uniform(-1, 1, (5, num_agvs, 2)), np.full((5, num_agvs), 0.2),
+                              sim.state.drone_position + draws.uniform(-3, 3, (5, 2)))
+        sim.step(decisions, sim.draw(draws))
+        sim.state.slot[:] = np.arange(5) + t  # scenarios at different slots
+    layout = ObservationLayout(cfg)
+    obs = layout.encode(sim, bound)
+    k, f, win = num_agvs, layout.agv_features, layout.slices["reference"]
+    expected = np.empty_like(obs)
+    expected[:, : k * f].reshape(5, k, f)[..., win] = layout.scaled_windows(sim.reference_windows())
+    expected[:, -1] = sim.state.slot / cfg.num_slots
+    if bound is not None:
+        expected = np.clip(expected, np.float32(-bound), np.float32(bound))
+        assert (np.abs(obs) == np.float32(bound)).any()  # the bound bites
+    windows = np.zeros(obs.shape, bool)
+    windows[:, : k * f].reshape(5, k, f)[..., win] = True
+    windows[:, -1] = True
+    assert np.array_equal(obs[windows], expected[windows])
+    untabled = ObservationLayout(cfg)
+    untabled.batch_window_table_bytes = 0  # no table: every feature from the compiled loop
+    assert untabled._slot_table(sim.params.fixed_reference) is None
+    assert np.array_equal(untabled.encode(sim, bound), obs)
