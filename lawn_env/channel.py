@@ -87,8 +87,10 @@ class LinkParams:
         ch = config.channel
         blocklength = math.inf if ch.infinite_blocklength else ch.blocklength
         rho = ch.ce_error_var if (ch.ce_aware_planning or not planning) else 0.0
+        threshold = 0.0 if ch.perfect_links else snr_threshold(ch.rate_threshold_bps_hz, blocklength, ch.bler,
+                                                                ch.paper_rate_form)
         return cls(
-            snr_threshold=snr_threshold(ch.rate_threshold_bps_hz, blocklength, ch.bler, ch.paper_rate_form),
+            snr_threshold=threshold,
             alpha0=ch.alpha0,
             noise_power_w=ch.noise_power_w,
             m=ch.nakagami_m,

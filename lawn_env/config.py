@@ -83,6 +83,10 @@ class ChannelConfig:
     ce_aware_planning: bool = True
     """Planners inside the package (the Comm-v0 MPC, experts) use rho in their outage model;
     False makes them CSI-unaware (they plan with rho = 0) *(decided)*."""
+    perfect_links: bool = False
+    """Every command is delivered: the SNR threshold G_th is 0, so the outage probability is 0 on
+    every link for the simulator and the planners alike. Not a channel but a reference: the
+    ``limit:perfect-links`` headroom row of the benchmark (docs/benchmark.md) *(decided)*."""
 
     @property
     def alpha0(self) -> float:

@@ -109,7 +109,7 @@ def test_anchor_names_and_errors():
 def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     pytest.importorskip("stable_baselines3")
     from training.leaderboard import costs_of, learned_entries, own_anchor, run_learned_protocol
-    from training.tables import fmt_paired, paired_difference, read_csv
+    from training.tables import fmt_geometric, fmt_paired, paired_difference, paired_geometric, read_csv
 
     agents = ["zoo:ppo-comm", "zoo:bc-comm", "zoo:ppo-comm"]
     anchors = sorted({own_anchor(a) for a in agents})
@@ -121,13 +121,17 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
         run_learned_protocol(["zoo:nope"], tmp_path, episodes=3, workers=1, progress=False)
     table = run_learned_protocol(["zoo:ppo-comm"], tmp_path, episodes=3, workers=1, progress=False)
     lines = table.splitlines()
-    assert "vs own anchor (paired)" in lines[0] and "score v1" in lines[0]
+    assert "vs own anchor (paired mean)" in lines[0] and "vs own anchor (geometric" in lines[0] and "score v1" in lines[0]
     agent = next(line for line in lines if line.startswith("| zoo:ppo-comm "))
     anchor = own_anchor("zoo:ppo-comm")
     assert f"| {anchor} |" in agent
     rows = read_csv(tmp_path / "episodes.csv")
     diff = paired_difference(costs_of(rows, "zoo:ppo-comm", "lawn/Comm-v0"), costs_of(rows, anchor, "lawn/Comm-v0"))
-    assert fmt_paired(*diff[:2]) in agent.split("|")[7]
+    assert fmt_paired(*diff[:2]) in agent.split("|")[11]
+    geo = paired_geometric(costs_of(rows, "zoo:ppo-comm", "lawn/Comm-v0"), costs_of(rows, anchor, "lawn/Comm-v0"))
+    assert agent.split("|")[9].strip() == fmt_geometric(geo)
+    split = [float(r["transient_cost"]) + float(r["sustained_cost"]) - float(r["control_cost"]) for r in rows]
+    assert max(map(abs, split)) < 1e-6
     assert any(line.startswith("| anchor:stake | lawn/Comm-v0 |") for line in lines)
     assert any(line.startswith("| rg-mpc | lawn/Comm-v0 | – |") and "| 100.0 |" in line for line in lines)
     assert (tmp_path / "episodes.csv").exists() and "3 test seeds" in table
@@ -165,8 +169,9 @@ def test_selection_keeps_the_start_unless_a_validation_beats_it_significantly():
 
 # ---------------------------------------------------------------------- the task suite
 def test_suite_tasks_are_presets_with_their_own_scenarios():
-    configs = [presets.get(task) for task in presets.SUITE]
-    assert presets.SUITE[0] == "default" and len(set(map(repr, configs))) == len(configs)
+    for suite in (presets.SUITE, presets.SUITE_V1):
+        configs = [presets.get(task) for task in suite]
+        assert suite[0] == "default" and len(set(map(repr, configs))) == len(configs)
     assert presets.get("k8").num_agvs == 8 and presets.get("k3").num_agvs == 3
     assert presets.get("imperfect-csi").channel.ce_error_var > 0
     assert presets.get("short-blocklength").channel.blocklength < ScenarioConfig().channel.blocklength
@@ -180,14 +185,18 @@ def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(t
     from training.leaderboard import run_suite, suite_table
 
     policies = ["anchor:stake", "zoo:ppo-comm"]
-    rows, skipped, _ = run_suite(policies, list(presets.SUITE), 1, tmp_path, workers=1, progress=False)
-    assert {r["task"] for r in rows} == set(presets.SUITE)
-    assert set(skipped) == {("k3", "zoo:ppo-comm"), ("k8", "zoo:ppo-comm")}
-    assert "expects observations of shape (335,)" in skipped[("k8", "zoo:ppo-comm")]
-    board, refs = suite_table(rows, policies, list(presets.SUITE), skipped)
+    tasks = ["default", "wide-k8"]
+    rows, skipped, _ = run_suite(policies, tasks, 1, tmp_path, workers=1, progress=False)
+    assert {r["task"] for r in rows} == set(tasks)
+    assert {r["policy"] for r in rows} >= {"rg-mpc", "epa", "noise:rg-mpc", "limit:fast-drone", "limit:perfect-links"}
+    assert set(skipped) == {("wide-k8", "zoo:ppo-comm")}
+    assert "expects observations of shape (335,)" in skipped[("wide-k8", "zoo:ppo-comm")]
+    board, refs = suite_table(rows, policies, tasks, skipped)
     agent = next(line for line in board.splitlines() if line.startswith("| zoo:ppo-comm"))
-    assert agent.count("n/a") == 2 and "(5 tasks)" in agent
-    assert all(f"| {task} |" in refs for task in presets.SUITE)
+    assert agent.count("n/a") == 1 and "(1 task)" in agent
+    assert all(f"| {task} |" in refs for task in tasks)
+    per_slot = (tmp_path / "per_slot.csv").read_text().splitlines()
+    assert per_slot[0].startswith("task,env,policy,slot,mean_stage_cost") and len(per_slot) > 120
 
 
 # ---------------------------------------------------------------------- datasets
@@ -389,8 +398,9 @@ def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "1 policies x 1 tasks, 3 seeds each" in printed
     board = (out / "board.md").read_text()
-    assert board.splitlines()[0] == "| policy | env | k3 | mean over tasks |"
-    assert board.splitlines()[2].startswith("| anchor:stake | lawn/Joint-v0 | ")
+    assert board.splitlines()[0] == "| policy | env | k3 | IQM over tasks [95 %] |"
+    names = [line.split("|")[1].strip() for line in board.splitlines()[2:]]
+    assert names == ["noise:rg-mpc", "limit:fast-drone", "limit:perfect-links", "anchor:stake"]
     page = (docs / "LEADERBOARD.md").read_text()
     assert "This board runs `k3` only (`--tasks`)" in page and board.strip() in page
     assert "| k3 | lawn/Joint-v0 | 3 |" in (out / "references.md").read_text()

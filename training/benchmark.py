@@ -7,31 +7,41 @@ from typing import Sequence
 
 from lawn_env import ScenarioConfig
 
-from .evaluate import SUMMARY_METRICS, evaluate, format_table, paired_cost_difference, summarize, write_rows
+from .evaluate import (SUMMARY_METRICS, TRANSIENT_SLOTS, evaluate, format_table, paired_cost_difference,
+                       paired_cost_geometric, summarize, write_rows)
 from .score import scores_by_policy
 
 __all__ = ["run_benchmark", "plot_summary"]
 
 
 def run_benchmark(policies: Sequence[str], env_id: str, config: ScenarioConfig, episodes: int, seed: int,
-                  out_dir: Path, workers: int = 1, progress: bool = True) -> tuple[list[dict], list[dict]]:
+                  out_dir: Path, workers: int = 1, progress: bool = True, transient_slots: int = TRANSIENT_SLOTS
+                  ) -> tuple[list[dict], list[dict]]:
     """Run every policy on seeds ``seed .. seed+episodes-1``; write ``episodes.csv``,
     ``summary.csv``, ``summary.md`` and ``benchmark.png`` into ``out_dir``. With ``epa`` and
-    ``rg-mpc`` among the policies, the summary has the normalized score (:mod:`training.score`)."""
+    ``rg-mpc`` among the policies, the summary has the normalized score (:mod:`training.score`);
+    every policy is compared with the first, per seed, as a mean of relative differences and as a
+    geometric mean of cost ratios (the deciding statistic, docs/benchmark.md)."""
     tasks = [(name, env_id, config, seed + i, {}) for name in policies for i in range(episodes)]
-    rows = evaluate(tasks, workers=workers, progress=progress, desc="benchmark")
+    rows = evaluate(tasks, workers=workers, progress=progress, desc="benchmark", transient_slots=transient_slots)
     summary = summarize(rows)
     paired = paired_cost_difference(rows, policies[0])
+    geometric = paired_cost_geometric(rows, policies[0])
     scores = {policy: score for (_, _, policy), score in scores_by_policy(rows).items()}
     for entry in summary:
         mean, half = paired.get(entry["policy"], (float("nan"), float("nan")))
         entry[f"cost_vs_{policies[0]}"], entry[f"cost_vs_{policies[0]}_ci95"] = mean, half
+        if entry["policy"] in geometric:
+            g = geometric[entry["policy"]]
+            entry[f"ratio_vs_{policies[0]}"], entry["ratio_low"], entry["ratio_high"] = g.ratio, g.low, g.high
+            entry["seeds_won"] = g.won
         if entry["policy"] in scores:
             entry["score"], entry["score_low"], entry["score_high"] = scores[entry["policy"]][:3]
     out_dir = Path(out_dir)
     write_rows(rows, out_dir / "episodes.csv")
     write_rows(summary, out_dir / "summary.csv")
-    (out_dir / "summary.md").write_text(format_table(summary, paired=paired, reference=policies[0], scores=scores) + "\n")
+    (out_dir / "summary.md").write_text(format_table(summary, paired=paired, reference=policies[0], scores=scores,
+                                                           geometric=geometric) + "\n")
     plot_summary(summary, out_dir / "benchmark.png",
                  title=f"{env_id}, K={config.num_agvs}, {episodes} seeds from {seed}: mean ± 95 % interval")
     return rows, summary
@@ -42,7 +52,7 @@ def plot_summary(summary: list[dict], path: Path, title: str = "") -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(12, 3.6), dpi=110)
+    fig = Figure(figsize=(16, 3.6), dpi=110)
     FigureCanvasAgg(fig)
     names = [entry["policy"] for entry in summary]
     colors = [f"C{i}" for i in range(len(names))]
@@ -54,7 +64,8 @@ def plot_summary(summary: list[dict], path: Path, title: str = "") -> None:
         ax.bar(names, means, yerr=errs, color=colors, capsize=4)
         ax.set_title(label.replace("(s)", "(ms)"), fontsize=10)
         ax.tick_params(axis="x", labelrotation=45, labelsize=8)
-        if key == "control_cost" and max(means) > 20 * min(m for m in means if m > 0):
+        positive = [m for m in means if m > 0]
+        if key.endswith("_cost") and positive and max(positive) > 20 * min(positive):
             ax.set_yscale("log")
     if title:
         fig.suptitle(title, fontsize=10)

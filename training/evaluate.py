@@ -24,14 +24,24 @@ from agents import Policy, make_policy
 from agents.rollouts import Step, rollout
 from lawn_env import ScenarioConfig
 
-from .tables import mean_ci, paired_difference, write_csv
+from . import limits
+from .tables import Geometric, fmt_geometric, mean_ci, paired_difference, paired_geometric, write_csv
 
 __all__ = ["episode_row", "run_episode", "pool_map", "worker_pool", "evaluate", "summarize", "write_rows",
-           "SUMMARY_METRICS"]
+           "SUMMARY_METRICS", "TRANSIENT_SLOTS", "split_cost", "paired_cost_difference", "paired_cost_geometric"]
+
+#: Where an episode's control cost splits (docs/benchmark.md, "The cost's structure"): slots
+#: 0..TRANSIENT_SLOTS-1 are the transient (the AGVs' recovery from their initial offsets while the
+#: drone flies in from the area's edge: 91 % of ``rg-mpc``'s cost on the default task falls in
+#: slots 0-9), the slots from TRANSIENT_SLOTS on the sustained part. ``--transient-slots`` of
+#: ``lawn evaluate`` and ``lawn benchmark`` moves it.
+TRANSIENT_SLOTS = 20
 
 #: Metrics summarized with a mean and a 95 % interval (name, label).
 SUMMARY_METRICS = (
     ("control_cost", "control cost"),
+    ("transient_cost", "transient cost"),
+    ("sustained_cost", "sustained cost"),
     ("rmse_m", "RMSE (m)"),
     ("outage_rate", "outage rate"),
     ("decision_time_median_s", "decision time (s)"),
@@ -70,11 +80,21 @@ def episode_row(policy: Policy, env_id: str, config: ScenarioConfig, seed: int) 
     return row
 
 
+def build_policy(policy: str, config: ScenarioConfig, env_id: str | None = None,
+                 policy_kwargs: Mapping[str, Any] | None = None) -> tuple[Policy, ScenarioConfig]:
+    """The policy a row name plays and the config it plays on: a limit or noise-floor row
+    (:mod:`training.limits`) is ``rg-mpc`` on its lifted config or with its settings; any other
+    name is :func:`agents.make_policy` on ``config``."""
+    name, played, kwargs = limits.resolve(policy, config, policy_kwargs)
+    return make_policy(name, played, env_id=env_id, **kwargs), played
+
+
 def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
                 policy_kwargs: Mapping[str, Any] | None = None) -> dict:
-    """One seeded episode of the named policy (:func:`episode_row`)."""
-    agent = make_policy(policy, config, env_id=env_id, **dict(policy_kwargs or {}))
-    row = episode_row(agent, env_id, config, seed)
+    """One seeded episode of the named policy or reference row (:func:`build_policy`,
+    :func:`episode_row`)."""
+    agent, played = build_policy(policy, config, env_id, policy_kwargs)
+    row = episode_row(agent, env_id, played, seed)
     row["policy"] = policy
     return row
 
@@ -83,9 +103,25 @@ def _run_task(task) -> dict:
     return run_episode(*task)
 
 
-def evaluate(tasks: Iterable[tuple], workers: int = 1, progress: bool = True, desc: str = "episodes") -> list[dict]:
-    """Run ``(policy, env_id, config, seed, policy_kwargs)`` tasks; rows in task order."""
-    return pool_map(_run_task, list(tasks), workers, progress, desc)
+def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SLOTS) -> tuple[float, float]:
+    """(transient, sustained) control cost of an episode's per-slot stage costs: the sums over slots
+    ``0..transient_slots-1`` and ``transient_slots..``; they add up to the episode's control cost."""
+    if isinstance(transient_slots, bool) or not isinstance(transient_slots, (int, np.integer)) or transient_slots < 0:
+        raise ValueError(f"transient_slots={transient_slots!r}: must be an integer >= 0")
+    costs = np.asarray(stage_costs, dtype=float)
+    return float(costs[:transient_slots].sum()), float(costs[transient_slots:].sum())
+
+
+def evaluate(tasks: Iterable[tuple], workers: int = 1, progress: bool = True, desc: str = "episodes",
+             transient_slots: int = TRANSIENT_SLOTS) -> list[dict]:
+    """Run ``(policy, env_id, config, seed, policy_kwargs)`` tasks; rows in task order, each with its
+    ``transient_cost`` and ``sustained_cost`` split at ``transient_slots`` (:func:`split_cost`)."""
+    split_cost((), transient_slots)  # a bad split fails before any episode
+    rows = pool_map(_run_task, list(tasks), workers, progress, desc)
+    for row in rows:
+        row["transient_cost"], row["sustained_cost"] = split_cost(json.loads(row["stage_costs"]), transient_slots)
+        row["transient_slots"] = int(transient_slots)
+    return rows
 
 
 def _die_with_parent(parent_pid: int) -> None:
@@ -158,12 +194,26 @@ def paired_cost_difference(rows: list[dict], reference: str, metric: str = "cont
     return out
 
 
+def paired_cost_geometric(rows: list[dict], reference: str, metric: str = "control_cost") -> dict[str, Geometric]:
+    """Per policy: the geometric mean of its per-seed cost ratios against ``reference`` with a 95 %
+    bootstrap interval and the share of seeds won (:func:`training.tables.paired_geometric`)."""
+    ref = {r["seed"]: float(r[metric]) for r in rows if r["policy"] == reference}
+    out = {}
+    for name in dict.fromkeys(r["policy"] for r in rows):
+        mine = {r["seed"]: float(r[metric]) for r in rows if r["policy"] == name}
+        if name != reference and any(s in ref for s in mine):
+            out[name] = paired_geometric(mine, ref)
+    return out
+
+
 def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy",
                  paired: dict[str, tuple[float, float]] | None = None, reference: str | None = None,
-                 scores: Mapping[str, tuple] | None = None) -> str:
+                 scores: Mapping[str, tuple] | None = None, geometric: Mapping[str, Geometric] | None = None) -> str:
     """A Markdown table: mean ± 95 % interval per metric (decision time in ms), optionally the
-    normalized score (``scores``: policy -> :func:`training.score.normalized_score`) and the paired
-    relative cost difference against ``reference``."""
+    normalized score (``scores``: policy -> :func:`training.score.normalized_score`), the paired
+    relative cost difference against ``reference`` (``paired``: mean of per-seed relative
+    differences, t-interval) and the geometric one (``geometric``: the deciding statistic,
+    docs/benchmark.md)."""
     from .score import SCORE_VERSION, format_score
 
     header = [by, "episodes"] + [label.replace("(s)", "(ms)") for _, label in metrics]
@@ -171,6 +221,8 @@ def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMA
         header.insert(3, f"score v{SCORE_VERSION} [95 %]")
     if paired:
         header.append(f"cost vs {reference} (paired)")
+    if geometric:
+        header.append(f"cost vs {reference} (geometric [95 %], seeds won)")
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for entry in summary:
         cells = [str(entry[by]), str(entry["episodes"])]
@@ -183,6 +235,8 @@ def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMA
         if paired:
             mean, half = paired.get(entry[by], (math.nan, math.nan))
             cells.append("–" if entry[by] == reference else f"{mean * 100:+.1f} % ± {half * 100:.1f} %")
+        if geometric:
+            cells.append("–" if entry[by] == reference else fmt_geometric(geometric.get(entry[by])))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

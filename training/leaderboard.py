@@ -18,6 +18,7 @@ table says so.
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -32,14 +33,16 @@ from agents.learned import zoo_agents
 from agents.runs import read_run
 from lawn_env import ScenarioConfig, central_env_id, presets
 
-from .evaluate import evaluate, write_rows
+from .evaluate import TRANSIENT_SLOTS, build_policy, evaluate, write_rows
+from .limits import REFERENCE_ROWS, is_reference_row
 from .protocol import TEST_EPISODES
-from .score import SCORE_HIGH, SCORE_LOW, SCORE_VERSION, format_score, scores_by_policy
-from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci, paired_difference
+from .score import SCORE_HIGH, SCORE_LOW, SCORE_VERSION, aggregate_score, format_score, score_inputs, scores_by_policy
+from .tables import Geometric, fmt_geometric, fmt_num, fmt_paired, fmt_pct, mean_ci, paired_difference, paired_geometric
 
 __all__ = ["own_anchor", "policy_env", "costs_of", "paired", "protocol_cells", "learned_entries", "run_entries",
            "learned_table", "run_learned_protocol",
-           "SUITE_POLICIES", "suite_policies", "run_suite", "suite_table", "skipped_summary", "write_leaderboard"]
+           "SUITE_POLICIES", "suite_policies", "run_suite", "per_slot_profile", "suite_table", "structure_table",
+           "task_tables", "plot_profiles", "skipped_summary", "write_leaderboard", "geometric"]
 
 #: Rows without a per-slot trace keep the saved tables small (100 seeds x many agents).
 _DROPPED = ("stage_costs",)
@@ -85,22 +88,40 @@ def learned_entries(agents: Sequence[str], envs: Sequence[str] | None = None) ->
 
 
 def run_entries(entries: Sequence[tuple[str, str]], config: ScenarioConfig, seeds: Sequence[int], workers: int = 1,
-                progress: bool = True, task: str = "default", desc: str = "benchmark") -> list[dict]:
+                progress: bool = True, task: str = "default", desc: str = "benchmark",
+                transient_slots: int = TRANSIENT_SLOTS, profiles: list[dict] | None = None) -> list[dict]:
     """Full episodes of every (policy, env) entry on every seed; rows with a ``task`` column and
-    without the per-slot trace."""
+    without the per-slot trace (its mean per slot appended to ``profiles`` when given,
+    :func:`per_slot_profile`)."""
     tasks = [(policy, env, config, int(s), {}) for policy, env in entries for s in seeds]
-    rows = evaluate(tasks, workers=workers, progress=progress, desc=desc)
+    rows = evaluate(tasks, workers=workers, progress=progress, desc=desc, transient_slots=transient_slots)
     for row in rows:
         row["task"] = task
+    if profiles is not None:
+        profiles += per_slot_profile(rows)
+    for row in rows:
         for key in _DROPPED:
             row.pop(key, None)
     return rows
 
 
-def costs_of(rows: Sequence[Mapping], policy: str, env: str, task: str | None = None) -> dict[int, float]:
-    """Control cost per seed of ``policy`` on ``env`` (and ``task``, when given) in evaluation rows."""
-    return {int(r["seed"]): float(r["control_cost"]) for r in rows
+def costs_of(rows: Sequence[Mapping], policy: str, env: str, task: str | None = None,
+             metric: str = "control_cost") -> dict[int, float]:
+    """``metric`` (default: the control cost) per seed of ``policy`` on ``env`` (and ``task``, when
+    given) in evaluation rows."""
+    return {int(r["seed"]): float(r[metric]) for r in rows
             if r["policy"] == policy and r["env"] == env and (task is None or r.get("task", "default") == task)}
+
+
+def geometric(rows: Sequence[Mapping], policy: str, reference: str, env: str, task: str | None = None) -> Geometric:
+    """The geometric mean of ``policy``'s per-seed cost ratios against ``reference``, its bootstrap
+    interval and the share of seeds won (:func:`training.tables.paired_geometric`)."""
+    return paired_geometric(costs_of(rows, policy, env, task), costs_of(rows, reference, env, task))
+
+
+def _mean_cell(rows: Sequence[Mapping], policy: str, env: str, task: str | None, metric: str) -> str:
+    mean, half = mean_ci(costs_of(rows, policy, env, task, metric).values())
+    return f"{fmt_num(mean)} ± {fmt_num(half)}"
 
 
 def paired(rows: Sequence[Mapping], policy: str, reference: str, env: str) -> tuple[float, float]:
@@ -114,15 +135,20 @@ def protocol_cells(rows: Sequence[Mapping], scores: Mapping, policy: str, env: s
     cost, score, paired difference against rg-mpc and against its own anchor, and its worst seed
     against the anchor."""
     cost = costs_of(rows, policy, env)
-    mean, half = mean_ci(cost.values())
     anchor = own_anchor(policy)
-    cells = {"anchor": anchor or "–", "cost": f"{fmt_num(mean)} ± {fmt_num(half)}",
+    cells = {"anchor": anchor or "–", "cost": _mean_cell(rows, policy, env, None, "control_cost"),
              "score": format_score(scores.get(("default", env, policy))),
              "vs_ref": "–" if policy == SCORE_HIGH else fmt_paired(*paired(rows, policy, SCORE_HIGH, env)),
-             "vs_anchor": "–", "worst": "–"}
+             "vs_anchor": "–", "worst": "–", "geo_ref": "–", "geo_anchor": "–"}
+    if "transient_cost" in rows[0]:
+        cells["transient"] = _mean_cell(rows, policy, env, None, "transient_cost")
+        cells["sustained"] = _mean_cell(rows, policy, env, None, "sustained_cost")
+    if policy != SCORE_HIGH:
+        cells["geo_ref"] = fmt_geometric(geometric(rows, policy, SCORE_HIGH, env))
     if anchor is not None:
         base = costs_of(rows, anchor, env)
         cells["vs_anchor"] = fmt_paired(*paired(rows, policy, anchor, env))
+        cells["geo_anchor"] = fmt_geometric(geometric(rows, policy, anchor, env))
         cells["worst"] = fmt_pct(max((cost[s] - base[s]) / base[s] for s in cost if s in base))
     return cells
 
@@ -132,16 +158,21 @@ def learned_table(rows: Sequence[Mapping], entries: Sequence[tuple[str, str]],
     """The learned protocol's Markdown table of ``entries`` from their rows."""
     scores = scores_by_policy(rows)
     seeds = len({int(r["seed"]) for r in rows})
-    lines = [f"| policy | env | acts around | control cost | score v{SCORE_VERSION} [95 %] | vs rg-mpc (paired) "
-             f"| vs own anchor (paired) | worst seed vs own anchor |", "|" + "---|" * 8]
+    lines = [f"| policy | env | acts around | control cost | transient | sustained | score v{SCORE_VERSION} [95 %] "
+             f"| vs rg-mpc (geometric, seeds won) | vs own anchor (geometric, seeds won) | vs rg-mpc (paired mean) "
+             f"| vs own anchor (paired mean) | worst seed vs own anchor |", "|" + "---|" * 12]
     for policy, env in entries:
         c = protocol_cells(rows, scores, policy, env)
         name = (labels or {}).get(policy, policy)
-        lines.append(f"| {name} | {env} | {c['anchor']} | {c['cost']} | {c['score']} | {c['vs_ref']} "
-                     f"| {c['vs_anchor']} | {c['worst']} |")
-    lines += ["", f"{seeds} test seeds; score v{SCORE_VERSION}: 0 = {SCORE_LOW}, 100 = {SCORE_HIGH} "
-              "(training/score.py); paired columns: mean per-seed relative difference in control cost and its "
-              "95 % t-interval."]
+        lines.append(f"| {name} | {env} | {c['anchor']} | {c['cost']} | {c['transient']} | {c['sustained']} "
+                     f"| {c['score']} | {c['geo_ref']} | {c['geo_anchor']} | {c['vs_ref']} | {c['vs_anchor']} "
+                     f"| {c['worst']} |")
+    split = rows[0]["transient_slots"]
+    lines += ["", f"{seeds} test seeds; control cost split into the transient (slots 0-{split - 1}) and the sustained "
+              f"part (slots {split} on); score v{SCORE_VERSION}: 0 = {SCORE_LOW}, 100 = {SCORE_HIGH} "
+              "(training/score.py); geometric columns (the deciding statistic, docs/benchmark.md): the geometric "
+              "mean of the per-seed cost ratios - 1 with its 95 % bootstrap interval and the share of seeds won; "
+              "paired-mean columns: the mean per-seed relative difference and its 95 % t-interval."]
     return "\n".join(lines)
 
 
@@ -178,55 +209,84 @@ def _applicable(policy: str, env: str, config: ScenarioConfig) -> str | None:
     """None when ``policy`` can act on ``env`` with ``config``, else why not (one line). Names are
     checked on the default task first (by the caller), so a typo is an error, not an n/a."""
     try:
-        make_policy(policy, config, env_id=env)
+        build_policy(policy, config, env)
     except (ValueError, MissingExtra) as exc:  # a network built for another K; torch not installed
         return str(exc)
     return None
 
 
 def run_suite(policies: Sequence[str], tasks: Sequence[str], episodes: int, out_dir: Path, workers: int = 1,
-              progress: bool = True) -> tuple[list[dict], dict[tuple[str, str], str], float]:
-    """Every policy on every task (seeds 0..episodes-1), with the references of each env used;
-    writes ``episodes.csv``. Returns the rows, the (task, policy) pairs that cannot run with the
-    reason, and the wall time."""
+              progress: bool = True, transient_slots: int = TRANSIENT_SLOTS
+              ) -> tuple[list[dict], dict[tuple[str, str], str], float]:
+    """Every policy on every task (seeds 0..episodes-1), with the references of each env used and
+    the reference rows (:data:`training.limits.REFERENCE_ROWS`: the noise floor and the two
+    headroom rows, on ``lawn/Joint-v0``); writes ``episodes.csv`` and ``per_slot.csv`` (the mean
+    stage cost per slot of every task, env and policy). Returns the rows, the (task, policy) pairs
+    that cannot run with the reason, and the wall time."""
     start = time.perf_counter()
     policies = list(dict.fromkeys(policies))
     envs = {p: policy_env(p) for p in policies}
     for p in policies:  # unknown names and agents that cannot act on the default task are errors
-        make_policy(p, ScenarioConfig(), env_id=envs[p])
+        build_policy(p, ScenarioConfig(), envs[p])
     rows: list[dict] = []
+    profiles: list[dict] = []
     skipped: dict[tuple[str, str], str] = {}
     for task in tasks:
         config = presets.get(task)
-        entries = [(p, env) for env in dict.fromkeys(envs.values()) for p in (SCORE_HIGH, SCORE_LOW)]
+        entries = [(p, env) for env in dict.fromkeys([JOINT, *envs.values()]) for p in (SCORE_HIGH, SCORE_LOW)]
+        entries += [(p, JOINT) for p in REFERENCE_ROWS]
         for p in policies:
             reason = _applicable(p, envs[p], config)
             if reason is not None:
                 skipped[(task, p)] = reason
             elif (p, envs[p]) not in entries:
                 entries.append((p, envs[p]))
-        rows += run_entries(entries, config, range(episodes), workers, progress, task=task, desc=f"suite: {task}")
+        rows += run_entries(entries, config, range(episodes), workers, progress, task=task, desc=f"suite: {task}",
+                            transient_slots=transient_slots, profiles=profiles)
     write_rows(rows, Path(out_dir) / "episodes.csv")
+    write_rows(profiles, Path(out_dir) / "per_slot.csv")
     return rows, skipped, time.perf_counter() - start
+
+
+def per_slot_profile(rows: Sequence[Mapping]) -> list[dict]:
+    """The mean stage cost per slot over the episodes of every (task, env, policy) of rows that
+    hold their per-slot trace (``stage_costs``): one row per slot."""
+    groups: dict[tuple[str, str, str], list[list[float]]] = {}
+    for r in rows:
+        key = (str(r.get("task", "default")), str(r["env"]), str(r["policy"]))
+        groups.setdefault(key, []).append(json.loads(r["stage_costs"]))
+    out = []
+    for (task, env, policy), traces in groups.items():
+        mean = np.mean(np.asarray(traces, dtype=float), axis=0)
+        out += [{"task": task, "env": env, "policy": policy, "slot": n, "mean_stage_cost": float(c),
+                 "episodes": len(traces)} for n, c in enumerate(mean)]
+    return out
+
+
+def _aggregate(rows: Sequence[Mapping], env: str, policy: str, tasks: Sequence[str], inputs: Mapping
+               ) -> tuple[float, float, float, int]:
+    """The IQM over ``tasks`` of ``policy``'s scores on ``env`` (:func:`training.score.aggregate_score`)."""
+    return aggregate_score({t: inputs[(t, env, policy)] for t in tasks if (t, env, policy) in inputs})
 
 
 def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequence[str],
                 skipped: Mapping[tuple[str, str], str]) -> tuple[str, str]:
-    """The leaderboard (score per task, mean over tasks) and the references' costs per task."""
-    scores = scores_by_policy(rows)
-    lines = ["| policy | env | " + " | ".join(tasks) + " | mean over tasks |", "|" + "---|" * (len(tasks) + 3)]
-    for p in policies:
-        env = policy_env(p)
-        cells, means = [], []
+    """The leaderboard (score per task, the IQM over tasks with its stratified bootstrap interval)
+    and the references' costs per task."""
+    scores, inputs = scores_by_policy(rows), score_inputs(rows)
+    at = list(policies).index(SCORE_HIGH) + 1 if SCORE_HIGH in policies else 0  # the reference rows after rg-mpc
+    names = list(dict.fromkeys([*policies[:at], *REFERENCE_ROWS, *policies[at:]]))
+    lines = ["| policy | env | " + " | ".join(tasks) + f" | IQM over tasks [95 %] |", "|" + "---|" * (len(tasks) + 3)]
+    for p in names:
+        env = JOINT if is_reference_row(p) else policy_env(p)
+        if is_reference_row(p) and not any(r["policy"] == p for r in rows):
+            continue
+        cells = []
         for task in tasks:
             score = scores.get((task, env, p))
-            if (task, p) in skipped or score is None:
-                cells.append("n/a" if (task, p) in skipped else "–")
-                continue
-            cells.append(format_score(score))
-            means.append(score[0])
-        overall = f"{np.mean(means):.1f}" if len(means) == len(tasks) else f"{np.mean(means):.1f} ({len(means)} tasks)" \
-            if means else "–"
+            cells.append("n/a" if (task, p) in skipped else format_score(score))
+        iqm, lo, hi, n = _aggregate(rows, env, p, tasks, inputs)
+        overall = "–" if n == 0 else format_score((iqm, lo, hi, n)) + ("" if n == len(tasks) else f" ({n} task{'s' * (n != 1)})")
         lines.append(f"| {p} | {env} | " + " | ".join(cells) + f" | {overall} |")
     refs = [f"| task | env | episodes | {SCORE_LOW} cost | {SCORE_HIGH} cost | gap (mean) | per-seed gap / {SCORE_HIGH} cost, "
             f"min to max | seeds where {SCORE_LOW} costs no more |", "|" + "---|" * 8]
@@ -244,6 +304,96 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
     return "\n".join(lines), "\n".join(refs)
 
 
+def structure_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
+    """Per task, what decides it: ``rg-mpc``'s control cost, its transient and sustained parts (the
+    sustained share), the noise floor and the two headroom rows against ``rg-mpc`` (geometric,
+    :mod:`training.limits`), on ``lawn/Joint-v0``."""
+    lines = [f"| task | {SCORE_HIGH} cost | transient | sustained (share) | "
+             + " | ".join(f"{p} vs {SCORE_HIGH} (geometric, seeds won)" for p in REFERENCE_ROWS) + " |",
+             "|" + "---|" * (4 + len(REFERENCE_ROWS))]
+    for task in tasks:
+        high = [r for r in rows if r["policy"] == SCORE_HIGH and r["env"] == JOINT and r.get("task") == task]
+        if not high:
+            continue
+        total = sum(float(r["control_cost"]) for r in high)
+        share = sum(float(r["sustained_cost"]) for r in high) / total
+        cells = [_mean_cell(rows, SCORE_HIGH, JOINT, task, m) for m in ("control_cost", "transient_cost",
+                                                                       "sustained_cost")]
+        cells[2] += f" ({share * 100:.0f} %)"
+        for p in REFERENCE_ROWS:
+            cost = costs_of(rows, p, JOINT, task)
+            cells.append(fmt_geometric(geometric(rows, p, SCORE_HIGH, JOINT, task)) if cost else "–")
+        lines.append(f"| {task} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def task_tables(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequence[str],
+                skipped: Mapping[tuple[str, str], str]) -> str:
+    """One Markdown table per task: every row's control cost, its transient and sustained parts, the
+    score, and the comparison with ``rg-mpc`` on the same env (geometric, the deciding statistic,
+    and the paired mean of relative differences)."""
+    scores = scores_by_policy(rows)
+    out = []
+    for task in tasks:
+        lines = [f"**{task}**", "", f"| policy | env | control cost | transient | sustained | score v{SCORE_VERSION} "
+                 f"[95 %] | vs {SCORE_HIGH} (geometric, seeds won) | vs {SCORE_HIGH} (paired mean) |",
+                 "|" + "---|" * 8]
+        names = list(dict.fromkeys([SCORE_HIGH, SCORE_LOW, *REFERENCE_ROWS, *policies]))
+        for env in dict.fromkeys(r["env"] for r in rows if r.get("task") == task):
+            for p in names:
+                if (task, p) in skipped or not costs_of(rows, p, env, task):
+                    continue
+                cells = [_mean_cell(rows, p, env, task, m) for m in ("control_cost", "transient_cost", "sustained_cost")]
+                cells.append(format_score(scores.get((task, env, p))))
+                if p == SCORE_HIGH:
+                    cells += ["–", "–"]
+                else:
+                    mean, half, _ = paired_difference(costs_of(rows, p, env, task), costs_of(rows, SCORE_HIGH, env, task))
+                    cells += [fmt_geometric(geometric(rows, p, SCORE_HIGH, env, task)), fmt_paired(mean, half)]
+                lines.append(f"| {p} | {env} | " + " | ".join(cells) + " |")
+        out.append("\n".join(lines))
+    return "\n\n".join(out)
+
+
+def plot_profiles(per_slot: Sequence[Mapping], path: Path, tasks: Sequence[str],
+                  transient_slots: int = TRANSIENT_SLOTS) -> Path:
+    """The mean stage cost per slot of the experts, baselines, anchors, reference rows and agents on
+    ``lawn/Joint-v0`` (the agents on their own env), one panel per task, log scale; from the rows of
+    ``per_slot.csv`` (:func:`per_slot_profile`)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    cols = min(3, len(tasks))
+    nrows = -(-len(tasks) // cols)
+    fig = Figure(figsize=(5.2 * cols, 3.6 * nrows), dpi=100)
+    FigureCanvasAgg(fig)
+    policies = list(dict.fromkeys(str(r["policy"]) for r in per_slot))
+    styles = {p: (f"C{i % 10}", "-" if i < 10 else "--") for i, p in enumerate(policies)}
+    for j, task in enumerate(tasks):
+        ax = fig.add_subplot(nrows, cols, j + 1)
+        for p in policies:
+            mine = [r for r in per_slot if r["task"] == task and r["policy"] == p
+                    and (r["env"] == JOINT or p.startswith(("zoo:", "sb3:", "bc:", "marl:")))]
+            if not mine:
+                continue
+            color, line = styles[p]
+            ax.plot([int(r["slot"]) for r in mine], [float(r["mean_stage_cost"]) for r in mine], line, color=color,
+                    lw=1.0, label=p)
+        ax.axvline(transient_slots - 0.5, color="0.6", lw=0.8, ls=":")
+        ax.set_yscale("log")
+        ax.set_title(task, fontsize=10)
+        ax.set_xlabel("slot", fontsize=8)
+        ax.set_ylabel("mean stage cost", fontsize=8)
+        ax.tick_params(labelsize=7)
+    handles, labels = fig.axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(6, len(labels)), fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0.04 + 0.02 * (len(labels) // 6), 1, 1))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
+
+
 def skipped_summary(skipped: Mapping[tuple[str, str], str]) -> list[str]:
     """One line per task of the policies that cannot act there, with the first one's reason."""
     by_task: dict[str, list[str]] = {}
@@ -253,36 +403,69 @@ def skipped_summary(skipped: Mapping[tuple[str, str], str]) -> list[str]:
 
 
 def write_leaderboard(path: Path, board: str, refs: str, skipped: Mapping[tuple[str, str], str], episodes: int,
-                      seconds: float, workers: int, tasks: Sequence[str] = presets.SUITE) -> Path:
-    """docs/LEADERBOARD.md: the protocol, the board over ``tasks``, the references, what could not run."""
+                      seconds: float, workers: int, tasks: Sequence[str] = presets.SUITE, structure: str = "",
+                      details: str = "", figure: Path | None = None, transient_slots: int = TRANSIENT_SLOTS) -> Path:
+    """docs/LEADERBOARD.md: the protocol, the board over ``tasks``, each task's cost structure,
+    noise floor and headroom, every row per task, the references, what could not run."""
     from .provenance import provenance
 
     reasons = skipped_summary(skipped)
     subset = "" if list(tasks) == list(presets.SUITE) else \
         f" This board runs {', '.join(f'`{t}`' for t in tasks)} only (`--tasks`)."
-    tasks = ", ".join(f"`{t}`" for t in presets.SUITE)
+    names = ", ".join(f"`{t}`" for t in presets.SUITE)
+    picture = "" if figure is None else \
+        f"\n![Mean stage cost per slot, per task](figures/{Path(figure).name})\n\n*The mean stage cost per slot over " \
+        f"the test seeds (log scale), experts, baselines, anchors and reference rows on `lawn/Joint-v0`, learned " \
+        f"agents on their own env; the dotted line is the transient/sustained split.*\n"
+    split = f"slots 0-{transient_slots - 1}"
     text = f"""# Leaderboard: the task suite
 
 Generated by `lawn benchmark --suite --docs docs` (`bash scripts/refresh_docs.sh --only suite`) at
 {provenance()}, in {seconds / 60:.1f} min with {workers} workers.
 
-Suite v{presets.SUITE_VERSION} (`lawn_env.presets.SUITE`): {tasks};{subset} each task is a preset,
-`gym.make("lawn/Comm-v0", config="k8")` runs it. Every policy plays full 120-slot episodes of
-the unmodified scenario on the test seeds 0-{episodes - 1} of every task; learned agents were
-trained on `default` only, so the other tasks measure how they generalize.
+Suite v{presets.SUITE_VERSION} (`lawn_env.presets.SUITE`): {names};{subset} each task is a preset,
+`gym.make("lawn/Comm-v0", config="steady")` runs it ([the benchmark protocol](benchmark.md) says why
+these tasks). Every policy plays full episodes of the unmodified scenario on the test seeds
+0-{episodes - 1} of every task; learned agents were trained on `default` only, so the other tasks
+measure how they generalize.
 
 Score v{SCORE_VERSION} (`training/score.py`), D4RL's normalized score adapted to a cost:
 100 × (mean cost of `epa` − mean cost) / (mean cost of `epa` − mean cost of `rg-mpc`), on the
 same seeds, task and env (the numerator paired per seed); 0 is the paper's equal-power baseline,
 100 the package's best expert, above 100 beats it. The interval is a 95 % paired bootstrap over
-seeds. Experts, baselines and anchors act on `lawn/Joint-v0`; each learned agent on its own env.
+seeds. The last column is the headline, rliable's aggregate: the interquartile mean of the
+per-task scores with a 95 % stratified bootstrap interval (seeds resampled within each task).
+Experts, baselines, anchors and the reference rows act on `lawn/Joint-v0`; each learned agent on
+its own env. `noise:rg-mpc`, `limit:fast-drone` and `limit:perfect-links` are references, not
+policies ([headroom rows](benchmark.md#headroom-and-noise-floor)).
 
 {board}
 
 n/a: the policy cannot act on the task{': ' + '; '.join(reasons) + '.' if reasons else '.'} –: no score
 (the references do not separate on that task's seeds, training/score.py).
 
-The references, per task and env (mean control cost ± 95 % interval):
+## What decides each task
+
+`rg-mpc`'s control cost split into the transient ({split}) and the sustained part, and the three
+reference rows against it, each as the geometric mean of the per-seed cost ratios − 1 with its
+95 % bootstrap interval and the share of seeds won (the deciding statistic): a difference between
+two policies smaller than the noise floor's is not one; the headroom rows say how much of the cost
+the drone's reach and the links decide under the expert's own planning.
+
+{structure}
+{picture}
+## Every row, per task
+
+Control cost, its transient and sustained parts (mean ± 95 % t-interval), the score, and the
+comparison with `rg-mpc` on the same env and seeds: geometric (deciding) and as the mean of per-seed
+relative differences (t-interval), which the few seeds where one cost is many times the other can
+dominate.
+
+{details}
+
+## The references
+
+Per task and env (mean control cost ± 95 % interval):
 
 {refs}
 

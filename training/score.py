@@ -31,12 +31,14 @@ from typing import Iterable, Mapping
 import numpy as np
 from scipy import stats
 
-__all__ = ["SCORE_VERSION", "SCORE_LOW", "SCORE_HIGH", "normalized_score", "scores_by_policy", "format_score"]
+from .tables import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
+
+__all__ = ["SCORE_VERSION", "SCORE_LOW", "SCORE_HIGH", "normalized_score", "scores_by_policy", "score_inputs",
+           "aggregate_score", "format_score"]
 
 SCORE_VERSION = 1
 #: The policies that define 0 and 100.
 SCORE_LOW, SCORE_HIGH = "epa", "rg-mpc"
-_RESAMPLES = 2000
 
 
 def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: Mapping[int, float]
@@ -63,17 +65,17 @@ def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: 
     def statistic(e_, r_, x_, axis=-1):
         return 100.0 * np.mean(e_ - x_, axis=axis) / np.mean(e_ - r_, axis=axis)
 
-    res = stats.bootstrap((e, r, x), statistic, paired=True, vectorized=True, n_resamples=_RESAMPLES,
-                          method="percentile", random_state=np.random.default_rng(20261124))
+    res = stats.bootstrap((e, r, x), statistic, paired=True, vectorized=True, n_resamples=BOOTSTRAP_RESAMPLES,
+                          method="percentile", random_state=np.random.default_rng(BOOTSTRAP_SEED))
     return score, float(res.confidence_interval.low), float(res.confidence_interval.high), len(seeds)
 
 
-def scores_by_policy(rows: Iterable[Mapping], metric: str = "control_cost") -> dict[tuple[str, str, str], tuple]:
-    """Scores of every (task, env, policy) of evaluation rows (``policy``, ``env``, ``seed``,
-    ``metric`` and optionally ``task``, default ``"default"``), against the reference rows of the
-    same task and env. Groups without both references, sharing no seed with them, or whose
-    references do not separate (EPA not costlier than rg-mpc on average) are left out: no score is
-    defined there."""
+def score_inputs(rows: Iterable[Mapping], metric: str = "control_cost"
+                 ) -> dict[tuple[str, str, str], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per (task, env, policy) of evaluation rows (``policy``, ``env``, ``seed``, ``metric`` and
+    optionally ``task``, default ``"default"``): the per-seed costs (E, R, x) of the two references
+    and the policy on the seeds all three hold, aligned. Groups without both references or sharing
+    no seed with them are left out."""
     costs: dict[tuple[str, str, str], dict[int, float]] = {}
     for row in rows:
         key = (str(row.get("task") or "default"), str(row["env"]), str(row["policy"]))
@@ -83,11 +85,55 @@ def scores_by_policy(rows: Iterable[Mapping], metric: str = "control_cost") -> d
         low, high = costs.get((task, env, SCORE_LOW)), costs.get((task, env, SCORE_HIGH))
         if low is None or high is None:
             continue
+        seeds = [s for s in cost if s in low and s in high]
+        if seeds:
+            out[(task, env, policy)] = tuple(np.array([float(c[s]) for s in seeds]) for c in (low, high, cost))
+    return out
+
+
+def scores_by_policy(rows: Iterable[Mapping], metric: str = "control_cost") -> dict[tuple[str, str, str], tuple]:
+    """Scores of every (task, env, policy) of evaluation rows (:func:`score_inputs`), against the
+    reference rows of the same task and env. Groups without both references, sharing no seed with
+    them, or whose references do not separate (EPA not costlier than rg-mpc on average) are left
+    out: no score is defined there."""
+    out = {}
+    for key, (e, r, x) in score_inputs(rows, metric).items():
+        seeds = range(len(x))
         try:
-            out[(task, env, policy)] = normalized_score(cost, low, high)
-        except ValueError:  # no common seed, or the references do not separate
+            out[key] = normalized_score(dict(zip(seeds, x)), dict(zip(seeds, e)), dict(zip(seeds, r)))
+        except ValueError:  # the references do not separate
             continue
     return out
+
+
+def aggregate_score(per_task: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
+                    resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float, float, int]:
+    """The headline over tasks, rliable's convention (Agarwal et al., 2021): the interquartile mean
+    of the per-task scores (``scipy.stats.trim_mean(scores, 0.25)``: the lowest and highest quarter
+    of the tasks dropped, ``int(0.25 T)`` at each end) with a 95 % stratified bootstrap interval
+    (each task's seeds resampled on their own, its score recomputed from the resampled (E, R, x),
+    the IQM taken; percentile method, a fixed seed). ``per_task``: task -> the aligned per-seed
+    costs (E, R, x) of :func:`score_inputs`. Returns (IQM, low, high, number of tasks); tasks
+    whose references do not separate are left out."""
+    scores, draws = [], []
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    for task in sorted(per_task):
+        e, r, x = (np.asarray(a, dtype=float) for a in per_task[task])
+        gap = float(np.mean(e - r))
+        if not gap > 0:
+            continue
+        scores.append(100.0 * float(np.mean(e - x)) / gap)
+        idx = rng.integers(0, e.size, size=(resamples, e.size))
+        gaps = np.mean(e[idx] - r[idx], axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            draws.append(np.where(gaps > 0, 100.0 * np.mean(e[idx] - x[idx], axis=1) / gaps, np.nan))
+    if not scores:
+        return math.nan, math.nan, math.nan, 0
+    iqm = float(stats.trim_mean(scores, 0.25))
+    boot = stats.trim_mean(np.stack(draws, axis=1), 0.25, axis=1)
+    boot = boot[np.isfinite(boot)]  # resamples where a task's references did not separate have no score
+    lo, hi = np.percentile(boot, [2.5, 97.5]) if boot.size else (math.nan, math.nan)
+    return iqm, float(lo), float(hi), len(scores)
 
 
 def format_score(score: tuple[float, float, float, int] | None) -> str:

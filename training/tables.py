@@ -7,14 +7,20 @@ from __future__ import annotations
 import csv
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Mapping
 
 import numpy as np
 from scipy import stats
 
-__all__ = ["mean_ci", "paired_difference", "verdict", "write_csv", "read_csv", "parse_bool", "fmt_pct", "fmt_num",
-           "fmt_paired"]
+__all__ = ["mean_ci", "paired_difference", "Geometric", "paired_geometric", "verdict", "write_csv", "read_csv",
+           "parse_bool", "fmt_pct", "fmt_num", "fmt_paired", "fmt_geometric"]
+
+#: Resamples of every bootstrap interval of the tables (the score's and the geometric comparison's).
+BOOTSTRAP_RESAMPLES = 2000
+#: The bootstraps' fixed seed: the same rows give the same interval.
+BOOTSTRAP_SEED = 20261124
 
 
 def write_csv(rows: list[dict], path: Path | str, atomic: bool = False) -> Path:
@@ -77,6 +83,56 @@ def paired_difference(a: Mapping, b: Mapping, relative: bool = True) -> tuple[fl
     return mean, half, len(diffs)
 
 
+@dataclass(frozen=True)
+class Geometric:
+    """A paired comparison on the log scale: ``ratio`` = exp(mean_i log(a_i / b_i)), the geometric
+    mean of the per-seed cost ratios, with its 95 % bootstrap interval (``low``, ``high``), the
+    number of ``seeds`` and the share of them ``a`` ``won`` (a_i < b_i; a tie counts half)."""
+
+    ratio: float
+    low: float
+    high: float
+    seeds: int
+    won: float
+
+    @property
+    def change(self) -> float:
+        """The relative change ratio - 1 (-0.1 is 10 % below the reference)."""
+        return self.ratio - 1.0
+
+    @property
+    def excludes_zero(self) -> bool:
+        """The 95 % interval lies on one side of no change."""
+        return bool(self.high < 1.0 or self.low > 1.0)
+
+
+def paired_geometric(a: Mapping, b: Mapping, resamples: int = BOOTSTRAP_RESAMPLES) -> Geometric:
+    """The geometric mean of the per-key (seed) cost ratios ``a[k] / b[k]`` over the keys both hold,
+    its 95 % percentile bootstrap interval (``scipy.stats.bootstrap`` on the log-ratios, a fixed
+    seed; NaN for fewer than 3 seeds) and the share of seeds ``a`` won. On heavy-tailed costs the
+    mean of relative differences follows the few seeds where one cost is many times the other; the
+    mean log-ratio weighs a halving and a doubling alike (docs/benchmark.md). Costs must be > 0."""
+    keys = [k for k in a if k in b]
+    if not keys:
+        raise ValueError("paired_geometric: the two cost maps share no seed")
+    x = np.array([float(a[k]) for k in keys])
+    y = np.array([float(b[k]) for k in keys])
+    if not (np.all(x > 0) and np.all(y > 0)):
+        raise ValueError(f"paired_geometric: every cost must be > 0 and finite, got min {min(x.min(), y.min())!r}")
+    logs = np.log(x) - np.log(y)
+    won = float(np.mean((logs < 0) + 0.5 * (logs == 0)))
+    mean = float(logs.mean())
+    if logs.size < 3:
+        lo = hi = math.nan
+    elif np.ptp(logs) == 0:  # every seed the same ratio: the bootstrap distribution is that point
+        lo = hi = mean
+    else:
+        res = stats.bootstrap((logs,), np.mean, vectorized=True, n_resamples=resamples, method="percentile",
+                              random_state=np.random.default_rng(BOOTSTRAP_SEED))
+        lo, hi = float(res.confidence_interval.low), float(res.confidence_interval.high)
+    return Geometric(math.exp(mean), math.exp(lo), math.exp(hi), int(logs.size), won)
+
+
 def verdict(mean: float, half: float, expect: str, tie_tolerance: float = 0.01) -> str:
     """"holds" when the 95 % interval lies on the ``expect``ed side of zero ("negative" or
     "positive"), "differs" when it lies on the other side, else "not significant". With
@@ -112,6 +168,16 @@ def fmt_num(x: float) -> str:
     if not math.isfinite(x):
         return "n/a"
     return f"{x:,.0f}" if abs(x) < 1e5 else f"{x:.3g}"
+
+
+def fmt_geometric(g: Geometric | None, wins: bool = True) -> str:
+    """A geometric comparison: ``-17.5 % [-25.0, -9.1] (wins 61 %)``; ``n/a`` when undefined."""
+    if g is None or not math.isfinite(g.ratio):
+        return "n/a"
+    text = fmt_pct(g.change)
+    if math.isfinite(g.low) and math.isfinite(g.high):
+        text += f" [{(g.low - 1) * 100:+.1f}, {(g.high - 1) * 100:+.1f}]"
+    return text + (f" (wins {g.won * 100:.0f} %)" if wins else "")
 
 
 def fmt_paired(mean: float, half: float) -> str:

@@ -16,15 +16,18 @@ from .common import Parents, config_of, count, included, policy_help, policy_nam
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     from agents import BENCHMARK_POLICIES
 
-    bm = sub.add_parser("benchmark", parents=p("workers", "quiet", "seed", "config"),
+    from ..limits import REFERENCE_ROWS
+
+    bm = sub.add_parser("benchmark", parents=p("workers", "quiet", "seed", "config", "split"),
                         help="the expert and the baselines on the same seeded episodes; --protocol learned and "
                              "--suite: the learned agents' protocol and the task suite's leaderboard",
                         epilog="--protocol learned and --suite fix the test seeds (0..N-1) and the scenario; "
                                "--seed, --preset, --set and --env belong to the paper protocol.")
     bm.add_argument("--policies", nargs="+", default=None, type=policy_name,
-                    help=policy_help() + f" (default: {' '.join(BENCHMARK_POLICIES)}; with --protocol learned every "
+                    help=policy_help() + f" (default: {' '.join(BENCHMARK_POLICIES)} and the reference rows "
+                         f"{' '.join(REFERENCE_ROWS)}; with --protocol learned every "
                          "shipped agent with its anchor and the references; with --suite every expert, baseline, "
-                         "shipped agent and the stake and distance anchors)")
+                         "shipped agent and the stake and distance anchors, beside the reference rows)")
     bm.add_argument("--protocol", choices=["paper", "learned"], default="paper",
                     help="paper (default): the policies on --episodes seeds of one scenario; learned: agents "
                          "beside rg-mpc, epa and their own anchors on the 100 test seeds, with the normalized score")
@@ -45,9 +48,11 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from agents import BENCHMARK_POLICIES, make_policy
+    from agents import BENCHMARK_POLICIES
 
     from ..benchmark import run_benchmark
+    from ..evaluate import build_policy
+    from ..limits import REFERENCE_ROWS
 
     if not args.suite and (args.tasks or args.docs):
         raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
@@ -57,12 +62,12 @@ def run(args: argparse.Namespace) -> int:
     args.env = args.env or "lawn/Joint-v0"
     args.seed = 0 if args.seed is None else args.seed
     cfg = config_of(args)
-    args.policies = list(args.policies or BENCHMARK_POLICIES) + included(args.include)
+    args.policies = list(args.policies or (*BENCHMARK_POLICIES, *REFERENCE_ROWS)) + included(args.include)
     for name in args.policies:
-        make_policy(name, cfg, env_id=args.env)  # fail fast
+        build_policy(name, cfg, args.env)  # fail fast
     args.episodes = args.episodes or 20
     run_benchmark(args.policies, args.env, cfg, args.episodes, args.seed, Path(args.out), workers=args.workers,
-                  progress=not args.quiet)
+                  progress=not args.quiet, transient_slots=args.transient_slots)
     print(f"lawn benchmark: {args.env}, preset {args.preset}, K={cfg.num_agvs}, {args.episodes} seeds from "
           f"{args.seed}; mean ± 95 % interval")
     print((Path(args.out) / "summary.md").read_text().rstrip())
@@ -90,26 +95,37 @@ def _check_fixed_protocol(args: argparse.Namespace) -> None:
 def _suite(args: argparse.Namespace) -> int:
     from lawn_env.presets import SUITE
 
-    from ..leaderboard import run_suite, skipped_summary, suite_policies, suite_table, write_leaderboard
+    from ..leaderboard import (plot_profiles, run_suite, skipped_summary, structure_table, suite_policies,
+                               suite_table, task_tables, write_leaderboard)
     from ..protocol import TEST_EPISODES
+    from ..score import SCORE_VERSION
+    from ..tables import read_csv
 
     episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
     tasks = args.tasks or list(SUITE)
     policies = list(args.policies or suite_policies()) + included(args.include)
-    rows, skipped, seconds = run_suite(policies, tasks, episodes, out, workers=args.workers, progress=not args.quiet)
+    rows, skipped, seconds = run_suite(policies, tasks, episodes, out, workers=args.workers, progress=not args.quiet,
+                                       transient_slots=args.transient_slots)
     board, refs = suite_table(rows, policies, tasks, skipped)
+    structure, details = structure_table(rows, tasks), task_tables(rows, policies, tasks, skipped)
     print(f"lawn benchmark --suite: {len(policies)} policies x {len(tasks)} tasks, {episodes} seeds each, "
-          f"{seconds / 60:.1f} min; normalized score v1 [95 %] (0 = epa, 100 = rg-mpc)")
+          f"{seconds / 60:.1f} min; normalized score v{SCORE_VERSION} [95 %] (0 = epa, 100 = rg-mpc)")
     print(board)
+    print(structure)
     for line in skipped_summary(skipped):
         print(f"  n/a {line}")
-    (out / "board.md").write_text(board + "\n")
-    (out / "references.md").write_text(refs + "\n")
-    print(f"wrote {out}/episodes.csv, board.md (the scores) and references.md (the references' costs)")
+    for name, text in (("board", board), ("references", refs), ("structure", structure), ("tasks", details)):
+        (out / f"{name}.md").write_text(text + "\n")
+    plot_profiles(read_csv(out / "per_slot.csv"), out / "per_slot.png", tasks, args.transient_slots)
+    print(f"wrote {out}/episodes.csv, per_slot.csv, board.md (the scores), references.md (the references' costs), "
+          "structure.md (cost structure, noise floor, headroom), tasks.md (every row per task) and per_slot.png")
     if args.docs:
+        figure = plot_profiles(read_csv(out / "per_slot.csv"), Path(args.docs) / "figures" / "suite-per-slot.png", tasks,
+                               args.transient_slots)
         doc = write_leaderboard(Path(args.docs) / "LEADERBOARD.md", board, refs, skipped, episodes, seconds,
-                                args.workers, tasks)
-        print(f"wrote {doc}")
+                                args.workers, tasks, structure=structure, details=details, figure=figure,
+                                transient_slots=args.transient_slots)
+        print(f"wrote {doc} and {figure}")
     return 0
 
 

@@ -37,13 +37,17 @@ count, seed = _int_at_least(1), _int_at_least(0)
 
 
 def policy_name(value: str) -> str:
-    """argparse type: a registered policy or a learned agent's name (``zoo:``, ``sb3:``, ...)."""
+    """argparse type: a registered policy, a learned agent's name (``zoo:``, ``sb3:``, ...) or a
+    benchmark reference row (``limit:...``, ``noise:...``, :mod:`training.limits`)."""
     from agents.learned import learned_name_forms
     from agents.policies import is_policy_name, policy_names
 
-    if not is_policy_name(value):
+    from ..limits import REFERENCE_ROWS, is_reference_row
+
+    if not (is_policy_name(value) or is_reference_row(value)):
         raise argparse.ArgumentTypeError(
-            f"unknown policy {value!r}; valid: {', '.join(policy_names())}, or {learned_name_forms()}")
+            f"unknown policy {value!r}; valid: {', '.join(policy_names())}, the reference rows "
+            f"{', '.join(REFERENCE_ROWS)}, or {learned_name_forms()}")
     return value
 
 
@@ -52,7 +56,10 @@ def policy_help(prefix: str = "") -> str:
     from agents import policy_names
     from agents.learned import learned_name_forms
 
-    return f"{prefix}{', '.join(policy_names())}, or {learned_name_forms(' / ')} for learned agents"
+    from ..limits import REFERENCE_ROWS
+
+    return (f"{prefix}{', '.join(policy_names())}, or {learned_name_forms(' / ')} for learned agents; "
+            f"the benchmark's reference rows {', '.join(REFERENCE_ROWS)} (docs/benchmark.md)")
 
 
 class Parents:
@@ -84,13 +91,21 @@ class Parents:
                        help="config override with a dotted key, e.g. --set channel.blocklength=256 (repeatable)")
 
     @staticmethod
+    def _split(p: argparse.ArgumentParser) -> None:
+        from ..evaluate import TRANSIENT_SLOTS
+
+        p.add_argument("--transient-slots", type=_int_at_least(0), default=TRANSIENT_SLOTS, metavar="N",
+                       help="the transient/sustained split of each episode's control cost: slots 0..N-1 and N on "
+                            "(default: %(default)s)")
+
+    @staticmethod
     def _policy_arg(p: argparse.ArgumentParser) -> None:
         p.add_argument("--policy-arg", action="append", default=[], metavar="KEY=VALUE",
                        help="policy setting, e.g. --policy-arg tolerance=1e-3 (repeatable)")
 
     def __call__(self, *names: str) -> list[argparse.ArgumentParser]:
         """New parent parsers of ``--debug`` and the named shared flags (``"workers"``, ``"quiet"``,
-        ``"seed"``, ``"config"``, ``"policy_arg"``)."""
+        ``"seed"``, ``"config"``, ``"split"``, ``"policy_arg"``)."""
         out = []
         for name in ("debug",) + names:
             parent = argparse.ArgumentParser(add_help=False)

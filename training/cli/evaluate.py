@@ -12,7 +12,7 @@ from .common import Parents, config_of, count, parse_overrides, policy_help, pol
 
 
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
-    ev = sub.add_parser("evaluate", parents=p("workers", "quiet", "seed", "config", "policy_arg"),
+    ev = sub.add_parser("evaluate", parents=p("workers", "quiet", "seed", "config", "split", "policy_arg"),
                         help="run a policy on seeded episodes and write one row per episode")
     ev.add_argument("--policy", required=True, type=policy_name, help=policy_help())
     ev.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
@@ -25,9 +25,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from agents import make_policy
-
-    from ..evaluate import evaluate, format_table, summarize, write_rows
+    from ..evaluate import build_policy, evaluate, format_table, paired_cost_geometric, summarize, write_rows
     from ..score import SCORE_HIGH, SCORE_LOW, scores_by_policy
 
     cfg = config_of(args)
@@ -35,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"--out {args.out!r}: the extension must be .csv or .json")
     kwargs = parse_overrides(args.policy_arg, "--policy-arg")
-    policy = make_policy(args.policy, cfg, env_id=args.env, **kwargs)  # fail fast on bad names and settings
+    policy, _ = build_policy(args.policy, cfg, args.env, kwargs)  # fail fast on bad names and settings
     args.env = args.env or policy.env_id
     seeds = [args.seed + i for i in range(args.episodes)]
     # a reference run with --policy-arg is another policy under the reference's name: no score for it
@@ -43,7 +41,8 @@ def run(args: argparse.Namespace) -> int:
     references = [p for p in (SCORE_HIGH, SCORE_LOW) if p != args.policy] if scored else []
     tasks = [(name, args.env, cfg, s, kwargs if name == args.policy else {}) for name in [args.policy, *references]
              for s in seeds]
-    rows = evaluate(tasks, workers=args.workers, progress=not args.quiet, desc=args.policy)
+    rows = evaluate(tasks, workers=args.workers, progress=not args.quiet, desc=args.policy,
+                    transient_slots=args.transient_slots)
     mine = [r for r in rows if r["policy"] == args.policy]
     write_rows(mine, out)
     scores = None if not scored else {
@@ -51,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
     note = f" (score: {SCORE_LOW} and {SCORE_HIGH} on the same seeds)" if scored else \
         "" if args.no_score else f" (no score: --policy-arg changes the reference {args.policy} itself)"
     print(f"lawn evaluate: {args.policy} on {args.env}, {args.episodes} episodes from seed {args.seed}{note}")
-    print(format_table(summarize(mine), scores=scores))
+    geometric = None if not scored or args.policy == SCORE_HIGH else {
+        p: g for p, g in paired_cost_geometric(rows, SCORE_HIGH).items() if p == args.policy}
+    print(format_table(summarize(mine), scores=scores, geometric=geometric, reference=SCORE_HIGH))
     print(f"wrote {len(mine)} rows to {out}")
     return 0

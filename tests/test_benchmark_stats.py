@@ -1,0 +1,179 @@
+"""The benchmark's cost structure, its statistics and its reference rows (docs/benchmark.md): the
+transient/sustained split, the geometric paired comparison, the IQM aggregate, the headroom and
+noise-floor rows, the tasks of suite v2."""
+
+import json
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from scipy import stats
+
+import lawn_env
+from lawn_env import ScenarioConfig, presets
+from training.evaluate import TRANSIENT_SLOTS, build_policy, evaluate, split_cost
+from training.limits import LIMITS, NOISE, REFERENCE_ROWS, limit_config, resolve
+from training.score import aggregate_score, normalized_score
+from training.tables import paired_difference, paired_geometric
+
+
+def _flat(tree: dict, prefix: str = "") -> dict:
+    out = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            out.update(_flat(value, f"{prefix}{key}."))
+        else:
+            out[prefix + key] = value
+    return out
+
+
+# ---------------------------------------------------------------------- the cost's structure
+@pytest.mark.parametrize("env_id", list(lawn_env.ENV_IDS))
+def test_transient_and_sustained_costs_add_up_to_the_episode_cost(env_id):
+    rows = evaluate([("epa", env_id, ScenarioConfig(), 3, {}), ("rg-mpc", env_id, ScenarioConfig(), 3, {})],
+                    progress=False)
+    for row in rows:
+        stage = json.loads(row["stage_costs"])
+        assert len(stage) == 120 and row["transient_slots"] == TRANSIENT_SLOTS
+        assert row["transient_cost"] == pytest.approx(sum(stage[:TRANSIENT_SLOTS]), rel=1e-12)
+        assert row["transient_cost"] + row["sustained_cost"] == pytest.approx(row["control_cost"], rel=1e-9)
+        assert 0 < row["sustained_cost"] < row["control_cost"]
+    other = evaluate([("epa", env_id, ScenarioConfig(), 3, {})], progress=False, transient_slots=5)[0]
+    assert other["control_cost"] == rows[0]["control_cost"]  # the split only reads the episode
+    assert other["transient_cost"] < rows[0]["transient_cost"] and other["transient_slots"] == 5
+
+
+def test_split_cost_edges_and_errors():
+    assert split_cost([1.0, 2.0, 3.0], 0) == (0.0, 6.0)
+    assert split_cost([1.0, 2.0, 3.0], 2) == (3.0, 3.0)
+    assert split_cost([1.0, 2.0, 3.0], 10) == (6.0, 0.0)
+    for bad in (-1, 2.5, True, "3"):
+        with pytest.raises(ValueError, match="transient_slots"):
+            split_cost([1.0], bad)
+    with pytest.raises(ValueError, match="transient_slots=-2"):
+        evaluate([("epa", "lawn/Joint-v0", ScenarioConfig(), 0, {})], progress=False, transient_slots=-2)
+
+
+# ---------------------------------------------------------------------- the geometric comparison
+def test_geometric_comparison_equals_the_direct_computation():
+    rng = np.random.default_rng(5)
+    b = rng.lognormal(3.0, 1.0, 400)
+    a = b * rng.lognormal(-0.1, 0.3, 400)
+    g = paired_geometric(dict(enumerate(a)), dict(enumerate(b)))
+    logs = np.log(a / b)
+    assert g.ratio == pytest.approx(math.exp(logs.mean()), rel=1e-12) and g.seeds == 400
+    assert g.won == pytest.approx(np.mean(a < b))
+    half = stats.norm.ppf(0.975) * logs.std(ddof=1) / math.sqrt(logs.size)  # the bootstrap's normal limit
+    assert math.log(g.low) == pytest.approx(logs.mean() - half, abs=0.006)
+    assert math.log(g.high) == pytest.approx(logs.mean() + half, abs=0.006)
+    assert g.excludes_zero and g.change < 0
+
+
+def test_geometric_and_mean_of_ratios_disagree_on_heavy_tails():
+    base = {s: 100.0 for s in range(10)}
+    policy = {s: 50.0 if s < 8 else 1000.0 for s in range(10)}  # halves 8 seeds, 10x on 2
+    mean, _, _ = paired_difference(policy, base)
+    g = paired_geometric(policy, base)
+    assert mean == pytest.approx((8 * -0.5 + 2 * 9.0) / 10)  # +140 %: the mean of ratios says worse
+    assert g.ratio == pytest.approx(math.exp((8 * math.log(0.5) + 2 * math.log(10.0)) / 10))  # -9 %: better
+    assert mean > 0 > g.change and g.won == 0.8
+
+
+def test_geometric_ties_small_samples_and_errors():
+    same = {s: 10.0 + s for s in range(5)}
+    g = paired_geometric(same, same)
+    assert (g.ratio, g.low, g.high, g.won) == (1.0, 1.0, 1.0, 0.5) and not g.excludes_zero
+    two = paired_geometric({0: 2.0, 1: 4.0}, {0: 1.0, 1: 1.0})
+    assert two.ratio == pytest.approx(math.sqrt(8.0)) and math.isnan(two.low) and two.seeds == 2
+    with pytest.raises(ValueError, match="must be > 0"):
+        paired_geometric({0: 0.0}, {0: 1.0})
+    with pytest.raises(ValueError, match="share no seed"):
+        paired_geometric({0: 1.0}, {1: 1.0})
+
+
+# ---------------------------------------------------------------------- the aggregate
+def test_aggregate_is_rliables_interquartile_mean_of_the_task_scores():
+    rng = np.random.default_rng(2)
+    per_task = {}
+    for i, target in enumerate([10.0, 40.0, 70.0, 95.0, 300.0]):  # one outlying task
+        e = 200.0 + rng.normal(0, 5, 30)
+        r = 100.0 + rng.normal(0, 5, 30)
+        x = e - (target / 100.0) * (e - r).mean() + rng.normal(0, 1, 30)
+        per_task[f"t{i}"] = (e, r, x)
+    scores = [normalized_score(dict(enumerate(x)), dict(enumerate(e)), dict(enumerate(r)))[0]
+              for e, r, x in per_task.values()]
+    iqm, lo, hi, n = aggregate_score(per_task)
+    middle = sorted(scores)[1:-1]  # trim_mean(0.25) of five drops int(1.25) = 1 at each end
+    assert n == 5 and iqm == pytest.approx(np.mean(middle), rel=1e-12)
+    assert iqm == pytest.approx(stats.trim_mean(scores, 0.25), rel=1e-12)  # rliable's metrics.aggregate_iqm
+    assert lo < iqm < hi and hi - lo < 20  # the outlier moves neither the point nor the interval much
+    # a task whose costs do not vary contributes its one score to every resample
+    fixed = {t: (np.full(10, 200.0), np.full(10, 100.0), np.full(10, 150.0)) for t in ("a", "b", "c", "d")}
+    assert aggregate_score(fixed) == (50.0, 50.0, 50.0, 4)
+    assert aggregate_score({})[3] == 0
+
+
+# ---------------------------------------------------------------------- reference rows
+@pytest.mark.parametrize("task", presets.SUITE)
+def test_limit_rows_lift_one_field_of_their_task(task):
+    config = presets.get(task)
+    base = _flat(config.to_dict())
+    for name, (key, value) in LIMITS.items():
+        lifted = _flat(limit_config(name, config).to_dict())
+        changed = {k for k in base if base[k] != lifted[k]}
+        assert changed == ({key} if base[key] != value else set()), name
+        policy, played, kwargs = resolve(name, config)
+        assert policy == "rg-mpc" and played == limit_config(name, config) and kwargs == {}
+    for name, settings in NOISE.items():
+        assert resolve(name, config) == ("rg-mpc", config, settings)
+    assert LIMITS["limit:fast-drone"][1] == 300.0  # the validated maximum of drone.max_speed_mps
+    with pytest.raises(ValueError, match="unknown limit row 'limit:nope'"):
+        limit_config("limit:nope", config)
+
+
+def test_perfect_links_deliver_every_command_and_planners_see_it():
+    config = ScenarioConfig().override({"channel.perfect_links": True})
+    env = gym.make("lawn/Joint-v0", config=config)
+    policy, _ = build_policy("limit:perfect-links", ScenarioConfig(), "lawn/Joint-v0")
+    obs, info = env.reset(seed=1)
+    policy.reset(seed=1)
+    for _ in range(10):
+        obs, reward, terminated, truncated, info = env.step(policy.act(obs))
+        assert info["delivered"].all() and np.all(info["outage_probability"] == 0.0)
+    assert policy.last_plan.info["success_probability"] == pytest.approx(1.0)
+
+
+def test_reference_rows_run_under_their_names_and_beat_or_tie_the_expert():
+    rows = evaluate([(p, "lawn/Joint-v0", ScenarioConfig(), 0, {}) for p in ("rg-mpc", *REFERENCE_ROWS)],
+                    progress=False)
+    cost = {r["policy"]: r["control_cost"] for r in rows}
+    assert set(cost) == {"rg-mpc", *REFERENCE_ROWS}
+    assert cost["limit:perfect-links"] < cost["rg-mpc"] and cost["limit:fast-drone"] < cost["rg-mpc"]
+    assert cost["noise:rg-mpc"] == pytest.approx(cost["rg-mpc"], rel=0.05)
+
+
+# ---------------------------------------------------------------------- suite v2
+@pytest.mark.parametrize("task", presets.SUITE)
+def test_suite_tasks_resolve_validate_and_run_an_episode(task):
+    config = presets.get(task)
+    assert ScenarioConfig.from_dict(config.to_dict()) == config
+    env = gym.make("lawn/Joint-v0", config=task)
+    policy, _ = build_policy("epa", config, "lawn/Joint-v0")
+    obs, _ = env.reset(seed=0)
+    policy.reset(seed=0)
+    done, slots = False, 0
+    while not done:
+        obs, _, terminated, truncated, info = env.step(policy.act(obs))
+        done, slots = terminated or truncated, slots + 1
+    assert slots == config.num_slots and info["episode_metrics"]["control_cost"] > 0
+
+
+def test_steady_tasks_start_without_the_transient():
+    for task in ("steady", "steady-low-power", "steady-gusty", "wide-k8"):
+        config = presets.get(task)
+        x0, x1, y0, y1 = config.area_m
+        assert config.reference.initial_offset_std_m == 0.0
+        assert config.drone.start_m == ((x0 + x1) / 2, (y0 + y1) / 2)
+    assert presets.SUITE_VERSION == 2 and presets.SUITE[0] == "default" and "disturbed" in presets.SUITE
+    assert set(presets.SUITE_V1) <= set(presets.names())
