@@ -121,7 +121,8 @@ def outage_from_argument(m: float, x: float) -> float:  # pragma: no cover - com
 
 #: The columns of ``SimState.totals`` (B, 4 + 3K): the episode's running sums of the tracking
 #: and effort costs, the predicted outage probabilities, the drone's path length, then per AGV the
-#: squared position errors, the lost commands and the powers.
+#: squared position errors, the lost commands and the powers. The outage and power sums count the
+#: slots that send a command only: on the others nothing is transmitted (MODEL.md §7).
 TOTALS = ("tracking", "effort", "outage_p", "path", "sq_error", "outages", "power")
 
 
@@ -164,7 +165,7 @@ def _slot(x_aug, increment, send, power, drone_next, fading, reference, slot, ap
     4. the packed error against the reference at slot n+1 and the stage terms (e' Q1 e, du' Q2 du)
        = err^2 @ packed_w;
     5. the slot's stage costs summed over AGVs (left to right) and the episode's running sums
-       (:data:`TOTALS`) advanced.
+       (:data:`TOTALS`) advanced (the outage and power sums on command slots only).
 
     ``constants``: :attr:`SimParams.constants` (lag_alpha, a_max, H^2, c_d, c_ce, m). Writes the
     outputs (the last seven arguments, new arrays the caller allocates: a compiled function's
@@ -229,6 +230,7 @@ def _slot(x_aug, increment, send, power, drone_next, fading, reference, slot, ap
     np.dot(squares, packed_w, terms.reshape((n, 2)))
     totals_next[:] = totals
     for b in range(num):
+        sent = 1.0 if send[b % send.shape[0]] else 0.0
         t, e, o = terms[b, 0, 0], terms[b, 0, 1], outage[b, 0]
         for i in range(1, k):
             t += terms[b, i, 0]
@@ -237,14 +239,14 @@ def _slot(x_aug, increment, send, power, drone_next, fading, reference, slot, ap
         costs[b, 0], costs[b, 1], costs[b, 2] = t, e, t + e
         totals_next[b, 0] += t
         totals_next[b, 1] += e
-        totals_next[b, 2] += o
+        totals_next[b, 2] += sent * o
         sx = drone_next[b, 0] - drone_prev[b, 0]
         sy = drone_next[b, 1] - drone_prev[b, 1]
         totals_next[b, 3] += np.sqrt(sx * sx + sy * sy)
         for i in range(k):
             totals_next[b, 4 + i] += err[b, i, 0] ** 2 + err[b, i, 1] ** 2
-            totals_next[b, 4 + k + i] += 0.0 if delivered[b, i] else 1.0
-            totals_next[b, 4 + 2 * k + i] += power[b, i]
+            totals_next[b, 4 + k + i] += 0.0 if delivered[b, i] else sent
+            totals_next[b, 4 + 2 * k + i] += sent * power[b, i]
 
 
 # ---------------------------------------------------------------------- parameters, state, draws
@@ -538,18 +540,22 @@ def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np
     """Metrics of MODEL.md §6 over the slots each scenario of ``rows`` has run in its episode (the
     decision time is the caller's), one dict per row: ``slots``, ``control_cost`` (tracking +
     effort), ``tracking_cost``, ``effort_cost``, ``rmse_m``, ``rmse_per_agv_m``, ``outage_rate``,
-    ``outage_rate_predicted``, ``outage_rate_per_agv``, ``mean_power_w``, ``drone_path_length_m``."""
+    ``outage_rate_predicted``, ``outage_rate_per_agv`` (over the commands sent: with commands every
+    P slots, the slots n with n % P == 0), ``mean_power_w`` (the power radiated per link, averaged
+    over every slot: 0 W on a slot without a command), ``drone_path_length_m``."""
     rows = np.asarray(rows, dtype=np.int64).reshape(-1)
     n, k = state.slot[rows], params.num_agvs
     if np.any(n == 0):
         raise RuntimeError("no slot has been simulated yet")
     t = state.totals[rows]
-    nk, per = n * k, n[:, None]
+    period = params.disturbance.control_period_slots if params.disturbed else 1
+    sent = (n + period - 1) // period  # the command slots 0, P, 2P, ... among slots 0..n-1
+    nk, per = sent * k, sent[:, None]
     sq_error, outages, power = t[:, 4 : 4 + k], t[:, 4 + k : 4 + 2 * k], t[:, 4 + 2 * k :]
     columns = zip(n.tolist(), control_costs(state, rows).tolist(), t[:, 0].tolist(), t[:, 1].tolist(),
-                  np.sqrt(sq_error.sum(axis=1) / nk).tolist(), np.sqrt(sq_error / per).tolist(),
+                  np.sqrt(sq_error.sum(axis=1) / (n * k)).tolist(), np.sqrt(sq_error / n[:, None]).tolist(),
                   (outages.sum(axis=1) / nk).tolist(), (t[:, 2] / nk).tolist(), (outages / per).tolist(),
-                  (power / per).tolist(), t[:, 3].tolist())
+                  (power / n[:, None]).tolist(), t[:, 3].tolist())
     return [dict(zip(_METRICS, values)) for values in columns]
 
 

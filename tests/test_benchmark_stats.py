@@ -13,7 +13,7 @@ from scipy import stats
 import lawn_env
 from lawn_env import ScenarioConfig, presets
 from training.evaluate import TRANSIENT_SLOTS, build_policy, evaluate, split_cost
-from training.limits import LIMITS, NOISE, REFERENCE_ROWS, limit_config, resolve
+from training.limits import LIMIT_SETTINGS, LIMITS, NOISE, REFERENCE_ROWS, limit_config, resolve
 from training.score import aggregate_score, normalized_score
 from training.tables import paired_difference, paired_geometric
 
@@ -124,7 +124,7 @@ def test_limit_rows_lift_one_field_of_their_task(task):
         changed = {k for k in base if base[k] != lifted[k]}
         assert changed == ({key} if base[key] != value else set()), name
         policy, played, kwargs = resolve(name, config)
-        assert policy == "rg-mpc" and played == limit_config(name, config) and kwargs == {}
+        assert policy == "rg-mpc" and played == limit_config(name, config) and kwargs == LIMIT_SETTINGS.get(name, {})
     for name, settings in NOISE.items():
         assert resolve(name, config) == ("rg-mpc", config, settings)
     assert LIMITS["limit:fast-drone"][1] == 300.0  # the validated maximum of drone.max_speed_mps

@@ -162,3 +162,29 @@ def test_the_step_takes_decisions_of_any_real_dtype():
     # integer zero power: every link in outage, no command arrives, the increments applied are zero
     assert (records[2].outage_probability == 1.0).all() and not records[2].delivered.any()
     assert not records[2].applied_increment.any() and records[2].power_w.dtype == np.float64
+
+
+def test_a_slot_without_a_command_transmits_nothing():
+    """With commands every second slot, the powers decided for a slot without a command have no
+    effect: the control cost, the outage metrics and the radiated power do not depend on them
+    (outage rates count the commands sent; the mean power counts 0 W on a slot that sends none)."""
+    from lawn_env import DisturbanceConfig
+    from lawn_env.core import Decisions, Simulation
+
+    cfg = ScenarioConfig(num_slots=21, disturbance=DisturbanceConfig(control_period_slots=2))
+    metrics = []
+    for hold_power in (0.25, 1e-9):
+        sim = Simulation(cfg)
+        view = sim.row(0)
+        draws = np.random.default_rng(4)
+        sim.reset([draws])
+        rng = np.random.default_rng(9)
+        for n in range(cfg.num_slots):
+            power = np.full((1, cfg.num_agvs), 0.25 if n % 2 == 0 else hold_power)
+            decisions = Decisions(rng.uniform(-1, 1, (1, cfg.num_agvs, 2)), power, view.drone_target(np.zeros(2))[None])
+            sim.step(decisions, sim.draw(draws))
+        metrics.append(sim.episode_metrics()[0])
+    low, high = metrics
+    assert low == high  # every metric, the outage rates and the mean power included
+    assert high["mean_power_w"] == pytest.approx([0.25 * 11 / 21] * cfg.num_agvs)  # 11 command slots of 21, 0 W between
+    assert 0 < high["outage_rate"] < 1

@@ -182,7 +182,7 @@ def test_suite_tasks_are_presets_with_their_own_scenarios():
 
 def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(tmp_path):
     pytest.importorskip("stable_baselines3")
-    from training.leaderboard import run_suite, suite_table
+    from training.suite import run_suite, suite_table
 
     policies = ["anchor:stake", "zoo:ppo-comm"]
     tasks = ["default", "wide-k8"]

@@ -5,7 +5,9 @@ with one field of the scenario lifted (docs/benchmark.md, "Headroom rows"):
 
 * ``limit:fast-drone``: the drone's speed bound ``drone.max_speed_mps`` raised to the largest value
   the configuration accepts (its validated upper bound): how much of the cost the drone's reach
-  decides;
+  decides. ``rg-mpc``'s drone grid is capped at 1,000 points there (its default cap, 10,000, lays
+  the whole area at 2 m spacing for a 150 m reach, 20 times the time per decision, for the same
+  headroom within its interval: ``python benchmarks/fast_drone_grid.py``);
 * ``limit:perfect-links``: ``channel.perfect_links`` on, every command delivered: how much of the
   cost the links decide.
 
@@ -34,7 +36,7 @@ from lawn_env.config import DroneConfig
 
 from .score import SCORE_HIGH
 
-__all__ = ["LIMITS", "NOISE", "REFERENCE_ROWS", "is_reference_row", "limit_config", "resolve"]
+__all__ = ["LIMITS", "LIMIT_SETTINGS", "NOISE", "REFERENCE_ROWS", "is_reference_row", "limit_config", "resolve"]
 
 
 def _max_speed() -> float:
@@ -47,6 +49,10 @@ def _max_speed() -> float:
 LIMITS: dict[str, tuple[str, Any]] = {
     "limit:fast-drone": ("drone.max_speed_mps", _max_speed()),
     "limit:perfect-links": ("channel.perfect_links", True),
+}
+#: name -> the settings of ``rg-mpc`` a limit row plays with (bounded time per decision).
+LIMIT_SETTINGS: dict[str, dict[str, Any]] = {
+    "limit:fast-drone": {"max_drone_points": 1_000},
 }
 #: name -> the settings of ``rg-mpc`` that differ (harmlessly) from its defaults.
 NOISE: dict[str, dict[str, Any]] = {
@@ -75,7 +81,7 @@ def resolve(name: str, config: ScenarioConfig, policy_kwargs: Mapping[str, Any] 
     becomes ``rg-mpc`` on its config with its settings; any other name is returned as given."""
     kwargs = dict(policy_kwargs or {})
     if name in LIMITS:
-        return SCORE_HIGH, limit_config(name, config), kwargs
+        return SCORE_HIGH, limit_config(name, config), {**LIMIT_SETTINGS.get(name, {}), **kwargs}
     if name in NOISE:
         return SCORE_HIGH, config, {**NOISE[name], **kwargs}
     return name, config, kwargs

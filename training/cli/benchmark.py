@@ -95,7 +95,7 @@ def _check_fixed_protocol(args: argparse.Namespace) -> None:
 def _suite(args: argparse.Namespace) -> int:
     from lawn_env.presets import SUITE
 
-    from ..leaderboard import (plot_profiles, run_suite, skipped_summary, structure_table, suite_policies,
+    from ..suite import (plot_profiles, run_suite, skipped_summary, structure_table, suite_policies,
                                suite_table, task_tables, write_leaderboard)
     from ..protocol import TEST_EPISODES
     from ..score import SCORE_VERSION
