@@ -16,8 +16,9 @@
 #                                                       retrain, `time bash scripts/train_agents.sh`)
 #   block zoo-drift (docs/training.md)                  benchmarks/zoo_drift.py (the table's shipped agents
 #                                                       and experts re-evaluated at the current code)
-#   docs/LEADERBOARD.md                                 lawn benchmark --suite (--only suite; about half
-#                                                       an hour on 2 cores)
+#   docs/LEADERBOARD.md                                 lawn benchmark --suite (--only suite; about 17
+#                                                       minutes on 2 cores), with block fast-drone-grid
+#                                                       (docs/benchmark.md: benchmarks/fast_drone_grid.py)
 #   docs/figures/episodes/*.gif                         lawn render (--only render): the README's animation
 #                                                       (rg-mpc, default task), a learned agent, the disturbed preset
 #   bash scripts/refresh_docs.sh [--train] [--only NAME ...]
@@ -99,6 +100,8 @@ if want learned; then
 fi
 if want suite; then
   "$lawn" benchmark --suite --docs docs --out runs/suite --workers 2 --quiet | tee runs/suite-stdout.txt
+  "$py" benchmarks/fast_drone_grid.py > runs/fast_drone_grid.md
+  splice fast-drone-grid runs/fast_drone_grid.md "python benchmarks/fast_drone_grid.py"
 fi
 if want render; then
   mkdir -p docs/figures/episodes

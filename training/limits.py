@@ -6,8 +6,8 @@ with one field of the scenario lifted (docs/benchmark.md, "Headroom rows"):
 * ``limit:fast-drone``: the drone's speed bound ``drone.max_speed_mps`` raised to the largest value
   the configuration accepts (its validated upper bound): how much of the cost the drone's reach
   decides. ``rg-mpc``'s drone grid is capped at 1,000 points there (its default cap, 10,000, lays
-  the whole area at 2 m spacing for a 150 m reach, 20 times the time per decision, for the same
-  headroom within its interval: ``python benchmarks/fast_drone_grid.py``);
+  the whole area at 2 m spacing for a 150 m reach: about six times the time for a headroom within
+  the same interval, ``python benchmarks/fast_drone_grid.py``);
 * ``limit:perfect-links``: ``channel.perfect_links`` on, every command delivered: how much of the
   cost the links decide.
 
