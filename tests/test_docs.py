@@ -17,7 +17,8 @@ BLOCKS = {"benchmark": "README.md", "benchmark-nominal": "docs/policies.md", "ga
           "expert-speed": "docs/experts.md", "anchors": "docs/rl.md", "zoo-drift": "docs/training.md",
           "train-throughput": "docs/training.md", "env-throughput": "docs/performance.md",
           "vector-step": "docs/performance.md", "numba-jit": "docs/performance.md",
-          "qp-speed": "docs/performance.md", "speedups": "docs/performance.md"}
+          "qp-speed": "docs/performance.md", "speedups": "docs/performance.md",
+          "fast-drone-grid": "docs/benchmark.md"}
 
 
 def test_replace_block_rewrites_only_the_block_and_stamps_it(tmp_path):
