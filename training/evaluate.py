@@ -8,16 +8,14 @@ come back in seed order whatever the scheduling.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 import gymnasium as gym
 import numpy as np
-from tqdm.auto import tqdm
 
 import lawn_env
 from agents import Policy, make_policy
@@ -25,6 +23,7 @@ from agents.rollouts import Step, rollout
 from lawn_env import ScenarioConfig
 
 from . import limits
+from .pool import pool_map, worker_pool
 from .tables import Geometric, fmt_geometric, mean_ci, paired_difference, paired_geometric, write_csv
 
 __all__ = ["episode_row", "run_episode", "pool_map", "worker_pool", "evaluate", "summarize", "write_rows",
@@ -99,8 +98,12 @@ def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
     return row
 
 
-def _run_task(task) -> dict:
-    return run_episode(*task)
+def _run_task(task, transient_slots: int = TRANSIENT_SLOTS) -> dict:
+    """One task's row, its control cost split in the worker (:func:`split_cost`)."""
+    row = run_episode(*task)
+    row["transient_cost"], row["sustained_cost"] = split_cost(json.loads(row["stage_costs"]), transient_slots)
+    row["transient_slots"] = int(transient_slots)
+    return row
 
 
 def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SLOTS) -> tuple[float, float]:
@@ -117,54 +120,8 @@ def evaluate(tasks: Iterable[tuple], workers: int = 1, progress: bool = True, de
     """Run ``(policy, env_id, config, seed, policy_kwargs)`` tasks; rows in task order, each with its
     ``transient_cost`` and ``sustained_cost`` split at ``transient_slots`` (:func:`split_cost`)."""
     split_cost((), transient_slots)  # a bad split fails before any episode
-    rows = pool_map(_run_task, list(tasks), workers, progress, desc)
-    for row in rows:
-        row["transient_cost"], row["sustained_cost"] = split_cost(json.loads(row["stage_costs"]), transient_slots)
-        row["transient_slots"] = int(transient_slots)
-    return rows
-
-
-def _die_with_parent(parent_pid: int) -> None:
-    """Worker initializer: the worker gets SIGKILL when the process that made the pool dies (Linux
-    ``PR_SET_PDEATHSIG``), so a killed ``lawn sweep``/``evaluate`` leaves no workers behind."""
-    import ctypes
-    import os
-    import signal
-    import sys
-
-    if sys.platform.startswith("linux"):
-        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
-    if os.getppid() != parent_pid:  # the parent died before the line above took effect
-        os._exit(1)
-
-
-def worker_pool(workers: int) -> ProcessPoolExecutor:
-    """The process pool of every parallel command: ``spawn`` workers (fresh interpreters, safe with
-    torch and OpenMP thread pools, children of this process) that die with it."""
-    import os
-
-    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_die_with_parent, initargs=(os.getpid(),))
-
-
-def pool_map(fn: Callable[[Any], Any], tasks: list, workers: int, progress: bool, desc: str) -> list:
-    """``[fn(t) for t in tasks]`` in a process pool when ``workers > 1``, with a progress bar;
-    results in task order whatever the scheduling."""
-    bar = tqdm(total=len(tasks), desc=desc, unit="ep", disable=None if progress else True, leave=False)
-    try:
-        if workers <= 1 or len(tasks) <= 1:
-            out = []
-            for task in tasks:
-                out.append(fn(task))
-                bar.update()
-            return out
-        with worker_pool(workers) as pool:
-            futures = [pool.submit(fn, task) for task in tasks]
-            for fut in futures:
-                fut.add_done_callback(lambda _: bar.update())
-            return [fut.result() for fut in futures]
-    finally:
-        bar.close()
+    return pool_map(functools.partial(_run_task, transient_slots=transient_slots), list(tasks), workers, progress,
+                    desc)
 
 
 def summarize(rows: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy") -> list[dict]:
