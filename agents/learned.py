@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import json
 import pickle
+import zipfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -50,9 +51,29 @@ def _selected(path: Path) -> tuple[Path, Path]:
     return path / "model.zip", path / "vecnormalize.pkl"
 
 
+#: What loading a damaged or truncated archive raises, by where it breaks: the zip's directory
+#: (``zipfile.BadZipFile``; torch's own reader: ``RuntimeError``), a member cut short
+#: (``RuntimeError``, ``EOFError``), the pickled or JSON parts (``UnpicklingError``, ``ValueError``),
+#: an SB3 archive that lost its data (``AssertionError``, ``KeyError``).
+DAMAGED = (zipfile.BadZipFile, RuntimeError, EOFError, pickle.UnpicklingError, ValueError, AssertionError, KeyError)
+
+
+def load_saved(load: Callable[[str], Any], path: Path, what: str) -> Any:
+    """``load(path)`` for a saved model or network; a damaged or truncated file raises a
+    ``ValueError`` that names it (not a library's internal error)."""
+    path = Path(path)
+    try:
+        return load(str(path))
+    except DAMAGED as exc:
+        raise ValueError(f"{path}: cannot read this {what}: the file is damaged or truncated "
+                         f"({type(exc).__name__}: {str(exc).splitlines()[0][:200] if str(exc) else 'no detail'}); "
+                         "restore it (git checkout, a copy) or retrain it") from None
+
+
 def _load_model(run: RunDir):
     _sb3()
-    return algorithm_class(run.algo, f"{run.path}: run.json: ").load(str(_selected(run.path)[0]), device="cpu")
+    cls = algorithm_class(run.algo, f"{run.path}: run.json: ")
+    return load_saved(lambda p: cls.load(p, device="cpu"), _selected(run.path)[0], f"{run.algo} model")
 
 
 class ObsNormalizer:
@@ -208,7 +229,7 @@ def export_agent(run_dir: Path, out_dir: Path, record: dict[str, Any]) -> Path:
     normalizer = ObsNormalizer.load(_selected(run_dir)[1])
     if normalizer is not None:
         normalizer.save(out_dir / "normalizer.npz")
-    agent = {"algo": algo, "env": run.env, "interface": run.interface,
+    agent = {"algo": algo, "trainer": run.record.get("trainer", algo), "env": run.env, "interface": run.interface,
              "config": read_json(run_dir / "config.json"), **record}
     (out_dir / "agent.json").write_text(json.dumps(agent, indent=2) + "\n")
     return out_dir
@@ -218,7 +239,7 @@ def zoo_agents() -> dict[str, dict]:
     """Shipped agents by name: their ``agent.json`` records."""
     if not ZOO_DIR.is_dir():
         return {}
-    return {p.parent.name: json.loads(p.read_text()) for p in sorted(ZOO_DIR.glob("*/agent.json"))}
+    return {p.parent.name: read_json(p) for p in sorted(ZOO_DIR.glob("*/agent.json"))}
 
 
 def _load_zoo(name: str, config=None, env_id=None, seed=None) -> Policy:
@@ -228,7 +249,8 @@ def _load_zoo(name: str, config=None, env_id=None, seed=None) -> Policy:
     record = agents[name]
     _sb3()
     network_class = policy_network_class(record["algo"], f"zoo:{name}: agent.json: ")
-    network = network_class.load(str(ZOO_DIR / name / "policy.zip"), device="cpu")
+    network = load_saved(lambda p: network_class.load(p, device="cpu"), ZOO_DIR / name / "policy.zip",
+                         f"zoo agent's {record['algo']} network")
     cfg = config if config is not None else ScenarioConfig.from_dict(record["config"])
     normalizer = ObsNormalizer.load(ZOO_DIR / name / "normalizer.npz")
     if record["env"] == PARALLEL_ENV_ID:

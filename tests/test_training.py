@@ -3,6 +3,7 @@
 import csv
 import json
 import math
+import re
 
 import gymnasium as gym
 import numpy as np
@@ -387,15 +388,95 @@ def test_recipe_commands_parse_as_lawn_train():
 
 @pytest.mark.parametrize("algo", ["sac", "ppo"])
 def test_start_at_anchor_makes_the_untrained_policy_play_the_zero_action(algo):
-    from training.train import _start_at_anchor, algorithm_class
+    from training.options import start_at_anchor
+    from training.train import algorithm_class
 
     env = gym.make("lawn/CommRL-v0", num_slots=4)
     model = algorithm_class(algo)("MlpPolicy", env, seed=0, **({"learning_starts": 10} if algo == "sac" else {}))
     obs, _ = env.reset(seed=0)
     before, _ = model.predict(obs, deterministic=True)
     assert np.abs(before).max() > 1e-3  # SB3's init acts away from zero (SAC's by far)
-    _start_at_anchor(model, algo)
+    start_at_anchor(model, algo)
     after, _ = model.predict(obs, deterministic=True)
     np.testing.assert_array_equal(after, np.zeros_like(after))
     with pytest.raises(ValueError, match="start_at_anchor: supported for sac, ppo, not 'td3'"):
-        _start_at_anchor(model, "td3")
+        start_at_anchor(model, "td3")
+
+
+@pytest.mark.parametrize("bad, message", [
+    ("learnin_rate=1e-4", "unknown PPO hyperparameters \\['learnin_rate'\\]"),
+    ("n_envs=0", "--hp n_envs=0: must be an integer >= 1"),
+    ("actor_warmup_steps=abc", "--hp actor_warmup_steps='abc'"),
+    ("policy=Foo", "--hp policy='Foo': PPO takes"),
+    ("seed=3", "unknown PPO hyperparameters \\['seed'\\]"),
+    ('normalize={"bad": 1}', "unknown VecNormalize options \\['bad'\\]"),
+    ('learning_rate="lin_x"', "--hp learning_rate='lin_x'"),
+    ('policy_kwargs={"bogus": 1}', "bogus"),
+])
+def test_a_failed_lawn_train_leaves_nothing_and_the_corrected_command_runs(tmp_path, capsys, bad, message):
+    """Every option is checked before the run directory gets its files, or the files are removed when
+    SB3 refuses the model: the corrected command with the same --out then trains."""
+    out = tmp_path / "r3"
+    args = ["train", "--algo", "ppo", "--env", "CartPole-v1", "--timesteps", "64", "--out", str(out), "--quiet",
+            "--hp", "n_steps=32", "--hp", "batch_size=32"]
+    assert main(args + ["--hp", bad]) == 2
+    err = capsys.readouterr().err
+    assert re.search(message, err) and "internal error" not in err, err
+    assert not out.exists()
+    assert main(args) == 0 and (out / "run.json").exists()
+
+
+def test_the_valid_keys_are_the_public_ones():
+    from training.options import split_params
+
+    with pytest.raises(ValueError) as info:
+        split_params("ppo", "lawn/Joint-v0", {"learnin_rate": 1e-4})
+    listed = str(info.value).split("valid: ")[1].split(", ")
+    assert "learning_rate" in listed and "init_log_std" in listed and "actor_warmup_steps" in listed
+    assert not any(k.startswith("_") for k in listed) and "seed" not in listed and "verbose" not in listed
+    with pytest.raises(ValueError, match="--hp init_log_std: applies to ppo, a2c, not sac"):
+        split_params("sac", "lawn/Joint-v0", {"init_log_std": -1.0})
+
+
+def _truncate(path):
+    """Rewrite the zip at ``path`` with its largest member cut to half its length."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as zf:
+        members = {info.filename: zf.read(info.filename) for info in zf.infolist()}
+    biggest = max(members, key=lambda name: len(members[name]))
+    members[biggest] = members[biggest][: len(members[biggest]) // 2]
+    with zipfile.ZipFile(path, "w") as zf:
+        for name, data in members.items():
+            zf.writestr(name, data)
+
+
+def test_a_damaged_checkpoint_names_its_file(tmp_path, monkeypatch, capsys):
+    import shutil
+
+    import agents.learned as learned
+
+    zoo = tmp_path / "zoo"
+    shutil.copytree(learned.ZOO_DIR / "ppo-comm", zoo / "ppo-comm")
+    _truncate(zoo / "ppo-comm" / "policy.zip")
+    monkeypatch.setattr(learned, "ZOO_DIR", zoo)
+    with pytest.raises(ValueError, match=r"policy\.zip: cannot read this zoo agent's ppo network: the file is damaged"):
+        make_policy("zoo:ppo-comm")
+    out, _ = _train(tmp_path, "ppo", steps=64, name="cut")
+    (out / "best_model.zip").unlink(missing_ok=True)
+    _truncate(out / "model.zip")
+    assert main(["evaluate", "--policy", f"sb3:{out}", "--episodes", "1", "--no-score", "--quiet",
+                 "--out", str(tmp_path / "rows.csv")]) == 2
+    err = capsys.readouterr().err
+    assert f"{out / 'model.zip'}: cannot read this ppo model" in err and "internal error" not in err
+    (out / "model.zip").write_bytes(b"")  # an empty file
+    with pytest.raises(ValueError, match="damaged or truncated"):
+        make_policy(f"sb3:{out}")
+
+
+def test_zoo_lists_each_agents_real_trainer(capsys):
+    assert main(["zoo"]) == 0
+    printed = capsys.readouterr().out
+    block = printed.split("zoo:bc-comm")[1].split("zoo:")[0]
+    assert "bc, a ppo network" in block
+    assert ", ppo)" in printed.split("zoo:ppo-comm ")[1].split("zoo:")[0]

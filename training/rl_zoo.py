@@ -21,7 +21,8 @@ def zoo_hyperparams(algo: str = "ppo") -> dict[str, dict[str, Any]]:
     """rl-zoo3's hyperparameters of ``algo`` for every RL id whose base env's entry in lawn's file
     trains on the RL interface."""
     from .recipes import RECIPES
-    from .train import LAWN_KEYS, load_hyperparams
+    from .options import LAWN_KEYS
+    from .train import load_hyperparams
 
     plain = [r for r in RECIPES.values() if r.algo == algo and not r.hp and r.init_from is None]
     budgets = {r.env_id: r.timesteps for r in plain}

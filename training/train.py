@@ -35,17 +35,20 @@ Seeds: :mod:`training.protocol` (training, validation and test seeds never meet)
 
 from __future__ import annotations
 
-import inspect
 import json
 import pickle
+import shutil
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
+from agents.learned import load_saved
 from agents.runs import ALGORITHMS, algorithm_class, read_json, read_run
 from lawn_env import ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig
 from lawn_env.interface import InterfaceLike, resolve_interface
 
+from .options import RunOptions, split_params, start_at_anchor
 from .checkpoints import Checkpoint, clear_history, latest_checkpoint, restore_history
 from .protocol import TRAIN_SEED_BASE, VALIDATION_SEED_BASE, limit_torch_threads, versions, write_learning_curve
 
@@ -77,17 +80,6 @@ def load_hyperparams(algo: str, env_id: str, overrides: Mapping[str, Any] | None
     params = dict(data[env_id])
     params.update(overrides or {})
     return params, int(data["version"])
-
-
-#: Hyperparameter keys that ``lawn train`` reads itself (the rest go to the SB3 algorithm).
-LAWN_KEYS = ("n_envs", "normalize", "policy", "interface", "actor_warmup_steps", "init_log_std", "start_at_anchor")
-
-
-def _check_algo_kwargs(cls, kwargs: Mapping[str, Any]) -> None:
-    valid = set(inspect.signature(cls.__init__).parameters) - {"self", "env", "policy"}
-    unknown = sorted(set(kwargs) - valid)
-    if unknown:
-        raise ValueError(f"unknown {cls.__name__} hyperparameters {unknown}; valid: {', '.join(sorted(valid))}")
 
 
 def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, normalize: bool | Mapping[str, Any],
@@ -163,30 +155,52 @@ def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: 
     out_dir = Path(out_dir)
     if (out_dir / "run.json").exists():
         raise ValueError(f"{out_dir} already holds a run; use --resume {out_dir} or another --out")
+    if algo != "bc":
+        split_params(algo, env_id, params, vec)  # every option checked before anything is written
     if algo == "bc":
         from .bc import train_bc_run
 
         return train_bc_run(env_id, config, timesteps, seed, out_dir, params, version, progress=progress,
                             dataset=dataset, eval_episodes=eval_episodes)
     if init_from is not None:
-        source = read_run(init_from, "--init-from")
-        if source.interface != params.get("interface"):
-            raise ValueError(f"--init-from {init_from}: it was trained with interface {source.interface}, "
-                             f"this run uses {params.get('interface')}; pass the same --interface")
-        hp_file = Path(init_from) / "hyperparams.json"
-        theirs = _net_arch(json.loads(hp_file.read_text())) if hp_file.exists() else None
-        if theirs is not None and theirs != _net_arch(params):
-            raise ValueError(f"--init-from {init_from}: its network is net_arch={theirs}, this run builds "
-                             f"net_arch={_net_arch(params)}; pass --hp 'policy_kwargs={{\"net_arch\": {theirs}}}'")
+        _check_init_from(Path(init_from), algo, params)
     spec = RunSpec(algo=algo, env=env_id, seed=seed, timesteps=timesteps, hyperparams_version=version,
                    interface=params.get("interface"),
                    eval_every=eval_every, eval_episodes=eval_episodes, checkpoint_every=checkpoint_every,
                    init_from=str(init_from) if init_from else None, vec=vec, versions=versions())
+    existed = out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
+    written = [out_dir / name for name in ("config.json", "hyperparams.json", "run.json", "monitor", "tb")]
     (out_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
     (out_dir / "hyperparams.json").write_text(json.dumps(params, indent=2))
     (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
-    return _learn(spec, params, config, out_dir, start=None, progress=progress, callbacks=callbacks)
+    try:
+        run = _setup(spec, params, config, out_dir, start=None, callbacks=callbacks)
+    except BaseException:  # a model SB3 refuses to build: nothing of the run is left behind
+        if not existed:
+            shutil.rmtree(out_dir, ignore_errors=True)
+        for path in written:
+            shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
+        raise
+    return _learn(run, progress=progress)
+
+
+def _check_init_from(init_from: Path, algo: str, params: Mapping[str, Any]) -> None:
+    """``--init-from``: a finished run of the same algorithm, interface and network as this run's."""
+    source = read_run(init_from, "--init-from")
+    theirs = source.record.get("target", source.record.get("algo"))
+    if theirs != algo:
+        raise ValueError(f"--init-from {init_from}: it holds a {theirs} policy, not {algo}")
+    if not (Path(init_from) / "model.zip").exists():
+        raise ValueError(f"--init-from {init_from}: no model.zip there (the run did not finish)")
+    if source.interface != params.get("interface"):
+        raise ValueError(f"--init-from {init_from}: it was trained with interface {source.interface}, "
+                         f"this run uses {params.get('interface')}; pass the same --interface")
+    hp_file = Path(init_from) / "hyperparams.json"
+    theirs = _net_arch(json.loads(hp_file.read_text())) if hp_file.exists() else None
+    if theirs is not None and theirs != _net_arch(params):
+        raise ValueError(f"--init-from {init_from}: its network is net_arch={theirs}, this run builds "
+                         f"net_arch={_net_arch(params)}; pass --hp 'policy_kwargs={{\"net_arch\": {theirs}}}'")
 
 
 def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -> dict:
@@ -226,71 +240,58 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
     else:
         restore_history(out_dir, checkpoint)
         spec["wall_time_s"] = float(checkpoint.state.get("wall_time_s", 0.0))
+    split_params(spec["algo"], spec["env"], params, spec.get("vec", "dummy"))  # before run.json is rewritten
     (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
-    summary = _learn(spec, params, config, out_dir, start=checkpoint, progress=progress)
+    summary = _learn(_setup(spec, params, config, out_dir, start=checkpoint), progress=progress)
     summary["resumed_from"] = checkpoint.steps if checkpoint is not None else None
     return summary
 
 
-def _start_at_anchor(model: Any, algo: str) -> None:
-    """``start_at_anchor``: the policy's output layer starts at zero weights and bias, so that its
-    deterministic action is the zero action: the run starts at its interface's anchor, and model
-    selection, which validates the start, compares what training finds against the anchor itself.
-    SB3's SAC initializes its mean layer like any other (its untrained policy acts far from zero);
-    PPO's orthogonal init with gain 0.01 acts near zero but not at it (the zoo's PPO-joint starts are
-    +1.7 % ± 1.0 % above the anchor across seeds). A run started ``--init-from`` keeps the weights it
-    loads: it starts at the policy it fine-tunes."""
-    import torch
+@dataclass
+class _Run:
+    """A run ready to learn: its spec, model, env, callbacks and where it writes."""
 
-    layers = {"sac": lambda: model.actor.mu, "ppo": lambda: model.policy.action_net}
-    if algo not in layers:
-        raise ValueError(f"start_at_anchor: supported for {', '.join(layers)}, not {algo!r}")
-    layer = layers[algo]()
-    with torch.no_grad():
-        layer.weight.zero_()
-        layer.bias.zero_()
+    spec: RunSpec
+    model: Any
+    env: Any
+    hooks: list
+    out_dir: Path
+    wall_before: float
+    resumed: bool
 
 
-def _lr_schedule(value):
-    """``lin_3e-4`` (rl-zoo's notation): linear decay from 3e-4 to 0 over the run; numbers as they are."""
-    if isinstance(value, str) and value.startswith("lin_"):
-        start = float(value[4:])
-        return lambda progress_remaining: progress_remaining * start
-    return value
-
-
-def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, start: Checkpoint | None,
-           progress: bool, callbacks: list | None = None) -> dict:
+def _setup(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, start: Checkpoint | None,
+           callbacks: list | None = None) -> _Run:
+    """The env, the model and the callbacks of a run (new or resumed from ``start``)."""
     from stable_baselines3.common.utils import set_random_seed
 
     limit_torch_threads()
     cls = algorithm_class(spec["algo"])
-    params = dict(params)
-    n_envs = int(params.pop("n_envs", 1))
-    normalize = params.pop("normalize", False)
-    policy = params.pop("policy", "MlpPolicy")
-    interface = params.pop("interface", None)
-    warmup = int(params.pop("actor_warmup_steps", 0))
-    init_log_std = params.pop("init_log_std", None)
-    at_anchor = bool(params.pop("start_at_anchor", False))
-    for key in ("learning_rate", "clip_range"):
-        if key in params:
-            params[key] = _lr_schedule(params[key])
-    _check_algo_kwargs(cls, params)
+    options = split_params(spec["algo"], spec["env"], params, spec.get("vec", "dummy"))
     seed = int(spec["seed"])
     done_steps = start.steps if start else 0
     env_seed = TRAIN_SEED_BASE + 1000 * seed + done_steps  # a resumed run continues with fresh, still seeded, episodes
     set_random_seed(env_seed)
-    env = make_train_env(spec["env"], config, n_envs, env_seed, normalize, out_dir / "monitor",
-                         vecnormalize_path=start.vecnormalize if start else None, interface=interface,
+    env = make_train_env(spec["env"], config, options.n_envs, env_seed, options.normalize, out_dir / "monitor",
+                         vecnormalize_path=start.vecnormalize if start else None, interface=options.interface,
                          append_monitor=start is not None, vec=spec.get("vec", "dummy"))
-    model = _model(cls, spec, env, start, out_dir, policy, params, at_anchor, init_log_std)
-    remaining = int(spec["timesteps"]) - model.num_timesteps
+    try:
+        model = _model(cls, spec, env, start, out_dir, options)
+    except BaseException:
+        env.close()
+        raise
     wall_before = float(spec.get("wall_time_s", 0.0))
-    hooks = _hooks(spec, config, interface, out_dir, wall_before, warmup) + list(callbacks or [])
+    hooks = _hooks(spec, config, options.interface, out_dir, wall_before, options.actor_warmup_steps)
+    return _Run(spec, model, env, hooks + list(callbacks or []), out_dir, wall_before, start is not None)
+
+
+def _learn(run: _Run, progress: bool) -> dict:
+    """Train a set-up run to its timestep target; save the model, its statistics and the curve."""
+    model, env, spec, out_dir = run.model, run.env, run.spec, run.out_dir
+    remaining = int(spec["timesteps"]) - model.num_timesteps
     began = time.perf_counter()
     if remaining > 0:
-        model.learn(total_timesteps=remaining, callback=hooks, reset_num_timesteps=start is None,
+        model.learn(total_timesteps=remaining, callback=run.hooks, reset_num_timesteps=not run.resumed,
                     progress_bar=progress, tb_log_name="run")
     elapsed = time.perf_counter() - began
     model.save(str(out_dir / "model.zip"))
@@ -301,33 +302,33 @@ def _learn(spec: RunSpec, params: dict, config: ScenarioConfig, out_dir: Path, s
     spec_out = dict(spec)
     spec_out["num_timesteps"] = int(model.num_timesteps)
     spec_out["updates"] = int(getattr(model, "_n_updates", 0))
-    spec_out["wall_time_s"] = float(elapsed + wall_before)
+    spec_out["wall_time_s"] = float(elapsed + run.wall_before)
     (out_dir / "run.json").write_text(json.dumps(spec_out, indent=2))
     summary = write_learning_curve(out_dir, spec_out)
     env.close()
     return summary
 
 
-def _model(cls, spec: RunSpec, env, start: Checkpoint | None, out_dir: Path, policy: str, params: dict,
-           at_anchor: bool, init_log_std: float | None):
+def _model(cls, spec: RunSpec, env, start: Checkpoint | None, out_dir: Path, options: RunOptions):
     """The model a run trains: its checkpoint's, or a new one (from a cloned run's weights, at the
     anchor, with the fine-tuning's exploration noise as the spec asks)."""
     if start:
-        model = cls.load(str(start.model), env=env, tensorboard_log=str(out_dir / "tb"))
+        model = load_saved(lambda p: cls.load(p, env=env, tensorboard_log=str(out_dir / "tb")), start.model,
+                           "checkpoint model")
         if start.replay_buffer is not None:
             model.load_replay_buffer(str(start.replay_buffer))
         return model
-    model = cls(policy, env, seed=int(spec["seed"]) if spec["env"] != PARALLEL_ENV_ID else None, verbose=0,
-                tensorboard_log=str(out_dir / "tb"), **params)
+    model = cls(options.policy, env, seed=int(spec["seed"]) if spec["env"] != PARALLEL_ENV_ID else None, verbose=0,
+                tensorboard_log=str(out_dir / "tb"), **options.algo_kwargs)
     if spec.get("init_from"):
         _init_from(model, Path(spec["init_from"]), env)
-    if at_anchor and not spec.get("init_from"):
-        _start_at_anchor(model, spec["algo"])
-    if init_log_std is not None:  # exploration noise of a fine-tuned policy (after the cloned weights)
+    if options.start_at_anchor and not spec.get("init_from"):
+        start_at_anchor(model, spec["algo"])
+    if options.init_log_std is not None:  # exploration noise of a fine-tuned policy (after the cloned weights)
         import torch
 
         with torch.no_grad():
-            model.policy.log_std.fill_(float(init_log_std))
+            model.policy.log_std.fill_(float(options.init_log_std))
     return model
 
 
@@ -382,11 +383,7 @@ def _init_from(model, source: Path, env) -> None:
     """Start from a behaviour-cloned policy of the same algorithm (its weights and obs statistics)."""
     from stable_baselines3.common.vec_env import VecNormalize
 
-    run = json.loads((source / "run.json").read_text())
-    if run.get("target", run.get("algo")) != type(model).__name__.lower():
-        raise ValueError(f"--init-from {source}: it holds a {run.get('target', run.get('algo'))} policy, "
-                         f"not {type(model).__name__.lower()}")
-    other = type(model).load(str(source / "model.zip"))
+    other = load_saved(type(model).load, source / "model.zip", "--init-from model")
     model.policy.load_state_dict(other.policy.state_dict())
     norm_path = source / "vecnormalize.pkl"
     if isinstance(env, VecNormalize) and norm_path.exists():

@@ -294,11 +294,13 @@ def format_zoo_list() -> str:
         return "no shipped agents (lawn zoo build exports them)"
     lines = []
     for name, rec in agents.items():
+        trainer = rec.get("trainer") or (RECIPES[name].algo if name in RECIPES else rec.get("algo"))
+        algo = trainer if trainer == rec.get("algo") else f"{trainer}, a {rec.get('algo')} network"
         bench = rec.get("benchmark", {})
         ship = bench.get("shipped_vs_reference", [math.nan, math.nan])
         gain = bench.get("shipped_vs_anchor", [math.nan, math.nan])
         lines.append(f"zoo:{name}  {rec.get('label', '')}")
-        lines.append(f"  drives {rec.get('evaluated_on')} (trained on {rec.get('trained_on')}, {rec.get('algo')}), "
+        lines.append(f"  drives {rec.get('evaluated_on')} (trained on {rec.get('trained_on')}, {algo}), "
                      f"{rec.get('budget_steps', 0):,} steps, training seeds {rec.get('training_seeds')}, shipped seed "
                      f"{rec.get('shipped_seed')}")
         lines.append(f"  test seeds {bench.get('test_seeds')}: cost vs rg-mpc {fmt_paired(*ship)}, vs its anchor "
