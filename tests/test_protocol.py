@@ -223,6 +223,15 @@ def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
         expected = run_episode("rg-mpc", "lawn/Comm-v0", ScenarioConfig(), 7 + i)["control_cost"]
         assert float(np.sum(episode.infos["stage_cost"][1:])) == pytest.approx(expected, rel=1e-12)
         assert float(-np.sum(episode.rewards)) == pytest.approx(expected, rel=1e-12)
+    # Minari's normalized score is the package's score / 100 (epa and rg-mpc on the same seeds)
+    from training.score import normalized_score
+
+    costs = {p: {7 + i: run_episode(p, "lawn/Comm-v0", ScenarioConfig(), 7 + i)["control_cost"] for i in range(2)}
+             for p in ("epa", "rg-mpc")}
+    returns = np.array([float(np.sum(e.rewards)) for e in episodes])
+    recorded = {7 + i: -r for i, r in enumerate(returns)}
+    assert minari.get_normalized_score(dataset, returns.mean()) == pytest.approx(
+        normalized_score(recorded, costs["epa"], costs["rg-mpc"])[0] / 100, rel=1e-9)
     env = dataset.recover_environment()
     assert env.spec.id == "lawn/Comm-v0"
     obs, _ = env.reset(seed=7)

@@ -11,7 +11,10 @@ per step; the first info of an episode is the reset's). The env is made from a p
 ``dataset.recover_environment()`` rebuilds it. Each episode's summed ``infos["stage_cost"]``
 (steps 1..T) is the episode's control cost, which ``lawn evaluate`` reports for that seed.
 
-Behaviour cloning trains from such a dataset (``lawn train --algo bc --dataset ID``,
+The dataset carries Minari's reference scores: ``ref_min_score`` the mean return of ``epa`` and
+``ref_max_score`` that of ``rg-mpc`` on the same seeds, task and env (run beside the recording), so
+``minari.get_normalized_score(dataset, returns)`` is the package's normalized score / 100
+(:mod:`training.score`: 0 equal power, 1 the best expert). Behaviour cloning trains from such a dataset (``lawn train --algo bc --dataset ID``,
 :func:`training.bc.dataset_transitions`). ``minari`` is in the ``data`` extra (``pip install -e '.[data]'``).
 """
 
@@ -96,19 +99,41 @@ def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_i
     if dataset_id in minari.list_local_datasets():
         raise ValueError(f"--dataset-id {dataset_id!r} already exists under MINARI_DATASETS_PATH; choose another id "
                          f"or delete it (minari delete {dataset_id})")
+    low, high = _reference_returns(env_id, config, seed, episodes)
     env = DataCollector(gym.make(env_id, config=task), step_data_callback=_step_data_callback(), record_infos=True)
     for i in tqdm(range(episodes), desc=f"dataset {dataset_id}", unit="ep", disable=None if progress else True):
         rollout(env, agent, seed + i)
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="`author_email` is set to None")
         dataset = env.create_dataset(
-            dataset_id=dataset_id, eval_env=env.spec, algorithm_name=policy, author="lawn dataset create",
+            dataset_id=dataset_id, eval_env=_plain_spec(env_id, task), algorithm_name=policy, author="lawn dataset create",
             code_permalink=provenance(),
             description=description or (f"{episodes} full episodes (seeds {seed}-{seed + episodes - 1}) of {policy} "
                                         f"on {env_id}, task {task!r}: the unmodified scenario"),
-            requirements=[f"lawn=={lawn_env.__version__}"])
+            requirements=[f"lawn=={lawn_env.__version__}"], ref_min_score=low, ref_max_score=high)
     env.close()
     return dataset
+
+
+def _plain_spec(env_id: str, task: str) -> gym.envs.registration.EnvSpec:
+    """The spec of the env the dataset was recorded on, without the recording wrapper (Minari makes
+    it again to check the reference scores)."""
+    env = gym.make(env_id, config=task)
+    spec = env.spec
+    env.close()
+    return spec
+
+
+def _reference_returns(env_id: str, config: Any, seed: int, episodes: int) -> tuple[float, float]:
+    """The mean returns (minus the control cost: the v0 envs' reward) of ``epa`` and ``rg-mpc`` on the
+    dataset's seeds, task and env: Minari's ``ref_min_score`` and ``ref_max_score``."""
+    from .evaluate import evaluate
+    from .score import SCORE_HIGH, SCORE_LOW
+
+    tasks = [(p, env_id, config, seed + i, {}) for p in (SCORE_LOW, SCORE_HIGH) for i in range(episodes)]
+    rows = evaluate(tasks, progress=False)
+    low, high = (-float(np.mean([r["control_cost"] for r in rows if r["policy"] == p])) for p in (SCORE_LOW, SCORE_HIGH))
+    return low, high
 
 
 def load_dataset(dataset_id: str) -> "minari.MinariDataset":
