@@ -151,3 +151,15 @@ def test_every_lawn_command_of_the_docs_parses():
             except SystemExit:
                 bad.append(f"{_label(page)}:{line}: {command}: {err.getvalue().strip().splitlines()[-1]}")
     assert seen >= 20 and not bad, bad
+
+
+def test_the_spawn_block_runs_saved_as_a_script(tmp_path):
+    """The AsyncVectorEnv block of the clients page, saved as a file and run with ``python``: spawn
+    workers import the file, so it needs its ``if __name__ == "__main__":`` guard."""
+    import subprocess
+    import sys
+
+    block = next(b for b in python_blocks(ROOT / "docs" / "clients.md") if 'context="spawn"' in b.code)
+    script = tmp_path / "spawn_envs.py"
+    script.write_text(block.code)
+    subprocess.run([sys.executable, str(script)], cwd=tmp_path, check=True, capture_output=True, timeout=300)
