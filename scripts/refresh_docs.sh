@@ -6,6 +6,7 @@
 #   blocks benchmark (README), benchmark-nominal        lawn benchmark (+ docs/figures/benchmark.png)
 #   block gap (docs/experts.md)                         lawn gap (+ docs/figures/gap.png, convergence.png)
 #   blocks expert-speed, env-throughput, train-throughput, vector-step   benchmarks/*.py --markdown
+#   block parallel-scaling (docs/performance.md)        benchmarks/parallel_scaling.py (--only parallel)
 #   blocks numba-jit, qp-speed, speedups (--only qp)      benchmarks/{numba_jit,qp_speed,speedups}.py
 #                                                       (speedups: side by side with the commit before
 #                                                       the compiled solver, in a git worktree ../before)
@@ -32,7 +33,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --train) train=1 ;;
     --only) shift; while [ $# -gt 0 ] && [[ "$1" != --* ]]; do only+=("$1"); shift; done; continue ;;
-    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|qp|learned|suite|render ...]" >&2; exit 2 ;;
+    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|parallel|qp|learned|suite|render ...]" >&2; exit 2 ;;
   esac
   shift
 done
@@ -72,6 +73,10 @@ if want throughput; then
   splice train-throughput runs/train_throughput.md "python benchmarks/train_throughput.py"
   "$py" benchmarks/vector_step_breakdown.py --markdown runs/vector_step.md
   splice vector-step runs/vector_step.md "python benchmarks/vector_step_breakdown.py"
+fi
+if want parallel; then  # the 16-core block (parallel-scaling-16) is measured once, on such a machine
+  "$py" benchmarks/parallel_scaling.py --markdown runs/parallel_scaling.md || true  # a FAIL is reported in the table
+  splice parallel-scaling runs/parallel_scaling.md "python benchmarks/parallel_scaling.py"
 fi
 if want qp; then
   "$py" benchmarks/numba_jit.py --markdown runs/numba_jit.md
