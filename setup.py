@@ -34,6 +34,8 @@ def _write(target: Path) -> None:
         target.write_text(json.dumps(stamp) + "\n")
     elif (ROOT / STAMP).exists():  # building from an sdist: its stamp
         shutil.copyfile(ROOT / STAMP, target)
+    else:  # no commit known: no stamp (not one left in build/ by an earlier build)
+        target.unlink(missing_ok=True)
 
 
 class BuildPy(build_py):

@@ -51,23 +51,36 @@ def _selected(path: Path) -> tuple[Path, Path]:
     return path / "model.zip", path / "vecnormalize.pkl"
 
 
-#: What loading a damaged or truncated archive raises, by where it breaks: the zip's directory
-#: (``zipfile.BadZipFile``; torch's own reader: ``RuntimeError``), a member cut short
-#: (``RuntimeError``, ``EOFError``), the pickled or JSON parts (``UnpicklingError``, ``ValueError``),
-#: an SB3 archive that lost its data (``AssertionError``, ``KeyError``).
-DAMAGED = (zipfile.BadZipFile, RuntimeError, EOFError, pickle.UnpicklingError, ValueError, AssertionError, KeyError)
+#: What reading a damaged or truncated archive raises: the zip's directory (``zipfile.BadZipFile``;
+#: torch's own reader: ``RuntimeError``), a member cut short (``RuntimeError``, ``EOFError``), the
+#: pickled part (``UnpicklingError``).
+DAMAGED = (zipfile.BadZipFile, RuntimeError, EOFError, pickle.UnpicklingError)
+#: What an archive that lost its data also raises (SB3: ``AssertionError`` "No data found", a JSON
+#: ``ValueError``, a missing ``KeyError``), and a readable one for other reasons (mismatched spaces):
+#: damage only when the zip itself does not read back.
+_MAYBE_DAMAGED = (ValueError, AssertionError, KeyError)
+
+
+def _zip_reads(path: Path) -> bool:
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return zf.testzip() is None and bool(zf.namelist())
+    except (zipfile.BadZipFile, OSError, EOFError):
+        return False
 
 
 def load_saved(load: Callable[[str], Any], path: Path, what: str) -> Any:
     """``load(path)`` for a saved model or network; a damaged or truncated file raises a
-    ``ValueError`` that names it (not a library's internal error)."""
+    ``ValueError`` that names it (not a library's internal error); other errors pass unchanged."""
     path = Path(path)
     try:
         return load(str(path))
-    except DAMAGED as exc:
+    except DAMAGED + _MAYBE_DAMAGED as exc:
+        if isinstance(exc, _MAYBE_DAMAGED) and not isinstance(exc, DAMAGED) and _zip_reads(path):
+            raise
+        detail = str(exc).splitlines()[0][:200] if str(exc) else "no detail"
         raise ValueError(f"{path}: cannot read this {what}: the file is damaged or truncated "
-                         f"({type(exc).__name__}: {str(exc).splitlines()[0][:200] if str(exc) else 'no detail'}); "
-                         "restore it (git checkout, a copy) or retrain it") from None
+                         f"({type(exc).__name__}: {detail}); restore it (git checkout, a copy) or retrain it") from exc
 
 
 def _load_model(run: RunDir):

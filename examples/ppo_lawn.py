@@ -160,14 +160,22 @@ def control_cost(env: gym.Env, act, seed: int) -> tuple[float, bool]:
     return float(info["episode_metrics"]["control_cost"]), bool(truncated and not terminated)
 
 
+def _obs_normalizer(env: gym.Env) -> gym.wrappers.NormalizeObservation:
+    """The NormalizeObservation wrapper inside ``env``'s stack."""
+    while not isinstance(env, gym.wrappers.NormalizeObservation):
+        env = env.env
+    return env
+
+
 def evaluate(agent: Agent, args: Args, train_env: gym.Env) -> None:
     """The trained policy's mean action and the zero action on the same seeds, on the training
     interface with the training run's observation statistics frozen: full episodes, their cost."""
     env = make_env(args)()
     if args.norm_obs:  # the statistics the policy was trained with, no longer updated
-        source, target = train_env.get_wrapper_attr("obs_rms"), env.get_wrapper_attr("obs_rms")
-        target.mean, target.var, target.count = source.mean.copy(), source.var.copy(), source.count
-        env.set_wrapper_attr("update_running_mean", False)
+        source, target = _obs_normalizer(train_env), _obs_normalizer(env)
+        target.obs_rms.mean, target.obs_rms.var = source.obs_rms.mean.copy(), source.obs_rms.var.copy()
+        target.obs_rms.count = source.obs_rms.count
+        target.update_running_mean = False  # this wrapper's own flag (NormalizeReward has one too)
     zero = np.zeros(env.action_space.shape, dtype=np.float32)
 
     def policy(obs):

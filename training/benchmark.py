@@ -24,6 +24,8 @@ def run_benchmark(policies: Sequence[str], env_id: str, config: ScenarioConfig, 
     geometric mean of cost ratios (the deciding statistic, docs/benchmark.md)."""
     tasks = [(name, env_id, config, seed + i, {}) for name in policies for i in range(episodes)]
     rows = evaluate(tasks, workers=workers, progress=progress, desc="benchmark", transient_slots=transient_slots)
+    out_dir = Path(out_dir)
+    write_rows(rows, out_dir / "episodes.csv")  # the episodes first: a failed summary loses none of them
     summary = summarize(rows)
     paired = paired_cost_difference(rows, policies[0])
     geometric = paired_cost_geometric(rows, policies[0])
@@ -37,8 +39,6 @@ def run_benchmark(policies: Sequence[str], env_id: str, config: ScenarioConfig, 
             entry["seeds_won"] = g.won
         if entry["policy"] in scores:
             entry["score"], entry["score_low"], entry["score_high"] = scores[entry["policy"]][:3]
-    out_dir = Path(out_dir)
-    write_rows(rows, out_dir / "episodes.csv")
     write_rows(summary, out_dir / "summary.csv")
     (out_dir / "summary.md").write_text(format_table(summary, paired=paired, reference=policies[0], scores=scores,
                                                            geometric=geometric) + "\n")

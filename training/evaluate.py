@@ -108,7 +108,8 @@ def _run_task(task, transient_slots: int = TRANSIENT_SLOTS) -> dict:
 
 def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SLOTS) -> tuple[float, float]:
     """(transient, sustained) control cost of an episode's per-slot stage costs: the sums over slots
-    ``0..transient_slots-1`` and ``transient_slots..``; they add up to the episode's control cost."""
+    ``0..transient_slots-1`` and ``transient_slots..``; they add up to the episode's control cost (an
+    episode no longer than the split is all transient)."""
     if isinstance(transient_slots, bool) or not isinstance(transient_slots, (int, np.integer)) or transient_slots < 0:
         raise ValueError(f"transient_slots={transient_slots!r}: must be an integer >= 0")
     costs = np.asarray(stage_costs, dtype=float)
@@ -119,9 +120,9 @@ def evaluate(tasks: Iterable[tuple], workers: int = 1, progress: bool = True, de
              transient_slots: int = TRANSIENT_SLOTS) -> list[dict]:
     """Run ``(policy, env_id, config, seed, policy_kwargs)`` tasks; rows in task order, each with its
     ``transient_cost`` and ``sustained_cost`` split at ``transient_slots`` (:func:`split_cost`)."""
+    tasks = list(tasks)
     split_cost((), transient_slots)  # a bad split fails before any episode
-    return pool_map(functools.partial(_run_task, transient_slots=transient_slots), list(tasks), workers, progress,
-                    desc)
+    return pool_map(functools.partial(_run_task, transient_slots=transient_slots), tasks, workers, progress, desc)
 
 
 def summarize(rows: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy") -> list[dict]:

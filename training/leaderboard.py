@@ -135,9 +135,8 @@ def protocol_cells(rows: Sequence[Mapping], scores: Mapping, policy: str, env: s
              "score": format_score(scores.get(("default", env, policy))),
              "vs_ref": "–" if policy == SCORE_HIGH else fmt_paired(*paired(rows, policy, SCORE_HIGH, env)),
              "vs_anchor": "–", "worst": "–", "geo_ref": "–", "geo_anchor": "–"}
-    if "transient_cost" in rows[0]:
-        cells["transient"] = mean_cell(rows, policy, env, None, "transient_cost")
-        cells["sustained"] = mean_cell(rows, policy, env, None, "sustained_cost")
+    cells["transient"] = mean_cell(rows, policy, env, None, "transient_cost")
+    cells["sustained"] = mean_cell(rows, policy, env, None, "sustained_cost")
     if policy != SCORE_HIGH:
         cells["geo_ref"] = fmt_geometric(geometric(rows, policy, SCORE_HIGH, env))
     if anchor is not None:
@@ -172,7 +171,8 @@ def learned_table(rows: Sequence[Mapping], entries: Sequence[tuple[str, str]],
 
 
 def run_learned_protocol(agents: Sequence[str], out_dir: Path, episodes: int = TEST_EPISODES, workers: int = 1,
-                         progress: bool = True, config: ScenarioConfig | None = None) -> str:
+                         progress: bool = True, config: ScenarioConfig | None = None,
+                         transient_slots: int = TRANSIENT_SLOTS) -> str:
     """The learned protocol over ``agents`` (default: every shipped agent); writes
     ``episodes.csv`` and ``summary.md`` into ``out_dir`` and returns the table with its runtime."""
     start = time.perf_counter()
@@ -181,7 +181,8 @@ def run_learned_protocol(agents: Sequence[str], out_dir: Path, episodes: int = T
     entries = learned_entries(agents)
     for policy, env in entries:
         make_policy(policy, config, env_id=env)  # a bad name or a mismatched agent fails before any episode
-    rows = run_entries(entries, config, range(episodes), workers, progress, desc="learned protocol")
+    rows = run_entries(entries, config, range(episodes), workers, progress, desc="learned protocol",
+                       transient_slots=transient_slots)
     table = learned_table(rows, entries) + f" Runtime {time.perf_counter() - start:.0f} s with {workers} workers."
     out_dir = Path(out_dir)
     write_rows(rows, out_dir / "episodes.csv")

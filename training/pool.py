@@ -29,7 +29,7 @@ from tqdm.auto import tqdm
 
 __all__ = ["worker_pool", "shared_pool", "shutdown_shared_pool", "pool_map", "single_threaded", "chunk_size"]
 
-_SHARED: dict[str, Any] = {"pool": None, "workers": 0}
+_SHARED: dict[str, Any] = {"pool": None, "workers": 0, "pid": 0}
 
 
 def single_threaded() -> None:
@@ -77,20 +77,23 @@ def shared_pool(workers: int) -> ProcessPoolExecutor:
     """This process's persistent pool of ``workers`` workers: made on first use, reused by every
     later call with the same count, replaced when the count changes or the pool broke."""
     pool = _SHARED["pool"]
+    if pool is not None and _SHARED["pid"] != os.getpid():  # a forked child: the parent's pool is not its own
+        _SHARED.update(pool=None, workers=0, pid=0)
+        pool = None
     if pool is not None and (_SHARED["workers"] != workers or getattr(pool, "_broken", False)):
         shutdown_shared_pool()
         pool = None
     if pool is None:
         pool = worker_pool(workers)
-        _SHARED.update(pool=pool, workers=workers)
+        _SHARED.update(pool=pool, workers=workers, pid=os.getpid())
     return pool
 
 
 def shutdown_shared_pool() -> None:
     """Stop the persistent pool's workers (at exit, or to start afresh)."""
-    pool = _SHARED["pool"]
-    _SHARED.update(pool=None, workers=0)
-    if pool is not None:
+    pool, owner = _SHARED["pool"], _SHARED["pid"]
+    _SHARED.update(pool=None, workers=0, pid=0)
+    if pool is not None and owner == os.getpid():
         pool.shutdown(wait=True, cancel_futures=True)
 
 
@@ -113,7 +116,7 @@ def pool_map(fn: Callable[[Any], Any], tasks: list, workers: int, progress: bool
     ``fn`` must be picklable (a module-level function or a ``functools.partial`` of one)."""
     bar = tqdm(total=len(tasks), desc=desc, unit="ep", disable=None if progress else True, leave=False)
     try:
-        if workers <= 1 or len(tasks) <= 1:
+        if workers <= 1 or len(tasks) <= 1 or multiprocessing.parent_process() is not None:  # in a worker: serially
             out = []
             for task in tasks:
                 out.append(fn(task))

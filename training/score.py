@@ -41,6 +41,14 @@ SCORE_VERSION = 1
 SCORE_LOW, SCORE_HIGH = "epa", "rg-mpc"
 
 
+def _score(e: np.ndarray, r: np.ndarray, x: np.ndarray, axis: int = -1) -> np.ndarray:
+    """The score's formula, 100 (mean E - mean x) / (mean E - mean R), along ``axis``. The callers
+    refuse a sample whose references do not separate; a bootstrap resample that does not is kept as
+    it comes out (both intervals, the task's and the aggregate's, treat it alike)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return 100.0 * np.mean(e - x, axis=axis) / np.mean(e - r, axis=axis)
+
+
 def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: Mapping[int, float]
                      ) -> tuple[float, float, float, int]:
     """Score, 95 % interval (low end, high end) and seed count of a policy's per-seed costs
@@ -58,14 +66,10 @@ def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: 
     if not gap > 0:
         raise ValueError(f"the references do not separate on these {len(seeds)} seeds: mean {SCORE_LOW} cost "
                          f"{e.mean():.6g} is not above mean {SCORE_HIGH} cost {r.mean():.6g}")
-    score = 100.0 * float(np.mean(e - x)) / gap
+    score = float(_score(e, r, x))
     if len(seeds) < 3:
         return score, math.nan, math.nan, len(seeds)
-
-    def statistic(e_, r_, x_, axis=-1):
-        return 100.0 * np.mean(e_ - x_, axis=axis) / np.mean(e_ - r_, axis=axis)
-
-    res = stats.bootstrap((e, r, x), statistic, paired=True, vectorized=True, n_resamples=BOOTSTRAP_RESAMPLES,
+    res = stats.bootstrap((e, r, x), _score, paired=True, vectorized=True, n_resamples=BOOTSTRAP_RESAMPLES,
                           method="percentile", random_state=np.random.default_rng(BOOTSTRAP_SEED))
     return score, float(res.confidence_interval.low), float(res.confidence_interval.high), len(seeds)
 
@@ -108,9 +112,10 @@ def scores_by_policy(rows: Iterable[Mapping], metric: str = "control_cost") -> d
 
 def aggregate_score(per_task: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
                     resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float, float, int]:
-    """The headline over tasks, rliable's convention (Agarwal et al., 2021): the interquartile mean
-    of the per-task scores (``scipy.stats.trim_mean(scores, 0.25)``: the lowest and highest quarter
-    of the tasks dropped, ``int(0.25 T)`` at each end) with a 95 % stratified bootstrap interval
+    """The headline over tasks: rliable's interquartile mean (Agarwal et al., 2021;
+    ``scipy.stats.trim_mean(scores, 0.25)``) of the per-task scores, ``int(T / 4)`` tasks dropped at
+    each end (the mean of the middle four of six; nothing dropped below four tasks; rliable pools the
+    runs of every task, here each task is one score), with a 95 % stratified bootstrap interval
     (each task's seeds resampled on their own, its score recomputed from the resampled (E, R, x),
     the IQM taken; percentile method, a fixed seed). ``per_task``: task -> the aligned per-seed
     costs (E, R, x) of :func:`score_inputs`. Returns (IQM, low, high, number of tasks); tasks
@@ -119,20 +124,16 @@ def aggregate_score(per_task: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndar
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     for task in sorted(per_task):
         e, r, x = (np.asarray(a, dtype=float) for a in per_task[task])
-        gap = float(np.mean(e - r))
-        if not gap > 0:
+        if not float(np.mean(e - r)) > 0:
             continue
-        scores.append(100.0 * float(np.mean(e - x)) / gap)
+        scores.append(float(_score(e, r, x)))
         idx = rng.integers(0, e.size, size=(resamples, e.size))
-        gaps = np.mean(e[idx] - r[idx], axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            draws.append(np.where(gaps > 0, 100.0 * np.mean(e[idx] - x[idx], axis=1) / gaps, np.nan))
+        draws.append(_score(e[idx], r[idx], x[idx], axis=1))
     if not scores:
         return math.nan, math.nan, math.nan, 0
     iqm = float(stats.trim_mean(scores, 0.25))
     boot = stats.trim_mean(np.stack(draws, axis=1), 0.25, axis=1)
-    boot = boot[np.isfinite(boot)]  # resamples where a task's references did not separate have no score
-    lo, hi = np.percentile(boot, [2.5, 97.5]) if boot.size else (math.nan, math.nan)
+    lo, hi = np.percentile(boot, [2.5, 97.5])
     return iqm, float(lo), float(hi), len(scores)
 
 

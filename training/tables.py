@@ -117,8 +117,10 @@ def paired_geometric(a: Mapping, b: Mapping, resamples: int = BOOTSTRAP_RESAMPLE
         raise ValueError("paired_geometric: the two cost maps share no seed")
     x = np.array([float(a[k]) for k in keys])
     y = np.array([float(b[k]) for k in keys])
-    if not (np.all(x > 0) and np.all(y > 0)):
-        raise ValueError(f"paired_geometric: every cost must be > 0 and finite, got min {min(x.min(), y.min())!r}")
+    bad = [k for k, u, v in zip(keys, x, y) if not (u > 0 and v > 0 and np.isfinite(u) and np.isfinite(v))]
+    if bad:
+        raise ValueError(f"paired_geometric: every cost must be > 0 and finite; seed {bad[0]!r} has {a[bad[0]]!r} "
+                         f"against {b[bad[0]]!r}")
     logs = np.log(x) - np.log(y)
     won = float(np.mean((logs < 0) + 0.5 * (logs == 0)))
     mean = float(logs.mean())

@@ -229,6 +229,7 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
     if checkpoint is not None and checkpoint.steps >= target:
         raise ValueError(f"--resume {out_dir}: --timesteps {target} is not above the last checkpoint's "
                          f"{checkpoint.steps} steps")
+    split_params(spec["algo"], spec["env"], params, spec.get("vec", "dummy"))  # before any file is touched
     spec["timesteps"] = target
     spec.pop("num_timesteps", None)
     if checkpoint is None and any((out_dir / "checkpoints").glob("model_*_steps.zip")):
@@ -240,7 +241,6 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
     else:
         restore_history(out_dir, checkpoint)
         spec["wall_time_s"] = float(checkpoint.state.get("wall_time_s", 0.0))
-    split_params(spec["algo"], spec["env"], params, spec.get("vec", "dummy"))  # before run.json is rewritten
     (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
     summary = _learn(_setup(spec, params, config, out_dir, start=checkpoint), progress=progress)
     summary["resumed_from"] = checkpoint.steps if checkpoint is not None else None

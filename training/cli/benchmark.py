@@ -135,7 +135,7 @@ def _learned(args: argparse.Namespace) -> int:
 
     episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
     table = run_learned_protocol(list(args.policies or []) + included(args.include), out, episodes,
-                                 workers=args.workers, progress=not args.quiet)
+                                 workers=args.workers, progress=not args.quiet, transient_slots=args.transient_slots)
     print(f"lawn benchmark --protocol learned: test seeds 0-{episodes - 1}, full unmodified episodes")
     print(table)
     print(f"wrote {out}/episodes.csv and {out}/summary.md")

@@ -94,7 +94,7 @@ class Parents:
     def _split(p: argparse.ArgumentParser) -> None:
         from ..evaluate import TRANSIENT_SLOTS
 
-        p.add_argument("--transient-slots", type=_int_at_least(0), default=TRANSIENT_SLOTS, metavar="N",
+        p.add_argument("--transient-slots", type=_int_at_least(1), default=TRANSIENT_SLOTS, metavar="N",
                        help="the transient/sustained split of each episode's control cost: slots 0..N-1 and N on "
                             "(default: %(default)s)")
 
