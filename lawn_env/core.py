@@ -320,6 +320,11 @@ class SimParams:
         )
 
     @property
+    def command_period(self) -> int:
+        """Commands go out at the slots n with n % P == 0 (MODEL.md §7): P of the disturbance mode, else 1."""
+        return self.disturbance.control_period_slots if self.disturbed else 1
+
+    @property
     def measurement_noise(self) -> bool:
         d = self.disturbance
         return self.disturbed and (d.measurement_noise_position_m > 0 or d.measurement_noise_velocity_mps > 0)
@@ -507,7 +512,7 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
             wind = wind + draws.gust
         drone_next = apply_wind(drone_next, wind, params.slot_s, params.area_lo, params.area_hi)
     x_aug = state.x_aug
-    send = state.slot % d.control_period_slots == 0 if params.disturbed else params.always
+    send = state.slot % params.command_period == 0 if params.disturbed else params.always
     process_position = _NO_NOISE if draws.process_position is None else draws.process_position
     process_velocity = _NO_NOISE if draws.process_velocity is None else draws.process_velocity
     num, k = x_aug.shape[0], x_aug.shape[1]
@@ -548,8 +553,8 @@ def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np
     if np.any(n == 0):
         raise RuntimeError("no slot has been simulated yet")
     t = state.totals[rows]
-    period = params.disturbance.control_period_slots if params.disturbed else 1
-    sent = (n + period - 1) // period  # the command slots 0, P, 2P, ... among slots 0..n-1
+    period = params.command_period
+    sent = (n + period - 1) // period  # the command slots 0, P, 2P, ... among slots 0..n-1 (step's rule)
     nk, per = sent * k, sent[:, None]
     sq_error, outages, power = t[:, 4 : 4 + k], t[:, 4 + k : 4 + 2 * k], t[:, 4 + 2 * k :]
     columns = zip(n.tolist(), control_costs(state, rows).tolist(), t[:, 0].tolist(), t[:, 1].tolist(),

@@ -47,10 +47,11 @@ SUMMARY_METRICS = (
 )
 
 
-def episode_row(policy: Policy, env_id: str, config: ScenarioConfig, seed: int) -> dict:
+def episode_row(policy: Policy, env_id: str, config: ScenarioConfig, seed: int,
+                transient_slots: int = TRANSIENT_SLOTS) -> dict:
     """One seeded, full episode of the unmodified scenario (``env_id`` of ``lawn_env.ENV_IDS``)
     under a built policy (:func:`agents.rollout`); returns a flat row of MODEL.md §6 metrics plus
-    decision statistics."""
+    decision statistics and the control cost's transient and sustained parts (:func:`split_cost`)."""
     if env_id not in lawn_env.ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; valid: {', '.join(lawn_env.ENV_IDS)}")
     ao_iterations, stage_costs = [], []
@@ -75,6 +76,8 @@ def episode_row(policy: Policy, env_id: str, config: ScenarioConfig, seed: int) 
     row["decision_time_p95_s"] = float(np.percentile(episode.decision_s, 95))
     row["ao_iterations_mean"] = float(np.mean(ao_iterations)) if ao_iterations else math.nan
     row["qp_fallbacks"] = fallbacks
+    row["transient_cost"], row["sustained_cost"] = split_cost(stage_costs, transient_slots)
+    row["transient_slots"] = int(transient_slots)
     row["stage_costs"] = json.dumps(stage_costs)  # realized stage cost per slot (the per-slot figures read it)
     return row
 
@@ -89,21 +92,17 @@ def build_policy(policy: str, config: ScenarioConfig, env_id: str | None = None,
 
 
 def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
-                policy_kwargs: Mapping[str, Any] | None = None) -> dict:
+                policy_kwargs: Mapping[str, Any] | None = None, transient_slots: int = TRANSIENT_SLOTS) -> dict:
     """One seeded episode of the named policy or reference row (:func:`build_policy`,
     :func:`episode_row`)."""
     agent, played = build_policy(policy, config, env_id, policy_kwargs)
-    row = episode_row(agent, env_id, played, seed)
+    row = episode_row(agent, env_id, played, seed, transient_slots)
     row["policy"] = policy
     return row
 
 
 def _run_task(task, transient_slots: int = TRANSIENT_SLOTS) -> dict:
-    """One task's row, its control cost split in the worker (:func:`split_cost`)."""
-    row = run_episode(*task)
-    row["transient_cost"], row["sustained_cost"] = split_cost(json.loads(row["stage_costs"]), transient_slots)
-    row["transient_slots"] = int(transient_slots)
-    return row
+    return run_episode(*task, transient_slots=transient_slots)
 
 
 def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SLOTS) -> tuple[float, float]:
