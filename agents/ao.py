@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, field
 from typing import Annotated, Sequence
 
 import numpy as np
@@ -62,9 +63,8 @@ class AOSettings:
     """iota_max, AO iterations per slot."""
     tolerance: Annotated[float, Field(ge=0)] = 1e-2
     """epsilon of Algorithm 2: stop when an iteration lowers J^ by less than this fraction. The
-    paper gives no value and reports convergence "within a few iterations"; 1e-2 stops after 5-6
-    iterations on the default scenario. Tighter values keep lowering J^ slowly (see
-    ``benchmarks/expert_speed.py --tolerance-sweep``)."""
+    paper gives no value and reports convergence "within a few iterations"; tighter values keep
+    lowering J^, slowly, at K more QPs per iteration (docs/experts.md has the sweep)."""
     pgd_max_iterations: Annotated[int, Field(ge=1)] = 5
     """Algorithm 1 iterations per power block (it continues from the current powers at the next
     AO iteration, so the cap bounds the work per pass, not the accuracy of the AO)."""
@@ -132,6 +132,21 @@ class DroneObjective:
     def gradient(self, q: np.ndarray) -> np.ndarray:
         psi, _, dpsi_dq = channel.success_and_gradients(self._power, q, self._agv, self._link)
         return (2.0 * self._l * psi + 2.0 * self._s) @ dpsi_dq
+
+
+@dataclass
+class _Point:
+    """The AO's current point within one slot and what it has counted on the way there."""
+
+    dmu: np.ndarray | None  # (K, N_p, 2); None until the first control block
+    power_w: np.ndarray
+    drone_position: np.ndarray
+    value: float  # J^ at the point
+    trace: list[list[float]] = field(default_factory=list)
+    iterations: int = 0
+    qp_fallbacks: int = 0
+    pgd_iterations: int = 0
+    sca_iterations: int = 0
 
 
 class AOSolver:
@@ -269,13 +284,23 @@ class AOSolver:
         hover at q[n-1]).
         """
         start = time.perf_counter()
-        unknown = [b for b in blocks if b not in BLOCKS]
-        if unknown:
-            raise ValueError(f"unknown AO blocks {unknown}; valid: {', '.join(BLOCKS)}")
-        if "control" not in blocks and increments is None:
-            raise ValueError("increments are required when the control block is not optimized")
-        prob = SlotProblem(self.mpc, self.link, snapshot)
+        _check_blocks(blocks, increments)
+        prob = SlotProblem(self.mpc, self.link, snapshot, self.config.drone_reach_m)
         self._memory = {}  # step sizes carried across the AO iterations of this slot
+        point = self._initial_point(prob, snapshot, increments, power_w, drone_position)
+        self._alternate_until_converged(prob, blocks, point)
+        before_final = point.value
+        if "control" in blocks and ("power" in blocks or "drone" in blocks):
+            # The last power or drone block moved psi after the last QP: end with the control
+            # block at the returned (p, q), so the increments sent are that QP's exact optimum
+            # (one more QP per AGV; J^ can only fall, the trace stays monotone).
+            self._solve_controls(prob, point)
+        return _to_plan(prob, point, before_final, start)
+
+    def _initial_point(self, prob: SlotProblem, snapshot: Snapshot, increments: np.ndarray | None,
+                       power_w: np.ndarray | None, drone_position: np.ndarray | None) -> _Point:
+        """The AO's starting (increments, p, q) and J^ there (infinite until the first QP when the
+        increments are left to the control block)."""
         if power_w is not None:
             p = np.asarray(power_w, dtype=float)
         elif self.settings.warm_start and snapshot.last_power_w is not None:
@@ -284,54 +309,73 @@ class AOSolver:
             p = self.equal_power()
         q = prob.q_prev.copy() if drone_position is None else np.asarray(drone_position, dtype=float)
         dmu = None if increments is None else np.asarray(increments, dtype=float)
-        current = prob.objective(dmu, p, q) if dmu is not None else math.inf
-        trace = []
-        qp_fallbacks = 0
-        pgd_iterations = 0
-        sca_iterations = 0
-        iterations = 0
-        for iterations in range(1, self.settings.max_iterations + 1):
-            before = current
-            row = [math.nan, math.nan, math.nan]
-            if "control" in blocks:
-                dmu, current, sol = self.control_block(prob, p, q, dmu, current)
-                qp_fallbacks += sol.num_fallbacks
-                row[0] = current
-            coef = prob.coefficients(dmu)
-            if "power" in blocks:
-                p, current, its = self.power_block(coef, prob.distance_sq(q), p, current)
-                pgd_iterations += its
-                row[1] = current
-            if "drone" in blocks:
-                q, current, its = self.drone_block(prob, coef, p, q, current)
-                sca_iterations += its
-                row[2] = current
-            trace.append(row)
-            if math.isfinite(before) and before - current <= self.settings.tolerance * abs(before):
+        value = prob.objective(dmu, p, q) if dmu is not None else math.inf
+        return _Point(dmu, p, q, value)
+
+    def _alternate_until_converged(self, prob: SlotProblem, blocks: Sequence[str], point: _Point) -> None:
+        """Algorithm 2's loop: block passes until one lowers J^ by less than ``tolerance`` (relative)
+        or ``max_iterations`` have run."""
+        for iteration in range(1, self.settings.max_iterations + 1):
+            point.iterations = iteration
+            before = point.value
+            point.trace.append(self._run_blocks(prob, blocks, point))
+            if math.isfinite(before) and before - point.value <= self.settings.tolerance * abs(before):
                 break
-        before_final = current
-        if "control" in blocks and ("power" in blocks or "drone" in blocks):
-            # The last power or drone block moved psi after the last QP: end with the control
-            # block at the returned (p, q), so the increments sent are that QP's exact optimum
-            # (one more QP per AGV; J^ can only fall, the trace stays monotone).
-            dmu, current, sol = self.control_block(prob, p, q, dmu, current)
-            qp_fallbacks += sol.num_fallbacks
-        return Plan(
-            increments=dmu,
-            power_w=p,
-            drone_position=q,
-            objective=current,
-            objective_trace=np.array(trace),
-            iterations=iterations,
-            solve_time_s=time.perf_counter() - start,
-            info={
-                "qp_fallbacks": qp_fallbacks,
-                "pgd_iterations": pgd_iterations,
-                "sca_iterations": sca_iterations,
-                "success_probability": prob.success(p, q),
-                "objective_before_final_qp": before_final,
-            },
-        )
+
+    def _run_blocks(self, prob: SlotProblem, blocks: Sequence[str], point: _Point) -> list[float]:
+        """One AO iteration: control, power, drone in turn (those in ``blocks``); returns the trace
+        row, J^ after each block run (NaN for the others)."""
+        row = [math.nan, math.nan, math.nan]
+        if "control" in blocks:
+            self._solve_controls(prob, point)
+            row[0] = point.value
+        coef = prob.coefficients(point.dmu)
+        if "power" in blocks:
+            point.power_w, point.value, its = self.power_block(coef, prob.distance_sq(point.drone_position),
+                                                               point.power_w, point.value)
+            point.pgd_iterations += its
+            row[1] = point.value
+        if "drone" in blocks:
+            point.drone_position, point.value, its = self.drone_block(prob, coef, point.power_w,
+                                                                      point.drone_position, point.value)
+            point.sca_iterations += its
+            row[2] = point.value
+        return row
+
+    def _solve_controls(self, prob: SlotProblem, point: _Point) -> None:
+        """The control block at the point's (p, q), counting the QP fallbacks."""
+        point.dmu, point.value, sol = self.control_block(prob, point.power_w, point.drone_position, point.dmu,
+                                                         point.value)
+        point.qp_fallbacks += sol.num_fallbacks
+
+
+def _check_blocks(blocks: Sequence[str], increments: np.ndarray | None) -> None:
+    unknown = [b for b in blocks if b not in BLOCKS]
+    if unknown:
+        raise ValueError(f"unknown AO blocks {unknown}; valid: {', '.join(BLOCKS)}")
+    if "control" not in blocks and increments is None:
+        raise ValueError("increments are required when the control block is not optimized")
+
+
+def _to_plan(prob: SlotProblem, point: _Point, before_final: float, start: float) -> Plan:
+    """The AO's result as a :class:`Plan` (``before_final``: J^ before the closing control block)."""
+    p, q = point.power_w, point.drone_position
+    return Plan(
+        increments=point.dmu,
+        power_w=p,
+        drone_position=q,
+        objective=point.value,
+        objective_trace=np.array(point.trace),
+        iterations=point.iterations,
+        solve_time_s=time.perf_counter() - start,
+        info={
+            "qp_fallbacks": point.qp_fallbacks,
+            "pgd_iterations": point.pgd_iterations,
+            "sca_iterations": point.sca_iterations,
+            "success_probability": prob.success(p, q),
+            "objective_before_final_qp": before_final,
+        },
+    )
 
 
 def expected_cost(snapshot: Snapshot, accel_increments: npt.ArrayLike, power_w: npt.ArrayLike,

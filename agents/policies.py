@@ -25,8 +25,6 @@ import math
 from typing import Any, Mapping
 
 import numpy as np
-from pydantic import ConfigDict
-from pydantic.dataclasses import dataclass as pydantic_dataclass
 
 from lawn_env import ObservationLayout, ScenarioConfig, spaces
 from lawn_env.core import Snapshot
@@ -40,7 +38,7 @@ from .base import JOINT, Policy
 from .learned import LOADERS, learned_name_forms
 from .reduced import GlobalPlanner, GlobalSettings, ReducedGradientPlanner, ReducedSettings
 from .scripted import HeuristicPolicy
-from .tracking import lqr_gain, lqr_rollout, pid_rollout
+from .tracking import PIDGains, lqr_gain, lqr_rollout, pid_rollout
 
 __all__ = [
     "Policy",
@@ -154,19 +152,6 @@ class SFPolicy(PlannerPolicy):
         return self.solver.solve(snapshot, blocks=("control", "power"), drone_position=q_next)
 
 
-@pydantic_dataclass(frozen=True, config=ConfigDict(extra="forbid", allow_inf_nan=False))
-class PIDGains:
-    """Gains of the predictive PID (per axis, SI units). Defaults from the grid search of
-    ``benchmarks/tune_pid.py`` (closed-loop control cost with perfect links, seeds 0-2): the best
-    gains with a non-zero integral term. The grid's overall best, kp = 0.3, ki = 0, kd = 0.6, costs
-    3 % less; the integral is kept so that the baseline is the PID the paper names."""
-
-    kp: float = 0.3
-    ki: float = 0.02
-    kd: float = 0.6
-    integral_limit: float = 10.0
-
-
 class PIDPolicy(PlannerPolicy):
     """Predictive PID: the PID law rolled out over the horizon replaces the QP; power and drone are
     optimized (Algorithm 1 + SCA, alternated) on the expected cost of its predicted inputs."""
@@ -186,9 +171,8 @@ class PIDPolicy(PlannerPolicy):
     def plan(self, snapshot: Snapshot) -> Plan:
         c, g = self.config, self.gains
         increments, integral = pid_rollout(
-            snapshot.x_aug, snapshot.reference, self.integral, self.solver.model, (g.kp, g.ki, g.kd),
-            c.control.accel_max_mps2, c.control.accel_increment_max_mps2, g.integral_limit,
-            commands=self._commands(snapshot),
+            snapshot.x_aug, snapshot.reference, self.integral, self.solver.model, g,
+            c.control.accel_max_mps2, c.control.accel_increment_max_mps2, commands=self._commands(snapshot),
         )
         self.integral = integral  # the integrator advances with the step that is sent
         return self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)

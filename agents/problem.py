@@ -46,9 +46,13 @@ Coefficients = tuple[np.ndarray, np.ndarray, np.ndarray]
 class SlotProblem:
     """One slot's planning problem, the shape both experts share: the snapshot's state, the slot's
     QP data (the planner's warm-started MPC), the planning link and the slot's feasible sets (power
-    budget, the drone's reach from where it is, the area); evaluates J^ and its pieces."""
+    budget, the drone's reach from where it is, the area); evaluates J^ and its pieces.
 
-    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot):
+    ``reach_m`` is the planner's own V_max Δτ (from the config it was built with, like ``mpc`` and
+    ``link``), not the snapshot's: a planner built for another drone speed than the environment's
+    plans the moves of the drone it was built for."""
+
+    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, reach_m: float):
         self.mpc = mpc
         self.link = link
         config = snapshot.config
@@ -64,7 +68,7 @@ class SlotProblem:
         self.agv_xy = self.x_aug[:, 0:2]
         self.data: SlotData = mpc.prepare(self.x_aug, self.reference, snapshot.slot)
         self.budget = config.power_budget_w
-        self.reach = config.drone_reach_m
+        self.reach = float(reach_m)
         self.area = tuple(config.area_m)
 
     # ------------------------------------------------------------------ pieces of J^

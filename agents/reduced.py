@@ -1,4 +1,4 @@
-"""The reduced per-slot problem and the planners built on it (MODEL.md §4, issue #4).
+"""The reduced per-slot problem and the planners built on it (MODEL.md §4).
 
 For fixed (p, q) the control part splits into one convex QP per AGV whose optimal value V_k
 depends on (p, q) only through psi_k = psi(p_k, q). The per-slot problem is therefore
@@ -17,7 +17,7 @@ Two planners use this:
   positions are searched on a fine grid of the disc ∩ area; for each position the power budget
   is split exactly on a power grid by min-plus dynamic programming; the best point is then
   polished by projected gradient on the exact Phi and its value is the exact Phi there (the QPs
-  re-solved at the returned (p, q)). Seconds per slot.
+  re-solved at the returned (p, q)). Too slow to control with: it measures optimality gaps.
 * :class:`ReducedGradientPlanner` (``"rg-mpc"``): the fast expert. The same pipeline at a coarse
   resolution (a few psi points, a coarse drone grid, a coarse power grid) picks a starting point;
   it is compared by exact Phi with the previous slot's solution and with equal power at hover,
@@ -68,8 +68,8 @@ class ReducedProblem(SlotProblem):
     """Phi(p, q) of one slot, evaluated with exact QPs (the shared, warm-started MPC): the AO's
     slot problem with the controls solved out."""
 
-    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot):
-        super().__init__(mpc, link, snapshot)
+    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, reach_m: float):
+        super().__init__(mpc, link, snapshot, reach_m)
         self.evaluations = 0
 
     # ------------------------------------------------------------------ exact
@@ -193,8 +193,9 @@ class ValueTable:
 
 @numba.njit(cache=True)
 def _hermite(grid, values, slopes, psi):  # pragma: no cover - compiled
-    """Cubic Hermite interpolation of each AGV's column at psi (B, K, L), the expression in the
-    order numpy evaluated it before (bitwise the same values)."""
+    """Cubic Hermite interpolation of each AGV's column at psi (B, K, L). The order of the
+    expression's terms is part of the result (floating point): reordering them changes the
+    tabulated V in the last bits, and with it the grid searches' choices."""
     out = np.empty_like(psi)
     top = grid.size - 2
     for b in range(psi.shape[0]):
@@ -292,7 +293,7 @@ class ReducedGradientPlanner(_ReducedPlannerBase):
 
     def plan(self, snapshot: Snapshot) -> Plan:
         start = time.perf_counter()
-        problem = ReducedProblem(self.mpc, self.link, snapshot)
+        problem = ReducedProblem(self.mpc, self.link, snapshot, self.config.drone_reach_m)
         k = self.config.num_agvs
         starts = {"search": self._search(problem),
                   "equal": problem.evaluate(np.full(k, problem.budget / k), problem.q_prev)}
@@ -317,7 +318,7 @@ class GlobalPlanner(_ReducedPlannerBase):
 
     def plan(self, snapshot: Snapshot) -> Plan:
         start = time.perf_counter()
-        problem = ReducedProblem(self.mpc, self.link, snapshot)
+        problem = ReducedProblem(self.mpc, self.link, snapshot, self.config.drone_reach_m)
         s = self.settings
         table = problem.table(self.psi_grid)
         positions = disc_box_grid(problem.q_prev, problem.reach, problem.area, s.drone_spacing_m, s.max_drone_points)

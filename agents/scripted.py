@@ -7,7 +7,7 @@ It reads only the observation (decoded with :class:`lawn_env.ObservationLayout`)
 * power: split in proportion to the squared distance to each AGV (equalizes mean SNR);
 * drone: flies toward the centroid of the AGVs at full speed.
 
-It is not one of the paper's baselines (those arrive with the expert); it is the "do something
+It is not one of the paper's baselines (:mod:`agents.policies` has those); it is the "do something
 reasonable" reference point for the demo and for smoke tests.
 """
 

@@ -11,10 +11,25 @@ goes out; in between the law is not applied and the AGV holds its acceleration (
 from __future__ import annotations
 
 import numpy as np
+from pydantic import ConfigDict
+from pydantic.dataclasses import dataclass as pydantic_dataclass
 
 from lawn_env.dynamics import PredictionModel, step_augmented
 
-__all__ = ["saturate", "pid_rollout", "lqr_gain", "lqr_rollout"]
+__all__ = ["PIDGains", "saturate", "pid_rollout", "lqr_gain", "lqr_rollout"]
+
+
+@pydantic_dataclass(frozen=True, config=ConfigDict(extra="forbid", allow_inf_nan=False))
+class PIDGains:
+    """Gains of the predictive PID (per axis, SI units). Defaults from the grid search of
+    ``benchmarks/tune_pid.py`` (closed-loop control cost with perfect links): the best gains with a
+    non-zero integral term, so that the baseline is the PID the paper names (docs/baselines: the
+    grid's overall best has ki = 0)."""
+
+    kp: float = 0.3
+    ki: float = 0.02
+    kd: float = 0.6
+    integral_limit: float = 10.0
 
 
 def saturate(u_desired: np.ndarray, u_prev: np.ndarray, accel_max: float, accel_increment_max: float) -> np.ndarray:
@@ -24,15 +39,16 @@ def saturate(u_desired: np.ndarray, u_prev: np.ndarray, accel_max: float, accel_
 
 
 def pid_rollout(x_aug: np.ndarray, reference: np.ndarray, integral: np.ndarray, model: PredictionModel,
-                gains: tuple[float, float, float], accel_max: float, accel_increment_max: float,
-                integral_limit: float, commands: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                gains: PIDGains, accel_max: float, accel_increment_max: float,
+                commands: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """PID per axis on the position error with velocity and acceleration feed-forward:
     ``u[i] = a_ref[i+1] + k_p e_p + k_i I + k_d e_v`` (``e_v`` is the velocity error, the
     derivative of the position error; ``a_ref[i+1]`` is the reference acceleration the cost
-    compares u[i] with, since the augmented state at i+1 carries u[i]). Returns the increments
-    (K, N_p, 2) and the integral after the first step.
+    compares u[i] with, since the augmented state at i+1 carries u[i]). ``gains`` carries
+    ``kp``, ``ki``, ``kd`` and the integral's clamp ``integral_limit`` (:class:`PIDGains`).
+    Returns the increments (K, N_p, 2) and the integral after the first step.
     """
-    kp, ki, kd = gains
+    kp, ki, kd, integral_limit = gains.kp, gains.ki, gains.kd, gains.integral_limit
     dt = model.slot_s
     x = x_aug.copy()
     integ = integral.copy()

@@ -16,6 +16,7 @@ import numpy as np
 
 import lawn_env  # noqa: F401
 from agents import rollout
+from agents.tracking import PIDGains
 from agents.tracking import pid_rollout
 from lawn_env import presets, spaces
 from lawn_env.dynamics import PredictionModel
@@ -24,7 +25,7 @@ from lawn_env.dynamics import PredictionModel
 class TrackingPID:
     """The PID tracking law alone (equal power, hovering drone), acting on the env's full state."""
 
-    def __init__(self, env, gains: tuple[float, float, float]):
+    def __init__(self, env, gains: PIDGains):
         self.env, self.gains = env, gains
         self.cfg = env.config
         self.model = PredictionModel.from_config(self.cfg)
@@ -38,14 +39,14 @@ class TrackingPID:
         c = self.cfg.control
         snap = self.env.snapshot()
         du, self.integral = pid_rollout(snap.x_aug, snap.reference, self.integral, self.model, self.gains,
-                                        c.accel_max_mps2, c.accel_increment_max_mps2, 10.0)
+                                        c.accel_max_mps2, c.accel_increment_max_mps2)
         return np.concatenate([spaces.encode_increments(du[:, 0], c.accel_increment_max_mps2), self.power,
                                [0.0, 0.0]]).astype(np.float32)
 
 
 def episode_cost(kp: float, ki: float, kd: float, seed: int) -> float:
     env = gym.make("lawn/Joint-v0", config=presets.get("paper-nominal")).unwrapped
-    return rollout(env, TrackingPID(env, (kp, ki, kd)), seed).metrics["control_cost"]
+    return rollout(env, TrackingPID(env, PIDGains(kp=kp, ki=ki, kd=kd, integral_limit=10.0)), seed).metrics["control_cost"]
 
 
 def main() -> None:

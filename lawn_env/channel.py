@@ -1,25 +1,23 @@
 """Short-packet drone-to-AGV link with Nakagami-m fading (MODEL.md §2).
 
-Functions vectorized over any leading shape; the link's two scalar equations (the squared
-distance, the outage argument) are compiled once (:func:`link_distance_sq`, :func:`link_argument`)
-and used both by the simulation's slot kernel and, as ufuncs, by every array function here. All
-functions take *linear*
-quantities (power in W, gain as a ratio); the config's dB values are converted by
-:class:`LinkParams`. Distances are 3-D drone–AGV distances in m.
+Each equation of the link is one compiled scalar function here, called by the simulation's slot
+kernel and, as a numpy ufunc, by every array method of :class:`LinkParams` (the planners, the RL
+interface's anchors, the stake prior and the tests call those):
 
-Equations
----------
-* FBL rate (Polyanskiy–Poor–Verdú normal approximation), bit/s/Hz:
-  ``R(G) = log2(1+G) - sqrt(V/l) Q^{-1}(eps) log2(e)``, ``V = 1 - (1+G)^{-2}``.
-  ``paper_form=True`` drops ``log2(e)`` as the paper prints it (a units slip, MODEL.md §2).
-* SNR threshold: the root of ``R(G) = R_th`` on the increasing branch, found by bracketed root
-  finding above the closed-form turning point, cached per ``(R_th, l, eps, paper_form)``.
-  ``blocklength=inf`` gives the IBL threshold ``2^R_th - 1``.
-* Outage (Prop. 1): ``P = gammainc(m, x)`` (regularized lower incomplete gamma) with
-  ``x = m G_th (rho + d^2 sigma^2 / (alpha0 p)) / (1 - rho)``; for perfect CSI (rho = 0) this is
-  ``x = m g``, ``g = d^2 G_th sigma^2 / (alpha0 p)``. ``p = 0`` gives ``P = 1``.
-  The MMSE CE error is treated as noise: ``G_eff = (1-rho) beta |h|^2 p / (rho beta p + sigma^2)``.
-* Success ``psi = 1 - P = gammaincc(m, x)``, with derivatives in log form.
+* :func:`link_distance_sq`: ``d^2 = ||c - q||^2 + H^2`` (m^2);
+* :func:`link_argument`: the outage argument of Prop. 1,
+  ``x = m G_th (rho + d^2 sigma^2 / (alpha0 p)) / (1 - rho) = c_d d^2 / p + c_ce``;
+* :func:`outage_law`: the outage probability ``P = gammainc(m, x)`` (regularized lower incomplete
+  gamma: ``m |h|^2 ~ Gamma(m, 1)``), its complement ``psi = gammaincc(m, x)`` (accurate when tiny)
+  and its density ``-d psi / dx``;
+* :func:`command_delivered`: a command arrives when ``m |h|^2 >= x`` (realized SNR >= G_th).
+
+All functions take *linear* quantities (power in W, gain as a ratio); the config's dB values are
+converted by :class:`LinkParams`. The FBL rate and the SNR threshold are in :mod:`lawn_env.rate`:
+``R(G) = log2(1+G) - sqrt(V/l) Q^{-1}(eps) log2(e)``, ``V = 1 - (1+G)^{-2}`` (``paper_form=True``
+drops ``log2(e)`` as the paper prints it, MODEL.md §2); the threshold G_th is the root of
+``R(G) = R_th`` on the increasing branch (``blocklength=inf``: ``2^R_th - 1``). The MMSE CE error
+is treated as noise: ``G_eff = (1-rho) beta |h|^2 p / (rho beta p + sigma^2)``.
 """
 
 from __future__ import annotations
@@ -29,10 +27,11 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import llvmlite.binding
 import numba
 import numpy as np
 import numpy.typing as npt
-from scipy import special
+from numba.extending import get_cython_function_address
 
 from .rate import LOG2E, fbl_rate, ibl_rate, rate_turning_point, snr_threshold
 
@@ -46,26 +45,109 @@ __all__ = [
     "ibl_rate",
     "rate_turning_point",
     "snr_threshold",
-    "outage_probability",
-    "success_probability",
     "success_and_gradients",
-    "gamma_density",
-    "outage_argument",
-    "outage_argument_sq",
-    "delivered_from_fading",
     "sample_normalized_fading",
-    "realized_snr",
-    "sample_fading",
-    "sample_delivery",
     "distance_sq",
     "POWER_FLOOR_W",
     "link_distance_sq",
     "link_argument",
+    "outage_law",
+    "command_delivered",
+    "OUTAGE",
+    "SUCCESS",
+    "DENSITY",
 ]
+
+
+def _scipy_special(name: str) -> numba.types.ExternalFunction:
+    """scipy's own compiled ``name(a, x)`` (the function its ufunc calls, so the same values) as a
+    function the compiled code here can call. It is linked under a symbol name, not an address, so
+    that a cached kernel still finds it in a new process."""
+    symbol = f"lawn_scipy_{name}"
+    llvmlite.binding.add_symbol(symbol, get_cython_function_address("scipy.special.cython_special", name))
+    f8 = numba.types.float64
+    return numba.types.ExternalFunction(symbol, f8(f8, f8))
+
+
+_GAMMAINC = _scipy_special("gammainc")
+_GAMMAINCC = _scipy_special("gammaincc")
+_GAMMALN = numba.types.ExternalFunction("lawn_scipy_gammaln", numba.types.float64(numba.types.float64))
+llvmlite.binding.add_symbol("lawn_scipy_gammaln", get_cython_function_address("scipy.special.cython_special",
+                                                                              "gammaln"))
+
+#: What :func:`outage_law` returns: the outage probability, the success probability, the density.
+OUTAGE, SUCCESS, DENSITY = 0, 1, 2
+
+#: Powers are floored here before dividing; gammainc(m, x) is exactly 1.0 in double precision
+#: at that floor for any geometry, so p = 0 means outage probability 1 without inf/NaN.
+POWER_FLOOR_W = 1e-300
+
+
+@numba.njit(cache=True)
+def link_distance_sq(dx: float, dy: float, altitude_sq: float) -> float:  # pragma: no cover - compiled
+    """d^2 = (dx^2 + dy^2) + H^2 for the horizontal offset (dx, dy) m between drone and AGV."""
+    return (dx * dx + dy * dy) + altitude_sq
+
+
+@numba.njit(cache=True)
+def link_argument(distance_sq_m2: float, power_w: float, c_d: float, c_ce: float) -> float:  # pragma: no cover
+    """The outage argument x = c_d d^2 / (p + POWER_FLOOR_W) + c_ce of one link (Prop. 1, with the
+    coefficients of :attr:`LinkParams.coefficients`). The floor keeps p = 0 finite: x ~ 1e295,
+    gammainc(m, x) == 1.0 exactly."""
+    x = distance_sq_m2 * c_d / (power_w + POWER_FLOOR_W)
+    return x + c_ce if c_ce != 0.0 else x
+
+
+@numba.njit(cache=True)
+def outage_law(m: float, x: float, part: int) -> float:  # pragma: no cover - compiled
+    """The outage law of one link at the outage argument x (Prop. 1): ``part`` OUTAGE gives
+    P = Pr(m |h|^2 < x) = gammainc(m, x), SUCCESS psi = 1 - P = gammaincc(m, x) (accurate when
+    psi is tiny, where 1 - P has no digits left), DENSITY -d psi / dx = x^(m-1) e^(-x) / Gamma(m)
+    (in log form, accurate for large x). The three are one law: they change together."""
+    if part == OUTAGE:
+        return _GAMMAINC(m, x)
+    if part == SUCCESS:
+        return _GAMMAINCC(m, x)
+    log_x = 0.0 if m == 1.0 else (m - 1.0) * math.log(x)
+    return math.exp(log_x - x - _GAMMALN(m))
+
+
+@numba.njit(cache=True)
+def command_delivered(normalized_fading: float, x: float) -> bool:  # pragma: no cover - compiled
+    """True where the command arrives: realized SNR >= G_th, i.e. ``m |h|^2 >= x``.
+
+    ``G_eff >= G_th`` rearranges to ``|h|^2 >= G_th (rho + sigma^2 d^2/(alpha0 p)) / (1 - rho) = x / m``
+    (a test computes the SNR itself and checks that the two forms agree). Comparing the SNR with
+    G_th is comparing R(SNR) with R_th on the increasing branch; below the turning point
+    R < 0 < R_th, also an outage."""
+    return normalized_fading >= x
+
+
+@numba.vectorize(["float64(float64, float64, int64)"], cache=True)
+def _law_dufunc(m, x, part):  # pragma: no cover - compiled
+    return outage_law(m, x, part)
+
+
+@numba.vectorize(["float64(float64, float64, float64, float64)"], cache=True)
+def _argument_dufunc(distance_sq_m2, power_w, c_d, c_ce):  # pragma: no cover - compiled
+    return link_argument(distance_sq_m2, power_w, c_d, c_ce)
+
+
+@numba.njit(cache=True)
+def _distance_rows(diff, altitude_sq, out):  # pragma: no cover - compiled
+    for i in range(diff.shape[0]):
+        out[i] = link_distance_sq(diff[i, 0], diff[i, 1], altitude_sq)
+
+
+# numpy's ufuncs of the compiled loops (numba's wrappers dispatch several times slower)
+_law = _law_dufunc.ufunc
+_argument = _argument_dufunc.ufunc
+
 
 @dataclass(frozen=True)
 class LinkParams:
-    """Linear link parameters shared by the simulator and the planners.
+    """Linear link parameters shared by the simulator and the planners, and every array form of
+    the link's equations (the compiled functions above over any leading shape).
 
     ``snr_threshold`` is G_th; ``ce_error_var`` is rho (0 for perfect CSI).
     """
@@ -100,33 +182,32 @@ class LinkParams:
 
     @functools.cached_property
     def coefficients(self) -> tuple[float, float]:
-        """(c_d, c_ce) with the outage argument x = c_d d^2 / p + c_ce (see :func:`outage_argument_sq`)."""
-        return _outage_coefficients(self.snr_threshold, self.alpha0, self.noise_power_w, self.m, self.ce_error_var)
+        """(c_d, c_ce) of :func:`link_argument`: c_d = m G_th sigma^2 / (alpha0 (1 - rho)),
+        c_ce = m G_th rho / (1 - rho), the part of x that power cannot remove."""
+        scale = self.m * self.snr_threshold / (1.0 - self.ce_error_var)
+        return scale * self.noise_power_w / self.alpha0, scale * self.ce_error_var
 
-    # ------------------------------------------------------------------ the one home of psi
-    # Every view of the link (the simulator, the vector envs, the planners, the RL interface's
-    # anchor) computes distances, outage and success probabilities and their slopes here.
     @functools.cached_property
     def altitude_sq(self) -> float:
         return self.altitude_m * self.altitude_m
 
     def distance_sq(self, drone_xy: npt.ArrayLike, agv_xy: npt.ArrayLike) -> np.ndarray:
-        """Squared 3-D distances d^2 = ||c - q||^2 + H^2 (m^2) from the drone at ``drone_xy`` to the
-        AGVs at ``agv_xy`` (both (..., 2), broadcasting; :func:`distance_sq` for this altitude)."""
-        return _distance_sq(drone_xy, agv_xy, self.altitude_sq)
+        """Squared 3-D distances d^2 (m^2) from the drone at ``drone_xy`` to the AGVs at ``agv_xy``
+        (both (..., 2), broadcasting): :func:`link_distance_sq` over arrays."""
+        return _offsets_distance_sq(np.asarray(agv_xy, dtype=float) - drone_xy, self.altitude_sq)
 
     def outage_argument_sq(self, power_w: npt.ArrayLike, distance_sq_m2: npt.ArrayLike) -> np.ndarray:
-        """x of Prop. 1 for this link (fast path of :func:`outage_argument_sq`)."""
+        """x of Prop. 1 at powers (W) and squared distances (m^2): :func:`link_argument` over arrays."""
         c_d, c_ce = self.coefficients
-        return _outage_argument(power_w, distance_sq_m2, c_d, c_ce)
+        return _argument(distance_sq_m2, power_w, c_d, c_ce)
 
     def outage_at(self, x: npt.ArrayLike) -> np.ndarray:
-        """Outage probability gammainc(m, x) at outage arguments ``x``."""
-        return special.gammainc(self.m, x)
+        """Outage probability at outage arguments ``x`` (:func:`outage_law`)."""
+        return _law(float(self.m), x, OUTAGE)
 
     def success_at(self, x: npt.ArrayLike) -> np.ndarray:
-        """Success probability psi = gammaincc(m, x) at outage arguments ``x`` (accurate when tiny)."""
-        return special.gammaincc(self.m, x)
+        """Success probability psi at outage arguments ``x`` (:func:`outage_law`; accurate when tiny)."""
+        return _law(float(self.m), x, SUCCESS)
 
     def outage_sq(self, power_w: npt.ArrayLike, distance_sq_m2: npt.ArrayLike) -> np.ndarray:
         """Outage probability at powers (W) and squared distances (m^2)."""
@@ -138,34 +219,29 @@ class LinkParams:
         return self.success_at(self.outage_argument_sq(power_w, distance_sq_m2))
 
     def success_slope_term(self, x: npt.ArrayLike) -> np.ndarray:
-        """g = x^(m-1) e^(-x) / Gamma(m) (x - x_ce) >= 0 at outage arguments ``x``: d psi/dp = g / p and
+        """g = (-d psi / dx) (x - x_ce) >= 0 at outage arguments ``x``: d psi/dp = g / p and
         d psi/d(d^2) = -g / d^2 (x falls with p and grows with d^2; x_ce is the part power cannot remove)."""
-        return gamma_density(self.m, x) * (x - self.coefficients[1])
+        return _law(float(self.m), x, DENSITY) * (x - self.coefficients[1])
 
     def success_power_slope(self, x: npt.ArrayLike, power_w: npt.ArrayLike) -> np.ndarray:
         """d psi / d p (1/W) at outage arguments ``x`` of powers ``power_w`` (floored at
         ``POWER_FLOOR_W`` as the arguments were)."""
         return self.success_slope_term(x) / power_w
 
-    @functools.cached_property
-    def kwargs(self) -> dict:
-        """The link as keyword arguments of the module-level functions (:func:`outage_probability`, ...)."""
-        return dict(
-            snr_threshold=self.snr_threshold,
-            alpha0=self.alpha0,
-            noise_power_w=self.noise_power_w,
-            m=self.m,
-            ce_error_var=self.ce_error_var,
-        )
+    def stake_power_weights(self, stake: np.ndarray, distance_sq_m2: np.ndarray) -> np.ndarray:
+        """The power split that minimizes the expected loss ``sum_k w_k P_k`` over a fixed budget in
+        the high-SNR regime of :func:`outage_law`, ``P ∝ x^m ∝ (d^2 / p)^m``: the Lagrange condition
+        gives ``p_k ∝ (w_k d_k^(2m))^(1/(m+1))``. Weights (..., K) for stakes ``w`` > 0 and squared
+        distances (..., K), computed in logs (``d^(2m)`` overflows for large m) and scaled so that
+        the largest is 1."""
+        m = self.m
+        log_w = (np.log(stake) + m * np.log(distance_sq_m2)) / (m + 1.0)
+        return np.exp(log_w - log_w.max(axis=-1, keepdims=True))
 
 
 def distance_sq(drone_xy: np.ndarray, agv_xy: np.ndarray, altitude_m: float) -> np.ndarray:
     """Squared 3-D distance d^2 = ||q - c||^2 + H^2, m^2 (broadcasts over leading axes)."""
-    return _distance_sq(drone_xy, agv_xy, altitude_m * altitude_m)
-
-
-def _distance_sq(drone_xy: npt.ArrayLike, agv_xy: npt.ArrayLike, altitude_sq: float) -> np.ndarray:
-    return _offsets_distance_sq(np.asarray(agv_xy, dtype=float) - drone_xy, altitude_sq)
+    return _offsets_distance_sq(np.asarray(agv_xy, dtype=float) - drone_xy, altitude_m * altitude_m)
 
 
 def _offsets_distance_sq(diff: np.ndarray, altitude_sq: float) -> np.ndarray:
@@ -176,104 +252,13 @@ def _offsets_distance_sq(diff: np.ndarray, altitude_sq: float) -> np.ndarray:
     return out if out.ndim else out[()]
 
 
-#: Powers are floored here before dividing; gammainc(m, x) is exactly 1.0 in double precision
-#: at that floor for any geometry, so p = 0 means outage probability 1 without inf/NaN.
-POWER_FLOOR_W = 1e-300
-
-
-@numba.njit(cache=True)
-def link_distance_sq(dx: float, dy: float, altitude_sq: float) -> float:  # pragma: no cover - compiled
-    """d^2 = (dx^2 + dy^2) + H^2 for the horizontal offset (dx, dy) m between drone and AGV: the
-    one place of this equation (the slot kernel calls it; :func:`distance_sq` runs it over arrays)."""
-    return (dx * dx + dy * dy) + altitude_sq
-
-
-@numba.njit(cache=True)
-def link_argument(distance_sq_m2: float, power_w: float, c_d: float, c_ce: float) -> float:  # pragma: no cover
-    """The outage argument x = c_d d^2 / (p + POWER_FLOOR_W) + c_ce of one link: the one place of this
-    equation (the slot kernel calls it; :func:`outage_argument_sq` is its ufunc). The floor keeps
-    p = 0 finite: x ~ 1e295, gammainc(m, x) == 1.0 exactly."""
-    x = distance_sq_m2 * c_d / (power_w + POWER_FLOOR_W)
-    return x + c_ce if c_ce != 0.0 else x
-
-
-@numba.njit(cache=True)
-def _distance_rows(diff, altitude_sq, out):  # pragma: no cover - compiled
-    for i in range(diff.shape[0]):
-        out[i] = link_distance_sq(diff[i, 0], diff[i, 1], altitude_sq)
-
-
-@numba.vectorize(["float64(float64, float64, float64, float64)"], cache=True)
-def _argument_dufunc(distance_sq_m2, power_w, c_d, c_ce):  # pragma: no cover - compiled
-    return link_argument(distance_sq_m2, power_w, c_d, c_ce)
-
-
-_argument_ufunc = _argument_dufunc.ufunc  # numpy's ufunc of the compiled loop (numba's wrapper dispatches slower)
-
-
-def _outage_coefficients(snr_threshold, alpha0, noise_power_w, m, ce_error_var):
-    """(c_d, c_ce) with x = c_d d^2 / p + c_ce: c_d = m G_th sigma^2 / (alpha0 (1 - rho)), c_ce = m G_th rho / (1 - rho)."""
-    scale = m * snr_threshold / (1.0 - ce_error_var)
-    return scale * noise_power_w / alpha0, scale * ce_error_var
-
-
-def outage_argument_sq(power_w: npt.ArrayLike, distance_sq_m2: npt.ArrayLike, *, snr_threshold: float, alpha0: float,
-                       noise_power_w: float, m: float, ce_error_var: float = 0.0) -> np.ndarray:
-    """x of Prop. 1 from the squared distance: x = m G_th (rho + d^2 sigma^2 / (alpha0 p)) / (1 - rho).
-
-    ``Pr(outage) = Pr(|h|^2 < x / m) = gammainc(m, x)`` since ``m |h|^2 ~ Gamma(m, 1)``.
-    """
-    c_d, c_ce = _outage_coefficients(snr_threshold, alpha0, noise_power_w, m, ce_error_var)
-    return _outage_argument(power_w, distance_sq_m2, c_d, c_ce)
-
-
-def _outage_argument(power_w, distance_sq_m2, c_d: float, c_ce: float):
-    return _argument_ufunc(distance_sq_m2, power_w, c_d, c_ce)
-
-
-def outage_argument(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float,
-                    noise_power_w: float, m: float, ce_error_var: float = 0.0) -> np.ndarray:
-    """The incomplete-gamma argument x of Prop. 1 (``x = m g`` for perfect CSI)."""
-    return outage_argument_sq(power_w, np.square(distance_m), snr_threshold=snr_threshold, alpha0=alpha0,
-                              noise_power_w=noise_power_w, m=m, ce_error_var=ce_error_var)
-
-
-def outage_probability(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float,
-                       noise_power_w: float, m: float, ce_error_var: float = 0.0) -> np.ndarray:
-    """Outage probability Pr(G < G_th) = gammainc(m, x) (Prop. 1, MODEL.md §2).
-
-    Evaluated with the regularized incomplete gamma function, accurate for tiny outage (the
-    paper's ``1 - e^{-mg} sum ...`` form loses all digits there). ``p = 0`` gives 1.
-    """
-    x = outage_argument(
-        power_w, distance_m, snr_threshold=snr_threshold, alpha0=alpha0,
-        noise_power_w=noise_power_w, m=m, ce_error_var=ce_error_var,
-    )
-    return special.gammainc(m, x)
-
-
-def success_probability(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, *, snr_threshold: float, alpha0: float,
-                        noise_power_w: float, m: float, ce_error_var: float = 0.0) -> np.ndarray:
-    """psi = 1 - P = gammaincc(m, x), accurate also when psi is tiny."""
-    x = outage_argument(
-        power_w, distance_m, snr_threshold=snr_threshold, alpha0=alpha0,
-        noise_power_w=noise_power_w, m=m, ce_error_var=ce_error_var,
-    )
-    return special.gammaincc(m, x)
-
-
-def gamma_density(m: float, x: npt.ArrayLike) -> np.ndarray:
-    """x^(m-1) e^(-x) / Gamma(m) = -d psi / dx, in log form (accurate for large x)."""
-    return np.exp(special.xlogy(m - 1, x) - x - special.gammaln(m))
-
-
 def success_and_gradients(power_w: npt.ArrayLike, drone_xy: npt.ArrayLike, agv_xy: npt.ArrayLike,
                           link: LinkParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """psi, d psi / d p (1/W) and d psi / d q (1/m, shape (..., 2)) for each link.
 
-    ``drone_xy`` broadcasts against ``agv_xy`` (..., 2). The derivatives use the log form of the
-    Gamma density, d psi/dx = -x^(m-1) e^(-x) / Gamma(m), with dx/dp = -(x - x_ce)/p and
-    dx/d(d^2) = (x - x_ce)/d^2. At p = 0 (floored at ``POWER_FLOOR_W``) psi and both derivatives are 0.
+    ``drone_xy`` broadcasts against ``agv_xy`` (..., 2). With dx/dp = -(x - x_ce)/p and
+    dx/d(d^2) = (x - x_ce)/d^2 (:meth:`LinkParams.success_slope_term`). At p = 0 (floored at
+    ``POWER_FLOOR_W``) psi and both derivatives are 0.
     """
     diff = np.asarray(drone_xy, dtype=float) - np.asarray(agv_xy, dtype=float)
     d2 = _offsets_distance_sq(diff, link.altitude_sq)
@@ -283,39 +268,7 @@ def success_and_gradients(power_w: npt.ArrayLike, drone_xy: npt.ArrayLike, agv_x
     return link.success_at(x), g / p, (-2.0 * g / d2)[..., None] * diff
 
 
-def realized_snr(power_w: npt.ArrayLike, distance_m: npt.ArrayLike, fading: npt.ArrayLike, *, alpha0: float,
-                 noise_power_w: float, ce_error_var: float = 0.0) -> np.ndarray:
-    """Effective SNR for fading power gains ``fading`` = ``|h|^2`` (MMSE CE error as noise)."""
-    beta_p = alpha0 / np.square(distance_m) * np.asarray(power_w, dtype=float)
-    return (1.0 - ce_error_var) * beta_p * fading / (ce_error_var * beta_p + noise_power_w)
-
-
-def sample_fading(rng: np.random.Generator, m: float, size: int | tuple[int, ...]) -> np.ndarray:
-    """Nakagami-m power gains ``|h|^2 ~ Gamma(shape m, scale 1/m)`` (unit mean)."""
-    return rng.standard_gamma(m, size) / m
-
-
 def sample_normalized_fading(rng: np.random.Generator, m: float, size: int | tuple[int, ...]) -> np.ndarray:
-    """``m |h|^2 ~ Gamma(m, 1)``: the fading on the scale of the outage argument x.
-
-    The same draws as :func:`sample_fading` times m (one generator call, one fewer operation)."""
+    """``m |h|^2 ~ Gamma(m, 1)``: the Nakagami-m fading power gain on the scale of the outage
+    argument x (unit-mean ``|h|^2`` times m)."""
     return rng.standard_gamma(m, size)
-
-
-def delivered_from_fading(normalized_fading: npt.ArrayLike, outage_arg: npt.ArrayLike) -> np.ndarray:
-    """True where the command arrives: realized SNR >= G_th, i.e. ``m |h|^2 >= x``.
-
-    ``G_eff >= G_th`` rearranges to ``|h|^2 >= G_th (rho + sigma^2 d^2/(alpha0 p)) / (1 - rho) = x / m``
-    (:func:`realized_snr` computes the SNR itself; a test checks that the two forms agree).
-    Comparing the SNR with G_th is equivalent to comparing R(SNR) with R_th on the increasing
-    branch; below the turning point R < 0 < R_th, also an outage.
-    """
-    return normalized_fading >= outage_arg
-
-
-def sample_delivery(rng: np.random.Generator, power_w: npt.ArrayLike, distance_m: npt.ArrayLike,
-                    link: LinkParams) -> np.ndarray:
-    """Draw Nakagami-m fading and return True where the command arrives (MODEL.md §2)."""
-    distance_m = np.asarray(distance_m, dtype=float)
-    x = link.outage_argument_sq(power_w, np.square(distance_m))
-    return delivered_from_fading(sample_normalized_fading(rng, link.m, x.shape), x)

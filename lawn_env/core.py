@@ -24,57 +24,28 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Sequence
 
-import llvmlite.binding
 import numba
 import numpy as np
-from numba.extending import get_cython_function_address
 
-from . import channel, drone, references
+from . import channel, drone, dynamics, references
 from .config import DisturbanceConfig, ScenarioConfig
-from .dynamics import PredictionModel, packed_step_matrices
+from .dynamics import POSITION, PredictionModel, initial_state, measure, packed_step_matrices
+
+#: Offsets of the augmented state's parts (:data:`lawn_env.dynamics.POSITION`, ...) for the kernels.
+POS, VEL, ACCEL = dynamics.POSITION.start, dynamics.VELOCITY.start, dynamics.ACCELERATION.start
 
 __all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Snapshot", "Simulation", "ScenarioView", "Trail",
-           "draw_slot", "reset", "step", "episode_metrics", "control_costs", "initial_state", "saturate_increment", "link_outage",
-           "link_success", "apply_wind", "measure", "saturate", "outage_from_argument", "TOTALS"]
+           "draw_slot", "reset", "step", "episode_metrics", "control_costs", "link_outage", "link_success",
+           "SLOT_CONSTANTS", "TOTALS"]
 
 
-# ---------------------------------------------------------------------- the slot's equations
-# Shape-generic over leading axes: (K, ...) for one scenario, (B, K, ...) for a batch of them.
-def initial_state(reference_start: np.ndarray, offsets: np.ndarray, area_lo: np.ndarray,
-                  area_hi: np.ndarray) -> np.ndarray:
-    """Augmented AGV states at slot 0: the reference start position plus ``offsets`` (kept in
-    the area), the reference velocity, zero previous acceleration. (..., K, 6) from the
-    reference's first slot (..., K, 6) and offsets (..., K, 2)."""
-    x_aug = np.zeros(reference_start.shape)
-    x_aug[..., 0:2] = np.clip(reference_start[..., 0:2] + offsets, area_lo, area_hi)
-    x_aug[..., 2:4] = reference_start[..., 2:4]
-    return x_aug
-
-
-@numba.njit(cache=True)
-def saturate(u_prev: float, du: float, accel_max: float) -> float:  # pragma: no cover - compiled
-    """The increment ``du`` clipped so that ``|u[n-1] + du| <= a_max`` (the control set, by saturation):
-    the one place of this equation (the slot kernel calls it; :func:`saturate_increment` is its ufunc)."""
-    u = max(u_prev + du, -accel_max)
-    u = min(u, accel_max)
-    return u - u_prev
-
-
-@numba.vectorize(["float64(float64, float64, float64)"], cache=True)
-def _saturate_dufunc(u_prev: float, du: float, accel_max: float) -> float:  # pragma: no cover - compiled
-    return saturate(u_prev, du, accel_max)
-
-
-#: :func:`saturate` over arrays (broadcasting, a new array): numpy's ufunc of the compiled loop
-#: (numba's wrapper dispatches about 3x slower; the RL interface's LQR anchor calls it every step).
-saturate_increment = _saturate_dufunc.ufunc
-
-
+# ---------------------------------------------------------------------- the slot kernel
+# It composes the equations of channel.py and dynamics.py for B scenarios at once; it holds none.
 def link_outage(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray,
                 link: channel.LinkParams) -> tuple[np.ndarray, np.ndarray]:
     """The outage argument x (Prop. 1) and the outage probability of the links from the drone at
     ``drone_xy`` (..., 2) to the AGVs (x_aug (..., K, 6)) with powers (..., K)."""
-    x = link.outage_argument_sq(power_w, link.distance_sq(drone_xy[..., None, :], x_aug[..., 0:2]))
+    x = link.outage_argument_sq(power_w, link.distance_sq(drone_xy[..., None, :], x_aug[..., POSITION]))
     return x, link.outage_at(x)
 
 
@@ -82,48 +53,58 @@ def link_success(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray, l
     """The success probability psi of the links from the drone at ``drone_xy`` (..., 2) to the AGVs
     (x_aug (..., K, 6)) with powers (..., K): the planners' psi when ``link`` is their link model
     (``LinkParams.from_config(config, planning=True)``)."""
-    return link.success_sq(power_w, link.distance_sq(drone_xy[..., None, :], x_aug[..., 0:2]))
+    return link.success_sq(power_w, link.distance_sq(drone_xy[..., None, :], x_aug[..., POSITION]))
 
 
-def apply_wind(drone_next: np.ndarray, wind_mps: np.ndarray, slot_s: float, area_lo: np.ndarray,
-               area_hi: np.ndarray) -> np.ndarray:
-    """The drone's next position (..., 2) drifted by the slot's wind (mean plus gust, (..., 2) m/s)
-    and kept in the area (disturbance mode)."""
-    return np.clip(drone_next + wind_mps * slot_s, area_lo, area_hi)
+#: The scalars the slot kernel reads, by name (a record: it passes into compiled code as cheaply
+#: as an array): the actuator lag's alpha (-1: no lag), the acceleration bound, and the true
+#: link's H^2, c_d, c_ce (:attr:`lawn_env.channel.LinkParams.coefficients`) and m.
+SLOT_CONSTANTS = np.dtype([("lag_alpha", "f8"), ("accel_max", "f8"), ("altitude_sq", "f8"), ("c_d", "f8"),
+                           ("c_ce", "f8"), ("m", "f8")])
 
 
-def measure(x_aug: np.ndarray, tracking_error: np.ndarray, position_noise: np.ndarray,
-            velocity_noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """What the policies observe under measurement noise (..., K, 2) on positions and velocities:
-    the state and the tracking error, both with the same noise."""
-    noise = np.zeros_like(x_aug)
-    noise[..., 0:2] = position_noise
-    noise[..., 2:4] = velocity_noise
-    return x_aug + noise, tracking_error + noise
+class SlotInputs(NamedTuple):
+    """A slot's inputs to the kernel (B scenarios): the decisions, the draws and the state read.
+    ``send`` (B,) or (1,): whether the slot sends its commands; ``process_*`` (B, K, 2), or
+    (0, 0, 2) without process noise."""
+
+    x_aug: np.ndarray
+    increment: np.ndarray
+    send: np.ndarray
+    power: np.ndarray
+    drone_next: np.ndarray
+    fading: np.ndarray
+    reference: np.ndarray
+    slot: np.ndarray
+    applied: np.ndarray
+    process_position: np.ndarray
+    process_velocity: np.ndarray
+    drone_prev: np.ndarray
+    totals: np.ndarray
 
 
-# scipy's own compiled gammainc(a, x) (the function its ufunc calls, so the same values), named as
-# a symbol the compiled kernels link against: a cached kernel refers to it by name, not address.
-llvmlite.binding.add_symbol("lawn_scipy_gammainc",
-                            get_cython_function_address("scipy.special.cython_special", "gammainc"))
-_GAMMAINC = numba.types.ExternalFunction("lawn_scipy_gammainc", numba.types.float64(numba.types.float64,
-                                                                                       numba.types.float64))
+class SlotOutputs(NamedTuple):
+    """The kernel's outputs, new arrays the caller allocates (a compiled function's returned
+    arrays cost more to hand back than these to allocate): ``rows`` (2, B, K, 8), the packed rows
+    [x~[n+1], du delivered] and the packed error [x~[n+1] - x~_ref[n+1], du]; ``terms`` (B, K, 2);
+    ``delivered``, ``outage`` (B, K); ``applied`` (B, K, 2; under lag); ``costs`` (B, 3); ``totals``."""
+
+    rows: np.ndarray
+    terms: np.ndarray
+    delivered: np.ndarray
+    outage: np.ndarray
+    applied: np.ndarray
+    costs: np.ndarray
+    totals: np.ndarray
 
 
-@numba.njit(cache=True)
-def outage_from_argument(m: float, x: float) -> float:  # pragma: no cover - compiled
-    """The outage probability gammainc(m, x) at the outage argument x, in compiled code: scipy's
-    own compiled function, so bit for bit the value of ``scipy.special.gammainc`` (and of
-    :meth:`~lawn_env.channel.LinkParams.outage_at`) for every m and x (a test checks m = 1..100 and
-    x from 1e-300 to 1e3)."""
-    return _GAMMAINC(m, x)
+class Packed(NamedTuple):
+    """The packed matrices of :func:`lawn_env.dynamics.packed_step_matrices` and A~'s
+    acceleration columns (the actuator lag's correction)."""
 
-
-#: The columns of ``SimState.totals`` (B, 4 + 3K): the episode's running sums of the tracking
-#: and effort costs, the predicted outage probabilities, the drone's path length, then per AGV the
-#: squared position errors, the lost commands and the powers. The outage and power sums count the
-#: slots that send a command only: on the others nothing is transmitted (MODEL.md §7).
-TOTALS = ("tracking", "effort", "outage_p", "path", "sq_error", "outages", "power")
+    step_t: np.ndarray
+    cost_w: np.ndarray
+    accel_effect_t: np.ndarray
 
 
 def _array(dtype, ndim: int, out: bool = False, layout: str = "A") -> numba.types.Array:
@@ -133,123 +114,157 @@ def _array(dtype, ndim: int, out: bool = False, layout: str = "A") -> numba.type
 
 
 _F, _B, _I = numba.types.float64, numba.types.boolean, numba.types.int64
-#: The slot kernel's one signature: every caller (single, parallel and vector envs; fixed and random
-#: paths; any role) converts to it, so the kernel compiles once (cold, ~3 s) instead of once per
-#: argument layout (12 variants otherwise).
+#: The slot kernel's one signature, its arguments the fields of SlotInputs, Packed, the constants
+#: and SlotOutputs in order: every caller (single, parallel and vector envs; fixed and random
+#: paths; any role) converts to it, so the kernel compiles once instead of once per argument layout.
 _SLOT_SIGNATURE = numba.types.none(
     _array(_F, 3), _array(_F, 3), _array(_B, 1), _array(_F, 2), _array(_F, 2), _array(_F, 2), _array(_F, 4),
     _array(_I, 1), _array(_F, 3), _array(_F, 3), _array(_F, 3), _array(_F, 2), _array(_F, 2),
-    _array(_F, 2, layout="C"), _array(_F, 2, layout="C"), _array(_F, 2, layout="C"), _array(_F, 1, layout="C"),
-    _array(_F, 4, out=True), _array(_F, 3, out=True),
-    _array(_B, 2, out=True), _array(_F, 2, out=True), _array(_F, 3, out=True), _array(_F, 2, out=True),
-    _array(_F, 2, out=True))
+    _array(_F, 2, layout="C"), _array(_F, 2, layout="C"), _array(_F, 2, layout="C"),
+    numba.types.Array(numba.from_dtype(SLOT_CONSTANTS), 1, "C", readonly=True),
+    _array(_F, 4, out=True), _array(_F, 3, out=True), _array(_B, 2, out=True), _array(_F, 2, out=True),
+    _array(_F, 3, out=True), _array(_F, 2, out=True), _array(_F, 2, out=True))
+
+
+@numba.njit(cache=True)
+def _links(inp, c, out, rows):  # pragma: no cover - compiled
+    """Step 1: per link, the outage argument at the drone's next position, the outage probability,
+    the delivery, and the packed row [x~, du delivered] with du saturated (zero without a command)."""
+    x_aug, k = inp.x_aug, inp.x_aug.shape[1]
+    for b in range(x_aug.shape[0]):
+        sending = inp.send[b % inp.send.shape[0]]
+        for i in range(k):
+            r = b * k + i
+            d2 = channel.link_distance_sq(x_aug[b, i, 0] - inp.drone_next[b, 0], x_aug[b, i, 1] - inp.drone_next[b, 1],
+                                          c.altitude_sq)
+            x = channel.link_argument(d2, inp.power[b, i], c.c_d, c.c_ce)
+            out.outage[b, i] = channel.outage_law(c.m, x, channel.OUTAGE)
+            ok = channel.command_delivered(inp.fading[b, i], x)
+            out.delivered[b, i] = ok
+            for j in range(6):
+                rows[r, j] = x_aug[b, i, j]
+            for a in range(2):
+                u_prev = x_aug[b, i, ACCEL + a]
+                du = dynamics.saturate(u_prev, inp.increment[b, i, a], c.accel_max) if sending else 0.0
+                rows[r, 6 + a] = du * (1.0 if ok else 0.0)
+
+
+@numba.njit(cache=True)
+def _lag(inp, c, out, flat, accel_effect_t):  # pragma: no cover - compiled
+    """Step 3 (actuator lag): the AGV moves with the applied acceleration instead of the commanded
+    u[n]; the difference enters through A~'s acceleration columns."""
+    num, k = inp.x_aug.shape[0], inp.x_aug.shape[1]
+    gap = np.empty((num * k, 2))
+    for b in range(num):
+        for i in range(k):
+            r = b * k + i
+            for a in range(2):
+                commanded = inp.x_aug[b, i, ACCEL + a] + flat[r, 6 + a]
+                out.applied[b, i, a] = dynamics.lagged_acceleration(inp.applied[b, i, a], commanded, c.lag_alpha)
+                gap[r, a] = out.applied[b, i, a] - commanded
+    correction = gap @ accel_effect_t
+    for r in range(num * k):
+        for j in range(4):
+            flat[r, j] += correction[r, j]
+
+
+@numba.njit(cache=True)
+def _process_noise(inp, packed):  # pragma: no cover - compiled
+    """Step 3 (process noise): added to the next positions and velocities where drawn."""
+    k = packed.shape[1]
+    for b in range(inp.process_position.shape[0]):
+        for i in range(k):
+            for a in range(2):
+                packed[b, i, POS + a] += inp.process_position[b, i, a]
+    for b in range(inp.process_velocity.shape[0]):
+        for i in range(k):
+            for a in range(2):
+                packed[b, i, VEL + a] += inp.process_velocity[b, i, a]
+
+
+@numba.njit(cache=True)
+def _errors(inp, packed, err, squares):  # pragma: no cover - compiled
+    """Step 4: the packed error against the reference at slot n+1, and its squares."""
+    num, k = packed.shape[0], packed.shape[1]
+    for b in range(num):
+        s = inp.slot[b] + 1
+        for i in range(k):
+            r = b * k + i
+            for j in range(8):
+                e = packed[b, i, j] - inp.reference[b, i, s, j] if j < 6 else packed[b, i, j]
+                err[b, i, j] = e
+                squares[r, j] = e * e
+
+
+@numba.njit(cache=True)
+def _accumulate(inp, out, err):  # pragma: no cover - compiled
+    """Step 5: the slot's stage costs summed over AGVs (left to right) and the episode's running
+    sums (:data:`TOTALS`) advanced, the outage and power sums on command slots only."""
+    terms, totals = out.terms, out.totals
+    num, k = terms.shape[0], terms.shape[1]
+    totals[:] = inp.totals
+    for b in range(num):
+        sent = 1.0 if inp.send[b % inp.send.shape[0]] else 0.0
+        t, e, o = terms[b, 0, 0], terms[b, 0, 1], out.outage[b, 0]
+        for i in range(1, k):
+            t += terms[b, i, 0]
+            e += terms[b, i, 1]
+            o += out.outage[b, i]
+        out.costs[b, 0], out.costs[b, 1], out.costs[b, 2] = t, e, t + e
+        totals[b, 0] += t
+        totals[b, 1] += e
+        totals[b, 2] += sent * o
+        sx = inp.drone_next[b, 0] - inp.drone_prev[b, 0]
+        sy = inp.drone_next[b, 1] - inp.drone_prev[b, 1]
+        totals[b, 3] += np.sqrt(sx * sx + sy * sy)
+        for i in range(k):
+            totals[b, 4 + i] += err[b, i, 0] ** 2 + err[b, i, 1] ** 2
+            totals[b, 4 + k + i] += 0.0 if out.delivered[b, i] else sent
+            totals[b, 4 + 2 * k + i] += sent * inp.power[b, i]
 
 
 @numba.njit([_SLOT_SIGNATURE], cache=True)
 def _slot(x_aug, increment, send, power, drone_next, fading, reference, slot, applied, process_position,
-          process_velocity, drone_prev, totals, packed_t, packed_w, accel_effect_t, constants, rows_out, terms,
-          delivered, outage, applied_next, costs, totals_next):  # pragma: no cover - compiled
-    """One slot of B scenarios (see :func:`step`), in this order:
-
-    1. the links: the increments saturated (:func:`saturate`; zero where ``send`` is False: no
-       command this slot), the outage argument x at the drone's next position
-       (:func:`~lawn_env.channel.link_distance_sq`, :func:`~lawn_env.channel.link_argument`), the
-       outage probability gammainc(m, x) (scipy's own compiled function, the value its ufunc
-       gives), ``delivered`` = ``m|h|^2 >= x``;
-    2. the transition: the packed rows [x~[n+1], du] = [x~, du delivered] @ packed_t (BLAS, as
-       numpy's ``@``);
-    3. the disturbance mode's changes (``lag_alpha`` >= 0: the actuator lag moves the AGV with the
-       applied acceleration instead of the commanded u[n], the difference entering through A~'s
-       acceleration columns; process noise on positions and velocities where the arrays are not
-       empty);
-    4. the packed error against the reference at slot n+1 and the stage terms (e' Q1 e, du' Q2 du)
-       = err^2 @ packed_w;
-    5. the slot's stage costs summed over AGVs (left to right) and the episode's running sums
-       (:data:`TOTALS`) advanced (the outage and power sums on command slots only).
-
-    ``constants``: :attr:`SimParams.constants` (lag_alpha, a_max, H^2, c_d, c_ce, m). Writes the
-    outputs (the last seven arguments, new arrays the caller allocates: a compiled function's
-    returned arrays cost more to hand back than these to allocate): ``rows_out`` (2, B, K, 8), the
-    packed rows [x~[n+1], du delivered] and the packed error [x~[n+1] - x~_ref[n+1], du], ``terms`` (B, K, 2),
-    ``delivered``, ``outage`` (B, K), ``applied_next`` (B, K, 2; only under lag), ``costs`` (B, 3)
-    (the slot's tracking, effort and stage cost) and ``totals_next``.
-    """
-    lag_alpha, accel_max, altitude_sq, c_d, c_ce, m = (constants[0], constants[1], constants[2], constants[3],
-                                                       constants[4], constants[5])
-    packed, err = rows_out[0], rows_out[1]
+          process_velocity, drone_prev, totals, step_t, cost_w, accel_effect_t, constants, rows_out, terms, delivered,
+          outage, applied_next, costs, totals_next):  # pragma: no cover - compiled
+    """One slot of B scenarios (see :func:`step`): 1. the links (:func:`_links`); 2. the transition,
+    [x~[n+1], du] = [x~, du delivered] @ packed_t (BLAS, as numpy's ``@``); 3. the disturbance
+    mode's actuator lag (``lag_alpha`` >= 0) and process noise (where the arrays are not empty);
+    4. the packed error and the stage terms (e' Q1 e, du' Q2 du) = err^2 @ packed_w; 5. the costs
+    and the running sums."""
+    inp = SlotInputs(x_aug, increment, send, power, drone_next, fading, reference, slot, applied, process_position,
+                     process_velocity, drone_prev, totals)
+    out = SlotOutputs(rows_out, terms, delivered, outage, applied_next, costs, totals_next)
+    c = constants[0]
     num, k = x_aug.shape[0], x_aug.shape[1]
     n = num * k
     rows = np.empty((n, 8))
-    for b in range(num):
-        sending = send[b % send.shape[0]]
-        for i in range(k):
-            r = b * k + i
-            d2 = channel.link_distance_sq(x_aug[b, i, 0] - drone_next[b, 0], x_aug[b, i, 1] - drone_next[b, 1],
-                                          altitude_sq)
-            x = channel.link_argument(d2, power[b, i], c_d, c_ce)
-            outage[b, i] = outage_from_argument(m, x)
-            ok = fading[b, i] >= x
-            delivered[b, i] = ok
-            for j in range(6):
-                rows[r, j] = x_aug[b, i, j]
-            for a in range(2):
-                du = saturate(x_aug[b, i, 4 + a], increment[b, i, a], accel_max) if sending else 0.0
-                rows[r, 6 + a] = du * (1.0 if ok else 0.0)
+    _links(inp, c, out, rows)
+    packed, err = out.rows[0], out.rows[1]
     flat = packed.reshape((n, 8))
-    np.dot(rows, packed_t, flat)
-    if lag_alpha >= 0.0:
-        gap = np.empty((n, 2))
-        for b in range(num):
-            for i in range(k):
-                r = b * k + i
-                for a in range(2):
-                    commanded = x_aug[b, i, 4 + a] + flat[r, 6 + a]
-                    applied_next[b, i, a] = lag_alpha * applied[b, i, a] + (1.0 - lag_alpha) * commanded
-                    gap[r, a] = applied_next[b, i, a] - commanded
-        correction = gap @ accel_effect_t
-        for r in range(n):
-            for j in range(4):
-                flat[r, j] += correction[r, j]
-    for b in range(process_position.shape[0]):
-        for i in range(k):
-            for a in range(2):
-                packed[b, i, a] += process_position[b, i, a]
-    for b in range(process_velocity.shape[0]):
-        for i in range(k):
-            for a in range(2):
-                packed[b, i, 2 + a] += process_velocity[b, i, a]
+    np.dot(rows, step_t, flat)
+    if c.lag_alpha >= 0.0:
+        _lag(inp, c, out, flat, accel_effect_t)
+    _process_noise(inp, packed)
     squares = np.empty((n, 8))
-    for b in range(num):
-        s = slot[b] + 1
-        for i in range(k):
-            r = b * k + i
-            for j in range(8):
-                e = packed[b, i, j] - reference[b, i, s, j] if j < 6 else packed[b, i, j]
-                err[b, i, j] = e
-                squares[r, j] = e * e
-    np.dot(squares, packed_w, terms.reshape((n, 2)))
-    totals_next[:] = totals
-    for b in range(num):
-        sent = 1.0 if send[b % send.shape[0]] else 0.0
-        t, e, o = terms[b, 0, 0], terms[b, 0, 1], outage[b, 0]
-        for i in range(1, k):
-            t += terms[b, i, 0]
-            e += terms[b, i, 1]
-            o += outage[b, i]
-        costs[b, 0], costs[b, 1], costs[b, 2] = t, e, t + e
-        totals_next[b, 0] += t
-        totals_next[b, 1] += e
-        totals_next[b, 2] += sent * o
-        sx = drone_next[b, 0] - drone_prev[b, 0]
-        sy = drone_next[b, 1] - drone_prev[b, 1]
-        totals_next[b, 3] += np.sqrt(sx * sx + sy * sy)
-        for i in range(k):
-            totals_next[b, 4 + i] += err[b, i, 0] ** 2 + err[b, i, 1] ** 2
-            totals_next[b, 4 + k + i] += 0.0 if delivered[b, i] else sent
-            totals_next[b, 4 + 2 * k + i] += sent * power[b, i]
+    _errors(inp, packed, err, squares)
+    np.dot(squares, cost_w, terms.reshape((n, 2)))
+    _accumulate(inp, out, err)
+
+
+#: The columns of ``SimState.totals`` (B, 4 + 3K): the episode's running sums of the tracking
+#: and effort costs, the predicted outage probabilities, the drone's path length, then per AGV the
+#: squared position errors, the lost commands and the powers. The outage and power sums count the
+#: slots that send a command only: on the others nothing is transmitted (MODEL.md §7).
+TOTALS = ("tracking", "effort", "outage_p", "path", "sq_error", "outages", "power")
 
 
 # ---------------------------------------------------------------------- parameters, state, draws
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
 @dataclass(frozen=True, eq=False)
 class SimParams:
     """What the config fixes for every episode: sizes, the links (true and planning), the packed
@@ -265,9 +280,7 @@ class SimParams:
     model: PredictionModel
     link: channel.LinkParams
     planning_link: channel.LinkParams
-    packed_t: np.ndarray  # (8, 8): [x~, du] rows -> [x~[n+1], du]
-    packed_w: np.ndarray  # (8, 2): squared packed error -> (e' Q1 e, du' Q2 du)
-    accel_effect_t: np.ndarray  # (2, 4): A~'s u[n-1] columns (the actuator lag's correction)
+    packed: Packed  # the transition and the stage cost on packed rows, A~'s acceleration columns
     area: tuple[float, float, float, float]
     area_lo: np.ndarray
     area_hi: np.ndarray
@@ -279,11 +292,9 @@ class SimParams:
     fixed_reference: np.ndarray | None  # (K, T, 6) of the fixed path set
     disturbance: DisturbanceConfig
     disturbed: bool
-    lag_alpha: float  # exp(-slot / lag) under actuator lag, else -1.0 (no lag); packed in constants[0] too
-    always: np.ndarray = None  # (1,) True: every slot sends its commands (no disturbance mode)
-    #: the slot kernel's scalars: lag_alpha, accel_max and the link's H^2, c_d, c_ce and m (the
-    #: outage argument x = c_d d^2 / p + c_ce), one array (a compiled call's arguments each cost)
-    constants: np.ndarray = None
+    lag_alpha: float  # exp(-slot / lag) under actuator lag, else -1.0 (no lag)
+    constants: np.ndarray  # (1,) of SLOT_CONSTANTS
+    every_slot: np.ndarray  # (1,) True: the ``send`` of a config whose every slot sends its commands
 
     @classmethod
     def from_config(cls, config: ScenarioConfig) -> SimParams:
@@ -306,17 +317,16 @@ class SimParams:
             config=config, num_agvs=k, num_slots=slots, horizon=horizon, steps=steps, slot_s=config.slot_s,
             model=model, link=link,
             planning_link=channel.LinkParams.from_config(config, planning=True),
-            packed_t=np.ascontiguousarray(packed_t), packed_w=np.ascontiguousarray(packed_w),
-            accel_effect_t=np.ascontiguousarray(model.a_aug[0:4, 4:6].T),
+            packed=Packed(np.ascontiguousarray(packed_t), np.ascontiguousarray(packed_w),
+                          np.ascontiguousarray(model.a_aug[0:4, dynamics.ACCELERATION].T)),
             area=area, area_lo=np.array([area[0], area[2]]), area_hi=np.array([area[1], area[3]]),
             max_speed=config.drone.max_speed_mps,
             power_budget_w=config.power_budget_w, drone_start=np.array(config.drone.start_m, dtype=float),
             envelope=envelope, fixed_paths=fixed_paths, fixed_reference=fixed,
             disturbance=d, disturbed=d.active,
-            lag_alpha=lag_alpha,
-            always=np.ones(1, dtype=bool),
-            constants=np.array([lag_alpha, config.control.accel_max_mps2, link.altitude_sq, *link.coefficients,
-                                float(link.m)]),
+            lag_alpha=lag_alpha, constants=_readonly(np.array([(lag_alpha, config.control.accel_max_mps2, link.altitude_sq,
+                                           *link.coefficients, link.m)], dtype=SLOT_CONSTANTS)),
+            every_slot=np.ones(1, dtype=bool),
         )
 
     @property
@@ -503,27 +513,27 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     acceleration lags the commanded one, process noise perturbs the AGVs and measurement noise
     what the policies observe. The decisions may come in any real dtype (the kernel's is float64)."""
     d = params.disturbance
-    increment = np.asarray(decisions.increment, dtype=np.float64)
-    power = np.asarray(decisions.power_w, dtype=np.float64)
     drone_next = np.asarray(decisions.drone_next, dtype=np.float64)
     if params.disturbed:
         wind = np.asarray(d.wind_mps, dtype=float)
         if draws.gust is not None:
             wind = wind + draws.gust
-        drone_next = apply_wind(drone_next, wind, params.slot_s, params.area_lo, params.area_hi)
+        drone_next = drone.drift(drone_next, wind, params.slot_s, params.area_lo, params.area_hi)
     x_aug = state.x_aug
-    send = state.slot % params.command_period == 0 if params.disturbed else params.always
-    process_position = _NO_NOISE if draws.process_position is None else draws.process_position
-    process_velocity = _NO_NOISE if draws.process_velocity is None else draws.process_velocity
     num, k = x_aug.shape[0], x_aug.shape[1]
+    increment = np.asarray(decisions.increment, dtype=np.float64)
+    power = np.asarray(decisions.power_w, dtype=np.float64)
+    send = state.slot % params.command_period == 0 if params.disturbed else params.every_slot
     rows, terms = np.empty((2, num, k, 8)), np.empty((num, k, 2))
     delivered, outage_p = np.empty((num, k), np.bool_), np.empty((num, k))
     applied = state.applied if params.lag_alpha < 0.0 else np.empty((num, k, 2))
     costs, totals = np.empty((num, 3)), np.empty(state.totals.shape)
-    _slot(x_aug, increment, send, power, drone_next, draws.fading, state.reference, state.slot,
-          state.applied, process_position, process_velocity, state.drone_position, state.totals, params.packed_t,
-          params.packed_w, params.accel_effect_t, params.constants, rows, terms, delivered, outage_p, applied, costs,
-          totals)
+    step_t, cost_w, accel_effect_t = params.packed
+    _slot(x_aug, increment, send, power, drone_next, draws.fading, state.reference, state.slot, state.applied,
+          _NO_NOISE if draws.process_position is None else draws.process_position,
+          _NO_NOISE if draws.process_velocity is None else draws.process_velocity, state.drone_position,
+          state.totals, step_t, cost_w, accel_effect_t, params.constants, rows, terms, delivered, outage_p, applied,
+          costs, totals)  # the fields of SlotInputs, Packed, SlotConstants and SlotOutputs, in order
     packed, err = rows[0], rows[1]
     x_next, error, applied_increment, slot = packed[:, :, 0:6], err[:, :, 0:6], packed[:, :, 6:8], state.slot + 1
     x_obs, error_obs = x_next, error

@@ -18,7 +18,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["move_drone", "toward", "hypot", "move_rows"]
+__all__ = ["move_drone", "toward", "hypot", "move_rows", "drift"]
 
 
 @numba.njit(cache=True, inline="always")
@@ -151,3 +151,10 @@ def toward(position_m: np.ndarray, target_m: np.ndarray, max_speed_mps: float, s
     x0, x1, y0, y1 = area_m
     _toward(p.reshape(-1, 2), t.reshape(-1, 2), max_speed_mps, slot_s, x0, x1, y0, y1, out.reshape(-1, 2))
     return out
+
+
+def drift(drone_next: np.ndarray, wind_mps: np.ndarray, slot_s: float, area_lo: np.ndarray,
+          area_hi: np.ndarray) -> np.ndarray:
+    """The drone's next position (..., 2) drifted by the slot's wind (mean plus gust, (..., 2) m/s)
+    and kept in the area (disturbance mode, MODEL.md §7)."""
+    return np.clip(drone_next + wind_mps * slot_s, area_lo, area_hi)

@@ -1,9 +1,17 @@
 """AGV dynamics, the outage-aware prediction model and its cost (MODEL.md §3).
 
 State x = [x, y, v_x, v_y] (m, m/s), input u = [a_x, a_y] (m/s^2); augmented state
-x~ = [x; u[n-1]] in R^6 with input Delta-u[n] = u[n] - u[n-1]. Everything here is a pure
-function of arrays, vectorized over a leading AGV axis where it applies; the environments,
-the Comm-v0 MPC, the experts and the baselines all use these.
+x~ = [x; u[n-1]] in R^6 (:data:`POSITION`, :data:`VELOCITY`, :data:`ACCELERATION` name its
+parts) with input Delta-u[n] = u[n] - u[n-1]. Each equation lives once here:
+
+* the transition: :func:`agv_matrices` (A, B); everything else (A~, B~, the simulator's packed
+  matrix, the MPC's prediction matrices, the LQR gain, the actuator lag's correction) is built
+  from it;
+* the control set: :func:`saturate` (compiled; :data:`saturate_increment` over arrays);
+* the actuator lag: :func:`lagged_acceleration` (compiled);
+* measurement noise: :func:`measure`; the initial state: :func:`initial_state`;
+* the stage cost ``e' Q1 e + Delta-u' Q2 Delta-u``: :func:`packed_step_matrices` (the simulator's
+  form) and :class:`PredictionModel` (the MPC's horizon form, Q4 and Q5 from the same Q1, Q2).
 """
 
 from __future__ import annotations
@@ -12,6 +20,7 @@ import functools
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+import numba
 import numpy as np
 import numpy.typing as npt
 from scipy import linalg
@@ -26,11 +35,66 @@ __all__ = [
     "increment_sum_matrix",
     "PredictionModel",
     "step_augmented",
-    "stage_cost",
     "packed_step_matrices",
-    "expected_cost_coefficients",
     "cost_coefficients",
+    "saturate",
+    "saturate_increment",
+    "lagged_acceleration",
+    "initial_state",
+    "measure",
+    "POSITION",
+    "VELOCITY",
+    "ACCELERATION",
 ]
+
+#: The parts of the augmented state x~ (its last axis): position, velocity, previous acceleration.
+POSITION, VELOCITY, ACCELERATION = slice(0, 2), slice(2, 4), slice(4, 6)
+
+
+@numba.njit(cache=True)
+def saturate(u_prev: float, du: float, accel_max: float) -> float:  # pragma: no cover - compiled
+    """The increment ``du`` clipped so that ``|u[n-1] + du| <= a_max`` (the control set, by saturation)."""
+    u = max(u_prev + du, -accel_max)
+    u = min(u, accel_max)
+    return u - u_prev
+
+
+@numba.vectorize(["float64(float64, float64, float64)"], cache=True)
+def _saturate_dufunc(u_prev: float, du: float, accel_max: float) -> float:  # pragma: no cover - compiled
+    return saturate(u_prev, du, accel_max)
+
+
+#: :func:`saturate` over arrays (broadcasting, a new array): numpy's ufunc of the compiled loop,
+#: which dispatches faster than numba's wrapper.
+saturate_increment = _saturate_dufunc.ufunc
+
+
+@numba.njit(cache=True)
+def lagged_acceleration(applied: float, commanded: float, lag_alpha: float) -> float:  # pragma: no cover
+    """The acceleration an AGV applies next under actuator lag (MODEL.md §7): a first-order lag
+    toward the commanded one, ``alpha a + (1 - alpha) u`` with ``alpha = exp(-slot / lag)``."""
+    return lag_alpha * applied + (1.0 - lag_alpha) * commanded
+
+
+def initial_state(reference_start: np.ndarray, offsets: np.ndarray, area_lo: np.ndarray,
+                  area_hi: np.ndarray) -> np.ndarray:
+    """Augmented AGV states at slot 0: the reference start position plus ``offsets`` (kept in
+    the area), the reference velocity, zero previous acceleration. (..., K, 6) from the
+    reference's first slot (..., K, 6) and offsets (..., K, 2)."""
+    x_aug = np.zeros(reference_start.shape)
+    x_aug[..., POSITION] = np.clip(reference_start[..., POSITION] + offsets, area_lo, area_hi)
+    x_aug[..., VELOCITY] = reference_start[..., VELOCITY]
+    return x_aug
+
+
+def measure(x_aug: np.ndarray, tracking_error: np.ndarray, position_noise: np.ndarray,
+            velocity_noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """What the policies observe under measurement noise (..., K, 2) on positions and velocities:
+    the state and the tracking error, both with the same noise."""
+    noise = np.zeros_like(x_aug)
+    noise[..., POSITION] = position_noise
+    noise[..., VELOCITY] = velocity_noise
+    return x_aug + noise, tracking_error + noise
 
 
 class ScenarioSettings(Protocol):
@@ -204,17 +268,12 @@ def step_augmented(x_aug: np.ndarray, du: np.ndarray, a_aug: np.ndarray, b_aug: 
     return x_aug @ a_aug.T + du @ b_aug.T
 
 
-def stage_cost(err: np.ndarray, du: np.ndarray, q1_diag: np.ndarray, q2_diag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Realized stage-cost terms per AGV: e' Q1 e and Delta-u' Q2 Delta-u (diagonal weights)."""
-    return (err * err) @ q1_diag, (du * du) @ q2_diag
-
-
 def packed_step_matrices(a_aug: np.ndarray, b_aug: np.ndarray, q1_diag: npt.ArrayLike,
                          q2_diag: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """The transition and the stage cost on the packed row [x~, Delta-u] (8 entries), for the
     simulator's hot path: ``[x~, du] @ T = [A~ x~ + B~ du, du]`` and, with ``e`` the packed
     error ``[x~ - x~_ref, du]``, ``(e * e) @ W = [e' Q1 e, du' Q2 du]``. Built from the same
-    A~, B~, Q1, Q2 as :func:`step_augmented` and :func:`stage_cost` (a test checks they agree).
+    A~, B~, Q1, Q2 as :func:`step_augmented` and the MPC's weights.
     """
     t = np.zeros((8, 8))
     t[0:6, 0:6] = a_aug.T
@@ -224,17 +283,6 @@ def packed_step_matrices(a_aug: np.ndarray, b_aug: np.ndarray, q1_diag: npt.Arra
     w[0:6, 0] = q1_diag
     w[6:8, 1] = q2_diag
     return t, w
-
-
-def expected_cost_coefficients(model: PredictionModel, x_aug: np.ndarray, chi_ref: np.ndarray,
-                               dmu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """L, S, W of J^_k(psi) = L psi^2 + 2 S psi + W for fixed Delta-mu (paper, P4).
-
-    L = Dmu' F'Q4F Dmu, S = (C x~ - chi_ref)' Q4 F Dmu, W = Dmu' Q5 Dmu + (C x~ - chi_ref)' Q4 (C x~ - chi_ref).
-    Shapes: x_aug (K, 6), chi_ref (K, N_p+1, 6), dmu (K, N_p, 2) -> three (K,) arrays.
-    """
-    r = model.residual(x_aug, chi_ref)
-    return cost_coefficients(model, r @ model.ftq4.T, model.cost_to_go(r), dmu)
 
 
 def cost_coefficients(model: PredictionModel, linear: np.ndarray, constant: np.ndarray,

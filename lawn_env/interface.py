@@ -66,13 +66,13 @@ from pydantic.dataclasses import dataclass
 from . import spaces
 from .channel import LinkParams
 from .config import ScenarioConfig
-from .core import Decisions, saturate_increment
+from .core import Decisions
 from .drone import toward
-from .dynamics import PredictionModel
+from .dynamics import PredictionModel, saturate_increment
 from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
 
 __all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FLOOR", "resolve_interface", "ActionLayout",
-           "Decision", "ROLES", "InterfaceLike"]
+           "ROLES", "InterfaceLike"]
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 
@@ -195,11 +195,6 @@ def resolve_interface(interface: InterfaceLike) -> RLInterface:
         base = resolve_interface(data.pop("base", "v0"))
         return RLInterface(**{**base.to_dict(), **data})
     raise TypeError(f"interface must be an RLInterface, a dict, 'v0', 'rl' or None; got {type(interface).__name__}")
-
-
-#: The decisions an action decodes to: :class:`lawn_env.core.Decisions` (the one type; this name
-#: stays for code that imported it from here).
-Decision = Decisions
 
 
 _NO_INCREMENT = np.empty((0, 0, 2))  # direct_rows' increment output of a role without increments
@@ -334,9 +329,7 @@ class ActionLayout:
         stake = self.mpc.command_stakes(data)
         floor = STAKE_FLOOR * stake.mean(axis=-1, keepdims=True)
         stake = np.where(floor > 0, np.maximum(stake, floor), 1.0)  # no stake anywhere: by distance alone
-        m = self._link.m
-        log_w = (np.log(stake) + m * np.log(d2)) / (m + 1.0)  # in logs: d^(2m) overflows for large m
-        return np.exp(log_w - log_w.max(axis=-1, keepdims=True))
+        return self._link.stake_power_weights(stake, d2)
 
     def _anchor_increment(self, data: SlotData | None, power_w: np.ndarray, d2: np.ndarray, x_aug: np.ndarray,
                           reference: np.ndarray | None) -> np.ndarray:

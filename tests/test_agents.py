@@ -16,7 +16,7 @@ CFG = ScenarioConfig()
 
 
 def _slot_problem(solver, snap):
-    return SlotProblem(solver.mpc, solver.link, snap)
+    return SlotProblem(solver.mpc, solver.link, snap, solver.config.drone_reach_m)
 
 
 def _snapshots(count, seed=0, config=CFG):
@@ -72,7 +72,7 @@ def test_control_block_matches_an_independent_qp_solve():
     solver = AOSolver(CFG)
     reference = OutageAwareMPC.from_config(CFG, backend="osqp")
     for snap in _snapshots(6, seed=4):
-        prob = SlotProblem(solver.mpc, solver.link, snap)
+        prob = _slot_problem(solver, snap)
         p = np.array([0.1, 0.2, 0.3, 0.4])
         q = snap.drone_position
         dmu, value, _ = solver.control_block(prob, p, q, None, math.inf)
@@ -85,7 +85,7 @@ def test_control_block_matches_an_independent_qp_solve():
 def test_power_gradient_matches_finite_differences(rng):
     solver = AOSolver(CFG)
     for snap in _snapshots(5, seed=5):
-        prob = SlotProblem(solver.mpc, solver.link, snap)
+        prob = _slot_problem(solver, snap)
         dmu, _, _ = solver.control_block(prob, solver.equal_power(), snap.drone_position, None, math.inf)
         obj = solver.power_objective(prob.coefficients(dmu), prob.distance_sq(snap.drone_position))
         p = rng.uniform(0.05, 0.4, 4)
@@ -103,7 +103,7 @@ def test_power_gradient_matches_finite_differences(rng):
 def test_drone_gradient_matches_finite_differences():
     solver = AOSolver(CFG)
     for snap in _snapshots(5, seed=6):
-        prob = SlotProblem(solver.mpc, solver.link, snap)
+        prob = _slot_problem(solver, snap)
         p = solver.equal_power()
         dmu, _, _ = solver.control_block(prob, p, snap.drone_position, None, math.inf)
         obj = solver.drone_objective(prob, prob.coefficients(dmu), p)
@@ -228,10 +228,12 @@ def test_registry_errors():
 
 def test_tracking_laws_converge_on_a_straight_reference():
     """With every command delivered, PID and LQR bring a 3 m offset down on a straight line."""
+    from agents.policies import PIDGains
     from agents.tracking import lqr_gain, lqr_rollout, pid_rollout
     from lawn_env.dynamics import PredictionModel, step_augmented
 
     model = PredictionModel.from_config(CFG)
+    gains = PIDGains(kp=0.3, ki=0.02, kd=0.6, integral_limit=10.0)
     t = np.arange(200) * CFG.slot_s
     ref = np.zeros((1, 200, 6))
     ref[0, :, 0] = 10 + 3.0 * t
@@ -244,7 +246,7 @@ def test_tracking_laws_converge_on_a_straight_reference():
         for n in range(150):
             window = ref[:, n : n + 11]
             if law == "pid":
-                du, integral = pid_rollout(x, window, integral, model, (0.3, 0.02, 0.6), 2.0, 1.0, 10.0)
+                du, integral = pid_rollout(x, window, integral, model, gains, 2.0, 1.0)
             else:
                 du = lqr_rollout(x, window, model, lqr_gain(model), 2.0, 1.0)
             x = step_augmented(x, du[:, 0], model.a_aug, model.b_aug)

@@ -64,6 +64,10 @@ def _link(m=2, rho=0.0, rate=None):
     return LinkParams.from_config(cfg)
 
 
+def _outage(link, power_w, distance_m):
+    return link.outage_sq(power_w, np.square(np.asarray(distance_m, dtype=float)))
+
+
 @pytest.mark.parametrize(
     "m, rho, target",
     [(1, 0.0, 0.002), (2, 0.0, 0.01), (2, 0.0, 0.3), (2, 0.0, 0.9), (3, 0.0, 0.05), (2, 0.05, 0.2)],
@@ -75,37 +79,42 @@ def test_outage_closed_form_matches_monte_carlo(m, rho, target):
     # find the power giving the target outage, then sample deliveries at that power
     from scipy.optimize import brentq
 
-    power = brentq(lambda p: channel.outage_probability(p, dist, **link.kwargs) - target, 1e-12, 1e6)
-    p_closed = float(channel.outage_probability(power, dist, **link.kwargs))
+    power = brentq(lambda p: _outage(link, p, dist) - target, 1e-12, 1e6)
+    p_closed = float(_outage(link, power, dist))
     n = 400_000
-    delivered = channel.sample_delivery(np.random.default_rng(7), np.full(n, power), np.full(n, dist), link)
+    x = float(link.outage_argument_sq(power, dist**2))
+    fading = channel.sample_normalized_fading(np.random.default_rng(7), link.m, n)
+    delivered = np.array([channel.command_delivered(g, x) for g in fading[:1000]] + list(fading[1000:] >= x))
     p_mc = 1.0 - delivered.mean()
     sigma = math.sqrt(p_closed * (1 - p_closed) / n)
     assert abs(p_mc - p_closed) < 5 * sigma, (p_mc, p_closed, sigma)
 
 
 def test_realized_snr_agrees_with_fading_threshold(rng):
+    """The delivery rule m|h|^2 >= x against the realized SNR itself (MODEL.md §2, the MMSE CE error
+    as noise: G_eff = (1-rho) beta |h|^2 p / (rho beta p + sigma^2), beta = alpha0 / d^2) and the rate."""
     link = _link(2, 0.03)
     power = rng.uniform(0.01, 1.0, 10_000)
     dist = rng.uniform(50, 250, 10_000)
     g = channel.sample_normalized_fading(rng, link.m, power.shape)
-    x = channel.outage_argument(power, dist, **link.kwargs)
-    via_threshold = channel.delivered_from_fading(g, x)
-    snr = channel.realized_snr(power, dist, g / link.m, alpha0=link.alpha0, noise_power_w=link.noise_power_w,
-                               ce_error_var=link.ce_error_var)
+    x = link.outage_argument_sq(power, dist**2)
+    via_threshold = np.array([channel.command_delivered(gi, xi) for gi, xi in zip(g, x)])
+    beta_p = link.alpha0 / dist**2 * power
+    rho = link.ce_error_var
+    snr = (1.0 - rho) * beta_p * (g / link.m) / (rho * beta_p + link.noise_power_w)
     rate = channel.fbl_rate(snr, 1024, 1e-6)
     via_rate = rate >= 1.0  # _link's R_th when rho > 0
     mismatch = via_threshold != via_rate
     # the two forms can differ only at the threshold itself (rounding), never in bulk
     assert mismatch.sum() <= 2
-    assert via_threshold.mean() == pytest.approx(1 - channel.outage_probability(power, dist, **link.kwargs).mean(), abs=0.02)
+    assert via_threshold.mean() == pytest.approx(1 - _outage(link, power, dist).mean(), abs=0.02)
 
 
 def test_outage_accurate_for_tiny_values():
     link = presets.get("paper-nominal")
     params = LinkParams.from_config(link)
-    p = channel.outage_probability(0.25, 60.0, **params.kwargs)
-    x = float(channel.outage_argument(0.25, 60.0, **params.kwargs))
+    p = float(_outage(params, 0.25, 60.0))
+    x = float(params.outage_argument_sq(0.25, 60.0**2))
     # series for m = 2: P = 1 - e^-x (1 + x) = x^2/2 - x^3/3 + ...
     assert p == pytest.approx(x**2 / 2 - x**3 / 3 + x**4 / 8, rel=1e-9)
     # the paper's sum form 1 - e^-x (1 + x) cancels ~8 digits at these outages: a relative error
@@ -117,7 +126,7 @@ def test_outage_accurate_for_tiny_values():
 
 def test_zero_power_means_outage_and_no_nan():
     link = _link()
-    p = channel.outage_probability(np.array([0.0, 0.5]), np.array([60.0, 60.0]), **link.kwargs)
+    p = _outage(link, np.array([0.0, 0.5]), np.array([60.0, 60.0]))
     assert p[0] == 1.0 and 0 < p[1] < 1
     psi, dp, dq = channel.success_and_gradients(np.array([0.0, 0.5]), np.zeros(2), np.array([[30.0, 40.0]] * 2), link)
     assert psi[0] == 0.0 and dp[0] == 0.0 and np.all(dq[0] == 0.0)
@@ -132,8 +141,10 @@ def test_gradients_match_finite_differences(m, rho, rng):
     agv = rng.uniform(0, 200, (6, 2))
     psi, dpsi_dp, dpsi_dq = channel.success_and_gradients(power, drone, agv, link)
     dist = np.sqrt(channel.distance_sq(drone, agv, link.altitude_m))
-    assert np.allclose(psi, channel.success_probability(power, dist, **link.kwargs))
-    assert np.allclose(psi, 1 - channel.outage_probability(power, dist, **link.kwargs))
+    x = ((dist**2) * link.m * link.snr_threshold * link.noise_power_w / link.alpha0 / power
+         + link.m * link.snr_threshold * link.ce_error_var) / (1 - link.ce_error_var)  # Prop. 1 written out
+    np.testing.assert_allclose(psi, special.gammaincc(m, x), rtol=1e-12)  # scipy, the oracle
+    np.testing.assert_allclose(psi, 1 - _outage(link, power, dist), rtol=1e-9)
     h = 1e-6
     fd_p = (channel.success_and_gradients(power + h, drone, agv, link)[0]
             - channel.success_and_gradients(power - h, drone, agv, link)[0]) / (2 * h)
@@ -161,14 +172,14 @@ def test_regimes_of_model_md_section_8():
     dmax = float(np.sqrt(channel.distance_sq(corners[0], corners[1], 50.0)))
     nominal = LinkParams.from_config(presets.get("paper-nominal"))
     equal = 1.0 / 4
-    worst = channel.outage_probability(equal, dmax, **nominal.kwargs)  # corner to corner: 3.6e-5
-    best = channel.outage_probability(equal, 50.0, **nominal.kwargs)  # straight above: 3.3e-8
-    from_center = channel.outage_probability(equal, np.sqrt(channel.distance_sq(drone, grid, 50.0)), **nominal.kwargs)
+    worst = _outage(nominal, equal, dmax)  # corner to corner: 3.6e-5
+    best = _outage(nominal, equal, 50.0)  # straight above: 3.3e-8
+    from_center = _outage(nominal, equal, np.sqrt(channel.distance_sq(drone, grid, 50.0)))
     assert 1e-8 < best < worst < 1e-4
     assert from_center.max() < 3e-6  # a drone anywhere central keeps every link at ~1e-6 or better
     default = LinkParams.from_config(presets.get("default"))
     d = np.sqrt(channel.distance_sq(drone, grid, 50.0))
-    p = channel.outage_probability(equal, d, **default.kwargs)
+    p = _outage(default, equal, d)
     assert p.min() < 0.05 and p.max() > 0.5  # outage matters at the default point: 0.024 .. 0.63
 
 
@@ -181,7 +192,7 @@ def test_ce_floor_makes_outage_power_independent_at_0_dbw():
         cfg = presets.get("paper-nominal").override(power_budget_dbw=budget, **{"channel.ce_error_var": 0.1})
         link = LinkParams.from_config(cfg)
         p_max = cfg.power_budget_w
-        out = np.array([channel.outage_probability(p, d, **link.kwargs) for p in (p_max / 16, p_max / 4, p_max)])
+        out = np.array([_outage(link, p, d) for p in (p_max / 16, p_max / 4, p_max)])
         if spread == "floor":
             assert 0.033 < out.min() and out.max() < 0.043
         else:
@@ -193,20 +204,30 @@ def test_ce_error_floor_at_the_default_rate_threshold():
     rho = 1e-3 even at full power straight above the AGV, practically 1 at rho = 1e-2."""
     for rho, low, high in ((1e-3, 0.68, 0.70), (1e-2, 1 - 1e-8, 1.0)):
         link = LinkParams.from_config(presets.get("default").override(**{"channel.ce_error_var": rho}))
-        assert low <= channel.outage_probability(1.0, 50.0, **link.kwargs) <= high
+        assert low <= _outage(link, 1.0, 50.0) <= high
 
 
-def test_compiled_outage_equals_scipy_over_the_whole_range():
-    """The slot kernel's outage probability (:func:`lawn_env.core.outage_from_argument`) is
-    scipy's gammainc bit for bit: integer m = 1..100 (and non-integer m), x = 0 and 1e-300..1e3."""
-    from lawn_env.core import outage_from_argument
-
+def test_the_outage_law_is_scipys_gammainc_gammaincc_and_density():
+    """:func:`lawn_env.channel.outage_law` (the kernel's and every array method's) against scipy, the
+    oracle: gammainc and gammaincc bit for bit for integer m = 1..100 (and non-integer m), x = 0 and
+    1e-300..1e3; the density x^(m-1) e^(-x) / Gamma(m) to rounding; the array methods equal the scalar."""
     xs = np.concatenate([[0.0], np.logspace(-300, 3, 400), [5e-324, 1e295]])
+    law = channel.outage_law
     for m in [*range(1, 101), 0.5, 1.5, 2.75, 37.3]:
-        expected = special.gammainc(m, xs)
-        got = np.array([outage_from_argument(float(m), float(x)) for x in xs])
-        np.testing.assert_array_equal(got, expected, err_msg=f"m={m}")
-    assert outage_from_argument(2.0, 1e295) == 1.0 and outage_from_argument(2.0, 0.0) == 0.0
+        np.testing.assert_array_equal([law(float(m), float(x), channel.OUTAGE) for x in xs], special.gammainc(m, xs),
+                                      err_msg=f"m={m}")
+        np.testing.assert_array_equal([law(float(m), float(x), channel.SUCCESS) for x in xs],
+                                      special.gammaincc(m, xs), err_msg=f"m={m}")
+        inner = xs[1:-1]
+        np.testing.assert_allclose([law(float(m), float(x), channel.DENSITY) for x in inner],
+                                   np.exp(special.xlogy(m - 1, inner) - inner - special.gammaln(m)), rtol=1e-12,
+                                   atol=1e-300)
+    assert law(2.0, 1e295, channel.OUTAGE) == 1.0 and law(2.0, 0.0, channel.OUTAGE) == 0.0
+    link = _link(3)
+    x = np.logspace(-5, 2, 50)
+    np.testing.assert_array_equal(link.outage_at(x), [law(3.0, v, channel.OUTAGE) for v in x])
+    np.testing.assert_array_equal(link.success_at(x), [law(3.0, v, channel.SUCCESS) for v in x])
+    np.testing.assert_array_equal(link.success_slope_term(x), [law(3.0, v, channel.DENSITY) * v for v in x])
 
 
 def test_compiled_link_equations_equal_the_array_forms():
@@ -219,9 +240,27 @@ def test_compiled_link_equations_equal_the_array_forms():
     np.testing.assert_array_equal(d2, (diff[..., 0] ** 2 + diff[..., 1] ** 2) + 2500.0)
     np.testing.assert_array_equal(d2[3, 1], channel.link_distance_sq(diff[3, 1, 0], diff[3, 1, 1], 2500.0))
     power = np.concatenate([rng.uniform(0, 1, 199), [0.0]])
-    for c_ce in (0.0, 0.37):
-        x = channel._outage_argument(power, d2.ravel()[:200], 3.1e-5, c_ce)
-        reference = d2.ravel()[:200] * 3.1e-5 / (power + channel.POWER_FLOOR_W) + c_ce
+    for rho in (0.0, 0.02):
+        link = _link(2, rho)
+        c_d, c_ce = link.coefficients
+        x = link.outage_argument_sq(power, d2.ravel()[:200])
+        reference = d2.ravel()[:200] * c_d / (power + channel.POWER_FLOOR_W) + c_ce
         np.testing.assert_array_equal(x, reference)
-        assert channel.link_argument(d2.ravel()[7], power[7], 3.1e-5, c_ce) == x[7]
+        assert channel.link_argument(d2.ravel()[7], power[7], c_d, c_ce) == x[7]
     assert np.isfinite(x[-1]) and special.gammainc(2.0, x[-1]) == 1.0  # p = 0: outage 1, no inf/NaN
+
+
+def test_the_stake_split_minimizes_the_high_snr_expected_loss():
+    """:meth:`LinkParams.stake_power_weights` solves min sum_k w_k (d_k^2 / p_k)^m over sum p = P
+    (the outage law's high-SNR form): no feasible perturbation of the split lowers the loss."""
+    link = _link(3)
+    rng = np.random.default_rng(2)
+    stake, d2 = rng.uniform(0.1, 5.0, 5), rng.uniform(2500.0, 40000.0, 5)
+    w = link.stake_power_weights(stake, d2)
+    p = w / w.sum()
+    loss = lambda q: float(np.sum(stake * (d2 / q) ** link.m))  # noqa: E731
+    assert w.max() == 1.0
+    for _ in range(50):
+        step = rng.normal(0, 1e-3, 5)
+        q = p + step - step.mean()
+        assert loss(q) >= loss(p) * (1 - 1e-12)

@@ -77,20 +77,14 @@ def test_expected_cost_coefficients(rng):
     x0 = rng.normal(size=(k, 6))
     ref = rng.normal(size=(k, n + 1, 6))
     dmu = rng.normal(size=(k, n, 2))
-    lcoef, scoef, wcoef = dynamics.expected_cost_coefficients(model, x0, ref, dmu)
+    r = model.residual(x0, ref)  # the MPC's prepared slot data (OutageAwareMPC.prepare) from these
+    lcoef, scoef, wcoef = dynamics.cost_coefficients(model, r @ model.ftq4.T, model.cost_to_go(r), dmu)
     q4 = linalg.block_diag(*([np.eye(6)] * n + [model.q3]))
     for psi in (0.2, 0.9):
         chi = model.predict(x0, dmu, psi)
         e = (chi - ref).reshape(k, -1)
         direct = np.einsum("ki,ij,kj->k", e, q4, e) + (dmu.reshape(k, -1) ** 2).sum(1)
         assert np.allclose(lcoef * psi**2 + 2 * scoef * psi + wcoef, direct)
-
-
-def test_stage_cost():
-    err = np.array([[1.0, 2, 0, 0, 0, 0], [0, 0, 1, 1, 1, 1]])
-    du = np.array([[1.0, 1.0], [0.0, 2.0]])
-    tracking, effort = dynamics.stage_cost(err, du, np.ones(6), np.array([1.0, 0.5]))
-    assert np.allclose(tracking, [5.0, 4.0]) and np.allclose(effort, [1.5, 2.0])
 
 
 def test_increment_sum_matrix():
@@ -109,12 +103,13 @@ def test_packed_step_equals_step_and_stage_cost(rng):
     assert np.allclose(packed[:, :6], x_next) and np.allclose(packed[:, 6:], du)
     err = packed - np.concatenate([ref, np.zeros((5, 2))], axis=1)
     terms = (err * err) @ w
-    tracking, effort = dynamics.stage_cost(x_next - ref, du, q1, q2)
-    assert np.allclose(terms[:, 0], tracking) and np.allclose(terms[:, 1], effort)
+    e = x_next - ref  # e' Q1 e and du' Q2 du written out
+    assert np.allclose(terms[:, 0], np.einsum("ki,i,ki->k", e, q1, e))
+    assert np.allclose(terms[:, 1], np.einsum("ki,i,ki->k", du, q2, du))
 
 
 def test_the_disturbed_slot_is_the_nominal_transition_plus_the_lag_and_noise():
-    """The disturbance mode runs through the simulator's one step path (issue #13): checked here
+    """The disturbance mode runs through the simulator's one step path: checked here
     against the double integrator written out with the lagged acceleration, for the true state."""
     from lawn_env import DisturbanceConfig
     from lawn_env.core import Decisions, Simulation
@@ -137,9 +132,9 @@ def test_the_disturbed_slot_is_the_nominal_transition_plus_the_lag_and_noise():
         expected = np.hstack([x[:, 0:2] + x[:, 2:4] * dt + 0.5 * applied * dt * dt, x[:, 2:4] + applied * dt, commanded])
         np.testing.assert_allclose(view.x_aug, expected, rtol=1e-12, atol=1e-12)
         err = expected - view.reference[:, view.slot]
-        tracking, effort = dynamics.stage_cost(err, record.applied_increment[0], np.ones(6), np.ones(2))
-        np.testing.assert_allclose(record.tracking_cost[0], tracking, rtol=1e-12)
-        np.testing.assert_allclose(record.effort_cost[0], effort, rtol=1e-12)
+        du = record.applied_increment[0]
+        np.testing.assert_allclose(record.tracking_cost[0], (err * err).sum(axis=1), rtol=1e-12)  # Q1 = Q2 = I
+        np.testing.assert_allclose(record.effort_cost[0], (du * du).sum(axis=1), rtol=1e-12)
     assert np.allclose(record.drone_position[0], np.clip(q + np.array([1.0, -2.0]) * dt, 0, 200))  # the wind moved the hovering drone
 
 

@@ -50,12 +50,13 @@ def test_warm_start_gives_the_cold_answer(rng):
 
 
 def test_value_is_the_expected_cost(rng):
-    from lawn_env.dynamics import expected_cost_coefficients
+    from lawn_env.dynamics import cost_coefficients
 
     mpc = OutageAwareMPC.from_config(CFG)
     x, ref, psi = next(_problems(rng, 1))
     sol = mpc.solve(x, ref, psi)
-    l, s, w = expected_cost_coefficients(mpc.model, x, ref, sol.increments)
+    data = mpc.prepare(x, ref)
+    l, s, w = cost_coefficients(mpc.model, data.linear, data.constant, sol.increments)
     assert np.allclose(sol.value, l * psi**2 + 2 * s * psi + w)
 
 

@@ -8,6 +8,7 @@ from agents import AOSolver, expected_cost, make_policy
 from agents.optim import disc_box_grid, min_plus_allocation, project_disc_box
 from agents.reduced import GlobalPlanner, GlobalSettings, ReducedGradientPlanner, ReducedProblem
 from lawn_env import ScenarioConfig, channel
+from lawn_env.config import DroneConfig
 from lawn_env.mpc import OutageAwareMPC
 from test_agents import _snapshots
 
@@ -16,7 +17,7 @@ CFG = ScenarioConfig()
 
 def _problem(snap, backend="daqp"):
     return ReducedProblem(OutageAwareMPC.from_config(CFG, backend=backend), channel.LinkParams.from_config(CFG, planning=True),
-                          snap)
+                          snap, CFG.drone_reach_m)
 
 
 def test_envelope_derivative_matches_finite_differences(rng):
@@ -87,6 +88,35 @@ def test_rg_mpc_is_never_worse_than_the_paper_ao_on_sampled_slots():
     for snap in _snapshots(10, seed=15):
         rg.reset()
         assert rg.plan(snap).objective <= ao.solve(snap).objective * (1 + 1e-6)
+
+
+def test_planners_plan_with_their_own_drone_reach():
+    """A planner built for a slower drone than the environment's plans, from the env's snapshots
+    (whose config has the env's V_max), the moves of the drone it was built for: its drone grid
+    and its planned position lie within its own reach V_max Δτ, not the env's."""
+    slow = ScenarioConfig(drone=DroneConfig(max_speed_mps=CFG.drone.max_speed_mps / 3))
+    reach = slow.drone_reach_m
+    rg, ao = ReducedGradientPlanner(slow), AOSolver(slow)
+    gl = GlobalPlanner(slow, GlobalSettings(psi_points=21, power_levels=20, refine_iterations=5))
+    problems = []
+    search = rg._search
+    rg._search = lambda problem: problems.append(problem) or search(problem)
+    env = gym.make("lawn/Joint-v0", config=CFG).unwrapped
+    env.reset(seed=0)
+    longest = 0.0
+    for _ in range(3):
+        snap = env.snapshot()
+        assert snap.config.drone_reach_m > reach
+        for planner in (rg, gl, ao):
+            step = float(np.linalg.norm(planner.plan(snap).drone_position - snap.drone_position))
+            assert step <= reach + 1e-9, type(planner).__name__
+            longest = max(longest, step)
+        problem = problems[-1]
+        assert problem.reach == reach
+        grid = disc_box_grid(problem.q_prev, problem.reach, problem.area, rg.settings.drone_spacing_m)
+        assert np.linalg.norm(grid - snap.drone_position, axis=1).max() <= reach + 1e-9
+        env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+    assert longest > 0.5 * reach  # the drone flies in from the area's edge: the reach binds
 
 
 def test_min_plus_allocation_against_brute_force(rng):
