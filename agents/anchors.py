@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from lawn_env.interface import ActionLayout, InterfaceLike, resolve_interface
+from lawn_env.interface import InterfaceLike, action_codec, resolve_interface
 
 from .base import COMM, JOINT, Policy
 
@@ -50,8 +50,8 @@ class InterfacePolicy(Policy):
         super().__init__(config, env_id, seed)
         self.interface = resolve_interface(interface)
         role = "joint" if env_id == JOINT else "comm"
-        self.scheme = ActionLayout(self.config, role, self.interface)
-        self.v0 = ActionLayout(self.config, role, None)
+        self.scheme = action_codec(self.config, role, self.interface)
+        self.v0 = action_codec(self.config, role, None)
 
     def _on_reset(self, rng) -> None:
         self.scheme.reset()

@@ -10,6 +10,7 @@ import numpy as np
 
 from lawn_env import ObservationLayout
 from lawn_env.core import Snapshot
+from lawn_env.spaces import DirectActions
 from lawn_env.presets import ConfigLike, resolve_config
 
 if TYPE_CHECKING:
@@ -47,6 +48,8 @@ class Policy:
             raise ValueError(f"policy {self.name!r} drives {', '.join(self.env_ids)}; got env_id={env_id!r}")
         self.env_id = env_id
         self.layout = ObservationLayout(self.config)
+        #: The v0 actions of ``env_id`` (what every policy's action is, whatever it plans with)
+        self.actions = DirectActions(self.config, "joint" if env_id == JOINT else "comm")
         self._seed_rng = np.random.default_rng(seed)
 
     def reset(self, seed: int | None = None) -> None:

@@ -131,7 +131,7 @@ class SB3Policy(InterfacePolicy):
 
     ``network(obs) -> action`` is any deterministic SB3 predictor (a model or a bare policy);
     observations pass through the training interface's clipping and the normalizer, actions
-    through the training scheme's decode and the v0 encode (:class:`lawn_env.ActionLayout`).
+    through the training scheme's decode and the v0 encode (:func:`lawn_env.action_codec`).
     """
 
     name = "sb3"

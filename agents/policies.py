@@ -26,8 +26,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from lawn_env import ObservationLayout, ScenarioConfig, spaces
-from lawn_env.core import Snapshot
+from lawn_env import ObservationLayout, ScenarioConfig
+from lawn_env.core import Decisions, Snapshot
 from lawn_env.drone import move_drone
 from lawn_env.dynamics import command_mask, planning_period
 from lawn_env.presets import ConfigLike, resolve_config
@@ -73,8 +73,6 @@ class PlannerPolicy(Policy):
     def __init__(self, config: ConfigLike = None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
         super().__init__(config, env_id, seed)
         self.solver = self._make_solver(**settings)
-        c = self.config
-        self._scales = (c.control.accel_increment_max_mps2, c.power_budget_w, c.drone.max_speed_mps, c.slot_s)
 
     def _make_solver(self, **settings: Any):
         return AOSolver(self.config, AOSettings(**settings))
@@ -98,14 +96,9 @@ class PlannerPolicy(Policy):
 
     def action(self, plan: Plan, snapshot: Snapshot) -> np.ndarray:
         """The normalized action of ``self.env_id`` that carries out ``plan``."""
-        inc_max, budget, vmax, dt = self._scales
-        parts = [
-            spaces.encode_power(plan.power_w, budget),
-            spaces.encode_drone(plan.drone_position, snapshot.drone_position, vmax, dt),
-        ]
-        if self.env_id == JOINT:
-            parts.insert(0, spaces.encode_increments(plan.increments[:, 0], inc_max))
-        return np.concatenate(parts).astype(np.float32)
+        increment = plan.increments[:, 0] if self.env_id == JOINT else None
+        return self.actions.encode(Decisions(increment, plan.power_w, plan.drone_position), snapshot.x_aug, None,
+                                   snapshot.drone_position)
 
 
 class AOMPCPolicy(PlannerPolicy):

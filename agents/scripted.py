@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lawn_env import spaces
+from lawn_env.core import Decisions
 from lawn_env.presets import ConfigLike
 
 from .base import JOINT, Policy
@@ -49,8 +49,4 @@ class HeuristicPolicy(Policy):
         dist = np.linalg.norm(step)
         reach = cfg.drone_reach_m
         q_next = centroid if dist <= reach else q + step * (reach / dist)
-        return np.concatenate([
-            spaces.encode_increments(du, cfg.control.accel_increment_max_mps2),
-            spaces.encode_power(power, cfg.power_budget_w),
-            spaces.encode_drone(q_next, q, cfg.drone.max_speed_mps, cfg.slot_s),
-        ]).astype(np.float32)
+        return self.actions.encode(Decisions(du, power, q_next), x, None, q)

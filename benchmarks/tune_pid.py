@@ -18,7 +18,9 @@ import lawn_env  # noqa: F401
 from agents import rollout
 from agents.tracking import PIDGains
 from agents.tracking import pid_rollout
-from lawn_env import presets, spaces
+from lawn_env import presets
+from lawn_env.core import Decisions
+from lawn_env.spaces import DirectActions
 from lawn_env.dynamics import PredictionModel
 
 
@@ -30,7 +32,8 @@ class TrackingPID:
         self.cfg = env.config
         self.model = PredictionModel.from_config(self.cfg)
         k, budget = self.cfg.num_agvs, self.cfg.power_budget_w
-        self.power = spaces.encode_power(np.full(k, budget / k), budget)
+        self.power = np.full(k, budget / k)
+        self.actions = DirectActions(self.cfg, "joint")
 
     def reset(self, seed: int | None = None) -> None:
         self.integral = np.zeros((self.cfg.num_agvs, 2))
@@ -40,8 +43,8 @@ class TrackingPID:
         snap = self.env.snapshot()
         du, self.integral = pid_rollout(snap.x_aug, snap.reference, self.integral, self.model, self.gains,
                                         c.accel_max_mps2, c.accel_increment_max_mps2)
-        return np.concatenate([spaces.encode_increments(du[:, 0], c.accel_increment_max_mps2), self.power,
-                               [0.0, 0.0]]).astype(np.float32)
+        q = snap.drone_position
+        return self.actions.encode(Decisions(du[:, 0], self.power, q), snap.x_aug, None, q)  # a hovering drone
 
 
 def episode_cost(kp: float, ki: float, kd: float, seed: int) -> float:

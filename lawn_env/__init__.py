@@ -12,7 +12,7 @@ from . import channel, dynamics, drone, presets, references
 from .config import ChannelConfig, ControlConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 from .core import Simulation, Snapshot
 from .envs import CommEnv, JointEnv, LawnParallelEnv, env, parallel_env, raw_env
-from .interface import RL_INTERFACE, ActionLayout, RLInterface
+from .interface import RL_INTERFACE, RLInterface, action_codec
 from .presets import resolve_config
 from .spaces import ObservationLayout
 
@@ -69,7 +69,7 @@ __all__ = [
     "central_env_id",
     "RLInterface",
     "RL_INTERFACE",
-    "ActionLayout",
+    "action_codec",
     "ChannelConfig",
     "ControlConfig",
     "DroneConfig",

@@ -101,7 +101,7 @@ def link_argument(distance_sq_m2: float, power_w: float, c_d: float, c_ce: float
 @numba.njit(cache=True)
 def outage_law(m: float, x: float, part: int) -> float:  # pragma: no cover - compiled
     """The outage law of one link at the outage argument x (Prop. 1): ``part`` OUTAGE gives
-    P = Pr(m |h|^2 < x) = gammainc(m, x), SUCCESS psi = 1 - P = gammaincc(m, x) (accurate when
+    ``P = Pr(m |h|^2 < x) = gammainc(m, x)``, SUCCESS psi = 1 - P = gammaincc(m, x) (accurate when
     psi is tiny, where 1 - P has no digits left), DENSITY -d psi / dx = x^(m-1) e^(-x) / Gamma(m)
     (in log form, accurate for large x). The three are one law: they change together."""
     if part == OUTAGE:

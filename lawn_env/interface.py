@@ -7,8 +7,8 @@ accelerating; single slots cost up to 1e7), so every environment also takes
 ``interface=RLInterface(...)`` (or ``interface="rl"`` for :data:`RL_INTERFACE`), which changes
 *how the agent talks to the scenario*, never the scenario:
 
-* **Action schemes** (:class:`ActionLayout`, one object that decodes and encodes every scheme,
-  used by the environments, the learned-policy wrappers and behaviour cloning):
+* **Action schemes** (one codec per scheme, :func:`action_codec` picks it, used by the
+  environments, the policies, the learned-policy wrappers and behaviour cloning):
 
   - ``"direct"``: the v0 actions (:mod:`lawn_env.spaces`);
   - ``"anchored"``: actions measured from a safe anchor, so the zero action is a good policy.
@@ -63,16 +63,16 @@ import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 from pydantic.dataclasses import dataclass
 
-from . import spaces
 from .channel import LinkParams
 from .config import ScenarioConfig
 from .core import Decisions
 from .drone import toward
 from .dynamics import PredictionModel, saturate_increment
 from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
+from .spaces import ActionCodec, DirectActions
 
-__all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FLOOR", "resolve_interface", "ActionLayout",
-           "ROLES", "InterfaceLike"]
+__all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FLOOR", "resolve_interface", "action_codec",
+           "AnchoredActions", "InterfaceLike"]
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 
@@ -197,59 +197,42 @@ def resolve_interface(interface: InterfaceLike) -> RLInterface:
     raise TypeError(f"interface must be an RLInterface, a dict, 'v0', 'rl' or None; got {type(interface).__name__}")
 
 
-_NO_INCREMENT = np.empty((0, 0, 2))  # direct_rows' increment output of a role without increments
+def action_codec(config: ScenarioConfig, role: str = "joint", interface: InterfaceLike = None,
+                 mpc_backend: str = DEFAULT_BACKEND) -> ActionCodec:
+    """The action codec of ``role`` (``joint`` or ``comm``) under ``interface``'s action scheme:
+    :class:`~lawn_env.spaces.DirectActions` or :class:`AnchoredActions` (``mpc_backend``: the QP
+    backend of the anchor's MPC)."""
+    iface = resolve_interface(interface)
+    if iface.action_scheme == "direct":
+        return DirectActions(config, role)
+    return AnchoredActions(config, role, iface, mpc_backend)
 
-#: What an action of each role decides: ``joint`` (increments, power, drone: Joint-v0),
-#: ``comm`` (power and drone: Comm-v0 and the parallel env's drone).
-ROLES = ("joint", "comm")
 
+class AnchoredActions(ActionCodec):
+    """Actions measured from a safe anchor (module docstring): the drone flies toward the AGVs'
+    centroid plus ``a * drone_offset_m``, the power split is ``prior exp(a * power_log_range)``
+    spending the budget, and Joint's increments are a residual on the anchor controller's."""
 
-class ActionLayout:
-    """Decode and encode the normalized actions of one role under one scheme.
+    scheme = "anchored"
 
-    ``decode(action, x_aug, reference, drone_position)`` turns a checked action in [-1, 1]
-    into a :class:`Decisions`; ``encode(decision, x_aug, reference, drone_position)`` is its
-    inverse (exact for decisions the scheme can express; otherwise the nearest action, clipped).
-    The state arguments are the measured augmented states (K, 6), the reference window
-    (K, N_p+1, 6) and the drone's current position (2,); :class:`~lawn_env.core.Snapshot` and
-    the observation's decode carry the same arrays.
-    """
-
-    def __init__(self, config: ScenarioConfig, role: str = "joint", interface: InterfaceLike = None,
-                 mpc_backend: str = DEFAULT_BACKEND):
-        if role not in ROLES:
-            raise ValueError(f"role={role!r}; valid: {', '.join(ROLES)}")
-        self.interface = resolve_interface(interface)
-        self.scheme = self.interface.action_scheme
-        self.role = role
-        k = config.num_agvs
-        self.num_agvs = k
-        self._inc_size = 2 * k if role == "joint" else 0
-        self.size = self._inc_size + k + 2
-        self.space = gym.spaces.Box(-1.0, 1.0, shape=(self.size,), dtype=np.float32)
+    def __init__(self, config: ScenarioConfig, role: str, interface: RLInterface, mpc_backend: str = DEFAULT_BACKEND):
+        super().__init__(config, role)
+        self.interface = interface
         self._inc_max = config.control.accel_increment_max_mps2
         self._pmax = config.power_budget_w
         self._vmax = config.drone.max_speed_mps
         self._dt = config.slot_s
         self._reach = config.drone_reach_m
-        self._area = tuple(float(v) for v in config.area_m)
-        self.mpc = None
+        self._link = LinkParams.from_config(config, planning=True)
+        self._stake = interface.power_anchor == "stake"
         self._lqr_model = None
-        if self.scheme == "anchored":
-            self._link = LinkParams.from_config(config, planning=True)
-            self._stake = self.interface.power_anchor == "stake"
-            lqr = role == "joint" and self.interface.increment_anchor == "lqr"
-            if (role == "joint" and not lqr) or self._stake:  # the residual's controller, and the stakes
-                self.mpc = OutageAwareMPC.from_config(config, backend=mpc_backend)
-            if lqr:
-                self._lqr_model = PredictionModel.from_config(config)
-                self._accel_max = config.control.accel_max_mps2
-
-    @property
-    def needs_reference(self) -> bool:
-        """Whether decoding needs the reference window (the anchor plans with the MPC, or its
-        increments track the reference with the LQR)."""
-        return self.mpc is not None or self._lqr_model is not None
+        lqr = role == "joint" and interface.increment_anchor == "lqr"
+        if (role == "joint" and not lqr) or self._stake:  # the residual's controller, and the stakes
+            self.mpc = OutageAwareMPC.from_config(config, backend=mpc_backend)
+        if lqr:
+            self._lqr_model = PredictionModel.from_config(config)
+            self._accel_max = config.control.accel_max_mps2
+        self.needs_reference = self.mpc is not None or self._lqr_model is not None
 
     def reset(self, which: np.ndarray | None = None) -> None:
         """Start an episode (the anchor MPC's warm starts are per episode, like the envs' MPC);
@@ -257,31 +240,11 @@ class ActionLayout:
         if self.mpc is not None:
             self.mpc.reset(which)
 
-    def decode(self, actions: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
-               drone_position: np.ndarray, slot: int | np.ndarray | None = None) -> Decisions:
-        """The decisions of checked actions: one scenario (action (size,), states (K, 6), reference
-        window (K, N_p+1, 6), drone position (2,), slot) or a batch of B (the same with a leading B
-        axis, ``slot`` (B,): the scenarios' slots, for move blocking with a control period); the
-        Decisions's arrays have the same leading axes."""
-        a = np.asarray(actions)
-        if a.ndim == 1:  # one scenario: the batch of one
-            ref = None if reference is None else reference[None]
-            d = self.decode(a[None], x_aug[None], ref, np.asarray(drone_position)[None],
-                            None if slot is None else np.asarray(slot).reshape(1))
-            return Decisions(None if d.increment is None else d.increment[0], d.power_w[0], d.drone_next[0])
-        k = self.num_agvs
-        if self.scheme == "direct":
-            num = a.shape[0]
-            increment = np.empty((num, k, 2)) if self._inc_size else None
-            power, drone_next = np.empty((num, k)), np.empty((num, 2))
-            spaces.direct_rows(np.ascontiguousarray(a, dtype=np.float64), self._inc_size, k, self._inc_max, self._pmax,
-                               self._vmax, self._dt, *self._area, np.ascontiguousarray(drone_position, dtype=np.float64),
-                               _NO_INCREMENT if increment is None else increment, power, drone_next)
-            return Decisions(increment, power, drone_next)
-        comm = a[:, self._inc_size :]
+    def _decode_rows(self, actions, x_aug, reference, drone_position, slot) -> Decisions:
+        k, comm = self.num_agvs, actions[:, self.increment_size :]
         target = x_aug[..., 0:2].mean(axis=-2) + comm[:, k:] * self.interface.drone_offset_m
-        drone_next = toward(drone_position, target, self._vmax, self._dt, self._area)
-        return self._anchored(a[:, : 2 * k], comm[:, :k], x_aug, reference, slot, drone_next)
+        drone_next = toward(drone_position, target, self._vmax, self._dt, self.area)
+        return self._anchored(actions[:, : 2 * k], comm[:, :k], x_aug, reference, slot, drone_next)
 
     def _prepare(self, x_aug: np.ndarray, reference: np.ndarray | None, slot: int | np.ndarray | None
                  ) -> SlotData | None:
@@ -302,7 +265,7 @@ class ActionLayout:
         d2 = self._distance_sq(x_aug, drone_next)
         w = self._prior(d2, data) * np.exp(a_power * self.interface.power_log_range)
         power = w * (self._pmax / w.sum(axis=-1, keepdims=True))
-        if not self._inc_size:
+        if not self.increment_size:
             return Decisions(None, power, drone_next)
         increment = self._anchor_increment(data, power, d2, x_aug, reference)
         increment += a_increment.reshape(increment.shape) * (self.interface.residual_scale * self._inc_max)
@@ -356,12 +319,6 @@ class ActionLayout:
         """The action (float32) that decodes to ``decision`` (nearest one, clipped, otherwise)."""
         power = np.asarray(decision.power_w, dtype=float)
         drone_next = np.asarray(decision.drone_next, dtype=float)
-        if self.scheme == "direct":
-            parts = [spaces.encode_power(power, self._pmax),
-                     spaces.encode_drone(drone_next, drone_position, self._vmax, self._dt)]
-            if self._inc_size:
-                parts.insert(0, spaces.encode_increments(decision.increment, self._inc_max))
-            return np.concatenate(parts).astype(np.float32)
         centroid = x_aug[:, 0:2].mean(axis=0)
         target = drone_next
         move = drone_next - drone_position
@@ -377,7 +334,7 @@ class ActionLayout:
         log_w -= 0.5 * (log_w.max() + log_w.min())  # any common shift gives the same split: center the range
         a_power = np.clip(log_w / self.interface.power_log_range, -1.0, 1.0)
         parts = [a_power, a_drone]
-        if self._inc_size:
+        if self.increment_size:
             anchor = self._anchor_increment(data, power, d2, x_aug, reference)
             scale = self.interface.residual_scale * self._inc_max
             parts.insert(0, np.clip((np.asarray(decision.increment, dtype=float) - anchor) / scale, -1, 1).reshape(-1))

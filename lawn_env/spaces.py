@@ -19,9 +19,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+import gymnasium as gym
 import numba
 import numpy as np
 
+from .core import Decisions
 from .drone import move_rows
 
 if TYPE_CHECKING:
@@ -30,15 +32,13 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ObservationLayout",
+    "ActionCodec",
+    "DirectActions",
+    "ACTION_LIMITS",
+    "ROLES",
     "check_action",
     "power_rows",
     "direct_rows",
-    "decode_increments",
-    "encode_increments",
-    "decode_power",
-    "encode_power",
-    "decode_drone",
-    "encode_drone",
     "POSITION_ERROR_SCALE_M",
     "VELOCITY_SCALE_MPS",
 ]
@@ -75,28 +75,10 @@ def check_action(action: Any, size: int, name: str = "action", num_envs: int | N
     return a
 
 
-def decode_increments(a: np.ndarray, accel_increment_max: float) -> np.ndarray:
-    """(2K,) normalized -> (K, 2) increments in m/s^2 (before saturation)."""
-    return a.reshape(-1, 2) * accel_increment_max
-
-
-def encode_increments(du: np.ndarray, accel_increment_max: float) -> np.ndarray:
-    return np.clip(np.asarray(du, dtype=float).reshape(-1) / accel_increment_max, -1.0, 1.0)
-
-
-def decode_power(a: np.ndarray, power_budget_w: float) -> np.ndarray:
-    """(..., K) normalized -> powers in W with sum <= P_max: ``w = (a + 1) / 2``,
-    ``p = P_max w / max(1, sum w)``. The sum runs left to right, the order Python's ``sum`` takes,
-    whatever K and the batch."""
-    a = np.asarray(a, dtype=np.float64)
-    out = np.empty(a.shape)
-    power_rows(a.reshape(-1, a.shape[-1]), float(power_budget_w), out.reshape(-1, a.shape[-1]))
-    return out
-
-
 @numba.njit(cache=True)
 def power_rows(a: np.ndarray, budget: float, out: np.ndarray) -> None:  # pragma: no cover - compiled
-    """The compiled rule of :func:`decode_power` on rows (B, K), written to ``out``."""
+    """The power split of the direct scheme on rows of actions (B, K), written to ``out``:
+    ``w = (a + 1) / 2``, ``p = P_max w / max(1, sum w)``, the sum left to right whatever K."""
     k = a.shape[1]
     for b in range(a.shape[0]):
         total = a[b, 0]
@@ -109,24 +91,24 @@ def power_rows(a: np.ndarray, budget: float, out: np.ndarray) -> None:  # pragma
 
 
 @numba.njit(cache=True)
-def direct_rows(a: np.ndarray, inc_size: int, k: int, inc_max: float, budget: float, max_speed: float, slot_s: float,
-                x0: float, x1: float, y0: float, y1: float, position: np.ndarray, increment: np.ndarray,
+def direct_rows(a: np.ndarray, increment_size: int, limits: np.ndarray, position: np.ndarray, increment: np.ndarray,
                 power: np.ndarray, drone_next: np.ndarray) -> None:  # pragma: no cover - compiled
-    """The direct scheme's decisions of checked actions (B, size), written to ``increment``
-    (B, K, 2) (nothing when ``inc_size`` is 0), ``power`` (B, K) (:func:`power_rows`) and
-    ``drone_next`` (B, 2) (:func:`lawn_env.drone.move_rows` at the velocities ``a * V_max``): arrays
-    the caller allocates (cheaper than a compiled function's returned arrays)."""
-    num = a.shape[0]
+    """The direct scheme's decisions of checked actions (B, size) under ``limits`` (a record of
+    :data:`ACTION_LIMITS`), written to ``increment`` (B, K, 2) (nothing when ``increment_size`` is 0),
+    ``power`` (B, K) (:func:`power_rows`) and ``drone_next`` (B, 2) (:func:`lawn_env.drone.move_rows`
+    at the velocities ``a * V_max``): arrays the caller allocates (cheaper than a compiled function's
+    returned arrays)."""
+    lim = limits[0]
+    num, k = a.shape[0], power.shape[1]
     velocity = np.empty((num, 2))
     for b in range(num):
-        if inc_size:
-            for i in range(k):
-                increment[b, i, 0] = a[b, 2 * i] * inc_max
-                increment[b, i, 1] = a[b, 2 * i + 1] * inc_max
-        velocity[b, 0] = a[b, inc_size + k] * max_speed
-        velocity[b, 1] = a[b, inc_size + k + 1] * max_speed
-    power_rows(a[:, inc_size : inc_size + k], budget, power)
-    move_rows(position, velocity, max_speed, slot_s, x0, x1, y0, y1, drone_next)
+        for i in range(increment_size // 2):
+            increment[b, i, 0] = a[b, 2 * i] * lim.increment_max
+            increment[b, i, 1] = a[b, 2 * i + 1] * lim.increment_max
+        velocity[b, 0] = a[b, increment_size + k] * lim.max_speed
+        velocity[b, 1] = a[b, increment_size + k + 1] * lim.max_speed
+    power_rows(a[:, increment_size : increment_size + k], lim.power_budget, power)
+    move_rows(position, velocity, lim.max_speed, lim.slot_s, lim.x0, lim.x1, lim.y0, lim.y1, drone_next)
 
 
 @numba.njit(cache=True)
@@ -139,23 +121,107 @@ def _first_outside(a):  # pragma: no cover - compiled
     return -1
 
 
-def encode_power(power_w: np.ndarray, power_budget_w: float) -> np.ndarray:
-    """Inverse of :func:`decode_power` on the feasible set (p >= 0, sum p <= P_max)."""
-    p = np.asarray(power_w, dtype=float)
-    if np.any(p < -1e-12) or p.sum() > power_budget_w * (1 + 1e-9):
-        raise ValueError(f"power_w={p.tolist()} is not a feasible split of P_max={power_budget_w} W")
-    return np.clip(2.0 * p / power_budget_w - 1.0, -1.0, 1.0)
+#: What the direct scheme's decode needs of the config, by name (a record, for the compiled decode):
+#: the increment bound Delta-a_max, the power budget P_max, V_max, the slot and the area.
+ACTION_LIMITS = np.dtype([("increment_max", "f8"), ("power_budget", "f8"), ("max_speed", "f8"), ("slot_s", "f8"),
+                          ("x0", "f8"), ("x1", "f8"), ("y0", "f8"), ("y1", "f8")])
+
+#: What an action of each role decides: ``joint`` (increments, power, drone: Joint-v0),
+#: ``comm`` (power and drone: Comm-v0 and the parallel env's drone).
+ROLES = ("joint", "comm")
 
 
-def decode_drone(a: np.ndarray, max_speed_mps: float) -> np.ndarray:
-    """(2,) normalized -> commanded velocity in m/s (radial clipping happens in the move)."""
-    return a * max_speed_mps
+class ActionCodec:
+    """The normalized actions of one role under one scheme: ``decode`` turns checked actions in
+    [-1, 1] into :class:`~lawn_env.core.Decisions`, ``encode`` is its inverse (exact for decisions
+    the scheme can express; otherwise the nearest action, clipped). One codec per scheme:
+    :class:`DirectActions` (the v0 actions) and
+    :class:`~lawn_env.interface.AnchoredActions`; :func:`lawn_env.interface.action_codec` picks an
+    interface's. The envs decode with it and the policies encode with it.
+
+    The state arguments are the measured augmented states (K, 6), the reference window
+    (K, N_p+1, 6) and the drone's current position (2,) (:class:`~lawn_env.core.Snapshot` and the
+    observation's decode carry the same arrays), or a batch of them with a leading B axis.
+    """
+
+    scheme = ""
+    #: Whether decoding needs the reference window.
+    needs_reference = False
+    #: The MPC the scheme's anchor plans with (None: none).
+    mpc = None
+
+    def __init__(self, config: ScenarioConfig, role: str = "joint"):
+        if role not in ROLES:
+            raise ValueError(f"role={role!r}; valid: {', '.join(ROLES)}")
+        k = config.num_agvs
+        self.role, self.num_agvs = role, k
+        self.increment_size = 2 * k if role == "joint" else 0
+        self.size = self.increment_size + k + 2
+        self.space = gym.spaces.Box(-1.0, 1.0, shape=(self.size,), dtype=np.float32)
+        self.limits = np.array([(config.control.accel_increment_max_mps2, config.power_budget_w,
+                                 config.drone.max_speed_mps, config.slot_s, *config.area_m)], dtype=ACTION_LIMITS)
+        self.limits.setflags(write=False)
+        self.area = tuple(float(v) for v in config.area_m)
+
+    def reset(self, which: np.ndarray | None = None) -> None:
+        """Start an episode (``which``: a mask over a batch's scenarios, all when None)."""
+
+    def decode(self, actions: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
+               drone_position: np.ndarray, slot: int | np.ndarray | None = None) -> Decisions:
+        """The decisions of checked actions: one scenario (action (size,), states (K, 6), reference
+        window (K, N_p+1, 6), drone position (2,), slot) or a batch of B (the same with a leading B
+        axis, ``slot`` (B,): the scenarios' slots, for move blocking with a control period); the
+        Decisions's arrays have the same leading axes."""
+        a = np.asarray(actions)
+        if a.ndim > 1:
+            return self._decode_rows(a, x_aug, reference, drone_position, slot)
+        ref = None if reference is None else reference[None]
+        x = None if x_aug is None else np.asarray(x_aug)[None]
+        d = self._decode_rows(a[None], x, ref, np.asarray(drone_position)[None],
+                              None if slot is None else np.asarray(slot).reshape(1))
+        return Decisions(None if d.increment is None else d.increment[0], d.power_w[0], d.drone_next[0])
+
+    def _decode_rows(self, actions, x_aug, reference, drone_position, slot) -> Decisions:  # pragma: no cover
+        raise NotImplementedError
+
+    def encode(self, decision: Decisions, x_aug: np.ndarray, reference: np.ndarray | None,
+               drone_position: np.ndarray, slot: int | None = None) -> np.ndarray:  # pragma: no cover - interface
+        """The action (float32) of one scenario that decodes to ``decision``."""
+        raise NotImplementedError
 
 
-def encode_drone(next_position: np.ndarray, position: np.ndarray, max_speed_mps: float, slot_s: float) -> np.ndarray:
-    """Normalized drone action that moves from ``position`` to the feasible ``next_position``."""
-    v = (np.asarray(next_position, dtype=float) - np.asarray(position, dtype=float)) / (slot_s * max_speed_mps)
-    return np.clip(v, -1.0, 1.0)
+_NO_INCREMENT = np.empty((0, 0, 2))  # direct_rows' increment output of a role without increments
+
+
+class DirectActions(ActionCodec):
+    """The v0 actions (module docstring): increments ``a * Delta-a_max``, power ``w = (a + 1) / 2``,
+    ``p = P_max w / max(1, sum w)``, drone velocity ``a * V_max``."""
+
+    scheme = "direct"
+
+    def _decode_rows(self, actions, x_aug, reference, drone_position, slot) -> Decisions:
+        num, k = actions.shape[0], self.num_agvs
+        increment = np.empty((num, k, 2)) if self.increment_size else None
+        power, drone_next = np.empty((num, k)), np.empty((num, 2))
+        direct_rows(np.ascontiguousarray(actions, dtype=np.float64), self.increment_size, self.limits,
+                    np.ascontiguousarray(drone_position, dtype=np.float64),
+                    _NO_INCREMENT if increment is None else increment, power, drone_next)
+        return Decisions(increment, power, drone_next)
+
+    def encode(self, decision: Decisions, x_aug: np.ndarray | None, reference: np.ndarray | None,
+               drone_position: np.ndarray, slot: int | None = None) -> np.ndarray:
+        """The action of ``decision`` (the state but the drone's position is not needed): power
+        ``a = 2 p / P_max - 1`` (a feasible split, else ``ValueError``), the drone's velocity to its
+        next position over V_max, increments over Delta-a_max, clipped to [-1, 1]."""
+        lim = self.limits[0]
+        p = np.asarray(decision.power_w, dtype=float)
+        if np.any(p < -1e-12) or p.sum() > lim["power_budget"] * (1 + 1e-9):
+            raise ValueError(f"power_w={p.tolist()} is not a feasible split of P_max={lim['power_budget']} W")
+        move = np.asarray(decision.drone_next, dtype=float) - np.asarray(drone_position, dtype=float)
+        parts = [2.0 * p / lim["power_budget"] - 1.0, move / (lim["slot_s"] * lim["max_speed"])]
+        if self.increment_size:
+            parts.insert(0, np.asarray(decision.increment, dtype=float).reshape(-1) / lim["increment_max"])
+        return np.clip(np.concatenate(parts), -1.0, 1.0).astype(np.float32)
 
 
 @numba.njit(cache=True)

@@ -231,7 +231,7 @@ def test_comm_env_applies_the_mpc_first_increment():
         a = env.action_space.sample()
         x = env.sim.x_aug.copy()
         ref = env.sim.reference_window().copy()
-        power = lawn_env.spaces.decode_power(a[:4].astype(float), env.config.power_budget_w)
+        power = lawn_env.spaces.DirectActions(env.config, "comm").decode(a, x, ref, env.sim.drone_position).power_w
         q_next = env.sim.drone_target(a[4:].astype(float) * env.config.drone.max_speed_mps)
         psi = env.sim.planning_success(power, q_next)
         expected = independent.solve(x, ref, psi).increments[:, 0]

@@ -10,7 +10,7 @@ import lawn_env
 from agents import make_policy
 from lawn_env import ScenarioConfig
 from lawn_env.core import Decisions
-from lawn_env.interface import RL_INTERFACE, STAKE_FLOOR, ActionLayout, RLInterface, resolve_interface
+from lawn_env.interface import RL_INTERFACE, STAKE_FLOOR, RLInterface, action_codec, resolve_interface
 from lawn_env.dynamics import PredictionModel
 
 RL_IDS = list(lawn_env.RL_ENV_IDS)
@@ -138,7 +138,7 @@ def test_stake_prior_is_the_linearized_slot_problems_power_split():
     for _ in range(3):
         env.step(env.action_space.sample())
     sim = env.sim
-    layout = ActionLayout(cfg, "comm", "rl")
+    layout = action_codec(cfg, "comm", "rl")
     mpc = layout.mpc
     data = mpc.prepare(sim.x_obs, sim.reference_window(), sim.slot)
     stakes = mpc.command_stakes(data)
@@ -184,7 +184,7 @@ def test_stake_prior_is_the_linearized_slot_problems_power_split():
     np.testing.assert_allclose(split(layout.power_prior(sim.x_obs, decision.drone_next, data)),
                                split(d2 ** (m / (m + 1))), rtol=1e-12)
     # a large Nakagami m (d^(2m) would overflow) still gives a finite split that spends the budget
-    deep = ActionLayout(ScenarioConfig(channel={"nakagami_m": 71}), "comm", "rl")
+    deep = action_codec(ScenarioConfig(channel={"nakagami_m": 71}), "comm", "rl")
     far = deep.decode(np.zeros(deep.size), sim.x_obs, sim.reference_window(), sim.drone_position, sim.slot)
     assert np.all(np.isfinite(far.power_w)) and far.power_w.min() > 0
     assert far.power_w.sum() == pytest.approx(cfg.power_budget_w)
@@ -196,7 +196,7 @@ def test_lqr_increment_anchor_is_the_lqr_baselines_first_increment_and_solves_no
     from agents.tracking import lqr_rollout
 
     cfg = ScenarioConfig()
-    layout = ActionLayout(cfg, "joint", {"base": "rl", "power_anchor": "distance", "increment_anchor": "lqr"})
+    layout = action_codec(cfg, "joint", {"base": "rl", "power_anchor": "distance", "increment_anchor": "lqr"})
     assert layout.mpc is None and layout.needs_reference  # the distance prior and the LQR: no MPC, the reference
     env = gym.make("lawn/Joint-v0").unwrapped
     env.reset(seed=3)
@@ -216,7 +216,7 @@ def test_lqr_increment_anchor_is_the_lqr_baselines_first_increment_and_solves_no
     with pytest.raises(ValueError, match="increment_anchor='lqr'.*pass the reference window"):
         layout.decode(np.zeros(layout.size), sim.x_obs, None, sim.drone_position)
     with pytest.raises(ValueError, match="increment_anchor"):
-        ActionLayout(cfg, "joint", {"base": "rl", "increment_anchor": "pid"})
+        action_codec(cfg, "joint", {"base": "rl", "increment_anchor": "pid"})
 
 
 @pytest.mark.parametrize("role", ["joint", "comm"])
@@ -225,7 +225,7 @@ def test_encode_decode_round_trip(role, scheme):
     cfg = ScenarioConfig()
     fields = {"action_scheme": "anchored", "increment_anchor": "lqr"} if scheme == "anchored-lqr" else \
         {"action_scheme": scheme}
-    layout = ActionLayout(cfg, role, fields)
+    layout = action_codec(cfg, role, fields)
     env = gym.make("lawn/Joint-v0").unwrapped
     env.reset(seed=2)
     rng = np.random.default_rng(1)
@@ -255,7 +255,7 @@ def test_planner_decisions_survive_both_schemes():
     obs, _ = env.reset(seed=4)
     expert = make_policy("rg-mpc", cfg)
     expert.reset(4)
-    anchored = ActionLayout(cfg, "joint", "rl")
+    anchored = action_codec(cfg, "joint", "rl")
     checked = 0
     for _ in range(30):
         expert.act(obs)

@@ -2,38 +2,59 @@ import numpy as np
 import pytest
 
 from lawn_env import drone, spaces
+from lawn_env.core import Decisions
+
+
+def _codec(k=4, role="comm", budget_dbw=None):
+    from lawn_env import ScenarioConfig
+
+    cfg = ScenarioConfig(num_agvs=k, **({} if budget_dbw is None else {"power_budget_dbw": budget_dbw}))
+    return spaces.DirectActions(cfg, role), cfg
 
 
 def test_power_map_respects_budget_and_inverts(rng):
+    q = np.array([100.0, 100.0])
     for k in (1, 2, 4, 32):
+        codec, cfg = _codec(k, budget_dbw=3.0)
+        budget = cfg.power_budget_w
         for _ in range(200):
-            a = rng.uniform(-1, 1, k)
-            p = spaces.decode_power(a, 2.0)
-            assert np.all(p >= 0) and p.sum() <= 2.0 * (1 + 1e-12)
+            a = np.concatenate([rng.uniform(-1, 1, k), [0.0, 0.0]])
+            p = codec.decode(a, None, None, q).power_w
+            assert np.all(p >= 0) and p.sum() <= budget * (1 + 1e-12)
         # every feasible split is reachable, exactly
-        target = rng.dirichlet(np.ones(k)) * rng.uniform(0.2, 2.0)
-        assert np.allclose(spaces.decode_power(spaces.encode_power(target, 2.0), 2.0), target)
-    assert np.allclose(spaces.decode_power(np.zeros(4), 1.0), 0.25)  # zero action: equal split
-    assert np.allclose(spaces.decode_power(-np.ones(3), 1.0), 0.0)
+        target = rng.dirichlet(np.ones(k)) * rng.uniform(0.1, 1.0) * budget
+        action = codec.encode(Decisions(None, target, q), None, None, q)
+        assert np.allclose(codec.decode(action, None, None, q).power_w, target, rtol=0, atol=1e-6 * budget)  # float32
+    codec, cfg = _codec(4)
+    zero = codec.decode(np.zeros(6), None, None, q).power_w
+    assert np.allclose(zero, cfg.power_budget_w / 4)  # zero action: equal split
+    assert np.allclose(codec.decode(-np.ones(6), None, None, q).power_w, 0.0)
     with pytest.raises(ValueError, match="not a feasible split"):
-        spaces.encode_power(np.array([0.8, 0.8]), 1.0)
+        codec.encode(Decisions(None, np.full(4, cfg.power_budget_w / 2), q), None, None, q)
 
 
 def test_drone_move_is_feasible_and_inverts(rng):
-    area = (0.0, 200.0, 0.0, 200.0)
+    codec, cfg = _codec(2)
+    reach = cfg.drone_reach_m
     for _ in range(500):
         q = rng.uniform(0, 200, 2)
-        v = spaces.decode_drone(rng.uniform(-1, 1, 2), 15.0)
-        q2 = drone.move_drone(q, v, 15.0, 0.5, area)
-        assert np.linalg.norm(q2 - q) <= 7.5 + 1e-9 and np.all((q2 >= 0) & (q2 <= 200))
-        a = spaces.encode_drone(q2, q, 15.0, 0.5)
-        assert np.allclose(drone.move_drone(q, spaces.decode_drone(a, 15.0), 15.0, 0.5, area), q2)
+        a = np.concatenate([np.zeros(2), rng.uniform(-1, 1, 2)])
+        q2 = codec.decode(a, None, None, q).drone_next
+        assert np.linalg.norm(q2 - q) <= reach + 1e-9 and np.all((q2 >= 0) & (q2 <= 200))
+        assert np.allclose(q2, drone.move_drone(q, a[2:] * cfg.drone.max_speed_mps, cfg.drone.max_speed_mps,
+                                                cfg.slot_s, cfg.area_m))
+        back = codec.encode(Decisions(None, np.zeros(2), q2), None, None, q)
+        assert np.allclose(codec.decode(back, None, None, q).drone_next, q2, rtol=0, atol=1e-5)  # float32 actions
 
 
 def test_increment_maps():
-    a = np.array([0.5, -1.0, 1.0, 0.0])
-    du = spaces.decode_increments(a, 1.0)
-    assert du.shape == (2, 2) and np.allclose(spaces.encode_increments(du, 1.0), a)
+    codec, cfg = _codec(2, "joint")
+    a = np.array([0.5, -1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    q = np.array([100.0, 100.0])
+    d = codec.decode(a, None, None, q)
+    assert d.increment.shape == (2, 2)
+    np.testing.assert_allclose(d.increment.reshape(-1), a[:4] * cfg.control.accel_increment_max_mps2)
+    np.testing.assert_allclose(codec.encode(d, None, None, q), a, atol=1e-7)
 
 
 def test_check_action_messages():

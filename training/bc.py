@@ -30,7 +30,7 @@ from agents.rollouts import Actor
 from agents.runs import algorithm_class
 from lawn_env import ObservationLayout, ScenarioConfig
 from lawn_env.presets import resolve_config
-from lawn_env.interface import ActionLayout, InterfaceLike, RLInterface, resolve_interface
+from lawn_env.interface import InterfaceLike, RLInterface, action_codec, resolve_interface
 from lawn_env.spaces import check_action
 
 __all__ = ["collect", "label_transitions", "fit", "train_bc_run", "BC_TARGETS"]
@@ -79,7 +79,7 @@ def label_transitions(config: ScenarioConfig, env_id: str, interface: InterfaceL
     actions re-expressed in the interface's scheme (decode as v0, encode in the scheme)."""
     iface = resolve_interface(interface)
     role = "joint" if env_id == "lawn/Joint-v0" else "comm"
-    v0, scheme = ActionLayout(config, role, None), ActionLayout(config, role, iface)
+    v0, scheme = action_codec(config, role, None), action_codec(config, role, iface)
     layout = ObservationLayout(config)
     obs_out, act_out = [], []
     for observations, actions in episodes:

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..core import Decisions, ScenarioView, Simulation, SlotDraws, SlotRecord, Snapshot, Trail, link_success
 from ..config import ScenarioConfig
-from ..interface import ActionLayout, InterfaceLike, RLInterface, resolve_interface
+from ..interface import InterfaceLike, RLInterface, action_codec, resolve_interface
 from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
 from ..spaces import ObservationLayout, check_action
@@ -104,7 +104,7 @@ class Engine:
         self.sim = Simulation(config, num_envs)
         self.num_envs = self.sim.num_envs
         self.layout = ObservationLayout(config)
-        self.actions = ActionLayout(config, role, self.interface, mpc_backend=qp_backend)
+        self.actions = action_codec(config, role, self.interface, mpc_backend=qp_backend)
         self.role = ROLES[role](config, qp_backend)
         self._windows = role == "comm" or self.actions.needs_reference
         self._never = np.zeros(self.num_envs, dtype=bool)
