@@ -63,41 +63,6 @@ SLOT_CONSTANTS = np.dtype([("lag_alpha", "f8"), ("accel_max", "f8"), ("altitude_
                            ("c_ce", "f8"), ("m", "f8")])
 
 
-class SlotInputs(NamedTuple):
-    """A slot's inputs to the kernel (B scenarios): the decisions, the draws and the state read.
-    ``send`` (B,) or (1,): whether the slot sends its commands; ``process_*`` (B, K, 2), or
-    (0, 0, 2) without process noise."""
-
-    x_aug: np.ndarray
-    increment: np.ndarray
-    send: np.ndarray
-    power: np.ndarray
-    drone_next: np.ndarray
-    fading: np.ndarray
-    reference: np.ndarray
-    slot: np.ndarray
-    applied: np.ndarray
-    process_position: np.ndarray
-    process_velocity: np.ndarray
-    drone_prev: np.ndarray
-    totals: np.ndarray
-
-
-class SlotOutputs(NamedTuple):
-    """The kernel's outputs, new arrays the caller allocates (a compiled function's returned
-    arrays cost more to hand back than these to allocate): ``rows`` (2, B, K, 8), the packed rows
-    [x~[n+1], du delivered] and the packed error [x~[n+1] - x~_ref[n+1], du]; ``terms`` (B, K, 2);
-    ``delivered``, ``outage`` (B, K); ``applied`` (B, K, 2; under lag); ``costs`` (B, 3); ``totals``."""
-
-    rows: np.ndarray
-    terms: np.ndarray
-    delivered: np.ndarray
-    outage: np.ndarray
-    applied: np.ndarray
-    costs: np.ndarray
-    totals: np.ndarray
-
-
 class Packed(NamedTuple):
     """The packed matrices of :func:`lawn_env.dynamics.packed_step_matrices` and A~'s
     acceleration columns (the actuator lag's correction)."""
@@ -114,8 +79,7 @@ def _array(dtype, ndim: int, out: bool = False, layout: str = "A") -> numba.type
 
 
 _F, _B, _I = numba.types.float64, numba.types.boolean, numba.types.int64
-#: The slot kernel's one signature, its arguments the fields of SlotInputs, Packed, the constants
-#: and SlotOutputs in order: every caller (single, parallel and vector envs; fixed and random
+#: The slot kernel's one signature: every caller (single, parallel and vector envs; fixed and random
 #: paths; any role) converts to it, so the kernel compiles once instead of once per argument layout.
 _SLOT_SIGNATURE = numba.types.none(
     _array(_F, 3), _array(_F, 3), _array(_B, 1), _array(_F, 2), _array(_F, 2), _array(_F, 2), _array(_F, 4),
@@ -126,130 +90,133 @@ _SLOT_SIGNATURE = numba.types.none(
     _array(_F, 3, out=True), _array(_F, 2, out=True), _array(_F, 2, out=True))
 
 
-@numba.njit(cache=True)
-def _links(inp, c, out, rows):  # pragma: no cover - compiled
+@numba.njit(cache=True, inline="always")
+def _links(x_aug, increment, send, power, drone_next, fading, c, outage, delivered, rows):  # pragma: no cover
     """Step 1: per link, the outage argument at the drone's next position, the outage probability,
     the delivery, and the packed row [x~, du delivered] with du saturated (zero without a command)."""
-    x_aug, k = inp.x_aug, inp.x_aug.shape[1]
+    k = x_aug.shape[1]
+    altitude_sq, c_d, c_ce, m, accel_max = c.altitude_sq, c.c_d, c.c_ce, c.m, c.accel_max
     for b in range(x_aug.shape[0]):
-        sending = inp.send[b % inp.send.shape[0]]
+        sending = send[b % send.shape[0]]
         for i in range(k):
             r = b * k + i
-            d2 = channel.link_distance_sq(x_aug[b, i, 0] - inp.drone_next[b, 0], x_aug[b, i, 1] - inp.drone_next[b, 1],
-                                          c.altitude_sq)
-            x = channel.link_argument(d2, inp.power[b, i], c.c_d, c.c_ce)
-            out.outage[b, i] = channel.outage_law(c.m, x, channel.OUTAGE)
-            ok = channel.command_delivered(inp.fading[b, i], x)
-            out.delivered[b, i] = ok
+            d2 = channel.link_distance_sq(x_aug[b, i, POS] - drone_next[b, 0], x_aug[b, i, POS + 1] - drone_next[b, 1],
+                                          altitude_sq)
+            x = channel.link_argument(d2, power[b, i], c_d, c_ce)
+            outage[b, i] = channel.outage_law(m, x, channel.OUTAGE)
+            ok = channel.command_delivered(fading[b, i], x)
+            delivered[b, i] = ok
             for j in range(6):
                 rows[r, j] = x_aug[b, i, j]
             for a in range(2):
-                u_prev = x_aug[b, i, ACCEL + a]
-                du = dynamics.saturate(u_prev, inp.increment[b, i, a], c.accel_max) if sending else 0.0
+                du = dynamics.saturate(x_aug[b, i, ACCEL + a], increment[b, i, a], accel_max) if sending else 0.0
                 rows[r, 6 + a] = du * (1.0 if ok else 0.0)
 
 
-@numba.njit(cache=True)
-def _lag(inp, c, out, flat, accel_effect_t):  # pragma: no cover - compiled
+@numba.njit(cache=True, inline="always")
+def _lag(x_aug, applied, lag_alpha, applied_next, flat, accel_effect_t):  # pragma: no cover - compiled
     """Step 3 (actuator lag): the AGV moves with the applied acceleration instead of the commanded
     u[n]; the difference enters through A~'s acceleration columns."""
-    num, k = inp.x_aug.shape[0], inp.x_aug.shape[1]
+    num, k = x_aug.shape[0], x_aug.shape[1]
     gap = np.empty((num * k, 2))
     for b in range(num):
         for i in range(k):
             r = b * k + i
             for a in range(2):
-                commanded = inp.x_aug[b, i, ACCEL + a] + flat[r, 6 + a]
-                out.applied[b, i, a] = dynamics.lagged_acceleration(inp.applied[b, i, a], commanded, c.lag_alpha)
-                gap[r, a] = out.applied[b, i, a] - commanded
+                commanded = x_aug[b, i, ACCEL + a] + flat[r, 6 + a]
+                applied_next[b, i, a] = dynamics.lagged_acceleration(applied[b, i, a], commanded, lag_alpha)
+                gap[r, a] = applied_next[b, i, a] - commanded
     correction = gap @ accel_effect_t
     for r in range(num * k):
         for j in range(4):
             flat[r, j] += correction[r, j]
 
 
-@numba.njit(cache=True)
-def _process_noise(inp, packed):  # pragma: no cover - compiled
+@numba.njit(cache=True, inline="always")
+def _process_noise(packed, process_position, process_velocity):  # pragma: no cover - compiled
     """Step 3 (process noise): added to the next positions and velocities where drawn."""
     k = packed.shape[1]
-    for b in range(inp.process_position.shape[0]):
+    for b in range(process_position.shape[0]):
         for i in range(k):
             for a in range(2):
-                packed[b, i, POS + a] += inp.process_position[b, i, a]
-    for b in range(inp.process_velocity.shape[0]):
+                packed[b, i, POS + a] += process_position[b, i, a]
+    for b in range(process_velocity.shape[0]):
         for i in range(k):
             for a in range(2):
-                packed[b, i, VEL + a] += inp.process_velocity[b, i, a]
+                packed[b, i, VEL + a] += process_velocity[b, i, a]
 
 
-@numba.njit(cache=True)
-def _errors(inp, packed, err, squares):  # pragma: no cover - compiled
+@numba.njit(cache=True, inline="always")
+def _errors(packed, reference, slot, err, squares):  # pragma: no cover - compiled
     """Step 4: the packed error against the reference at slot n+1, and its squares."""
     num, k = packed.shape[0], packed.shape[1]
     for b in range(num):
-        s = inp.slot[b] + 1
+        s = slot[b] + 1
         for i in range(k):
             r = b * k + i
             for j in range(8):
-                e = packed[b, i, j] - inp.reference[b, i, s, j] if j < 6 else packed[b, i, j]
+                e = packed[b, i, j] - reference[b, i, s, j] if j < 6 else packed[b, i, j]
                 err[b, i, j] = e
                 squares[r, j] = e * e
 
 
-@numba.njit(cache=True)
-def _accumulate(inp, out, err):  # pragma: no cover - compiled
+@numba.njit(cache=True, inline="always")
+def _accumulate(terms, outage, delivered, err, send, power, drone_next, drone_prev, costs, totals):  # pragma: no cover
     """Step 5: the slot's stage costs summed over AGVs (left to right) and the episode's running
-    sums (:data:`TOTALS`) advanced, the outage and power sums on command slots only."""
-    terms, totals = out.terms, out.totals
+    sums (:data:`TOTALS`, ``totals`` holding the last slot's) advanced, the outage and power sums on
+    command slots only."""
     num, k = terms.shape[0], terms.shape[1]
-    totals[:] = inp.totals
     for b in range(num):
-        sent = 1.0 if inp.send[b % inp.send.shape[0]] else 0.0
-        t, e, o = terms[b, 0, 0], terms[b, 0, 1], out.outage[b, 0]
+        sent = 1.0 if send[b % send.shape[0]] else 0.0
+        t, e, o = terms[b, 0, 0], terms[b, 0, 1], outage[b, 0]
         for i in range(1, k):
             t += terms[b, i, 0]
             e += terms[b, i, 1]
-            o += out.outage[b, i]
-        out.costs[b, 0], out.costs[b, 1], out.costs[b, 2] = t, e, t + e
+            o += outage[b, i]
+        costs[b, 0], costs[b, 1], costs[b, 2] = t, e, t + e
         totals[b, 0] += t
         totals[b, 1] += e
         totals[b, 2] += sent * o
-        sx = inp.drone_next[b, 0] - inp.drone_prev[b, 0]
-        sy = inp.drone_next[b, 1] - inp.drone_prev[b, 1]
+        sx, sy = drone_next[b, 0] - drone_prev[b, 0], drone_next[b, 1] - drone_prev[b, 1]
         totals[b, 3] += np.sqrt(sx * sx + sy * sy)
         for i in range(k):
             totals[b, 4 + i] += err[b, i, 0] ** 2 + err[b, i, 1] ** 2
-            totals[b, 4 + k + i] += 0.0 if out.delivered[b, i] else sent
-            totals[b, 4 + 2 * k + i] += sent * inp.power[b, i]
+            totals[b, 4 + k + i] += 0.0 if delivered[b, i] else sent
+            totals[b, 4 + 2 * k + i] += sent * power[b, i]
 
 
 @numba.njit([_SLOT_SIGNATURE], cache=True)
 def _slot(x_aug, increment, send, power, drone_next, fading, reference, slot, applied, process_position,
           process_velocity, drone_prev, totals, step_t, cost_w, accel_effect_t, constants, rows_out, terms, delivered,
           outage, applied_next, costs, totals_next):  # pragma: no cover - compiled
-    """One slot of B scenarios (see :func:`step`): 1. the links (:func:`_links`); 2. the transition,
-    [x~[n+1], du] = [x~, du delivered] @ packed_t (BLAS, as numpy's ``@``); 3. the disturbance
-    mode's actuator lag (``lag_alpha`` >= 0) and process noise (where the arrays are not empty);
-    4. the packed error and the stage terms (e' Q1 e, du' Q2 du) = err^2 @ packed_w; 5. the costs
-    and the running sums."""
-    inp = SlotInputs(x_aug, increment, send, power, drone_next, fading, reference, slot, applied, process_position,
-                     process_velocity, drone_prev, totals)
-    out = SlotOutputs(rows_out, terms, delivered, outage, applied_next, costs, totals_next)
+    """One slot of B scenarios (see :func:`step`): 1. the links (:func:`_links`); 2. the transition, [x~[n+1], du] = [x~, du delivered] @ packed_t (BLAS, as
+    numpy's ``@``); 3. the disturbance mode's actuator lag (``lag_alpha`` >= 0) and process noise
+    (where the arrays are not empty); 4. the packed error and the stage terms
+    (e' Q1 e, du' Q2 du) = err^2 @ packed_w; 5. the costs and the running sums.
+
+    Reads the state and the decisions (``send`` (B,) or (1,): whether the slot sends its
+    commands; ``process_*`` (B, K, 2), or (0, 0, 2) without process noise), the :class:`Packed`
+    matrices and the :data:`SLOT_CONSTANTS` record; writes the outputs, new arrays the caller
+    allocates (a compiled function's returned arrays cost more to hand back): ``rows_out``
+    (2, B, K, 8), the packed rows [x~[n+1], du delivered] and the packed error
+    [x~[n+1] - x~_ref[n+1], du]; ``terms`` (B, K, 2); ``delivered``, ``outage`` (B, K);
+    ``applied_next`` (B, K, 2; under lag); ``costs`` (B, 3); ``totals_next``."""
     c = constants[0]
     num, k = x_aug.shape[0], x_aug.shape[1]
     n = num * k
     rows = np.empty((n, 8))
-    _links(inp, c, out, rows)
-    packed, err = out.rows[0], out.rows[1]
+    _links(x_aug, increment, send, power, drone_next, fading, c, outage, delivered, rows)
+    packed, err = rows_out[0], rows_out[1]
     flat = packed.reshape((n, 8))
     np.dot(rows, step_t, flat)
     if c.lag_alpha >= 0.0:
-        _lag(inp, c, out, flat, accel_effect_t)
-    _process_noise(inp, packed)
+        _lag(x_aug, applied, c.lag_alpha, applied_next, flat, accel_effect_t)
+    _process_noise(packed, process_position, process_velocity)
     squares = np.empty((n, 8))
-    _errors(inp, packed, err, squares)
+    _errors(packed, reference, slot, err, squares)
     np.dot(squares, cost_w, terms.reshape((n, 2)))
-    _accumulate(inp, out, err)
+    totals_next[:] = totals
+    _accumulate(terms, outage, delivered, err, send, power, drone_next, drone_prev, costs, totals_next)
 
 
 #: The columns of ``SimState.totals`` (B, 4 + 3K): the episode's running sums of the tracking
@@ -533,7 +500,7 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
           _NO_NOISE if draws.process_position is None else draws.process_position,
           _NO_NOISE if draws.process_velocity is None else draws.process_velocity, state.drone_position,
           state.totals, step_t, cost_w, accel_effect_t, params.constants, rows, terms, delivered, outage_p, applied,
-          costs, totals)  # the fields of SlotInputs, Packed, SlotConstants and SlotOutputs, in order
+          costs, totals)
     packed, err = rows[0], rows[1]
     x_next, error, applied_increment, slot = packed[:, :, 0:6], err[:, :, 0:6], packed[:, :, 6:8], state.slot + 1
     x_obs, error_obs = x_next, error

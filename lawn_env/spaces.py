@@ -224,53 +224,76 @@ class DirectActions(ActionCodec):
         return np.clip(np.concatenate(parts), -1.0, 1.0).astype(np.float32)
 
 
+#: What the compiled encode reads of an :class:`ObservationLayout`, by name (one record): where
+#: each per-AGV feature starts in an AGV's block (from the layout's table), the block's size and
+#: window count, and the scalings: states ``x * state_scale - state_shift``, errors and reference
+#: windows ``* reference_scale``, positions ``(p - center) * inverse_half_extent``, powers
+#: ``* inverse_budget``.
+OBS_CODEC = np.dtype([("state", "i8"), ("error", "i8"), ("reference", "i8"), ("relative_to_drone", "i8"),
+                      ("outage_probability", "i8"), ("delivered", "i8"), ("power", "i8"), ("agv_features", "i8"),
+                      ("window", "i8"), ("state_scale", "f8", 6), ("state_shift", "f8", 6),
+                      ("reference_scale", "f8", 6), ("center", "f8", 2), ("inverse_half_extent", "f8", 2),
+                      ("inverse_budget", "f8")])
+
+
 @numba.njit(cache=True)
-def _encode_rows(out, table, slot, x_obs, error_obs, drone, outage, delivered, power, reference, num_slots, scales,
-                 features, w0, bound, clip_table):  # pragma: no cover - compiled
+def _encode_rows(out, table, slot, x_obs, error_obs, drone, outage, delivered, power, reference, codec, num_slots,
+                 bound, clip_table):  # pragma: no cover - compiled
     """Every observation row, each feature computed in float64 as :meth:`ObservationLayout.encode`
-    documents, rounded once to float32 and clipped to ``bound`` in float32. The slot-dependent
-    features (the reference windows, slot n / N) are the slot's row of the fixed path set's
-    ``table`` when it has rows (clipped too with ``clip_table``), else computed here from each
-    scenario's ``reference`` (B, K, T, 6) as :meth:`ObservationLayout.scaled_windows` does.
-    ``scales`` rows: state scale, state shift (scaled), reference scale (6 each), then the area
-    center, the inverse half-extent and the inverse power budget."""
-    num, k = x_obs.shape[0], x_obs.shape[1]
-    g = k * features
-    window = (features - 17) // 6
-    w1 = w0 + 6 * window
-    state_scale, state_shift, ref_scale = scales[0], scales[1], scales[2]
-    b32 = np.float32(bound)
-    for b in range(num):
-        n = slot[b]
+    documents, rounded once to float32 and clipped to ``bound`` in float32 (``codec``: the
+    layout's :data:`OBS_CODEC` record). The slot-dependent features (the reference windows, slot n / N) are the slot's row of the fixed
+    path set's ``table`` when it has rows (clipped too with ``clip_table``), else computed here from
+    each scenario's ``reference`` (B, K, T, 6) as :meth:`ObservationLayout.scaled_windows` does."""
+    state = (x_obs, error_obs, drone, outage, delivered, power)
+    off = sc = codec[0]
+    k, b32 = x_obs.shape[1], np.float32(bound)
+    for b in range(x_obs.shape[0]):
         if table.shape[0] > 1:
-            out[b, :] = table[n]
+            out[b, :] = table[slot[b]]
             if clip_table:
                 for j in range(out.shape[1]):
                     out[b, j] = _clip32(out[b, j], b32)
         else:
-            for i in range(k):
-                col = i * features + w0
-                for w in range(window):
-                    for j in range(6):
-                        r = reference[b, i, n + w, j]
-                        if j < 2:
-                            r = r - reference[b, i, n, j]
-                        out[b, col + 6 * w + j] = _clip32(np.float32(r * ref_scale[j]), b32)
-            out[b, g + 2] = _clip32(np.float32(n / num_slots), b32)
-        dx = (drone[b, 0] - scales[3, 0]) * scales[3, 2]
-        dy = (drone[b, 1] - scales[3, 1]) * scales[3, 3]
-        for i in range(k):
-            base = i * features
+            _encode_windows(out[b], reference[b], slot[b], off, sc, b32)
+            out[b, k * off.agv_features + 2] = _clip32(np.float32(slot[b] / num_slots), b32)
+        _encode_state(out[b], b, state, off, sc, b32)
+
+
+@numba.njit(cache=True)
+def _encode_windows(row, reference, n, off, sc, b32):  # pragma: no cover - compiled
+    """One scenario's reference windows at slot n: positions relative to slot n's, scaled."""
+    for i in range(reference.shape[0]):
+        col = i * off.agv_features + off.reference
+        for w in range(off.window):
             for j in range(6):
-                out[b, base + j] = _clip32(np.float32(x_obs[b, i, j] * state_scale[j] - state_shift[j]), b32)
-                out[b, base + 6 + j] = _clip32(np.float32(error_obs[b, i, j] * ref_scale[j]), b32)
-            out[b, base + w1] = _clip32(np.float32((x_obs[b, i, 0] * state_scale[0] - state_shift[0]) - dx), b32)
-            out[b, base + w1 + 1] = _clip32(np.float32((x_obs[b, i, 1] * state_scale[1] - state_shift[1]) - dy), b32)
-            out[b, base + w1 + 2] = _clip32(np.float32(outage[b, i]), b32)
-            out[b, base + w1 + 3] = _clip32(np.float32(1.0 if delivered[b, i] else 0.0), b32)
-            out[b, base + w1 + 4] = _clip32(np.float32(power[b, i] * scales[3, 4]), b32)
-        out[b, g] = _clip32(np.float32(dx), b32)
-        out[b, g + 1] = _clip32(np.float32(dy), b32)
+                r = reference[i, n + w, j]
+                if j < 2:
+                    r = r - reference[i, n, j]
+                row[col + 6 * w + j] = _clip32(np.float32(r * sc.reference_scale[j]), b32)
+
+
+@numba.njit(cache=True)
+def _encode_state(row, b, state, off, sc, b32):  # pragma: no cover - compiled
+    """One scenario's state-dependent features: per AGV its state, error, position relative to the
+    drone, last outage, delivery and power; then the drone's position."""
+    x_obs, error_obs, drone, outage, delivered, power = state
+    k = x_obs.shape[1]
+    dx = (drone[b, 0] - sc.center[0]) * sc.inverse_half_extent[0]
+    dy = (drone[b, 1] - sc.center[1]) * sc.inverse_half_extent[1]
+    for i in range(k):
+        base = i * off.agv_features
+        for j in range(6):
+            row[base + off.state + j] = _clip32(np.float32(x_obs[b, i, j] * sc.state_scale[j] - sc.state_shift[j]), b32)
+            row[base + off.error + j] = _clip32(np.float32(error_obs[b, i, j] * sc.reference_scale[j]), b32)
+        rel = base + off.relative_to_drone
+        row[rel] = _clip32(np.float32((x_obs[b, i, 0] * sc.state_scale[0] - sc.state_shift[0]) - dx), b32)
+        row[rel + 1] = _clip32(np.float32((x_obs[b, i, 1] * sc.state_scale[1] - sc.state_shift[1]) - dy), b32)
+        row[base + off.outage_probability] = _clip32(np.float32(outage[b, i]), b32)
+        row[base + off.delivered] = _clip32(np.float32(1.0 if delivered[b, i] else 0.0), b32)
+        row[base + off.power] = _clip32(np.float32(power[b, i] * sc.inverse_budget), b32)
+    g = k * off.agv_features
+    row[g] = _clip32(np.float32(dx), b32)
+    row[g + 1] = _clip32(np.float32(dy), b32)
 
 
 @numba.njit(cache=True, inline="always")
@@ -307,7 +330,20 @@ class ObservationLayout:
     :meth:`decode` recovers the planner's state (the snapshot's arrays) from an observation.
     """
 
-    global_features = 3
+    #: The per-AGV features in order: name and names of its entries (the reference window's are
+    #: repeated for i = 0..N_p, ``{i}`` replaced). Every offset and slice comes from this table.
+    AGV_FEATURES = (
+        ("state", ("x", "y", "vx", "vy", "ux_prev", "uy_prev")),
+        ("error", ("ex", "ey", "evx", "evy", "eux", "euy")),
+        ("reference", ("ref{i}_dx", "ref{i}_dy", "ref{i}_vx", "ref{i}_vy", "ref{i}_ax", "ref{i}_ay")),
+        ("relative_to_drone", ("rel_drone_x", "rel_drone_y")),
+        ("outage_probability", ("outage_prob",)),
+        ("delivered", ("delivered",)),
+        ("power", ("power_frac",)),
+    )
+    #: The global features after the K blocks: the drone's position, then slot n / N.
+    GLOBAL_FEATURES = ("drone_x", "drone_y", "time_frac")
+    global_features = len(GLOBAL_FEATURES)
 
     def __init__(self, config: ScenarioConfig):
         self.num_agvs = config.num_agvs
@@ -319,39 +355,31 @@ class ObservationLayout:
         self.accel_max = config.control.accel_max_mps2
         self.power_budget_w = config.power_budget_w
         self.window = self.horizon + 1
-        self.agv_features = 17 + 6 * self.window
+        self.slices, start = {}, 0
+        for name, entries in self.AGV_FEATURES:
+            width = len(entries) * (self.window if name == "reference" else 1)
+            self.slices[name] = slice(start, start + width) if width > 1 else start
+            start += width
+        self.agv_features = start
         self.size = self.num_agvs * self.agv_features + self.global_features
         self._ref_scale = np.array([1 / POSITION_ERROR_SCALE_M] * 2 + [1 / VELOCITY_SCALE_MPS] * 2 + [1 / self.accel_max] * 2)
         self._state_scale = np.concatenate([1 / self.half_extent, [1 / VELOCITY_SCALE_MPS] * 2, [1 / self.accel_max] * 2])
         self._state_shift = np.concatenate([self.center, np.zeros(4)])
-        self._state_shift_scaled = self._state_shift * self._state_scale
-        self._inv_half = 1.0 / self.half_extent
-        self._inv_power = 1.0 / self.power_budget_w
-        w0 = 12
-        w1 = w0 + 6 * self.window
-        self.slices = {
-            "state": slice(0, 6),
-            "error": slice(6, 12),
-            "reference": slice(w0, w1),
-            "relative_to_drone": slice(w1, w1 + 2),
-            "outage_probability": w1 + 2,
-            "delivered": w1 + 3,
-            "power": w1 + 4,
-        }
         self._table_key = self._table = None
         self._table_peak = 0.0
         self._no_table = np.zeros((1, self.size), dtype=np.float32)
-        self._scales = np.zeros((4, 6))
-        self._scales[0], self._scales[1], self._scales[2] = self._state_scale, self._state_shift_scaled, self._ref_scale
-        self._scales[3, 0:2], self._scales[3, 2:4], self._scales[3, 4] = self.center, self._inv_half, self._inv_power
+        starts = {n: (v.start if isinstance(v, slice) else v) for n, v in self.slices.items()}
+        self._codec = np.array([(*starts.values(), self.agv_features, self.window, self._state_scale,
+                                 self._state_shift * self._state_scale, self._ref_scale, self.center,
+                                 1.0 / self.half_extent, 1.0 / self.power_budget_w)], dtype=OBS_CODEC)
 
     def feature_names(self) -> list[str]:
         """Human-readable names of the per-AGV block, then of the globals."""
-        names = ["x", "y", "vx", "vy", "ux_prev", "uy_prev", "ex", "ey", "evx", "evy", "eux", "euy"]
-        for i in range(self.window):
-            names += [f"ref{i}_dx", f"ref{i}_dy", f"ref{i}_vx", f"ref{i}_vy", f"ref{i}_ax", f"ref{i}_ay"]
-        names += ["rel_drone_x", "rel_drone_y", "outage_prob", "delivered", "power_frac"]
-        return names + ["drone_x", "drone_y", "time_frac"]
+        names = []
+        for name, entries in self.AGV_FEATURES:
+            repeats = range(self.window) if name == "reference" else [None]
+            names += [e.format(i=i) for i in repeats for e in entries]
+        return names + list(self.GLOBAL_FEATURES)
 
     #: :meth:`encode` precomputes a fixed path set's windows for the whole episode up to this
     #: size (float32 bytes), and gathers them per step beyond it.
@@ -392,9 +420,8 @@ class ObservationLayout:
         out = np.empty((sim.num_envs, self.size), np.float32)
         # the table's features need clipping only where they exceed the bound (it is built once)
         _encode_rows(out, table, st.slot, st.x_obs, st.error_obs, st.drone_position, st.last_outage_probability,
-                     st.last_delivered, st.last_power_w, st.reference, self.num_slots, self._scales, self.agv_features,
-                     self.slices["reference"].start, np.inf if bound is None else bound,
-                     bound is not None and self._table_peak > bound)
+                     st.last_delivered, st.last_power_w, st.reference, self._codec, self.num_slots,
+                     np.inf if bound is None else bound, bound is not None and self._table_peak > bound)
         return out
 
     def _slot_table(self, shared: np.ndarray | None) -> np.ndarray | None:
@@ -411,8 +438,7 @@ class ObservationLayout:
         windows = self.reference_windows(shared)  # (K, slots, 6W)
         rows = np.zeros((slots, self.size), dtype=np.float32)
         k, f = self.num_agvs, self.agv_features
-        w0, w1 = self.slices["reference"].start, self.slices["reference"].stop
-        rows[:, : k * f].reshape(slots, k, f)[..., w0:w1] = windows.transpose(1, 0, 2)
+        rows[:, : k * f].reshape(slots, k, f)[..., self.slices["reference"]] = windows.transpose(1, 0, 2)
         rows[:, -1] = np.arange(slots) / self.num_slots
         self._table_key, self._table, self._table_peak = shared, rows, float(np.abs(rows).max())
         return rows
@@ -430,8 +456,8 @@ class ObservationLayout:
         if obs.shape != (self.size,):
             raise ValueError(f"observation has shape {obs.shape}; expected ({self.size},)")
         blocks = self.agv_blocks(obs)
-        x_aug = blocks[:, 0:6] / self._state_scale + self._state_shift
-        error = blocks[:, 6:12] / self._ref_scale
+        x_aug = blocks[:, self.slices["state"]] / self._state_scale + self._state_shift
+        error = blocks[:, self.slices["error"]] / self._ref_scale
         win = blocks[:, self.slices["reference"]].reshape(self.num_agvs, self.window, 6) / self._ref_scale
         win[:, :, 0:2] += (x_aug[:, 0:2] - error[:, 0:2])[:, None, :]  # + reference position at slot n
         k = self.num_agvs * self.agv_features
