@@ -596,7 +596,7 @@ class Simulation:
         self.state, record = step(self.params, self.state, decisions, draws)
         return record
 
-    def keep(self, before: SimState, rows: np.ndarray) -> None:
+    def revert_rows(self, before: SimState, rows: np.ndarray) -> None:
         """Put the scenarios ``rows`` (a mask) back to ``before``, the state a :meth:`step` started
         from (a vector env's restarted scenarios, whose slot did not happen). The current state's
         arrays are the step's own (new ones), so ``before`` is unchanged."""

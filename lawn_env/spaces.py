@@ -17,7 +17,7 @@ followed by 3 global features (see :meth:`ObservationLayout.feature_names`).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import gymnasium as gym
 import numba
@@ -32,6 +32,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ObservationLayout",
+    "SlotTable",
     "ActionCodec",
     "DirectActions",
     "ACTION_LIMITS",
@@ -306,6 +307,13 @@ def _clip32(v, b32):  # pragma: no cover - compiled
     return v
 
 
+class SlotTable(NamedTuple):
+    """:meth:`ObservationLayout.slot_table`'s rows and their largest magnitude."""
+
+    rows: np.ndarray
+    peak: float
+
+
 class ObservationLayout:
     """The observation vector of the central environments, and its inverse.
 
@@ -365,8 +373,6 @@ class ObservationLayout:
         self._ref_scale = np.array([1 / POSITION_ERROR_SCALE_M] * 2 + [1 / VELOCITY_SCALE_MPS] * 2 + [1 / self.accel_max] * 2)
         self._state_scale = np.concatenate([1 / self.half_extent, [1 / VELOCITY_SCALE_MPS] * 2, [1 / self.accel_max] * 2])
         self._state_shift = np.concatenate([self.center, np.zeros(4)])
-        self._table_key = self._table = None
-        self._table_peak = 0.0
         self._no_table = np.zeros((1, self.size), dtype=np.float32)
         starts = {n: (v.start if isinstance(v, slice) else v) for n, v in self.slices.items()}
         self._codec = np.array([(*starts.values(), self.agv_features, self.window, self._state_scale,
@@ -402,36 +408,31 @@ class ObservationLayout:
         win *= self._ref_scale
         return win.reshape(win.shape[:-2] + (-1,))
 
-    def encode(self, sim: Simulation, bound: float | None = None) -> np.ndarray:
+    def encode(self, sim: Simulation, bound: float | None = None, table: SlotTable | None = None) -> np.ndarray:
         """Observations of every scenario of a :class:`~lawn_env.core.Simulation` at its current
         slot: (B, size) float32, each feature computed in float64 and rounded once, then, with
         ``bound``, clipped to ``[-bound, bound]`` in float32 (what
         :meth:`RLInterface.observe <lawn_env.interface.RLInterface.observe>` does to an
-        observation). A fixed path set shares one precomputed float32 table of the slot-dependent
-        features (the reference windows and slot n / N) while it stays under
-        ``batch_window_table_bytes``: a step copies one table row per scenario and writes the
-        state-dependent features over it; otherwise (random paths) the compiled loop computes the
-        windows from each scenario's reference as :meth:`scaled_windows` does (its oracle)."""
+        observation). With ``table``, the :meth:`slot_table` of the simulation's fixed path set, a
+        step copies one table row per scenario and writes the state-dependent features over it;
+        without it the compiled loop computes the reference windows from each scenario's reference
+        as :meth:`scaled_windows` does (its oracle): the same observations."""
         st = sim.state
-        shared = sim.params.fixed_reference
-        table = self._table if shared is not None and shared is self._table_key else self._slot_table(shared)
-        if table is None:
-            table = self._no_table  # the windows are computed in the compiled loop
         out = np.empty((sim.num_envs, self.size), np.float32)
-        # the table's features need clipping only where they exceed the bound (it is built once)
-        _encode_rows(out, table, st.slot, st.x_obs, st.error_obs, st.drone_position, st.last_outage_probability,
+        rows, peak = (self._no_table, 0.0) if table is None else table
+        _encode_rows(out, rows, st.slot, st.x_obs, st.error_obs, st.drone_position, st.last_outage_probability,
                      st.last_delivered, st.last_power_w, st.reference, self._codec, self.num_slots,
-                     np.inf if bound is None else bound, bound is not None and self._table_peak > bound)
+                     np.inf if bound is None else bound,
+                     bound is not None and peak > bound)  # the table's features clipped only where they exceed it
         return out
 
-    def _slot_table(self, shared: np.ndarray | None) -> np.ndarray | None:
-        """(slots, size) float32 rows holding the features that depend only on the slot for the
-        fixed path set ``shared`` (K, T, 6): reference windows and slot n / N; None for random
-        paths or when over ``batch_window_table_bytes``."""
+    def slot_table(self, shared: np.ndarray | None) -> SlotTable | None:
+        """The features that depend only on the slot for the fixed path set ``shared`` (K, T, 6)
+        (``SimParams.fixed_reference``), reference windows and slot n / N, as (slots, size)
+        float32 rows (:meth:`encode` takes them); None for random paths or when over
+        ``batch_window_table_bytes``."""
         if shared is None:
             return None
-        if self._table_key is shared:
-            return self._table
         slots = shared.shape[1] - self.window + 1
         if slots * self.size * 4 > self.batch_window_table_bytes:
             return None
@@ -440,8 +441,7 @@ class ObservationLayout:
         k, f = self.num_agvs, self.agv_features
         rows[:, : k * f].reshape(slots, k, f)[..., self.slices["reference"]] = windows.transpose(1, 0, 2)
         rows[:, -1] = np.arange(slots) / self.num_slots
-        self._table_key, self._table, self._table_peak = shared, rows, float(np.abs(rows).max())
-        return rows
+        return SlotTable(rows, float(np.abs(rows).max()))
 
     def agv_blocks(self, obs: np.ndarray) -> np.ndarray:
         """(K, agv_features) view of the per-AGV part."""

@@ -242,6 +242,35 @@ def test_comm_env_applies_the_mpc_first_increment():
         assert info["mpc_fallbacks"] == 0
 
 
+@pytest.mark.parametrize("env_id", ["lawn/Comm-v0", "lawn/CommRL-v0"])
+def test_under_measurement_noise_the_comm_mpc_plans_from_the_measured_state(env_id):
+    """The MPC that drives the AGVs plans from what a planner on the drone has, the measured state
+    (the snapshot's), and is the RL interface's anchor MPC (one per env): its increments are an
+    independent MPC's from the snapshot, not from the true state, which differs by the noise."""
+    from lawn_env.mpc import OutageAwareMPC
+
+    noise = {"measurement_noise_position_m": 0.5, "measurement_noise_velocity_mps": 0.2}
+    env = gym.make(env_id, disturbance=noise).unwrapped
+    env.reset(seed=3)
+    anchor = env.actions.mpc
+    assert (anchor is env.mpc) if env_id == "lawn/CommRL-v0" else anchor is None
+    independent = OutageAwareMPC.from_config(env.config, backend="daqp")
+    codec = lawn_env.action_codec(env.config, "comm", env.interface)  # its own MPC, warm-started apart
+    rng = np.random.default_rng(3)
+    for _ in range(10):
+        snap = env.snapshot()
+        assert not np.allclose(snap.x_aug, env.sim.x_aug)  # the noise is there
+        a = rng.uniform(-1, 1, env.action_space.shape).astype(np.float32)
+        decision = codec.decode(a, snap.x_aug, snap.reference, snap.drone_position, snap.slot)
+        psi = env.sim.planning_link.success_sq(decision.power_w, env.sim.planning_link.distance_sq(
+            decision.drone_next, snap.x_aug[:, 0:2]))
+        expected = independent.solve(snap.x_aug, snap.reference, psi, snap.slot).increments[:, 0]
+        _, _, _, _, info = env.step(a)
+        np.testing.assert_allclose(info["success_probability_planned"], psi, rtol=1e-6)  # the stakes' QPs
+        applied = np.where(info["delivered"][:, None], expected, 0.0)
+        np.testing.assert_allclose(info["applied_increment"], applied, atol=1e-6)
+
+
 def test_ce_error_raises_outage():
     base = gym.make("lawn/Joint-v0", channel={"rate_threshold_bps_hz": 1.0}).unwrapped
     ce = gym.make("lawn/Joint-v0", channel={"rate_threshold_bps_hz": 1.0, "ce_error_var": 0.05}).unwrapped

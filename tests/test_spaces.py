@@ -85,7 +85,8 @@ def test_encode_equals_its_numpy_oracle_bit_for_bit(num_agvs, bound):
         sim.step(decisions, sim.draw(draws))
         sim.state.slot[:] = np.arange(5) + t  # scenarios at different slots
     layout = ObservationLayout(cfg)
-    obs = layout.encode(sim, bound)
+    table = layout.slot_table(sim.params.fixed_reference)  # None for random paths
+    obs = layout.encode(sim, bound, table)
     k, f, win = num_agvs, layout.agv_features, layout.slices["reference"]
     expected = np.empty_like(obs)
     expected[:, : k * f].reshape(5, k, f)[..., win] = layout.scaled_windows(sim.reference_windows())
@@ -97,7 +98,8 @@ def test_encode_equals_its_numpy_oracle_bit_for_bit(num_agvs, bound):
     windows[:, : k * f].reshape(5, k, f)[..., win] = True
     windows[:, -1] = True
     assert np.array_equal(obs[windows], expected[windows])
-    untabled = ObservationLayout(cfg)
-    untabled.batch_window_table_bytes = 0  # no table: every feature from the compiled loop
-    assert untabled._slot_table(sim.params.fixed_reference) is None
-    assert np.array_equal(untabled.encode(sim, bound), obs)
+    assert (table is None) == (num_agvs > 4)
+    assert np.array_equal(layout.encode(sim, bound), obs)  # no table: every feature from the compiled loop
+    small = ObservationLayout(cfg)
+    small.batch_window_table_bytes = 0
+    assert small.slot_table(sim.params.fixed_reference) is None

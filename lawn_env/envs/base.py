@@ -25,7 +25,7 @@ from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
 from ..spaces import ObservationLayout, check_action
 
-__all__ = ["Engine", "EngineAccess", "JointRole", "CommRole", "ROLES", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS"]
+__all__ = ["Engine", "EngineAccess", "JointRole", "CommRole", "ROLE_TYPES", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS"]
 
 
 #: The info keys every step and reset of the central environments (and the parallel env's "drone")
@@ -42,72 +42,82 @@ class JointRole:
     name = "joint"
     info_keys: tuple[str, ...] = ()
 
-    def __init__(self, config: ScenarioConfig, qp_backend: str = DEFAULT_BACKEND):
-        del config, qp_backend  # nothing to build
+    def __init__(self, mpc: OutageAwareMPC | None = None):
+        del mpc  # nothing plans for the AGVs
 
     def reset(self, which: np.ndarray | None = None) -> None:
         """New episodes for the scenarios ``which`` (all when None)."""
 
-    def decide(self, engine: Engine, decision: Decisions, windows: np.ndarray | None) -> tuple[Decisions, dict]:
+    def decide(self, sim: Simulation, decision: Decisions, windows: np.ndarray | None) -> tuple[Decisions, dict]:
         """The slot's decisions for the decoded actions (they are), and the role's info keys."""
         return decision, {}
 
-    def reset_info(self, engine: Engine) -> dict:
+    def reset_info(self, sim: Simulation) -> dict:
         return {}
 
 
 class CommRole:
     """``lawn/Comm-v0``'s role: the actions decide the powers and the drone; every AGV's increment
     is the first one of the outage-aware MPC (QP P3) at its link's planned success probability,
-    solved for all B x K links at once (the compiled exact solver, warm-started per scenario)."""
+    solved for all B x K links at once (the compiled exact solver, warm-started per scenario).
+
+    The MPC plans from the state a planner on the drone has, the measured one (``x_obs``: the
+    snapshot's, every expert's; the true state without measurement noise), as does the RL
+    interface's anchor, which shares this MPC (one per env)."""
 
     name = "comm"
     info_keys = COMM_INFO_KEYS
 
-    def __init__(self, config: ScenarioConfig, qp_backend: str = DEFAULT_BACKEND):
-        self.mpc = OutageAwareMPC.from_config(config, backend=qp_backend)
+    def __init__(self, mpc: OutageAwareMPC):
+        self.mpc = mpc
         self.last_solve_time_s = float("nan")
 
     def reset(self, which: np.ndarray | None = None) -> None:
         self.mpc.reset(which)  # a new episode starts without the old one's warm starts
 
-    def decide(self, engine: Engine, decision: Decisions, windows: np.ndarray | None) -> tuple[Decisions, dict]:
-        sim = engine.sim
-        psi = link_success(sim.x_aug, decision.drone_next, decision.power_w, sim.params.planning_link)
-        solution = self.mpc.solve(sim.x_aug, windows, psi, sim.slot)
+    def decide(self, sim: Simulation, decision: Decisions, windows: np.ndarray | None) -> tuple[Decisions, dict]:
+        psi = link_success(sim.x_obs, decision.drone_next, decision.power_w, sim.params.planning_link)
+        solution = self.mpc.solve(sim.x_obs, windows, psi, sim.slot)
         self.last_solve_time_s = solution.solve_time_s  # not in info: infos must be deterministic
         extra = {"mpc_iterations": solution.iterations.astype(np.int64),
                  "mpc_fallbacks": np.count_nonzero(solution.status, axis=-1).astype(np.int64),
                  "success_probability_planned": np.asarray(psi, dtype=np.float64)}
         return Decisions(solution.increments[..., 0, :], decision.power_w, decision.drone_next), extra
 
-    def reset_info(self, engine: Engine) -> dict:
-        sim = engine.sim
+    def reset_info(self, sim: Simulation) -> dict:
         b, k = sim.num_envs, sim.num_agvs
         return {"mpc_iterations": np.zeros((b, k), dtype=np.int64), "mpc_fallbacks": np.zeros(b, dtype=np.int64),
-                "success_probability_planned": link_success(sim.x_aug, sim.drone_position, sim.last_power_w,
+                "success_probability_planned": link_success(sim.x_obs, sim.drone_position, sim.last_power_w,
                                                             sim.params.planning_link)}
 
 
-ROLES = {"joint": JointRole, "comm": CommRole}
+#: The roles by name: what the actions decide (:data:`lawn_env.spaces.ROLES`).
+ROLE_TYPES = {"joint": JointRole, "comm": CommRole}
 
 
 class Engine:
-    """B scenarios of one config, one role and one interface, stepped together (module docstring)."""
+    """B scenarios of one config, one role and one interface (module docstring). A step is its
+    named steps in order, which every view runs: :meth:`decide` (decode the actions; the role
+    decides the rest), :meth:`simulate` (one slot of the core), :meth:`observe`, :meth:`outcome`
+    (rewards, termination, truncation) and :meth:`info`."""
 
     def __init__(self, config: ScenarioConfig, role: str, interface: InterfaceLike = None, num_envs: int = 1,
                  qp_backend: str = DEFAULT_BACKEND):
-        if role not in ROLES:
-            raise ValueError(f"role={role!r}; valid: {', '.join(ROLES)}")
+        if role not in ROLE_TYPES:
+            raise ValueError(f"role={role!r}; valid: {', '.join(ROLE_TYPES)}")
         self.config = config
         self.interface: RLInterface = resolve_interface(interface)
         self.sim = Simulation(config, num_envs)
         self.num_envs = self.sim.num_envs
         self.layout = ObservationLayout(config)
         self.actions = action_codec(config, role, self.interface, mpc_backend=qp_backend)
-        self.role = ROLES[role](config, qp_backend)
-        self._windows = role == "comm" or self.actions.needs_reference
-        self._never = np.zeros(self.num_envs, dtype=bool)
+        mpc = None
+        if role == "comm":  # one MPC per env: the anchor's when it has one
+            mpc = self.actions.mpc or OutageAwareMPC.from_config(config, backend=qp_backend)
+        self.role = ROLE_TYPES[role](mpc)
+        self.needs_windows = role == "comm" or self.actions.needs_reference
+        self.slot_table = self.layout.slot_table(self.sim.params.fixed_reference)
+        self._no_termination = np.zeros(self.num_envs, dtype=bool)
 
     def reset(self, rngs: Sequence[np.random.Generator], which: np.ndarray | None = None) -> None:
         """New episodes for the scenarios ``which`` (all when None), scenario i from ``rngs[i]``."""
@@ -119,13 +129,16 @@ class Engine:
         """The batch's actions checked (:func:`~lawn_env.spaces.check_action`), (B, size) float64."""
         return check_action(actions, self.actions.size, name, self.num_envs)
 
-    def step(self, actions: np.ndarray, draws: SlotDraws) -> tuple[SlotRecord, dict]:
-        """One slot of every scenario for checked actions (B, size): the record and the role's info."""
+    def decide(self, actions: np.ndarray) -> tuple[Decisions, dict]:
+        """The slot's decisions of every scenario for checked actions (B, size), and the role's info."""
         sim = self.sim
-        windows = sim.reference_windows() if self._windows else None
+        windows = sim.reference_windows() if self.needs_windows else None
         decision = self.actions.decode(actions, sim.x_obs, windows, sim.drone_position, sim.slot)
-        decisions, extra = self.role.decide(self, decision, windows)
-        return sim.step(decisions, draws), extra
+        return self.role.decide(sim, decision, windows)
+
+    def simulate(self, decisions: Decisions, draws: SlotDraws) -> SlotRecord:
+        """One slot of every scenario with the slot's draws."""
+        return self.sim.step(decisions, draws)
 
     def outcome(self, costs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rewards for the slot's stage costs (B, M) (M = 1 for the central envs, 1 + K for the
@@ -137,7 +150,7 @@ class Engine:
         reward = iface.rewards_from_costs(costs)
         ended = sim.state.slot >= sim.num_slots
         if iface.termination_distance_m is None:
-            return reward, self._never, ended
+            return reward, self._no_termination, ended
         terminated = iface.terminates(sim.state.tracking_error[..., 0:2])
         if terminated.any():
             reward[terminated] += iface.terminal_penalties(sim.num_slots - sim.state.slot[terminated])[:, None]
@@ -153,7 +166,7 @@ class Engine:
         if record is None:
             costs = np.zeros((self.num_envs, 3))
             applied = np.zeros((self.num_envs, self.sim.num_agvs, 2))
-            extra = self.role.reset_info(self)
+            extra = self.role.reset_info(self.sim)
         else:
             costs, applied = record.costs, record.applied_increment
         at = slice(None) if i is None else i
@@ -174,7 +187,7 @@ class Engine:
 
     def observe(self) -> np.ndarray:
         """Every scenario's observation as the agent sees it (B, size) float32."""
-        return self.layout.encode(self.sim, self.interface.obs_bound)
+        return self.layout.encode(self.sim, self.interface.obs_bound, self.slot_table)
 
 
 class EngineAccess:
@@ -224,12 +237,11 @@ class EngineView(EngineAccess):
         self.engine.reset([rng])
         self.trail.restart()
 
-    def _advance(self, action: np.ndarray) -> tuple[SlotRecord, dict]:
-        """One slot for a checked action (size,), the slot's draws from the env's own generator."""
-        engine = self.engine
-        record, extra = engine.step(action[None], engine.sim.draw(self.np_random))
+    def _simulate(self, decisions: Decisions) -> SlotRecord:
+        """One slot with the slot's draws from the env's own generator, recorded in the trail."""
+        record = self.engine.simulate(decisions, self.engine.sim.draw(self.np_random))
         self.trail.record()
-        return record, extra
+        return record
 
     def snapshot(self) -> Snapshot:
         """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
@@ -297,7 +309,9 @@ class LawnEnvBase(EngineView, gym.Env):
         if self._done:
             raise RuntimeError("the episode has ended (or reset() was never called); call reset() before step()")
         engine = self.engine
-        record, extra = self._advance(check_action(action, self.actions.size))
+        decisions, extra = engine.decide(check_action(action, self.actions.size)[None])
+        record = self._simulate(decisions)
+        obs = engine.observe()[0]
         reward, terminated, truncated = engine.outcome(record.stage_cost)
         terminated, truncated = bool(terminated[0]), bool(truncated[0])
         info = engine.info(record, extra, i=0)
@@ -306,7 +320,7 @@ class LawnEnvBase(EngineView, gym.Env):
             info["episode_metrics"] = self.sim.episode_metrics()
         if self.render_mode == "human":
             self.render()
-        return engine.observe()[0], float(reward[0, 0]), terminated, truncated, info
+        return obs, float(reward[0, 0]), terminated, truncated, info
 
     # ------------------------------------------------------------------ extras
     def episode_metrics(self) -> dict:

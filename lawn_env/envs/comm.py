@@ -14,7 +14,8 @@ class CommEnv(LawnEnvBase):
     The communication-resource problem of the paper: every slot the agent chooses the split of
     the power budget over the K links and the drone's move. Each AGV is driven by the
     outage-aware MPC of MODEL.md §3: the QP P3 with the success probability psi_k of its link
-    at the chosen power and drone position, solved exactly (the compiled dual active-set solver
+    at the chosen power and drone position, planned from the measured state (what a planner on
+    the drone has; the true state without measurement noise), solved exactly (the compiled dual active-set solver
     of :mod:`lawn_env.qp`, warm-started per AGV). Its first increment is sent and arrives or
     not as in ``lawn/Joint-v0``. Good power and trajectory decisions raise psi where the MPC
     needs it.
@@ -66,12 +67,17 @@ class CommEnv(LawnEnvBase):
       env truncates itself); v0 observations saturate at ±1e6 (``OBS_LIMIT``, the space's
       bound); the dynamics and rewards are unchanged.
     * v0 (later): the MPC's QPs are solved by the compiled exact solver (``qp_backend="compiled"``,
-      the default; issue #22): the same decisions up to the solvers' rounding.
-    * v0 (later, issue #25): one compiled simulation core under every view, as ``lawn/Joint-v0``'s
+      the default): the same decisions up to the solvers' rounding.
+    * v0 (later): one compiled simulation core under every view, as ``lawn/Joint-v0``'s
       history says: this env's episodes bit for bit as before, ``episode_metrics`` summed slot by
       slot (within 1e-15 relative), the native vector env's slot randomness from one generator.
-    * v0 (later, issue #27): ``render()`` frames as ``lawn/Joint-v0``'s history says (a colour bar,
+    * v0 (later): ``render()`` frames as ``lawn/Joint-v0``'s history says (a colour bar,
       the running control cost, 512 x 448 pixels); episodes are unchanged.
+    * v0 (later): under measurement noise (the disturbance mode's ``measurement_noise_*``, as in
+      the ``disturbed`` preset) the MPC that drives the AGVs plans from the measured state, the
+      snapshot's, as every planner does (it planned from the true state before), and with
+      ``interface="rl"`` it is the anchor's MPC (one per env). Episodes with measurement noise
+      differ from before; every other episode is bit for bit as before.
     """
 
     role = "comm"

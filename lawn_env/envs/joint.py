@@ -87,14 +87,14 @@ class JointEnv(LawnEnvBase):
       env truncates itself); v0 observations saturate at ±1e6 (``OBS_LIMIT``, the space's
       bound); ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` gives the native
       vector env (:mod:`lawn_env.envs.vector`); the dynamics and rewards are unchanged.
-    * v0 (later, issue #25): every view (this env, ``lawn/Comm-v0``, the PettingZoo env, the native
+    * v0 (later): every view (this env, ``lawn/Comm-v0``, the PettingZoo env, the native
       vector envs) runs one compiled simulation core; this env's observations, rewards and infos
       are bit for bit as before for the same seed and actions, ``episode_metrics`` now accumulate
       slot by slot (equal to before within 1e-15 relative). The native vector env draws every
       scenario's slot randomness from one generator (the env's, scenario 0's), so with N > 1 its
       episodes differ from before for the same seed (N = 1 equals this env bit for bit), and its
       infos gain ``episode_metrics`` on the step an episode ends.
-    * v0 (later, issue #27): ``render()`` frames (every view) gain a colour bar of the links' outage
+    * v0 (later): ``render()`` frames (every view) gain a colour bar of the links' outage
       probability (now green to red) and the episode's control cost so far in the title, at
       512 x 448 pixels (480 x 480 before); ``lawn render`` writes an episode of them as an
       animation. Episodes are unchanged.

@@ -68,9 +68,9 @@ class LawnParallelEnv(EngineView, ParallelEnv):
     * v0: initial version; the ``interface`` keyword (opt-in) added later.
     * v0 (later): infos share one flat schema at reset and every step (``reward_tracking`` and
       ``reward_effort`` replace the nested ``reward_terms``), as TorchRL's PettingZoo wrapper needs.
-    * v0 (later, issue #25): the one simulation core of the central environments; under the same
+    * v0 (later): the one simulation core of the central environments; under the same
       decisions the drone's observations, rewards and infos equal ``lawn/Joint-v0``'s bit for bit.
-    * v0 (later, issue #27): ``render()`` frames as ``lawn/Joint-v0``'s history says (a colour bar,
+    * v0 (later): ``render()`` frames as ``lawn/Joint-v0``'s history says (a colour bar,
       the running control cost, 512 x 448 pixels).
     """
 
@@ -170,7 +170,8 @@ class LawnParallelEnv(EngineView, ParallelEnv):
         joint[2 * k :] = check_action(actions["drone"], k + 2, name="actions['drone']")
         for agent, i in self._agv_index.items():
             joint[2 * i : 2 * i + 2] = check_action(actions[agent], 2, name=f"actions[{agent!r}]")
-        record, extra = self._advance(joint)
+        decisions, extra = self.engine.decide(joint[None])
+        record = self._simulate(decisions)
         per_agv = record.tracking_cost[0] + record.effort_cost[0]
         costs = np.concatenate([record.costs[:, 2], per_agv])[None]
         agent_rewards, terminated, truncated = self.engine.outcome(costs)

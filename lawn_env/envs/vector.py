@@ -132,9 +132,10 @@ class JointVectorEnv(EngineAccess, VectorEnv):
             self._done = zeros
             return engine.observe(), np.zeros(self.num_envs), zeros, zeros.copy(), engine.info()
         before = sim.state
-        record, extra = engine.step(a, self._draw())
+        decisions, extra = engine.decide(a)
+        record = engine.simulate(decisions, self._draw())
         if restart.any():  # the restarted scenarios stay at their first slot, their warm starts cold
-            sim.keep(before, restart)
+            sim.revert_rows(before, restart)
             engine.actions.reset(restart)
             engine.role.reset(restart)
         if self.trail is not None and not restart[self.render_env]:
