@@ -8,8 +8,8 @@ interface's anchors, the stake prior and the tests call those):
 * :func:`link_argument`: the outage argument of Prop. 1,
   ``x = m G_th (rho + d^2 sigma^2 / (alpha0 p)) / (1 - rho) = c_d d^2 / p + c_ce``;
 * :func:`outage_law`: the outage probability ``P = gammainc(m, x)`` (regularized lower incomplete
-  gamma: ``m |h|^2 ~ Gamma(m, 1)``), its complement ``psi = gammaincc(m, x)`` (accurate when tiny)
-  and its density ``-d psi / dx``;
+  gamma: ``m |h|^2 ~ Gamma(m, 1)``), its complement ``psi = gammaincc(m, x)`` (accurate when tiny),
+  its density ``-d psi / dx`` and its high-SNR order;
 * :func:`command_delivered`: a command arrives when ``m |h|^2 >= x`` (realized SNR >= G_th).
 
 All functions take *linear* quantities (power in W, gain as a ratio); the config's dB values are
@@ -56,6 +56,7 @@ __all__ = [
     "OUTAGE",
     "SUCCESS",
     "DENSITY",
+    "ORDER",
 ]
 
 
@@ -75,8 +76,9 @@ _GAMMALN = numba.types.ExternalFunction("lawn_scipy_gammaln", numba.types.float6
 llvmlite.binding.add_symbol("lawn_scipy_gammaln", get_cython_function_address("scipy.special.cython_special",
                                                                               "gammaln"))
 
-#: What :func:`outage_law` returns: the outage probability, the success probability, the density.
-OUTAGE, SUCCESS, DENSITY = 0, 1, 2
+#: What :func:`outage_law` returns: the outage probability, the success probability, the density,
+#: the high-SNR order.
+OUTAGE, SUCCESS, DENSITY, ORDER = 0, 1, 2, 3
 
 #: Powers are floored here before dividing; gammainc(m, x) is exactly 1.0 in double precision
 #: at that floor for any geometry, so p = 0 means outage probability 1 without inf/NaN.
@@ -103,11 +105,15 @@ def outage_law(m: float, x: float, part: int) -> float:  # pragma: no cover - co
     """The outage law of one link at the outage argument x (Prop. 1): ``part`` OUTAGE gives
     ``P = Pr(m |h|^2 < x) = gammainc(m, x)``, SUCCESS psi = 1 - P = gammaincc(m, x) (accurate when
     psi is tiny, where 1 - P has no digits left), DENSITY -d psi / dx = x^(m-1) e^(-x) / Gamma(m)
-    (in log form, accurate for large x). The three are one law: they change together."""
+    (in log form, accurate for large x), ORDER the exponent a of its high-SNR form P ∝ x^a
+    (P ~ x^m / Gamma(m+1) as x -> 0: the diversity order m, which the stake prior's closed form
+    uses). The four are one law: they change together."""
     if part == OUTAGE:
         return _GAMMAINC(m, x)
     if part == SUCCESS:
         return _GAMMAINCC(m, x)
+    if part == ORDER:
+        return m
     log_x = 0.0 if m == 1.0 else (m - 1.0) * math.log(x)
     return math.exp(log_x - x - _GAMMALN(m))
 
@@ -230,11 +236,11 @@ class LinkParams:
 
     def stake_power_weights(self, stake: np.ndarray, distance_sq_m2: np.ndarray) -> np.ndarray:
         """The power split that minimizes the expected loss ``sum_k w_k P_k`` over a fixed budget in
-        the high-SNR regime of :func:`outage_law`, ``P ∝ x^m ∝ (d^2 / p)^m``: the Lagrange condition
-        gives ``p_k ∝ (w_k d_k^(2m))^(1/(m+1))``. Weights (..., K) for stakes ``w`` > 0 and squared
-        distances (..., K), computed in logs (``d^(2m)`` overflows for large m) and scaled so that
-        the largest is 1."""
-        m = self.m
+        the high-SNR regime of :func:`outage_law`, ``P ∝ x^a ∝ (d^2 / p)^a`` (a its ORDER, m for
+        Nakagami-m): the Lagrange condition gives ``p_k ∝ (w_k d_k^(2a))^(1/(a+1))``. Weights
+        (..., K) for stakes ``w`` > 0 and squared distances (..., K), computed in logs (``d^(2a)``
+        overflows for large a) and scaled so that the largest is 1."""
+        m = outage_law(float(self.m), 0.0, ORDER)
         log_w = (np.log(stake) + m * np.log(distance_sq_m2)) / (m + 1.0)
         return np.exp(log_w - log_w.max(axis=-1, keepdims=True))
 

@@ -1,0 +1,125 @@
+"""Each equation in one place: an edit of one function reaches every env, planner and prior.
+
+A copy of the package with two one-function edits, the outage law (:func:`lawn_env.channel.outage_law`:
+the argument doubled and the high-SNR order raised by one) and the AGV transition
+(:func:`lawn_env.dynamics.agv_matrices`: the velocity damped), runs in a fresh process beside the
+package itself; the test checks that the environments, the Comm MPC, the experts' link model,
+the RL interface's prior and the prediction model all changed as the edits say, and nothing else
+had to be touched. (Compiled code binds the functions it calls when it compiles, so the edit is
+made to the source, as a researcher would make it, and the copy compiles afresh.)
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import special
+
+ROOT = Path(__file__).resolve().parent.parent
+
+PROBE = r'''
+import json, sys
+import numpy as np, gymnasium as gym
+import lawn_env
+from lawn_env import action_codec, presets
+from lawn_env.channel import LinkParams
+from lawn_env.dynamics import PredictionModel
+from agents import make_policy
+
+cfg = presets.get("default")
+out = {"origin": lawn_env.__file__}
+env = gym.make("lawn/Joint-v0").unwrapped
+env.reset(seed=1)
+snap = env.snapshot()
+action = np.linspace(-0.5, 0.5, env.action_space.shape[0]).astype(np.float32)
+_, _, _, _, info = env.step(action)
+link = LinkParams.from_config(cfg)
+d2 = link.distance_sq(info["drone_position"], snap.x_aug[:, 0:2])
+out["x"] = link.outage_argument_sq(info["power_w"], d2).tolist()
+out["outage"] = info["outage_probability"].tolist()
+out["x_before"], out["x_after"] = snap.x_aug.tolist(), env.sim.x_aug.tolist()
+out["applied"] = info["applied_increment"].tolist()
+out["a_aug"] = PredictionModel.from_config(cfg).a_aug.tolist()
+out["lqr_gain"] = PredictionModel.from_config(cfg).lqr_gain.tolist()
+
+comm = gym.make("lawn/Comm-v0").unwrapped
+comm.reset(seed=1)
+snap = comm.snapshot()
+_, _, _, _, info = comm.step(np.zeros(6, dtype=np.float32))
+planning = LinkParams.from_config(cfg, planning=True)
+d2 = planning.distance_sq(info["drone_position"], snap.x_aug[:, 0:2])
+out["comm_x"] = planning.outage_argument_sq(info["power_w"], d2).tolist()
+out["comm_psi"] = info["success_probability_planned"].tolist()
+out["comm_prediction"] = comm.mpc.model.c[6:12].tolist()
+
+codec = action_codec(cfg, "comm", "rl")
+data = codec.mpc.prepare(snap.x_aug, snap.reference, snap.slot)
+out["stakes"] = codec.mpc.command_stakes(data).tolist()
+out["prior_d2"] = planning.distance_sq(snap.drone_position, snap.x_aug[:, 0:2]).tolist()
+out["prior"] = codec.power_prior(snap.x_aug, snap.drone_position, data).tolist()
+
+policy = make_policy("rg-mpc", cfg)
+policy.reset(seed=0)
+plan = policy.plan(snap)
+out["rg_power"] = plan.power_w.tolist()
+print(json.dumps(out))
+'''
+
+EDITS = {
+    "lawn_env/channel.py": ('    uses). The four are one law: they change together."""\n',
+                            '    uses). The four are one law: they change together."""\n'
+                            '    if part == ORDER:\n        return m + 1.0\n    x = 2.0 * x\n'),
+    "lawn_env/dynamics.py": ("    a[0, 2] = a[1, 3] = dt\n", "    a[0, 2] = a[1, 3] = dt\n    a[2, 2] = a[3, 3] = 0.9\n"),
+}
+
+
+def _probe(tree: Path, cache: Path | None = None) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    if cache is not None:  # the copy compiles afresh, its cache apart from the package's
+        env["NUMBA_CACHE_DIR"] = str(cache)
+    done = subprocess.run([sys.executable, "-c", PROBE], env=env, cwd=tree, capture_output=True, text=True,
+                          timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    assert out["origin"].startswith(str(tree))
+    return {k: np.asarray(v) for k, v in out.items() if k != "origin"}
+
+
+@pytest.mark.slow
+def test_one_function_edits_reach_every_env_planner_and_prior(tmp_path):
+    copy = tmp_path / "edited"
+    for package in ("lawn_env", "agents"):
+        shutil.copytree(ROOT / package, copy / package, ignore=shutil.ignore_patterns("__pycache__"))
+    for path, (old, new) in EDITS.items():
+        source = (copy / path).read_text()
+        assert source.count(old) == 1, path
+        (copy / path).write_text(source.replace(old, new))
+    base = _probe(ROOT)
+    edited = _probe(copy, tmp_path / "numba-edited")
+    m = 2.0  # the default Nakagami m
+
+    # the outage law: the simulator's outage, the Comm MPC's planned psi, the experts' and the prior
+    np.testing.assert_array_equal(base["outage"], special.gammainc(m, base["x"]))
+    np.testing.assert_array_equal(edited["outage"], special.gammainc(m, 2.0 * edited["x"]))
+    np.testing.assert_array_equal(base["comm_psi"], special.gammaincc(m, base["comm_x"]))
+    np.testing.assert_array_equal(edited["comm_psi"], special.gammaincc(m, 2.0 * edited["comm_x"]))
+    for out, order in ((base, m), (edited, m + 1.0)):
+        log_w = (np.log(out["stakes"]) + order * np.log(out["prior_d2"])) / (order + 1.0)
+        np.testing.assert_allclose(out["prior"], np.exp(log_w - log_w.max()), rtol=1e-12)
+    assert not np.allclose(base["rg_power"], edited["rg_power"], rtol=1e-3)  # rg-mpc plans with the new law
+
+    # the transition: the simulator, the prediction model, the LQR gain and the Comm MPC
+    a_edited = edited["a_aug"]
+    assert a_edited[2, 2] == a_edited[3, 3] == 0.9 and base["a_aug"][2, 2] == 1.0
+    x, du = edited["x_before"], edited["applied"]
+    b_aug = np.vstack([[[0.125, 0], [0, 0.125], [0.5, 0], [0, 0.5]], np.eye(2)])  # B~ at the 0.5 s slot
+    np.testing.assert_allclose(edited["x_after"], x @ a_edited.T + du @ b_aug.T, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(base["x_after"], base["x_before"] @ base["a_aug"].T + base["applied"] @ b_aug.T,
+                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(edited["comm_prediction"], a_edited)
+    assert not np.allclose(base["lqr_gain"], edited["lqr_gain"])
