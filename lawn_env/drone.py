@@ -4,11 +4,11 @@ Per slot the drone moves at most V_max * Delta-tau and stays inside the area D:
 ``||q[n] - q[n-1]|| <= V_max Delta-tau`` and ``q[n] in D`` (paper, constraints of P1).
 
 One rule for one drone and for a batch of them: :func:`move_drone` takes positions and
-velocities with any leading axes, (2,) or (B, 2), and runs one compiled loop. Its arithmetic is
-the scalar rule the environments were first written with (CPython's ``math.hypot`` for the speed,
-``v * V_max / speed`` for the radial clip, then the area box), so every episode recorded with that
-rule replays bit for bit; :func:`hypot` is CPython's two-argument ``math.hypot`` (3.11), which a
-test checks against ``math.hypot`` itself.
+velocities with any leading axes, (2,) or (B, 2), and runs one compiled loop: the speed by
+CPython's ``math.hypot``, ``v * V_max / speed`` for the radial clip, then the area box. The
+speed's rounding decides whether a move is clipped, so :func:`hypot` reproduces CPython's
+two-argument ``math.hypot`` (3.11), which a test checks against ``math.hypot`` itself: a move
+computed in Python (a planner's) and in the kernel agree to the bit.
 """
 
 from __future__ import annotations

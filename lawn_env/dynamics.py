@@ -184,7 +184,8 @@ def planning_period(config: ScenarioSettings) -> int:
 class PredictionModel:
     """Everything the outage-aware MPC needs, built once per (slot, horizon, Q1, Q2).
 
-    Use :meth:`from_config`; instances are cached and shared (treat arrays as read-only).
+    Use :meth:`from_config`; instances are cached by those values (``key``) and shared (the arrays
+    are read-only).
     """
 
     slot_s: float
@@ -203,11 +204,17 @@ class PredictionModel:
     q4c: np.ndarray  # Q4 C, (6(N_p+1), 6)
     increment_sum: np.ndarray  # T, (2N_p, 2N_p)
     q1_tiled: np.ndarray  # diag(Q1) repeated N_p times: Q4's diagonal blocks, (6 N_p,)
+    key: tuple  # (slot_s, horizon, q1_diag, q2_diag): what the model is built from, its cache key
 
     @classmethod
     def from_config(cls, config: ScenarioSettings) -> PredictionModel:
         ctl = config.control
         return _build_model(float(config.slot_s), int(ctl.horizon), tuple(ctl.q1_diag), tuple(ctl.q2_diag))
+
+    @classmethod
+    def from_key(cls, key: tuple) -> PredictionModel:
+        """The model built from :attr:`key`'s values (slot_s, horizon, q1_diag, q2_diag)."""
+        return _build_model(*key)
 
     @property
     def num_inputs(self) -> int:
@@ -257,7 +264,7 @@ def _build_model(slot_s: float, horizon: int, q1_diag: tuple, q2_diag: tuple) ->
     )
     for arr in arrays.values():
         arr.setflags(write=False)
-    return PredictionModel(slot_s=slot_s, horizon=horizon, **arrays)
+    return PredictionModel(slot_s=slot_s, horizon=horizon, key=(slot_s, horizon, q1_diag, q2_diag), **arrays)
 
 
 def step_augmented(x_aug: np.ndarray, du: np.ndarray, a_aug: np.ndarray, b_aug: np.ndarray) -> np.ndarray:

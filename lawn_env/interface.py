@@ -25,16 +25,14 @@ accelerating; single slots cost up to 1e7), so every environment also takes
       high-SNR outage ``P_out ∝ (d^2 / p)^m`` the Lagrange condition gives
       ``prior_k = (w_k d_k^(2m))^(1/(m+1))``; stakes are floored at ``STAKE_FLOOR`` of their mean.
       An AGV far off its track gets the power it needs to be brought back, which the distance
-      prior does not give it (on 20 validation seeds the zero action costs +4.6 % of ``rg-mpc``,
-      paired per seed, worst seed +45 %, against +44 % and +453 % with the distance prior;
-      ``python benchmarks/anchors.py``).
+      prior does not give it (docs/rl.md compares the two zero actions: ``python benchmarks/anchors.py``).
 
     Increments (Joint): a residual ``a * residual_scale * Delta-a_max`` on the first increment
     of the outage-aware MPC at each link's planned success probability (the QP P3 that drives
     the AGVs of ``lawn/Comm-v0``, :class:`lawn_env.mpc.OutageAwareMPC`), clipped to the control
     set; or, with ``increment_anchor="lqr"``, on the LQR baseline's first increment (no QP: the
     from-scratch recipe's anchor, with the distance prior an interface without the expert's MPC).
-    (A cheaper anchor, the unconstrained MPC's linear gain saturated afterwards, costs 20x
+    (A cheaper anchor, the unconstrained MPC's linear gain saturated afterwards, costs many times
     the MPC even with perfect links: the reference paths ask for more than the AGVs' acceleration
     bounds at their corners, and only a controller that plans with the bounds takes them well.)
 
@@ -86,7 +84,7 @@ class RLInterface:
     reward: Literal["cost", "scaled"] = "cost"
     """``cost``: minus the stage cost (v0); ``scaled``: minus the clipped, scaled stage cost."""
     cost_scale: PositiveFloat = 10.0
-    """Stage-cost units per unit of reward (the experts spend about 12 per slot at the defaults)."""
+    """Stage-cost units per unit of reward (of the order of an expert's cost per slot at the defaults)."""
     cost_clip: PositiveFloat = 100.0
     """Stage cost counted at most per slot (reward floor ``-cost_clip / cost_scale``)."""
     termination_distance_m: PositiveFloat | None = None

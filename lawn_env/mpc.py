@@ -253,11 +253,11 @@ class OutageAwareMPC:
         self.backend = self._make_backend(backend)
         # increment bounds per slot phase: zero where move blocking holds the acceleration
         self._box_upper = np.stack([np.repeat(np.where(mask, self.accel_increment_max, 0.0), 2) for mask in masks])
-        self._last_data = None
+        self._last_bounds = None  # the reference backends' last bounds (their workspaces keep them)
 
     def _make_backend(self, name: str):
         if name == "compiled":
-            return _CompiledBackend(_pencils(self.model, self.control_period))
+            return _CompiledBackend(_pencils(self.model.key, self.control_period))
         return _reference_backend(name, self._constraint)
 
     def hessian(self, s: float) -> np.ndarray:
@@ -272,7 +272,7 @@ class OutageAwareMPC:
         state = self.__dict__.copy()
         if self.backend_name != "compiled":
             state["backend"] = None
-        state["_last_data"] = None
+        state["_last_bounds"] = None
         return state
 
     def __setstate__(self, state: dict) -> None:
@@ -297,7 +297,7 @@ class OutageAwareMPC:
                 self.backend.forget(rows, which.shape[0])
                 return
         self.backend = self._make_backend(self.backend_name)
-        self._last_data = None
+        self._last_bounds = None
 
     # ------------------------------------------------------------------ problem data
     def prepare(self, x_aug: np.ndarray, chi_ref: np.ndarray, slot: npt.ArrayLike | None = None) -> SlotData:
@@ -395,7 +395,7 @@ class OutageAwareMPC:
                 for i in np.flatnonzero(~settled).tolist():
                     z[i], fval[i], iterations[i], status[i] = self._fallback_solve(i, s[i], q[i], lower[i], upper[i])
         else:
-            z, fval, iterations, status = self._solve_each(data, s, q, lower, upper)
+            z, fval, iterations, status = self._solve_each(s, q, lower, upper)
         if self.control_period > 1:  # the blocked increments exactly zero (reference solvers return ~1e-14)
             z = np.clip(z, lower[:, :n], upper[:, :n])
         return MPCSolution(
@@ -406,11 +406,12 @@ class OutageAwareMPC:
             solve_time_s=time.perf_counter() - start,
         )
 
-    def _solve_each(self, data: SlotData, s, q, lower, upper):
+    def _solve_each(self, s, q, lower, upper):
         """The reference backends: one problem at a time, each with its own warm workspace."""
         count, n = q.shape
-        bounds_changed = data is not self._last_data
-        self._last_data = data
+        last = self._last_bounds
+        bounds_changed = last is None or not (np.array_equal(last[0], lower) and np.array_equal(last[1], upper))
+        self._last_bounds = (lower.copy(), upper.copy())
         z = np.empty((count, n))
         fval = np.empty(count)
         status = np.zeros(count, dtype=np.int8)
@@ -452,8 +453,10 @@ def _writable(arr: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=32)
-def _pencils(model: PredictionModel, period: int) -> AxisPencils:
-    """The per-axis pencils of a model (itself cached, compared by identity) and control period,
-    built once per pair and shared."""
+def _pencils(model_key: tuple, period: int) -> AxisPencils:
+    """The per-axis pencils of the prediction model built from ``model_key``
+    (:attr:`~lawn_env.dynamics.PredictionModel.key`) and a control period, built once per pair of
+    values and shared."""
+    model = PredictionModel.from_key(model_key)
     masks = [command_mask(phase, model.horizon, period) for phase in range(period)]
     return AxisPencils.build(2.0 * model.q5, 2.0 * model.ftq4f, model.horizon, masks)

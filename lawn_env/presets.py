@@ -65,10 +65,10 @@ register("short-blocklength", ScenarioConfig(channel=ChannelConfig(blocklength=1
 #: 1e-3 the cap meets the threshold and every policy loses most commands.
 register("imperfect-csi", ScenarioConfig(channel=ChannelConfig(ce_error_var=1e-4)))
 
-# Suite v2's tasks decided throughout (docs/model.md, "The task suite"): on the default task 91 % of
-# the cost falls in slots 0-9, the AGVs' recovery from their initial offsets while the drone flies
-# in from the area's edge. A steady start removes that transient: the drone starts at the area's
-# centre (above the fleet: the paper paths' starts average (91, 86) m) and every AGV on its reference.
+# Suite v2's tasks decided throughout (docs/model.md, "The task suite"): on the default task most of
+# the cost falls in the first slots, the AGVs' recovery from their initial offsets while the drone
+# flies in from the area's edge. A steady start removes that transient: the drone starts at the
+# area's centre (above the paper paths' starts) and every AGV on its reference.
 _STEADY = dict(drone=DroneConfig(start_m=(100.0, 100.0)), reference=ReferenceConfig(initial_offset_std_m=0.0))
 #: A steady start on the default scenario: the cost is the links' and the planner's, slot after slot.
 register("steady", ScenarioConfig(**_STEADY))
