@@ -421,7 +421,7 @@ def reset(params: SimParams, state: SimState, rngs: Sequence[np.random.Generator
     x_aug[idx] = initial_state(start, offsets, params.area_lo, params.area_hi)
     state.x_aug = x_aug
     state.tracking_error[idx] = x_aug[idx] - start
-    state.applied[idx] = x_aug[idx, :, 4:6]
+    state.applied[idx] = x_aug[idx, :, dynamics.ACCELERATION]
     if params.measurement_noise:
         state.x_obs, state.error_obs = state.x_obs.copy(), state.error_obs.copy()
         d = params.disturbance
@@ -731,5 +731,5 @@ class Trail:
         """Drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions of slots 0..n."""
         i, n = self.view.i, len(self._states)
         return {"drone_position": np.array([s.drone_position[i] for s in self._states]),
-                "agv_position": np.array([s.x_aug[i, :, 0:2] for s in self._states]),
-                "reference_position": np.swapaxes(self.view.reference[:, :n, 0:2], 0, 1)}
+                "agv_position": np.array([s.x_aug[i, :, POSITION] for s in self._states]),
+                "reference_position": np.swapaxes(self.view.reference[:, :n, POSITION], 0, 1)}

@@ -65,7 +65,7 @@ from .channel import LinkParams
 from .config import ScenarioConfig
 from .core import Decisions
 from .drone import toward
-from .dynamics import PredictionModel, saturate_increment
+from .dynamics import ACCELERATION, POSITION, PredictionModel, saturate_increment
 from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
 from .spaces import ActionCodec, DirectActions
 
@@ -240,7 +240,7 @@ class AnchoredActions(ActionCodec):
 
     def _decode_rows(self, actions, x_aug, reference, drone_position, slot) -> Decisions:
         k, comm = self.num_agvs, actions[:, self.increment_size :]
-        target = x_aug[..., 0:2].mean(axis=-2) + comm[:, k:] * self.interface.drone_offset_m
+        target = x_aug[..., POSITION].mean(axis=-2) + comm[:, k:] * self.interface.drone_offset_m
         drone_next = toward(drone_position, target, self._vmax, self._dt, self.area)
         return self._anchored(actions[:, : 2 * k], comm[:, :k], x_aug, reference, slot, drone_next)
 
@@ -272,7 +272,7 @@ class AnchoredActions(ActionCodec):
 
     def _distance_sq(self, x_aug: np.ndarray, drone_next: np.ndarray) -> np.ndarray:
         """d_k^2 from the drone's next position to the AGVs, (..., K)."""
-        return self._link.distance_sq(drone_next[..., None, :], x_aug[..., 0:2])
+        return self._link.distance_sq(drone_next[..., None, :], x_aug[..., POSITION])
 
     def power_prior(self, x_aug: np.ndarray, drone_next: np.ndarray, data: SlotData | None = None) -> np.ndarray:
         """The anchored power split's weights, (..., K) (any leading batch axes; the zero action's
@@ -304,9 +304,9 @@ class AnchoredActions(ActionCodec):
             if reference is None:
                 raise ValueError("the anchored joint actions of this interface (increment_anchor='lqr') track the "
                                  "reference: pass the reference window")
-            feedforward = reference[..., 1, 4:6] - reference[..., 0, 4:6]
+            feedforward = reference[..., 1, ACCELERATION] - reference[..., 0, ACCELERATION]
             free = feedforward - (x_aug - reference[..., 0, :]) @ self._lqr_model.lqr_gain.T
-            return saturate_increment(x_aug[..., 4:6], free, self._accel_max)
+            return saturate_increment(x_aug[..., ACCELERATION], free, self._accel_max)
         start = "stakes" if self._stake else None
         psi = self._link.success_sq(power_w, d2)
         return self.mpc.solve_prepared(data, psi, start_from=start).increments[..., 0, :].copy()
@@ -317,7 +317,7 @@ class AnchoredActions(ActionCodec):
         """The action (float32) that decodes to ``decision`` (nearest one, clipped, otherwise)."""
         power = np.asarray(decision.power_w, dtype=float)
         drone_next = np.asarray(decision.drone_next, dtype=float)
-        centroid = x_aug[:, 0:2].mean(axis=0)
+        centroid = x_aug[:, POSITION].mean(axis=0)
         target = drone_next
         move = drone_next - drone_position
         dist = math.hypot(*move.tolist())

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from .dynamics import PredictionModel, command_mask, planning_period
+from .dynamics import ACCELERATION, PredictionModel, command_mask, planning_period
 from .qp import AxisPencils
 
 if TYPE_CHECKING:
@@ -333,7 +333,7 @@ class OutageAwareMPC:
             pos = np.repeat(pos.reshape(-1, n), k, axis=0)
         upper[:, :n] = pos
         np.negative(upper[:, :n], out=lower[:, :n])
-        u_prev = np.tile(flat_x[:, 4:6], self.model.horizon)  # u[n-1] repeated over the horizon
+        u_prev = np.tile(flat_x[:, ACCELERATION], self.model.horizon)  # u[n-1] repeated over the horizon
         np.subtract(self.accel_max, u_prev, out=upper[:, n:])
         np.subtract(-self.accel_max, u_prev, out=lower[:, n:])
         shape = lead + (k,)

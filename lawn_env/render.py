@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .dynamics import POSITION
+
 if TYPE_CHECKING:
     from .config import ScenarioConfig
     from .core import ScenarioView, Trail
@@ -62,7 +64,7 @@ def _draw(ax, sim, trail, *, links: bool = True, trails: bool = True, title: str
     if trails and len(agv) > 1:
         for i in range(k):
             ax.plot(agv[:, i, 0], agv[:, i, 1], "-", color=palette[i], lw=1.4)
-    pos = sim.x_aug[:, 0:2]
+    pos = sim.x_aug[:, POSITION]
     ax.scatter(pos[:, 0], pos[:, 1], c=palette, s=30, zorder=3, label="AGVs")
     q = sim.drone_position
     trail = traj["drone_position"]

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..core import Decisions, ScenarioView, Simulation, SlotDraws, SlotRecord, Snapshot, Trail, link_success
 from ..config import ScenarioConfig
+from ..dynamics import POSITION
 from ..interface import InterfaceLike, RLInterface, action_codec, resolve_interface
 from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
@@ -151,7 +152,7 @@ class Engine:
         ended = sim.state.slot >= sim.num_slots
         if iface.termination_distance_m is None:
             return reward, self._no_termination, ended
-        terminated = iface.terminates(sim.state.tracking_error[..., 0:2])
+        terminated = iface.terminates(sim.state.tracking_error[..., POSITION])
         if terminated.any():
             reward[terminated] += iface.terminal_penalties(sim.num_slots - sim.state.slot[terminated])[:, None]
         return reward, terminated, ended & ~terminated
