@@ -141,6 +141,30 @@ class AxisPencils:
                            self.group_end, self.w, self.lam, self.g, self.p0, self.p1, active, float(tol), int(max_iter))
 
 
+# The compiled functions below name the arrays of one axis problem alike. The scratch arrays are
+# allocated once per call of solve_stack and reused by every problem:
+#   wv, gv        the pencil of the problem's (phase, axis): W (n, n) and G = A W (m, n), m = 2 n
+#   n, nf         padded and free variables: loops run over j < nf; row j is z_j, row n + j the
+#                 running sum sum_{i<=j} z_i (padded rows are never read)
+#   s             the problem's psi^2; d (n,) = 1 / (1 + s lambda): (s P1 + P0)^-1 = W diag(d) W'
+#   qa            (n,) the linear term on the free variables
+#   lo, up        (m,) the rows' bounds; tlo, tup how far a row may pass them, tol * max(1, |bound|)
+#   z0, az0       the unconstrained minimizer and its row values; zz the current point; y scratch
+#   rows, sgn     the working set: its rows and their sides (+1 upper, -1 lower), the first nw entries
+#   lmb           their multipliers; lst the set's equality-constrained multipliers
+#   member        (m,) int8: which rows are in the set
+#   chol, cinv    lower Cholesky factor of the set's dual Hessian M_WW, the inverses of its diagonal
+#                 (multiplications, not divisions, in the solves)
+#   rhs, col      scratch; col holds L^-1 M_W,r of the row r last offered to the set
+# Only solve_stack allocates. The functions it calls are compiled without numba's reference counts
+# (_nrt=False, as numba compiles its own allocation-free helpers): they keep no array beyond their
+# call, and the counts numba would add for every array argument, on branches its pruning pass cannot
+# pair, cost more than the arithmetic of these short loops. They take plain arrays, not named tuples
+# of them: a call passes every field of every array it is given, so a tuple's unused arrays would
+# cost on every call, and inlining every call instead lengthens the first compilation.
+_kernel = numba.njit(cache=True, error_model="numpy", _nrt=False)
+
+
 @numba.njit(cache=True, error_model="numpy")
 def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray, phase: np.ndarray,
                 free: np.ndarray, num_free: np.ndarray, group_end: np.ndarray, w: np.ndarray, lam: np.ndarray,
@@ -157,26 +181,11 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
     obj_out = np.zeros(num)
     it_out = np.zeros(num, dtype=np.int64)
     ok_out = np.zeros(num, dtype=np.bool_)
-    # scratch, allocated once per call
-    qa = np.empty(n)
-    lo = np.empty(m)
-    up = np.empty(m)
-    d = np.empty(n)
-    z0 = np.empty(n)
-    zz = np.empty(n)
-    y = np.empty(n)
-    az0 = np.empty(m)
-    tup = np.empty(m)
-    tlo = np.empty(m)
-    member = np.zeros(m, dtype=np.int8)  # which rows are in the working set
-    rows = np.empty(m, dtype=np.int64)  # working set: constraint rows ...
-    sgn = np.empty(m)  # ... and their sides (+1 upper, -1 lower)
-    lmb = np.zeros(m)  # multipliers of the working set
-    lst = np.empty(m)  # the working set's equality-constrained multipliers
-    rhs = np.empty(m)
-    col = np.empty(m)
-    chol = np.zeros((m, m))  # lower Cholesky factor of the working set's dual Hessian
-    cinv = np.zeros(m)  # the inverses of its diagonal (multiplications, not divisions, in the solves)
+    # scratch, allocated once per call (the names of the notes above)
+    qa, d, z0, zz, y = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    lo, up, tlo, tup, az0 = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    rows, sgn, lmb, member = np.empty(m, dtype=np.int64), np.empty(m), np.zeros(m), np.zeros(m, dtype=np.int8)
+    chol, cinv, lst, rhs, col = np.zeros((m, m)), np.zeros(m), np.empty(m), np.empty(m), np.empty(m)
     for i in range(num):
         ph = phase[i]
         nf = num_free[ph]
@@ -184,217 +193,21 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
         good = True
         obj = 0.0
         for ax in range(2):
-            # ---------------------------------------------------------- reduced data of this axis
-            for j in range(nf):
-                h = free[ph, j]
-                qa[j] = q[i, 2 * h + ax]
-                lo[j] = lower[i, 2 * h + ax]
-                up[j] = upper[i, 2 * h + ax]
-                lrow = -np.inf
-                urow = np.inf
-                for r in range(h, group_end[ph, j]):
-                    lrow = max(lrow, lower[i, 2 * n + 2 * r + ax])
-                    urow = min(urow, upper[i, 2 * n + 2 * r + ax])
-                lo[n + j] = lrow
-                up[n + j] = urow
-            for j in range(nf):  # feasibility thresholds, relative to the bound
-                for r in (j, n + j):
-                    tup[r] = tol * max(1.0, abs(up[r]))
-                    tlo[r] = tol * max(1.0, abs(lo[r]))
             wv = w[ph, ax]
             gv = g[ph, ax]
-            si = s[i]
-            for j in range(nf):
-                d[j] = 1.0 / (1.0 + si * lam[ph, ax, j])
-            # unconstrained minimizer z0 = -W D W' q
-            for j in range(nf):
-                acc = 0.0
-                for k in range(nf):
-                    acc += wv[k, j] * qa[k]
-                y[j] = -acc * d[j]
-            run = 0.0
-            for k in range(nf):
-                acc = 0.0
-                for j in range(nf):
-                    acc += wv[k, j] * y[j]
-                z0[k] = acc
-                run += acc
-                az0[k] = acc
-                az0[n + k] = run
-            # ---------------------------------------------------------- start: independent rows of the guess (with zero
-            # multipliers, any set is a feasible start for the dual)
-            nw = 0
-            member[:] = 0
-            for r in range(m):
-                side = active[i, ax, r]
-                if side == 0:
-                    continue
-                active[i, ax, r] = 0
-                if r % n >= nf:
-                    continue
-                if _append(gv, d, rows, sgn, nw, r, float(side), chol, cinv, col, nf):
-                    rows[nw] = r
-                    sgn[nw] = float(side)
-                    lmb[nw] = 0.0
-                    member[r] = 1
-                    nw += 1
-            for r in range(m):  # and the rows the unconstrained minimizer violates
-                if r % n >= nf or member[r]:
-                    continue
-                side = 0.0
-                if az0[r] > up[r]:
-                    side = 1.0
-                elif az0[r] < lo[r]:
-                    side = -1.0
-                if side != 0.0 and _append(gv, d, rows, sgn, nw, r, side, chol, cinv, col, nf):
-                    rows[nw] = r
-                    sgn[nw] = side
-                    lmb[nw] = 0.0
-                    member[r] = 1
-                    nw += 1
-            # ---------------------------------------------------------- the dual active-set iterations
-            it = 0
-            done = False
-            while it < max_iter:
-                it += 1
-                # equality-constrained multipliers on the working set: M_WW lst = -(slack of z0)
-                for t in range(nw):
-                    r = rows[t]
-                    rhs[t] = (az0[r] - up[r]) if sgn[t] > 0 else (lo[r] - az0[r])
-                _chol_solve(chol, cinv, nw, rhs, lst)
-                blocking = -1
-                step = 1.0
-                for t in range(nw):
-                    if lst[t] < 0.0:
-                        frac = lmb[t] / (lmb[t] - lst[t])
-                        if blocking < 0 or frac < step:
-                            step = frac
-                            blocking = t
-                if blocking >= 0 and step == 0.0:
-                    # at a zero start (multipliers all zero) every row with a negative multiplier can
-                    # go at once: the multipliers stay zero, feasible for the dual
-                    zero = True
-                    for t in range(nw):
-                        if lmb[t] != 0.0:
-                            zero = False
-                    if zero:
-                        keep = 0
-                        for t in range(nw):
-                            if lst[t] < 0.0:
-                                member[rows[t]] = 0
-                            else:
-                                rows[keep] = rows[t]
-                                sgn[keep] = sgn[t]
-                                lmb[keep] = 0.0
-                                keep += 1
-                        nw = keep
-                        _factor(gv, d, rows, sgn, nw, chol, cinv, nf)
-                        continue
-                if blocking >= 0:  # step towards lst until a multiplier reaches zero, drop it
-                    for t in range(nw):
-                        lmb[t] += step * (lst[t] - lmb[t])
-                    _drop_factor_row(chol, cinv, nw, blocking)
-                    member[rows[blocking]] = 0
-                    nw = _remove(rows, sgn, lmb, nw, blocking)
-                    continue
-                for t in range(nw):
-                    lmb[t] = lst[t]
-                # primal point z = z0 - W D G_W' (sgn lmb) and the most violated constraint
-                for k in range(nf):
-                    acc = 0.0
-                    for t in range(nw):
-                        acc += gv[rows[t], k] * sgn[t] * lmb[t]
-                    y[k] = acc * d[k]
-                worst = 0.0
-                add_row = -1
-                add_side = 0.0
-                run = 0.0
-                for k in range(nf):
-                    acc = z0[k]
-                    for j in range(nf):
-                        acc -= wv[k, j] * y[j]
-                    zz[k] = acc
-                    run += acc
-                    for r, v in ((k, acc), (n + k, run)):
-                        if member[r]:  # held as an equality (to rounding) by the working set
-                            continue
-                        over = v - up[r]
-                        if over > tup[r] and over > worst:
-                            worst, add_row, add_side = over, r, 1.0
-                        under = lo[r] - v
-                        if under > tlo[r] and under > worst:
-                            worst, add_row, add_side = under, r, -1.0
-                if add_row < 0:
-                    done = True
-                    break
-                member[add_row] = 1
-                if _append(gv, d, rows, sgn, nw, add_row, add_side, chol, cinv, col, nf):
-                    rows[nw] = add_row
-                    sgn[nw] = add_side
-                    lmb[nw] = 0.0
-                    nw += 1
-                    continue
-                # the new row depends on the working set: move along the null direction of the
-                # working set's rows (z unchanged, the new multiplier grows) until one reaches zero
-                _chol_solve_l(chol, cinv, nw, col, rhs)  # col held L^-1 M_W,new; rhs = M_WW^-1 M_W,new
-                blocking = -1
-                step = 0.0
-                for t in range(nw):
-                    if rhs[t] > 0.0:
-                        frac = lmb[t] / rhs[t]
-                        if blocking < 0 or frac < step:
-                            step = frac
-                            blocking = t
-                if blocking < 0:  # no multiplier limits the step: the constraints are inconsistent
-                    break
-                for t in range(nw):
-                    lmb[t] -= step * rhs[t]
-                member[rows[blocking]] = 0
-                nw = _remove(rows, sgn, lmb, nw, blocking)
-                rows[nw] = add_row
-                sgn[nw] = add_side
-                lmb[nw] = step
-                nw += 1
-                _factor(gv, d, rows, sgn, nw, chol, cinv, nf)
+            _reduce_axis(q, lower, upper, free, group_end, i, ph, ax, n, nf, tol, qa, lo, up, tlo, tup)
+            _unconstrained_minimizer(wv, lam, ph, ax, s[i], n, nf, qa, d, y, z0, az0)
+            nw = _start_set(gv, d, n, nf, lo, up, az0, active, i, ax, rows, sgn, lmb, member, chol, cinv, col)
+            nw, it, done = _iterate(wv, gv, d, n, nf, lo, up, tlo, tup, z0, zz, y, az0, rows, sgn, lmb, member,
+                                    chol, cinv, lst, rhs, col, nw, max_iter)
             total_it += it
             if not done:
                 good = False
                 continue
-            # one step of iterative refinement: z = z0 - (...) loses digits to cancellation when
-            # |z0| >> |z| (small Q2, far from the reference); project z back onto the working set's
-            # equalities, dz = P^-1 A_W' mu with M_WW mu = (bound - A z)_W
-            if nw:
-                run = 0.0
-                for k in range(nf):
-                    run += zz[k]
-                    az0[n + k] = run  # reused: the running sums of z
-                off = False
-                for t in range(nw):
-                    r = rows[t]
-                    v = zz[r] if r < n else az0[r]
-                    rhs[t] = sgn[t] * ((up[r] if sgn[t] > 0 else lo[r]) - v)
-                    if abs(rhs[t]) > 0.01 * (tup[r] if sgn[t] > 0 else tlo[r]):
-                        off = True
-                if off:  # only where the residual is not already far below the tolerance
-                    _chol_solve(chol, cinv, nw, rhs, lst)
-                    for k in range(nf):
-                        acc = 0.0
-                        for t in range(nw):
-                            acc += gv[rows[t], k] * sgn[t] * lst[t]
-                        y[k] = acc * d[k]
-                    for k in range(nf):
-                        acc = 0.0
-                        for j in range(nf):
-                            acc += wv[k, j] * y[j]
-                        zz[k] += acc
+            _refine(wv, gv, d, n, nf, lo, up, tlo, tup, zz, y, az0, rows, sgn, nw, chol, cinv, lst, rhs)
             for t in range(nw):
                 active[i, ax, rows[t]] = np.int8(sgn[t])
-            p1v = p1[ph, ax]
-            for k in range(nf):  # 1/2 z'(s P1 + P0) z + q'z, P0 diagonal
-                acc = 0.0
-                for j in range(nf):
-                    acc += p1v[k, j] * zz[j]
-                obj += zz[k] * (0.5 * (si * acc + p0[ph, ax, k, k] * zz[k]) + qa[k])
+            obj = _add_objective(p0, p1, ph, ax, s[i], nf, qa, zz, obj)
             if not np.isfinite(obj):  # non-finite data (a caller's NaN or inf): the fallback decides
                 good = False
                 continue
@@ -412,24 +225,298 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
     return z_out, obj_out, it_out, ok_out
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def _dual_entry(gv, d, r1, s1, r2, s2, n):  # pragma: no cover - compiled
+@_kernel
+def _reduce_axis(q, lower, upper, free, group_end, i, ph, ax, n, nf, tol, qa, lo, up, tlo,
+                 tup):  # pragma: no cover - compiled
+    """Problem ``i``'s linear term ``qa``, row bounds ``lo``, ``up`` and feasibility thresholds
+    ``tlo``, ``tup`` on the free variables of axis ``ax`` (phase ``ph``). The running-sum rows
+    between two free increments are one row with the tightest of their bounds."""
+    for j in range(nf):
+        h = free[ph, j]
+        qa[j] = q[i, 2 * h + ax]
+        lo[j] = lower[i, 2 * h + ax]
+        up[j] = upper[i, 2 * h + ax]
+        lrow = -np.inf
+        urow = np.inf
+        for r in range(h, group_end[ph, j]):
+            lrow = max(lrow, lower[i, 2 * n + 2 * r + ax])
+            urow = min(urow, upper[i, 2 * n + 2 * r + ax])
+        lo[n + j] = lrow
+        up[n + j] = urow
+    for j in range(nf):  # feasibility thresholds, relative to the bound
+        for r in (j, n + j):
+            tup[r] = tol * max(1.0, abs(up[r]))
+            tlo[r] = tol * max(1.0, abs(lo[r]))
+
+
+@_kernel
+def _unconstrained_minimizer(wv, lam, ph, ax, s, n, nf, qa, d, y, z0, az0):  # pragma: no cover - compiled
+    """``d = 1 / (1 + s lambda)``, the unconstrained minimizer ``z0 = -W diag(d) W' q``
+    and its row values ``az0`` (the increments and their running sums)."""
+    for j in range(nf):
+        d[j] = 1.0 / (1.0 + s * lam[ph, ax, j])
+    for j in range(nf):
+        acc = 0.0
+        for k in range(nf):
+            acc += wv[k, j] * qa[k]
+        y[j] = -acc * d[j]
+    run = 0.0
+    for k in range(nf):
+        acc = 0.0
+        for j in range(nf):
+            acc += wv[k, j] * y[j]
+        z0[k] = acc
+        run += acc
+        az0[k] = acc
+        az0[n + k] = run
+
+
+@_kernel
+def _start_set(gv, d, n, nf, lo, up, az0, active, i, ax, rows, sgn, lmb, member, chol, cinv,
+               col):  # pragma: no cover - compiled
+    """The first working set: the rows of ``active[i, ax]`` (the problem's previous working set,
+    cleared as it is read), then the rows the unconstrained minimizer violates, each taken while
+    the set stays linearly independent. All start with zero multipliers: feasible for the dual, so
+    any set is a valid start. Returns the set's size."""
+    nw = 0
+    member[:] = 0
+    for r in range(2 * n):
+        side = active[i, ax, r]
+        if side == 0:
+            continue
+        active[i, ax, r] = 0
+        if r % n >= nf:
+            continue
+        if _append(gv, d, rows, sgn, nw, r, float(side), chol, cinv, col, nf):
+            nw = _push(rows, sgn, lmb, member, nw, r, float(side), 0.0)
+    for r in range(2 * n):
+        if r % n >= nf or member[r]:
+            continue
+        side = 0.0
+        if az0[r] > up[r]:
+            side = 1.0
+        elif az0[r] < lo[r]:
+            side = -1.0
+        if side != 0.0 and _append(gv, d, rows, sgn, nw, r, side, chol, cinv, col, nf):
+            nw = _push(rows, sgn, lmb, member, nw, r, side, 0.0)
+    return nw
+
+
+@_kernel
+def _iterate(wv, gv, d, n, nf, lo, up, tlo, tup, z0, zz, y, az0, rows, sgn, lmb, member, chol, cinv, lst, rhs, col,
+             nw, max_iter):  # pragma: no cover - compiled
+    """The dual active-set iterations from a start set of ``nw`` rows: (the final set's size, the
+    iterations, whether the problem is solved), a solved problem's point in ``zz``. Unsolved: the
+    iteration cap, or a dependent row whose multiplier can grow without limit (inconsistent
+    constraints)."""
+    it = 0
+    while it < max_iter:
+        it += 1
+        _equality_multipliers(lo, up, az0, rows, sgn, nw, chol, cinv, rhs, lst)
+        blocking, step = _first_to_zero(lmb, lst, nw)
+        if blocking >= 0 and step == 0.0 and _all_zero(lmb, nw):
+            nw = _drop_negative(gv, d, nf, rows, sgn, lmb, member, nw, chol, cinv, lst)
+            continue
+        if blocking >= 0:  # step towards lst until a multiplier reaches zero, drop it
+            for t in range(nw):
+                lmb[t] += step * (lst[t] - lmb[t])
+            _drop_factor_row(chol, cinv, nw, blocking)
+            member[rows[blocking]] = 0
+            nw = _remove(rows, sgn, lmb, nw, blocking)
+            continue
+        for t in range(nw):
+            lmb[t] = lst[t]
+        add_row, add_side = _most_violated(wv, gv, d, n, nf, lo, up, tlo, tup, z0, zz, y, rows, sgn, lmb, member, nw)
+        if add_row < 0:
+            return nw, it, True
+        member[add_row] = 1
+        if _append(gv, d, rows, sgn, nw, add_row, add_side, chol, cinv, col, nf):
+            nw = _push(rows, sgn, lmb, member, nw, add_row, add_side, 0.0)
+            continue
+        exchanged = _exchange_dependent(gv, d, nf, rows, sgn, lmb, member, nw, chol, cinv, col, rhs, add_row, add_side)
+        if exchanged < 0:
+            return nw, it, False
+        nw = exchanged
+    return nw, it, False
+
+
+@_kernel
+def _equality_multipliers(lo, up, az0, rows, sgn, nw, chol, cinv, rhs, lst):  # pragma: no cover - compiled
+    """The working set's equality-constrained multipliers: ``M_WW lst = -(slack of z0)``."""
+    for t in range(nw):
+        r = rows[t]
+        rhs[t] = (az0[r] - up[r]) if sgn[t] > 0 else (lo[r] - az0[r])
+    _chol_solve(chol, cinv, nw, rhs, lst)
+
+
+@_kernel
+def _first_to_zero(lmb, lst, nw):  # pragma: no cover - compiled
+    """The first multiplier to reach zero on the way from ``lmb`` to ``lst``: (its position, the
+    fraction of the way); (-1, 1.0) when none does."""
+    blocking = -1
+    step = 1.0
+    for t in range(nw):
+        if lst[t] < 0.0:
+            frac = lmb[t] / (lmb[t] - lst[t])
+            if blocking < 0 or frac < step:
+                step = frac
+                blocking = t
+    return blocking, step
+
+
+@_kernel
+def _all_zero(values, nw):  # pragma: no cover - compiled
+    for t in range(nw):
+        if values[t] != 0.0:
+            return False
+    return True
+
+
+@_kernel
+def _drop_negative(gv, d, nf, rows, sgn, lmb, member, nw, chol, cinv, lst):  # pragma: no cover - compiled
+    """At a zero start (multipliers all zero) every row with a negative multiplier ``lst`` can
+    leave at once: the multipliers stay zero, feasible for the dual. The factor is rebuilt; returns
+    the set's new size."""
+    keep = 0
+    for t in range(nw):
+        if lst[t] < 0.0:
+            member[rows[t]] = 0
+        else:
+            rows[keep] = rows[t]
+            sgn[keep] = sgn[t]
+            lmb[keep] = 0.0
+            keep += 1
+    _factor(gv, d, rows, sgn, keep, chol, cinv, nf)
+    return keep
+
+
+@_kernel
+def _most_violated(wv, gv, d, n, nf, lo, up, tlo, tup, z0, zz, y, rows, sgn, lmb, member,
+                   nw):  # pragma: no cover - compiled
+    """The primal point ``zz = z0 - W D G_W' (sgn lmb)`` and the row it violates most beyond the
+    row's threshold: (row, side +1 upper / -1 lower); (-1, 0.0) when it violates none."""
+    for k in range(nf):
+        acc = 0.0
+        for t in range(nw):
+            acc += gv[rows[t], k] * sgn[t] * lmb[t]
+        y[k] = acc * d[k]
+    worst = 0.0
+    add_row = -1
+    add_side = 0.0
+    run = 0.0
+    for k in range(nf):
+        acc = z0[k]
+        for j in range(nf):
+            acc -= wv[k, j] * y[j]
+        zz[k] = acc
+        run += acc
+        for r, v in ((k, acc), (n + k, run)):
+            if member[r]:  # held as an equality (to rounding) by the working set
+                continue
+            over = v - up[r]
+            if over > tup[r] and over > worst:
+                worst, add_row, add_side = over, r, 1.0
+            under = lo[r] - v
+            if under > tlo[r] and under > worst:
+                worst, add_row, add_side = under, r, -1.0
+    return add_row, add_side
+
+
+@_kernel
+def _exchange_dependent(gv, d, nf, rows, sgn, lmb, member, nw, chol, cinv, col, rhs, r,
+                        side):  # pragma: no cover - compiled
+    """Row ``r`` (side ``side``, already marked in ``member``) depends on the working set's rows
+    (``col`` holds ``L^-1 M_W,r``): move along the null direction of the set's rows (z unchanged,
+    the new multiplier grows) until a multiplier of the set reaches zero, and exchange that row for
+    ``r``. Returns the set's size, or -1 when no multiplier limits the step (the constraints are
+    inconsistent)."""
+    _chol_solve_l(chol, cinv, nw, col, rhs)  # rhs = M_WW^-1 M_W,r
+    blocking = -1
+    step = 0.0
+    for t in range(nw):
+        if rhs[t] > 0.0:
+            frac = lmb[t] / rhs[t]
+            if blocking < 0 or frac < step:
+                step = frac
+                blocking = t
+    if blocking < 0:
+        return -1
+    for t in range(nw):
+        lmb[t] -= step * rhs[t]
+    member[rows[blocking]] = 0
+    nw = _remove(rows, sgn, lmb, nw, blocking)
+    nw = _push(rows, sgn, lmb, member, nw, r, side, step)
+    _factor(gv, d, rows, sgn, nw, chol, cinv, nf)
+    return nw
+
+
+@_kernel
+def _refine(wv, gv, d, n, nf, lo, up, tlo, tup, zz, y, az0, rows, sgn, nw, chol, cinv, lst,
+            rhs):  # pragma: no cover - compiled
+    """One step of iterative refinement of ``zz``: ``z = z0 - (...)`` loses digits to cancellation
+    when |z0| >> |z| (small Q2, far from the reference); project z back onto the working set's
+    equalities, ``dz = P^-1 A_W' mu`` with ``M_WW mu = (bound - A z)_W``, unless the residual is
+    already far below the tolerance. ``az0`` is free once the iterations end: it takes the running
+    sums of z."""
+    if nw == 0:
+        return
+    run = 0.0
+    for k in range(nf):
+        run += zz[k]
+        az0[n + k] = run
+    off = False
+    for t in range(nw):
+        r = rows[t]
+        v = zz[r] if r < n else az0[r]
+        rhs[t] = sgn[t] * ((up[r] if sgn[t] > 0 else lo[r]) - v)
+        if abs(rhs[t]) > 0.01 * (tup[r] if sgn[t] > 0 else tlo[r]):
+            off = True
+    if not off:
+        return
+    _chol_solve(chol, cinv, nw, rhs, lst)
+    for k in range(nf):
+        acc = 0.0
+        for t in range(nw):
+            acc += gv[rows[t], k] * sgn[t] * lst[t]
+        y[k] = acc * d[k]
+    for k in range(nf):
+        acc = 0.0
+        for j in range(nf):
+            acc += wv[k, j] * y[j]
+        zz[k] += acc
+
+
+@_kernel
+def _add_objective(p0, p1, ph, ax, s, nf, qa, zz, obj):  # pragma: no cover - compiled
+    """``obj`` plus the axis problem's objective ``1/2 z'(s P1 + P0) z + q'z`` at ``zz``, term by
+    term (P0 is diagonal)."""
+    p1v = p1[ph, ax]
+    for k in range(nf):
+        acc = 0.0
+        for j in range(nf):
+            acc += p1v[k, j] * zz[j]
+        obj += zz[k] * (0.5 * (s * acc + p0[ph, ax, k, k] * zz[k]) + qa[k])
+    return obj
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _dual_entry(gv, d, r1, s1, r2, s2, nf):  # pragma: no cover - compiled
     acc = 0.0
-    for k in range(n):
+    for k in range(nf):
         acc += gv[r1, k] * d[k] * gv[r2, k]
     return s1 * s2 * acc
 
 
-@numba.njit(cache=True, error_model="numpy")
-def _append(gv, d, rows, sgn, nw, r, side, chol, cinv, col, n):  # pragma: no cover - compiled
+@_kernel
+def _append(gv, d, rows, sgn, nw, r, side, chol, cinv, col, nf):  # pragma: no cover - compiled
     """Extend the Cholesky factor by row ``r`` (side ``side``); False (factor unchanged, ``col``
     holding ``L^-1 M_W,r``) when the row is linearly dependent on the working set's rows."""
     for t in range(nw):
-        acc = _dual_entry(gv, d, rows[t], sgn[t], r, side, n)
+        acc = _dual_entry(gv, d, rows[t], sgn[t], r, side, nf)
         for u in range(t):
             acc -= chol[t, u] * col[u]
         col[t] = acc * cinv[t]
-    diag = _dual_entry(gv, d, r, side, r, side, n)
+    diag = _dual_entry(gv, d, r, side, r, side, nf)
     rest = diag
     for t in range(nw):
         rest -= col[t] * col[t]
@@ -442,12 +529,23 @@ def _append(gv, d, rows, sgn, nw, r, side, chol, cinv, col, n):  # pragma: no co
     return True
 
 
-@numba.njit(cache=True, error_model="numpy")
-def _factor(gv, d, rows, sgn, nw, chol, cinv, n):  # pragma: no cover - compiled
+@_kernel
+def _push(rows, sgn, lmb, member, nw, r, side, mult):  # pragma: no cover - compiled
+    """Row ``r`` (side ``side``, multiplier ``mult``) joins the working set, whose factor the caller
+    has extended; returns the set's new size."""
+    rows[nw] = r
+    sgn[nw] = side
+    lmb[nw] = mult
+    member[r] = 1
+    return nw + 1
+
+
+@_kernel
+def _factor(gv, d, rows, sgn, nw, chol, cinv, nf):  # pragma: no cover - compiled
     """Cholesky factor of the working set's dual Hessian from scratch."""
     for t in range(nw):
         for u in range(t + 1):
-            acc = _dual_entry(gv, d, rows[t], sgn[t], rows[u], sgn[u], n)
+            acc = _dual_entry(gv, d, rows[t], sgn[t], rows[u], sgn[u], nf)
             for v in range(u):
                 acc -= chol[t, v] * chol[u, v]
             if u == t:
@@ -457,7 +555,7 @@ def _factor(gv, d, rows, sgn, nw, chol, cinv, n):  # pragma: no cover - compiled
                 chol[t, u] = acc * cinv[u]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _drop_factor_row(chol, cinv, nw, t):  # pragma: no cover - compiled
     """The Cholesky factor without row and column ``t`` of its matrix, in O(nw^2): the trailing
     block takes a rank-one update with the dropped column (Givens rotations), then moves up."""
@@ -481,7 +579,7 @@ def _drop_factor_row(chol, cinv, nw, t):  # pragma: no cover - compiled
             chol[i, j] = chol[i + 1, j + 1]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _remove(rows, sgn, lmb, nw, t):  # pragma: no cover - compiled
     for u in range(t, nw - 1):
         rows[u] = rows[u + 1]
@@ -490,7 +588,7 @@ def _remove(rows, sgn, lmb, nw, t):  # pragma: no cover - compiled
     return nw - 1
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _chol_solve(chol, cinv, nw, rhs, out):  # pragma: no cover - compiled
     """out = (L L')^-1 rhs on the leading nw entries."""
     for t in range(nw):
@@ -505,7 +603,7 @@ def _chol_solve(chol, cinv, nw, rhs, out):  # pragma: no cover - compiled
         out[t] = acc * cinv[t]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _chol_solve_l(chol, cinv, nw, half, out):  # pragma: no cover - compiled
     """out = L'^-1 half (``half`` = L^-1 b already): the second half of :func:`_chol_solve`."""
     for t in range(nw - 1, -1, -1):

@@ -227,3 +227,41 @@ def test_the_training_package_keeps_small_modules_and_functions():
     long = {name: _long_functions(ast.parse(path.read_text()), 60) for name, path in training.items()}
     assert {name: fs for name, fs in long.items() if fs} == {}
     assert _long_functions(ast.parse("def f():\n" + "    x = 1\n" * 61), 60) == ["f (62 lines)"]
+
+
+_COMPILERS = {"njit", "jit", "vectorize", "guvectorize", "cfunc"}
+
+
+def _decorator_name(d: ast.expr) -> str:
+    target = d.func if isinstance(d, ast.Call) else d
+    return target.attr if isinstance(target, ast.Attribute) else getattr(target, "id", "")
+
+
+def _wide_functions(tree: ast.Module, limit: int) -> list[str]:
+    """Functions other than compiled kernels (``@numba.njit``, ..., or a module-level alias of one,
+    ``_kernel = numba.njit(...)``) with more than ``limit`` parameters (self/cls aside)."""
+    compilers = _COMPILERS | {t.id for n in tree.body if isinstance(n, ast.Assign) and isinstance(n.value, ast.Call)
+                              and _decorator_name(n.value) in _COMPILERS for t in n.targets if isinstance(t, ast.Name)}
+    out = []
+    for n in ast.walk(tree):
+        if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and not any(
+                _decorator_name(d) in compilers for d in n.decorator_list):
+            params = [a for a in n.args.posonlyargs + n.args.args + n.args.kwonlyargs if a.arg not in ("self", "cls")]
+            count = len(params) + (n.args.vararg is not None) + (n.args.kwarg is not None)
+            if count > limit:
+                out.append(f"{n.name} ({count} parameters)")
+    return out
+
+
+def test_the_core_and_the_agents_keep_short_and_narrow_functions():
+    """No function of ``lawn_env/`` or ``agents/`` over 60 lines, compiled kernels included; no
+    parameter list over 8 outside compiled signatures (a kernel's arguments are its data)."""
+    core = {name: path for name, path in _modules().items() if name.split(".")[0] in ("lawn_env", "agents")}
+    long = {name: _long_functions(ast.parse(path.read_text()), 60) for name, path in core.items()}
+    assert {name: fs for name, fs in long.items() if fs} == {}
+    wide = {name: _wide_functions(ast.parse(path.read_text()), 8) for name, path in core.items()}
+    assert {name: fs for name, fs in wide.items() if fs} == {}
+    kernel = ("import numba\n_kernel = numba.njit(cache=True)\n@numba.njit(cache=True)\ndef k(a, b, c, d, e, f, g, h, i):\n"
+              "    pass\n@_kernel\ndef j(a, b, c, d, e, f, g, h, i):\n    pass\n")
+    assert _wide_functions(ast.parse(kernel + "def w(a, b, c, d, e, f, g, h, *i):\n    pass\n"), 8) == [
+        "w (9 parameters)"]
