@@ -13,7 +13,9 @@ machine's speed cancels out of it; below 1 is faster):
 
 The target: every ratio within 1.05.
 
-Usage: ``python benchmarks/step_side_by_side.py --before ../before [--repeats 5] [--markdown out.md]``
+Usage: ``python benchmarks/step_side_by_side.py [--before ../before] [--before-commit SHA] [--repeats 5]
+[--markdown out.md]`` (the worktree is made when missing; the default commit is the one before the
+equations-once refactor).
 """
 
 from __future__ import annotations
@@ -29,10 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
-from report import finish  # benchmarks/report.py, beside this script
+from report import finish, worktree  # benchmarks/report.py, beside this script
 
 HERE = Path(__file__).resolve().parents[1]
 TARGET = 1.05
+#: The commit before the equations-once refactor (every equation in one function).
+BEFORE_COMMIT = "f10c390"
 
 
 def _single(env_id: str, steps: int = 3000) -> float:
@@ -105,7 +109,9 @@ MEASUREMENTS = {
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--before", type=Path, required=False, help="the other tree (a git worktree)")
+    parser.add_argument("--before", type=Path, default=Path("../before"),
+                        help="the other tree (made with git worktree from --before-commit when missing)")
+    parser.add_argument("--before-commit", default=BEFORE_COMMIT)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--only", nargs="+", choices=list(MEASUREMENTS), default=list(MEASUREMENTS))
     parser.add_argument("--markdown", help="write the table here")
@@ -114,7 +120,7 @@ def main() -> int:
     if args.child:
         print(json.dumps(MEASUREMENTS[args.child][0]()))
         return 0
-    trees = {"this": HERE} | ({"before": args.before.resolve()} if args.before else {})
+    trees = {"this": HERE, "before": worktree(args.before, args.before_commit)}
     figures = {name: {label: [] for label in trees} for name in args.only}
     for _ in range(args.repeats):
         for name in args.only:
@@ -123,14 +129,12 @@ def main() -> int:
                 out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", name], env=env,
                                      cwd=tree, capture_output=True, text=True, check=True)
                 figures[name][label].append(json.loads(out.stdout.strip().splitlines()[-1]))
-    lines = ["| measurement | this tree | before | ratio this/before |", "|---|---|---|---|"]
+    lines = [f"Medians of {args.repeats} interleaved fresh-process runs per tree; before = {args.before_commit}.", "",
+             "| measurement | this tree | before | ratio this/before |", "|---|---|---|---|"]
     checks = []
     for name in args.only:
         unit = MEASUREMENTS[name][1]
         mine = statistics.median(figures[name]["this"])
-        if "before" not in trees:
-            lines.append(f"| {name} | {mine:.3g} {unit} | | |")
-            continue
         other = statistics.median(figures[name]["before"])
         ratio = mine / other
         lines.append(f"| {name} | {mine:.3g} {unit} | {other:.3g} {unit} | {ratio:.3f} |")

@@ -3,10 +3,12 @@
 Each case plays seeded episodes of a registered id (single, vector and PettingZoo views; v0 and RL
 interfaces; fixed and random paths; the disturbance mode; the experts deciding) and hashes every
 observation, reward, termination flag and info array it returns (SHA-256 of the raw bytes, in
-order). With ``--before TREE`` the same cases run in a fresh process on that tree (a
-``git worktree`` of the commit before a change) and every digest must be equal.
+order). The same cases run in a fresh process on ``--before``, a ``git worktree`` of the commit
+before a change (made when missing), and every digest must be equal but for the changes the
+environments' version histories record (:data:`DOCUMENTED_CHANGES`).
 
-Usage: ``python benchmarks/v0_episodes.py [--before ../before] [--slots 40]``
+Usage: ``python benchmarks/v0_episodes.py [--before ../before] [--before-commit SHA] [--slots 40]
+[--markdown out.md]``
 """
 
 from __future__ import annotations
@@ -21,7 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
+from report import finish, worktree  # benchmarks/report.py, beside this script
+
 HERE = Path(__file__).resolve().parents[1]
+#: The commit before the equations-once refactor (every equation in one function).
+BEFORE_COMMIT = "f10c390"
+_MEASURED = "the Comm MPC plans from the measured state (lawn/Comm-v0's version history)"
+#: Cases whose episodes a documented change moved since BEFORE_COMMIT: case -> why.
+DOCUMENTED_CHANGES = {"comm-disturbed": _MEASURED, "comm-rl-disturbed": _MEASURED, "comm-rl-vector": _MEASURED}
 
 #: name -> (id, keyword arguments of the env, view, decider): view "single", "vector" (N = 3) or
 #: "parallel"; decider "random" (seeded uniform actions) or an expert's name.
@@ -35,6 +44,8 @@ CASES = {
     "joint-disturbed": ("lawn/Joint-v0", {"config": "disturbed"}, "single", "random"),
     "comm-disturbed": ("lawn/Comm-v0", {"config": "disturbed"}, "single", "random"),
     "comm-rl-disturbed": ("lawn/CommRL-v0", {"config": "disturbed"}, "single", "random"),
+    "comm-rl-disturbed-exact-measurements": ("lawn/CommRL-v0", {"config": "disturbed", "disturbance": {
+        "measurement_noise_position_m": 0.0, "measurement_noise_velocity_mps": 0.0}}, "single", "random"),
     "joint-rl-lqr": ("lawn/Joint-v0", {"interface": {"base": "rl", "increment_anchor": "lqr"}}, "single", "random"),
     "joint-vector": ("lawn/Joint-v0", {"config": "disturbed"}, "vector", "random"),
     "comm-vector": ("lawn/Comm-v0", {}, "vector", "random"),
@@ -136,31 +147,38 @@ def digests(slots: int) -> dict[str, str]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--before", type=Path, help="another tree to compare with (a git worktree)")
+    parser.add_argument("--before", type=Path, default=Path("../before"),
+                        help="the other tree (made with git worktree from --before-commit when missing)")
+    parser.add_argument("--before-commit", default=BEFORE_COMMIT)
     parser.add_argument("--slots", type=int, default=40, help="slots per episode (default 40)")
+    parser.add_argument("--markdown", help="write the table here")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         print(json.dumps(digests(args.slots)))
         return 0
-    trees = {"this tree": HERE} | ({"before": args.before.resolve()} if args.before else {})
+    trees = {"this": HERE, "before": worktree(args.before, args.before_commit)}
     results = {}
     for label, tree in trees.items():
         env = dict(os.environ, PYTHONPATH=str(tree))
         out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", "--slots", str(args.slots)],
                              env=env, cwd=tree, capture_output=True, text=True, check=True)
         results[label] = json.loads(out.stdout.strip().splitlines()[-1])
-    mine = results["this tree"]
+    lines = [f"{args.slots} slots per episode; before = {args.before_commit}.", "",
+             "| case | id | view | decided by | bitwise as before |", "|---|---|---|---|---|"]
     different = []
-    for name, value in mine.items():
-        other = results.get("before", {}).get(name)
-        same = "" if other is None else ("  same" if other == value else "  DIFFERENT")
-        if other is not None and other != value:
+    for name, (env_id, kwargs, view, decider) in CASES.items():
+        same = results["this"][name] == results["before"][name]
+        if not same:
             different.append(name)
-        print(f"{name:24s} {value[:16]}{same}")
-    if args.before:
-        print(f"{len(mine) - len(different)} of {len(mine)} cases bitwise equal to {args.before}")
-    return 1 if different else 0
+        config = ", ".join([kwargs.get("config", "default")] + [f"{k}={v}" for k, v in kwargs.items() if k != "config"])
+        verdict = "yes" if same else f"no: {DOCUMENTED_CHANGES.get(name, 'UNDOCUMENTED')}"
+        lines.append(f"| {name} | `{env_id}` ({config}) | {view} | {decider} | {verdict} |")
+    print("\n".join(lines))
+    undocumented = [n for n in different if n not in DOCUMENTED_CHANGES]
+    checks = [(f"{len(CASES) - len(different)} of {len(CASES)} cases bitwise as before; the others documented",
+               not undocumented)]
+    return finish(checks, args.markdown, lines)
 
 
 if __name__ == "__main__":

@@ -7,6 +7,9 @@
 #   block gap (docs/experts.md)                         lawn gap (+ docs/figures/gap.png, convergence.png)
 #   blocks expert-speed, env-throughput, train-throughput, vector-step   benchmarks/*.py --markdown
 #   block parallel-scaling (docs/performance.md)        benchmarks/parallel_scaling.py (--only parallel)
+#   blocks step-side-by-side, v0-episodes (--only equations)   benchmarks/{step_side_by_side,v0_episodes}.py
+#                                                       (side by side with the commit before the
+#                                                       equations-once refactor, in a git worktree ../before)
 #   blocks numba-jit, qp-speed, speedups (--only qp)      benchmarks/{numba_jit,qp_speed,speedups}.py
 #                                                       (speedups: side by side with the commit before
 #                                                       the compiled solver, in a git worktree ../before)
@@ -33,7 +36,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --train) train=1 ;;
     --only) shift; while [ $# -gt 0 ] && [[ "$1" != --* ]]; do only+=("$1"); shift; done; continue ;;
-    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|parallel|qp|learned|suite|render ...]" >&2; exit 2 ;;
+    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|parallel|equations|qp|learned|suite|render ...]" >&2; exit 2 ;;
   esac
   shift
 done
@@ -77,6 +80,12 @@ fi
 if want parallel; then  # the 16-core block (parallel-scaling-16) is measured once, on such a machine
   "$py" benchmarks/parallel_scaling.py --markdown runs/parallel_scaling.md || true  # a FAIL is reported in the table
   splice parallel-scaling runs/parallel_scaling.md "python benchmarks/parallel_scaling.py"
+fi
+if want equations; then
+  "$py" benchmarks/step_side_by_side.py --markdown runs/step_side_by_side.md || true  # a FAIL is reported in the table
+  splice step-side-by-side runs/step_side_by_side.md "python benchmarks/step_side_by_side.py"
+  "$py" benchmarks/v0_episodes.py --markdown runs/v0_episodes.md || true
+  splice v0-episodes runs/v0_episodes.md "python benchmarks/v0_episodes.py"
 fi
 if want qp; then
   "$py" benchmarks/numba_jit.py --markdown runs/numba_jit.md
