@@ -44,7 +44,7 @@ from pydantic.dataclasses import dataclass as pydantic_dataclass
 from lawn_env import channel
 from lawn_env.config import ScenarioConfig
 from lawn_env.core import Snapshot
-from lawn_env.dynamics import PredictionModel
+from lawn_env.dynamics import POSITION, PredictionModel
 from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
 
 from .optim import linear_argmin_disc_box, project_budget
@@ -285,7 +285,7 @@ class AOSolver:
         """
         start = time.perf_counter()
         _check_blocks(blocks, increments)
-        prob = SlotProblem(self.mpc, self.link, snapshot, self.config.drone_reach_m)
+        prob = SlotProblem(self.mpc, self.link, snapshot, self.config)
         self._memory = {}  # step sizes carried across the AO iterations of this slot
         point = self._initial_point(prob, snapshot, increments, power_w, drone_position)
         self._alternate_until_converged(prob, blocks, point)
@@ -401,7 +401,7 @@ def expected_cost(snapshot: Snapshot, accel_increments: npt.ArrayLike, power_w: 
     r = model.residual(x_aug, np.asarray(snapshot.reference, dtype=float))
     z = dmu.reshape(k, -1)
     fz = z @ model.f.T
-    psi = link.success_sq(p, link.distance_sq(q, x_aug[:, 0:2]))
+    psi = link.success_sq(p, link.distance_sq(q, x_aug[:, POSITION]))
     e = r + psi[:, None] * fz  # chi - chi_ref with the expected dynamics
     per = np.einsum("ki,ij,kj->k", e, model.q4, e) + np.einsum("ki,ij,kj->k", z, model.q5, z)
     return per if per_agv else float(per.sum())

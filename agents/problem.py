@@ -10,8 +10,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lawn_env import channel
+from lawn_env.config import ScenarioConfig
 from lawn_env.core import Snapshot
-from lawn_env.dynamics import cost_coefficients
+from lawn_env.dynamics import POSITION, cost_coefficients
 from lawn_env.mpc import OutageAwareMPC, SlotData
 
 __all__ = ["Plan", "Coefficients", "SlotProblem"]
@@ -48,14 +49,14 @@ class SlotProblem:
     QP data (the planner's warm-started MPC), the planning link and the slot's feasible sets (power
     budget, the drone's reach from where it is, the area); evaluates J^ and its pieces.
 
-    ``reach_m`` is the planner's own V_max Δτ (from the config it was built with, like ``mpc`` and
-    ``link``), not the snapshot's: a planner built for another drone speed than the environment's
-    plans the moves of the drone it was built for."""
+    ``config`` is the planner's own, the one its ``mpc`` and ``link`` were built from, not the
+    snapshot's: the sizes, the power budget, the drone's reach V_max Δτ and the area are those of the
+    system it plans for (a planner built for another drone speed than the environment's plans the
+    moves of the drone it was built for)."""
 
-    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, reach_m: float):
+    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig):
         self.mpc = mpc
         self.link = link
-        config = snapshot.config
         self.x_aug = np.asarray(snapshot.x_aug, dtype=float)
         self.reference = np.asarray(snapshot.reference, dtype=float)
         self.q_prev = np.asarray(snapshot.drone_position, dtype=float)
@@ -65,10 +66,10 @@ class SlotProblem:
                 f"snapshot shapes x_aug {self.x_aug.shape}, reference {self.reference.shape}; expected "
                 f"({k}, 6) and ({k}, {window}, 6) for this config"
             )
-        self.agv_xy = self.x_aug[:, 0:2]
+        self.agv_xy = self.x_aug[:, POSITION]
         self.data: SlotData = mpc.prepare(self.x_aug, self.reference, snapshot.slot)
         self.budget = config.power_budget_w
-        self.reach = float(reach_m)
+        self.reach = float(config.drone_reach_m)
         self.area = tuple(config.area_m)
 
     # ------------------------------------------------------------------ pieces of J^

@@ -68,8 +68,8 @@ class ReducedProblem(SlotProblem):
     """Phi(p, q) of one slot, evaluated with exact QPs (the shared, warm-started MPC): the AO's
     slot problem with the controls solved out."""
 
-    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, reach_m: float):
-        super().__init__(mpc, link, snapshot, reach_m)
+    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig):
+        super().__init__(mpc, link, snapshot, config)
         self.evaluations = 0
 
     # ------------------------------------------------------------------ exact
@@ -293,7 +293,7 @@ class ReducedGradientPlanner(_ReducedPlannerBase):
 
     def plan(self, snapshot: Snapshot) -> Plan:
         start = time.perf_counter()
-        problem = ReducedProblem(self.mpc, self.link, snapshot, self.config.drone_reach_m)
+        problem = ReducedProblem(self.mpc, self.link, snapshot, self.config)
         k = self.config.num_agvs
         starts = {"search": self._search(problem),
                   "equal": problem.evaluate(np.full(k, problem.budget / k), problem.q_prev)}
@@ -318,7 +318,7 @@ class GlobalPlanner(_ReducedPlannerBase):
 
     def plan(self, snapshot: Snapshot) -> Plan:
         start = time.perf_counter()
-        problem = ReducedProblem(self.mpc, self.link, snapshot, self.config.drone_reach_m)
+        problem = ReducedProblem(self.mpc, self.link, snapshot, self.config)
         s = self.settings
         table = problem.table(self.psi_grid)
         positions = disc_box_grid(problem.q_prev, problem.reach, problem.area, s.drone_spacing_m, s.max_drone_points)

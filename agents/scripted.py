@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from lawn_env.channel import LinkParams
 from lawn_env.core import Decisions
+from lawn_env.dynamics import ACCELERATION, POSITION, VELOCITY
 from lawn_env.presets import ConfigLike
 
 from .base import JOINT, Policy
@@ -33,18 +35,20 @@ class HeuristicPolicy(Policy):
                  kd: float = 0.9):
         super().__init__(config, env_id, seed)
         self.kp, self.kd = float(kp), float(kd)
+        self.link = LinkParams.from_config(self.config)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         cfg = self.config
         s = self.layout.decode(obs)
         x, ref, q = s["x_aug"], s["reference"], s["drone_position"]
         target = ref[:, 1]  # the reference one slot ahead
-        u = target[:, 4:6] + self.kp * (target[:, 0:2] - x[:, 0:2]) + self.kd * (target[:, 2:4] - x[:, 2:4])
+        u = (target[:, ACCELERATION] + self.kp * (target[:, POSITION] - x[:, POSITION])
+             + self.kd * (target[:, VELOCITY] - x[:, VELOCITY]))
         amax = cfg.control.accel_max_mps2
-        du = np.clip(u, -amax, amax) - x[:, 4:6]
-        d2 = ((x[:, 0:2] - q) ** 2).sum(axis=1) + cfg.drone.altitude_m**2
+        du = np.clip(u, -amax, amax) - x[:, ACCELERATION]
+        d2 = self.link.distance_sq(q, x[:, POSITION])
         power = cfg.power_budget_w * d2 / d2.sum()
-        centroid = x[:, 0:2].mean(axis=0)
+        centroid = x[:, POSITION].mean(axis=0)
         step = centroid - q
         dist = np.linalg.norm(step)
         reach = cfg.drone_reach_m

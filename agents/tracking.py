@@ -14,7 +14,7 @@ import numpy as np
 from pydantic import ConfigDict
 from pydantic.dataclasses import dataclass as pydantic_dataclass
 
-from lawn_env.dynamics import PredictionModel, step_augmented
+from lawn_env.dynamics import ACCELERATION, POSITION, VELOCITY, PredictionModel, step_augmented
 
 __all__ = ["PIDGains", "saturate", "pid_rollout", "lqr_gain", "lqr_rollout"]
 
@@ -23,8 +23,8 @@ __all__ = ["PIDGains", "saturate", "pid_rollout", "lqr_gain", "lqr_rollout"]
 class PIDGains:
     """Gains of the predictive PID (per axis, SI units). Defaults from the grid search of
     ``benchmarks/tune_pid.py`` (closed-loop control cost with perfect links): the best gains with a
-    non-zero integral term, so that the baseline is the PID the paper names (docs/baselines: the
-    grid's overall best has ki = 0)."""
+    non-zero integral term, so that the baseline is the PID the paper names (``python benchmarks/tune_pid.py``
+    prints the grid, whose overall best has ki = 0)."""
 
     kp: float = 0.3
     ki: float = 0.02
@@ -56,12 +56,12 @@ def pid_rollout(x_aug: np.ndarray, reference: np.ndarray, integral: np.ndarray, 
     first_integral = None
     for i in range(model.horizon):
         ref = reference[:, i]
-        e_pos = ref[:, 0:2] - x[:, 0:2]
+        e_pos = ref[:, POSITION] - x[:, POSITION]
         integ = np.clip(integ + e_pos * dt, -integral_limit, integral_limit)
         if first_integral is None:
             first_integral = integ.copy()
-        u = reference[:, i + 1, 4:6] + kp * e_pos + ki * integ + kd * (ref[:, 2:4] - x[:, 2:4])
-        du = saturate(u, x[:, 4:6], accel_max, accel_increment_max)
+        u = reference[:, i + 1, ACCELERATION] + kp * e_pos + ki * integ + kd * (ref[:, VELOCITY] - x[:, VELOCITY])
+        du = saturate(u, x[:, ACCELERATION], accel_max, accel_increment_max)
         if commands is not None and not commands[i]:
             du = np.zeros_like(du)
         out[:, i] = du
@@ -82,9 +82,9 @@ def lqr_rollout(x_aug: np.ndarray, reference: np.ndarray, model: PredictionModel
     x = x_aug.copy()
     out = np.empty((x.shape[0], model.horizon, 2))
     for i in range(model.horizon):
-        feedforward = reference[:, i + 1, 4:6] - reference[:, i, 4:6]
+        feedforward = reference[:, i + 1, ACCELERATION] - reference[:, i, ACCELERATION]
         du_free = feedforward - (x - reference[:, i]) @ gain.T
-        du = saturate(x[:, 4:6] + du_free, x[:, 4:6], accel_max, accel_increment_max)
+        du = saturate(x[:, ACCELERATION] + du_free, x[:, ACCELERATION], accel_max, accel_increment_max)
         if commands is not None and not commands[i]:
             du = np.zeros_like(du)
         out[:, i] = du

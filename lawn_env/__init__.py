@@ -6,6 +6,10 @@ builds the PettingZoo environment. The physics lives in :mod:`lawn_env.channel`,
 :mod:`lawn_env.dynamics`, :mod:`lawn_env.drone` and :mod:`lawn_env.references`.
 """
 
+from . import kernel_cache
+
+kernel_cache.install()  # before any kernel is decorated: their cache follows every source file they use
+
 from gymnasium.envs.registration import register, registry
 
 from . import channel, dynamics, drone, presets, references

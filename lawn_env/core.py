@@ -13,10 +13,10 @@
   the single environments and the PettingZoo env are its B = 1 views, the native vector envs its
   B = N views; :meth:`Simulation.row` is one scenario's state as single-scenario arrays.
 
-The slot's equations (saturation, links, transition, disturbance, measurement, stage cost) are
-the functions below, shape-generic over leading axes; the planners call them too. It knows
-nothing about action or observation encodings; the environments do (:mod:`lawn_env.spaces`,
-:mod:`lawn_env.interface`).
+The slot kernel composes the equations of :mod:`lawn_env.channel` (the link) and
+:mod:`lawn_env.dynamics` (the control set, the transition, the lag, the measurement) and holds
+none of its own. It knows nothing about action or observation encodings; the environments do
+(:mod:`lawn_env.spaces`, :mod:`lawn_env.interface`).
 """
 
 from __future__ import annotations
@@ -189,10 +189,10 @@ def _accumulate(terms, outage, delivered, err, send, power, drone_next, drone_pr
 def _slot(x_aug, increment, send, power, drone_next, fading, reference, slot, applied, process_position,
           process_velocity, drone_prev, totals, step_t, cost_w, accel_effect_t, constants, rows_out, terms, delivered,
           outage, applied_next, costs, totals_next):  # pragma: no cover - compiled
-    """One slot of B scenarios (see :func:`step`): 1. the links (:func:`_links`); 2. the transition, [x~[n+1], du] = [x~, du delivered] @ packed_t (BLAS, as
+    """One slot of B scenarios (see :func:`step`): 1. the links (:func:`_links`); 2. the transition, [x~[n+1], du] = [x~, du delivered] @ step_t (BLAS, as
     numpy's ``@``); 3. the disturbance mode's actuator lag (``lag_alpha`` >= 0) and process noise
     (where the arrays are not empty); 4. the packed error and the stage terms
-    (e' Q1 e, du' Q2 du) = err^2 @ packed_w; 5. the costs and the running sums.
+    (e' Q1 e, du' Q2 du) = err^2 @ cost_w; 5. the costs and the running sums.
 
     Reads the state and the decisions (``send`` (B,) or (1,): whether the slot sends its
     commands; ``process_*`` (B, K, 2), or (0, 0, 2) without process noise), the :class:`Packed`
@@ -279,7 +279,7 @@ class SimParams:
         fixed = references.reference_table(fixed_paths, steps, config.slot_s) if fixed_paths is not None else None
         d = config.disturbance
         link = channel.LinkParams.from_config(config)
-        lag_alpha = float(np.exp(-config.slot_s / d.actuator_lag_s)) if d.actuator_lag_s > 0 else -1.0
+        lag_alpha = dynamics.lag_alpha(config.slot_s, d.actuator_lag_s)
         return cls(
             config=config, num_agvs=k, num_slots=slots, horizon=horizon, steps=steps, slot_s=config.slot_s,
             model=model, link=link,
@@ -664,8 +664,9 @@ class ScenarioView:
         return link_outage(self.x_aug, np.asarray(drone_position, dtype=float), power_w, self.link)[1]
 
     def planning_success(self, power_w: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
-        """psi of the planners' link model (CSI-aware or not, see ChannelConfig)."""
-        return link_success(self.x_aug, np.asarray(drone_position, dtype=float), power_w, self.planning_link)
+        """psi of the planners' link model (CSI-aware or not, see ChannelConfig) at the measured
+        positions (what the planners, ``lawn/Comm-v0``'s MPC among them, plan from)."""
+        return link_success(self.x_obs, np.asarray(drone_position, dtype=float), power_w, self.planning_link)
 
     def drone_target(self, velocity_mps: np.ndarray) -> np.ndarray:
         """Next drone position for a commanded velocity (speed-limited, kept in the area)."""

@@ -40,6 +40,7 @@ __all__ = [
     "saturate",
     "saturate_increment",
     "lagged_acceleration",
+    "lag_alpha",
     "initial_state",
     "measure",
     "POSITION",
@@ -67,6 +68,12 @@ def _saturate_dufunc(u_prev: float, du: float, accel_max: float) -> float:  # pr
 #: :func:`saturate` over arrays (broadcasting, a new array): numpy's ufunc of the compiled loop,
 #: which dispatches faster than numba's wrapper.
 saturate_increment = _saturate_dufunc.ufunc
+
+
+def lag_alpha(slot_s: float, lag_s: float) -> float:
+    """The actuator lag's alpha = exp(-slot / lag) of :func:`lagged_acceleration`; -1.0 without a lag
+    (``lag_s`` = 0), which the slot kernel reads as "no lag"."""
+    return float(np.exp(-slot_s / lag_s)) if lag_s > 0 else -1.0
 
 
 @numba.njit(cache=True)

@@ -22,8 +22,9 @@ accelerating; single slots cost up to 1e7), so every environment also takes
       ``sum_k w_k P_out,k`` of the reduced per-slot problem linearized in psi (``lawn_env.mpc``,
       MODEL.md §4), where ``w_k = V_k(0) - V_k(1)`` is what AGV k's command is worth this slot
       (:meth:`~lawn_env.mpc.OutageAwareMPC.command_stakes`, one extra MPC solve). With the
-      high-SNR outage ``P_out ∝ (d^2 / p)^m`` the Lagrange condition gives
-      ``prior_k = (w_k d_k^(2m))^(1/(m+1))``; stakes are floored at ``STAKE_FLOOR`` of their mean.
+      high-SNR outage ``P_out ∝ (d^2 / p)^a`` (a the outage law's order, m for Nakagami-m:
+      :meth:`~lawn_env.channel.LinkParams.stake_power_weights`) the Lagrange condition gives
+      ``prior_k = (w_k d_k^(2a))^(1/(a+1))``; stakes are floored at ``STAKE_FLOOR`` of their mean.
       An AGV far off its track gets the power it needs to be brought back, which the distance
       prior does not give it (docs/rl.md compares the two zero actions: ``python benchmarks/anchors.py``).
 
@@ -160,7 +161,7 @@ class RLInterface:
 
 
 #: Stakes below this fraction of their mean are raised to it (``power_anchor="stake"``): a link whose
-#: command is worth nothing now still gets ``STAKE_FLOOR^(1/(m+1))`` of an average link's power weight.
+#: command is worth nothing now still gets ``STAKE_FLOOR^(1/(a+1))`` of an average link's power weight.
 STAKE_FLOOR = 1e-3
 
 #: Saturation of observation features without ``obs_clip`` (normalized units).
@@ -277,7 +278,7 @@ class AnchoredActions(ActionCodec):
     def power_prior(self, x_aug: np.ndarray, drone_next: np.ndarray, data: SlotData | None = None) -> np.ndarray:
         """The anchored power split's weights, (..., K) (any leading batch axes; the zero action's
         powers are ``P_max prior / sum(prior)``): ``d_k^2`` from the drone's next position, or with
-        ``power_anchor="stake"`` ``(w_k d_k^(2m))^(1/(m+1))`` for the stakes ``w_k`` of the slot's
+        ``power_anchor="stake"`` ``(w_k d_k^(2a))^(1/(a+1))`` (a the outage law's order) for the stakes ``w_k`` of the slot's
         prepared MPC ``data`` (module docstring), scaled so that the largest weight is 1."""
         return self._prior(self._distance_sq(x_aug, drone_next), data)
 

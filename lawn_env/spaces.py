@@ -25,6 +25,7 @@ import numpy as np
 
 from .core import Decisions
 from .drone import move_rows
+from .dynamics import POSITION
 
 if TYPE_CHECKING:
     from .config import ScenarioConfig
@@ -374,10 +375,14 @@ class ObservationLayout:
         self._state_scale = np.concatenate([1 / self.half_extent, [1 / VELOCITY_SCALE_MPS] * 2, [1 / self.accel_max] * 2])
         self._state_shift = np.concatenate([self.center, np.zeros(4)])
         self._no_table = np.zeros((1, self.size), dtype=np.float32)
-        starts = {n: (v.start if isinstance(v, slice) else v) for n, v in self.slices.items()}
-        self._codec = np.array([(*starts.values(), self.agv_features, self.window, self._state_scale,
-                                 self._state_shift * self._state_scale, self._ref_scale, self.center,
-                                 1.0 / self.half_extent, 1.0 / self.power_budget_w)], dtype=OBS_CODEC)
+        codec = np.zeros(1, dtype=OBS_CODEC)  # filled by name: the table's order is free
+        for name, where in self.slices.items():
+            codec[name] = where.start if isinstance(where, slice) else where
+        codec["agv_features"], codec["window"] = self.agv_features, self.window
+        codec["state_scale"], codec["state_shift"] = self._state_scale, self._state_shift * self._state_scale
+        codec["reference_scale"], codec["center"] = self._ref_scale, self.center
+        codec["inverse_half_extent"], codec["inverse_budget"] = 1.0 / self.half_extent, 1.0 / self.power_budget_w
+        self._codec = codec
 
     def feature_names(self) -> list[str]:
         """Human-readable names of the per-AGV block, then of the globals."""
@@ -404,7 +409,7 @@ class ObservationLayout:
         """Raw reference windows (..., W, 6), slots n..n+N_p, as observation features
         (..., 6W): positions relative to slot n's, every entry scaled (a new array)."""
         win = windows.copy()
-        win[..., 0:2] -= windows[..., 0:1, 0:2]
+        win[..., POSITION] -= windows[..., 0:1, POSITION]
         win *= self._ref_scale
         return win.reshape(win.shape[:-2] + (-1,))
 
@@ -459,7 +464,7 @@ class ObservationLayout:
         x_aug = blocks[:, self.slices["state"]] / self._state_scale + self._state_shift
         error = blocks[:, self.slices["error"]] / self._ref_scale
         win = blocks[:, self.slices["reference"]].reshape(self.num_agvs, self.window, 6) / self._ref_scale
-        win[:, :, 0:2] += (x_aug[:, 0:2] - error[:, 0:2])[:, None, :]  # + reference position at slot n
+        win[:, :, POSITION] += (x_aug[:, POSITION] - error[:, POSITION])[:, None, :]  # + reference position at slot n
         k = self.num_agvs * self.agv_features
         return {
             "x_aug": x_aug,

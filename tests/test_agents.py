@@ -16,7 +16,7 @@ CFG = ScenarioConfig()
 
 
 def _slot_problem(solver, snap):
-    return SlotProblem(solver.mpc, solver.link, snap, solver.config.drone_reach_m)
+    return SlotProblem(solver.mpc, solver.link, snap, solver.config)
 
 
 def _snapshots(count, seed=0, config=CFG):

@@ -266,7 +266,7 @@ def test_under_measurement_noise_the_comm_mpc_plans_from_the_measured_state(env_
             decision.drone_next, snap.x_aug[:, 0:2]))
         expected = independent.solve(snap.x_aug, snap.reference, psi, snap.slot).increments[:, 0]
         _, _, _, _, info = env.step(a)
-        np.testing.assert_allclose(info["success_probability_planned"], psi, rtol=1e-6)  # the stakes' QPs
+        np.testing.assert_allclose(info["success_probability_planned"], psi, rtol=1e-6)  # the prior's stakes: QPs warm-started apart
         applied = np.where(info["delivered"][:, None], expected, 0.0)
         np.testing.assert_allclose(info["applied_increment"], applied, atol=1e-6)
 
