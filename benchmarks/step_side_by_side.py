@@ -7,13 +7,14 @@ machine's speed cancels out of it; below 1 is faster):
 
 * ``joint-step``, ``comm-step``: one ``lawn/Joint-v0`` / ``lawn/Comm-v0`` step (seeded uniform
   actions, the env unwrapped), microseconds;
-* ``joint-vector``, ``comm-vector``: one step of the native vector env at N = 1,024, milliseconds;
+* ``joint-vector``, ``comm-vector``: one step of the native vector env at N = 1,024, milliseconds
+  (``joint-vector-k32``: K = 32, random paths, the observation's windows computed in the loop);
 * ``rg-mpc``: the median decision time of ``rg-mpc`` on ``lawn/Joint-v0`` (K = 4, one episode of
   40 slots), milliseconds.
 
 The target: every ratio within 1.05.
 
-Usage: ``python benchmarks/step_side_by_side.py [--before ../before] [--before-commit SHA] [--repeats 5]
+Usage: ``python benchmarks/step_side_by_side.py [--before ../before-equations] [--before-commit SHA] [--repeats 5]
 [--markdown out.md]`` (the worktree is made when missing; the default commit is the one before the
 equations-once refactor).
 """
@@ -58,12 +59,12 @@ def _single(env_id: str, steps: int = 3000) -> float:
     return statistics.median(times[100:]) * 1e6
 
 
-def _vector(env_id: str, steps: int = 60) -> float:
+def _vector(env_id: str, steps: int = 60, **kwargs) -> float:
     import gymnasium as gym
 
     import lawn_env  # noqa: F401  (registers the ids)
 
-    envs = gym.make_vec(env_id, num_envs=1024, vectorization_mode="vector_entry_point")
+    envs = gym.make_vec(env_id, num_envs=1024, vectorization_mode="vector_entry_point", **kwargs)
     rng = np.random.default_rng(0)
     actions = rng.uniform(-1, 1, (8,) + envs.action_space.shape).astype(np.float32)
     envs.reset(seed=0)
@@ -102,6 +103,7 @@ MEASUREMENTS = {
     "joint-step": (lambda: _single("lawn/Joint-v0"), "us"),
     "comm-step": (lambda: _single("lawn/Comm-v0"), "us"),
     "joint-vector": (lambda: _vector("lawn/Joint-v0"), "ms"),
+    "joint-vector-k32": (lambda: _vector("lawn/Joint-v0", steps=20, config="k32"), "ms"),
     "comm-vector": (lambda: _vector("lawn/Comm-v0"), "ms"),
     "rg-mpc": (_rg_mpc, "ms"),
 }
@@ -109,7 +111,7 @@ MEASUREMENTS = {
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--before", type=Path, default=Path("../before"),
+    parser.add_argument("--before", type=Path, default=Path("../before-equations"),
                         help="the other tree (made with git worktree from --before-commit when missing)")
     parser.add_argument("--before-commit", default=BEFORE_COMMIT)
     parser.add_argument("--repeats", type=int, default=5)

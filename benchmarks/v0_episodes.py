@@ -7,7 +7,7 @@ order). The same cases run in a fresh process on ``--before``, a ``git worktree`
 before a change (made when missing), and every digest must be equal but for the changes the
 environments' version histories record (:data:`DOCUMENTED_CHANGES`).
 
-Usage: ``python benchmarks/v0_episodes.py [--before ../before] [--before-commit SHA] [--slots 40]
+Usage: ``python benchmarks/v0_episodes.py [--before ../before-equations] [--before-commit SHA] [--slots 40]
 [--markdown out.md]``
 """
 
@@ -147,7 +147,7 @@ def digests(slots: int) -> dict[str, str]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--before", type=Path, default=Path("../before"),
+    parser.add_argument("--before", type=Path, default=Path("../before-equations"),
                         help="the other tree (made with git worktree from --before-commit when missing)")
     parser.add_argument("--before-commit", default=BEFORE_COMMIT)
     parser.add_argument("--slots", type=int, default=40, help="slots per episode (default 40)")

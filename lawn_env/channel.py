@@ -114,7 +114,12 @@ def outage_law(m: float, x: float, part: int) -> float:  # pragma: no cover - co
         return _GAMMAINCC(m, x)
     if part == ORDER:
         return m
-    log_x = 0.0 if m == 1.0 else (m - 1.0) * math.log(x)
+    if m == 1.0:
+        log_x = 0.0
+    elif x == 0.0:  # x^(m-1) at 0 without log(0)'s floating-point flag (numpy would warn of it)
+        log_x = -math.inf if m > 1.0 else math.inf
+    else:
+        log_x = (m - 1.0) * math.log(x)
     return math.exp(log_x - x - _GAMMALN(m))
 
 

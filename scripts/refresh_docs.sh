@@ -9,7 +9,7 @@
 #   block parallel-scaling (docs/performance.md)        benchmarks/parallel_scaling.py (--only parallel)
 #   blocks step-side-by-side, v0-episodes (--only equations)   benchmarks/{step_side_by_side,v0_episodes}.py
 #                                                       (side by side with the commit before the
-#                                                       equations-once refactor, in a git worktree ../before)
+#                                                       equations-once refactor, in a git worktree ../before-equations)
 #   blocks numba-jit, qp-speed, speedups (--only qp)      benchmarks/{numba_jit,qp_speed,speedups}.py
 #                                                       (speedups: side by side with the commit before
 #                                                       the compiled solver, in a git worktree ../before)

@@ -230,6 +230,18 @@ def test_the_outage_law_is_scipys_gammainc_gammaincc_and_density():
     np.testing.assert_array_equal(link.success_slope_term(x), [law(3.0, v, channel.DENSITY) * v for v in x])
 
 
+def test_the_density_at_zero_is_exact_and_quiet():
+    """At x = 0 (perfect links: G_th = 0) the density is scipy's value, 0 for m > 1 and 1 for m = 1,
+    with no floating-point warning from log(0)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for m in (1.0, 2.0, 3.5):
+            assert channel.outage_law(m, 0.0, channel.DENSITY) == np.exp(special.xlogy(m - 1, 0.0) - special.gammaln(m))
+            assert np.all(_link(int(m)).success_slope_term(np.zeros(3)) == 0.0)
+
+
 def test_compiled_link_equations_equal_the_array_forms():
     """The link's scalar equations (one source, compiled: the kernel's and the ufuncs') give the
     array formulas' values bit for bit: d^2 = (dx^2 + dy^2) + H^2 and x = d^2 c_d / (p + floor) + c_ce."""
