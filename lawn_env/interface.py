@@ -100,6 +100,10 @@ class RLInterface:
     """Anchored power: weights ``prior exp(a * power_log_range)``; links differ at most by e^(2 range) from the prior."""
     residual_scale: PositiveFloat = 1.0
     """Anchored increments: residual ``a * residual_scale * Delta-a_max`` on the tracking controller."""
+    layout: Literal["flat", "entities"] = "flat"
+    """How observations and actions are laid out: ``flat`` (one vector each, the v0 layout) or
+    ``entities`` (a row per AGV padded to ``MAX_AGVS`` with a mask, and a row of globals, for set and
+    graph networks: :mod:`lawn_env.entities`)."""
     increment_anchor: Literal["mpc", "lqr"] = "mpc"
     """Anchored increments (Joint): the tracking controller under the residual. ``mpc``: the
     outage-aware MPC's first increment at each link's planned success probability; ``lqr``: the

@@ -21,6 +21,7 @@ import numpy as np
 from ..core import Decisions, ScenarioView, Simulation, SlotDraws, SlotRecord, Snapshot, Trail, link_success
 from ..config import ScenarioConfig
 from ..dynamics import POSITION
+from ..entities import EntityLayout
 from ..interface import InterfaceLike, RLInterface, action_codec, resolve_interface
 from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
@@ -119,6 +120,21 @@ class Engine:
         self.needs_windows = role == "comm" or self.actions.needs_reference
         self.slot_table = self.layout.slot_table(self.sim.params.fixed_reference)
         self._no_termination = np.zeros(self.num_envs, dtype=bool)
+        #: The entity layout of the interface's ``layout="entities"`` (:mod:`lawn_env.entities`); None: flat.
+        self.entities = (EntityLayout(config, role, self.interface.obs_bound) if self.interface.layout == "entities"
+                         else None)
+
+    @property
+    def observation_space(self) -> gym.spaces.Space:
+        """One scenario's observation space in the interface's layout."""
+        if self.entities is None:
+            return self.interface.observation_space(self.layout.size)
+        return self.entities.observation_space
+
+    @property
+    def action_space(self) -> gym.spaces.Box:
+        """One scenario's action space in the interface's layout."""
+        return self.actions.space if self.entities is None else self.entities.action_space
 
     def reset(self, rngs: Sequence[np.random.Generator], which: np.ndarray | None = None) -> None:
         """New episodes for the scenarios ``which`` (all when None), scenario i from ``rngs[i]``."""
@@ -126,9 +142,12 @@ class Engine:
         self.actions.reset(which)
         self.role.reset(which)
 
-    def check(self, actions: Any, name: str = "action") -> np.ndarray:
-        """The batch's actions checked (:func:`~lawn_env.spaces.check_action`), (B, size) float64."""
-        return check_action(actions, self.actions.size, name, self.num_envs)
+    def check(self, actions: Any, name: str = "action", batch: bool = True) -> np.ndarray:
+        """Actions in the interface's layout checked (:func:`~lawn_env.spaces.check_action`): the
+        batch's (B, size), or with ``batch=False`` one scenario's (size,); returned as the flat
+        actions the codec decodes, float64 (B, flat size) or (flat size,)."""
+        a = check_action(actions, self.action_space.shape[0], name, self.num_envs if batch else None)
+        return a if self.entities is None else self.entities.to_flat_actions(a)
 
     def decide(self, actions: np.ndarray) -> tuple[Decisions, dict]:
         """The slot's decisions of every scenario for checked actions (B, size), and the role's info."""
@@ -186,9 +205,15 @@ class Engine:
             info[key] = value[at]
         return info
 
-    def observe(self) -> np.ndarray:
-        """Every scenario's observation as the agent sees it (B, size) float32."""
+    def observe_flat(self) -> np.ndarray:
+        """Every scenario's flat observation as the agent sees it (B, size) float32."""
         return self.layout.encode(self.sim, self.interface.obs_bound, self.slot_table)
+
+    def observe(self) -> np.ndarray | dict[str, np.ndarray]:
+        """Every scenario's observation in the interface's layout: (B, size) float32, or the entity
+        layout's dict of (B, ...) arrays."""
+        flat = self.observe_flat()
+        return flat if self.entities is None else self.entities.observe(flat)
 
 
 class EngineAccess:
@@ -280,8 +305,7 @@ class LawnEnvBase(EngineView, gym.Env):
                  interface: InterfaceLike = None, qp_backend: str = DEFAULT_BACKEND, **overrides: Any):
         self._setup_view(config, render_mode, overrides, interface, self.role, qp_backend)
         self.num_agvs = self.config.num_agvs
-        self.observation_space = self.interface.observation_space(self.layout.size)
-        self.action_space = self.actions.space
+        self.observation_space, self.action_space = self.engine.observation_space, self.engine.action_space
         self._done = True
 
     # ------------------------------------------------------------------ gym API
@@ -304,15 +328,15 @@ class LawnEnvBase(EngineView, gym.Env):
         self._done = False
         if self.render_mode == "human":
             self.render()
-        return self.engine.observe()[0], self.engine.info(i=0)
+        return self._observation(), self.engine.info(i=0)
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._done:
             raise RuntimeError("the episode has ended (or reset() was never called); call reset() before step()")
         engine = self.engine
-        decisions, extra = engine.decide(check_action(action, self.actions.size)[None])
+        decisions, extra = engine.decide(engine.check(action, batch=False)[None])
         record = self._simulate(decisions)
-        obs = engine.observe()[0]
+        obs = self._observation()
         reward, terminated, truncated = engine.outcome(record.stage_cost)
         terminated, truncated = bool(terminated[0]), bool(truncated[0])
         info = engine.info(record, extra, i=0)
@@ -322,6 +346,16 @@ class LawnEnvBase(EngineView, gym.Env):
         if self.render_mode == "human":
             self.render()
         return obs, float(reward[0, 0]), terminated, truncated, info
+
+    def _observation(self) -> np.ndarray | dict[str, np.ndarray]:
+        """This scenario's observation in the interface's layout."""
+        obs = self.engine.observe()
+        return obs[0] if self.entities is None else {key: value[0] for key, value in obs.items()}
+
+    @property
+    def entities(self) -> EntityLayout | None:
+        """The entity layout (``interface={"layout": "entities"}``); None for the flat one."""
+        return self.engine.entities
 
     # ------------------------------------------------------------------ extras
     def episode_metrics(self) -> dict:

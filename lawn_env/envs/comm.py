@@ -78,6 +78,8 @@ class CommEnv(LawnEnvBase):
       snapshot's, as every planner does (it planned from the true state before), and with
       ``interface="rl"`` it is the anchor's MPC (one per env). Episodes with measurement noise
       differ from before; every other episode is bit for bit as before.
+    * v0 (later): the interface's ``layout="entities"`` as ``lawn/Joint-v0``'s history says
+      (opt-in; episodes are unchanged).
     """
 
     role = "comm"

@@ -75,7 +75,8 @@ class JointEnv(LawnEnvBase):
     top-level config fields or a section mapped to a dict, e.g. ``num_agvs=3,
     channel={"blocklength": 256}``. ``interface`` is None (the paper's benchmark), ``"rl"``,
     or an :class:`~lawn_env.RLInterface` / dict of its fields; ``lawn/JointRL-v0`` is this env
-    with ``interface="rl"``.
+    with ``interface="rl"``. The interface's ``layout="entities"`` lays observations and actions
+    out per AGV, padded to 64 rows with a mask (:mod:`lawn_env.entities`).
 
     ## Version History
 
@@ -98,4 +99,7 @@ class JointEnv(LawnEnvBase):
       probability (now green to red) and the episode's control cost so far in the title, at
       512 x 448 pixels (480 x 480 before); ``lawn render`` writes an episode of them as an
       animation. Episodes are unchanged.
+    * v0 (later): the interface's ``layout`` field (opt-in; the flat layout stays the default):
+      ``"entities"`` gives a row per AGV padded to 64 rows, a mask and per-AGV action rows, the
+      flat layout's features and actions rearranged; episodes are unchanged.
     """

@@ -85,6 +85,9 @@ class LawnParallelEnv(EngineView, ParallelEnv):
                                  "give one of them (max_cycles is PettingZoo's name for num_slots)")
             overrides = {**overrides, "num_slots": max_cycles}
         self._setup_view(config, render_mode, overrides, interface, "joint")
+        if self.interface.layout != "flat":  # each agent's observation is already its own entity's
+            raise ValueError(f"interface layout={self.interface.layout!r}: the multi-agent env gives each AGV agent "
+                             "its own row and the drone the flat observation; use layout='flat' (the default)")
         self.max_cycles = self.config.num_slots
         k = self.config.num_agvs
         self.possible_agents = ["drone"] + [f"agv_{i}" for i in range(k)]
@@ -191,7 +194,7 @@ class LawnParallelEnv(EngineView, ParallelEnv):
         return observations, rewards, terminations, truncations, infos
 
     def _observations(self) -> dict:
-        central = self.engine.observe()[0]
+        central = self.engine.observe_flat()[0]
         blocks = self.layout.agv_blocks(central)
         glob = central[-self.layout.global_features :]
         obs = {"drone": central}
@@ -204,7 +207,7 @@ class LawnParallelEnv(EngineView, ParallelEnv):
         """Global state: the central observation (an element of ``state_space``)."""
         if not self.engine.sim.started:
             raise RuntimeError("call reset() before state()")
-        return self.engine.observe()[0]
+        return self.engine.observe_flat()[0]
 
     def episode_metrics(self) -> dict:
         """MODEL.md §6's metrics of the episode so far (the central envs put them in the last info)."""

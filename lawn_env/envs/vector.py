@@ -81,8 +81,8 @@ class JointVectorEnv(EngineAccess, VectorEnv):
         self.trail = Trail(self.sim.row(self.render_env)) if render_mode else None
         self._renderer = None
         self.num_agvs = self.config.num_agvs
-        self.single_observation_space = self.interface.observation_space(self.layout.size)
-        self.single_action_space = self.actions.space
+        self.single_observation_space = self.engine.observation_space
+        self.single_action_space = self.engine.action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._rngs: list[np.random.Generator] = []
