@@ -117,3 +117,13 @@ def test_bad_layouts_and_fleets_raise_errors_that_name_them():
         _make("lawn/Joint-v0", 65, reference={"path_set": "random"})
     with pytest.raises(ValueError, match="multi-agent"):
         lawn_env.parallel_env(interface={"layout": "entities"})
+
+
+def test_the_core_and_the_agents_import_without_torch():
+    """The fleet network needs torch and SB3 (the rl extra); lawn_env and agents import without them."""
+    import subprocess
+    import sys
+
+    code = "import sys, lawn_env, agents; print('torch' in sys.modules, 'stable_baselines3' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False", "False"]

@@ -1,0 +1,81 @@
+"""The fleet policy (agents/fleet.py): permutation-equivariant, blind to padded rows, one network for
+every K, saved and loaded like any SB3 model."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+pytest.importorskip("stable_baselines3")
+
+from stable_baselines3 import PPO  # noqa: E402
+
+from agents.fleet import FleetPolicy  # noqa: E402
+from lawn_env.entities import MAX_AGVS  # noqa: E402
+
+
+def _env(env_id="lawn/Joint-v0", k=5):
+    return gym.make(env_id, interface={"base": "rl", "layout": "entities"}, num_agvs=k,
+                    reference={"path_set": "random"})
+
+
+def _model(env, seed=0):
+    return PPO(FleetPolicy, env, n_steps=32, batch_size=32, n_epochs=1, seed=seed,
+               policy_kwargs=dict(width=32, heads=2, layers=2))
+
+
+def _rows(action, per_agv):
+    return action[..., : MAX_AGVS * per_agv].reshape(action.shape[:-1] + (MAX_AGVS, per_agv)), action[..., -2:]
+
+
+@pytest.mark.parametrize("env_id, per_agv", [("lawn/Joint-v0", 3), ("lawn/Comm-v0", 1)])
+def test_permuting_the_agvs_permutes_their_actions(env_id, per_agv):
+    k = 5
+    env = _env(env_id, k)
+    model = _model(env)
+    obs, _ = env.reset(seed=1)
+    perm = np.array([3, 0, 4, 1, 2])
+    shuffled = {key: value.copy() for key, value in obs.items()}
+    shuffled["agvs"][:k] = obs["agvs"][perm]
+    a, _ = model.predict(obs, deterministic=True)
+    b, _ = model.predict(shuffled, deterministic=True)
+    rows_a, drone_a = _rows(a, per_agv)
+    rows_b, drone_b = _rows(b, per_agv)
+    np.testing.assert_allclose(rows_b[:k], rows_a[perm], atol=1e-5)
+    np.testing.assert_allclose(drone_b, drone_a, atol=1e-5)
+    assert not np.allclose(rows_a[0], rows_a[1])  # the rows differ: the check above has teeth
+
+
+def test_padded_rows_change_no_action():
+    k = 4
+    env = _env(k=k)
+    model = _model(env)
+    obs, _ = env.reset(seed=2)
+    noisy = {key: value.copy() for key, value in obs.items()}
+    noisy["agvs"][k:] = np.random.default_rng(0).uniform(-1, 1, noisy["agvs"][k:].shape)
+    a, _ = model.predict(obs, deterministic=True)
+    b, _ = model.predict(noisy, deterministic=True)
+    np.testing.assert_allclose(b, a, atol=1e-6)
+    assert np.all(_rows(a, 3)[0][k:] == 0.0)  # padded rows' means are zero
+
+
+def test_a_network_trained_at_k4_runs_at_k3_and_k8_and_reloads(tmp_path):
+    model = _model(_env(k=4))
+    model.learn(64)
+    for k in (3, 8):
+        env = _env(k=k)
+        obs, _ = env.reset(seed=k)
+        for _ in range(3):
+            action, _ = model.predict(obs, deterministic=True)
+            assert env.action_space.contains(np.clip(action, -1, 1))
+            obs, *_ = env.step(np.clip(action, -1, 1))
+    model.save(tmp_path / "fleet")
+    again = PPO.load(tmp_path / "fleet")
+    assert again.policy.fleet == {"width": 32, "heads": 2, "layers": 2}
+    obs, _ = _env(k=8).reset(seed=0)
+    np.testing.assert_array_equal(again.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
+
+
+def test_the_flat_layout_is_refused_with_a_clear_error():
+    with pytest.raises(ValueError, match="entity layout"):
+        PPO(FleetPolicy, gym.make("lawn/JointRL-v0"))
