@@ -15,7 +15,7 @@ from gymnasium.envs.registration import register, registry
 from . import channel, dynamics, drone, presets, references
 from .config import ChannelConfig, ControlConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 from .core import Simulation, Snapshot
-from .envs import CommEnv, JointEnv, LawnParallelEnv, env, parallel_env, raw_env
+from .envs import CommEnv, JointEnv, LawnParallelEnv, MixedFleetEnv, env, parallel_env, raw_env
 from .interface import RL_INTERFACE, RLInterface, action_codec
 from .presets import resolve_config
 from .spaces import ObservationLayout
@@ -95,4 +95,5 @@ __all__ = [
     "drone",
     "presets",
     "references",
+    "MixedFleetEnv",
 ]

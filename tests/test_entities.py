@@ -127,3 +127,27 @@ def test_the_core_and_the_agents_import_without_torch():
     code = "import sys, lawn_env, agents; print('torch' in sys.modules, 'stable_baselines3' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]
+
+
+def test_mixed_fleets_draw_k_per_episode_deterministically():
+    """MixedFleetEnv: Gymnasium's checker passes; the same seed draws the same K and plays the same
+    episode; the draws cover the sizes; each episode is the env of its K (identical spaces)."""
+    sizes = (3, 5, 8)
+    env = lawn_env.MixedFleetEnv("lawn/Comm-v0", fleet_sizes=sizes)
+    check_env(env, skip_render_check=True)
+    seen, rng = set(), np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (3,) + env.action_space.shape).astype(np.float32)
+    for seed in range(12):
+        runs = []
+        for _ in range(2):
+            obs, info = env.reset(seed=seed)
+            steps = [env.step(a) for a in actions]
+            runs.append((info["num_agvs"], obs["mask"].sum(), [s[1] for s in steps], steps[-1][0]["agvs"]))
+        assert runs[0][0] == runs[1][0] == runs[0][1] and runs[0][2] == runs[1][2]
+        np.testing.assert_array_equal(runs[0][3], runs[1][3])
+        seen.add(runs[0][0])
+    assert seen == set(sizes)
+    with pytest.raises(ValueError, match="fleet_sizes"):
+        lawn_env.MixedFleetEnv(fleet_sizes=(3, 65))
+    with pytest.raises(ValueError, match="env_id"):
+        lawn_env.MixedFleetEnv("lawn/Parallel-v0")

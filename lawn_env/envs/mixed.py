@@ -1,0 +1,62 @@
+"""Mixed fleets: one environment whose every episode draws its fleet size K.
+
+:class:`MixedFleetEnv` holds one central environment per fleet size, all in the entity layout
+(:mod:`lawn_env.entities`), whose spaces do not depend on K; each ``reset`` draws K from the env's
+generator and plays that episode on the env of that size. A network that reads the entity layout
+(``agents.fleet.FleetPolicy``) trains on it once for every K it will meet.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import gymnasium as gym
+import numpy as np
+
+from ..entities import MAX_AGVS
+from ..interface import InterfaceLike, resolve_interface
+from ..presets import ConfigLike, resolve_config
+
+__all__ = ["MixedFleetEnv"]
+
+
+class MixedFleetEnv(gym.Env):
+    """Episodes of ``env_id`` (``lawn/Joint-v0`` or ``lawn/Comm-v0``) with K drawn uniformly from
+    ``fleet_sizes`` at every reset; ``interface`` is any interface (its layout is set to
+    ``entities``), ``config`` and ``overrides`` as for ``gym.make`` (``num_agvs`` is the draw's).
+    ``info["num_agvs"]`` carries the episode's K."""
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, env_id: str = "lawn/Joint-v0", fleet_sizes: Sequence[int] = tuple(range(3, 17)),
+                 interface: InterfaceLike = "rl", config: ConfigLike = None, **overrides: Any):
+        sizes = sorted({int(k) for k in fleet_sizes})
+        if not sizes or sizes[0] < 1 or sizes[-1] > MAX_AGVS:
+            raise ValueError(f"fleet_sizes={list(fleet_sizes)!r}: give at least one size in [1, {MAX_AGVS}]")
+        if env_id not in ("lawn/Joint-v0", "lawn/Comm-v0"):
+            raise ValueError(f"env_id={env_id!r}; valid: 'lawn/Joint-v0', 'lawn/Comm-v0'")
+        iface = resolve_interface(interface).to_dict() | {"layout": "entities"}
+        base = resolve_config(config, **overrides)
+        self.fleet_sizes = tuple(sizes)
+        self.envs = {k: gym.make(env_id, config=base.override(num_agvs=k), interface=iface).unwrapped for k in sizes}
+        first = self.envs[sizes[0]]
+        self.observation_space, self.action_space = first.observation_space, first.action_space
+        for k, env in self.envs.items():
+            if env.observation_space != self.observation_space or env.action_space != self.action_space:
+                raise ValueError(f"num_agvs={k} gives other spaces than num_agvs={sizes[0]}")
+        self.env = first
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict[str, Any]]:
+        super().reset(seed=seed)
+        k = int(self.np_random.choice(self.fleet_sizes))
+        self.env = self.envs[k]
+        obs, info = self.env.reset(seed=int(self.np_random.integers(2**31)), options=options)
+        return obs, {**info, "num_agvs": k}
+
+    def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        return obs, reward, terminated, truncated, {**info, "num_agvs": self.env.num_agvs}
+
+    def close(self) -> None:
+        for env in self.envs.values():
+            env.close()
