@@ -20,6 +20,7 @@ from typing import Any, Callable
 import numpy as np
 
 from lawn_env import PARALLEL_ENV_ID, ScenarioConfig
+from lawn_env.entities import EntityLayout
 from lawn_env.interface import InterfaceLike
 
 from .anchors import InterfacePolicy, load_anchor
@@ -131,7 +132,10 @@ class SB3Policy(InterfacePolicy):
 
     ``network(obs) -> action`` is any deterministic SB3 predictor (a model or a bare policy);
     observations pass through the training interface's clipping and the normalizer, actions
-    through the training scheme's decode and the v0 encode (:func:`lawn_env.action_codec`).
+    through the training scheme's decode and the v0 encode (:func:`lawn_env.action_codec`). With
+    the interface's ``layout="entities"`` the observation is rearranged into the entity layout and
+    the network's entity action gathered back (:mod:`lawn_env.entities`), so one network trained on
+    one fleet size acts on any other (up to ``MAX_AGVS``).
     """
 
     name = "sb3"
@@ -143,10 +147,15 @@ class SB3Policy(InterfacePolicy):
         self.network = network
         self.normalizer = normalizer
         self.name = label
-        expected = tuple(network.observation_space.shape)
-        if expected != (self.layout.size,):
-            raise ValueError(f"{label} expects observations of shape {expected}; this scenario gives "
-                             f"({self.layout.size},): evaluate it with its training config")
+        self.entities = None
+        if self.interface.layout == "entities":
+            self.entities = EntityLayout(self.config, "joint" if env_id == JOINT else "comm", self.interface.obs_bound)
+            expected, given = network.observation_space, self.entities.observation_space
+        else:
+            expected, given = network.observation_space.shape, (self.layout.size,)
+        if expected != given:
+            raise ValueError(f"{label} expects observations {expected}; this scenario gives {given}: evaluate it "
+                             "with its training config (its horizon; for the flat layout, its K)")
 
     @classmethod
     def from_run(cls, path: str | Path, config: ScenarioConfig | None = None, env_id: str | None = None,
@@ -166,8 +175,13 @@ class SB3Policy(InterfacePolicy):
         x = self.interface.observe(raw.copy())
         if self.normalizer is not None:
             x = self.normalizer.normalize_obs(x)
+        if self.entities is not None:
+            x = {key: value[0] for key, value in self.entities.observe(x[None]).items()}
         action, _ = self.network.predict(x, deterministic=True)
-        return self.to_v0(np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0), raw)
+        action = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        if self.entities is not None:
+            action = self.entities.to_flat_actions(action)
+        return self.to_v0(action, raw)
 
 
 class MARLPolicy(InterfacePolicy):

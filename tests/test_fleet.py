@@ -79,3 +79,36 @@ def test_a_network_trained_at_k4_runs_at_k3_and_k8_and_reloads(tmp_path):
 def test_the_flat_layout_is_refused_with_a_clear_error():
     with pytest.raises(ValueError, match="entity layout"):
         PPO(FleetPolicy, gym.make("lawn/JointRL-v0"))
+
+
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+def test_a_fleet_network_acts_on_the_unmodified_v0_envs_of_any_k(env_id):
+    """SB3Policy carries an entity-layout network to the flat v0 env of any K: the v0 action it
+    hands the env is the network's entity action gathered and decoded as in training."""
+    from agents.learned import SB3Policy
+    from lawn_env import action_codec, presets
+
+    iface = {"base": "rl", "layout": "entities"}
+    model = _model(gym.make(env_id, interface=iface, num_agvs=4, reference={"path_set": "random"}))
+    for k in (3, 8):
+        config = presets.get("default").override(num_agvs=k, reference={"path_set": "random"})
+        policy = SB3Policy(model, config, env_id, interface=iface)
+        v0 = gym.make(env_id, config=config).unwrapped
+        twin = gym.make(env_id, config=config, interface=iface).unwrapped
+        obs, _ = v0.reset(seed=k)
+        twin_obs, _ = twin.reset(seed=k)
+        policy.reset(seed=k)
+        scheme = action_codec(config, "joint" if env_id == "lawn/Joint-v0" else "comm", iface)
+        for _ in range(3):
+            action = policy.act(obs)
+            assert v0.action_space.contains(action)
+            entity, _ = model.predict(twin_obs, deterministic=True)
+            snap = v0.snapshot()
+            expected = scheme.decode(policy.entities.to_flat_actions(np.clip(entity, -1, 1)), snap.x_aug,
+                                     snap.reference, snap.drone_position, snap.slot)
+            decided = policy.v0.decode(action, snap.x_aug, snap.reference, snap.drone_position, snap.slot)
+            np.testing.assert_allclose(decided.power_w, expected.power_w, rtol=1e-5, atol=1e-9)
+            obs, *_ = v0.step(action)
+            twin_obs, *_ = twin.step(np.clip(entity, -1, 1))
+    with pytest.raises(ValueError, match="training config"):
+        SB3Policy(model, presets.get("default").override(control={"horizon": 5}), env_id, interface=iface)
