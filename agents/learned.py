@@ -150,12 +150,12 @@ class SB3Policy(InterfacePolicy):
         self.entities = None
         if self.interface.layout == "entities":
             self.entities = EntityLayout(self.config, "joint" if env_id == JOINT else "comm", self.interface.obs_bound)
-            expected, given = network.observation_space, self.entities.observation_space
-        else:
-            expected, given = network.observation_space.shape, (self.layout.size,)
-        if expected != given:
-            raise ValueError(f"{label} expects observations {expected}; this scenario gives {given}: evaluate it "
-                             "with its training config (its horizon; for the flat layout, its K)")
+            if network.observation_space != self.entities.observation_space:
+                raise ValueError(f"{label} expects observations {network.observation_space}; this scenario gives "
+                                 f"{self.entities.observation_space}: evaluate it with its training horizon")
+        elif tuple(network.observation_space.shape) != (self.layout.size,):
+            raise ValueError(f"{label} expects observations of shape {tuple(network.observation_space.shape)}; this "
+                             f"scenario gives ({self.layout.size},): evaluate it with its training config")
 
     @classmethod
     def from_run(cls, path: str | Path, config: ScenarioConfig | None = None, env_id: str | None = None,

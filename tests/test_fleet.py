@@ -110,5 +110,5 @@ def test_a_fleet_network_acts_on_the_unmodified_v0_envs_of_any_k(env_id):
             np.testing.assert_allclose(decided.power_w, expected.power_w, rtol=1e-5, atol=1e-9)
             obs, *_ = v0.step(action)
             twin_obs, *_ = twin.step(np.clip(entity, -1, 1))
-    with pytest.raises(ValueError, match="training config"):
+    with pytest.raises(ValueError, match="training horizon"):
         SB3Policy(model, presets.get("default").override(control={"horizon": 5}), env_id, interface=iface)
