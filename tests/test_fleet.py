@@ -11,6 +11,7 @@ pytest.importorskip("stable_baselines3")
 from stable_baselines3 import PPO  # noqa: E402
 
 from agents.fleet import FleetPolicy  # noqa: E402
+from lawn_env.entities import EntityLayout  # noqa: E402
 from lawn_env.entities import MAX_AGVS  # noqa: E402
 
 
@@ -112,3 +113,35 @@ def test_a_fleet_network_acts_on_the_unmodified_v0_envs_of_any_k(env_id):
             twin_obs, *_ = twin.step(np.clip(entity, -1, 1))
     with pytest.raises(ValueError, match="training horizon"):
         SB3Policy(model, presets.get("default").override(control={"horizon": 5}), env_id, interface=iface)
+
+
+def test_dagger_labels_the_expert_and_fitting_lowers_the_loss():
+    """The fleet data set's labels are the expert's decisions (decoded they give its powers), the
+    padded entries carry none, and a DAgger round on two fleet sizes trains the network."""
+    from agents import make_policy
+    from lawn_env import action_codec, presets
+    from training.fleet import dagger_round, fit_fleet, fleet_pairs
+
+    iface = {"base": "rl", "layout": "entities"}
+    configs = [presets.get("default").override(num_agvs=k, num_slots=12) for k in (3, 4)]
+    obs, actions, present = fleet_pairs("lawn/Comm-v0", configs[0], 6, 0, iface)
+    assert obs["agvs"].shape[0] == 6 and present.sum(axis=1).tolist() == [3 + 2] * 6
+    assert not actions[~present].any()
+    env = gym.make("lawn/Comm-v0", config=configs[0])
+    o, _ = env.reset(seed=0)
+    expert = make_policy("rg-mpc", configs[0], env_id="lawn/Comm-v0")
+    expert.reset(seed=0)
+    snap = env.unwrapped.snapshot()
+    want = expert.actions.decode(expert.act(o), snap.x_aug, snap.reference, snap.drone_position, snap.slot)
+    layout = EntityLayout(configs[0], "comm", 10.0)
+    scheme = action_codec(configs[0], "comm", iface)
+    got = scheme.decode(layout.to_flat_actions(actions[0]).astype(float), snap.x_aug, snap.reference,
+                        snap.drone_position, snap.slot)
+    np.testing.assert_allclose(got.power_w, want.power_w, rtol=1e-4)
+
+    model = _model(_env("lawn/Comm-v0", 4))
+    data = dagger_round(None, "lawn/Comm-v0", configs, 12, 0, iface)
+    losses = fit_fleet(model, *data, epochs=5, batch_size=8, learning_rate=3e-3, seed=0)
+    assert losses[-1] < 0.5 * losses[0]
+    more = dagger_round(model, "lawn/Comm-v0", configs, 6, 50, iface)
+    assert more[0]["agvs"].shape[0] == 12 and set(more[0]["mask"].sum(axis=1).tolist()) == {3.0, 4.0}
