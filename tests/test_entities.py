@@ -102,7 +102,8 @@ def test_the_native_vector_env_takes_the_layout():
     envs = gym.make_vec("lawn/Comm-v0", num_envs=3, vectorization_mode="vector_entry_point",
                         interface={"layout": "entities"}, num_agvs=6, reference={"path_set": "random"})
     obs, _ = envs.reset(seed=0)
-    assert envs.observation_space.contains(obs) and obs["agvs"].shape == (3, MAX_AGVS, envs.unwrapped.layout.agv_features)
+    assert envs.observation_space.contains(obs)
+    assert obs["agvs"].shape == (3, MAX_AGVS, envs.unwrapped.layout.agv_features)
     for _ in range(3):
         obs, reward, *_ = envs.step(envs.action_space.sample())
         assert envs.observation_space.contains(obs) and reward.shape == (3,)

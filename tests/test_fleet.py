@@ -145,3 +145,24 @@ def test_dagger_labels_the_expert_and_fitting_lowers_the_loss():
     assert losses[-1] < 0.5 * losses[0]
     more = dagger_round(model, "lawn/Comm-v0", configs, 6, 50, iface)
     assert more[0]["agvs"].shape[0] == 12 and set(more[0]["mask"].sum(axis=1).tolist()) == {3.0, 4.0}
+
+
+def test_lawn_train_fleet_runs_dagger_and_its_network_drives_any_k(tmp_path):
+    """``train("fleet", ...)``: a tiny DAgger run on K = 3 and 4 writes a run that ``sb3:DIR`` loads
+    and that drives the unmodified v0 env at K = 8; a bad hyperparameter is named."""
+    from agents import make_policy, rollout
+    from lawn_env import presets
+    from training.train import train
+
+    config = presets.get("default").override(num_agvs=4, num_slots=8)
+    hp = {"fleet_sizes": [3, 4], "epochs": 2, "dagger_iterations": 1, "dagger_timesteps": 8, "width": 16, "heads": 2}
+    summary = train("fleet", "lawn/Comm-v0", config, 16, 0, tmp_path / "run", hp_overrides=hp, eval_episodes=1,
+                    progress=False)
+    assert summary["bc_loss_last"] < summary["bc_loss_first"]
+    wide = config.override(num_agvs=8)
+    policy = make_policy(f"sb3:{tmp_path / 'run'}", wide, env_id="lawn/Comm-v0")
+    run = rollout(gym.make("lawn/Comm-v0", config=wide), policy, seed=3)
+    assert run.metrics["slots"] == 8 and np.isfinite(run.metrics["control_cost"])
+    with pytest.raises(ValueError, match="unknown fleet hyperparameters"):
+        train("fleet", "lawn/Comm-v0", config, 16, 0, tmp_path / "bad", hp_overrides={"width_": 8}, progress=False)
+    assert not (tmp_path / "bad").exists()  # nothing written

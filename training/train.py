@@ -62,7 +62,7 @@ TRAIN_ENV_IDS = (*ENV_IDS, PARALLEL_ENV_ID, "CartPole-v1")
 
 
 #: The algorithm names ``lawn train`` accepts (``bc`` is behaviour cloning, training/bc.py).
-ALGOS = (*ALGORITHMS, "bc")
+ALGOS = (*ALGORITHMS, "bc", "fleet")
 
 
 def load_hyperparams(algo: str, env_id: str, overrides: Mapping[str, Any] | None = None) -> tuple[dict, int]:
@@ -155,13 +155,17 @@ def train(algo: str, env_id: str, config: ScenarioConfig, timesteps: int, seed: 
     out_dir = Path(out_dir)
     if (out_dir / "run.json").exists():
         raise ValueError(f"{out_dir} already holds a run; use --resume {out_dir} or another --out")
-    if algo != "bc":
+    if algo not in ("bc", "fleet"):
         split_params(algo, env_id, params, vec)  # every option checked before anything is written
     if algo == "bc":
         from .bc import train_bc_run
 
         return train_bc_run(env_id, config, timesteps, seed, out_dir, params, version, progress=progress,
                             dataset=dataset, eval_episodes=eval_episodes)
+    if algo == "fleet":
+        from .fleet import train_fleet_run
+
+        return train_fleet_run(env_id, config, timesteps, seed, out_dir, params, version, eval_episodes=eval_episodes)
     if init_from is not None:
         _check_init_from(Path(init_from), algo, params)
     spec = RunSpec(algo=algo, env=env_id, seed=seed, timesteps=timesteps, hyperparams_version=version,

@@ -15,7 +15,9 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
 
     tr = sub.add_parser("train", parents=p("workers", "quiet", "seed", "config"),
                         help="train a Stable-Baselines3 agent (or behaviour cloning) on a lawn env")
-    tr.add_argument("--algo", choices=ALGOS, help="algorithm: SB3's, or bc (behaviour cloning of an expert)")
+    tr.add_argument("--algo", choices=ALGOS,
+                    help="algorithm: SB3's, bc (behaviour cloning of an expert) or fleet (DAgger, one network "
+                         "for any K)")
     tr.add_argument("--env", choices=TRAIN_ENV_IDS, help="lawn/Parallel-v0 is the multi-agent PettingZoo env")
     tr.add_argument("--timesteps", type=count, help="environment steps (for bc: expert transitions)")
     tr.add_argument("--seeds", type=seed, nargs="+", metavar="SEED",
