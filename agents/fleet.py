@@ -69,6 +69,8 @@ class FleetNet(nn.Module):
 
     def _tokens(self, flat: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
         agvs, glob, mask = self._split(flat)
+        present = max(1, int(mask.sum(dim=1).max()))  # the rows past every sample's fleet are padding:
+        agvs, mask = agvs[:, :present], mask[:, :present]  # masked as keys and zeroed as outputs, so dropped
         tokens = th.cat([self.global_encoder(glob)[:, None], self.agv_encoder(agvs)], dim=1)
         padded = th.cat([th.zeros_like(mask[:, :1], dtype=th.bool), mask < 0.5], dim=1)
         for layer in self.attention:
@@ -77,7 +79,8 @@ class FleetNet(nn.Module):
 
     def _actions(self, tokens: th.Tensor, mask: th.Tensor) -> th.Tensor:
         rows = self.agv_head(tokens[:, 1:]) * mask[..., None]
-        return th.cat([rows.flatten(1), self.drone_head(tokens[:, 0])], dim=1)
+        padding = rows.new_zeros((rows.shape[0], self.rows - rows.shape[1], self.per_agv))
+        return th.cat([th.cat([rows, padding], dim=1).flatten(1), self.drone_head(tokens[:, 0])], dim=1)
 
     def forward(self, features: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
         tokens, mask = self._tokens(features)
