@@ -149,13 +149,13 @@ def train_fleet_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: i
         raise ValueError(f"fleet networks train on lawn/Joint-v0 or lawn/Comm-v0, not {env_id!r}")
     st = fleet_settings(params)
     env = MixedFleetEnv(env_id, st["fleet_sizes"], st["interface"], config)  # checks the sizes
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     model = PPO(FleetPolicy, env, seed=seed, device="cpu", verbose=0,
                 policy_kwargs={**st["network"], "log_std_init": -1.0})
     configs = [config.override(num_agvs=k) for k in st["fleet_sizes"]]
     history = _dagger(model, env_id, configs, st, timesteps, TRAIN_SEED_BASE + 1000 * seed)
+    out_dir = Path(out_dir)  # written once the network is trained: a failed run leaves nothing
+    out_dir.mkdir(parents=True, exist_ok=True)
     model.save(str(out_dir / "model.zip"))
     spec = {"algo": "ppo", "target": "ppo", "trainer": "fleet", "env": env_id, "seed": seed, "timesteps": timesteps,
             "interface": st["interface"], "fleet_sizes": st["fleet_sizes"],
