@@ -334,7 +334,10 @@ class AnchoredActions(ActionCodec):
         data = self._prepare(x_aug, reference, slot)
         d2 = self._distance_sq(x_aug, drone_next)
         log_w = np.log(np.maximum(power, 1e-300) / self._prior(d2, data))
-        log_w -= 0.5 * (log_w.max() + log_w.min())  # any common shift gives the same split: center the range
+        # any common shift gives the same split: centre the range, unless the log-weights span more
+        # than the action's range (an expert that leaves links unpowered): then the strongest link
+        # sits at the top, so the links that carry the budget keep their split and the weakest saturate
+        log_w -= max(0.5 * (log_w.max() + log_w.min()), log_w.max() - self.interface.power_log_range)
         a_power = np.clip(log_w / self.interface.power_log_range, -1.0, 1.0)
         parts = [a_power, a_drone]
         if self.increment_size:

@@ -245,6 +245,31 @@ def test_encode_decode_round_trip(role, scheme):
             assert first.increment is None
 
 
+def test_encode_keeps_the_strongest_links_when_the_split_spans_more_than_the_range():
+    """An expert that leaves links (nearly) unpowered spans more log-weight than the action's range:
+    the encoded action keeps the split of the links that carry the budget (the strongest at the
+    top of the range) and saturates the weakest, instead of centring the span and clipping both."""
+    cfg = ScenarioConfig(num_agvs=6)
+    codec = action_codec(cfg, "comm", {"base": "rl", "power_anchor": "distance"})
+    env = gym.make("lawn/Comm-v0", config=cfg).unwrapped
+    env.reset(seed=3)
+    sim = env.sim
+    args = (sim.x_obs, sim.reference_window(), sim.drone_position)
+    zero = codec.decode(np.zeros(codec.size), *args)
+    prior = zero.power_w / zero.power_w.max()
+    wanted = prior * np.array([1.0, 0.5, 0.25, 1e-9, 1e-12, 0.0])  # three links off
+    power = wanted / wanted.sum() * cfg.power_budget_w
+    action = codec.encode(Decisions(None, power, zero.drone_next), *args)
+    a = action[: cfg.num_agvs]
+    assert a[0] == pytest.approx(1.0) and np.all(a[3:] == -1.0)
+    np.testing.assert_allclose(a[:3] - a[0], np.log([1.0, 0.5, 0.25]) / codec.interface.power_log_range, atol=1e-6)
+    out = codec.decode(action.astype(np.float64), *args)
+    top = power[:3] / power[:3].sum()
+    np.testing.assert_allclose(out.power_w[:3] / out.power_w[:3].sum(), top, rtol=1e-5)
+    off = np.exp(-2 * codec.interface.power_log_range) * prior[3:] / prior[0]  # the bottom of the range
+    np.testing.assert_allclose(out.power_w[3:] / out.power_w[0], off, rtol=1e-5)
+
+
 def test_planner_decisions_survive_both_schemes():
     """What behaviour cloning does: the expert's plan encoded in the anchored scheme decodes to
     the same physical decision, wherever the scheme can express it (a drone target within
