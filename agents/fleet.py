@@ -15,15 +15,18 @@ module is imported only when used.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
+import numba
+import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-__all__ = ["EntityFeatures", "FleetNet", "FleetPolicy"]
+__all__ = ["EntityFeatures", "FleetNet", "FleetPolicy", "FleetInference"]
 
 
 class EntityFeatures(BaseFeaturesExtractor):
@@ -69,8 +72,9 @@ class FleetNet(nn.Module):
 
     def _tokens(self, flat: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
         agvs, glob, mask = self._split(flat)
-        present = max(1, int(mask.sum(dim=1).max()))  # the rows past every sample's fleet are padding:
-        agvs, mask = agvs[:, :present], mask[:, :present]  # masked as keys and zeroed as outputs, so dropped
+        rows = th.nonzero(mask.amax(dim=0) > 0.5)  # the rows past every sample's last AGV are padding:
+        present = int(rows[-1, 0]) + 1 if len(rows) else 1  # masked as keys, zeroed as outputs: dropped
+        agvs, mask = agvs[:, :present], mask[:, :present]
         tokens = th.cat([self.global_encoder(glob)[:, None], self.agv_encoder(agvs)], dim=1)
         padded = th.cat([th.zeros_like(mask[:, :1], dtype=th.bool), mask < 0.5], dim=1)
         for layer in self.attention:
@@ -119,3 +123,121 @@ class FleetPolicy(ActorCriticPolicy):
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         return {**super()._get_constructor_parameters(), **self.fleet}
+
+
+def _numpy(tensor: th.Tensor, transpose: bool = False) -> np.ndarray:
+    array = tensor.detach().cpu().numpy().astype(np.float32)
+    return np.ascontiguousarray(array.T if transpose else array)
+
+
+def _linear(layer: nn.Linear) -> tuple[np.ndarray, np.ndarray]:
+    return _numpy(layer.weight, transpose=True), _numpy(layer.bias)
+
+
+@numba.njit(cache=True)
+def _layer_norm(x: np.ndarray, gain: np.ndarray, bias: np.ndarray, eps: float) -> np.ndarray:
+    n, width = x.shape
+    out = np.empty_like(x)
+    for i in range(n):
+        mean = 0.0
+        for c in range(width):
+            mean += x[i, c]
+        mean /= width
+        var = 0.0
+        for c in range(width):
+            var += (x[i, c] - mean) ** 2
+        inv = 1.0 / np.sqrt(var / width + eps)
+        for c in range(width):
+            out[i, c] = (x[i, c] - mean) * inv * gain[c] + bias[c]
+    return out
+
+
+@numba.njit(cache=True)
+def _mix(qkv: np.ndarray, heads: int) -> np.ndarray:
+    """Scaled dot-product attention of every head over all the tokens: ``qkv`` (n, 3 width) holds
+    the queries, keys and values; returns the heads' outputs side by side (n, width)."""
+    n, width = qkv.shape[0], qkv.shape[1] // 3
+    d = width // heads
+    scale = np.float32(1.0 / np.sqrt(d))
+    mixed = np.empty((n, width), dtype=qkv.dtype)
+    for h in range(heads):
+        o = h * d
+        q = np.ascontiguousarray(qkv[:, o : o + d]) * scale
+        keys = np.ascontiguousarray(qkv[:, width + o : width + o + d].T)
+        scores = q @ keys
+        for i in range(n):
+            top = scores[i].max()
+            total = np.float32(0.0)
+            for j in range(n):
+                scores[i, j] = np.exp(scores[i, j] - top)
+                total += scores[i, j]
+            scores[i] /= total
+        mixed[:, o : o + d] = scores @ np.ascontiguousarray(qkv[:, 2 * width + o : 2 * width + o + d])
+    return mixed
+
+
+@numba.njit(cache=True)
+def _attend(x: np.ndarray, weights: tuple, heads: int, eps: float) -> np.ndarray:
+    """One post-norm encoder layer (``nn.TransformerEncoderLayer``: ReLU, no dropout, no mask) on
+    the tokens ``x`` (n, width); ``weights`` as :class:`_Attention` packs them."""
+    in_w, in_b, out_w, out_b, w1, b1, w2, b2, g1, c1, g2, c2 = weights
+    x = _layer_norm(x + (_mix(x @ in_w + in_b, heads) @ out_w + out_b), g1, c1, eps)
+    hidden = np.maximum(x @ w1 + b1, np.float32(0.0))
+    return _layer_norm(x + (hidden @ w2 + b2), g2, c2, eps)
+
+
+class _Attention:
+    """One ``nn.TransformerEncoderLayer`` of :class:`FleetNet`, its weights as float32 arrays."""
+
+    def __init__(self, layer: nn.TransformerEncoderLayer):
+        if layer.norm_first or layer.activation_relu_or_gelu != 1 or not layer.self_attn.batch_first:
+            raise ValueError("FleetInference runs post-norm, ReLU, batch-first encoder layers (FleetNet's)")
+        attn = layer.self_attn
+        self.heads = int(attn.num_heads)
+        if layer.norm1.eps != layer.norm2.eps:
+            raise ValueError("FleetInference runs encoder layers whose two norms share their eps")
+        self.eps = float(layer.norm1.eps)
+        self.weights = (_numpy(attn.in_proj_weight, transpose=True), _numpy(attn.in_proj_bias),
+                        *_linear(attn.out_proj), *_linear(layer.linear1), *_linear(layer.linear2),
+                        _numpy(layer.norm1.weight), _numpy(layer.norm1.bias), _numpy(layer.norm2.weight),
+                        _numpy(layer.norm2.bias))
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        return _attend(x, self.weights, self.heads, self.eps)
+
+
+class FleetInference:
+    """A :class:`FleetPolicy`'s deterministic action for one observation, in numpy (float32): the
+    same layers as :class:`FleetNet`, on the AGVs present only (a padded row is masked as a key and
+    zeroed as an output, so dropping it is exact), without torch's per-call cost, which dominates
+    a single small observation (``benchmarks/fleet_decision.py``). The torch module stays the
+    oracle (tests compare them); the weights are copied when this is built."""
+
+    def __init__(self, policy: FleetPolicy):
+        if not isinstance(policy, FleetPolicy):
+            raise TypeError(f"FleetInference runs a FleetPolicy, got {type(policy).__name__}")
+        net = policy.mlp_extractor
+        self.rows, self.per_agv = net.rows, net.per_agv
+        self.agv = [_linear(net.agv_encoder[i]) for i in (0, 2)]
+        self.glob = [_linear(net.global_encoder[i]) for i in (0, 2)]
+        self.attention = [_Attention(layer) for layer in net.attention]
+        self.agv_head, self.drone_head = _linear(net.agv_head), _linear(net.drone_head)
+
+    @staticmethod
+    def _encode(x: np.ndarray, mlp: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+        for weight, bias in mlp:
+            x = np.tanh(x @ weight + bias)
+        return x
+
+    def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
+        """The action (rows * per_agv + 2,) for one entity observation (``agvs``, ``globals``, ``mask``)."""
+        present = np.flatnonzero(np.asarray(obs["mask"]) > 0.5)
+        glob = np.asarray(obs["globals"], dtype=np.float32)[None]
+        agvs = np.asarray(obs["agvs"], dtype=np.float32)[present]
+        tokens = np.concatenate([self._encode(glob, self.glob), self._encode(agvs, self.agv)])
+        for layer in self.attention:
+            tokens = layer(tokens)
+        action = np.zeros(self.rows * self.per_agv + 2, dtype=np.float32)
+        action[:-2].reshape(self.rows, self.per_agv)[present] = tokens[1:] @ self.agv_head[0] + self.agv_head[1]
+        action[-2:] = tokens[0] @ self.drone_head[0] + self.drone_head[1]
+        return action

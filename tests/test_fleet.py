@@ -77,6 +77,35 @@ def test_a_network_trained_at_k4_runs_at_k3_and_k8_and_reloads(tmp_path):
     np.testing.assert_array_equal(again.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
 
 
+def test_the_compiled_inference_gives_the_torch_networks_actions():
+    """FleetInference (what SB3Policy acts with) against the torch module it copies, every weight
+    perturbed (the layer norms' gains and biases included), on fleets of 1 to 64 and on a mask with
+    holes; and a non-fleet policy is refused."""
+    import torch
+
+    from agents.fleet import FleetInference
+
+    model = _model(_env(k=4))
+    rng = np.random.default_rng(0)
+    with torch.no_grad():
+        for param in model.policy.parameters():
+            param.add_(torch.as_tensor(rng.normal(0, 0.3, tuple(param.shape)), dtype=param.dtype))
+    fast = FleetInference(model.policy)
+    space = model.policy.observation_space
+    for k in (1, 3, 17, MAX_AGVS, "holes"):
+        obs = {key: rng.uniform(-2, 2, space[key].shape).astype(np.float32) for key in ("agvs", "globals")}
+        mask = (rng.random(MAX_AGVS) < 0.3) if k == "holes" else (np.arange(MAX_AGVS) < k)
+        obs["mask"] = mask.astype(np.float32)
+        with torch.no_grad():
+            expected = model.policy.get_distribution({key: torch.as_tensor(v)[None] for key, v in obs.items()})
+            expected = expected.mode().numpy()[0]
+        got = fast(obs)
+        np.testing.assert_allclose(got, expected, atol=2e-5)
+        assert np.all(_rows(got, 3)[0][~mask] == 0.0) and np.abs(expected).max() > 0.1
+    with pytest.raises(TypeError, match="FleetPolicy"):
+        FleetInference(PPO("MlpPolicy", gym.make("lawn/JointRL-v0"), n_steps=32, batch_size=32).policy)
+
+
 def test_the_flat_layout_is_refused_with_a_clear_error():
     with pytest.raises(ValueError, match="entity layout"):
         PPO(FleetPolicy, gym.make("lawn/JointRL-v0"))
