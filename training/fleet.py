@@ -48,7 +48,9 @@ def fleet_pairs(env_id: str, config: ScenarioConfig, steps: int, seed: int, inte
 def fit_fleet(model: Any, obs: dict[str, np.ndarray], actions: np.ndarray, present: np.ndarray, epochs: int,
               batch_size: int, learning_rate: float, seed: int) -> list[float]:
     """Mean-squared-error regression of the model's deterministic action on the labelled entries;
-    returns the loss over the whole data set before the first epoch and after each."""
+    returns the loss over the whole data set before the first epoch and after each. Every batch
+    holds one fleet size (the network then attends over that many rows, not the data's largest
+    fleet); the batches of an epoch come in random order."""
     import torch
 
     torch.manual_seed(seed)
@@ -57,20 +59,25 @@ def fit_fleet(model: Any, obs: dict[str, np.ndarray], actions: np.ndarray, prese
     x = {key: torch.as_tensor(value) for key, value in obs.items()}
     y, w = torch.as_tensor(actions), torch.as_tensor(present, dtype=torch.float32)
     rng = np.random.default_rng(seed)
+    sizes = np.asarray(obs["mask"]).sum(axis=1)
+    groups = [np.flatnonzero(sizes == k) for k in np.unique(sizes)]
 
-    def loss_of(idx: Any) -> Any:
+    def squared(idx: Any) -> Any:
         mean = policy.get_distribution({key: value[idx] for key, value in x.items()}).mode()
-        return (((mean - y[idx]) ** 2) * w[idx]).sum() / w[idx].sum()
+        return (((mean - y[idx]) ** 2) * w[idx]).sum()
 
     def full_loss() -> float:
         with torch.no_grad():
-            return float(loss_of(slice(None)))
+            chunks = [torch.as_tensor(g[i : i + 4096]) for g in groups for i in range(0, len(g), 4096)]
+            return float(sum(squared(idx) for idx in chunks) / w.sum())
 
     losses = [full_loss()]
     for _ in range(epochs):
-        order = rng.permutation(len(y))
-        for start in range(0, len(y), batch_size):
-            loss = loss_of(torch.as_tensor(order[start : start + batch_size]))
+        batches = [g[i : i + batch_size] for g in (rng.permutation(g) for g in groups)
+                   for i in range(0, len(g), batch_size)]
+        for b in rng.permutation(len(batches)):
+            idx = torch.as_tensor(batches[b])
+            loss = squared(idx) / w[idx].sum()
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()
@@ -157,7 +164,7 @@ def train_fleet_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: i
     out_dir = Path(out_dir)  # written once the network is trained: a failed run leaves nothing
     out_dir.mkdir(parents=True, exist_ok=True)
     model.save(str(out_dir / "model.zip"))
-    spec = {"algo": "ppo", "target": "ppo", "trainer": "fleet", "env": env_id, "seed": seed, "timesteps": timesteps,
+    spec = {"algo": "fleet", "target": "ppo", "trainer": "fleet", "env": env_id, "seed": seed, "timesteps": timesteps,
             "interface": st["interface"], "fleet_sizes": st["fleet_sizes"],
             "num_timesteps": int(history[-1]["samples"]), "hyperparams_version": version,
             "wall_time_s": time.perf_counter() - start, "eval_episodes": eval_episodes, "versions": versions()}

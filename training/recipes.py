@@ -67,12 +67,21 @@ _SCRATCH = {"interface": {"base": "rl", "power_anchor": "distance"}, "learning_r
 #: From scratch on Joint: the same, with the LQR baseline's increments under the residual.
 _SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_anchor": "lqr"}}
 
+#: One network for every fleet size (agents/fleet.py): DAgger of rg-mpc on fleets of 3 to 32 AGVs
+#: (training/hyperparams/fleet.yml), 40,000 labelled states, then 4 rounds of 10,000 on the
+#: network's own; one training seed (a run is about 15 minutes of one core).
+_FLEET_SEEDS = (0,)
+
 #: The learned comparators. Training runs them in this order, the longest first (a recipe that
 #: starts from another runs in a second phase); the tables list them per env in this order.
 RECIPES: dict[str, Recipe] = {r.name: r for r in (
     Recipe("bc-comm", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Comm-v0", 100_000, hp=_BC_AT_SCALE),
     Recipe("bc-joint", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Joint-v0", 100_000,
            hp=_BC_AT_SCALE),
+    Recipe("fleet-comm", "Fleet network (attention over the AGVs), DAgger of rg-mpc on K = 3-32", "fleet",
+           "lawn/Comm-v0", 40_000, seeds=_FLEET_SEEDS),
+    Recipe("fleet-joint", "Fleet network (attention over the AGVs), DAgger of rg-mpc on K = 3-32", "fleet",
+           "lawn/Joint-v0", 40_000, seeds=_FLEET_SEEDS),
     Recipe("ppo-comm-scratch", "PPO from the distance prior (no MPC in the action)", "ppo", "lawn/Comm-v0",
            1_000_000, hp=_SCRATCH, eval_every=100_000, vec="native"),
     Recipe("ppo-joint-scratch", "PPO from the distance prior and the LQR (no MPC in the action)", "ppo",
