@@ -26,19 +26,21 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-__all__ = ["EntityFeatures", "FleetNet", "FleetPolicy", "FleetInference"]
+__all__ = ["EntityFeatures", "FleetNet", "FleetAgentNet", "FleetPolicy", "FleetInference"]
 
 
 class EntityFeatures(BaseFeaturesExtractor):
-    """The entity observation as one flat tensor ``[agvs, globals, mask]``, which :class:`FleetNet`
-    splits back into its parts (SB3's policies pass one tensor from the extractor on)."""
+    """The entity observation as one flat tensor ``[agvs, globals, mask]`` (and ``me``, the
+    multi-agent env's one-hot of the acting entity), which :class:`FleetNet` splits back into its
+    parts (SB3's policies pass one tensor from the extractor on)."""
 
     def __init__(self, observation_space: spaces.Dict):
         rows, features = observation_space["agvs"].shape
-        super().__init__(observation_space, rows * features + observation_space["globals"].shape[0] + rows)
+        self.keys = ["globals", "mask"] + (["me"] if "me" in observation_space.spaces else [])
+        super().__init__(observation_space, rows * features + sum(observation_space[k].shape[0] for k in self.keys))
 
     def forward(self, observations: dict[str, th.Tensor]) -> th.Tensor:
-        return th.cat([observations["agvs"].flatten(1), observations["globals"], observations["mask"]], dim=1)
+        return th.cat([observations["agvs"].flatten(1), *(observations[k] for k in self.keys)], dim=1)
 
 
 def _mlp(inputs: int, width: int) -> nn.Sequential:
@@ -97,6 +99,34 @@ class FleetNet(nn.Module):
         return self._tokens(features)[0][:, 0]
 
 
+class FleetAgentNet(FleetNet):
+    """:class:`FleetNet` for one agent of the multi-agent env's entity layout (each observation
+    ends with ``me``, the acting entity's one-hot): the same computation for every entity, then the
+    acting one's action row (the drone's move padded to the row's width) and its token as the
+    value's latent. Parameter sharing across agents is the network's own sharing across rows."""
+
+    def __init__(self, rows: int, features: int, num_globals: int, per_agv: int, **sizes: Any):
+        super().__init__(rows, features, num_globals, per_agv, **sizes)
+        self.latent_dim_pi = per_agv
+
+    def _agent(self, features: th.Tensor) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+        tokens, mask = self._tokens(features[:, : -(self.rows + 1)])
+        return tokens, mask, features[:, -(self.rows + 1) :][:, : tokens.shape[1], None]
+
+    def forward_actor(self, features: th.Tensor) -> th.Tensor:
+        tokens, mask, me = self._agent(features)
+        drone = self.drone_head(tokens[:, 0])
+        drone = th.cat([drone, drone.new_zeros((drone.shape[0], self.per_agv - 2))], dim=1)
+        return (me * th.cat([drone[:, None], self.agv_head(tokens[:, 1:])], dim=1)).sum(dim=1)
+
+    def forward_critic(self, features: th.Tensor) -> th.Tensor:
+        tokens, _, me = self._agent(features)
+        return (me * tokens).sum(dim=1)
+
+    def forward(self, features: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+        return self.forward_actor(features), self.forward_critic(features)
+
+
 class FleetPolicy(ActorCriticPolicy):
     """SB3's actor-critic with :class:`FleetNet` in place of the MLPs: the network's outputs are
     the actions' means themselves (no dense layer over all rows, which would tie the actions to
@@ -113,8 +143,12 @@ class FleetPolicy(ActorCriticPolicy):
 
     def _build_mlp_extractor(self) -> None:
         rows, features = self.observation_space["agvs"].shape
+        num_globals = self.observation_space["globals"].shape[0]
+        if "me" in self.observation_space.spaces:  # one agent of the multi-agent env: its own row
+            self.mlp_extractor = FleetAgentNet(rows, features, num_globals, self.action_space.shape[0], **self.fleet)
+            return
         per_agv = (self.action_space.shape[0] - 2) // rows
-        self.mlp_extractor = FleetNet(rows, features, self.observation_space["globals"].shape[0], per_agv, **self.fleet)
+        self.mlp_extractor = FleetNet(rows, features, num_globals, per_agv, **self.fleet)
 
     def _build(self, lr_schedule: Any) -> None:
         super()._build(lr_schedule)

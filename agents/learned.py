@@ -21,14 +21,14 @@ import numpy as np
 
 from lawn_env import PARALLEL_ENV_ID, ScenarioConfig
 from lawn_env.entities import EntityLayout
-from lawn_env.interface import InterfaceLike
+from lawn_env.interface import InterfaceLike, resolve_interface
 
 from .anchors import InterfacePolicy, load_anchor
 from .base import COMM, JOINT, Policy
 from .errors import MissingExtra
 from .runs import RL_EXTRA, RunDir, algorithm_class, policy_network_class, read_json, read_run
 
-__all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "LOADERS", "learned_name_forms", "ZOO_DIR", "zoo_agents",
+__all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "marl_policy", "LOADERS", "learned_name_forms", "ZOO_DIR", "zoo_agents",
            "export_agent"]
 
 #: Shipped agents: one folder per agent (``lawn zoo`` lists them).
@@ -151,7 +151,8 @@ class SB3Policy(InterfacePolicy):
         self._predict = lambda x: network.predict(x, deterministic=True)[0]
         if self.interface.layout == "entities":
             self.entities = EntityLayout(self.config, "joint" if env_id == JOINT else "comm", self.interface.obs_bound)
-            if network.observation_space != self.entities.observation_space:
+            seen = getattr(network.observation_space, "spaces", {})
+            if {k: v for k, v in seen.items() if k != "me"} != self.entities.observation_space.spaces:
                 raise ValueError(f"{label} expects observations {network.observation_space}; this scenario gives "
                                  f"{self.entities.observation_space}: evaluate it with its training horizon")
             self._predict = _entity_predictor(network)
@@ -229,8 +230,8 @@ class MARLPolicy(InterfacePolicy):
             raise ValueError(f"{path} was trained on {run.env}, not the multi-agent env; use sb3:{path}")
         if env_id not in (None, JOINT):
             raise ValueError(f"{path} is a multi-agent policy; it drives {JOINT}, not {env_id}")
-        return cls(_load_model(run), config if config is not None else run.load_config(), run.interface,
-                   ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}")
+        return marl_policy(_load_model(run), config if config is not None else run.load_config(), run.interface,
+                           ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}")
 
     def agent_observations(self, obs: np.ndarray) -> np.ndarray:
         """(K+1, width): the drone's and each AGV's padded observation with its one-hot indicator,
@@ -255,6 +256,15 @@ class MARLPolicy(InterfacePolicy):
         k = self.config.num_agvs
         central = np.concatenate([actions[1:, :2].reshape(-1), actions[0, : k + 2]])
         return self.to_v0(central, np.asarray(obs, dtype=np.float32))
+
+
+def marl_policy(network: Any, config: ScenarioConfig, interface: InterfaceLike, normalizer: ObsNormalizer | None,
+                seed: int | None, label: str) -> InterfacePolicy:
+    """A multi-agent network on ``lawn/Joint-v0``: :class:`MARLPolicy`, or for the entity layout
+    (a fleet network, which computes every agent's row at once) :class:`SB3Policy`."""
+    if resolve_interface(interface).layout == "entities":
+        return SB3Policy(network, config, JOINT, interface, normalizer, seed, label=label)
+    return MARLPolicy(network, config, interface, normalizer, seed, label=label)
 
 
 # ---------------------------------------------------------------------- shipped agents (zoo)
@@ -297,7 +307,7 @@ def _load_zoo(name: str, config=None, env_id=None, seed=None) -> Policy:
     if record["env"] == PARALLEL_ENV_ID:
         if env_id not in (None, JOINT):
             raise ValueError(f"zoo:{name} is a multi-agent policy; it drives {JOINT}, not {env_id}")
-        return MARLPolicy(network, cfg, record["interface"], normalizer, seed, label=f"zoo:{name}")
+        return marl_policy(network, cfg, record["interface"], normalizer, seed, label=f"zoo:{name}")
     if env_id not in (None, record["env"]):
         raise ValueError(f"zoo:{name} was trained on {record['env']}, not {env_id}")
     return SB3Policy(network, cfg, record["env"], record["interface"], normalizer, seed, label=f"zoo:{name}")

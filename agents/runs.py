@@ -24,6 +24,7 @@ ALGORITHMS: dict[str, tuple[str, str]] = {
     "a2c": ("stable_baselines3:A2C", "stable_baselines3.common.policies:ActorCriticPolicy"),
     "sac": ("stable_baselines3:SAC", "stable_baselines3.sac.policies:Actor"),
     "td3": ("stable_baselines3:TD3", "stable_baselines3.td3.policies:Actor"),
+    "fleet": ("stable_baselines3:PPO", "agents.fleet:FleetPolicy"),  # lawn train --algo fleet: a PPO model
 }
 #: How to install what training and trained agents need.
 RL_EXTRA = "bash scripts/setup.sh full, or pip install torch==2.13.0 && pip install -e '.[rl]'"
@@ -85,7 +86,10 @@ class RunDir:
 
     @property
     def algo(self) -> str:
-        """The algorithm of the model it holds (behaviour cloning: the target algorithm's)."""
+        """The algorithm of the model it holds (behaviour cloning: the target algorithm's; a fleet
+        run: ``fleet``, a PPO model whose policy is :class:`agents.fleet.FleetPolicy`)."""
+        if self.record.get("trainer") == "fleet":
+            return "fleet"
         return self.record.get("target", self.record["algo"])
 
     @property

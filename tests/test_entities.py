@@ -116,8 +116,10 @@ def test_bad_layouts_and_fleets_raise_errors_that_name_them():
         gym.make("lawn/Joint-v0", interface={"layout": "graph"})
     with pytest.raises(ValueError, match="MAX_AGVS=64"):
         _make("lawn/Joint-v0", 65, reference={"path_set": "random"})
-    with pytest.raises(ValueError, match="multi-agent"):
-        lawn_env.parallel_env(interface={"layout": "entities"})
+    with pytest.raises(ValueError, match="layout"):
+        lawn_env.parallel_env(interface={"layout": "rows"})
+    with pytest.raises(ValueError, match="MAX_AGVS=64"):
+        lawn_env.parallel_env(interface={"layout": "entities"}, num_agvs=65, reference={"path_set": "random"})
 
 
 def test_the_core_and_the_agents_import_without_torch():

@@ -1,6 +1,8 @@
 """The fleet policy (agents/fleet.py): permutation-equivariant, blind to padded rows, one network for
 every K, saved and loaded like any SB3 model."""
 
+import json
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -195,3 +197,120 @@ def test_lawn_train_fleet_runs_dagger_and_its_network_drives_any_k(tmp_path):
     with pytest.raises(ValueError, match="unknown fleet hyperparameters"):
         train("fleet", "lawn/Comm-v0", config, 16, 0, tmp_path / "bad", hp_overrides={"width_": 8}, progress=False)
     assert not (tmp_path / "bad").exists()  # nothing written
+
+
+def test_each_agent_of_the_multi_agent_env_gets_its_own_row_of_one_network():
+    """In the multi-agent entity layout the shared network gives each agent its own row of the
+    fleet network's action (the drone its move, padded) and its own token's value; permuting the
+    AGVs permutes the agents' actions; the compiled copy gives every row at once."""
+    import lawn_env
+    import torch
+
+    from agents.fleet import FleetInference
+    from training.marl import make_marl_vec_env
+
+    k = 4
+    venv = make_marl_vec_env(lawn_env.ScenarioConfig(num_agvs=k), 1, 0, interface={"base": "rl", "layout": "entities"})
+    model = PPO(FleetPolicy, venv, n_steps=16, batch_size=16, policy_kwargs=dict(width=16, heads=2, layers=1))
+    obs = venv.reset()
+    rng = np.random.default_rng(0)
+    with torch.no_grad():
+        for param in model.policy.parameters():
+            param.add_(torch.as_tensor(rng.normal(0, 0.3, tuple(param.shape)), dtype=param.dtype))
+    actions, _ = model.predict(obs, deterministic=True)  # (K + 1, 3): the drone, then agv_0..agv_3
+    full = FleetInference(model.policy)({key: value[0] for key, value in obs.items()})
+    rows, drone = _rows(np.clip(full, -1, 1), 3)  # predict clips to the action space
+    np.testing.assert_allclose(actions[0, :2], drone, atol=1e-5)
+    assert actions[0, 2] == 0.0
+    np.testing.assert_allclose(actions[1:], rows[:k], atol=1e-5)
+    assert np.abs(actions).max() < 1.0 or np.abs(full).max() > 1.0
+    perm = np.array([2, 0, 3, 1])
+    shuffled = {key: value.copy() for key, value in obs.items()}
+    shuffled["agvs"][:, :k] = obs["agvs"][:, perm]
+    again, _ = model.predict(shuffled, deterministic=True)
+    np.testing.assert_allclose(again[1:], actions[1:][perm], atol=1e-5)
+    values = model.policy.predict_values(model.policy.obs_to_tensor(obs)[0]).detach().numpy()[:, 0]
+    assert len(set(np.round(values, 6))) == k + 1  # each agent's own token
+    from training.options import start_at_anchor
+
+    start_at_anchor(model, "ppo")  # the heads zeroed: every agent's action is its anchor's (zero)
+    assert not model.predict(obs, deterministic=True)[0].any()
+    venv.close()
+
+
+def test_multi_agent_ppo_trains_the_fleet_network_and_drives_any_k(tmp_path):
+    """``lawn train --algo ppo --env lawn/Parallel-v0`` with ``policy: FleetPolicy`` in the entity
+    layout: started at the anchor (its heads zeroed), it trains at K = 3 and its network drives
+    the unmodified ``lawn/Joint-v0`` at K = 6 (``marl:DIR``)."""
+    from agents import make_policy, rollout
+    from lawn_env import presets
+    from training.train import train
+
+    config = presets.get("default").override(num_agvs=3, num_slots=8)
+    hp = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,
+          "start_at_anchor": True, "n_envs": 1, "n_steps": 16, "batch_size": 32,
+          "policy_kwargs": {"width": 16, "heads": 2, "layers": 1}}
+    train("ppo", "lawn/Parallel-v0", config, 64, 0, tmp_path / "run", hp_overrides=hp, eval_episodes=1, progress=False)
+    wide = config.override(num_agvs=6)
+    policy = make_policy(f"marl:{tmp_path / 'run'}", wide, env_id="lawn/Joint-v0")
+    run = rollout(gym.make("lawn/Joint-v0", config=wide), policy, seed=3)
+    assert run.metrics["slots"] == 8 and np.isfinite(run.metrics["control_cost"])
+    with pytest.raises(ValueError, match="ppo or a2c"):
+        train("sac", "lawn/Comm-v0", config, 64, 0, tmp_path / "bad", hp_overrides={"policy": "FleetPolicy"},
+              progress=False)
+    assert not (tmp_path / "bad").exists()
+
+
+def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(tmp_path, monkeypatch):
+    """``lawn zoo build --only fleet-comm``: the fleet section's block is rebuilt, the rest of the
+    page and the other runs' recorded episodes are kept, the agent is exported (a fleet network:
+    agent.json says so and zoo:NAME loads it); the table over fleet sizes runs it beside rg-mpc
+    and the noise floor at every size."""
+    import dataclasses
+
+    import agents.learned as learned
+    import training.recipes as recipes_module
+    import training.zoo as zoo
+    from agents import make_policy
+    from lawn_env import ScenarioConfig, presets
+    from training.generalization import fleet_agents, generalization_table, run_generalization
+    from training.tables import read_csv
+    from training.train import train
+
+    tiny = dataclasses.replace(recipes_module.RECIPES["fleet-comm"], timesteps=16)
+    monkeypatch.setitem(recipes_module.RECIPES, "fleet-comm", tiny)
+    runs, docs = tmp_path / "runs", tmp_path / "docs"
+    hp = {"fleet_sizes": [3, 4], "epochs": 1, "dagger_iterations": 0, "width": 16, "heads": 2}
+    train("fleet", "lawn/Comm-v0", ScenarioConfig(), 16, 0, runs / "fleet-comm" / "seed-0", hp_overrides=hp,
+          eval_episodes=1, progress=False)
+    (docs / "learned").mkdir(parents=True)
+    page = "# Learned\n\nkept\n\n<!-- zoo-fleet:begin -->\nold\n<!-- zoo-fleet:end -->\n\nkept too\n"
+    (docs / "LEARNED.md").write_text(page)
+    other = {"policy": "bc:runs/agents/bc-comm/seed-0", "env": "lawn/Comm-v0", "seed": "0", "control_cost": "1.0"}
+    (docs / "learned" / "episodes.csv").write_text(",".join(other) + "\n" + ",".join(other.values()) + "\n")
+    table = zoo.build_zoo(runs, docs / "LEARNED.md", workers=1, progress=False, episodes=2, target=tmp_path / "zoo",
+                          only=["fleet-comm"])
+    text = (docs / "LEARNED.md").read_text()
+    assert text.startswith("# Learned\n\nkept\n") and text.endswith("<!-- zoo-fleet:end -->\n\nkept too\n")
+    assert "old" not in text and "`zoo:fleet-comm`, seed 0" in text and "lawn zoo build --only fleet-comm" in text
+    assert "`zoo:fleet-comm`" in table
+    rows = read_csv(docs / "learned" / "episodes.csv")
+    assert rows[0]["policy"] == other["policy"] and any("/fleet-comm/seed-0" in r["policy"] for r in rows)
+    record = json.loads((tmp_path / "zoo" / "fleet-comm" / "agent.json").read_text())
+    assert record["algo"] == "fleet" and record["interface"]["layout"] == "entities"
+    with pytest.raises(ValueError, match="unknown recipe 'nope'"):
+        zoo.build_zoo(runs, docs / "LEARNED.md", only=["nope"])
+
+    monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
+    assert fleet_agents() == ["zoo:fleet-comm"]
+    policy = make_policy("zoo:fleet-comm", ScenarioConfig(num_agvs=7), env_id="lawn/Comm-v0")
+    assert policy.entities.num_agvs == 7
+    sizes = {3: 2, 5: 2}
+    rows = run_generalization(fleet_agents(), sizes, workers=1, progress=False,
+                              base=presets.get("default").override(num_slots=6))
+    assert {(r["policy"], r["task"]) for r in rows} == {(p, f"k{k}") for p in ("rg-mpc", "noise:rg-mpc", "zoo:fleet-comm")
+                                                        for k in sizes}
+    text = generalization_table(rows, fleet_agents(), sizes)
+    lines = [line for line in text.splitlines() if line.startswith("| zoo:fleet-comm")]
+    assert [line.split(" | ")[2] for line in lines] == ["3", "5"] and all("×" in line for line in lines)
+    assert sum(line.startswith("| noise:rg-mpc") for line in text.splitlines()) == 2

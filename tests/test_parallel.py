@@ -89,3 +89,36 @@ def test_parallel_step_rejects_what_is_not_a_dict_of_actions():
     actions["agv_1"] = np.zeros((1, 2))
     with pytest.raises(ValueError, match=r"actions\['agv_1'\] has shape \(1, 2\); expected \(2,\)"):
         par.step(actions)
+
+
+@pytest.mark.parametrize("k", [3, 4, 8])
+def test_the_entity_layout_passes_pettingzoos_checker(k):
+    env = lawn_env.parallel_env(interface={"base": "rl", "layout": "entities"}, num_agvs=k, num_slots=12)
+    parallel_api_test(env, num_cycles=15)
+    assert env.observation_space("drone") is env.observation_space(f"agv_{k - 1}")  # one space for all agents
+    assert env.action_space("drone").shape == (2,) and env.action_space("agv_0").shape == (3,)
+
+
+def test_entity_agents_in_lockstep_with_the_central_entity_env():
+    """The multi-agent entity layout is the central one split by entity: every agent sees the
+    central entity observation and its own one-hot; the agents' rows and the drone's move,
+    assembled, give bit for bit the central env's step."""
+    k, iface = 5, {"base": "rl", "layout": "entities"}
+    par = lawn_env.parallel_env(interface=iface, num_agvs=k, reference={"path_set": "random"})
+    joint = gym.make("lawn/Joint-v0", interface=iface, num_agvs=k, reference={"path_set": "random"}).unwrapped
+    obs, _ = par.reset(seed=4)
+    jobs, _ = joint.reset(seed=4)
+    rng = np.random.default_rng(2)
+    for _ in range(6):
+        for j, agent in enumerate(par.possible_agents):
+            assert all(np.array_equal(obs[agent][key], jobs[key]) for key in jobs)
+            assert obs[agent]["me"].argmax() == j and obs[agent]["me"].sum() == 1.0
+        a = np.zeros(joint.action_space.shape, dtype=np.float32)
+        a[: 3 * k] = rng.uniform(-1, 1, 3 * k)
+        a[-2:] = rng.uniform(-1, 1, 2)
+        actions = {"drone": a[-2:], **{f"agv_{i}": a[3 * i : 3 * i + 3] for i in range(k)}}
+        obs, rewards, *_ = par.step(actions)
+        jobs, jr, *_ = joint.step(a)
+        assert rewards["drone"] == jr
+    with pytest.raises(ValueError, match=r"actions\['agv_0'\]"):
+        par.step({**actions, "agv_0": np.zeros(2, dtype=np.float32)})

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from stable_baselines3.common.callbacks import BaseCallback
 
-from agents.learned import MARLPolicy, ObsNormalizer, SB3Policy
+from agents.learned import ObsNormalizer, SB3Policy, marl_policy
 from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
 from lawn_env.interface import InterfaceLike
 
@@ -59,7 +59,7 @@ class ControlCostValidation(BaseCallback):
     def _policy(self):
         normalizer = ObsNormalizer.from_vecnormalize(self.model.get_vec_normalize_env())
         if self.env_id == PARALLEL_ENV_ID:
-            return MARLPolicy(self.model, self.config, self.interface, normalizer)
+            return marl_policy(self.model, self.config, self.interface, normalizer, None, "marl")
         return SB3Policy(self.model, self.config, self.env_id, self.interface, normalizer)
 
     def validation_costs(self) -> dict[int, float]:

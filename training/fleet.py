@@ -164,7 +164,7 @@ def train_fleet_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: i
     out_dir = Path(out_dir)  # written once the network is trained: a failed run leaves nothing
     out_dir.mkdir(parents=True, exist_ok=True)
     model.save(str(out_dir / "model.zip"))
-    spec = {"algo": "fleet", "target": "ppo", "trainer": "fleet", "env": env_id, "seed": seed, "timesteps": timesteps,
+    spec = {"algo": "fleet", "target": "fleet", "trainer": "fleet", "env": env_id, "seed": seed, "timesteps": timesteps,
             "interface": st["interface"], "fleet_sizes": st["fleet_sizes"],
             "num_timesteps": int(history[-1]["samples"]), "hyperparams_version": version,
             "wall_time_s": time.perf_counter() - start, "eval_episodes": eval_episodes, "versions": versions()}

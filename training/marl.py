@@ -6,6 +6,11 @@ observation and action to a common size and appends a one-hot agent indicator
 share all parameters; the drone's outputs come from the same network conditioned on its
 indicator (SB3 trains one policy per VecEnv, so a separate drone network would need two
 coupled learners). ``agents.learned.MARLPolicy`` runs such a policy on ``lawn/Joint-v0``.
+
+With the interface's entity layout (``interface={"layout": "entities", ...}``, ``policy:
+FleetPolicy``) the shared network is :class:`agents.fleet.FleetPolicy`: every agent sees the
+whole fleet and which entity it is, the spaces do not depend on K, and one network trained at one
+fleet size acts at any other (``agents.learned.SB3Policy`` drives ``lawn/Joint-v0`` with it).
 """
 
 from __future__ import annotations
@@ -19,10 +24,14 @@ __all__ = ["wrap_parallel", "make_marl_vec_env"]
 
 
 def wrap_parallel(config: ScenarioConfig, interface: InterfaceLike = None) -> Any:
-    """The PettingZoo env (on the given interface) with SuperSuit's padding and agent indicator."""
+    """The PettingZoo env (on the given interface) with SuperSuit's padding and agent indicator.
+    In the entity layout every agent already has the same observation space, with ``me`` saying
+    which entity it is: only the drone's action is padded (to an AGV's row)."""
     import supersuit as ss
 
     env = parallel_env(config, interface=interface)
+    if env.entities is not None:
+        return ss.pad_action_space_v0(env)
     env = ss.pad_observations_v0(env)
     env = ss.pad_action_space_v0(env)
     return ss.agent_indicator_v0(env, type_only=False)

@@ -104,8 +104,16 @@ def split_params(algo: str, env_id: str, params: Mapping[str, Any], vec: str = "
     options = RunOptions(**{k: params.pop(k) for k in list(params) if k in LAWN_KEYS})
     options.start_at_anchor = bool(options.start_at_anchor)
     policy = options.policy
-    if isinstance(policy, str) and policy not in getattr(cls, "policy_aliases", {}):
-        raise ValueError(f"--hp policy={policy!r}: {cls.__name__} takes {', '.join(cls.policy_aliases)}")
+    if policy == "FleetPolicy":  # lawn's attention policy for the entity layout (agents/fleet.py)
+        from agents.fleet import FleetPolicy
+
+        if algo not in ("ppo", "a2c"):
+            raise ValueError(f"--hp policy=FleetPolicy is an actor-critic policy: ppo or a2c, not {algo}")
+
+        options.policy = FleetPolicy
+    elif isinstance(policy, str) and policy not in getattr(cls, "policy_aliases", {}):
+        raise ValueError(f"--hp policy={policy!r}: {cls.__name__} takes "
+                         f"{', '.join([*cls.policy_aliases, 'FleetPolicy'])}")
     for key in ("learning_rate", "clip_range"):
         if key in params:
             params[key] = lr_schedule(params[key], key)
@@ -128,10 +136,14 @@ def start_at_anchor(model: Any, algo: str) -> None:
     loads: it starts at the policy it fine-tunes."""
     import torch
 
-    layers = {"sac": lambda: model.actor.mu, "ppo": lambda: model.policy.action_net}
+    def heads() -> list:  # a fleet network's means are its two heads' outputs (its action_net is the identity)
+        net = model.policy.mlp_extractor
+        return [net.agv_head, net.drone_head] if hasattr(net, "agv_head") else [model.policy.action_net]
+
+    layers = {"sac": lambda: [model.actor.mu], "ppo": heads}
     if algo not in layers:
         raise ValueError(f"start_at_anchor: supported for {', '.join(layers)}, not {algo!r}")
-    layer = layers[algo]()
     with torch.no_grad():
-        layer.weight.zero_()
-        layer.bias.zero_()
+        for layer in layers[algo]():
+            layer.weight.zero_()
+            layer.bias.zero_()

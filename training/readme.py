@@ -16,7 +16,7 @@ from pathlib import Path
 
 from .provenance import provenance
 
-__all__ = ["replace_block", "block_names", "find_block", "pages"]
+__all__ = ["replace_block", "block_body", "block_names", "find_block", "pages"]
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -45,6 +45,18 @@ def find_block(name: str, root: Path = ROOT) -> Path:
         where = ", ".join(str(p.relative_to(root)) for p in holders) or "no page"
         raise ValueError(f"generated block {name!r} must be in exactly one page, found in {where}; blocks: {known}")
     return holders[0]
+
+
+def block_body(path: Path, name: str) -> str:
+    """The current text of block ``name`` in ``path`` (empty when the page or the block is missing),
+    so that a page rewritten whole keeps the blocks other commands generate."""
+    path = Path(path)
+    text = path.read_text() if path.exists() else ""
+    begin, end = _markers(name)
+    found = [re.search(f"^{re.escape(m)}$", text, flags=re.MULTILINE) for m in (begin, end)]
+    if not all(found) or found[1].start() < found[0].end():
+        return ""
+    return text[found[0].end() : found[1].start()].strip()
 
 
 def replace_block(path: Path, name: str, content: str, source: str | None = None) -> None:

@@ -16,7 +16,7 @@ from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
 from .evaluate import pool_map
 from .train import train_task
 
-__all__ = ["Recipe", "RECIPES", "recipe", "finished", "train_recipes", "ZOO_VALIDATION_EPISODES"]
+__all__ = ["Recipe", "RECIPES", "SECTIONS", "recipe", "finished", "train_recipes", "ZOO_VALIDATION_EPISODES"]
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,13 @@ class Recipe:
     init_from: str | None = None  # another recipe's name: seed s starts from that recipe's seed s
     eval_every: int = 25_000
     vec: str = "dummy"  # lawn train --vec: "native" trains on lawn's batched vector env
+    section: str = "main"  # where docs/LEARNED.md shows it: the page's tables, or the "fleet" block (SECTIONS)
+    num_agvs: int = 4  # the fleet it trains on (lawn train --set num_agvs=K); every recipe is evaluated at K = 4
+
+    @property
+    def config(self) -> ScenarioConfig:
+        """The scenario it trains on: the default one, with its fleet size."""
+        return ScenarioConfig(num_agvs=self.num_agvs)
 
     @property
     def evaluated_on(self) -> str:
@@ -44,6 +51,8 @@ class Recipe:
         parts += [f"--hp {shlex.quote(f'{k}={json.dumps(v)}')}" for k, v in self.hp.items()]
         if self.vec != "dummy":
             parts.append(f"--vec {self.vec}")
+        if self.num_agvs != 4:
+            parts.append(f"--set num_agvs={self.num_agvs}")
         if self.init_from:
             parts.append(f"--init-from RUNS/{self.init_from}/seed-<s>")
         return " ".join(parts)
@@ -72,6 +81,12 @@ _SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_
 #: network's own; one training seed (a run is about 15 minutes of one core).
 _FLEET_SEEDS = (0,)
 
+#: Multi-agent PPO with the fleet network (training/marl.py): every agent sees the fleet and which
+#: entity it is, and acts with its own row; started at the anchor (the heads zeroed), small steps.
+_MARL_FLEET = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,
+               "start_at_anchor": True, "n_steps": 64, "batch_size": 256, "learning_rate": "lin_1e-4",
+               "policy_kwargs": {"width": 32, "heads": 4, "layers": 2, "log_std_init": -3.0}}
+
 #: The learned comparators. Training runs them in this order, the longest first (a recipe that
 #: starts from another runs in a second phase); the tables list them per env in this order.
 RECIPES: dict[str, Recipe] = {r.name: r for r in (
@@ -79,9 +94,13 @@ RECIPES: dict[str, Recipe] = {r.name: r for r in (
     Recipe("bc-joint", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Joint-v0", 100_000,
            hp=_BC_AT_SCALE),
     Recipe("fleet-comm", "Fleet network (attention over the AGVs), DAgger of rg-mpc on K = 3-32", "fleet",
-           "lawn/Comm-v0", 40_000, seeds=_FLEET_SEEDS),
+           "lawn/Comm-v0", 40_000, seeds=_FLEET_SEEDS, section="fleet"),
     Recipe("fleet-joint", "Fleet network (attention over the AGVs), DAgger of rg-mpc on K = 3-32", "fleet",
-           "lawn/Joint-v0", 40_000, seeds=_FLEET_SEEDS),
+           "lawn/Joint-v0", 40_000, seeds=_FLEET_SEEDS, section="fleet"),
+    Recipe("ppo-marl-fleet-k16", "PPO multi-agent, fleet network, trained at K = 16", "ppo", PARALLEL_ENV_ID,
+           100_000, seeds=_FLEET_SEEDS, hp=_MARL_FLEET, eval_every=25_000, section="fleet", num_agvs=16),
+    Recipe("ppo-marl-fleet-k64", "PPO multi-agent, fleet network, trained at K = 64", "ppo", PARALLEL_ENV_ID,
+           40_000, seeds=_FLEET_SEEDS, hp=_MARL_FLEET, eval_every=10_000, section="fleet", num_agvs=64),
     Recipe("ppo-comm-scratch", "PPO from the distance prior (no MPC in the action)", "ppo", "lawn/Comm-v0",
            1_000_000, hp=_SCRATCH, eval_every=100_000, vec="native"),
     Recipe("ppo-joint-scratch", "PPO from the distance prior and the LQR (no MPC in the action)", "ppo",
@@ -96,6 +115,11 @@ RECIPES: dict[str, Recipe] = {r.name: r for r in (
     Recipe("ppo-joint-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Joint-v0", 60_000, init_from="bc-joint",
            hp=_FINE_TUNE, eval_every=10_000),
 )}
+
+
+#: The sections of docs/LEARNED.md (``lawn zoo build`` rebuilds whole sections): ``main``, the
+#: page's tables; ``fleet``, the fleet networks' tables (generated block ``zoo-fleet``).
+SECTIONS: tuple[str, ...] = ("main", "fleet")
 
 
 def recipe(name: str) -> Recipe:
@@ -131,7 +155,7 @@ def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, 
                     continue
                 if out.exists():
                     shutil.rmtree(out)  # an unfinished run: start it again from scratch
-                tasks.append(dict(algo=r.algo, env_id=r.env_id, config=ScenarioConfig(), timesteps=r.timesteps, seed=s,
+                tasks.append(dict(algo=r.algo, env_id=r.env_id, config=r.config, timesteps=r.timesteps, seed=s,
                                   out_dir=out, hp_overrides=dict(r.hp), eval_every=r.eval_every,
                                   eval_episodes=ZOO_VALIDATION_EPISODES,
                                   progress=False, vec=r.vec,

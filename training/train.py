@@ -62,7 +62,7 @@ TRAIN_ENV_IDS = (*ENV_IDS, PARALLEL_ENV_ID, "CartPole-v1")
 
 
 #: The algorithm names ``lawn train`` accepts (``bc`` is behaviour cloning, training/bc.py).
-ALGOS = (*ALGORITHMS, "bc", "fleet")
+ALGOS = (*ALGORITHMS, "bc")  # "fleet" (training/fleet.py) is in ALGORITHMS: its model is a PPO one
 
 
 def load_hyperparams(algo: str, env_id: str, overrides: Mapping[str, Any] | None = None) -> tuple[dict, int]:

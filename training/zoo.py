@@ -16,7 +16,7 @@ import math
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -28,8 +28,9 @@ from .evaluate import evaluate, write_rows
 from .leaderboard import learned_entries, own_anchor, paired, protocol_cells, run_entries
 from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
 from .score import SCORE_HIGH, SCORE_VERSION, scores_by_policy
-from .recipes import RECIPES, Recipe, finished, recipe, train_recipes
-from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci
+from .readme import block_body, replace_block
+from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe, train_recipes
+from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci, read_csv
 
 __all__ = ["Recipe", "RECIPES", "recipe", "train_recipes", "finished_runs", "evaluate_zoo", "zoo_tables", "render_zoo",
            "plot_curves", "export_zoo", "build_zoo", "format_zoo_list", "ZooEvaluation", "ZooTables", "Shipped"]
@@ -169,24 +170,61 @@ def export_zoo(tables: ZooTables, ev: ZooEvaluation, target: Path = ZOO_DIR) -> 
 
 
 def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True,
-              episodes: int = TEST_EPISODES, export: bool = True, target: Path = ZOO_DIR) -> str:
-    """Evaluate every finished recipe run by the learned protocol, write the tables (``out_doc``,
-    and its learning-curve plot), export each recipe's validation-selected run into
-    ``target``; returns the recipe table (Markdown). The four stages: :func:`evaluate_zoo`,
-    :func:`zoo_tables`, :func:`render_zoo` (and :func:`plot_curves`), :func:`export_zoo`."""
-    ev = evaluate_zoo(finished_runs(Path(runs)), episodes, workers, progress)
-    write_rows(ev.rows, out_doc.parent / "learned" / "episodes.csv")
-    tables = zoo_tables(ev)
-    table, per_run = render_zoo(tables)
-    out_doc.parent.mkdir(parents=True, exist_ok=True)
+              episodes: int = TEST_EPISODES, export: bool = True, target: Path = ZOO_DIR,
+              only: Sequence[str] | None = None) -> str:
+    """Evaluate the finished recipe runs by the learned protocol, write the tables (``out_doc``,
+    and its learning-curve plot), export each recipe's validation-selected run into ``target``;
+    returns the recipe tables (Markdown). The four stages: :func:`evaluate_zoo`,
+    :func:`zoo_tables`, :func:`render_zoo` (and :func:`plot_curves`), :func:`export_zoo`.
+
+    The page has sections (:data:`training.recipes.SECTIONS`): the ``main`` tables and the fleet
+    networks' block. ``only`` (recipe names) rebuilds the sections those recipes are in and keeps
+    the rest of the page, and of ``docs/learned/episodes.csv``, as it is; without it every section
+    with finished runs is rebuilt. Nothing is written before every section is evaluated."""
+    names = list(only or [])
+    for name in names:
+        recipe(name)  # an unknown name is an error that names the recipes
+    sections = [x for x in SECTIONS if not names or any(RECIPES[n].section == x for n in names)]
+    built: dict[str, tuple[ZooEvaluation, ZooTables]] = {}
+    for section in sections:
+        recipes = {n: r for n, r in RECIPES.items() if r.section == section}
+        if names or any(finished(Path(runs) / r.name / f"seed-{s}", r.timesteps) for r in recipes.values()
+                        for s in r.seeds):
+            ev = evaluate_zoo(finished_runs(Path(runs), recipes), episodes, workers, progress)
+            built[section] = (ev, zoo_tables(ev))
+    if not built:
+        raise ValueError(f"{runs}: no finished recipe runs (lawn zoo train --runs {runs} trains them)")
+    out_doc = Path(out_doc)
+    _merge_rows(out_doc.parent / "learned" / "episodes.csv", built)
+    rendered = {section: render_zoo(tables) for section, (_, tables) in built.items()}
+    if "main" in built:
+        _write_page(built["main"][0], rendered["main"], out_doc, episodes, workers)
+    if "fleet" in built:
+        replace_block(out_doc, "zoo-fleet", "\n\n".join(rendered["fleet"]),
+                      source="lawn zoo build" + (f" --only {' '.join(names)}" if names else ""))
+    if export:
+        for ev, tables in built.values():
+            export_zoo(tables, ev, target)
+    return "\n\n".join(table for table, _ in rendered.values())
+
+
+def _merge_rows(path: Path, built: Mapping[str, tuple[ZooEvaluation, ZooTables]]) -> None:
+    """The episodes of the rebuilt sections, with the recorded episodes of the other sections' runs."""
+    kept = [r for r in read_csv(path) if any(f"/{rec.name}/seed-" in r["policy"] for rec in RECIPES.values()
+                                             if rec.section not in built)]
+    new = [row for ev, _ in built.values() for row in ev.rows]
+    write_rows([{k: r.get(k, "") for k in new[0]} for r in kept] + new, path)
+
+
+def _write_page(ev: ZooEvaluation, rendered: tuple[str, str], out_doc: Path, episodes: int, workers: int) -> None:
+    """The page's main tables and learning curves; the generated blocks it holds keep their text."""
     reference = {env: evaluate([("rg-mpc", env, ScenarioConfig(), VALIDATION_SEED_BASE + i, {}) for i in range(10)],
                                workers=workers, progress=False) for env in ev.envs}
+    out_doc.parent.mkdir(parents=True, exist_ok=True)
     plot_curves(ev.found, {env: float(np.mean([r["control_cost"] for r in rs])) for env, rs in reference.items()},
                 out_doc.parent / "learned" / "curves.png")
-    out_doc.write_text(_document(table, per_run, episodes))
-    if export:
-        export_zoo(tables, ev, target)
-    return table
+    blocks = {name: block_body(out_doc, name) for name in _PAGE_BLOCKS}
+    out_doc.write_text(_document(*rendered, episodes, blocks))
 
 
 def plot_curves(found: list[tuple[Recipe, list[Path]]], reference: dict[str, float], path: Path) -> None:
@@ -250,7 +288,12 @@ def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
     return target
 
 
-def _document(table: str, per_run: str, episodes: int) -> str:
+#: The generated blocks of docs/LEARNED.md that other commands write: the fleet networks' tables
+#: (``lawn zoo build`` of the fleet section) and their table over fleet sizes (``lawn benchmark --suite``).
+_PAGE_BLOCKS = ("zoo-fleet", "fleet-generalization")
+
+
+def _document(table: str, per_run: str, episodes: int, blocks: Mapping[str, str]) -> str:
     from .provenance import provenance
 
     return f"""# Learned comparators
@@ -284,6 +327,30 @@ Validation cost during training (every seed of every recipe; dashed: `rg-mpc` on
 validation seeds):
 
 ![learning curves](learned/curves.png)
+""" + FLEET_SECTION.format(**{name.replace("-", "_"): blocks.get(name, "") for name in _PAGE_BLOCKS})
+
+
+#: The fleet networks' part of docs/LEARNED.md (its blocks filled by the commands that make them).
+FLEET_SECTION = """
+## One network for every fleet size
+
+`zoo:fleet-comm` and `zoo:fleet-joint` (`agents/fleet.py`) read the entity layout (a row per AGV,
+padded to 64 with a mask, and a row of globals: [spaces](envs/spaces.md#the-entity-layout)) and
+attend over the AGVs, so one network acts on any fleet. Each was trained once, by DAgger of
+`rg-mpc` on fleets of 3 to 32 AGVs (`training/hyperparams/fleet.yml`; `lawn zoo train --only
+fleet-comm fleet-joint`), in an action interface that decodes without an MPC (the distance prior,
+and on Joint the LQR's increments under a residual), so that deciding costs the network and a
+closed form. On the default task (K = 4), by the protocol above:
+
+<!-- zoo-fleet:begin -->
+{zoo_fleet}
+<!-- zoo-fleet:end -->
+
+### Fleet sizes 3 to 64, without retraining
+
+<!-- fleet-generalization:begin -->
+{fleet_generalization}
+<!-- fleet-generalization:end -->
 """
 
 

@@ -229,6 +229,11 @@ class EngineAccess:
         return getattr(self.engine.role, "last_solve_time_s", float("nan"))
 
     @property
+    def entities(self) -> EntityLayout | None:
+        """The entity layout (``interface={"layout": "entities"}``); None for the flat one."""
+        return self.engine.entities
+
+    @property
     def mpc(self) -> OutageAwareMPC | None:
         """The MPC that drives the AGVs of every scenario (``lawn/Comm-v0``; None otherwise)."""
         return getattr(self.engine.role, "mpc", None)
@@ -351,11 +356,6 @@ class LawnEnvBase(EngineView, gym.Env):
         """This scenario's observation in the interface's layout."""
         obs = self.engine.observe()
         return obs[0] if self.entities is None else {key: value[0] for key, value in obs.items()}
-
-    @property
-    def entities(self) -> EntityLayout | None:
-        """The entity layout (``interface={"layout": "entities"}``); None for the flat one."""
-        return self.engine.entities
 
     # ------------------------------------------------------------------ extras
     def episode_metrics(self) -> dict:

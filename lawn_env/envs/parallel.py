@@ -10,6 +10,7 @@ from gymnasium.utils import seeding
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
+from ..entities import MAX_AGVS
 from ..interface import InterfaceLike
 from ..presets import ConfigLike
 from ..spaces import check_action
@@ -33,12 +34,19 @@ class LawnParallelEnv(EngineView, ParallelEnv):
       ``lawn/Comm-v0``).
     * ``"agv_k"``: ``Box(-1, 1, (2,))``: the increment, ``a * Delta-a_max`` m/s^2, saturated to
       the acceleration bound.
+    * With ``interface={"layout": "entities", ...}``: ``"drone"`` ``Box(-1, 1, (2,))``, its move;
+      ``"agv_k"`` ``Box(-1, 1, (3,))``, its row of the entity action (the increment, then its
+      power weight: the power split is normalised over the AGVs), so that the spaces do not
+      depend on K (:mod:`lawn_env.entities`).
 
     ## Observation Spaces
 
     * ``"drone"``: the central observation of ``lawn/Joint-v0``.
     * ``"agv_k"``: AGV k's block of that observation followed by the 3 global features (drone
       position, time): ``agv_features + 3`` floats.
+    * With the entity layout, every agent: the central entity observation (``agvs``, ``globals``,
+      ``mask``) and ``me``, a one-hot of which entity it is (index 0 the drone, 1 + k AGV k), in
+      one ``Dict`` space for all agents; ``state()`` stays the flat central observation.
 
     ## Rewards
 
@@ -72,6 +80,8 @@ class LawnParallelEnv(EngineView, ParallelEnv):
       decisions the drone's observations, rewards and infos equal ``lawn/Joint-v0``'s bit for bit.
     * v0 (later): ``render()`` frames as ``lawn/Joint-v0``'s history says (a colour bar,
       the running control cost, 512 x 448 pixels).
+    * v0 (later): the entity layout (opt-in, ``interface={"layout": "entities"}``): spaces that
+      do not depend on K, the power split decided by the AGVs' own power weights.
     """
 
     metadata = {"name": "lawn_v0", "render_modes": ["human", "rgb_array"], "render_fps": 4, "is_parallelizable": True}
@@ -85,14 +95,20 @@ class LawnParallelEnv(EngineView, ParallelEnv):
                                  "give one of them (max_cycles is PettingZoo's name for num_slots)")
             overrides = {**overrides, "num_slots": max_cycles}
         self._setup_view(config, render_mode, overrides, interface, "joint")
-        if self.interface.layout != "flat":  # each agent's observation is already its own entity's
-            raise ValueError(f"interface layout={self.interface.layout!r}: the multi-agent env gives each AGV agent "
-                             "its own row and the drone the flat observation; use layout='flat' (the default)")
         self.max_cycles = self.config.num_slots
         k = self.config.num_agvs
         self.possible_agents = ["drone"] + [f"agv_{i}" for i in range(k)]
         self.agents: list[str] = []
         self._agv_index = {f"agv_{i}": i for i in range(k)}
+        if self.entities is None:
+            self._flat_spaces(k)
+        else:
+            self._entity_spaces(k)
+        self.state_space = self.interface.observation_space(self.layout.size)
+        self._np_random, _ = seeding.np_random()
+        self._agv_terms = (np.zeros(k), np.zeros(k))
+
+    def _flat_spaces(self, k: int) -> None:
         agv_size = self.layout.agv_features + self.layout.global_features
         self._observation_spaces = {
             "drone": self.interface.observation_space(self.layout.size),
@@ -102,11 +118,21 @@ class LawnParallelEnv(EngineView, ParallelEnv):
             "drone": gym.spaces.Box(-1.0, 1.0, shape=(k + 2,), dtype=np.float32),
             **{a: gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for a in self._agv_index},
         }
-        self.state_space = self._observation_spaces["drone"]
-        self._np_random, _ = seeding.np_random()
-        self._agv_terms = (np.zeros(k), np.zeros(k))
 
-    def observation_space(self, agent: str) -> gym.spaces.Box:
+    def _entity_spaces(self, k: int) -> None:
+        """Every agent sees the entity observation and which entity it is (``me``: one-hot, the
+        drone first, then the AGVs' rows); an AGV acts with its entity row, the drone with its move."""
+        entities = self.entities
+        space = gym.spaces.Dict({**entities.observation_space.spaces,
+                                 "me": gym.spaces.Box(0.0, 1.0, shape=(MAX_AGVS + 1,), dtype=np.float32)})
+        self._observation_spaces = {a: space for a in self.possible_agents}
+        self._me = {a: np.eye(MAX_AGVS + 1, dtype=np.float32)[j] for j, a in enumerate(self.possible_agents)}
+        self._action_spaces = {
+            "drone": gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32),
+            **{a: gym.spaces.Box(-1.0, 1.0, shape=(entities.per_agv,), dtype=np.float32) for a in self._agv_index},
+        }
+
+    def observation_space(self, agent: str) -> gym.spaces.Space:
         return self._lookup(self._observation_spaces, agent)
 
     def action_space(self, agent: str) -> gym.spaces.Box:
@@ -168,12 +194,7 @@ class LawnParallelEnv(EngineView, ParallelEnv):
         unknown = [a for a in actions if a not in self._action_spaces]
         if missing or unknown:
             raise ValueError(f"actions: missing agents {missing}, unknown agents {unknown}; expected {self.agents}")
-        k = self.config.num_agvs
-        joint = np.empty(self.actions.size)  # the central action: increments, then the drone's part
-        joint[2 * k :] = check_action(actions["drone"], k + 2, name="actions['drone']")
-        for agent, i in self._agv_index.items():
-            joint[2 * i : 2 * i + 2] = check_action(actions[agent], 2, name=f"actions[{agent!r}]")
-        decisions, extra = self.engine.decide(joint[None])
+        decisions, extra = self.engine.decide(self._central_action(actions)[None])
         record = self._simulate(decisions)
         per_agv = record.tracking_cost[0] + record.effort_cost[0]
         costs = np.concatenate([record.costs[:, 2], per_agv])[None]
@@ -193,7 +214,27 @@ class LawnParallelEnv(EngineView, ParallelEnv):
             self.render()
         return observations, rewards, terminations, truncations, infos
 
+    def _central_action(self, actions: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The central action of the agents' (checked): flat, increments then the drone's part."""
+        k = self.config.num_agvs
+        if self.entities is not None:
+            entity = np.zeros(self.entities.action_space.shape)
+            c = self.entities.per_agv
+            entity[-2:] = check_action(actions["drone"], 2, name="actions['drone']")
+            for agent, i in self._agv_index.items():
+                entity[c * i : c * i + c] = check_action(actions[agent], c, name=f"actions[{agent!r}]")
+            return self.entities.to_flat_actions(entity)
+        joint = np.empty(self.actions.size)
+        joint[2 * k :] = check_action(actions["drone"], k + 2, name="actions['drone']")
+        for agent, i in self._agv_index.items():
+            joint[2 * i : 2 * i + 2] = check_action(actions[agent], 2, name=f"actions[{agent!r}]")
+        return joint
+
     def _observations(self) -> dict:
+        if self.entities is not None:
+            shared = {key: value[0] for key, value in self.engine.observe().items()}
+            return {a: {**{key: value.copy() for key, value in shared.items()}, "me": self._me[a].copy()}
+                    for a in self.possible_agents}
         central = self.engine.observe_flat()[0]
         blocks = self.layout.agv_blocks(central)
         glob = central[-self.layout.global_features :]

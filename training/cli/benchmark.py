@@ -119,7 +119,13 @@ def _suite(args: argparse.Namespace) -> int:
     plot_profiles(read_csv(out / "per_slot.csv"), out / "per_slot.png", tasks, args.transient_slots)
     print(f"wrote {out}/episodes.csv, per_slot.csv, board.md (the scores), references.md (the references' costs), "
           "structure.md (cost structure, noise floor, headroom), tasks.md (every row per task) and per_slot.png")
+    fleet = _fleet_sizes(args, policies, out)
     if args.docs:
+        if fleet:
+            from ..readme import replace_block
+
+            replace_block(Path(args.docs) / "LEARNED.md", "fleet-generalization", fleet,
+                          source="lawn benchmark --suite --docs docs")
         figure = plot_profiles(read_csv(out / "per_slot.csv"), Path(args.docs) / "figures" / "suite-per-slot.png", tasks,
                                args.transient_slots)
         doc = write_leaderboard(Path(args.docs) / "LEADERBOARD.md", board, refs, skipped, episodes, seconds,
@@ -127,6 +133,28 @@ def _suite(args: argparse.Namespace) -> int:
                                 transient_slots=args.transient_slots)
         print(f"wrote {doc} and {figure}")
     return 0
+
+
+def _fleet_sizes(args: argparse.Namespace, policies: list[str], out: Path) -> str:
+    """The fleet networks among ``policies`` on every fleet size of the generalization table
+    (:mod:`training.generalization`); writes ``fleet_sizes.csv`` and ``.md``, returns the block
+    (empty without fleet networks)."""
+    import time
+
+    from ..evaluate import write_rows
+    from ..generalization import fleet_agents, generalization_block, run_generalization
+
+    agents = [p for p in fleet_agents() if p in policies]
+    if not agents:
+        return ""
+    start = time.perf_counter()
+    rows = run_generalization(agents, workers=args.workers, progress=not args.quiet)
+    block = generalization_block(rows, agents, (time.perf_counter() - start) / 60, args.workers)
+    write_rows(rows, out / "fleet_sizes.csv")
+    (out / "fleet_sizes.md").write_text(block + "\n")
+    print(block)
+    print(f"wrote {out}/fleet_sizes.csv and fleet_sizes.md (the fleet networks on K = 3 ... 64)")
+    return block
 
 
 def _learned(args: argparse.Namespace) -> int:
