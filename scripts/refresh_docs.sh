@@ -13,6 +13,7 @@
 #   blocks numba-jit, qp-speed, speedups (--only qp)      benchmarks/{numba_jit,qp_speed,speedups}.py
 #                                                       (speedups: side by side with the commit before
 #                                                       the compiled solver, in a git worktree ../before)
+#   block fleet-decision (docs/performance.md; --only fleet)   benchmarks/fleet_decision.py
 #   block anchors (docs/rl.md; with learned)            benchmarks/anchors.py --markdown
 #   docs/LEARNED.md                                     lawn zoo build (needs the training runs in
 #                                                       runs/agents: with --train, scripts/train_agents.sh
@@ -21,7 +22,9 @@
 #   block zoo-drift (docs/training.md)                  benchmarks/zoo_drift.py (the table's shipped agents
 #                                                       and experts re-evaluated at the current code)
 #   docs/LEADERBOARD.md                                 lawn benchmark --suite (--only suite; about 17
-#                                                       minutes on 2 cores), with block fast-drone-grid
+#                                                       minutes on 2 cores), with block fleet-generalization
+#                                                       (docs/LEARNED.md: the fleet networks on K = 3..64)
+#                                                       and block fast-drone-grid
 #                                                       (docs/benchmark.md: benchmarks/fast_drone_grid.py)
 #   docs/figures/episodes/*.gif                         lawn render (--only render): the README's animation
 #                                                       (rg-mpc, default task), a learned agent, the disturbed preset
@@ -36,7 +39,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --train) train=1 ;;
     --only) shift; while [ $# -gt 0 ] && [[ "$1" != --* ]]; do only+=("$1"); shift; done; continue ;;
-    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|parallel|equations|qp|learned|suite|render ...]" >&2; exit 2 ;;
+    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|parallel|equations|qp|fleet|learned|suite|render ...]" >&2; exit 2 ;;
   esac
   shift
 done
@@ -94,6 +97,10 @@ if want qp; then
   splice qp-speed runs/qp_speed.md "python benchmarks/qp_speed.py"
   "$py" benchmarks/speedups.py --markdown runs/speedups.md || true
   splice speedups runs/speedups.md "python benchmarks/speedups.py"
+fi
+if want fleet; then
+  "$py" benchmarks/fleet_decision.py --markdown runs/fleet_decision.md
+  splice fleet-decision runs/fleet_decision.md "python benchmarks/fleet_decision.py"
 fi
 if want learned; then
   "$py" benchmarks/anchors.py --markdown runs/anchors.md

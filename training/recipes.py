@@ -77,8 +77,8 @@ _SCRATCH = {"interface": {"base": "rl", "power_anchor": "distance"}, "learning_r
 _SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_anchor": "lqr"}}
 
 #: One network for every fleet size (agents/fleet.py): DAgger of rg-mpc on fleets of 3 to 32 AGVs
-#: (training/hyperparams/fleet.yml), 40,000 labelled states, then 4 rounds of 10,000 on the
-#: network's own; one training seed (a run is about 15 minutes of one core).
+#: (training/hyperparams/fleet.yml), 50,000 labelled states, then 4 rounds of 12,500 on the
+#: network's own; one training seed (a run is about 25 minutes, two side by side on 2 cores).
 _FLEET_SEEDS = (0,)
 
 #: Multi-agent PPO with the fleet network (training/marl.py): every agent sees the fleet and which
@@ -94,13 +94,13 @@ RECIPES: dict[str, Recipe] = {r.name: r for r in (
     Recipe("bc-joint", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Joint-v0", 100_000,
            hp=_BC_AT_SCALE),
     Recipe("fleet-comm", "Fleet network (attention over the AGVs), DAgger of rg-mpc on K = 3-32", "fleet",
-           "lawn/Comm-v0", 40_000, seeds=_FLEET_SEEDS, section="fleet"),
+           "lawn/Comm-v0", 50_000, seeds=_FLEET_SEEDS, section="fleet"),
     Recipe("fleet-joint", "Fleet network (attention over the AGVs), DAgger of rg-mpc on K = 3-32", "fleet",
-           "lawn/Joint-v0", 40_000, seeds=_FLEET_SEEDS, section="fleet"),
+           "lawn/Joint-v0", 50_000, seeds=_FLEET_SEEDS, section="fleet"),
     Recipe("ppo-marl-fleet-k16", "PPO multi-agent, fleet network, trained at K = 16", "ppo", PARALLEL_ENV_ID,
            100_000, seeds=_FLEET_SEEDS, hp=_MARL_FLEET, eval_every=25_000, section="fleet", num_agvs=16),
     Recipe("ppo-marl-fleet-k64", "PPO multi-agent, fleet network, trained at K = 64", "ppo", PARALLEL_ENV_ID,
-           40_000, seeds=_FLEET_SEEDS, hp=_MARL_FLEET, eval_every=10_000, section="fleet", num_agvs=64),
+           30_000, seeds=_FLEET_SEEDS, hp=_MARL_FLEET, eval_every=10_000, section="fleet", num_agvs=64),
     Recipe("ppo-comm-scratch", "PPO from the distance prior (no MPC in the action)", "ppo", "lawn/Comm-v0",
            1_000_000, hp=_SCRATCH, eval_every=100_000, vec="native"),
     Recipe("ppo-joint-scratch", "PPO from the distance prior and the LQR (no MPC in the action)", "ppo",

@@ -340,7 +340,9 @@ attend over the AGVs, so one network acts on any fleet. Each was trained once, b
 `rg-mpc` on fleets of 3 to 32 AGVs (`training/hyperparams/fleet.yml`; `lawn zoo train --only
 fleet-comm fleet-joint`), in an action interface that decodes without an MPC (the distance prior,
 and on Joint the LQR's increments under a residual), so that deciding costs the network and a
-closed form. On the default task (K = 4), by the protocol above:
+closed form. `zoo:ppo-marl-fleet-k16` and `zoo:ppo-marl-fleet-k64` are the multi-agent PPO
+recipe with the same network (each agent acts with its own row; `training/marl.py`), trained at
+K = 16 and K = 64 from the stake anchor. On the default task (K = 4), by the protocol above:
 
 <!-- zoo-fleet:begin -->
 {zoo_fleet}

@@ -19,7 +19,9 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     zo.add_argument("action", nargs="?", default="list", choices=["list", "train", "build"],
                     help="list the shipped agents (default), train their recipes, or build the zoo from the runs")
     zo.add_argument("--runs", default="runs/agents", help="training runs, one folder per recipe (default: %(default)s)")
-    zo.add_argument("--only", nargs="+", metavar="NAME", help="train only these recipes")
+    zo.add_argument("--only", nargs="+", metavar="NAME",
+                    help="train only these recipes; build: rebuild only the sections of docs/LEARNED.md they are in "
+                         "(the fleet networks' block, or the main tables), keeping the rest of the page")
     zo.add_argument("--doc", default="docs/LEARNED.md", help="build: the table's document (default: %(default)s)")
     zo.set_defaults(func=run)
 
@@ -38,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
         dirs = train_recipes(Path(args.runs), args.only, workers=args.workers, progress=not args.quiet)
         print(f"lawn zoo train: {len(dirs)} runs in {args.runs}")
         return 0
-    table = build_zoo(Path(args.runs), Path(args.doc), workers=args.workers, progress=not args.quiet)
+    table = build_zoo(Path(args.runs), Path(args.doc), workers=args.workers, progress=not args.quiet, only=args.only)
     print(table)
     print(f"wrote {args.doc} and {ZOO_HINT}")
     return 0
