@@ -15,7 +15,6 @@ module is imported only when used.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numba
@@ -103,7 +102,10 @@ class FleetAgentNet(FleetNet):
     """:class:`FleetNet` for one agent of the multi-agent env's entity layout (each observation
     ends with ``me``, the acting entity's one-hot): the same computation for every entity, then the
     acting one's action row (the drone's move padded to the row's width) and its token as the
-    value's latent. Parameter sharing across agents is the network's own sharing across rows."""
+    value's latent. Parameter sharing across agents is the network's own sharing across rows.
+    The agents share SB3's state-independent log-std per action entry: the drone's move explores
+    with the AGVs' increment noise (and its padded third entry, which the env ignores, with the
+    power weight's)."""
 
     def __init__(self, rows: int, features: int, num_globals: int, per_agv: int, **sizes: Any):
         super().__init__(rows, features, num_globals, per_agv, **sizes)
@@ -113,18 +115,22 @@ class FleetAgentNet(FleetNet):
         tokens, mask = self._tokens(features[:, : -(self.rows + 1)])
         return tokens, mask, features[:, -(self.rows + 1) :][:, : tokens.shape[1], None]
 
-    def forward_actor(self, features: th.Tensor) -> th.Tensor:
-        tokens, mask, me = self._agent(features)
+    def _own_action(self, tokens: th.Tensor, me: th.Tensor) -> th.Tensor:
         drone = self.drone_head(tokens[:, 0])
         drone = th.cat([drone, drone.new_zeros((drone.shape[0], self.per_agv - 2))], dim=1)
         return (me * th.cat([drone[:, None], self.agv_head(tokens[:, 1:])], dim=1)).sum(dim=1)
+
+    def forward_actor(self, features: th.Tensor) -> th.Tensor:
+        tokens, _, me = self._agent(features)
+        return self._own_action(tokens, me)
 
     def forward_critic(self, features: th.Tensor) -> th.Tensor:
         tokens, _, me = self._agent(features)
         return (me * tokens).sum(dim=1)
 
     def forward(self, features: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
-        return self.forward_actor(features), self.forward_critic(features)
+        tokens, _, me = self._agent(features)  # the attention once for the action and the value
+        return self._own_action(tokens, me), (me * tokens).sum(dim=1)
 
 
 class FleetPolicy(ActorCriticPolicy):
@@ -145,6 +151,10 @@ class FleetPolicy(ActorCriticPolicy):
         rows, features = self.observation_space["agvs"].shape
         num_globals = self.observation_space["globals"].shape[0]
         if "me" in self.observation_space.spaces:  # one agent of the multi-agent env: its own row
+            if self.observation_space["me"].shape != (rows + 1,) or self.action_space.shape[0] < 2:
+                raise ValueError(f"FleetPolicy for one agent needs obs['me'] of shape ({rows + 1},) (the drone, then "
+                                 f"the {rows} rows) and an action of 2 or more entries; got "
+                                 f"{self.observation_space['me'].shape} and {self.action_space.shape}")
             self.mlp_extractor = FleetAgentNet(rows, features, num_globals, self.action_space.shape[0], **self.fleet)
             return
         per_agv = (self.action_space.shape[0] - 2) // rows
@@ -225,11 +235,14 @@ class _Attention:
 
     def __init__(self, layer: nn.TransformerEncoderLayer):
         if layer.norm_first or layer.activation_relu_or_gelu != 1 or not layer.self_attn.batch_first:
-            raise ValueError("FleetInference runs post-norm, ReLU, batch-first encoder layers (FleetNet's)")
+            raise ValueError("FleetInference runs post-norm, ReLU, batch-first encoder layers (FleetNet's); got "
+                             f"norm_first={layer.norm_first}, activation {layer.activation_relu_or_gelu} (1: ReLU), "
+                             f"batch_first={layer.self_attn.batch_first}")
         attn = layer.self_attn
         self.heads = int(attn.num_heads)
         if layer.norm1.eps != layer.norm2.eps:
-            raise ValueError("FleetInference runs encoder layers whose two norms share their eps")
+            raise ValueError(f"FleetInference runs encoder layers whose two norms share their eps; got "
+                             f"{layer.norm1.eps} and {layer.norm2.eps}")
         self.eps = float(layer.norm1.eps)
         self.weights = (_numpy(attn.in_proj_weight, transpose=True), _numpy(attn.in_proj_bias),
                         *_linear(attn.out_proj), *_linear(layer.linear1), *_linear(layer.linear2),
@@ -250,6 +263,10 @@ class FleetInference:
     def __init__(self, policy: FleetPolicy):
         if not isinstance(policy, FleetPolicy):
             raise TypeError(f"FleetInference runs a FleetPolicy, got {type(policy).__name__}")
+        if policy.use_sde or policy.squash_output or not isinstance(policy.features_extractor, EntityFeatures):
+            raise ValueError("FleetInference copies the Gaussian mean of a FleetPolicy that reads EntityFeatures; got "
+                             f"use_sde={policy.use_sde}, squash_output={policy.squash_output}, features extractor "
+                             f"{type(policy.features_extractor).__name__}")
         net = policy.mlp_extractor
         self.rows, self.per_agv = net.rows, net.per_agv
         self.agv = [_linear(net.agv_encoder[i]) for i in (0, 2)]

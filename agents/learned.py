@@ -263,6 +263,12 @@ def marl_policy(network: Any, config: ScenarioConfig, interface: InterfaceLike, 
     """A multi-agent network on ``lawn/Joint-v0``: :class:`MARLPolicy`, or for the entity layout
     (a fleet network, which computes every agent's row at once) :class:`SB3Policy`."""
     if resolve_interface(interface).layout == "entities":
+        from .fleet import FleetPolicy
+
+        if not isinstance(getattr(network, "policy", network), FleetPolicy):
+            raise ValueError(f"{label}: a multi-agent network of the entity layout drives {JOINT} when it is a "
+                             f"FleetPolicy (lawn train --hp policy=FleetPolicy), got "
+                             f"{type(getattr(network, 'policy', network)).__name__}")
         return SB3Policy(network, config, JOINT, interface, normalizer, seed, label=label)
     return MARLPolicy(network, config, interface, normalizer, seed, label=label)
 
@@ -273,8 +279,9 @@ def export_agent(run_dir: Path, out_dir: Path, record: dict[str, Any]) -> Path:
     alone, without critics) and observation statistics as a shipped agent with ``agent.json``."""
     run_dir, out_dir = Path(run_dir), Path(out_dir)
     run = read_run(run_dir, require_model=True)
-    algo = run.algo
     model = _load_model(run)
+    # a fleet network is loaded by its own class (ALGORITHMS["fleet"]), whoever trained it
+    algo = "fleet" if type(getattr(model, "policy", None)).__name__ == "FleetPolicy" else run.algo
     out_dir.mkdir(parents=True, exist_ok=True)
     (model.actor if algo in ("sac", "td3") else model.policy).save(str(out_dir / "policy.zip"))
     normalizer = ObsNormalizer.load(_selected(run_dir)[1])

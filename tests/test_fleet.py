@@ -314,3 +314,30 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     lines = [line for line in text.splitlines() if line.startswith("| zoo:fleet-comm")]
     assert [line.split(" | ")[2] for line in lines] == ["3", "5"] and all("×" in line for line in lines)
     assert sum(line.startswith("| noise:rg-mpc") for line in text.splitlines()) == 2
+
+
+def test_a_multi_agent_fleet_run_ships_to_the_zoo_and_a_flat_policy_is_refused(tmp_path, monkeypatch):
+    """The zoo exports a multi-agent fleet network as a fleet network (its own class loads it) and
+    ``zoo:NAME`` drives lawn/Joint-v0 with it at another K; the multi-agent entity layout refuses a
+    policy other than FleetPolicy before anything is written."""
+    import agents.learned as learned
+    from agents import make_policy
+    from lawn_env import presets
+    from training.train import train
+
+    config = presets.get("default").override(num_agvs=3, num_slots=6)
+    hp = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,
+          "n_envs": 1, "n_steps": 16, "batch_size": 32, "policy_kwargs": {"width": 16, "heads": 2, "layers": 1}}
+    train("ppo", "lawn/Parallel-v0", config, 32, 0, tmp_path / "run", hp_overrides=hp, eval_episodes=1, progress=False)
+    monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
+    learned.export_agent(tmp_path / "run", tmp_path / "zoo" / "marl-fleet", {"label": "tiny", "name": "marl-fleet",
+                                                                              "evaluated_on": "lawn/Joint-v0"})
+    assert json.loads((tmp_path / "zoo" / "marl-fleet" / "agent.json").read_text())["algo"] == "fleet"
+    wide = config.override(num_agvs=5)
+    policy = make_policy("zoo:marl-fleet", wide, env_id="lawn/Joint-v0")
+    obs, _ = gym.make("lawn/Joint-v0", config=wide).reset(seed=0)
+    assert policy.entities.num_agvs == 5 and policy.act(obs).shape == (17,)
+    with pytest.raises(ValueError, match="policy=FleetPolicy"):
+        train("ppo", "lawn/Parallel-v0", config, 32, 0, tmp_path / "flat", progress=False,
+              hp_overrides={**hp, "policy": "MultiInputPolicy"})
+    assert not (tmp_path / "flat").exists()

@@ -49,14 +49,15 @@ def fit_fleet(model: Any, obs: dict[str, np.ndarray], actions: np.ndarray, prese
               batch_size: int, learning_rate: float, seed: int) -> list[float]:
     """Mean-squared-error regression of the model's deterministic action on the labelled entries;
     returns the loss over the whole data set before the first epoch and after each. The step size
-    decays linearly to a tenth of ``learning_rate`` over the epochs. Every batch holds one fleet size (the network then attends over that many rows, not the data's largest
+    falls by 0.9 ``learning_rate`` / ``epochs`` after each epoch (a tenth of it would come after the
+    last). Every batch holds one fleet size (the network then attends over that many rows, not the data's largest
     fleet); the batches of an epoch come in random order."""
     import torch
 
     torch.manual_seed(seed)
     policy = model.policy
     optimizer = torch.optim.Adam(policy.parameters(), lr=learning_rate)
-    decay = torch.optim.lr_scheduler.LinearLR(optimizer, 1.0, 0.1, total_iters=max(1, epochs))  # to a tenth, per epoch
+    decay = torch.optim.lr_scheduler.LinearLR(optimizer, 1.0, 0.1, total_iters=max(1, epochs))
     x = {key: torch.as_tensor(value) for key, value in obs.items()}
     y, w = torch.as_tensor(actions), torch.as_tensor(present, dtype=torch.float32)
     rng = np.random.default_rng(seed)

@@ -25,7 +25,8 @@ from .limits import NOISE
 from .score import SCORE_HIGH
 from .tables import fmt_geometric, fmt_num, fmt_paired, paired_difference
 
-__all__ = ["FLEET_SIZES", "TARGETS", "fleet_agents", "run_generalization", "generalization_table"]
+__all__ = ["FLEET_SIZES", "TARGETS", "fleet_agents", "run_generalization", "generalization_table",
+           "generalization_block"]
 
 #: Fleet size -> test seeds (0..n-1) of the table.
 FLEET_SIZES: dict[int, int] = {3: 100, 4: 100, 8: 100, 16: 40, 32: 40, 64: 20}

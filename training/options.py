@@ -13,6 +13,9 @@ import inspect
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
+from lawn_env import PARALLEL_ENV_ID
+from lawn_env.interface import resolve_interface
+
 __all__ = ["LAWN_KEYS", "RunOptions", "split_params", "public_keys", "lr_schedule", "start_at_anchor"]
 
 #: Hyperparameter keys that ``lawn train`` reads itself (the rest go to the SB3 algorithm), with the
@@ -114,6 +117,10 @@ def split_params(algo: str, env_id: str, params: Mapping[str, Any], vec: str = "
     elif isinstance(policy, str) and policy not in getattr(cls, "policy_aliases", {}):
         raise ValueError(f"--hp policy={policy!r}: {cls.__name__} takes "
                          f"{', '.join([*cls.policy_aliases, 'FleetPolicy'])}")
+    if env_id == PARALLEL_ENV_ID and options.interface is not None and options.policy is not _fleet_policy() \
+            and resolve_interface(options.interface).layout == "entities":
+        raise ValueError(f"--hp policy={policy!r}: the multi-agent env's entity layout trains --hp policy=FleetPolicy "
+                         "(each agent acts with its own row of the fleet network)")
     for key in ("learning_rate", "clip_range"):
         if key in params:
             params[key] = lr_schedule(params[key], key)
@@ -124,6 +131,15 @@ def split_params(algo: str, env_id: str, params: Mapping[str, Any], vec: str = "
         raise ValueError(f"unknown {cls.__name__} hyperparameters {unknown}; valid: {', '.join(sorted(valid + mine))}")
     options.algo_kwargs = params
     return options
+
+
+def _fleet_policy() -> type | None:
+    """agents.fleet.FleetPolicy (None without torch)."""
+    try:
+        from agents.fleet import FleetPolicy
+    except ImportError:
+        return None
+    return FleetPolicy
 
 
 def start_at_anchor(model: Any, algo: str) -> None:

@@ -24,13 +24,14 @@ from agents.learned import ZOO_DIR, export_agent, zoo_agents
 from agents.runs import RunDir, read_run
 from lawn_env import ScenarioConfig
 
-from .evaluate import evaluate, write_rows
+from .evaluate import evaluate
 from .leaderboard import learned_entries, own_anchor, paired, protocol_cells, run_entries
 from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
 from .score import SCORE_HIGH, SCORE_VERSION, scores_by_policy
-from .readme import block_body, replace_block
+from .readme import block_body, block_names, replace_body
 from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe, train_recipes
-from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci, read_csv
+from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci, read_csv, write_csv
+from .zoo_page import PAGE_BLOCKS, document, merged_rows, read_text, write_atomic
 
 __all__ = ["Recipe", "RECIPES", "recipe", "train_recipes", "finished_runs", "evaluate_zoo", "zoo_tables", "render_zoo",
            "plot_curves", "export_zoo", "build_zoo", "format_zoo_list", "ZooEvaluation", "ZooTables", "Shipped"]
@@ -85,7 +86,8 @@ def finished_runs(runs: Path, recipes: Mapping[str, Recipe] | None = None) -> li
              for r in recipes.values()]
     found = [(r, dirs) for r, dirs in found if dirs]
     if not found:
-        raise ValueError(f"{runs}: no finished recipe runs (lawn zoo train --runs {runs} trains them)")
+        raise ValueError(f"{runs}: no finished recipe runs of {', '.join(recipes)} (lawn zoo train --runs {runs} "
+                         "trains them)")
     return found
 
 
@@ -115,8 +117,9 @@ def zoo_tables(ev: ZooEvaluation) -> ZooTables:
             across = mean_ci(g[0] for g in gains)
             run_rows += [_run_cells(ev, r, d, best, d == chosen, env) for d, best in zip(dirs, validation)]
             specs = [ev.runs[d].record for d in dirs]
-            algo = r.algo.upper() if r.algo != "bc" else "BC"
-            budget = (f"{algo}, {int(specs[0].get('num_timesteps', r.timesteps)):,} steps, "
+            algo = {"bc": "BC", "fleet": "DAgger"}.get(r.algo, r.algo.upper())
+            budget = (f"{algo}, {int(specs[0].get('num_timesteps', r.timesteps)):,} steps"
+                      f"{'' if r.num_agvs == 4 else f' at K = {r.num_agvs}'}, "
                       f"{np.mean([s['wall_time_s'] for s in specs]):.0f} s")
             label = f"{r.label} (`zoo:{r.name}`, seed {ev.runs[chosen].record['seed']})"
             recipe_rows.append(_cells(ev, ev.runs[chosen].policy_name, env, label, budget,
@@ -180,11 +183,16 @@ def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True
     The page has sections (:data:`training.recipes.SECTIONS`): the ``main`` tables and the fleet
     networks' block. ``only`` (recipe names) rebuilds the sections those recipes are in and keeps
     the rest of the page, and of ``docs/learned/episodes.csv``, as it is; without it every section
-    with finished runs is rebuilt. Nothing is written before every section is evaluated."""
+    with finished runs is rebuilt. Everything is evaluated and rendered before the first file is
+    written (the page and the episodes are replaced whole, through a temporary file)."""
     names = list(only or [])
     for name in names:
         recipe(name)  # an unknown name is an error that names the recipes
     sections = [x for x in SECTIONS if not names or any(RECIPES[n].section == x for n in names)]
+    out_doc = Path(out_doc)
+    if names and "main" not in sections and "zoo-fleet" not in block_names(read_text(out_doc)):
+        raise ValueError(f"{out_doc}: no generated block 'zoo-fleet' to rebuild; build the whole page (lawn zoo "
+                         "build without --only)")
     built: dict[str, tuple[ZooEvaluation, ZooTables]] = {}
     for section in sections:
         recipes = {n: r for n, r in RECIPES.items() if r.section == section}
@@ -194,37 +202,32 @@ def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True
             built[section] = (ev, zoo_tables(ev))
     if not built:
         raise ValueError(f"{runs}: no finished recipe runs (lawn zoo train --runs {runs} trains them)")
-    out_doc = Path(out_doc)
-    _merge_rows(out_doc.parent / "learned" / "episodes.csv", built)
     rendered = {section: render_zoo(tables) for section, (_, tables) in built.items()}
+    page = read_text(out_doc)
     if "main" in built:
-        _write_page(built["main"][0], rendered["main"], out_doc, episodes, workers)
+        page = _main_page(built["main"][0], rendered["main"], out_doc, episodes, workers)
     if "fleet" in built:
-        replace_block(out_doc, "zoo-fleet", "\n\n".join(rendered["fleet"]),
-                      source="lawn zoo build" + (f" --only {' '.join(names)}" if names else ""))
+        page = replace_body(page, "zoo-fleet", "\n\n".join(rendered["fleet"]),
+                            source="lawn zoo build" + (f" --only {' '.join(names)}" if names else ""))
+    rows = merged_rows(read_csv(out_doc.parent / "learned" / "episodes.csv"), built)
+    write_csv(rows, out_doc.parent / "learned" / "episodes.csv", atomic=True)
+    write_atomic(out_doc, page)
     if export:
         for ev, tables in built.values():
             export_zoo(tables, ev, target)
     return "\n\n".join(table for table, _ in rendered.values())
 
 
-def _merge_rows(path: Path, built: Mapping[str, tuple[ZooEvaluation, ZooTables]]) -> None:
-    """The episodes of the rebuilt sections, with the recorded episodes of the other sections' runs."""
-    kept = [r for r in read_csv(path) if any(f"/{rec.name}/seed-" in r["policy"] for rec in RECIPES.values()
-                                             if rec.section not in built)]
-    new = [row for ev, _ in built.values() for row in ev.rows]
-    write_rows([{k: r.get(k, "") for k in new[0]} for r in kept] + new, path)
-
-
-def _write_page(ev: ZooEvaluation, rendered: tuple[str, str], out_doc: Path, episodes: int, workers: int) -> None:
-    """The page's main tables and learning curves; the generated blocks it holds keep their text."""
+def _main_page(ev: ZooEvaluation, rendered: tuple[str, str], out_doc: Path, episodes: int, workers: int) -> str:
+    """The page with the main tables (and its learning curves drawn); the generated blocks it holds
+    keep their text."""
     reference = {env: evaluate([("rg-mpc", env, ScenarioConfig(), VALIDATION_SEED_BASE + i, {}) for i in range(10)],
                                workers=workers, progress=False) for env in ev.envs}
-    out_doc.parent.mkdir(parents=True, exist_ok=True)
+    (out_doc.parent / "learned").mkdir(parents=True, exist_ok=True)
     plot_curves(ev.found, {env: float(np.mean([r["control_cost"] for r in rs])) for env, rs in reference.items()},
                 out_doc.parent / "learned" / "curves.png")
-    blocks = {name: block_body(out_doc, name) for name in _PAGE_BLOCKS}
-    out_doc.write_text(_document(*rendered, episodes, blocks))
+    blocks = {name: block_body(out_doc, name) for name in PAGE_BLOCKS}
+    return document(*rendered, episodes, blocks)
 
 
 def plot_curves(found: list[tuple[Recipe, list[Path]]], reference: dict[str, float], path: Path) -> None:
@@ -286,75 +289,6 @@ def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
         shutil.rmtree(target)
     export_agent(s.run_dir, target, record)
     return target
-
-
-#: The generated blocks of docs/LEARNED.md that other commands write: the fleet networks' tables
-#: (``lawn zoo build`` of the fleet section) and their table over fleet sizes (``lawn benchmark --suite``).
-_PAGE_BLOCKS = ("zoo-fleet", "fleet-generalization")
-
-
-def _document(table: str, per_run: str, episodes: int, blocks: Mapping[str, str]) -> str:
-    from .provenance import provenance
-
-    return f"""# Learned comparators
-
-Generated by `lawn zoo build` (`scripts/train_agents.sh` trains and builds) at {provenance()}. Every number is the
-realized control cost of full 120-slot episodes of the unmodified scenario (`lawn/Comm-v0` or
-`lawn/Joint-v0`, default config) on the test seeds 0-{episodes - 1}, whatever interface the agent
-was trained with (the learned protocol, `training/leaderboard.py`). Model selection (the best
-checkpoint of a run among its start and the checkpoints significantly better than the start, the
-shipped seed of a recipe) uses only the validation seeds 500000+i; training episodes use seeds
-1000000 + 1000 s + ....
-
-Each agent acts around the zero action of its interface ("acts around": `anchor:stake` or
-`anchor:distance`, `agents/anchors.py`), which is a row of its own on the same seeds; "vs own
-anchor" is the per-test-seed relative difference in control cost against it, averaged over the
-test seeds with a paired 95 % t-interval: what learning adds. "vs rg-mpc" is the same against the
-expert. The score is the normalized score v1 (`training/score.py`: 0 = `epa`, 100 = `rg-mpc`,
-95 % paired bootstrap interval). The last column averages "vs own anchor" per training run and
-gives a 95 % t-interval across the training seeds.
-
-{table}
-
-Every training run (the selected validation is the checkpoint with the lowest mean per-seed
-relative difference against `rg-mpc` on the validation seeds, paired on the same seeds; the
-shipped seed of a recipe is the run whose selected validation is lowest; the worst test seed is
-the largest per-seed relative difference against the run's own anchor):
-
-{per_run}
-
-Validation cost during training (every seed of every recipe; dashed: `rg-mpc` on the same
-validation seeds):
-
-![learning curves](learned/curves.png)
-""" + FLEET_SECTION.format(**{name.replace("-", "_"): blocks.get(name, "") for name in _PAGE_BLOCKS})
-
-
-#: The fleet networks' part of docs/LEARNED.md (its blocks filled by the commands that make them).
-FLEET_SECTION = """
-## One network for every fleet size
-
-`zoo:fleet-comm` and `zoo:fleet-joint` (`agents/fleet.py`) read the entity layout (a row per AGV,
-padded to 64 with a mask, and a row of globals: [spaces](envs/spaces.md#the-entity-layout)) and
-attend over the AGVs, so one network acts on any fleet. Each was trained once, by DAgger of
-`rg-mpc` on fleets of 3 to 32 AGVs (`training/hyperparams/fleet.yml`; `lawn zoo train --only
-fleet-comm fleet-joint`), in an action interface that decodes without an MPC (the distance prior,
-and on Joint the LQR's increments under a residual), so that deciding costs the network and a
-closed form. `zoo:ppo-marl-fleet-k16` and `zoo:ppo-marl-fleet-k64` are the multi-agent PPO
-recipe with the same network (each agent acts with its own row; `training/marl.py`), trained at
-K = 16 and K = 64 from the stake anchor. On the default task (K = 4), by the protocol above:
-
-<!-- zoo-fleet:begin -->
-{zoo_fleet}
-<!-- zoo-fleet:end -->
-
-### Fleet sizes 3 to 64, without retraining
-
-<!-- fleet-generalization:begin -->
-{fleet_generalization}
-<!-- fleet-generalization:end -->
-"""
-
 
 
 def format_zoo_list() -> str:

@@ -95,6 +95,8 @@ def _check_fixed_protocol(args: argparse.Namespace) -> None:
 def _suite(args: argparse.Namespace) -> int:
     from lawn_env.presets import SUITE
 
+    from ..generalization import fleet_agents
+    from ..readme import block_names, replace_block
     from ..suite import (plot_profiles, run_suite, skipped_summary, structure_table, suite_policies,
                                suite_table, task_tables, write_leaderboard)
     from ..protocol import TEST_EPISODES
@@ -104,6 +106,11 @@ def _suite(args: argparse.Namespace) -> int:
     episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
     tasks = args.tasks or list(SUITE)
     policies = list(args.policies or suite_policies()) + included(args.include)
+    learned = Path(args.docs or ".") / "LEARNED.md"
+    if args.docs and set(fleet_agents()) & set(policies) and \
+            "fleet-generalization" not in block_names(learned.read_text() if learned.exists() else ""):
+        raise ValueError(f"--docs {args.docs}: {learned} has no generated block 'fleet-generalization' for the "
+                         "fleet networks' table over fleet sizes")
     rows, skipped, seconds = run_suite(policies, tasks, episodes, out, workers=args.workers, progress=not args.quiet,
                                        transient_slots=args.transient_slots)
     board, refs = suite_table(rows, policies, tasks, skipped)
@@ -121,35 +128,34 @@ def _suite(args: argparse.Namespace) -> int:
           "structure.md (cost structure, noise floor, headroom), tasks.md (every row per task) and per_slot.png")
     fleet = _fleet_sizes(args, policies, out)
     if args.docs:
-        if fleet:
-            from ..readme import replace_block
-
-            replace_block(Path(args.docs) / "LEARNED.md", "fleet-generalization", fleet,
-                          source="lawn benchmark --suite --docs docs")
         figure = plot_profiles(read_csv(out / "per_slot.csv"), Path(args.docs) / "figures" / "suite-per-slot.png", tasks,
                                args.transient_slots)
         doc = write_leaderboard(Path(args.docs) / "LEADERBOARD.md", board, refs, skipped, episodes, seconds,
                                 args.workers, tasks, structure=structure, details=details, figure=figure,
                                 transient_slots=args.transient_slots)
         print(f"wrote {doc} and {figure}")
+        if fleet:
+            replace_block(learned, "fleet-generalization", fleet, source="lawn benchmark --suite --docs docs")
+            print(f"wrote {learned} (the fleet networks on K = 3 ... 64)")
     return 0
 
 
 def _fleet_sizes(args: argparse.Namespace, policies: list[str], out: Path) -> str:
     """The fleet networks among ``policies`` on every fleet size of the generalization table
-    (:mod:`training.generalization`); writes ``fleet_sizes.csv`` and ``.md``, returns the block
-    (empty without fleet networks)."""
+    (:mod:`training.generalization`; ``--episodes`` caps its seeds per size); writes
+    ``fleet_sizes.csv`` and ``.md``, returns the block (empty without fleet networks)."""
     import time
 
     from ..evaluate import write_rows
-    from ..generalization import fleet_agents, generalization_block, run_generalization
+    from ..generalization import FLEET_SIZES, fleet_agents, generalization_block, run_generalization
 
     agents = [p for p in fleet_agents() if p in policies]
     if not agents:
         return ""
     start = time.perf_counter()
-    rows = run_generalization(agents, workers=args.workers, progress=not args.quiet)
-    block = generalization_block(rows, agents, (time.perf_counter() - start) / 60, args.workers)
+    sizes = {k: min(n, args.episodes) if args.episodes else n for k, n in FLEET_SIZES.items()}
+    rows = run_generalization(agents, sizes, workers=args.workers, progress=not args.quiet)
+    block = generalization_block(rows, agents, (time.perf_counter() - start) / 60, args.workers, sizes)
     write_rows(rows, out / "fleet_sizes.csv")
     (out / "fleet_sizes.md").write_text(block + "\n")
     print(block)
