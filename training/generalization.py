@@ -23,7 +23,7 @@ from lawn_env import ScenarioConfig, presets
 from .leaderboard import costs_of, geometric, mean_cell, policy_env, run_entries
 from .limits import NOISE
 from .score import SCORE_HIGH
-from .tables import fmt_geometric, fmt_num, fmt_paired, paired_difference
+from .tables import fmt_geometric, fmt_paired, paired_difference
 
 __all__ = ["FLEET_SIZES", "TARGETS", "fleet_agents", "run_generalization", "generalization_table",
            "generalization_block"]
@@ -61,6 +61,13 @@ def _decision_ms(rows: Sequence[Mapping], policy: str, env: str, task: str) -> f
     return 1e3 * float(np.median(list(costs_of(rows, policy, env, task, "decision_time_median_s").values())))
 
 
+def _trained_for_every_size(agents: Sequence[str]) -> set[str]:
+    """The agents the targets are for: the fleet networks trained on mixed fleets (``lawn train
+    --algo fleet``), not the multi-agent ones trained at one size."""
+    records = zoo_agents()
+    return {a for a in agents if records.get(a.partition(":")[2], {}).get("trainer") == "fleet"}
+
+
 def _target_cell(k: int, change: float) -> str:
     target = TARGETS.get(k)
     if target is None:
@@ -75,6 +82,7 @@ def generalization_table(rows: Sequence[Mapping], agents: Sequence[str], sizes: 
              f"seeds won) | vs {SCORE_HIGH} (paired mean) | target | decision time (ms) | {SCORE_HIGH} decision "
              f"time (ms) | {SCORE_HIGH} / policy time |", "|" + "---|" * 12]
     envs = list(dict.fromkeys(policy_env(a) for a in agents))
+    targeted = _trained_for_every_size(agents)
     for env in envs:
         for policy in [_NOISE, *(a for a in agents if policy_env(a) == env)]:
             for k in sizes:
@@ -85,10 +93,10 @@ def generalization_table(rows: Sequence[Mapping], agents: Sequence[str], sizes: 
                 g = geometric(rows, policy, SCORE_HIGH, env, task)
                 mean, half, _ = paired_difference(mine, ref)
                 ms, ref_ms = _decision_ms(rows, policy, env, task), _decision_ms(rows, SCORE_HIGH, env, task)
-                target = "–" if policy == _NOISE else _target_cell(k, g.change)
+                target = _target_cell(k, g.change) if policy in targeted else "–"
                 lines.append(f"| {policy} | {env} | {k} | {len(mine)} | {mean_cell(rows, policy, env, task, 'control_cost')} "
                              f"| {mean_cell(rows, SCORE_HIGH, env, task, 'control_cost')} | {fmt_geometric(g)} "
-                             f"| {fmt_paired(mean, half)} | {target} | {fmt_num(ms)} | {fmt_num(ref_ms)} "
+                             f"| {fmt_paired(mean, half)} | {target} | {ms:.3g} | {ref_ms:.3g} "
                              f"| {ref_ms / ms:.1f}× |")
     return "\n".join(lines)
 
@@ -102,6 +110,6 @@ def generalization_block(rows: Sequence[Mapping], agents: Sequence[str], minutes
             f"`{_NOISE}` is `{SCORE_HIGH}` with a harmless setting changed (the noise floor: a difference "
             f"within its own is not one). The geometric mean of the per-seed cost ratios decides (95 % "
             f"bootstrap interval, share of seeds won); the paired mean of relative differences is beside it. "
-            f"The target is the geometric change's; decision times are the median over episodes of each "
+            f"The target (for the networks trained on mixed fleets) is the geometric change's; decision times are the median over episodes of each "
             f"episode's median time per decision, measured in the same run ({workers} worker processes, "
             f"{minutes:.1f} min).\n\n" + generalization_table(rows, agents, sizes))
