@@ -287,7 +287,7 @@ def export_agent(run_dir: Path, out_dir: Path, record: dict[str, Any]) -> Path:
     normalizer = ObsNormalizer.load(_selected(run_dir)[1])
     if normalizer is not None:
         normalizer.save(out_dir / "normalizer.npz")
-    agent = {"algo": algo, "trainer": run.record.get("trainer", algo), "env": run.env, "interface": run.interface,
+    agent = {"algo": algo, "trainer": run.record.get("trainer", run.algo), "env": run.env, "interface": run.interface,
              "config": read_json(run_dir / "config.json"), **record}
     (out_dir / "agent.json").write_text(json.dumps(agent, indent=2) + "\n")
     return out_dir

@@ -332,7 +332,8 @@ def test_a_multi_agent_fleet_run_ships_to_the_zoo_and_a_flat_policy_is_refused(t
     monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
     learned.export_agent(tmp_path / "run", tmp_path / "zoo" / "marl-fleet", {"label": "tiny", "name": "marl-fleet",
                                                                               "evaluated_on": "lawn/Joint-v0"})
-    assert json.loads((tmp_path / "zoo" / "marl-fleet" / "agent.json").read_text())["algo"] == "fleet"
+    record = json.loads((tmp_path / "zoo" / "marl-fleet" / "agent.json").read_text())
+    assert record["algo"] == "fleet" and record["trainer"] == "ppo"  # a fleet network, trained by PPO
     wide = config.override(num_agvs=5)
     policy = make_policy("zoo:marl-fleet", wide, env_id="lawn/Joint-v0")
     obs, _ = gym.make("lawn/Joint-v0", config=wide).reset(seed=0)
