@@ -17,8 +17,9 @@
 #   block anchors (docs/rl.md; with learned)            benchmarks/anchors.py --markdown
 #   docs/LEARNED.md                                     lawn zoo build (needs the training runs in
 #                                                       runs/agents: with --train, scripts/train_agents.sh
-#                                                       trains them first: 69 min on 2 cores at the last
-#                                                       retrain, `time bash scripts/train_agents.sh`)
+#                                                       trains them first: about 100 min on 2 cores,
+#                                                       `time bash scripts/train_agents.sh`; with the fleet
+#                                                       runs only, their block zoo-fleet alone)
 #   block zoo-drift (docs/training.md)                  benchmarks/zoo_drift.py (the table's shipped agents
 #                                                       and experts re-evaluated at the current code)
 #   docs/LEADERBOARD.md                                 lawn benchmark --suite (--only suite; about 17
