@@ -342,3 +342,27 @@ def test_a_multi_agent_fleet_run_ships_to_the_zoo_and_a_flat_policy_is_refused(t
         train("ppo", "lawn/Parallel-v0", config, 32, 0, tmp_path / "flat", progress=False,
               hp_overrides={**hp, "policy": "MultiInputPolicy"})
     assert not (tmp_path / "flat").exists()
+
+
+def test_the_suite_writes_the_table_over_fleet_sizes_for_the_shipped_fleet_networks(tmp_path):
+    """``lawn benchmark --suite`` with a fleet network among the policies: every fleet size of the
+    table (``--episodes`` caps its seeds), written beside the suite's files; with ``--docs`` a page
+    without the block is refused before anything runs."""
+    import argparse
+
+    from training.cli import main
+    from training.cli.benchmark import _fleet_sizes
+    from training.generalization import FLEET_SIZES
+    from training.tables import read_csv
+
+    args = argparse.Namespace(episodes=1, workers=1, quiet=True)
+    block = _fleet_sizes(args, ["rg-mpc", "zoo:fleet-comm"], tmp_path)
+    rows = read_csv(tmp_path / "fleet_sizes.csv")
+    assert {r["task"] for r in rows if r["policy"] == "zoo:fleet-comm"} == {f"k{k}" for k in FLEET_SIZES}
+    assert all(r["seed"] == "0" for r in rows)
+    assert block.count("| zoo:fleet-comm |") == len(FLEET_SIZES) and (tmp_path / "fleet_sizes.md").exists()
+    assert _fleet_sizes(args, ["rg-mpc"], tmp_path) == ""
+    (tmp_path / "docs").mkdir()
+    assert main(["benchmark", "--suite", "--docs", str(tmp_path / "docs"), "--policies", "zoo:fleet-comm",
+                 "--episodes", "1", "--out", str(tmp_path / "suite"), "--quiet"]) == 2
+    assert not any((tmp_path / "suite").iterdir())  # the checked, empty --out folder: nothing was run
