@@ -286,7 +286,7 @@ def test_shipped_agents_load_and_act(name):
     record = zoo_agents()[name]
     policy = make_policy(f"zoo:{name}")
     assert policy.env_id == record["evaluated_on"]
-    env = gym.make(policy.env_id)
+    env = gym.make(policy.env_id, config=policy.config)  # its training scenario (a multi-agent fleet run: K = 16, 64)
     obs, _ = env.reset(seed=0)
     policy.reset(0)
     for _ in range(5):
