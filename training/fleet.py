@@ -164,22 +164,24 @@ def train_fleet_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: i
                 policy_kwargs={**st["network"], "log_std_init": -1.0})
     configs = [config.override(num_agvs=k) for k in st["fleet_sizes"]]
     history = _dagger(model, env_id, configs, st, timesteps, TRAIN_SEED_BASE + 1000 * seed)
-    out_dir = Path(out_dir)  # written once the network is trained: a failed run leaves nothing
+    wall = time.perf_counter() - start
+    out_dir = Path(out_dir)  # written once the network is trained and validated: a failed run leaves nothing
+    validation = ControlCostValidation(env_id, config, st["interface"], episodes=eval_episodes, every=1,
+                                       out_dir=out_dir, seed_base=VALIDATION_SEED_BASE)
+    validation.model = model
+    row = validation.validate()
+    env.close()
     out_dir.mkdir(parents=True, exist_ok=True)
     model.save(str(out_dir / "model.zip"))
     spec = {"algo": "fleet", "target": "fleet", "trainer": "fleet", "env": env_id, "seed": seed, "timesteps": timesteps,
             "interface": st["interface"], "fleet_sizes": st["fleet_sizes"],
             "num_timesteps": int(history[-1]["samples"]), "hyperparams_version": version,
-            "wall_time_s": time.perf_counter() - start, "eval_episodes": eval_episodes, "versions": versions()}
+            "wall_time_s": wall, "eval_episodes": eval_episodes, "versions": versions()}
     for name, data in (("config.json", config.to_dict()), ("hyperparams.json", st), ("run.json", spec),
                        ("bc_losses.json", history)):
         (out_dir / name).write_text(json.dumps(data, indent=2))
-    validation = ControlCostValidation(env_id, config, st["interface"], episodes=eval_episodes, every=1,
-                                       out_dir=out_dir, seed_base=VALIDATION_SEED_BASE)
-    validation.model = model
     (out_dir / "learning_curve.csv").unlink(missing_ok=True)
-    append_learning_curve(out_dir, history[-1]["samples"], validation.validate())
+    append_learning_curve(out_dir, history[-1]["samples"], row)
     summary = write_learning_curve(out_dir, spec)
     summary.update(bc_loss_first=history[0]["losses"][0], bc_loss_last=history[-1]["losses"][-1])
-    env.close()
     return summary
