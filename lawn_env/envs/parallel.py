@@ -127,6 +127,8 @@ class LawnParallelEnv(EngineView, ParallelEnv):
                                  "me": gym.spaces.Box(0.0, 1.0, shape=(MAX_AGVS + 1,), dtype=np.float32)})
         self._observation_spaces = {a: space for a in self.possible_agents}
         self._me = {a: np.eye(MAX_AGVS + 1, dtype=np.float32)[j] for j, a in enumerate(self.possible_agents)}
+        for me in self._me.values():
+            me.flags.writeable = False
         self._action_spaces = {
             "drone": gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32),
             **{a: gym.spaces.Box(-1.0, 1.0, shape=(entities.per_agv,), dtype=np.float32) for a in self._agv_index},
@@ -231,10 +233,11 @@ class LawnParallelEnv(EngineView, ParallelEnv):
         return joint
 
     def _observations(self) -> dict:
-        if self.entities is not None:
+        if self.entities is not None:  # fresh arrays every step, shared read-only by the agents (not copied K + 1 times)
             shared = {key: value[0] for key, value in self.engine.observe().items()}
-            return {a: {**{key: value.copy() for key, value in shared.items()}, "me": self._me[a].copy()}
-                    for a in self.possible_agents}
+            for value in shared.values():
+                value.flags.writeable = False
+            return {a: {**shared, "me": self._me[a]} for a in self.possible_agents}
         central = self.engine.observe_flat()[0]
         blocks = self.layout.agv_blocks(central)
         glob = central[-self.layout.global_features :]
