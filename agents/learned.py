@@ -148,14 +148,13 @@ class SB3Policy(InterfacePolicy):
         self.normalizer = normalizer
         self.name = label
         self.entities = None
-        self._predict = lambda x: network.predict(x, deterministic=True)[0]
+        self._predict = _predictor(network)
         if self.interface.layout == "entities":
             self.entities = EntityLayout(self.config, "joint" if env_id == JOINT else "comm", self.interface.obs_bound)
             seen = getattr(network.observation_space, "spaces", {})
             if {k: v for k, v in seen.items() if k != "me"} != self.entities.observation_space.spaces:
                 raise ValueError(f"{label} expects observations {network.observation_space}; this scenario gives "
                                  f"{self.entities.observation_space}: evaluate it with its training horizon")
-            self._predict = _entity_predictor(network)
         elif tuple(network.observation_space.shape) != (self.layout.size,):
             raise ValueError(f"{label} expects observations of shape {tuple(network.observation_space.shape)}; this "
                              f"scenario gives ({self.layout.size},): evaluate it with its training config")
@@ -186,8 +185,8 @@ class SB3Policy(InterfacePolicy):
         return self.to_v0(action, raw)
 
 
-def _entity_predictor(network: Any) -> Any:
-    """The deterministic action of an entity-layout network for one observation: a fleet network
+def _predictor(network: Any) -> Any:
+    """The deterministic action of a network for one observation: a fleet network
     (:class:`agents.fleet.FleetPolicy`) through its compiled copy (:class:`agents.fleet.FleetInference`,
     the same actions to float32 rounding, several times faster on one observation), any other
     through SB3's ``predict``."""

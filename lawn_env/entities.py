@@ -66,6 +66,7 @@ class EntityLayout:
         else:  # flat: powers (K), drone (2)
             self.gather = np.concatenate([rows, drone])
         self.fleet_frac = np.float32(k / MAX_AGVS)
+        self._mask = (np.arange(MAX_AGVS) < k).astype(np.float32)[None]
 
     def observe(self, flat: np.ndarray) -> dict[str, np.ndarray]:
         """The entity observations of flat ones (B, size) float32: ``agvs`` (B, MAX_AGVS, F),
@@ -76,9 +77,7 @@ class EntityLayout:
         glob = np.empty((num, len(GLOBALS)), dtype=np.float32)
         glob[:, :-1] = flat[:, k * f :]
         glob[:, -1] = self.fleet_frac
-        mask = np.zeros((num, MAX_AGVS), dtype=np.float32)
-        mask[:, :k] = 1.0
-        return {"agvs": agvs, "globals": glob, "mask": mask}
+        return {"agvs": agvs, "globals": glob, "mask": np.repeat(self._mask, num, axis=0)}
 
     def to_flat_actions(self, actions: np.ndarray) -> np.ndarray:
         """The flat actions (..., flat size) of checked entity actions (..., MAX_AGVS c + 2): the

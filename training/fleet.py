@@ -177,11 +177,11 @@ def train_fleet_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: i
             "interface": st["interface"], "fleet_sizes": st["fleet_sizes"],
             "num_timesteps": int(history[-1]["samples"]), "hyperparams_version": version,
             "wall_time_s": wall, "eval_episodes": eval_episodes, "versions": versions()}
-    for name, data in (("config.json", config.to_dict()), ("hyperparams.json", st), ("run.json", spec),
-                       ("bc_losses.json", history)):
+    for name, data in (("config.json", config.to_dict()), ("hyperparams.json", st), ("bc_losses.json", history)):
         (out_dir / name).write_text(json.dumps(data, indent=2))
     (out_dir / "learning_curve.csv").unlink(missing_ok=True)
     append_learning_curve(out_dir, history[-1]["samples"], row)
     summary = write_learning_curve(out_dir, spec)
+    (out_dir / "run.json").write_text(json.dumps(spec, indent=2))  # last: a run with run.json is a finished one
     summary.update(bc_loss_first=history[0]["losses"][0], bc_loss_last=history[-1]["losses"][-1])
     return summary

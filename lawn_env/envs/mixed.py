@@ -39,11 +39,8 @@ class MixedFleetEnv(gym.Env):
         base = resolve_config(config, **overrides)
         self.fleet_sizes = tuple(sizes)
         self.envs = {k: gym.make(env_id, config=base.override(num_agvs=k), interface=iface).unwrapped for k in sizes}
-        first = self.envs[sizes[0]]
+        first = self.envs[sizes[0]]  # the entity layout's spaces do not depend on K
         self.observation_space, self.action_space = first.observation_space, first.action_space
-        for k, env in self.envs.items():
-            if env.observation_space != self.observation_space or env.action_space != self.action_space:
-                raise ValueError(f"num_agvs={k} gives other spaces than num_agvs={sizes[0]}")
         self.env = first
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict[str, Any]]:
