@@ -1,5 +1,5 @@
 """lawn outside its source tree: the provenance stamp of an installed wheel, numba's cache of a
-read-only install, the process pool's workers."""
+read-only install (the process pool: tests/test_pool.py)."""
 
 import importlib.util
 import os
@@ -69,25 +69,3 @@ def test_a_wheel_in_a_foreign_repository_reports_lawns_commit_and_caches_outside
     assert out[0].startswith(str(site))  # the installed copy, not this checkout
     assert out[1].split("commit ")[1].split()[0] == _git(ROOT, "rev-parse", "--short=10", "HEAD")
     assert any((tmp_path / "cache").rglob("*.nbi")) and not any(site.rglob("*.nbi"))
-
-
-def test_pool_workers_run_single_threaded_and_stay():
-    from training import pool
-
-    pool.shutdown_shared_pool()
-    first = pool.pool_map(_threads, list(range(4)), workers=2, progress=False, desc="")
-    kept = pool.shared_pool(2)
-    second = pool.pool_map(_threads, list(range(4)), workers=2, progress=False, desc="")
-    assert pool.shared_pool(2) is kept and not getattr(kept, "_shutdown_thread", False)
-    pids = {pid for pid, _ in first + second}  # workers start on demand, then stay: never more than two
-    assert len(pids) <= 2 and os.getpid() not in pids
-    assert all(threads == {1} for _, threads in first + second)
-    pool.shutdown_shared_pool()
-
-
-def _threads(_):
-    from threadpoolctl import threadpool_info
-
-    import numba
-
-    return os.getpid(), {info["num_threads"] for info in threadpool_info()} | {numba.get_num_threads()}

@@ -1,19 +1,30 @@
-"""The process pool of every parallel command: workers that start once and stay.
+"""The process pool of every parallel command: the calling process works, helpers that start once
+and stay.
 
 Each ``lawn`` command that plays episodes in parallel (``evaluate``, ``benchmark``, the suite,
-``gap``, ``figures``, ``zoo``) maps independent tasks over ``spawn`` workers (fresh interpreters,
-safe with torch and OpenMP thread pools). Starting one costs an interpreter, the imports and the
-loading of numba's cache, about a second; the suite alone maps six batches. So
-:func:`pool_map` keeps one pool per process (:func:`shared_pool`) and reuses it for every batch
-with the same worker count; it is shut down when the process exits.
+``gap``, ``figures``, ``zoo``) maps independent tasks over ``workers`` processes: this one and
+``workers - 1`` helpers (:func:`pool_map`). The helpers are ``spawn`` workers by default (fresh
+interpreters, safe with torch and OpenMP thread pools; ``LAWN_START_METHOD`` or ``start_method=``
+picks ``fork`` or ``forkserver`` where the platform has them). Starting one costs an interpreter,
+the imports and the loading of numba's kernel cache (about two seconds; from an empty cache, the
+compilation): this process starts on the tasks at once and each helper joins when it is ready, so a
+short command pays nothing for a helper that is still starting, and the pool stays for the next
+batch (:func:`shared_pool`; the suite maps six), shut down when the process exits. A command can
+start its helpers before its own imports and set-up (:func:`start_helpers`).
 
-Inside a worker every numerical library runs on one thread (:func:`single_threaded`): the
-episodes are the parallelism. An OpenBLAS or OpenMP pool per worker would start as many threads as
-the machine has cores, and N workers would share the cores with N times that many threads.
+Every process of a map runs each numerical library on one thread (:func:`single_threaded`): the
+episodes are the parallelism. An OpenBLAS or OpenMP pool per process would start as many threads as
+the machine has cores, and N processes would share the cores with N times that many threads; and a
+task gives the same numbers in whichever process plays it.
 
-Tasks go to the workers in chunks (``chunksize``): one message per chunk instead of per episode,
-so the parent's share of the work does not grow with the number of workers
-(``benchmarks/parallel_scaling.py`` measures it).
+numba's own thread pool is never launched: lawn's kernels are serial, and numba refuses to change
+``NUMBA_NUM_THREADS`` once its threads run, which it checks at every compilation (a cold kernel
+cache compiles in the workers). :func:`single_threaded` sets the variable and reloads numba's
+configuration before any thread exists.
+
+Tasks go to the helpers in chunks (``chunksize``): one message per chunk instead of per episode,
+so the parent's share of the work does not grow with the number of workers; this process takes
+one task at a time between them (``benchmarks/parallel_scaling.py`` measures both).
 """
 
 from __future__ import annotations
@@ -21,28 +32,50 @@ from __future__ import annotations
 import atexit
 import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
+from collections import deque
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable
 
-from tqdm.auto import tqdm
+__all__ = ["worker_pool", "shared_pool", "start_helpers", "shutdown_shared_pool", "pool_map", "single_threaded",
+           "chunk_size", "resolve_start_method"]
 
-__all__ = ["worker_pool", "shared_pool", "shutdown_shared_pool", "pool_map", "single_threaded", "chunk_size"]
+_SHARED: dict[str, Any] = {"pool": None, "helpers": 0, "pid": 0, "method": None}
 
-_SHARED: dict[str, Any] = {"pool": None, "workers": 0, "pid": 0}
+#: The environment variable that picks the helpers' start method (default ``spawn``).
+START_METHOD_VARIABLE = "LAWN_START_METHOD"
+
+
+def resolve_start_method(method: str | None = None) -> str:
+    """The helpers' start method: ``method``, else ``$LAWN_START_METHOD``, else ``spawn``; one of
+    the platform's (:func:`multiprocessing.get_all_start_methods`)."""
+    method = method or os.environ.get(START_METHOD_VARIABLE) or "spawn"
+    allowed = multiprocessing.get_all_start_methods()
+    if method not in allowed:
+        source = "start_method" if method != os.environ.get(START_METHOD_VARIABLE) else f"${START_METHOD_VARIABLE}"
+        raise ValueError(f"{source}={method!r}: not a start method of this platform; valid: {', '.join(allowed)}")
+    return method
 
 
 def single_threaded() -> None:
-    """Limit BLAS, OpenMP and numba to one thread in this process (threadpoolctl for the native
-    pools that are already loaded; the environment variables for those loaded later)."""
-    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    """Limit BLAS, OpenMP and numba to one thread in this process: threadpoolctl for the native
+    pools already loaded, the environment variables for those loaded later, and numba's configuration
+    reloaded while its thread pool is not running (so that a later compilation, which reloads it
+    again, finds nothing changed)."""
+    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[name] = "1"
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)
     import numba
+    from numba.core import config
+    from numba.np.ufunc import parallel
 
-    numba.set_num_threads(1)
+    if getattr(parallel, "_is_initialized", False):  # already launched (a fork of a process that ran a
+        numba.set_num_threads(1)                      # parallel kernel): its size is fixed, use one
+    else:
+        os.environ["NUMBA_NUM_THREADS"] = "1"
+        config.reload_config()
 
 
 def _die_with_parent(parent_pid: int) -> None:
@@ -52,10 +85,13 @@ def _die_with_parent(parent_pid: int) -> None:
     import signal
     import sys
 
-    if sys.platform.startswith("linux"):
-        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
-    if os.getppid() != parent_pid:  # the parent died before the line above took effect
-        os._exit(1)
+    if sys.platform.startswith("linux"):  # the process that forked this one: the parent, or under
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # forkserver the server,
+    if os.getppid() != parent_pid:  # which exits with the parent. Did the parent die before that took effect?
+        try:
+            os.kill(parent_pid, 0)
+        except ProcessLookupError:
+            os._exit(1)
 
 
 def _init_worker(parent_pid: int) -> None:
@@ -66,33 +102,52 @@ def _init_worker(parent_pid: int) -> None:
     import agents  # noqa: F401  (lawn_env and its compiled kernels with it)
 
 
-def worker_pool(workers: int) -> ProcessPoolExecutor:
-    """A new pool of ``workers`` ``spawn`` workers (children of this process that die with it, one
-    thread per library); the caller shuts it down (``with worker_pool(n) as pool``)."""
-    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_init_worker, initargs=(os.getpid(),))
+def worker_pool(workers: int, start_method: str | None = None) -> ProcessPoolExecutor:
+    """A new pool of ``workers`` worker processes (children of this process that die with it, one
+    thread per library; :func:`resolve_start_method`); the caller shuts it down (``with worker_pool(n) as pool``)."""
+    context = multiprocessing.get_context(resolve_start_method(start_method))
+    return ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker,
+                               initargs=(os.getpid(),))
 
 
-def shared_pool(workers: int) -> ProcessPoolExecutor:
-    """This process's persistent pool of ``workers`` workers: made on first use, reused by every
-    later call with the same count, replaced when the count changes or the pool broke."""
+def _ready() -> int:
+    return os.getpid()
+
+
+def shared_pool(helpers: int, start_method: str | None = None) -> ProcessPoolExecutor:
+    """This process's persistent pool of ``helpers`` helper processes: made on first use, reused by
+    every later call with the same count and start method, replaced when either changes or the pool
+    broke."""
+    method = resolve_start_method(start_method)
     pool = _SHARED["pool"]
     if pool is not None and _SHARED["pid"] != os.getpid():  # a forked child: the parent's pool is not its own
-        _SHARED.update(pool=None, workers=0, pid=0)
+        _SHARED.update(pool=None, helpers=0, pid=0, method=None)
         pool = None
-    if pool is not None and (_SHARED["workers"] != workers or getattr(pool, "_broken", False)):
+    if pool is not None and (_SHARED["helpers"] != helpers or _SHARED["method"] != method
+                             or getattr(pool, "_broken", False)):
         shutdown_shared_pool()
         pool = None
     if pool is None:
-        pool = worker_pool(workers)
-        _SHARED.update(pool=pool, workers=workers, pid=os.getpid())
+        pool = worker_pool(helpers, method)
+        _SHARED.update(pool=pool, helpers=helpers, pid=os.getpid(), method=method)
     return pool
+
+
+def start_helpers(workers: int, start_method: str | None = None) -> None:
+    """Start the ``workers - 1`` helpers of a later :func:`pool_map` now, in the background (each
+    imports lawn and loads its kernels while this process goes on): a command calls it before its own
+    set-up. Nothing for ``workers <= 1`` or inside a worker."""
+    if workers <= 1 or multiprocessing.parent_process() is not None:
+        return
+    pool = shared_pool(workers - 1, start_method)
+    for _ in range(workers - 1):
+        pool.submit(_ready)  # spawn workers start on demand: one small task each
 
 
 def shutdown_shared_pool() -> None:
     """Stop the persistent pool's workers (at exit, or to start afresh)."""
     pool, owner = _SHARED["pool"], _SHARED["pid"]
-    _SHARED.update(pool=None, workers=0, pid=0)
+    _SHARED.update(pool=None, helpers=0, pid=0, method=None)
     if pool is not None and owner == os.getpid():
         pool.shutdown(wait=True, cancel_futures=True)
 
@@ -101,8 +156,8 @@ atexit.register(shutdown_shared_pool)
 
 
 def chunk_size(tasks: int, workers: int) -> int:
-    """Tasks per message: about eight chunks per worker (short tails, balanced loads), at most 4 (an
-    interrupted command waits for the chunks in flight)."""
+    """Tasks per helper message: about eight chunks per worker (short tails, balanced loads), at most
+    4 (an interrupted command waits for the chunks in flight)."""
     return max(1, min(4, tasks // (8 * workers)))
 
 
@@ -110,10 +165,16 @@ def _run_chunk(fn: Callable[[Any], Any], chunk: list) -> list:
     return [fn(task) for task in chunk]
 
 
-def pool_map(fn: Callable[[Any], Any], tasks: list, workers: int, progress: bool, desc: str) -> list:
-    """``[fn(t) for t in tasks]`` in this process's persistent pool (:func:`shared_pool`) when
-    ``workers > 1``, in chunks, with a progress bar; results in task order whatever the scheduling.
-    ``fn`` must be picklable (a module-level function or a ``functools.partial`` of one)."""
+def pool_map(fn: Callable[[Any], Any], tasks: list, workers: int, progress: bool, desc: str,
+             start_method: str | None = None) -> list:
+    """``[fn(t) for t in tasks]`` over ``workers`` processes: this one and ``workers - 1`` helpers of
+    this process's persistent pool (:func:`shared_pool`), with a progress bar; results in task order
+    whatever the scheduling. This process plays one task at a time while each helper holds at most
+    two chunks, so it starts at once and no helper waits for it. ``fn`` must be picklable (a
+    module-level function or a ``functools.partial`` of one). Serial for ``workers <= 1``, one task,
+    or inside a worker."""
+    from tqdm.auto import tqdm
+
     bar = tqdm(total=len(tasks), desc=desc, unit="ep", disable=None if progress else True, leave=False)
     try:
         if workers <= 1 or len(tasks) <= 1 or multiprocessing.parent_process() is not None:  # in a worker: serially
@@ -122,22 +183,59 @@ def pool_map(fn: Callable[[Any], Any], tasks: list, workers: int, progress: bool
                 out.append(fn(task))
                 bar.update()
             return out
-        size = chunk_size(len(tasks), workers)
-        chunks = [tasks[i:i + size] for i in range(0, len(tasks), size)]
-        pool = shared_pool(workers)
-        try:
-            futures = [pool.submit(_run_chunk, fn, chunk) for chunk in chunks]
-        except BrokenProcessPool:  # a worker died since the last batch: start afresh once
-            shutdown_shared_pool()
-            pool = shared_pool(workers)
-            futures = [pool.submit(_run_chunk, fn, chunk) for chunk in chunks]
-        for fut, chunk in zip(futures, chunks):
-            fut.add_done_callback(lambda _, n=len(chunk): bar.update(n))
-        try:
-            return [row for fut in futures for row in fut.result()]
-        except BaseException:
-            for fut in futures:
-                fut.cancel()
-            raise
+        return _map_with_helpers(fn, tasks, workers, bar, start_method)
     finally:
         bar.close()
+
+
+def _map_with_helpers(fn: Callable[[Any], Any], tasks: list, workers: int, bar, start_method: str | None) -> list:
+    from threadpoolctl import threadpool_limits
+
+    helpers = workers - 1
+    size = chunk_size(len(tasks), workers)
+    pending = deque(range(len(tasks)))  # task indices not yet handed out, in order
+    results: list[Any] = [None] * len(tasks)
+    in_flight: dict[Future, list[int]] = {}
+    pool = shared_pool(helpers, start_method)
+    restarted = False
+
+    def hand_out() -> None:
+        nonlocal pool, restarted
+        while pending and len(in_flight) < 2 * helpers:
+            chunk = [pending.popleft() for _ in range(min(size, len(pending)))]
+            try:
+                future = pool.submit(_run_chunk, fn, [tasks[i] for i in chunk])
+            except BrokenProcessPool:  # a helper died since the last batch: start afresh once
+                if restarted:
+                    raise
+                restarted = True
+                shutdown_shared_pool()
+                pool = shared_pool(helpers, start_method)
+                future = pool.submit(_run_chunk, fn, [tasks[i] for i in chunk])
+            in_flight[future] = chunk
+
+    def collect(futures) -> None:
+        for future in futures:
+            chunk = in_flight.pop(future)
+            for i, row in zip(chunk, future.result()):
+                results[i] = row
+            bar.update(len(chunk))
+
+    try:
+        with threadpool_limits(1):  # this process's tasks on one thread, as the helpers'
+            hand_out()
+            while pending:
+                i = pending.pop()  # this process plays from the end: the helpers' chunks stay in order
+                results[i] = fn(tasks[i])
+                bar.update()
+                collect([f for f in list(in_flight) if f.done()])
+                hand_out()
+        while in_flight:
+            done, _ = wait(list(in_flight), return_when=FIRST_COMPLETED)
+            collect(done)
+            hand_out()
+        return results
+    except BaseException:
+        for future in in_flight:
+            future.cancel()
+        raise

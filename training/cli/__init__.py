@@ -19,29 +19,38 @@ convergence at chosen slots.
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 from pathlib import Path
 
-import lawn_env
-from agents.errors import MissingExtra
+__all__ = ["main", "build_parser", "COMMANDS", "COMMAND_NAMES"]
 
-from . import benchmark, dataset, demo, evaluate, figures, gap, render, sweep, train, zoo
-from .common import Parents
+#: The subcommands in the order ``lawn --help`` lists them; ``COMMANDS`` are their modules.
+COMMAND_NAMES = ("demo", "render", "evaluate", "benchmark", "train", "zoo", "dataset", "sweep", "figures", "gap")
 
-__all__ = ["main", "build_parser", "COMMANDS"]
+#: The commands that play episodes over ``--workers`` processes: their helpers start before anything
+#: else (:func:`_start_helpers_early`).
+_PARALLEL = ("evaluate", "benchmark", "gap", "figures")
 
-#: The subcommands in the order ``lawn --help`` lists them.
-COMMANDS = (demo, render, evaluate, benchmark, train, zoo, dataset, sweep, figures, gap)
+
+def __getattr__(name: str):
+    if name == "COMMANDS":  # imported on first use: the module itself stays light (see main)
+        return tuple(importlib.import_module(f"{__name__}.{command}") for command in COMMAND_NAMES)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def build_parser() -> argparse.ArgumentParser:
+    import lawn_env
+
+    from .common import Parents
+
     parser = argparse.ArgumentParser(prog="lawn", description="Wireless predictive control over low-altitude networks.")
     parser.add_argument("--version", action="version", version=f"lawn {lawn_env.__version__}")
     parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
     sub = parser.add_subparsers(dest="command", required=True)
     parents = Parents()
-    for command in COMMANDS:
+    for command in __getattr__("COMMANDS"):
         command.add(sub, parents)
     return parser
 
@@ -81,10 +90,35 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split("\n")) if str(exc) else type(exc).__name__
 
 
+def _start_helpers_early(argv: list[str]) -> None:
+    """The helper processes of a parallel command (``--workers``, default 2 where there are two
+    cores) start importing lawn now, while this process imports it and builds the parser: the command
+    then finds them ready (training/pool.py). A reading of ``argv`` before the parser exists; when it
+    is unclear (help, a bad value), nothing starts and the parser has its say."""
+    words = [w for w in argv if w != "--debug"]
+    if not words or words[0] not in _PARALLEL or "-h" in words or "--help" in words:
+        return
+    workers = min(2, os.cpu_count() or 1)
+    for i, word in enumerate(words):
+        value = word.partition("=")[2] if word.startswith("--workers=") else \
+            (words[i + 1] if word == "--workers" and i + 1 < len(words) else None)
+        if value is not None:
+            if not value.isdigit():
+                return
+            workers = int(value)
+    from ..pool import start_helpers
+
+    start_helpers(workers)
+
+
 def main(argv: list[str] | None = None) -> int:
     """The ``lawn`` command. Errors print one line and exit non-zero (2: bad input, 3: a missing
     extra, 130: interrupted, 1: anything else, which is a bug); ``--debug`` shows the traceback."""
+    if argv is None:  # the command line itself (a call from Python starts nothing early)
+        _start_helpers_early(sys.argv[1:])
     args = build_parser().parse_args(argv)
+    from agents.errors import MissingExtra
+
     try:
         _check_out(args.command, getattr(args, "out", None))
         return args.func(args)

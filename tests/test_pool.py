@@ -1,0 +1,112 @@
+"""The process pool (training/pool.py): the calling process works beside its helpers, every process
+on one thread per library, the helpers kept between maps, and parallel maps that work from an empty
+kernel cache under every start method of the platform (numba compiles in the helpers)."""
+
+import multiprocessing
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from training import pool
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _where(task):
+    """The process and thread counts a task ran with (numba's configured count: asking for the
+    running count would launch numba's thread pool)."""
+    from threadpoolctl import threadpool_info
+
+    from numba.core import config
+
+    return task, os.getpid(), {info["num_threads"] for info in threadpool_info()}, config.NUMBA_NUM_THREADS
+
+
+def _fail_on_three(task):
+    if task == 3:
+        raise ValueError(f"task {task} is bad")
+    return task
+
+
+def test_the_caller_and_one_helper_share_the_tasks_in_order_on_one_thread_each():
+    pool.shutdown_shared_pool()
+    first = pool.pool_map(_where, list(range(24)), workers=2, progress=False, desc="")
+    kept = pool.shared_pool(1)
+    second = pool.pool_map(_where, list(range(24)), workers=2, progress=False, desc="")
+    try:
+        assert pool.shared_pool(1) is kept  # the helper stays for the next map
+        assert [row[0] for row in first] == list(range(24)) == [row[0] for row in second]  # task order
+        pids = {pid for _, pid, _, _ in first + second}
+        assert os.getpid() in pids and len(pids) == 2  # this process and one helper
+        assert all(threads == {1} for _, _, threads, _ in first + second)  # BLAS/OpenMP, here too during the map
+        assert all(numba_threads == 1 for _, pid, _, numba_threads in first + second if pid != os.getpid())
+    finally:
+        pool.shutdown_shared_pool()
+
+
+def test_a_failing_task_raises_in_the_caller_and_the_pool_serves_the_next_map():
+    pool.shutdown_shared_pool()
+    try:
+        with pytest.raises(ValueError, match="task 3 is bad"):
+            pool.pool_map(_fail_on_three, list(range(12)), workers=2, progress=False, desc="")
+        assert pool.pool_map(_fail_on_three, [0, 1, 2, 4], workers=2, progress=False, desc="") == [0, 1, 2, 4]
+    finally:
+        pool.shutdown_shared_pool()
+
+
+def test_an_unknown_start_method_is_named_with_the_platforms():
+    with pytest.raises(ValueError, match=r"start_method='threads'.*valid: .*spawn"):
+        pool.worker_pool(2, start_method="threads")
+
+
+_KERNEL_MODULE = '''
+import os
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def _square_sum(x):
+    total = 0.0
+    for v in x:
+        total += v * v
+    return total
+
+
+def task(n):
+    """Compiles on first call in each process: the cache directory starts empty."""
+    return os.getpid(), _square_sum(np.arange(float(n)))
+'''
+
+
+@pytest.mark.parametrize("method", multiprocessing.get_all_start_methods())
+def test_parallel_map_compiles_in_the_helpers_from_an_empty_kernel_cache(tmp_path, method):
+    """The main job's failure on a fresh machine: a helper that set numba's thread count and then
+    compiled a kernel raised "Cannot set NUMBA_NUM_THREADS to a different value once the threads
+    have been launched"."""
+    (tmp_path / "coldtask.py").write_text(_KERNEL_MODULE)
+    # a main module that imports numba at the top, as the lawn command does: spawn and forkserver
+    # helpers import it again before their initializer runs
+    (tmp_path / "main.py").write_text(textwrap.dedent(f"""
+        import coldtask
+        from training.pool import pool_map
+
+        if __name__ == "__main__":
+            rows = pool_map(coldtask.task, list(range(1, 13)), workers=2, progress=False, desc="",
+                            start_method={method!r})
+            print(len({{pid for pid, _ in rows}}), [value for _, value in rows])
+    """))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=f"{tmp_path}{os.pathsep}{ROOT}")
+    env.pop("NUMBA_NUM_THREADS", None)
+    done = subprocess.run([sys.executable, "main.py"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=240)
+    assert done.returncode == 0, done.stderr[-3000:]
+    processes, values = done.stdout.split(" ", 1)
+    assert values.strip() == str([float(sum(i * i for i in range(n))) for n in range(1, 13)])
+    assert processes == "2"  # the caller and its helper both compiled and played
+    assert any((tmp_path / "cache").rglob("*.nbi"))
