@@ -65,7 +65,7 @@ register("short-blocklength", ScenarioConfig(channel=ChannelConfig(blocklength=1
 #: 1e-3 the cap meets the threshold and every policy loses most commands.
 register("imperfect-csi", ScenarioConfig(channel=ChannelConfig(ce_error_var=1e-4)))
 
-# Suite v2's tasks decided throughout (docs/model.md, "The task suite"): on the default task most of
+# Suite v2's tasks decided throughout (docs/model-notes.md, "The task suite"): on the default task most of
 # the cost falls in the first slots, the AGVs' recovery from their initial offsets while the drone
 # flies in from the area's edge. A steady start removes that transient: the drone starts at the
 # area's centre (above the paper paths' starts) and every AGV on its reference.

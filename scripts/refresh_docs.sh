@@ -57,6 +57,7 @@ fi
 if want benchmark; then
   "$lawn" benchmark --episodes 20 --seed 0 --out runs/benchmark --quiet
   splice benchmark runs/benchmark/summary.md "lawn benchmark --episodes 20 --seed 0"
+  "$py" -m training.digests --write  # the table's rows' recorded episodes (tests/test_digests.py), with the table
   cp runs/benchmark/benchmark.png docs/figures/benchmark.png
   "$lawn" benchmark --preset paper-nominal --episodes 5 --policies ao-mpc epa sf pid lqr --out runs/benchmark-nominal --quiet
   splice benchmark-nominal runs/benchmark-nominal/summary.md \

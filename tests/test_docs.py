@@ -141,3 +141,21 @@ def test_the_clients_page_names_tests_that_exist_and_every_client():
     for client in ("Stable-Baselines3", "rl-zoo3", "CleanRL", "TorchRL", "Tianshou", "PettingZoo", "SuperSuit",
                    "RLlib"):
         assert f"| {client}" in page, client
+
+
+def test_no_two_files_differ_only_by_case():
+    """docs/MODEL.md and docs/model.md collided on case-insensitive file systems (macOS, Windows):
+    one of them was lost in such a checkout, and site/ built both."""
+    import subprocess
+
+    listed = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True)
+    if listed.returncode != 0:
+        pytest.skip("not a git checkout")
+    seen: dict[str, str] = {}
+    clashes = []
+    for path in listed.stdout.splitlines():
+        folded = path.casefold()
+        if folded in seen and seen[folded] != path:
+            clashes.append((seen[folded], path))
+        seen[folded] = path
+    assert not clashes

@@ -16,7 +16,8 @@ from pathlib import Path
 
 from .provenance import provenance
 
-__all__ = ["replace_block", "replace_body", "block_body", "block_names", "find_block", "pages"]
+__all__ = ["replace_block", "replace_body", "block_body", "block_names", "find_block", "pages", "first_table",
+           "check_block"]
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -80,13 +81,48 @@ def replace_block(path: Path, name: str, content: str, source: str | None = None
     path.write_text(replace_body(path.read_text(), name, content, source, where=str(path)))
 
 
+def first_table(text: str) -> list[str]:
+    """The lines of the first Markdown table in ``text`` (consecutive lines starting with ``|``)."""
+    lines = [line.strip() for line in text.splitlines()]
+    start = next((i for i, line in enumerate(lines) if line.startswith("|")), None)
+    if start is None:
+        return []
+    end = next((i for i in range(start, len(lines)) if not lines[i].startswith("|")), len(lines))
+    return lines[start:end]
+
+
+def check_block(name: str, text: str, root: Path = ROOT) -> list[str]:
+    """The differences between the first table of ``text`` (a command's fresh output) and the first
+    table of generated block ``name``: ``[]`` when they agree line for line."""
+    page = find_block(name, root)
+    committed, fresh = first_table(block_body(page, name)), first_table(text)
+    if not fresh:
+        return [f"the new output has no table (block {name!r} of {page.relative_to(root)})"]
+    import difflib
+
+    return list(difflib.unified_diff(committed, fresh, f"{page.relative_to(root)} ({name})", "this run", lineterm=""))
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="splice a Markdown file into a generated block of the docs")
+    parser = argparse.ArgumentParser(description="splice a Markdown file into a generated block of the docs, or "
+                                                 "check that the block's first table is the file's")
     parser.add_argument("name", help="the block's name (<!-- NAME:begin -->)")
-    parser.add_argument("file", help="the Markdown to splice in")
-    parser.add_argument("--source", required=True, help="the command that produced FILE")
+    parser.add_argument("file", help="the Markdown to splice in (or to compare, with --check)")
+    parser.add_argument("--source", help="the command that produced FILE (required to splice)")
+    parser.add_argument("--check", action="store_true",
+                        help="change nothing: exit 1 with a diff when the first table of FILE differs from the block's")
     args = parser.parse_args(argv)
     try:
+        if args.check:
+            diff = check_block(args.name, Path(args.file).read_text())
+            if diff:
+                print(f"training.readme: block {args.name!r} is not what the code produces now:", file=sys.stderr)
+                print("\n".join(diff), file=sys.stderr)
+                return 1
+            print(f"training.readme: block {args.name!r} holds the table {args.file} has")
+            return 0
+        if not args.source:
+            parser.error("--source is required to splice (the command that produced FILE)")
         page = find_block(args.name)
         replace_block(page, args.name, Path(args.file).read_text(), args.source)
     except (OSError, ValueError) as exc:

@@ -1,0 +1,35 @@
+"""Every row of the README's benchmark table replays its recorded episodes (training/digests.py):
+a change that moves any policy's episodes (ao-mpc and sf included) fails here until the digests and
+the tables are regenerated in the same commit (scripts/refresh_docs.sh --only benchmark)."""
+
+import json
+import re
+
+import pytest
+
+from training import digests
+from training.readme import ROOT, block_body, first_table
+
+RECORDED = json.loads(digests.DIGESTS.read_text())
+
+
+def test_the_digests_cover_every_row_of_the_readme_table():
+    rows = [line.split("|")[1].strip() for line in first_table(block_body(ROOT / "README.md", "benchmark"))[2:]]
+    assert rows == list(digests.ROWS) == list(RECORDED)
+    assert all([r["seed"] for r in RECORDED[name]] == list(digests.SEEDS) for name in RECORDED)
+
+
+@pytest.mark.parametrize("row", list(RECORDED))
+def test_a_table_row_replays_its_recorded_episodes(row):
+    now = [digests.episode_record(row, seed) for seed in digests.SEEDS]
+    for before, after in zip(RECORDED[row], now):
+        assert after == before, (
+            f"{row}, seed {before['seed']}: control cost {after['control_cost']} now, {before['control_cost']} "
+            "recorded; if the change is meant, regenerate the tables and the digests together "
+            "(bash scripts/refresh_docs.sh --only benchmark)")
+
+
+def test_a_changed_episode_changes_its_digest():
+    record = digests.episode_record("epa", 0)
+    other = digests.episode_record("epa", 1)
+    assert re.fullmatch(r"[0-9a-f]{16}", record["digest"]) and record["digest"] != other["digest"]
