@@ -206,3 +206,57 @@ def test_gap_compares_planners_only(tmp_path, capsys):
     assert main(["gap", "--policies", "anchor:stake", "--out", str(tmp_path / "g"), "--episodes", "1",
                  "--convergence-slots", "--set", "num_slots=4", "--quiet"]) == 2
     assert "--policies anchor:stake: the gap compares planners' per-slot plans" in capsys.readouterr().err
+
+
+def test_the_top_level_help_imports_nothing_of_lawn():
+    """``lawn --help`` and ``--version`` answer without loading lawn's compiled kernels."""
+    import subprocess
+    import sys
+
+    script = ("import sys\nfrom training.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+              "print(sorted(m for m in ('lawn_env', 'agents', 'numba') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True, timeout=60)
+    assert "evaluate" in done.stdout and done.stdout.strip().endswith("[]")
+
+
+def test_comparisons_refuse_an_rl_id_naming_its_v0_id(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--policy", "epa", "--env", "lawn/JointRL-v0", "--out", str(tmp_path / "r.csv")])
+    err = capsys.readouterr().err
+    assert "RL interface of 'lawn/Joint-v0'" in err and "pass --env lawn/Joint-v0" in err
+    with pytest.raises(SystemExit):
+        main(["benchmark", "--env", "lawn/Nope-v0", "--out", str(tmp_path / "b")])
+    assert "unknown env id 'lawn/Nope-v0'; valid: lawn/Joint-v0, lawn/Comm-v0" in capsys.readouterr().err
+
+
+def test_one_episode_commands_say_so_and_render_is_quiet(tmp_path, capsys):
+    from training.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    for name in ("render", "demo"):
+        seed = next(a for a in sub.choices[name]._actions if a.dest == "seed")
+        assert seed.help.startswith("the episode's seed"), name
+    out = tmp_path / "e.gif"
+    assert main(["render", "--policy", "epa", "--set", "num_slots=4", "--quiet", "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert out.stat().st_size > 0 and "slot" not in captured.err  # no progress bar
+
+
+def test_evaluate_counts_its_rows_in_words(tmp_path, capsys):
+    out = tmp_path / "one.csv"
+    assert main(["evaluate", "--policy", "epa", "--episodes", "1", "--set", "num_slots=4", "--no-score", "--quiet",
+                 "--workers", "1", "--out", str(out)]) == 0
+    assert f"wrote 1 row to {out}" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("policy, setting", [("rg-mpc", "power_levels=60"), ("ao-mpc", "tolerance=1e-3")])
+def test_the_policy_arg_examples_of_the_help_run(tmp_path, policy, setting):
+    from training.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    help_text = next(a for a in sub.choices["evaluate"]._actions if a.dest == "policy_arg").help
+    assert f"{setting} for {policy}" in help_text
+    assert main(["evaluate", "--policy", policy, "--policy-arg", setting, "--episodes", "1", "--set", "num_slots=3",
+                 "--no-score", "--quiet", "--workers", "1", "--out", str(tmp_path / "r.csv")]) == 0

@@ -20,25 +20,34 @@ FORMATS = (".gif", ".mp4")
 
 
 def record_frames(policy: str, env_id: str | None, seed: int, config: ScenarioConfig | str | None = None,
-                  every: int = 1, **policy_args: Any) -> tuple[list[np.ndarray], dict, str]:
+                  every: int = 1, progress: bool = False, **policy_args: Any) -> tuple[list[np.ndarray], dict, str]:
     """Play one seeded episode of ``env_id`` (default: the policy's own env) under ``policy`` and
-    keep the env's ``rgb_array`` frame of the start and of every ``every``-th slot (and the last).
-    Returns the frames, the episode's metrics (MODEL.md §6) and the env id it ran on."""
+    keep the env's ``rgb_array`` frame of the start and of every ``every``-th slot (and the last),
+    with a progress bar over the slots when ``progress``. Returns the frames, the episode's metrics
+    (MODEL.md §6) and the env id it ran on."""
+    from tqdm.auto import tqdm
+
     if not isinstance(every, (int, np.integer)) or every < 1:
         raise ValueError(f"every={every!r}: must be a positive integer (keep every n-th slot's frame)")
     actor = make_policy(policy, config, env_id=env_id, **policy_args)
     env_id = env_id or actor.env_id
     env = gym.make(env_id, config=actor.config if config is None else config, render_mode="rgb_array")
     frames: list[np.ndarray] = []
+    bar = tqdm(total=env.unwrapped.config.num_slots, desc=policy, unit="slot", disable=None if progress else True,
+               leave=False)
 
     def keep(step) -> None:
+        bar.update()
         if (step.slot + 1) % every == 0:  # the frame shows slot n + 1
             frames.append(env.render())
 
     # the start's frame: the reset rollout() does gives the same state for the same seed
     env.reset(seed=seed)
     frames.append(env.render())
-    episode = rollout(env, actor, seed, on_step=keep)
+    try:
+        episode = rollout(env, actor, seed, on_step=keep)
+    finally:
+        bar.close()
     if episode.length % every:  # the episode's last slot (at num_slots, or earlier if it terminated)
         frames.append(env.render())
     env.close()
@@ -79,12 +88,12 @@ def write_animation(frames: list[np.ndarray], out: Path, fps: float = 8.0) -> Pa
 
 def render_episode(policy: str, out: Path, env_id: str | None = None, seed: int = 0,
                    config: ScenarioConfig | str | None = None, fps: float = 8.0, every: int = 1,
-                   **policy_args: Any) -> dict:
+                   progress: bool = False, **policy_args: Any) -> dict:
     """One seeded episode of ``env_id`` under ``policy`` as an animation at ``out`` (GIF or MP4);
     returns the episode's metrics with the env id, frame count and file."""
     if env_id is not None and env_id not in lawn_env.ENV_IDS and env_id not in lawn_env.RL_ENV_IDS:
         raise ValueError(f"env {env_id!r}: unknown; valid: {', '.join([*lawn_env.ENV_IDS, *lawn_env.RL_ENV_IDS])}")
     check_output(Path(out), fps)
-    frames, metrics, env_id = record_frames(policy, env_id, seed, config, every, **policy_args)
+    frames, metrics, env_id = record_frames(policy, env_id, seed, config, every, progress, **policy_args)
     path = write_animation(frames, out, fps)
     return {**metrics, "env_id": env_id, "frames": len(frames), "out": str(path)}

@@ -29,6 +29,22 @@ __all__ = ["main", "build_parser", "COMMANDS", "COMMAND_NAMES"]
 #: The subcommands in the order ``lawn --help`` lists them; ``COMMANDS`` are their modules.
 COMMAND_NAMES = ("demo", "render", "evaluate", "benchmark", "train", "zoo", "dataset", "sweep", "figures", "gap")
 
+#: Each subcommand's line in ``lawn --help`` (its module's parser uses it too).
+COMMAND_HELP = {
+    "demo": "one seeded episode of lawn/Joint-v0 under a scripted policy",
+    "render": "one seeded episode of a policy as an animation (drone, AGVs, reference paths, links coloured by "
+              "outage probability)",
+    "evaluate": "run a policy on seeded episodes and write one row per episode",
+    "benchmark": "the expert and the baselines on the same seeded episodes; --protocol learned and --suite: the "
+                 "learned agents' protocol and the task suite's leaderboard",
+    "train": "train a Stable-Baselines3 agent (or behaviour cloning) on a lawn env",
+    "zoo": "shipped learned agents: list them, train their recipes, benchmark and export",
+    "dataset": "record a policy's episodes as a Minari dataset (data extra)",
+    "sweep": "run a grid of config fields x policies x seeds into a tidy table",
+    "figures": "the paper's experiments from tidy tables (running missing sweeps)",
+    "gap": "per-slot optimality gap of planners against the global reference",
+}
+
 #: The commands that play episodes over ``--workers`` processes: their helpers start before anything
 #: else (:func:`_start_helpers_early`).
 _PARALLEL = ("evaluate", "benchmark", "gap", "figures")
@@ -40,18 +56,41 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    import lawn_env
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
 
+    try:
+        return version("lawn")
+    except PackageNotFoundError:  # a checkout on the path, not installed
+        import lawn_env
+
+        return lawn_env.__version__
+
+
+def _top_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
+    parser = argparse.ArgumentParser(prog="lawn", description="Wireless predictive control over low-altitude networks.")
+    parser.add_argument("--version", action="version", version=f"lawn {_version()}")
+    parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
+    return parser, parser.add_subparsers(dest="command", required=True)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The whole ``lawn`` parser: every subcommand's flags (it imports lawn and its kernels)."""
     from .common import Parents
 
-    parser = argparse.ArgumentParser(prog="lawn", description="Wireless predictive control over low-altitude networks.")
-    parser.add_argument("--version", action="version", version=f"lawn {lawn_env.__version__}")
-    parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser, sub = _top_parser()
     parents = Parents()
     for command in __getattr__("COMMANDS"):
         command.add(sub, parents)
+    return parser
+
+
+def _light_parser() -> argparse.ArgumentParser:
+    """The top level alone (``lawn --help``, ``--version``, a mistyped command): the subcommands by
+    name and line, nothing imported."""
+    parser, sub = _top_parser()
+    for name in COMMAND_NAMES:
+        sub.add_parser(name, help=COMMAND_HELP[name], add_help=False)
     return parser
 
 
@@ -116,6 +155,9 @@ def main(argv: list[str] | None = None) -> int:
     extra, 130: interrupted, 1: anything else, which is a bug); ``--debug`` shows the traceback."""
     if argv is None:  # the command line itself (a call from Python starts nothing early)
         _start_helpers_early(sys.argv[1:])
+    words = sys.argv[1:] if argv is None else argv
+    if not any(w in COMMAND_NAMES for w in words if not w.startswith("-")):  # help, version or a mistyped command
+        _light_parser().parse_args(argv)  # exits, with the help, the version or the error
     args = build_parser().parse_args(argv)
     from agents.errors import MissingExtra
 

@@ -10,7 +10,8 @@ from pathlib import Path
 import lawn_env
 from lawn_env import presets
 
-from .common import Parents, config_of, count, included, policy_help, policy_name
+from . import COMMAND_HELP
+from .common import Parents, comparison_env, config_of, count, included, policy_help, policy_name
 
 
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
@@ -19,8 +20,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     from ..limits import REFERENCE_ROWS
 
     bm = sub.add_parser("benchmark", parents=p("workers", "quiet", "seed", "config", "split"),
-                        help="the expert and the baselines on the same seeded episodes; --protocol learned and "
-                             "--suite: the learned agents' protocol and the task suite's leaderboard",
+                        help=COMMAND_HELP["benchmark"],
                         epilog="--protocol learned and --suite fix the test seeds (0..N-1) and the scenario; "
                                "--seed, --preset, --set and --env belong to the paper protocol.")
     bm.add_argument("--policies", nargs="+", default=None, type=policy_name,
@@ -36,7 +36,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     bm.add_argument("--tasks", nargs="+", default=None, choices=presets.names(), metavar="TASK",
                     help="--suite: only these tasks (presets)")
     bm.add_argument("--docs", default=None, metavar="DIR", help="--suite: also write DIR/LEADERBOARD.md")
-    bm.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
+    bm.add_argument("--env", default=None, type=comparison_env, metavar="ENV",
                     help="the env of every policy (default: lawn/Joint-v0; --protocol learned and --suite run each "
                          "policy on its own env)")
     bm.add_argument("--include", nargs="*", default=[], metavar="DIR",

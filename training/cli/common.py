@@ -13,7 +13,7 @@ import lawn_env
 from agents.runs import read_run
 from lawn_env import presets
 
-__all__ = ["Parents", "count", "seed", "policy_name", "policy_help", "parse_overrides", "config_of", "included"]
+__all__ = ["Parents", "count", "seed", "comparison_env", "policy_name", "policy_help", "parse_overrides", "config_of", "included"]
 
 
 def _int_at_least(low: int) -> Callable[[str], int]:
@@ -34,6 +34,23 @@ def _int_at_least(low: int) -> Callable[[str], int]:
 
 #: argparse types: a count (>= 1) and a seed (>= 0).
 count, seed = _int_at_least(1), _int_at_least(0)
+
+
+def comparison_env(value: str) -> str:
+    """argparse type of ``evaluate`` and ``benchmark``'s ``--env``: an id of ``lawn_env.ENV_IDS``.
+    Comparisons play full episodes of the unmodified scenario; an RL id's termination and bounded
+    reward would change them (``lawn render`` shows an episode on any id)."""
+    if value in lawn_env.ENV_IDS:
+        return value
+    if value in lawn_env.RL_ENV_IDS:
+        raise argparse.ArgumentTypeError(
+            f"{value!r} is the RL interface of {lawn_env.RL_ENV_IDS[value]!r}: comparisons play full episodes of the "
+            f"unmodified scenario, so pass --env {lawn_env.RL_ENV_IDS[value]} (an agent trained on {value} plays it "
+            "through its own interface); lawn render shows an episode on either id")
+    raise argparse.ArgumentTypeError(f"unknown env id {value!r}; valid: {', '.join(lawn_env.ENV_IDS)}")
+
+
+comparison_env.__name__ = "env id"
 
 
 def policy_name(value: str) -> str:
@@ -85,6 +102,10 @@ class Parents:
         p.add_argument("--seed", type=seed, default=0, help="first seed; episode i uses seed + i (default: 0)")
 
     @staticmethod
+    def _one_seed(p: argparse.ArgumentParser) -> None:  # the commands that play one episode
+        p.add_argument("--seed", type=seed, default=0, help="the episode's seed (default: 0)")
+
+    @staticmethod
     def _config(p: argparse.ArgumentParser) -> None:
         p.add_argument("--preset", default="default", choices=presets.names(), help="scenario preset (default: %(default)s)")
         p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -101,11 +122,12 @@ class Parents:
     @staticmethod
     def _policy_arg(p: argparse.ArgumentParser) -> None:
         p.add_argument("--policy-arg", action="append", default=[], metavar="KEY=VALUE",
-                       help="policy setting, e.g. --policy-arg tolerance=1e-3 (repeatable)")
+                       help="policy setting, e.g. --policy-arg power_levels=60 for rg-mpc or tolerance=1e-3 for ao-mpc "
+                            "(repeatable; the fields of agents.ReducedSettings for rg-mpc, agents.AOSettings for the AO planners)")
 
     def __call__(self, *names: str) -> list[argparse.ArgumentParser]:
         """New parent parsers of ``--debug`` and the named shared flags (``"workers"``, ``"quiet"``,
-        ``"seed"``, ``"config"``, ``"split"``, ``"policy_arg"``)."""
+        ``"seed"`` (a first seed), ``"one_seed"`` (one episode's), ``"config"``, ``"split"``, ``"policy_arg"``)."""
         out = []
         for name in ("debug",) + names:
             parent = argparse.ArgumentParser(add_help=False)

@@ -6,12 +6,13 @@ import argparse
 
 from lawn_env import presets
 
+from . import COMMAND_HELP
 from .common import Parents, count, policy_help, policy_name
 
 
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     ds = sub.add_parser("dataset", parents=p("quiet", "seed"),
-                        help="record a policy's episodes as a Minari dataset (data extra)")
+                        help=COMMAND_HELP["dataset"])
     ds.add_argument("action", choices=["create"])
     ds.add_argument("--policy", required=True, type=policy_name, help=policy_help("any policy: "))
     ds.add_argument("--env", required=True, choices=["lawn/Joint-v0", "lawn/Comm-v0"], help="the env the episodes run on")

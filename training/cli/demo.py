@@ -5,12 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from . import COMMAND_HELP
 from .common import Parents, config_of
 
 
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
-    demo = sub.add_parser("demo", parents=p("seed", "config"),
-                          help="one seeded episode of lawn/Joint-v0 under a scripted policy")
+    demo = sub.add_parser("demo", parents=p("one_seed", "config"),
+                          help=COMMAND_HELP["demo"])
     demo.add_argument("--out", default="runs/demo", help="output directory (default: %(default)s)")
     demo.set_defaults(func=run)
 

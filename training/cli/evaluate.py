@@ -8,15 +8,18 @@ from pathlib import Path
 
 import lawn_env
 
-from .common import Parents, config_of, count, parse_overrides, policy_help, policy_name
+from . import COMMAND_HELP
+from .common import Parents, comparison_env, config_of, count, parse_overrides, policy_help, policy_name
 
 
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     ev = sub.add_parser("evaluate", parents=p("workers", "quiet", "seed", "config", "split", "policy_arg"),
-                        help="run a policy on seeded episodes and write one row per episode")
+                        help=COMMAND_HELP["evaluate"])
     ev.add_argument("--policy", required=True, type=policy_name, help=policy_help())
-    ev.add_argument("--env", default=None, choices=list(lawn_env.ENV_IDS),
-                    help="default: lawn/Joint-v0, or the env a trained agent was trained on")
+    ev.add_argument("--env", default=None, type=comparison_env, metavar="ENV",
+                    help=f"{', '.join(lawn_env.ENV_IDS)}: full episodes of the unmodified scenario (an agent trained on "
+                         "an RL id plays its v0 id through its own interface; default: lawn/Joint-v0, or a trained "
+                         "agent's)")
     ev.add_argument("--episodes", type=count, default=10, help="episodes, seeds --seed.. (default: %(default)s)")
     ev.add_argument("--out", required=True, help="rows file, .csv or .json")
     ev.add_argument("--no-score", action="store_true",
@@ -53,5 +56,5 @@ def run(args: argparse.Namespace) -> int:
     geometric = None if not scored or args.policy == SCORE_HIGH else {
         p: g for p, g in paired_cost_geometric(rows, SCORE_HIGH).items() if p == args.policy}
     print(format_table(summarize(mine), scores=scores, geometric=geometric, reference=SCORE_HIGH))
-    print(f"wrote {len(mine)} rows to {out}")
+    print(f"wrote {len(mine)} {'row' if len(mine) == 1 else 'rows'} to {out}")
     return 0

@@ -7,6 +7,7 @@ import argparse
 import time
 from pathlib import Path
 
+from . import COMMAND_HELP
 from .common import Parents
 
 
@@ -14,7 +15,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     from ..experiments import EXPERIMENTS
 
     fg = sub.add_parser("figures", parents=p("workers", "quiet"),
-                        help="the paper's experiments from tidy tables (running missing sweeps)")
+                        help=COMMAND_HELP["figures"])
     fg.add_argument("names", nargs="*", choices=[[]] + list(EXPERIMENTS), metavar="NAME",
                     help=f"figures to make (default: all): {', '.join(EXPERIMENTS)}")
     fg.add_argument("--out", default="runs/figures", help="output directory (default: %(default)s)")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from . import COMMAND_HELP
 from .common import Parents, config_of, count, parse_overrides, policy_help, policy_name
 
 
@@ -13,7 +14,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     from ..gap import CONVERGENCE_SLOTS
 
     gp = sub.add_parser("gap", parents=p("workers", "quiet", "seed", "config"),
-                        help="per-slot optimality gap of planners against the global reference")
+                        help=COMMAND_HELP["gap"])
     from agents import policy_names
 
     gp.add_argument("--policies", nargs="+", default=["ao-mpc", "rg-mpc"], type=policy_name, metavar="POLICY",

@@ -7,13 +7,13 @@ from pathlib import Path
 
 import lawn_env
 
+from . import COMMAND_HELP
 from .common import Parents, config_of, count, parse_overrides, policy_help, policy_name
 
 
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
-    re = sub.add_parser("render", parents=p("seed", "config", "policy_arg"),
-                        help="one seeded episode of a policy as an animation (drone, AGVs, reference paths, "
-                             "links coloured by outage probability)")
+    re = sub.add_parser("render", parents=p("quiet", "one_seed", "config", "policy_arg"),
+                        help=COMMAND_HELP["render"])
     re.add_argument("--policy", default="rg-mpc", type=policy_name, help=policy_help("default: rg-mpc; "))
     re.add_argument("--env", default=None, choices=[*lawn_env.ENV_IDS, *lawn_env.RL_ENV_IDS],
                     help="default: lawn/Joint-v0, or the env a trained agent was trained on")
@@ -26,7 +26,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..render import render_episode
     result = render_episode(args.policy, Path(args.out), env_id=args.env, seed=args.seed,
-                            config=config_of(args), fps=args.fps, every=args.every,
+                            config=config_of(args), fps=args.fps, every=args.every, progress=not args.quiet,
                             **parse_overrides(args.policy_arg, "--policy-arg"))
     print(f"lawn render: {args.policy} on {result['env_id']}, seed {args.seed}: control cost "
           f"{result['control_cost']:.1f}, {result['frames']} frames")

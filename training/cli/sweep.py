@@ -5,12 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from . import COMMAND_HELP
 from .common import Parents
 
 
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     sw = sub.add_parser("sweep", parents=p("workers", "quiet"),
-                        help="run a grid of config fields x policies x seeds into a tidy table")
+                        help=COMMAND_HELP["sweep"])
     sw.add_argument("spec", help="sweep spec (YAML or JSON)")
     sw.add_argument("--out", required=True, help="table (CSV); finished rows are skipped on rerun")
     sw.add_argument("--backend", choices=["process", "ray"], default="process",

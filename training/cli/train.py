@@ -7,6 +7,7 @@ from pathlib import Path
 
 from agents.errors import MissingExtra
 
+from . import COMMAND_HELP
 from .common import Parents, config_of, count, parse_overrides, seed
 
 
@@ -14,11 +15,12 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     from ..train import ALGOS, TRAIN_ENV_IDS
 
     tr = sub.add_parser("train", parents=p("workers", "quiet", "seed", "config"),
-                        help="train a Stable-Baselines3 agent (or behaviour cloning) on a lawn env")
+                        help=COMMAND_HELP["train"])
     tr.add_argument("--algo", choices=ALGOS,
                     help="algorithm: SB3's, bc (behaviour cloning of an expert) or fleet (DAgger, one network "
                          "for any K)")
-    tr.add_argument("--env", choices=TRAIN_ENV_IDS, help="lawn/Parallel-v0 is the multi-agent PettingZoo env")
+    tr.add_argument("--env", choices=TRAIN_ENV_IDS, help="lawn/Parallel-v0 is the multi-agent PettingZoo env; CartPole-v1 checks the "
+                         "training pipeline in seconds (it has no control cost: no validation on it)")
     tr.add_argument("--timesteps", type=count, help="environment steps (for bc: expert transitions)")
     tr.add_argument("--seeds", type=seed, nargs="+", metavar="SEED",
                     help="train one run per seed into OUT/seed-<s> (process pool, --workers) and summarize across seeds")

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from agents.errors import MissingExtra
 
+from . import COMMAND_HELP
 from .common import Parents
 
 #: Where ``lawn zoo build`` exports the agents.
@@ -15,7 +16,7 @@ ZOO_HINT = "agents/zoo/<name>/ (policy.zip, normalizer.npz, agent.json)"
 
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     zo = sub.add_parser("zoo", parents=p("workers", "quiet"),
-                        help="shipped learned agents: list them, train their recipes, benchmark and export")
+                        help=COMMAND_HELP["zoo"])
     zo.add_argument("action", nargs="?", default="list", choices=["list", "train", "build"],
                     help="list the shipped agents (default), train their recipes, or build the zoo from the runs")
     zo.add_argument("--runs", default="runs/agents", help="training runs, one folder per recipe (default: %(default)s)")
