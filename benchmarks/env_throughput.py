@@ -28,6 +28,7 @@ import gymnasium as gym
 import numpy as np
 
 import lawn_env  # noqa: F401  (registers the ids)
+from report import marks  # benchmarks/report.py, beside this script
 
 
 def measure(env_id: str, steps: int, repeats: int, seed: int = 0, **kwargs) -> float:
@@ -126,8 +127,8 @@ def main(argv=None) -> int:
         (f"vector Joint-v0 K=32, N={n} >= 150,000 env-steps/s", vjoint32 >= 1.5e5),
         (f"vector Comm-v0 K=4, N={n} >= 100,000 env-steps/s", vector["lawn/Comm-v0", 4] >= 1e5),
     ]
-    for name, ok in checks:
-        print(f"[{'PASS' if ok else 'FAIL'}] {name}")
+    for mark in marks([], checks):  # speed targets: reported, never an error
+        print(mark)
     if args.markdown:
         lines = [f"python {platform.python_version()}, numpy {np.__version__}, gymnasium {gym.__version__}, "
                  f"{os.cpu_count()} cores, {platform.machine()}:", "",
@@ -137,7 +138,7 @@ def main(argv=None) -> int:
                   f"N = {n}, resets included:", "",
                   "| env | K | env-steps/s | × CartPoleVectorEnv step time |", "|---|---|---|---|"]
         lines += [f"| {e} | {'–' if k == '-' else k} | {r:,.0f} | {vrows[0][2] / r:.1f} |" for e, k, r in vrows]
-        lines += [""] + [f"* [{'PASS' if ok else 'FAIL'}] {name}" for name, ok in checks]
+        lines += [""] + [f"* {mark}" for mark in marks([], checks)]
         with open(args.markdown, "w") as fh:
             fh.write("\n".join(lines) + "\n")
     if args.json:
@@ -145,7 +146,7 @@ def main(argv=None) -> int:
             json.dump({"rows": [{"env": e, "K": k, "steps_per_s": r} for e, k, r in rows],
                        "vector_rows": [{"env": e, "K": k, "num_envs": n, "env_steps_per_s": r} for e, k, r in vrows],
                        "checks": {n: ok for n, ok in checks}}, fh, indent=2)
-    return 0 if all(ok for _, ok in checks) else 1
+    return 0  # speed targets are reported, never an error
 
 
 if __name__ == "__main__":

@@ -33,6 +33,7 @@ import lawn_env  # noqa: F401
 from agents import AOSettings, AOSolver, make_policy, rollout
 from lawn_env import ScenarioConfig
 from lawn_env.mpc import OutageAwareMPC
+from report import marks  # benchmarks/report.py, beside this script
 
 
 def closed_loop(config: ScenarioConfig, episodes: int, slots: int | None = None, policy_name: str = "ao-mpc"):
@@ -131,7 +132,7 @@ def tolerance_sweep(pairs) -> list[tuple]:
     return out
 
 
-def markdown(results, sweep, checks) -> str:
+def markdown(results, sweep, marked: list[str]) -> str:
     """The README's tables of this run (decision times, QP block; tolerance sweep; checks)."""
     lines = ["| K | ao-mpc median (p95) | AO iterations | rg-mpc median (p95) | QP block: ours | CVXPY | speed-up | "
              "objective diff |", "|---|---|---|---|---|---|---|---|"]
@@ -147,7 +148,7 @@ def markdown(results, sweep, checks) -> str:
         for tol, t, it, med, mx in sweep:
             name = f"**{tol:.0e} (default)**" if tol == default else f"{tol:.0e}"
             lines.append(f"| {name} | {t * 1e3:.2f} | {it:.1f} | {med * 100:.1f} % | {mx * 100:.0f} % |")
-    lines += [""] + [f"* [{'PASS' if ok else 'FAIL'}] {name}" for name, ok in checks]
+    lines += [""] + [f"* {mark}" for mark in marked]
     return "\n".join(lines) + "\n"
 
 
@@ -175,22 +176,22 @@ def main(argv=None) -> int:
         print(f"  expert's whole decision vs one CVXPY QP block: {np.median(theirs) / np.median(times):.1f}x faster")
         if k == 4 and args.tolerance_sweep:
             sweep = tolerance_sweep(pairs)
-    checks = [
+    targets = [
         ("ao-mpc median <= 2 ms at K = 4", np.median(results[4][0]) <= 2e-3),
         ("ao-mpc median <= 30 ms at K = 32", np.median(results[32][0]) <= 30e-3),
         ("rg-mpc median <= 3 ms at K = 4", np.median(results[4][4]) <= 3e-3),
         ("rg-mpc median <= 60 ms at K = 32", np.median(results[32][4]) <= 60e-3),
         ("QP block >= 50x faster than CVXPY (K = 4 and 32)",
          all(np.median(results[k][2]) / np.median(results[k][1]) >= 50 for k in results)),
-        ("equal objective to 1e-6 relative", all(results[k][3].max() <= 1e-6 for k in results)),
     ]
+    checks = [("equal objective to 1e-6 relative", all(results[k][3].max() <= 1e-6 for k in results))]
     print()
-    for name, ok in checks:
-        print(f"[{'PASS' if ok else 'FAIL'}] {name}")
+    for mark in marks(checks, targets):
+        print(mark)
     if args.markdown:
         with open(args.markdown, "w") as fh:
-            fh.write(markdown(results, sweep, checks))
-    return 0 if all(ok for _, ok in checks) else 1
+            fh.write(markdown(results, sweep, marks(checks, targets)))
+    return 0 if all(ok for _, ok in checks) else 1  # a missed speed target is reported, not an error
 
 
 if __name__ == "__main__":

@@ -14,7 +14,8 @@ same run:
   sample of the same problems (``--daqp-sample``), and DAQP's own C time per QP from its info.
 
 Every compiled answer is checked against DAQP's on the sample (objective to 1e-9 relative).
-Target (issue #22): compiled, warm >= 5x faster per AGV-QP than DAQP through its Python API.
+Target: compiled, warm >= 5x faster per AGV-QP than DAQP through its Python API (reported as met or
+missed; the script exits 1 only when an answer differs from DAQP's).
 
 Usage: ``python benchmarks/qp_speed.py [--num-envs 1024] [--steps 30] [--markdown out.md]``
 """
@@ -165,11 +166,11 @@ def main(argv=None) -> int:
     print(head)
     for name, per in rows:
         print(f"{name:<40}{per * 1e6:>10.2f} us per AGV-QP")
-    checks = [(f"compiled (warm) >= 5x faster per AGV-QP than DAQP through Python: {speedup:.1f}x", speedup >= 5.0),
-              ("every sampled answer equals DAQP's to 1e-9", max(errors) <= 1e-9)]
+    targets = [(f"compiled (warm) >= 5x faster per AGV-QP than DAQP through Python: {speedup:.1f}x", speedup >= 5.0)]
+    checks = [("every sampled answer equals DAQP's to 1e-9", max(errors) <= 1e-9)]
     lines = [head + ":", "", "| solver | µs per AGV-QP | × compiled (warm) |", "|---|---|---|"]
     lines += [f"| {name} | {per * 1e6:.2f} | {per / rows[0][1]:.1f} |" for name, per in rows]
-    return finish(checks, args.markdown, lines)
+    return finish(checks, args.markdown, lines, targets=targets)
 
 
 if __name__ == "__main__":

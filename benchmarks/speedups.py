@@ -184,7 +184,7 @@ def main(argv=None) -> int:
         print(f"{key:<44}{b:>14,.4g}{a:>14,.4g}{r:>14.2f}")
     lines = [head + ":", "", "| figure | before | after | after / before |", "|---|---|---|---|"]
     lines += [f"| {k} | {b:,.4g} | {a:,.4g} | {r:.2f} |" for k, b, a, r in rows]
-    return finish(checks, args.markdown, lines)
+    return finish([], args.markdown, lines, targets=checks)  # speed targets: reported, never an error
 
 
 if __name__ == "__main__":

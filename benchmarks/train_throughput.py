@@ -21,6 +21,7 @@ import time
 import gymnasium as gym
 
 import lawn_env  # noqa: F401
+from report import marks  # benchmarks/report.py, beside this script
 
 
 def measure(env_id: str, timesteps: int, repeats: int) -> float:
@@ -85,8 +86,9 @@ def main(argv=None) -> int:
           f"native vector env {vec['native']:,.0f} steps/s ({vec['native'] / vec['dummy']:.1f}x)")
     ok = rates["lawn/Joint-v0"] >= 0.5 * base
     ok_vec = vec["native"] >= 10_000
-    print(f"[{'PASS' if ok else 'FAIL'}] lawn/Joint-v0 PPO throughput >= half of CartPole-v1's")
-    print(f"[{'PASS' if ok_vec else 'FAIL'}] lawn/Joint-v0 PPO on the native vector env (N = 64) >= 10,000 steps/s")
+    targets = marks([], [("lawn/Joint-v0 PPO throughput >= half of CartPole-v1's", ok),
+                         ("lawn/Joint-v0 PPO on the native vector env (N = 64) >= 10,000 steps/s", ok_vec)])
+    print("\n".join(targets))
     if args.markdown:
         lines = [f"python {platform.python_version()}, torch {torch.__version__}, stable-baselines3 "
                  f"{stable_baselines3.__version__}, one torch thread:", "",
@@ -96,11 +98,10 @@ def main(argv=None) -> int:
                   "| vector env | PPO steps/s |", "|---|---|",
                   f"| SB3 DummyVecEnv of 64 single envs | {vec['dummy']:,.0f} |",
                   f"| lawn's native vector env (`--vec native`) | {vec['native']:,.0f} |"]
-        lines += ["", f"* [{'PASS' if ok else 'FAIL'}] lawn/Joint-v0 PPO throughput >= half of CartPole-v1's",
-                  f"* [{'PASS' if ok_vec else 'FAIL'}] lawn/Joint-v0 PPO on the native vector env (N = 64) >= 10,000 steps/s"]
+        lines += [""] + [f"* {mark}" for mark in targets]
         with open(args.markdown, "w") as fh:
             fh.write("\n".join(lines) + "\n")
-    return 0 if ok and ok_vec else 1
+    return 0  # speed targets are reported, never an error
 
 
 if __name__ == "__main__":

@@ -71,33 +71,33 @@ if want gap; then
   cp runs/gap/convergence.png docs/figures/convergence.png
 fi
 if want speed; then
-  "$py" benchmarks/expert_speed.py --tolerance-sweep --markdown runs/expert_speed.md || true  # a FAIL is reported in the table
+  "$py" benchmarks/expert_speed.py --tolerance-sweep --markdown runs/expert_speed.md
   splice expert-speed runs/expert_speed.md "python benchmarks/expert_speed.py --tolerance-sweep"
 fi
 if want throughput; then
-  "$py" benchmarks/env_throughput.py --markdown runs/env_throughput.md || true
+  "$py" benchmarks/env_throughput.py --markdown runs/env_throughput.md
   splice env-throughput runs/env_throughput.md "python benchmarks/env_throughput.py"
-  "$py" benchmarks/train_throughput.py --markdown runs/train_throughput.md || true
+  "$py" benchmarks/train_throughput.py --markdown runs/train_throughput.md
   splice train-throughput runs/train_throughput.md "python benchmarks/train_throughput.py"
   "$py" benchmarks/vector_step_breakdown.py --markdown runs/vector_step.md
   splice vector-step runs/vector_step.md "python benchmarks/vector_step_breakdown.py"
 fi
 if want parallel; then  # the 16-core block (parallel-scaling-16) is measured once, on such a machine
-  "$py" benchmarks/parallel_scaling.py --markdown runs/parallel_scaling.md || true  # a FAIL is reported in the table
+  "$py" benchmarks/parallel_scaling.py --markdown runs/parallel_scaling.md
   splice parallel-scaling runs/parallel_scaling.md "python benchmarks/parallel_scaling.py"
 fi
 if want equations; then
-  "$py" benchmarks/step_side_by_side.py --markdown runs/step_side_by_side.md || true  # a FAIL is reported in the table
+  "$py" benchmarks/step_side_by_side.py --markdown runs/step_side_by_side.md
   splice step-side-by-side runs/step_side_by_side.md "python benchmarks/step_side_by_side.py"
-  "$py" benchmarks/v0_episodes.py --markdown runs/v0_episodes.md || true
+  "$py" benchmarks/v0_episodes.py --markdown runs/v0_episodes.md
   splice v0-episodes runs/v0_episodes.md "python benchmarks/v0_episodes.py"
 fi
 if want qp; then
   "$py" benchmarks/numba_jit.py --markdown runs/numba_jit.md
   splice numba-jit runs/numba_jit.md "python benchmarks/numba_jit.py"
-  "$py" benchmarks/qp_speed.py --markdown runs/qp_speed.md || true  # a FAIL is reported in the table
+  "$py" benchmarks/qp_speed.py --markdown runs/qp_speed.md
   splice qp-speed runs/qp_speed.md "python benchmarks/qp_speed.py"
-  "$py" benchmarks/speedups.py --markdown runs/speedups.md || true
+  "$py" benchmarks/speedups.py --markdown runs/speedups.md
   splice speedups runs/speedups.md "python benchmarks/speedups.py"
 fi
 if want fleet; then

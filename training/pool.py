@@ -133,15 +133,15 @@ def shared_pool(helpers: int, start_method: str | None = None) -> ProcessPoolExe
     return pool
 
 
-def start_helpers(workers: int, start_method: str | None = None) -> None:
+def start_helpers(workers: int, start_method: str | None = None) -> list[Future]:
     """Start the ``workers - 1`` helpers of a later :func:`pool_map` now, in the background (each
     imports lawn and loads its kernels while this process goes on): a command calls it before its own
-    set-up. Nothing for ``workers <= 1`` or inside a worker."""
+    set-up. Returns a future per helper start (its result: a process id, once a helper has started);
+    nothing for ``workers <= 1`` or inside a worker."""
     if workers <= 1 or multiprocessing.parent_process() is not None:
-        return
+        return []
     pool = shared_pool(workers - 1, start_method)
-    for _ in range(workers - 1):
-        pool.submit(_ready)  # spawn workers start on demand: one small task each
+    return [pool.submit(_ready) for _ in range(workers - 1)]  # spawn workers start on demand: a small task each
 
 
 def shutdown_shared_pool() -> None:
