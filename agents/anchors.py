@@ -78,7 +78,7 @@ class AnchorPolicy(InterfacePolicy):
         self._zero = np.zeros(self.scheme.size)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        return self.to_v0(self._zero, np.asarray(obs, dtype=np.float32))
+        return self.to_v0(self._zero, self.check_observation(obs))
 
 
 def anchor_name(interface: InterfaceLike) -> str:

@@ -45,6 +45,7 @@ from lawn_env import channel
 from lawn_env.config import ScenarioConfig
 from lawn_env.core import Snapshot
 from lawn_env.dynamics import POSITION, PredictionModel
+from lawn_env.errors import raises_config_errors
 from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
 
 from .optim import linear_argmin_disc_box, project_budget
@@ -55,6 +56,7 @@ __all__ = ["AOSettings", "AOSolver", "PowerObjective", "DroneObjective", "expect
 BLOCKS = ("control", "power", "drone")
 
 
+@raises_config_errors(noun="setting")
 @pydantic_dataclass(frozen=True, config=ConfigDict(extra="forbid", allow_inf_nan=False))
 class AOSettings:
     """Settings of the alternating optimization (the paper's symbols where it has them)."""

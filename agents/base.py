@@ -63,6 +63,19 @@ class Policy:
     def act(self, obs: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def check_observation(self, obs: Any) -> np.ndarray:
+        """``obs`` as float32 after checking it is one observation of this policy's scenario: every
+        policy rejects another shape with the same message (:meth:`lawn_env.ObservationLayout.check`),
+        followed by :meth:`observation_hint`."""
+        array = np.asarray(obs)
+        hint = self.observation_hint(array.shape) if array.shape != (self.layout.size,) else ""
+        return np.asarray(self.layout.check(array, hint), dtype=np.float32)
+
+    def observation_hint(self, shape: tuple[int, ...]) -> str:
+        """What to do about an observation of ``shape``, not this policy's (learned policies: the
+        fleet size they were built for and how to pass the env's config); empty by default."""
+        return ""
+
     def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
                 deterministic: bool = True) -> tuple[np.ndarray, Any]:
         """Stable-Baselines3's signature: a single observation or a batch of them."""

@@ -20,7 +20,7 @@ from typing import Any, Callable
 import numpy as np
 
 from lawn_env import PARALLEL_ENV_ID, ScenarioConfig
-from lawn_env.entities import EntityLayout
+from lawn_env.entities import MAX_AGVS, EntityLayout
 from lawn_env.interface import InterfaceLike, resolve_interface
 
 from .anchors import InterfacePolicy, load_anchor
@@ -142,11 +142,13 @@ class SB3Policy(InterfacePolicy):
     env_ids = (JOINT, COMM)
 
     def __init__(self, network: Any, config: ScenarioConfig, env_id: str, interface: InterfaceLike = None,
-                 normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "sb3"):
+                 normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "sb3",
+                 config_given: bool = True):
         super().__init__(config, env_id, interface, seed)
         self.network = network
         self.normalizer = normalizer
         self.name = label
+        self.config_given = config_given
         self.entities = None
         self._predict = _predictor(network)
         if self.interface.layout == "entities":
@@ -170,10 +172,13 @@ class SB3Policy(InterfacePolicy):
         if env_id not in (None, trained_env):
             raise ValueError(f"{path} was trained on {trained_env}, not {env_id}")
         return cls(_load_model(run), config if config is not None else run.load_config(), trained_env, run.interface,
-                   ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}")
+                   ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}", config_given=config is not None)
+
+    def observation_hint(self, shape: tuple[int, ...]) -> str:
+        return _built_for(self, shape, self.entities is not None)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        raw = np.asarray(obs, dtype=np.float32)
+        raw = self.check_observation(obs)
         x = self.interface.observe(raw.copy())
         if self.normalizer is not None:
             x = self.normalizer.normalize_obs(x)
@@ -208,11 +213,13 @@ class MARLPolicy(InterfacePolicy):
     env_ids = (JOINT,)
 
     def __init__(self, network: Any, config: ScenarioConfig, interface: InterfaceLike = None,
-                 normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "marl"):
+                 normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "marl",
+                 config_given: bool = True):
         super().__init__(config, JOINT, interface, seed)
         self.network = network
         self.normalizer = normalizer
         self.name = label
+        self.config_given = config_given
         k = self.config.num_agvs
         self.n_agents = k + 1
         self.obs_width = network.observation_space.shape[0] - self.n_agents
@@ -230,12 +237,16 @@ class MARLPolicy(InterfacePolicy):
         if env_id not in (None, JOINT):
             raise ValueError(f"{path} is a multi-agent policy; it drives {JOINT}, not {env_id}")
         return marl_policy(_load_model(run), config if config is not None else run.load_config(), run.interface,
-                           ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}")
+                           ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}",
+                           config_given=config is not None)
+
+    def observation_hint(self, shape: tuple[int, ...]) -> str:
+        return _built_for(self, shape, False)
 
     def agent_observations(self, obs: np.ndarray) -> np.ndarray:
         """(K+1, width): the drone's and each AGV's padded observation with its one-hot indicator,
         in PettingZoo's agent order (drone, agv_0, ...), as the agents see them (clipped)."""
-        central = self.interface.observe(np.array(obs, dtype=np.float32))
+        central = self.interface.observe(self.check_observation(obs).copy())
         blocks = self.layout.agv_blocks(central)
         glob = central[-self.layout.global_features:]
         out = np.zeros((self.n_agents, self.obs_width + self.n_agents), dtype=np.float32)
@@ -257,8 +268,27 @@ class MARLPolicy(InterfacePolicy):
         return self.to_v0(central, np.asarray(obs, dtype=np.float32))
 
 
+def _built_for(policy: Any, shape: tuple[int, ...], fleet: bool) -> str:
+    """The hint of a learned policy's observation-shape error when the observation is another
+    fleet size's: the K the policy was built for and what to pass ``make_policy`` so that it acts
+    on the env at hand (a fleet network acts at any K; another network at its training K only)."""
+    seen = policy.layout.fleet_size_of(shape)
+    if seen is None:  # not an observation of another K: the shape alone says what is wrong
+        return ""
+    label, k = policy.name, policy.config.num_agvs
+    source = "the config it was given" if policy.config_given else "its training config"
+    head = f"{label} was built for K = {k} ({source}) and this observation is of K = {seen}"
+    if fleet and seen > MAX_AGVS:
+        return f"{head}; a fleet network acts at K <= {MAX_AGVS} only"
+    if fleet or policy.config_given:
+        what = (f"a fleet network acts at any K up to {MAX_AGVS} without retraining" if fleet
+                else "pass the config of the env it acts on")
+        return f"{head}; {what}: make_policy({label!r}, config=env.unwrapped.config)"
+    return f"{head}; it acts on the fleet size it was trained at only (retrain it at K = {seen})"
+
+
 def marl_policy(network: Any, config: ScenarioConfig, interface: InterfaceLike, normalizer: ObsNormalizer | None,
-                seed: int | None, label: str) -> InterfacePolicy:
+                seed: int | None, label: str, config_given: bool = True) -> InterfacePolicy:
     """A multi-agent network on ``lawn/Joint-v0``: :class:`MARLPolicy`, or for the entity layout
     (a fleet network, which computes every agent's row at once) :class:`SB3Policy`."""
     if resolve_interface(interface).layout == "entities":
@@ -268,8 +298,8 @@ def marl_policy(network: Any, config: ScenarioConfig, interface: InterfaceLike, 
             raise ValueError(f"{label}: a multi-agent network of the entity layout drives {JOINT} when it is a "
                              f"FleetPolicy (lawn train --hp policy=FleetPolicy), got "
                              f"{type(getattr(network, 'policy', network)).__name__}")
-        return SB3Policy(network, config, JOINT, interface, normalizer, seed, label=label)
-    return MARLPolicy(network, config, interface, normalizer, seed, label=label)
+        return SB3Policy(network, config, JOINT, interface, normalizer, seed, label=label, config_given=config_given)
+    return MARLPolicy(network, config, interface, normalizer, seed, label=label, config_given=config_given)
 
 
 # ---------------------------------------------------------------------- shipped agents (zoo)
@@ -313,10 +343,12 @@ def _load_zoo(name: str, config=None, env_id=None, seed=None) -> Policy:
     if record["env"] == PARALLEL_ENV_ID:
         if env_id not in (None, JOINT):
             raise ValueError(f"zoo:{name} is a multi-agent policy; it drives {JOINT}, not {env_id}")
-        return marl_policy(network, cfg, record["interface"], normalizer, seed, label=f"zoo:{name}")
+        return marl_policy(network, cfg, record["interface"], normalizer, seed, label=f"zoo:{name}",
+                           config_given=config is not None)
     if env_id not in (None, record["env"]):
         raise ValueError(f"zoo:{name} was trained on {record['env']}, not {env_id}")
-    return SB3Policy(network, cfg, record["env"], record["interface"], normalizer, seed, label=f"zoo:{name}")
+    return SB3Policy(network, cfg, record["env"], record["interface"], normalizer, seed, label=f"zoo:{name}",
+                     config_given=config is not None)
 
 
 def _no_settings(loader):

@@ -41,6 +41,7 @@ from lawn_env import channel
 from lawn_env.config import ScenarioConfig
 from lawn_env.core import Snapshot
 from lawn_env.dynamics import cost_coefficients
+from lawn_env.errors import raises_config_errors
 from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
 
 from .problem import Plan, SlotProblem
@@ -216,6 +217,7 @@ def _hermite(grid, values, slopes, psi):  # pragma: no cover - compiled
 _CFG = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
+@raises_config_errors(noun="setting")
 @pydantic_dataclass(frozen=True, config=_CFG)
 class ReducedSettings:
     """Resolution and iteration budget of ``rg-mpc``."""
@@ -238,6 +240,7 @@ class ReducedSettings:
     qp_backend: str = DEFAULT_BACKEND
 
 
+@raises_config_errors(noun="setting")
 @pydantic_dataclass(frozen=True, config=_CFG)
 class GlobalSettings:
     """Resolution of the global reference ``global-mpc`` (same meanings as :class:`ReducedSettings`;

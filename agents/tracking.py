@@ -15,10 +15,12 @@ from pydantic import ConfigDict
 from pydantic.dataclasses import dataclass as pydantic_dataclass
 
 from lawn_env.dynamics import ACCELERATION, POSITION, VELOCITY, PredictionModel, step_augmented
+from lawn_env.errors import raises_config_errors
 
 __all__ = ["PIDGains", "saturate", "pid_rollout", "lqr_gain", "lqr_rollout"]
 
 
+@raises_config_errors("gains.", "gain")
 @pydantic_dataclass(frozen=True, config=ConfigDict(extra="forbid", allow_inf_nan=False))
 class PIDGains:
     """Gains of the predictive PID (per axis, SI units). Defaults from the grid search of

@@ -15,6 +15,7 @@ from gymnasium.envs.registration import register, registry
 from . import channel, dynamics, drone, presets, references
 from .config import ChannelConfig, ControlConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 from .core import Simulation, Snapshot
+from .errors import ConfigError, UnknownConfigKeyError
 from .envs import CommEnv, JointEnv, LawnParallelEnv, MixedFleetEnv, env, parallel_env, raw_env
 from .interface import RL_INTERFACE, RLInterface, action_codec
 from .presets import resolve_config
@@ -80,6 +81,8 @@ __all__ = [
     "ReferenceConfig",
     "DisturbanceConfig",
     "ScenarioConfig",
+    "ConfigError",
+    "UnknownConfigKeyError",
     "resolve_config",
     "Simulation",
     "Snapshot",

@@ -1,9 +1,11 @@
 """Scenario configuration: every quantity of MODEL.md §1–2 with its default and unit.
 
 The configuration is a tree of frozen dataclasses validated on construction (pydantic
-dataclasses, so a bad value raises ``ValueError`` naming the field, the value and the allowed
-range). Building from a dict rejects unknown keys by name. Fields marked *(decided)* are
-choices MODEL.md makes where the paper is silent; they are ordinary, overridable fields.
+dataclasses; a bad value raises :class:`~lawn_env.errors.ConfigError`, a ``ValueError`` naming
+each bad field by its dotted path, the value given and what is allowed). Building from a dict
+rejects unknown keys by name (:class:`~lawn_env.errors.UnknownConfigKeyError`). Fields marked
+*(decided)* are choices MODEL.md makes where the paper is silent; they are ordinary, overridable
+fields.
 
 Units are part of every field name (``_m``, ``_s``, ``_mps``, ``_db``, ``_dbw``, ``_dbm``,
 ``_bps_hz``); the functions of :mod:`lawn_env.channel` take linear values, and the derived
@@ -21,7 +23,10 @@ import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 from pydantic.dataclasses import dataclass
 
+from .errors import ConfigError, UnknownConfigKeyError, raises_config_errors
+
 __all__ = [
+    "ConfigError",
     "UnknownConfigKeyError",
     "ChannelConfig",
     "ControlConfig",
@@ -34,13 +39,6 @@ __all__ = [
 
 _PYDANTIC = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True, use_attribute_docstrings=True)
 
-class UnknownConfigKeyError(TypeError, ValueError):
-    """A configuration key (a keyword of ``gym.make``, a dotted override, a dict key) that the
-    scenario does not have. A ``TypeError``, as Python raises for an unexpected keyword argument
-    (libraries such as TorchRL retry without keywords an env rejects that way), and a
-    ``ValueError`` like every other invalid configuration."""
-
-
 PositiveFloat = Annotated[float, Field(gt=0)]
 Probability = Annotated[float, Field(gt=0, lt=1)]
 PositiveInt = Annotated[int, Field(ge=1, strict=True)]
@@ -49,6 +47,7 @@ PositiveInt = Annotated[int, Field(ge=1, strict=True)]
 REFERENCE_FAMILIES = ("lemniscate", "rounded_rectangle", "sinusoid", "spline")
 
 
+@raises_config_errors("channel.")
 @dataclass(frozen=True, config=_PYDANTIC)
 class ChannelConfig:
     """Drone-to-AGV short-packet link (MODEL.md §2)."""
@@ -99,6 +98,7 @@ class ChannelConfig:
         return 10.0 ** ((self.noise_power_dbm - 30.0) / 10.0)
 
 
+@raises_config_errors("drone.")
 @dataclass(frozen=True, config=_PYDANTIC)
 class DroneConfig:
     """Drone kinematics (MODEL.md §1)."""
@@ -112,6 +112,7 @@ class DroneConfig:
     resolvable in metres by the planners' drone grids) *(decided)*."""
 
 
+@raises_config_errors("control.")
 @dataclass(frozen=True, config=_PYDANTIC)
 class ControlConfig:
     """Outage-aware MPC of each AGV (MODEL.md §3)."""
@@ -144,6 +145,7 @@ class ControlConfig:
         return self
 
 
+@raises_config_errors("reference.")
 @dataclass(frozen=True, config=_PYDANTIC)
 class ReferenceConfig:
     """Reference paths of the AGVs (MODEL.md §1, decided)."""
@@ -176,6 +178,7 @@ class ReferenceConfig:
 NonNegative = Annotated[float, Field(ge=0)]
 
 
+@raises_config_errors("disturbance.")
 @dataclass(frozen=True, config=_PYDANTIC)
 class DisturbanceConfig:
     """The disturbance mode that stands in for the paper's AirSim validation (MODEL.md §7, decided).
@@ -215,6 +218,7 @@ class DisturbanceConfig:
                 or self.control_period_slots > 1)
 
 
+@raises_config_errors()
 @dataclass(frozen=True, config=_PYDANTIC)
 class ScenarioConfig:
     """One scenario: K AGVs tracking reference paths, one drone serving them over FBL links.
@@ -342,14 +346,14 @@ class ScenarioConfig:
                 if not isinstance(node, dict) or part not in node:
                     where = ".".join(parts[: depth + 1])
                     raise UnknownConfigKeyError(f"unknown config key {where!r} (unexpected keyword argument {where!r}); "
-                                                f"valid keys: {_valid_keys(self)}")
+                                                f"valid keys: {_valid_keys(self)}", [where])
                 if depth == len(parts) - 1:
                     if isinstance(node[part], dict) and isinstance(value, Mapping):
                         for sub in value:
                             if sub not in node[part]:
                                 raise UnknownConfigKeyError(
-                                    f"unknown config key '{key}.{sub}'; valid keys: {_valid_keys(self)}"
-                                )
+                                    f"unknown config key '{key}.{sub}'; valid keys: {_valid_keys(self)}",
+                                    [f"{key}.{sub}"])
                         node[part] = {**node[part], **dict(value)}
                     else:
                         node[part] = value
@@ -372,7 +376,8 @@ def _check_keys(cls, data: Mapping[str, Any], prefix: str) -> None:
     hints = typing.get_type_hints(cls)
     for key, value in data.items():
         if key not in fields:
-            raise UnknownConfigKeyError(f"unknown config key {prefix + str(key)!r}; valid keys: {_valid_keys(ScenarioConfig())}")
+            raise UnknownConfigKeyError(f"unknown config key {prefix + str(key)!r}; valid keys: "
+                                        f"{_valid_keys(ScenarioConfig())}", [prefix + str(key)])
         sub = hints.get(key)
         if isinstance(value, Mapping) and isinstance(sub, type) and dataclasses.is_dataclass(sub):
             _check_keys(sub, value, f"{prefix}{key}.")

@@ -64,6 +64,7 @@ from pydantic.dataclasses import dataclass
 
 from .channel import LinkParams
 from .config import ScenarioConfig
+from .errors import raises_config_errors
 from .core import Decisions
 from .drone import toward
 from .dynamics import ACCELERATION, POSITION, PredictionModel, saturate_increment
@@ -76,6 +77,7 @@ __all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FL
 PositiveFloat = Annotated[float, Field(gt=0)]
 
 
+@raises_config_errors("interface.", "interface field")
 @dataclass(frozen=True, config=ConfigDict(extra="forbid", allow_inf_nan=False))
 class RLInterface:
     """How an agent talks to the scenario (module docstring). The defaults are the v0 interface."""

@@ -69,12 +69,32 @@ def check_action(action: Any, size: int, name: str = "action", num_envs: int | N
         raise ValueError(f"{name} has shape {a.shape}; expected {shape}, float32, with entries in [-1, 1]")
     a = np.ascontiguousarray(a, dtype=np.float64)
     if _first_outside(a) >= 0:
-        bad = np.argwhere(~((a >= -1.0) & (a <= 1.0)))
-        where = (f"env {bad[0, 0]}: {name} entry {bad[0, 1]} = {a[tuple(bad[0])]!r} is" if num_envs is not None
-                 else f"{name} entries {bad[:8, 0].tolist()} = {a[bad[:8, 0]].tolist()} are")
-        raise ValueError(f"{where} outside [-1, 1] or not finite; actions are normalized (see the environment's "
-                         "Action Space)")
+        raise ValueError(_outside_message(a, name, batched=num_envs is not None))
     return a
+
+
+#: How many bad entries an action's error lists (it says how many there are in all).
+SHOWN_BAD_ENTRIES = 8
+
+
+def _outside_message(a: np.ndarray, name: str, batched: bool) -> str:
+    """The error for entries of ``a`` outside [-1, 1] or NaN: how many there are, and the first
+    :data:`SHOWN_BAD_ENTRIES` by index (``env i: action entry j`` in a batch) and value."""
+    bad = np.argwhere(~((a >= -1.0) & (a <= 1.0)))
+    n, shown = len(bad), bad[:SHOWN_BAD_ENTRIES]
+    tail = "actions are normalized (see the environment's Action Space)"
+    if batched:
+        items = [f"env {e}: {name} entry {j} = {float(a[e, j])!r}" for e, j in shown.tolist()]
+        if n == 1:
+            return f"{items[0]} is outside [-1, 1] or not finite; {tail}"
+        envs = len(np.unique(bad[:, 0]))
+        which = f"; the first {len(shown)}:" if n > len(shown) else ":"
+        return (f"{n} {name} entries (in {envs} env{'s' if envs > 1 else ''}) are outside [-1, 1] or not finite"
+                f"{which} {', '.join(items)}; {tail}")
+    index = shown[:, 0].tolist()
+    which = f"; the first {len(shown)}:" if n > len(shown) else ":"
+    return (f"{n} {name} {'entry is' if n == 1 else 'entries are'} outside [-1, 1] or not finite{which} "
+            f"entries {index} = {a[index].tolist()}; {tail}")
 
 
 @numba.njit(cache=True)
@@ -452,14 +472,28 @@ class ObservationLayout:
         """(K, agv_features) view of the per-AGV part."""
         return np.asarray(obs)[: self.num_agvs * self.agv_features].reshape(self.num_agvs, self.agv_features)
 
+    def fleet_size_of(self, shape: tuple[int, ...]) -> int | None:
+        """The K of an observation of ``shape`` at this layout's horizon (None when no K gives it)."""
+        if len(shape) != 1 or shape[0] <= self.global_features or (shape[0] - self.global_features) % self.agv_features:
+            return None
+        return (shape[0] - self.global_features) // self.agv_features
+
+    def check(self, obs: Any, hint: str = "") -> np.ndarray:
+        """``obs`` as an array, after checking that it is one observation of this layout: every policy
+        (planners through :meth:`decode`, learned policies before their network) rejects another shape
+        with ``ValueError("observation has shape (10,); expected (335,)")``, then ``: hint`` if given."""
+        array = np.asarray(obs)
+        if array.shape != (self.size,):
+            raise ValueError(f"observation has shape {array.shape}; expected ({self.size},)"
+                             + (f": {hint}" if hint else ""))
+        return array
+
     def decode(self, obs: np.ndarray) -> dict:
         """Planner state from an observation: ``x_aug`` (K, 6), ``reference`` (K, N_p+1, 6),
         ``drone_position`` (2,), ``slot``, ``last_power_w`` (K,), ``outage_probability`` (K,).
 
         Exact up to float32 rounding of the observation (about 1e-5 m in positions)."""
-        obs = np.asarray(obs, dtype=np.float64)
-        if obs.shape != (self.size,):
-            raise ValueError(f"observation has shape {obs.shape}; expected ({self.size},)")
+        obs = self.check(np.asarray(obs, dtype=np.float64))
         blocks = self.agv_blocks(obs)
         x_aug = blocks[:, self.slices["state"]] / self._state_scale + self._state_shift
         error = blocks[:, self.slices["error"]] / self._ref_scale

@@ -8,6 +8,8 @@ generator and plays that episode on the env of that size. A network that reads t
 
 from __future__ import annotations
 
+import numbers
+from collections.abc import Iterable, Mapping
 from typing import Any, Sequence
 
 import gymnasium as gym
@@ -20,6 +22,22 @@ from ..presets import ConfigLike, resolve_config
 __all__ = ["MixedFleetEnv"]
 
 
+def _fleet_sizes(fleet_sizes: Any) -> list[int]:
+    """The distinct sizes of ``fleet_sizes``, sorted, after checking that it is a non-empty sequence
+    of integers K in [1, MAX_AGVS] (the entity layout's rows; within the config's bounds of num_agvs)."""
+    allowed = f"a non-empty list of integers in [1, {MAX_AGVS}] (the fleet sizes K, at most MAX_AGVS={MAX_AGVS})"
+    if isinstance(fleet_sizes, (str, bytes, Mapping)) or not isinstance(fleet_sizes, Iterable):
+        raise ValueError(f"fleet_sizes={fleet_sizes!r}: expected {allowed}")
+    given = [k.item() if isinstance(k, np.generic) else k for k in fleet_sizes]  # numpy scalars as Python's
+    bad = [k for k in given if isinstance(k, bool) or not isinstance(k, numbers.Integral) or not 1 <= k <= MAX_AGVS]
+    if not given:
+        raise ValueError(f"fleet_sizes={fleet_sizes!r} is empty; expected {allowed}")
+    if bad:
+        what = f"the entries {bad!r} are" if len(bad) > 1 else f"the entry {bad[0]!r} is"
+        raise ValueError(f"fleet_sizes={given!r}: {what} not allowed; expected {allowed}")
+    return sorted({int(k) for k in given})
+
+
 class MixedFleetEnv(gym.Env):
     """Episodes of ``env_id`` (``lawn/Joint-v0`` or ``lawn/Comm-v0``) with K drawn uniformly from
     ``fleet_sizes`` at every reset; ``interface`` is any interface (its layout is set to
@@ -30,11 +48,12 @@ class MixedFleetEnv(gym.Env):
 
     def __init__(self, env_id: str = "lawn/Joint-v0", fleet_sizes: Sequence[int] = tuple(range(3, 17)),
                  interface: InterfaceLike = "rl", config: ConfigLike = None, **overrides: Any):
-        sizes = sorted({int(k) for k in fleet_sizes})
-        if not sizes or sizes[0] < 1 or sizes[-1] > MAX_AGVS:
-            raise ValueError(f"fleet_sizes={list(fleet_sizes)!r}: give at least one size in [1, {MAX_AGVS}]")
-        if env_id not in ("lawn/Joint-v0", "lawn/Comm-v0"):
+        if not isinstance(env_id, str) or env_id not in ("lawn/Joint-v0", "lawn/Comm-v0"):
             raise ValueError(f"env_id={env_id!r}; valid: 'lawn/Joint-v0', 'lawn/Comm-v0'")
+        sizes = _fleet_sizes(fleet_sizes)
+        if "num_agvs" in overrides:
+            raise ValueError(f"num_agvs={overrides['num_agvs']!r}: MixedFleetEnv draws K from fleet_sizes at every "
+                             "reset; give the sizes as fleet_sizes=[...] instead")
         iface = resolve_interface(interface).to_dict() | {"layout": "entities"}
         base = resolve_config(config, **overrides)
         self.fleet_sizes = tuple(sizes)
