@@ -22,9 +22,10 @@ numba's own thread pool is never launched: lawn's kernels are serial, and numba 
 cache compiles in the workers). :func:`single_threaded` sets the variable and reloads numba's
 configuration before any thread exists.
 
-Tasks go to the helpers in chunks (``chunksize``): one message per chunk instead of per episode,
-so the parent's share of the work does not grow with the number of workers; this process takes
-one task at a time between them (``benchmarks/parallel_scaling.py`` measures both).
+Tasks go to the helpers in chunks (:func:`chunk_size`): one message per chunk instead of per episode,
+so the parent's share of the work does not grow with the number of workers, and the chunks shrink to
+one task as the work runs out; this process takes one task at a time between them
+(``benchmarks/parallel_scaling.py`` measures the whole).
 """
 
 from __future__ import annotations
@@ -156,8 +157,9 @@ atexit.register(shutdown_shared_pool)
 
 
 def chunk_size(tasks: int, workers: int) -> int:
-    """Tasks per helper message: about eight chunks per worker (short tails, balanced loads), at most
-    4 (an interrupted command waits for the chunks in flight)."""
+    """Tasks per helper message for ``tasks`` still to hand out: about eight chunks per worker, at
+    most 4 (an interrupted command waits for the chunks in flight), down to one as the work runs out
+    (the last chunks are short, so no process waits long for another's)."""
     return max(1, min(4, tasks // (8 * workers)))
 
 
@@ -192,7 +194,6 @@ def _map_with_helpers(fn: Callable[[Any], Any], tasks: list, workers: int, bar, 
     from threadpoolctl import threadpool_limits
 
     helpers = workers - 1
-    size = chunk_size(len(tasks), workers)
     pending = deque(range(len(tasks)))  # task indices not yet handed out, in order
     results: list[Any] = [None] * len(tasks)
     in_flight: dict[Future, list[int]] = {}
@@ -202,6 +203,7 @@ def _map_with_helpers(fn: Callable[[Any], Any], tasks: list, workers: int, bar, 
     def hand_out() -> None:
         nonlocal pool, restarted
         while pending and len(in_flight) < 2 * helpers:
+            size = chunk_size(len(pending), workers)  # shrinking with the work left: short tails
             chunk = [pending.popleft() for _ in range(min(size, len(pending)))]
             try:
                 future = pool.submit(_run_chunk, fn, [tasks[i] for i in chunk])

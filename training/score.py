@@ -29,7 +29,6 @@ import math
 from typing import Iterable, Mapping
 
 import numpy as np
-from scipy import stats
 
 from .tables import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
 
@@ -69,6 +68,8 @@ def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: 
     score = float(_score(e, r, x))
     if len(seeds) < 3:
         return score, math.nan, math.nan, len(seeds)
+    from scipy import stats  # here, not at import: the episodes' processes never load scipy.stats
+
     res = stats.bootstrap((e, r, x), _score, paired=True, vectorized=True, n_resamples=BOOTSTRAP_RESAMPLES,
                           method="percentile", random_state=np.random.default_rng(BOOTSTRAP_SEED))
     return score, float(res.confidence_interval.low), float(res.confidence_interval.high), len(seeds)
@@ -131,6 +132,8 @@ def aggregate_score(per_task: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndar
         draws.append(_score(e[idx], r[idx], x[idx], axis=1))
     if not scores:
         return math.nan, math.nan, math.nan, 0
+    from scipy import stats
+
     iqm = float(stats.trim_mean(scores, 0.25))
     boot = stats.trim_mean(np.stack(draws, axis=1), 0.25, axis=1)
     lo, hi = np.percentile(boot, [2.5, 97.5])

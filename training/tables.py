@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Iterable, Mapping
 
 import numpy as np
-from scipy import stats
 
 __all__ = ["mean_ci", "paired_difference", "Geometric", "paired_geometric", "verdict", "write_csv", "read_csv",
            "parse_bool", "fmt_pct", "fmt_num", "fmt_paired", "fmt_geometric"]
@@ -71,6 +70,8 @@ def mean_ci(values: Iterable[float]) -> tuple[float, float]:
         return math.nan, math.nan
     if x.size < 2:
         return float(x.mean()), math.nan
+    from scipy import stats  # here, not at import: the episodes' processes never load scipy.stats
+
     return float(x.mean()), float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
 
 
@@ -129,6 +130,8 @@ def paired_geometric(a: Mapping, b: Mapping, resamples: int = BOOTSTRAP_RESAMPLE
     elif np.ptp(logs) == 0:  # every seed the same ratio: the bootstrap distribution is that point
         lo = hi = mean
     else:
+        from scipy import stats
+
         res = stats.bootstrap((logs,), np.mean, vectorized=True, n_resamples=resamples, method="percentile",
                               random_state=np.random.default_rng(BOOTSTRAP_SEED))
         lo, hi = float(res.confidence_interval.low), float(res.confidence_interval.high)
