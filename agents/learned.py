@@ -280,10 +280,9 @@ def _built_for(policy: Any, shape: tuple[int, ...], fleet: bool) -> str:
     head = f"{label} was built for K = {k} ({source}) and this observation is of K = {seen}"
     if fleet and seen > MAX_AGVS:
         return f"{head}; a fleet network acts at K <= {MAX_AGVS} only"
-    if fleet or policy.config_given:
-        what = (f"a fleet network acts at any K up to {MAX_AGVS} without retraining" if fleet
-                else "pass the config of the env it acts on")
-        return f"{head}; {what}: make_policy({label!r}, config=env.unwrapped.config)"
+    if fleet:
+        return (f"{head}; a fleet network acts at any K up to {MAX_AGVS} without retraining: "
+                f"make_policy({label!r}, config=env.unwrapped.config)")
     return f"{head}; it acts on the fleet size it was trained at only (retrain it at K = {seen})"
 
 

@@ -229,7 +229,8 @@ def test_comparisons_refuse_an_rl_id_naming_its_v0_id(tmp_path, capsys):
     assert "unknown env id 'lawn/Nope-v0'; valid: lawn/Joint-v0, lawn/Comm-v0" in capsys.readouterr().err
 
 
-def test_one_episode_commands_say_so_and_render_is_quiet(tmp_path, capsys):
+def test_one_episode_commands_say_so_and_render_is_quiet(tmp_path, monkeypatch):
+    import training.render
     from training.cli import build_parser
 
     parser = build_parser()
@@ -237,10 +238,47 @@ def test_one_episode_commands_say_so_and_render_is_quiet(tmp_path, capsys):
     for name in ("render", "demo"):
         seed = next(a for a in sub.choices[name]._actions if a.dest == "seed")
         assert seed.help.startswith("the episode's seed"), name
+    calls = []
+    real = training.render.render_episode
+    monkeypatch.setattr(training.render, "render_episode", lambda *a, **k: calls.append(k["progress"]) or real(*a, **k))
     out = tmp_path / "e.gif"
-    assert main(["render", "--policy", "epa", "--set", "num_slots=4", "--quiet", "--out", str(out)]) == 0
-    captured = capsys.readouterr()
-    assert out.stat().st_size > 0 and "slot" not in captured.err  # no progress bar
+    for flags in (["--quiet"], []):
+        assert main(["render", "--policy", "epa", "--set", "num_slots=4", *flags, "--out", str(out)]) == 0
+    assert calls == [False, True] and out.stat().st_size > 0
+
+
+@pytest.mark.parametrize("argv, workers", [
+    (["evaluate", "--policy", "epa", "--workers", "3"], 3),
+    (["benchmark", "--workers=4"], 4),
+    (["evaluate", "--work", "5"], 5),  # argparse's abbreviation
+    (["gap", "--debug"], 2),  # the default on two cores
+    (["evaluate", "--workers", "x"], 0),
+    (["evaluate", "--workers", "\u00b2"], 0),  # a digit to str.isdigit, no count to int()
+    (["evaluate", "--help"], 0),
+    (["sweep", "--workers", "4"], 0),  # a pool of its own
+    (["demo"], 0),
+])
+def test_the_early_start_reads_the_workers_of_a_parallel_command(argv, workers, monkeypatch):
+    import os
+
+    from training import cli
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    assert cli._early_workers(argv) == workers
+
+
+def test_a_failed_command_does_not_wait_for_its_helpers(tmp_path):
+    """The helpers start before the parser; a command the parser refuses ends them at once (a helper
+    left starting would hold the exit for its whole start)."""
+    import subprocess
+    import sys
+
+    script = ("import sys, multiprocessing as mp\nfrom training.cli import main\n"
+              "sys.argv = ['lawn', 'evaluate', '--policy', 'nope', '--workers', '3', '--out', 'r.csv']\n"
+              "try:\n    main()\nexcept SystemExit as e:\n    print('exit', e.code, len(mp.active_children()))\n")
+    done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert "unknown policy 'nope'" in done.stderr
+    assert done.stdout.split() == ["exit", "2", "0"]
 
 
 def test_evaluate_counts_its_rows_in_words(tmp_path, capsys):

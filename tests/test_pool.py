@@ -19,10 +19,13 @@ ROOT = Path(__file__).resolve().parent.parent
 def _where(task):
     """The process and thread counts a task ran with (numba's configured count: asking for the
     running count would launch numba's thread pool)."""
+    import time
+
     from threadpoolctl import threadpool_info
 
     from numba.core import config
 
+    time.sleep(0.02)
     return task, os.getpid(), {info["num_threads"] for info in threadpool_info()}, config.NUMBA_NUM_THREADS
 
 
@@ -34,6 +37,8 @@ def _fail_on_three(task):
 
 def test_the_caller_and_one_helper_share_the_tasks_in_order_on_one_thread_each():
     pool.shutdown_shared_pool()
+    for start in pool.start_helpers(2):  # started: it takes tasks from the first one on
+        start.result(timeout=120)
     first = pool.pool_map(_where, list(range(24)), workers=2, progress=False, desc="")
     kept = pool.shared_pool(1)
     second = pool.pool_map(_where, list(range(24)), workers=2, progress=False, desc="")
@@ -58,9 +63,75 @@ def test_a_failing_task_raises_in_the_caller_and_the_pool_serves_the_next_map():
         pool.shutdown_shared_pool()
 
 
-def test_an_unknown_start_method_is_named_with_the_platforms():
+def test_an_unknown_start_method_is_named_with_the_platforms(monkeypatch):
     with pytest.raises(ValueError, match=r"start_method='threads'.*valid: .*spawn"):
         pool.worker_pool(2, start_method="threads")
+    monkeypatch.setenv("LAWN_START_METHOD", "threads")
+    with pytest.raises(ValueError, match=r"\$LAWN_START_METHOD='threads'.*valid: .*spawn"):
+        pool.pool_map(_where, [0, 1], workers=2, progress=False, desc="")
+
+
+def test_a_short_map_does_not_wait_for_helpers_still_starting():
+    """Helpers get tasks only once started: a map shorter than a helper's start is played here."""
+    pool.shutdown_shared_pool()
+    try:
+        rows = pool.pool_map(_where, [0, 1, 2], workers=3, progress=False, desc="")
+        assert [row[0] for row in rows] == [0, 1, 2] and {row[1] for row in rows} == {os.getpid()}
+    finally:
+        pool.shutdown_shared_pool()
+
+
+def _sleep(task):
+    import time
+
+    time.sleep(task)
+    return os.getpid()
+
+
+def test_a_helper_keeps_working_while_the_caller_plays_a_long_task():
+    """Each chunk a helper returns hands it the next, whatever the caller is playing: with a long last
+    task (the caller plays from the end) the helper plays every other one."""
+    pool.shutdown_shared_pool()
+    try:
+        for start in pool.start_helpers(2):
+            start.result(timeout=120)
+        pids = pool.pool_map(_sleep, [0.02] * 30 + [3.0], workers=2, progress=False, desc="")
+        assert pids[-1] == os.getpid() and os.getpid() not in pids[:-1]
+    finally:
+        pool.shutdown_shared_pool()
+
+
+def _die_in_a_helper(task):
+    import multiprocessing as mp
+
+    if mp.parent_process() is not None:
+        os._exit(3)
+    return task
+
+
+def test_a_helper_that_dies_fails_the_map_with_a_clear_error_and_the_next_map_works():
+    pool.shutdown_shared_pool()
+    try:
+        for start in pool.start_helpers(2):
+            start.result(timeout=120)
+        with pytest.raises(pool.HelperDied, match=r"helper process ended while it held tasks .*--workers 1"):
+            pool.pool_map(_die_in_a_helper, list(range(40)), workers=2, progress=False, desc="")
+        rows = pool.pool_map(_where, list(range(8)), workers=2, progress=False, desc="")  # a fresh pool
+        assert [row[0] for row in rows] == list(range(8))
+    finally:
+        pool.shutdown_shared_pool()
+
+
+def test_stop_helpers_ends_them_at_once():
+    import multiprocessing as mp
+
+    pool.shutdown_shared_pool()
+    starts = pool.start_helpers(3)
+    assert len(starts) == 2 and len(mp.active_children()) == 2
+    pool.stop_helpers()
+    for child in mp.active_children():
+        child.join(timeout=10)
+    assert mp.active_children() == []
 
 
 _KERNEL_MODULE = '''
@@ -80,6 +151,9 @@ def _square_sum(x):
 
 def task(n):
     """Compiles on first call in each process: the cache directory starts empty."""
+    import time
+
+    time.sleep(0.05)
     return os.getpid(), _square_sum(np.arange(float(n)))
 '''
 
@@ -94,9 +168,11 @@ def test_parallel_map_compiles_in_the_helpers_from_an_empty_kernel_cache(tmp_pat
     # helpers import it again before their initializer runs
     (tmp_path / "main.py").write_text(textwrap.dedent(f"""
         import coldtask
-        from training.pool import pool_map
+        from training.pool import pool_map, start_helpers
 
         if __name__ == "__main__":
+            for start in start_helpers(2, {method!r}):  # the helper has started: it plays tasks too
+                start.result(timeout=120)
             rows = pool_map(coldtask.task, list(range(1, 13)), workers=2, progress=False, desc="",
                             start_method={method!r})
             print(len({{pid for pid, _ in rows}}), [value for _, value in rows])

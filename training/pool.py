@@ -1,16 +1,20 @@
 """The process pool of every parallel command: the calling process works, helpers that start once
 and stay.
 
-Each ``lawn`` command that plays episodes in parallel (``evaluate``, ``benchmark``, the suite,
-``gap``, ``figures``, ``zoo``) maps independent tasks over ``workers`` processes: this one and
-``workers - 1`` helpers (:func:`pool_map`). The helpers are ``spawn`` workers by default (fresh
+``lawn evaluate``, ``benchmark`` (the suite too), ``gap`` and ``zoo`` map independent tasks over
+``workers`` processes: this one and ``workers - 1`` helpers (:func:`pool_map`). (``lawn sweep``,
+``figures`` and ``train --seeds`` stream rows from ``workers`` processes of a :func:`worker_pool` while
+this one writes them.) The helpers are ``spawn`` workers by default (fresh
 interpreters, safe with torch and OpenMP thread pools; ``LAWN_START_METHOD`` or ``start_method=``
 picks ``fork`` or ``forkserver`` where the platform has them). Starting one costs an interpreter,
 the imports and the loading of numba's kernel cache (about two seconds; from an empty cache, the
-compilation): this process starts on the tasks at once and each helper joins when it is ready, so a
-short command pays nothing for a helper that is still starting, and the pool stays for the next
-batch (:func:`shared_pool`; the suite maps six), shut down when the process exits. A command can
-start its helpers before its own imports and set-up (:func:`start_helpers`).
+compilation): this process starts on the tasks at once and a helper gets tasks only once it has
+started, so a short command pays nothing for a helper that is still starting; each chunk a helper
+returns hands it the next at once, whatever this process is playing. The pool stays for the next
+batch (:func:`shared_pool`; the suite maps six) and is shut down when the process exits. A command
+starts its helpers before its own imports and set-up (:func:`start_helpers`), and ends them at once
+when it fails before its map (:func:`stop_helpers`). A helper that dies while it holds tasks (killed,
+out of memory, a crash in native code) fails the map with :class:`HelperDied`.
 
 Every process of a map runs each numerical library on one thread (:func:`single_threaded`): the
 episodes are the parallelism. An OpenBLAS or OpenMP pool per process would start as many threads as
@@ -33,15 +37,16 @@ from __future__ import annotations
 import atexit
 import multiprocessing
 import os
+import threading
 from collections import deque
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable
 
-__all__ = ["worker_pool", "shared_pool", "start_helpers", "shutdown_shared_pool", "pool_map", "single_threaded",
+__all__ = ["worker_pool", "shared_pool", "start_helpers", "stop_helpers", "shutdown_shared_pool", "HelperDied", "pool_map", "single_threaded",
            "chunk_size", "resolve_start_method"]
 
-_SHARED: dict[str, Any] = {"pool": None, "helpers": 0, "pid": 0, "method": None}
+_SHARED: dict[str, Any] = {"pool": None, "helpers": 0, "pid": 0, "method": None, "starts": []}
 
 #: The environment variable that picks the helpers' start method (default ``spawn``).
 START_METHOD_VARIABLE = "LAWN_START_METHOD"
@@ -122,7 +127,7 @@ def shared_pool(helpers: int, start_method: str | None = None) -> ProcessPoolExe
     method = resolve_start_method(start_method)
     pool = _SHARED["pool"]
     if pool is not None and _SHARED["pid"] != os.getpid():  # a forked child: the parent's pool is not its own
-        _SHARED.update(pool=None, helpers=0, pid=0, method=None)
+        _SHARED.update(pool=None, helpers=0, pid=0, method=None, starts=[])
         pool = None
     if pool is not None and (_SHARED["helpers"] != helpers or _SHARED["method"] != method
                              or getattr(pool, "_broken", False)):
@@ -130,7 +135,7 @@ def shared_pool(helpers: int, start_method: str | None = None) -> ProcessPoolExe
         pool = None
     if pool is None:
         pool = worker_pool(helpers, method)
-        _SHARED.update(pool=pool, helpers=helpers, pid=os.getpid(), method=method)
+        _SHARED.update(pool=pool, helpers=helpers, pid=os.getpid(), method=method, starts=[])
     return pool
 
 
@@ -138,17 +143,35 @@ def start_helpers(workers: int, start_method: str | None = None) -> list[Future]
     """Start the ``workers - 1`` helpers of a later :func:`pool_map` now, in the background (each
     imports lawn and loads its kernels while this process goes on): a command calls it before its own
     set-up. Returns a future per helper start (its result: a process id, once a helper has started);
-    nothing for ``workers <= 1`` or inside a worker."""
+    nothing for ``workers <= 1`` or inside a worker. Started once per pool: a later call returns the
+    same futures."""
     if workers <= 1 or multiprocessing.parent_process() is not None:
         return []
     pool = shared_pool(workers - 1, start_method)
-    return [pool.submit(_ready) for _ in range(workers - 1)]  # spawn workers start on demand: a small task each
+    if not _SHARED["starts"]:  # spawn workers start on demand: a small task each
+        _SHARED["starts"] = [pool.submit(_ready) for _ in range(workers - 1)]
+    return list(_SHARED["starts"])
+
+
+def stop_helpers() -> None:
+    """End this process's helpers at once, whatever they are doing (a command that fails before its
+    map does not wait for helpers still starting)."""
+    pool, owner = _SHARED["pool"], _SHARED["pid"]
+    _SHARED.update(pool=None, helpers=0, pid=0, method=None, starts=[])
+    if pool is None or owner != os.getpid():
+        return
+    children = multiprocessing.active_children()
+    for child in children:
+        child.terminate()
+    for child in children:
+        child.join(timeout=5)
+    pool.shutdown(wait=False, cancel_futures=True)
 
 
 def shutdown_shared_pool() -> None:
     """Stop the persistent pool's workers (at exit, or to start afresh)."""
     pool, owner = _SHARED["pool"], _SHARED["pid"]
-    _SHARED.update(pool=None, helpers=0, pid=0, method=None)
+    _SHARED.update(pool=None, helpers=0, pid=0, method=None, starts=[])
     if pool is not None and owner == os.getpid():
         pool.shutdown(wait=True, cancel_futures=True)
 
@@ -190,54 +213,82 @@ def pool_map(fn: Callable[[Any], Any], tasks: list, workers: int, progress: bool
         bar.close()
 
 
+class HelperDied(RuntimeError):
+    """A helper process ended while it held tasks (killed, out of memory, a crash in native code)."""
+
+
 def _map_with_helpers(fn: Callable[[Any], Any], tasks: list, workers: int, bar, start_method: str | None) -> list:
+    """The map of :func:`pool_map` over this process and its helpers. A helper gets tasks only once it
+    has started (its start future is done), at most two chunks at a time; each chunk that comes back
+    hands the next one out at once (from the pool's result thread), so no helper waits for this
+    process's task. This process plays the remaining tasks from the end, one at a time, then waits
+    only for the chunks the helpers hold: a short map, or one whose helpers are still starting, is
+    played here alone."""
     from threadpoolctl import threadpool_limits
 
-    helpers = workers - 1
+    starts = start_helpers(workers, start_method)
+    pool = _SHARED["pool"]
+    lock = threading.RLock()  # a callback may run in the thread that holds it (a future already done)
+    returned = threading.Condition(lock)
     pending = deque(range(len(tasks)))  # task indices not yet handed out, in order
     results: list[Any] = [None] * len(tasks)
     in_flight: dict[Future, list[int]] = {}
-    pool = shared_pool(helpers, start_method)
-    restarted = False
+    failure: list[BaseException] = []
+
+    def helper_died(error: BaseException, chunk: list[int]) -> HelperDied:
+        return HelperDied(f"a helper process ended while it held tasks {chunk[0]}..{chunk[-1]} of this map ({error}); "
+                          "rerun with --workers 1 (workers=1) to play them in this process and see what fails")
 
     def hand_out() -> None:
-        nonlocal pool, restarted
-        while pending and len(in_flight) < 2 * helpers:
-            size = chunk_size(len(pending), workers)  # shrinking with the work left: short tails
-            chunk = [pending.popleft() for _ in range(min(size, len(pending)))]
-            try:
-                future = pool.submit(_run_chunk, fn, [tasks[i] for i in chunk])
-            except BrokenProcessPool:  # a helper died since the last batch: start afresh once
-                if restarted:
-                    raise
-                restarted = True
-                shutdown_shared_pool()
-                pool = shared_pool(helpers, start_method)
-                future = pool.submit(_run_chunk, fn, [tasks[i] for i in chunk])
-            in_flight[future] = chunk
+        with lock:
+            ready = sum(1 for f in starts if f.done() and not f.cancelled() and f.exception() is None)
+            while pending and not failure and len(in_flight) < 2 * ready:
+                size = chunk_size(len(pending), workers)  # shrinking with the work left: short tails
+                chunk = [pending.popleft() for _ in range(min(size, len(pending)))]
+                try:
+                    future = pool.submit(_run_chunk, fn, [tasks[i] for i in chunk])
+                except BrokenProcessPool as exc:
+                    failure.append(helper_died(exc, chunk))
+                    return
+                in_flight[future] = chunk
+                future.add_done_callback(finished)
 
-    def collect(futures) -> None:
-        for future in futures:
-            chunk = in_flight.pop(future)
-            for i, row in zip(chunk, future.result()):
-                results[i] = row
-            bar.update(len(chunk))
+    def finished(future: Future) -> None:  # in the pool's result thread (or this one, for a done future)
+        with lock:
+            chunk = in_flight.pop(future, None)
+            if chunk is not None and not future.cancelled():
+                error = future.exception()
+                if error is None:
+                    for i, row in zip(chunk, future.result()):
+                        results[i] = row
+                    bar.update(len(chunk))
+                    hand_out()
+                else:
+                    failure.append(helper_died(error, chunk) if isinstance(error, BrokenProcessPool) else error)
+            returned.notify_all()
 
+    for start in starts:  # a helper that becomes ready takes its first chunks at once
+        start.add_done_callback(lambda _: hand_out())
     try:
         with threadpool_limits(1):  # this process's tasks on one thread, as the helpers'
-            hand_out()
-            while pending:
-                i = pending.pop()  # this process plays from the end: the helpers' chunks stay in order
+            while True:
+                with lock:
+                    hand_out()
+                    if failure or not pending:
+                        break
+                    i = pending.pop()  # this process plays from the end: the helpers' chunks stay in order
                 results[i] = fn(tasks[i])
                 bar.update()
-                collect([f for f in list(in_flight) if f.done()])
-                hand_out()
-        while in_flight:
-            done, _ = wait(list(in_flight), return_when=FIRST_COMPLETED)
-            collect(done)
-            hand_out()
+        with lock:
+            while in_flight and not failure:
+                returned.wait()
+        if failure:
+            raise failure[0]
         return results
-    except BaseException:
-        for future in in_flight:
-            future.cancel()
+    except BaseException as exc:
+        with lock:  # nothing more is handed out; what a helper has not begun is dropped
+            failure.append(exc)
+            pending.clear()
+            for future in list(in_flight):
+                future.cancel()
         raise

@@ -45,9 +45,10 @@ COMMAND_HELP = {
     "gap": "per-slot optimality gap of planners against the global reference",
 }
 
-#: The commands that play episodes over ``--workers`` processes: their helpers start before anything
-#: else (:func:`_start_helpers_early`).
-_PARALLEL = ("evaluate", "benchmark", "gap", "figures")
+#: The commands that map episodes over ``--workers`` processes (training/pool.py, ``pool_map``): their
+#: helpers start before anything else (:func:`_start_helpers_early`). ``sweep``, ``figures`` and
+#: ``train --seeds`` stream rows from a pool of their own.
+_PARALLEL = ("evaluate", "benchmark", "gap")
 
 
 def __getattr__(name: str):
@@ -129,25 +130,41 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split("\n")) if str(exc) else type(exc).__name__
 
 
+def _early_workers(argv: list[str]) -> int:
+    """The ``--workers`` of a parallel command read from ``argv`` before the parser exists (argparse's
+    abbreviations included, its default where absent); 0 when it is not one or the reading is unclear
+    (help, a value that is no count): the parser then has its say."""
+    words = [w for w in argv if w != "--debug"]
+    if not words or words[0] not in _PARALLEL or "-h" in words or "--help" in words:
+        return 0
+    workers = min(2, os.cpu_count() or 1)
+    for i, word in enumerate(words):
+        flag, eq, value = word.partition("=")
+        if len(flag) < 4 or not "--workers".startswith(flag):  # --workers, --work, --wo (argparse abbreviations)
+            continue
+        value = value if eq else (words[i + 1] if i + 1 < len(words) else "")
+        if not (value.isascii() and value.isdecimal()):
+            return 0
+        workers = int(value)
+    return workers
+
+
 def _start_helpers_early(argv: list[str]) -> None:
     """The helper processes of a parallel command (``--workers``, default 2 where there are two
     cores) start importing lawn now, while this process imports it and builds the parser: the command
-    then finds them ready (training/pool.py). A reading of ``argv`` before the parser exists; when it
-    is unclear (help, a bad value), nothing starts and the parser has its say."""
-    words = [w for w in argv if w != "--debug"]
-    if not words or words[0] not in _PARALLEL or "-h" in words or "--help" in words:
+    then finds them ready (training/pool.py). Nothing starts when the reading of ``argv`` is unclear
+    or a helper cannot start (the command then reports it as it would without the early start)."""
+    workers = _early_workers(argv)
+    if workers <= 1:
         return
-    workers = min(2, os.cpu_count() or 1)
-    for i, word in enumerate(words):
-        value = word.partition("=")[2] if word.startswith("--workers=") else \
-            (words[i + 1] if word == "--workers" and i + 1 < len(words) else None)
-        if value is not None:
-            if not value.isdigit():
-                return
-            workers = int(value)
     from ..pool import start_helpers
 
-    start_helpers(workers)
+    try:
+        start_helpers(workers)
+    except Exception:  # e.g. a bad LAWN_START_METHOD: the map raises it again, inside main's error handling
+        from ..pool import stop_helpers
+
+        stop_helpers()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -155,11 +172,25 @@ def main(argv: list[str] | None = None) -> int:
     extra, 130: interrupted, 1: anything else, which is a bug); ``--debug`` shows the traceback."""
     if argv is None:  # the command line itself (a call from Python starts nothing early)
         _start_helpers_early(sys.argv[1:])
+    code = 1
+    try:
+        code = _run(argv)
+        return code
+    finally:
+        if code != 0 and "training.pool" in sys.modules:  # a failed command does not wait for its helpers
+            from ..pool import stop_helpers
+
+            stop_helpers()
+
+
+def _run(argv: list[str] | None) -> int:
     words = sys.argv[1:] if argv is None else argv
     if not any(w in COMMAND_NAMES for w in words if not w.startswith("-")):  # help, version or a mistyped command
         _light_parser().parse_args(argv)  # exits, with the help, the version or the error
     args = build_parser().parse_args(argv)
     from agents.errors import MissingExtra
+
+    from ..pool import HelperDied
 
     try:
         _check_out(args.command, getattr(args, "out", None))
@@ -173,6 +204,9 @@ def main(argv: list[str] | None = None) -> int:
         if isinstance(exc, MissingExtra):
             print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
             return 3
+        if isinstance(exc, HelperDied):  # killed, out of memory, a crash in native code: said, not a traceback
+            print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
+            return 1
         if isinstance(exc, (ValueError, TypeError, OSError)):  # bad values, names, files: one clear line
             print(f"lawn {args.command}: error: {_one_line(exc)}", file=sys.stderr)
             return 2
