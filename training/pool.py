@@ -218,77 +218,90 @@ class HelperDied(RuntimeError):
 
 
 def _map_with_helpers(fn: Callable[[Any], Any], tasks: list, workers: int, bar, start_method: str | None) -> list:
-    """The map of :func:`pool_map` over this process and its helpers. A helper gets tasks only once it
-    has started (its start future is done), at most two chunks at a time; each chunk that comes back
-    hands the next one out at once (from the pool's result thread), so no helper waits for this
+    return _HelperMap(fn, tasks, workers, bar, start_method).run()
+
+
+class _HelperMap:
+    """One map of :func:`pool_map` over this process and its helpers. A helper gets tasks only once
+    it has started (its start future is done), at most two chunks at a time; each chunk that comes
+    back hands the next one out at once (from the pool's result thread), so no helper waits for this
     process's task. This process plays the remaining tasks from the end, one at a time, then waits
     only for the chunks the helpers hold: a short map, or one whose helpers are still starting, is
     played here alone."""
-    from threadpoolctl import threadpool_limits
 
-    starts = start_helpers(workers, start_method)
-    pool = _SHARED["pool"]
-    lock = threading.RLock()  # a callback may run in the thread that holds it (a future already done)
-    returned = threading.Condition(lock)
-    pending = deque(range(len(tasks)))  # task indices not yet handed out, in order
-    results: list[Any] = [None] * len(tasks)
-    in_flight: dict[Future, list[int]] = {}
-    failure: list[BaseException] = []
+    def __init__(self, fn: Callable[[Any], Any], tasks: list, workers: int, bar, start_method: str | None):
+        self.fn, self.tasks, self.workers, self.bar = fn, tasks, workers, bar
+        self.starts = start_helpers(workers, start_method)
+        self.pool = _SHARED["pool"]
+        self.lock = threading.RLock()  # a callback may run in the thread that holds it (a future already done)
+        self.returned = threading.Condition(self.lock)
+        self.pending = deque(range(len(tasks)))  # task indices not yet handed out, in order
+        self.results: list[Any] = [None] * len(tasks)
+        self.in_flight: dict[Future, list[int]] = {}
+        self.failure: list[BaseException] = []
 
-    def helper_died(error: BaseException, chunk: list[int]) -> HelperDied:
+    @staticmethod
+    def died(error: BaseException, chunk: list[int]) -> HelperDied:
         return HelperDied(f"a helper process ended while it held tasks {chunk[0]}..{chunk[-1]} of this map ({error}); "
                           "rerun with --workers 1 (workers=1) to play them in this process and see what fails")
 
-    def hand_out() -> None:
-        with lock:
-            ready = sum(1 for f in starts if f.done() and not f.cancelled() and f.exception() is None)
-            while pending and not failure and len(in_flight) < 2 * ready:
-                size = chunk_size(len(pending), workers)  # shrinking with the work left: short tails
-                chunk = [pending.popleft() for _ in range(min(size, len(pending)))]
+    def hand_out(self) -> None:
+        with self.lock:
+            ready = sum(1 for f in self.starts if f.done() and not f.cancelled() and f.exception() is None)
+            while self.pending and not self.failure and len(self.in_flight) < 2 * ready:
+                size = chunk_size(len(self.pending), self.workers)  # shrinking with the work left: short tails
+                chunk = [self.pending.popleft() for _ in range(min(size, len(self.pending)))]
                 try:
-                    future = pool.submit(_run_chunk, fn, [tasks[i] for i in chunk])
+                    future = self.pool.submit(_run_chunk, self.fn, [self.tasks[i] for i in chunk])
                 except BrokenProcessPool as exc:
-                    failure.append(helper_died(exc, chunk))
+                    self.failure.append(self.died(exc, chunk))
                     return
-                in_flight[future] = chunk
-                future.add_done_callback(finished)
+                self.in_flight[future] = chunk
+                future.add_done_callback(self.finished)
 
-    def finished(future: Future) -> None:  # in the pool's result thread (or this one, for a done future)
-        with lock:
-            chunk = in_flight.pop(future, None)
+    def finished(self, future: Future) -> None:  # in the pool's result thread (or this one, for a done future)
+        with self.lock:
+            chunk = self.in_flight.pop(future, None)
             if chunk is not None and not future.cancelled():
                 error = future.exception()
                 if error is None:
                     for i, row in zip(chunk, future.result()):
-                        results[i] = row
-                    bar.update(len(chunk))
-                    hand_out()
+                        self.results[i] = row
+                    self.bar.update(len(chunk))
+                    self.hand_out()
                 else:
-                    failure.append(helper_died(error, chunk) if isinstance(error, BrokenProcessPool) else error)
-            returned.notify_all()
+                    self.failure.append(self.died(error, chunk) if isinstance(error, BrokenProcessPool) else error)
+            self.returned.notify_all()
 
-    for start in starts:  # a helper that becomes ready takes its first chunks at once
-        start.add_done_callback(lambda _: hand_out())
-    try:
-        with threadpool_limits(1):  # this process's tasks on one thread, as the helpers'
-            while True:
-                with lock:
-                    hand_out()
-                    if failure or not pending:
-                        break
-                    i = pending.pop()  # this process plays from the end: the helpers' chunks stay in order
-                results[i] = fn(tasks[i])
-                bar.update()
-        with lock:
-            while in_flight and not failure:
-                returned.wait()
-        if failure:
-            raise failure[0]
-        return results
-    except BaseException as exc:
-        with lock:  # nothing more is handed out; what a helper has not begun is dropped
-            failure.append(exc)
-            pending.clear()
-            for future in list(in_flight):
-                future.cancel()
-        raise
+    def run(self) -> list:
+        from threadpoolctl import threadpool_limits
+
+        for start in self.starts:  # a helper that becomes ready takes its first chunks at once
+            start.add_done_callback(lambda _: self.hand_out())
+        try:
+            with threadpool_limits(1):  # this process's tasks on one thread, as the helpers'
+                while (i := self.next_here()) is not None:
+                    self.results[i] = self.fn(self.tasks[i])
+                    self.bar.update()
+            with self.lock:
+                while self.in_flight and not self.failure:
+                    self.returned.wait()
+            if self.failure:
+                raise self.failure[0]
+            return self.results
+        except BaseException as exc:
+            with self.lock:  # nothing more is handed out; what a helper has not begun is dropped
+                self.failure.append(exc)
+                self.pending.clear()
+                for future in list(self.in_flight):
+                    future.cancel()
+            raise
+
+    def next_here(self) -> int | None:
+        """The next task this process plays (from the end: the helpers' chunks stay in order), after
+        handing out what the started helpers can take; None when nothing is left or a map failed."""
+        with self.lock:
+            self.hand_out()
+            if self.failure or not self.pending:
+                return None
+            return self.pending.pop()
