@@ -160,12 +160,14 @@ def stop_helpers() -> None:
     _SHARED.update(pool=None, helpers=0, pid=0, method=None, starts=[])
     if pool is None or owner != os.getpid():
         return
-    children = multiprocessing.active_children()
-    for child in children:
-        child.terminate()
-    for child in children:
-        child.join(timeout=5)
+    helpers = list((getattr(pool, "_processes", None) or {}).values())
+    for helper in helpers:
+        helper.terminate()
     pool.shutdown(wait=False, cancel_futures=True)
+    for helper in helpers:  # one that outlives SIGTERM gets SIGKILL (a helper already reaped by the
+        helper.join(timeout=5)  # pool's manager thread may still read as alive here: kill() is a no-op)
+        if helper.is_alive():
+            helper.kill()
 
 
 def shutdown_shared_pool() -> None:
