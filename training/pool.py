@@ -160,14 +160,12 @@ def stop_helpers() -> None:
     _SHARED.update(pool=None, helpers=0, pid=0, method=None, starts=[])
     if pool is None or owner != os.getpid():
         return
-    helpers = list((getattr(pool, "_processes", None) or {}).values())
-    for helper in helpers:
-        helper.terminate()
+    for helper in list((getattr(pool, "_processes", None) or {}).values()):  # this pool's, no other child
+        helper.kill()  # SIGKILL: a helper holds nothing to clean up, and none outlives it
+    manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
-    for helper in helpers:  # one that outlives SIGTERM gets SIGKILL (a helper already reaped by the
-        helper.join(timeout=5)  # pool's manager thread may still read as alive here: kill() is a no-op)
-        if helper.is_alive():
-            helper.kill()
+    if manager is not None:  # the pool's manager thread sees them die and reaps them: the one thread
+        manager.join(timeout=10)  # that waits on them (two waiting threads race for the exit status)
 
 
 def shutdown_shared_pool() -> None:
