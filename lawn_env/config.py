@@ -131,6 +131,12 @@ class ControlConfig:
     accel_increment_max_mps2: Annotated[float, Field(ge=0.001)] = 1.0
     """Increment bound per axis per slot, m/s^2, at least 0.001 and at most 2 a_max (actions are
     scaled by it) *(decided)*."""
+    law: Literal["paper", "delivery"] = "paper"
+    """The increments the AGVs of ``lawn/Comm-v0`` apply (the MPC the environment solves for them;
+    ``lawn/Joint-v0``'s actions carry the increments): ``"paper"``, the paper's QP P3 at the link's
+    planned success probability psi (its expected-trajectory cost scales the command with psi);
+    ``"delivery"``, the same QP at psi = 1, the command planned as if it arrives (MODEL.md §4,
+    "Planning under delivery": a lost command is seen at the next slot and replanned) *(decided)*."""
 
     @model_validator(mode="after")
     def _check_weights(self) -> "ControlConfig":

@@ -130,14 +130,35 @@ def augmented_matrices(slot_s: float) -> tuple[np.ndarray, np.ndarray]:
     return a_aug, b_aug
 
 
-def terminal_weight(a_aug: np.ndarray, b_aug: np.ndarray, q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+def terminal_weight(a_aug: np.ndarray, b_aug: np.ndarray, q1: np.ndarray, q2: np.ndarray,
+                    success: float = 1.0) -> np.ndarray:
     """Q3: the stabilizing solution of the discrete algebraic Riccati equation (paper eq. for Q3)
 
     Q3 = Q1 + A~' Q3 A~ - A~' Q3 B~ (Q2 + B~' Q3 B~)^-1 B~' Q3 A~.
+
+    With ``success`` = psi < 1, the modified Riccati equation of control over a lossy link (every
+    command delivered with probability psi, a lost one seen and replanned: Schenato et al., Proc.
+    IEEE 2007), ``Q3 = Q1 + A~'Q3A~ - psi A~'Q3B~ (Q2 + B~'Q3B~)^-1 B~'Q3A~``: the cost-to-go of the
+    certainty-equivalent LQR when each command arrives with probability psi (MODEL.md §4, "Planning
+    under delivery"), solved by fixed-point iteration from the DARE's solution.
     """
+    if not 0.0 < success <= 1.0:
+        raise ValueError(f"success={success!r}: the terminal weight's success probability must lie in (0, 1]")
     q3 = linalg.solve_discrete_are(a_aug, b_aug, q1, q2)
     if not np.all(np.isfinite(q3)):
         raise ValueError("the discrete Riccati equation has no finite solution for these weights")
+    if success < 1.0:
+        for _ in range(100_000):
+            gain = np.linalg.solve(q2 + b_aug.T @ q3 @ b_aug, b_aug.T @ q3 @ a_aug)
+            nxt = q1 + a_aug.T @ q3 @ a_aug - success * (a_aug.T @ q3 @ b_aug) @ gain
+            nxt = 0.5 * (nxt + nxt.T)
+            done = np.abs(nxt - q3).max() <= 1e-12 * np.abs(nxt).max()
+            q3 = nxt
+            if done:
+                break
+        else:
+            raise ValueError(f"success={success!r}: the modified Riccati equation does not converge (below the "
+                             "critical arrival probability of these dynamics)")
     return 0.5 * (q3 + q3.T)
 
 
@@ -211,16 +232,19 @@ class PredictionModel:
     q4c: np.ndarray  # Q4 C, (6(N_p+1), 6)
     increment_sum: np.ndarray  # T, (2N_p, 2N_p)
     q1_tiled: np.ndarray  # diag(Q1) repeated N_p times: Q4's diagonal blocks, (6 N_p,)
-    key: tuple  # (slot_s, horizon, q1_diag, q2_diag): what the model is built from, its cache key
+    key: tuple  # (slot_s, horizon, q1_diag, q2_diag[, terminal_success < 1]): what it is built from, its cache key
 
     @classmethod
-    def from_config(cls, config: ScenarioSettings) -> PredictionModel:
+    def from_config(cls, config: ScenarioSettings, terminal_success: float = 1.0) -> PredictionModel:
+        """The model of ``config``; ``terminal_success`` < 1 takes the terminal weight of the modified
+        Riccati equation at that success probability (:func:`terminal_weight`)."""
         ctl = config.control
-        return _build_model(float(config.slot_s), int(ctl.horizon), tuple(ctl.q1_diag), tuple(ctl.q2_diag))
+        return _build_model(float(config.slot_s), int(ctl.horizon), tuple(ctl.q1_diag), tuple(ctl.q2_diag),
+                            float(terminal_success))
 
     @classmethod
     def from_key(cls, key: tuple) -> PredictionModel:
-        """The model built from :attr:`key`'s values (slot_s, horizon, q1_diag, q2_diag)."""
+        """The model built from :attr:`key`'s values (slot_s, horizon, q1_diag, q2_diag[, terminal_success])."""
         return _build_model(*key)
 
     @property
@@ -256,11 +280,12 @@ class PredictionModel:
 
 
 @functools.lru_cache(maxsize=32)
-def _build_model(slot_s: float, horizon: int, q1_diag: tuple, q2_diag: tuple) -> PredictionModel:
+def _build_model(slot_s: float, horizon: int, q1_diag: tuple, q2_diag: tuple,
+                 terminal_success: float = 1.0) -> PredictionModel:
     a_aug, b_aug = augmented_matrices(slot_s)
     q1 = np.diag(np.asarray(q1_diag, dtype=float))
     q2 = np.diag(np.asarray(q2_diag, dtype=float))
-    q3 = terminal_weight(a_aug, b_aug, q1, q2)
+    q3 = terminal_weight(a_aug, b_aug, q1, q2, terminal_success)
     c, f = prediction_matrices(a_aug, b_aug, horizon)
     q4, q5 = horizon_weights(q1, q2, q3, horizon)
     ftq4 = f.T @ q4
@@ -271,7 +296,8 @@ def _build_model(slot_s: float, horizon: int, q1_diag: tuple, q2_diag: tuple) ->
     )
     for arr in arrays.values():
         arr.setflags(write=False)
-    return PredictionModel(slot_s=slot_s, horizon=horizon, key=(slot_s, horizon, q1_diag, q2_diag), **arrays)
+    key = (slot_s, horizon, q1_diag, q2_diag) + (() if terminal_success == 1.0 else (terminal_success,))
+    return PredictionModel(slot_s=slot_s, horizon=horizon, key=key, **arrays)
 
 
 def step_augmented(x_aug: np.ndarray, du: np.ndarray, a_aug: np.ndarray, b_aug: np.ndarray) -> np.ndarray:

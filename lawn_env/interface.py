@@ -230,6 +230,7 @@ class AnchoredActions(ActionCodec):
         self._reach = config.drone_reach_m
         self._link = LinkParams.from_config(config, planning=True)
         self._stake = interface.power_anchor == "stake"
+        self._delivery = config.control.law == "delivery"  # the anchor MPC plans as the Comm AGVs do
         self._lqr_model = None
         lqr = role == "joint" and interface.increment_anchor == "lqr"
         if (role == "joint" and not lqr) or self._stake:  # the residual's controller, and the stakes
@@ -305,6 +306,7 @@ class AnchoredActions(ActionCodec):
         residual). ``increment_anchor="mpc"``: the outage-aware MPC's first increment at each link's
         planned success probability (with the stake prior it starts from this slot's stake solve's
         working sets: the same QPs at psi = 1, closer to these than the previous slot's).
+        Under ``control.law="delivery"`` the MPC plans at psi = 1, as the Comm environment's AGVs do.
         ``"lqr"``: ``Delta-u_ref - K (x~ - x~_ref)`` saturated so that ``|u| <= a_max``, the first
         increment of the LQR baseline's rollout."""
         if self._lqr_model is not None:
@@ -315,7 +317,7 @@ class AnchoredActions(ActionCodec):
             free = feedforward - (x_aug - reference[..., 0, :]) @ self._lqr_model.lqr_gain.T
             return saturate_increment(x_aug[..., ACCELERATION], free, self._accel_max)
         start = "stakes" if self._stake else None
-        psi = self._link.success_sq(power_w, d2)
+        psi = np.ones(d2.shape) if self._delivery else self._link.success_sq(power_w, d2)
         return self.mpc.solve_prepared(data, psi, start_from=start).increments[..., 0, :].copy()
 
     # ------------------------------------------------------------------ encode

@@ -281,9 +281,11 @@ class OutageAwareMPC:
             self.backend = self._make_backend(self.backend_name)
 
     @classmethod
-    def from_config(cls, config: ScenarioConfig, backend: str = DEFAULT_BACKEND) -> OutageAwareMPC:
+    def from_config(cls, config: ScenarioConfig, backend: str = DEFAULT_BACKEND,
+                    terminal_success: float = 1.0) -> OutageAwareMPC:
+        """The MPC of ``config`` (``terminal_success``: :meth:`PredictionModel.from_config`)."""
         ctl = config.control
-        return cls(PredictionModel.from_config(config), config.num_agvs, ctl.accel_max_mps2,
+        return cls(PredictionModel.from_config(config, terminal_success), config.num_agvs, ctl.accel_max_mps2,
                    ctl.accel_increment_max_mps2, backend=backend, control_period=planning_period(config))
 
     def reset(self, which: np.ndarray | None = None) -> None:
@@ -447,6 +449,35 @@ class OutageAwareMPC:
         return np.maximum(data.constant - delivered, 0.0)
 
 
+    def lost_command(self, data: SlotData) -> SlotData:
+        """The slot's QPs with the next command's increment held at zero: the command lost, the AGV
+        keeping u[n-1] until the command after it (MODEL.md §4, "Planning under delivery"). The next
+        command is the horizon's first increment that may be non-zero (:func:`command_mask`; the
+        first with commands every slot). Its phases are ``P .. 2P-1`` of the compiled pencils."""
+        n, p = self._n, self.control_period
+        phase = np.asarray(data.phase, dtype=np.int64)
+        first = (p - phase) % p  # the horizon index of the next command: 0 on a command slot
+        lower, upper = data.lower.copy(), data.upper.copy()
+        held = np.zeros(data.lower.shape[:-1] + (2 * n,), dtype=bool)
+        axes = 2 * np.broadcast_to(first[..., None], data.constant.shape)[..., None] + np.arange(2)
+        np.put_along_axis(held, axes, True, axis=-1)
+        lower[held], upper[held] = 0.0, 0.0
+        lost_phase = int(phase) + p if phase.ndim == 0 else phase + p
+        return SlotData(data.residual, data.linear, data.constant, lower, upper, lost_phase)
+
+    def delivery_values(self, data: SlotData) -> tuple[MPCSolution, np.ndarray]:
+        """The two MPC values of each AGV's next command (any leading batch axes, (..., K)): the
+        solution at psi = 1 (every planned increment delivered: its increments and ``value`` V^del)
+        and V^lost, the same problem's optimum with the next command held at zero (:meth:`lost_command`).
+        The expected cost of a command sent with success probability psi is
+        ``psi V^del + (1 - psi) V^lost`` (MODEL.md §4, "Planning under delivery"); ``V^lost - V^del``
+        >= 0 is what its delivery is worth."""
+        ones = np.ones(data.constant.shape)
+        delivered = self.solve_prepared(data, ones, warm_key="delivered")
+        lost = self.solve_prepared(self.lost_command(data), ones, warm_key="lost")
+        return delivered, np.maximum(lost.value, delivered.value)
+
+
 def _writable(arr: np.ndarray) -> np.ndarray:
     """C-contiguous and writable (the compiled kernel and DAQP take such buffers; no copy when it is)."""
     return np.require(arr, dtype=float, requirements=("C", "W"))
@@ -459,4 +490,7 @@ def _pencils(model_key: tuple, period: int) -> AxisPencils:
     values and shared."""
     model = PredictionModel.from_key(model_key)
     masks = [command_mask(phase, model.horizon, period) for phase in range(period)]
-    return AxisPencils.build(2.0 * model.q5, 2.0 * model.ftq4f, model.horizon, masks)
+    lost = [mask.copy() for mask in masks]  # phases P .. 2P-1: the next command held (lost_command)
+    for phase, mask in enumerate(lost):
+        mask[(period - phase) % period] = False
+    return AxisPencils.build(2.0 * model.q5, 2.0 * model.ftq4f, model.horizon, masks + lost)

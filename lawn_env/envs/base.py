@@ -70,8 +70,9 @@ class CommRole:
     name = "comm"
     info_keys = COMM_INFO_KEYS
 
-    def __init__(self, mpc: OutageAwareMPC):
+    def __init__(self, mpc: OutageAwareMPC, law: str = "paper"):
         self.mpc = mpc
+        self.law = law  # control.law: the QP at the planned psi ("paper") or at psi = 1 ("delivery")
         self.last_solve_time_s = float("nan")
 
     def reset(self, which: np.ndarray | None = None) -> None:
@@ -79,7 +80,8 @@ class CommRole:
 
     def decide(self, sim: Simulation, decision: Decisions, windows: np.ndarray | None) -> tuple[Decisions, dict]:
         psi = link_success(sim.x_obs, decision.drone_next, decision.power_w, sim.params.planning_link)
-        solution = self.mpc.solve(sim.x_obs, windows, psi, sim.slot)
+        planned = psi if self.law == "paper" else np.ones_like(psi)  # control.law: as if delivered
+        solution = self.mpc.solve(sim.x_obs, windows, planned, sim.slot)
         self.last_solve_time_s = solution.solve_time_s  # not in info: infos must be deterministic
         extra = {"mpc_iterations": solution.iterations.astype(np.int64),
                  "mpc_fallbacks": np.count_nonzero(solution.status, axis=-1).astype(np.int64),
@@ -116,7 +118,7 @@ class Engine:
         mpc = None
         if role == "comm":  # one MPC per env: the anchor's when it has one
             mpc = self.actions.mpc or OutageAwareMPC.from_config(config, backend=qp_backend)
-        self.role = ROLE_TYPES[role](mpc)
+        self.role = JointRole() if role == "joint" else CommRole(mpc, config.control.law)
         self.needs_windows = role == "comm" or self.actions.needs_reference
         self.slot_table = self.layout.slot_table(self.sim.params.fixed_reference)
         self._no_termination = np.zeros(self.num_envs, dtype=bool)
