@@ -1,4 +1,5 @@
-"""Policies that drive the lawn environments: the AO-MPC expert, the paper's baselines, a
+"""Policies that drive the lawn environments: the delivery-value expert ``dv-mpc``, the paper's
+AO-MPC expert and its exact solution ``rg-mpc``, the paper's baselines, a
 scripted heuristic, and wrappers for learned policies. ``make_policy(name, config)`` builds any
 of them; ``POLICIES`` is the registry; ``rollout(env, policy, seed)`` runs one episode."""
 
@@ -7,7 +8,7 @@ from .ao import AOSettings, AOSolver, expected_cost
 from .problem import Plan
 from .base import Planner
 from .policies import BENCHMARK_POLICIES, PAPER_POLICIES, POLICIES, Policy, make_policy, policy_names
-from .reduced import GlobalPlanner, ReducedGradientPlanner
+from .reduced import DeliverySettings, DeliveryValuePlanner, GlobalPlanner, ReducedGradientPlanner, ReducedSettings
 from .rollouts import Episode, Step, rollout
 from .scripted import HeuristicPolicy
 
@@ -25,6 +26,9 @@ __all__ = [
     "PAPER_POLICIES",
     "BENCHMARK_POLICIES",
     "ReducedGradientPlanner",
+    "ReducedSettings",
+    "DeliveryValuePlanner",
+    "DeliverySettings",
     "GlobalPlanner",
     "make_policy",
     "policy_names",

@@ -23,13 +23,18 @@ Two planners use this:
   it is compared by exact Phi with the previous slot's solution and with equal power at hover,
   and the best is refined by projected gradient with Armijo backtracking and Barzilai-Borwein
   steps on the exact Phi, alternating p and q, each evaluation K warm-started QPs.
+* :class:`DeliveryValuePlanner` (``"dv-mpc"``): the same search and refinement on the objective of
+  MODEL.md §4, "Planning under delivery": a command acts only if it arrives and a lost one is seen
+  and replanned at the next slot, so the increments are the psi = 1 MPC's and AGV k's expected cost
+  is ``V_k(psi) = V_k^lost - psi w_k``, linear in psi (:class:`DeliveryProblem`): two QPs per AGV per
+  slot, then no QP in the search or the refinement.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Annotated
 
 import numba
@@ -48,7 +53,7 @@ from .problem import Plan, SlotProblem
 from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
 
 __all__ = ["ReducedProblem", "ValueTable", "ReducedSettings", "ReducedGradientPlanner", "GlobalPlanner",
-           "GlobalSettings"]
+           "GlobalSettings", "DeliveryProblem", "DeliveryValue", "DeliverySettings", "DeliveryValuePlanner"]
 
 
 @dataclass
@@ -213,6 +218,47 @@ def _hermite(grid, values, slopes, psi):  # pragma: no cover - compiled
     return out
 
 
+class DeliveryProblem(ReducedProblem):
+    """One slot's problem under delivery (MODEL.md §4, "Planning under delivery"):
+
+        Phi(p, q) = sum_k psi_k V_k^del + (1 - psi_k) V_k^lost = sum_k V_k^lost - psi_k(p_k, q) w_k,
+
+    ``V^del`` the MPC's value with every planned increment delivered (psi = 1), ``V^lost`` the same
+    with the next command held at zero (:meth:`lawn_env.mpc.OutageAwareMPC.delivery_values`) and
+    ``w = V^lost - V^del >= 0`` what delivering AGV k's command is worth. The increments are the
+    psi = 1 solution's at every (p, q). Two QPs per AGV when it is built; an evaluation after that
+    is the channel alone."""
+
+    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig):
+        super().__init__(mpc, link, snapshot, config)
+        self.delivered, self.lost = mpc.delivery_values(self.data)
+        self.worth = self.lost - self.delivered.value  # w_k >= 0
+
+    def values_at_psi(self, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray, MPCSolution]:
+        """V_k(psi_k) = V^lost - psi w and its slope -w, exactly, for psi (..., K); the solution is
+        the psi = 1 one whatever psi."""
+        psi = np.asarray(psi, dtype=float)
+        return self.lost - psi * self.worth, np.broadcast_to(-self.worth, psi.shape), self.delivered
+
+    def table(self, psi_grid: np.ndarray) -> "DeliveryValue":
+        """The exact V_k(psi) (linear: no table to interpolate)."""
+        return DeliveryValue(self.lost, self.worth)
+
+
+class DeliveryValue:
+    """V_k(psi) = V_k^lost - psi w_k for psi of shape (..., K, L) (AGVs on axis -2) or (K,): the
+    grid search's value function of :class:`DeliveryProblem`."""
+
+    def __init__(self, lost: np.ndarray, worth: np.ndarray):
+        self.lost, self.worth = lost, worth
+
+    def __call__(self, psi: np.ndarray) -> np.ndarray:
+        psi = np.asarray(psi, dtype=float)
+        if psi.ndim == 1:
+            return self.lost - psi * self.worth
+        return self.lost[:, None] - psi * self.worth[:, None]
+
+
 # ---------------------------------------------------------------------- planners
 _CFG = ConfigDict(extra="forbid", allow_inf_nan=False)
 
@@ -254,6 +300,25 @@ class GlobalSettings:
     qp_backend: str = DEFAULT_BACKEND
 
 
+@raises_config_errors(noun="setting")
+@pydantic_dataclass(frozen=True, config=_CFG)
+class DeliverySettings:
+    """Resolution and iteration budget of ``dv-mpc`` (meanings as in :class:`ReducedSettings`; no psi
+    table: its values are linear in psi). An evaluation costs no QP, so it refines longer."""
+
+    drone_spacing_m: Annotated[float, Field(gt=0)] = 1.5
+    max_drone_points: Annotated[int, Field(ge=1)] = 10_000
+    coarse_power_levels: Annotated[int, Field(ge=2)] = 12
+    keep_positions: Annotated[int, Field(ge=1)] = 4
+    power_levels: Annotated[int, Field(ge=2)] = 40
+    refine_iterations: Annotated[int, Field(ge=0)] = 8
+    terminal_success: Annotated[float, Field(gt=0, le=1)] = 1.0
+    """The MPC's terminal weight: 1, the loss-free DARE's (the paper's Q3); below 1, the modified
+    Riccati equation's at that success probability (MODEL.md §4: a refinement measured in
+    docs/experts.md, not adopted)."""
+    qp_backend: str = DEFAULT_BACKEND
+
+
 class _ReducedPlannerBase:
     settings_class = ReducedSettings
 
@@ -262,7 +327,8 @@ class _ReducedPlannerBase:
         self.settings = settings if settings is not None else self.settings_class()
         self.mpc = OutageAwareMPC.from_config(config, backend=self.settings.qp_backend)
         self.link = channel.LinkParams.from_config(config, planning=True)
-        self.psi_grid = np.linspace(0.0, 1.0, self.settings.psi_points)
+        points = getattr(self.settings, "psi_points", None)  # dv-mpc's values need no table
+        self.psi_grid = np.linspace(0.0, 1.0, points) if points is not None else None
 
     def reset(self) -> None:
         self.mpc.reset()
@@ -294,9 +360,12 @@ class ReducedGradientPlanner(_ReducedPlannerBase):
         super().reset()
         self._last = None
 
+    def _problem(self, snapshot: Snapshot) -> ReducedProblem:
+        return ReducedProblem(self.mpc, self.link, snapshot, self.config)
+
     def plan(self, snapshot: Snapshot) -> Plan:
         start = time.perf_counter()
-        problem = ReducedProblem(self.mpc, self.link, snapshot, self.config)
+        problem = self._problem(snapshot)
         k = self.config.num_agvs
         starts = {"search": self._search(problem),
                   "equal": problem.evaluate(np.full(k, problem.budget / k), problem.q_prev)}
@@ -309,6 +378,45 @@ class ReducedGradientPlanner(_ReducedPlannerBase):
         self._last = (best.power_w.copy(), best.drone_position - problem.q_prev)
         return self._plan(problem, best, start, {"start": origin,
                                                  "start_values": {n: e.phi for n, e in starts.items()}})
+
+
+class DeliveryValuePlanner(ReducedGradientPlanner):
+    """``dv-mpc``: :class:`ReducedGradientPlanner`'s search and refinement on :class:`DeliveryProblem`
+    (MODEL.md §4, "Planning under delivery"). The increments are the psi = 1 MPC's; power and the
+    drone maximise ``sum_k psi_k w_k``, the expected worth of the commands delivered.
+
+    With commands every P slots (a control period the planner knows, MODEL.md §7) the command is
+    the increment of the next command slot, held P slots, and ``w`` its worth. On a slot without a
+    command nothing is sent: the drone serves the next command, planned from where it could be by
+    then (the reach of the moves until that slot, this one included), and this slot's move heads
+    straight for it (``info["command_position"]``)."""
+
+    settings_class = DeliverySettings
+
+    def __init__(self, config: ScenarioConfig, settings: DeliverySettings | None = None):
+        super().__init__(config, settings)
+        if self.settings.terminal_success != 1.0:
+            self.mpc = OutageAwareMPC.from_config(config, backend=self.settings.qp_backend,
+                                                  terminal_success=self.settings.terminal_success)
+        self.period = self.mpc.control_period
+
+    def _moves(self, slot: int) -> int:
+        """The drone's moves until the next command goes out, the one of this slot included."""
+        return 1 + (-int(slot)) % self.period
+
+    def _problem(self, snapshot: Snapshot) -> DeliveryProblem:
+        problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config)
+        problem.reach *= self._moves(snapshot.slot)
+        return problem
+
+    def plan(self, snapshot: Snapshot) -> Plan:
+        plan = super().plan(snapshot)
+        if self._moves(snapshot.slot) == 1:
+            return plan
+        target = plan.drone_position  # where the next command goes out from: one move toward it now
+        step = project_disc_box(target, np.asarray(snapshot.drone_position, dtype=float), float(self.config.drone_reach_m),
+                                tuple(self.config.area_m))
+        return replace(plan, drone_position=step, info={**plan.info, "command_position": target})
 
 
 class GlobalPlanner(_ReducedPlannerBase):

@@ -1,0 +1,178 @@
+"""``dv-mpc``, the delivery-value expert (MODEL.md §4, "Planning under delivery"), and the AGVs' law
+``control.law``."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from agents import make_policy, rollout
+from agents.reduced import DeliveryProblem, DeliverySettings, DeliveryValuePlanner
+from lawn_env import ScenarioConfig, channel, presets
+from lawn_env.dynamics import command_mask
+from lawn_env.errors import ConfigError
+from lawn_env.mpc import OutageAwareMPC
+from test_agents import _snapshots
+
+CFG = ScenarioConfig()
+DISTURBED = presets.get("disturbed")
+
+
+def _problem(snap, config=CFG, backend="compiled"):
+    return DeliveryProblem(OutageAwareMPC.from_config(config, backend=backend),
+                           channel.LinkParams.from_config(config, planning=True), snap, config)
+
+
+def test_the_lost_command_values_match_an_independent_qp(independent_qp):
+    """V^del is the QP at psi = 1; V^lost the same with the next command held at zero (with commands
+    every second slot, on a slot without one, the horizon's second increment), each checked against
+    cvxpy's solve of the QP written from the paper."""
+    for config in (CFG, DISTURBED):
+        for snap in _snapshots(2, seed=21, config=config):
+            problem = _problem(snap, config)
+            period = config.disturbance.control_period_slots
+            mask = command_mask(snap.slot, config.control.horizon, period)
+            first = int(np.flatnonzero(mask)[0])
+            for k in range(config.num_agvs):
+                blocked = ~mask
+                v_del, _ = independent_qp(config, snap.x_aug[k], snap.reference[k], 1.0, blocked)
+                lost_blocked = blocked.copy()
+                lost_blocked[first] = True
+                v_lost, _ = independent_qp(config, snap.x_aug[k], snap.reference[k], 1.0, lost_blocked)
+                assert problem.delivered.value[k] == pytest.approx(v_del, rel=1e-6, abs=1e-6)
+                assert problem.lost[k] == pytest.approx(v_lost, rel=1e-6, abs=1e-6)
+            assert np.all(problem.worth >= 0)
+
+
+def test_the_compiled_lost_command_matches_the_reference_backend():
+    for config in (CFG, DISTURBED):
+        for snap in _snapshots(3, seed=22, config=config):
+            compiled, reference = _problem(snap, config), _problem(snap, config, backend="daqp")
+            assert np.allclose(compiled.lost, reference.lost, rtol=1e-9, atol=1e-9)
+            assert np.allclose(compiled.delivered.increments, reference.delivered.increments, atol=1e-7)
+
+
+def test_the_objective_is_the_expected_cost_of_delivery(rng):
+    """Phi(p, q) = sum_k psi_k V^del_k + (1 - psi_k) V^lost_k, its slope in psi -w, at any (p, q)."""
+    for snap in _snapshots(3, seed=23):
+        problem = _problem(snap)
+        for _ in range(4):
+            p = rng.uniform(0.0, problem.budget / 4, 4)
+            q = snap.drone_position + rng.normal(0, 3, 2)
+            ev = problem.evaluate(p, q)
+            psi = problem.success(p, q)
+            expected = psi * problem.delivered.value + (1 - psi) * problem.lost
+            assert ev.phi == pytest.approx(expected.sum(), rel=1e-12)
+            assert np.allclose(ev.slopes, -(problem.lost - problem.delivered.value))
+            assert np.array_equal(ev.increments, problem.delivered.increments)
+
+
+def test_dv_mpc_sends_the_psi_one_increments_whatever_the_links():
+    policy = make_policy("dv-mpc", CFG)
+    policy.reset(seed=0)
+    mpc = OutageAwareMPC.from_config(CFG, backend="daqp")
+    for snap in _snapshots(4, seed=24):
+        plan = policy.plan(snap)
+        expected = mpc.solve(snap.x_aug, snap.reference, np.ones(4), snap.slot).increments
+        assert np.allclose(plan.increments, expected, atol=1e-7)
+        assert plan.power_w.sum() <= CFG.power_budget_w * (1 + 1e-9) and np.all(plan.power_w >= 0)
+        assert np.linalg.norm(plan.drone_position - snap.drone_position) <= CFG.drone_reach_m + 1e-9
+        assert np.allclose(plan.info["success_probability"], channel.LinkParams.from_config(CFG, planning=True)
+                           .success_sq(plan.power_w, np.sum((plan.drone_position - snap.x_aug[:, :2]) ** 2, axis=1)
+                                       + CFG.drone.altitude_m ** 2))
+
+
+def test_dv_mpc_does_not_lose_to_its_own_start():
+    """The refinement only accepts improvements: the returned objective is at most every start's."""
+    planner = DeliveryValuePlanner(CFG)
+    for snap in _snapshots(4, seed=25):
+        plan = planner.plan(snap)
+        assert plan.objective <= min(plan.info["start_values"].values()) + 1e-9
+
+
+def test_with_perfect_links_dv_mpc_decides_as_rg_mpc():
+    """Every command arrives: both plan the psi = 1 increments, and the episodes are the same."""
+    config = CFG.override({"channel.perfect_links": True})
+    costs = {}
+    for name in ("dv-mpc", "rg-mpc"):
+        env = gym.make("lawn/Joint-v0", config=config).unwrapped
+        slots = []
+        rollout(env, make_policy(name, config), 3, max_steps=15, on_step=lambda step: slots.append(step.info["stage_cost"]))
+        costs[name] = np.array(slots)
+    assert np.allclose(costs["dv-mpc"], costs["rg-mpc"], rtol=1e-9, atol=1e-9)
+
+
+def test_under_a_control_period_the_command_is_the_next_command_slots_increment():
+    config = DISTURBED
+    policy = make_policy("dv-mpc", config)
+    policy.reset(seed=0)
+    reach = config.drone_reach_m
+    mpc = OutageAwareMPC.from_config(config, backend="daqp")
+    for snap in _snapshots(6, seed=26, config=config):
+        plan = policy.plan(snap)
+        mask = command_mask(snap.slot, config.control.horizon, 2)
+        expected = mpc.solve(snap.x_aug, snap.reference, np.ones(4), snap.slot).increments
+        assert np.allclose(plan.increments, expected, atol=1e-7)
+        assert np.all(plan.increments[:, ~mask] == 0.0)
+        step = np.linalg.norm(plan.drone_position - snap.drone_position)
+        assert step <= reach + 1e-9
+        if snap.slot % 2:  # no command this slot: the drone heads for where the next one goes out
+            target = plan.info["command_position"]
+            assert np.linalg.norm(target - snap.drone_position) <= 2 * reach + 1e-9
+            direction = (plan.drone_position - snap.drone_position) @ (target - snap.drone_position)
+            assert direction >= 0
+        else:
+            assert "command_position" not in plan.info
+
+
+def test_comm_env_with_the_delivery_law_applies_the_psi_one_increments():
+    env = gym.make("lawn/Comm-v0", control={"law": "delivery"}).unwrapped
+    env.reset(seed=6)
+    env.action_space.seed(6)
+    independent = OutageAwareMPC.from_config(env.config, backend="osqp")
+    for _ in range(10):
+        a = env.action_space.sample()
+        x = env.sim.x_aug.copy()
+        ref = env.sim.reference_window().copy()
+        expected = independent.solve(x, ref, np.ones(4)).increments[:, 0]
+        _, _, _, _, info = env.step(a)
+        applied = np.where(info["delivered"][:, None], expected, 0.0)
+        assert np.allclose(info["applied_increment"], applied, atol=1e-6)
+        assert np.all(info["success_probability_planned"] < 1.0)  # the links as they are: only the law changed
+
+
+def test_dv_mpc_plans_for_the_law_the_comm_agvs_apply():
+    """On lawn/Comm-v0 under the paper's law the AGVs apply the psi-scaled QP: dv-mpc's problem is
+    then the paper's, which rg-mpc solves; under the delivery law it is the delivery value's."""
+    paper = make_policy("dv-mpc", CFG, env_id="lawn/Comm-v0")
+    delivery = make_policy("dv-mpc", CFG.override({"control.law": "delivery"}), env_id="lawn/Comm-v0")
+    rg = make_policy("rg-mpc", CFG, env_id="lawn/Comm-v0")
+    for policy in (paper, delivery, rg):
+        policy.reset(seed=0)
+    for snap in _snapshots(3, seed=27):
+        a, b = paper.plan(snap), rg.plan(snap)
+        assert np.array_equal(a.power_w, b.power_w) and np.array_equal(a.drone_position, b.drone_position)
+        assert isinstance(delivery.solver, DeliveryValuePlanner)
+
+
+def test_the_default_law_is_the_papers_and_comm_v0_is_unchanged():
+    assert ScenarioConfig().control.law == "paper"
+    for preset in presets.names():
+        assert presets.get(preset).control.law == "paper"
+
+
+def test_bad_values_of_the_new_settings_name_them():
+    with pytest.raises(ConfigError, match=r"control\.law.*'carrier-pigeon'.*paper.*delivery"):
+        ScenarioConfig().override({"control.law": "carrier-pigeon"})
+    with pytest.raises(ValueError, match=r"refine_iterations"):
+        make_policy("dv-mpc", CFG, refine_iterations=-1)
+    with pytest.raises(ValueError, match=r"psi_points"):  # rg-mpc's table: dv-mpc has none
+        make_policy("dv-mpc", CFG, psi_points=9)
+    with pytest.raises(ValueError, match=r"power_levels"):
+        DeliverySettings(power_levels=1)
+
+
+def test_dv_mpc_is_a_registered_policy_name():
+    from agents import policy_names
+    from agents.policies import is_policy_name
+
+    assert "dv-mpc" in policy_names() and is_policy_name("dv-mpc")
