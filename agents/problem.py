@@ -54,10 +54,13 @@ class SlotProblem:
     system it plans for (a planner built for another drone speed than the environment's plans the
     moves of the drone it was built for)."""
 
-    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig):
+    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig,
+                 state: np.ndarray | None = None):
         self.mpc = mpc
         self.link = link
-        self.x_aug = np.asarray(snapshot.x_aug, dtype=float)
+        # x~ as the planner estimates it (``state``: a tracker's, with the applied acceleration after
+        # x~ for a lag-aware MPC), else as observed
+        self.x_aug = np.asarray(snapshot.x_aug if state is None else np.asarray(state)[:, :6], dtype=float)
         self.reference = np.asarray(snapshot.reference, dtype=float)
         self.q_prev = np.asarray(snapshot.drone_position, dtype=float)
         k, window = config.num_agvs, config.control.horizon + 1
@@ -67,7 +70,8 @@ class SlotProblem:
                 f"({k}, 6) and ({k}, {window}, 6) for this config"
             )
         self.agv_xy = self.x_aug[:, POSITION]
-        self.data: SlotData = mpc.prepare(self.x_aug, self.reference, snapshot.slot)
+        self.data: SlotData = mpc.prepare(self.x_aug if state is None else np.asarray(state, dtype=float),
+                                          self.reference, snapshot.slot)
         self.budget = config.power_budget_w
         self.reach = float(config.drone_reach_m)
         self.area = tuple(config.area_m)

@@ -49,6 +49,7 @@ from lawn_env.dynamics import cost_coefficients
 from lawn_env.errors import raises_config_errors
 from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
 
+from .estimation import AGVTracker
 from .problem import Plan, SlotProblem
 from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
 
@@ -74,8 +75,9 @@ class ReducedProblem(SlotProblem):
     """Phi(p, q) of one slot, evaluated with exact QPs (the shared, warm-started MPC): the AO's
     slot problem with the controls solved out."""
 
-    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig):
-        super().__init__(mpc, link, snapshot, config)
+    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig,
+                 state: np.ndarray | None = None):
+        super().__init__(mpc, link, snapshot, config, state)
         self.evaluations = 0
 
     # ------------------------------------------------------------------ exact
@@ -229,8 +231,9 @@ class DeliveryProblem(ReducedProblem):
     psi = 1 solution's at every (p, q). Two QPs per AGV when it is built; an evaluation after that
     is the channel alone."""
 
-    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig):
-        super().__init__(mpc, link, snapshot, config)
+    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig,
+                 state: np.ndarray | None = None):
+        super().__init__(mpc, link, snapshot, config, state)
         self.delivered, self.lost = mpc.delivery_values(self.data)
         self.worth = self.lost - self.delivered.value  # w_k >= 0
 
@@ -312,6 +315,14 @@ class DeliverySettings:
     keep_positions: Annotated[int, Field(ge=1)] = 4
     power_levels: Annotated[int, Field(ge=2)] = 40
     refine_iterations: Annotated[int, Field(ge=0)] = 8
+    model_lag: bool = True
+    """Predict with the actuator lag the config declares (``disturbance.actuator_lag_s``): the MPC's
+    state is x~ and the acceleration the AGV applied, which the planner follows from the commanded
+    accelerations it observes (:class:`agents.estimation.AGVTracker`). Without a lag, no change."""
+    filter_measurements: bool = True
+    """Plan from a Kalman filter's positions and velocities where the config declares measurement
+    noise (``disturbance.measurement_noise_*``; :class:`agents.estimation.AGVTracker`), not from each
+    noisy measurement. Without measurement noise, no change."""
     terminal_success: Annotated[float, Field(gt=0, le=1)] = 1.0
     """The MPC's terminal weight: 1, the loss-free DARE's (the paper's Q3); below 1, the modified
     Riccati equation's at that success probability (MODEL.md §4: a refinement measured in
@@ -395,17 +406,32 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
 
     def __init__(self, config: ScenarioConfig, settings: DeliverySettings | None = None):
         super().__init__(config, settings)
-        if self.settings.terminal_success != 1.0:
-            self.mpc = OutageAwareMPC.from_config(config, backend=self.settings.qp_backend,
-                                                  terminal_success=self.settings.terminal_success)
+        s = self.settings
+        lag = s.model_lag and config.disturbance.actuator_lag_s > 0
+        if s.terminal_success != 1.0 or lag:
+            self.mpc = OutageAwareMPC.from_config(config, backend=s.qp_backend, terminal_success=s.terminal_success,
+                                                  lag=lag)
         self.period = self.mpc.control_period
+        self.tracker = AGVTracker(config, lag=lag, filter=s.filter_measurements)
+
+    def reset(self) -> None:
+        super().reset()
+        self.tracker.reset()
+
+    def _state(self, snapshot: Snapshot) -> np.ndarray | None:
+        """The MPC's state from the tracker (:class:`agents.estimation.AGVTracker`: filtered under
+        measurement noise, the applied acceleration appended under a lag); None when it has nothing to
+        add (the observed x~ as it is)."""
+        if self.tracker.lag_alpha is None and not self.tracker.filtering:
+            return None
+        return self.tracker.state(snapshot.x_aug)
 
     def _moves(self, slot: int) -> int:
         """The drone's moves until the next command goes out, the one of this slot included."""
         return 1 + (-int(slot)) % self.period
 
     def _problem(self, snapshot: Snapshot) -> DeliveryProblem:
-        problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config)
+        problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, self._state(snapshot))
         problem.reach *= self._moves(snapshot.slot)
         return problem
 

@@ -130,6 +130,23 @@ def augmented_matrices(slot_s: float) -> tuple[np.ndarray, np.ndarray]:
     return a_aug, b_aug
 
 
+def lag_matrices(slot_s: float, lag_alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    """The augmented model with the actuator lag of MODEL.md §7 (:func:`lagged_acceleration`) for a
+    planner: the state ``[p, v, u[n-1], a[n-1]]`` (8 entries: x~ and the acceleration the AGV applied
+    in the slot before), the input Delta-u. The AGV commands ``u = u[n-1] + Delta-u``, applies
+    ``a = alpha a[n-1] + (1 - alpha) u`` and moves with it, as the simulator's slot does (its
+    acceleration columns of A~ take ``a`` in place of ``u``). Returns (A (8, 8), B (8, 2))."""
+    a_aug, b_aug = augmented_matrices(slot_s)
+    effect = a_aug[0:4, 4:6]  # how an acceleration moves position and velocity over a slot
+    eye = np.eye(2)
+    a8, b8 = np.zeros((8, 8)), np.zeros((8, 2))
+    a8[0:4, 0:4] = a_aug[0:4, 0:4]
+    a8[0:4, 4:6], a8[0:4, 6:8], b8[0:4] = (1.0 - lag_alpha) * effect, lag_alpha * effect, (1.0 - lag_alpha) * effect
+    a8[4:6, 4:6], b8[4:6] = eye, eye
+    a8[6:8, 4:6], a8[6:8, 6:8], b8[6:8] = (1.0 - lag_alpha) * eye, lag_alpha * eye, (1.0 - lag_alpha) * eye
+    return a8, b8
+
+
 def terminal_weight(a_aug: np.ndarray, b_aug: np.ndarray, q1: np.ndarray, q2: np.ndarray,
                     success: float = 1.0) -> np.ndarray:
     """Q3: the stabilizing solution of the discrete algebraic Riccati equation (paper eq. for Q3)
@@ -232,19 +249,28 @@ class PredictionModel:
     q4c: np.ndarray  # Q4 C, (6(N_p+1), 6)
     increment_sum: np.ndarray  # T, (2N_p, 2N_p)
     q1_tiled: np.ndarray  # diag(Q1) repeated N_p times: Q4's diagonal blocks, (6 N_p,)
-    key: tuple  # (slot_s, horizon, q1_diag, q2_diag[, terminal_success < 1]): what it is built from, its cache key
+    key: tuple  # (slot_s, horizon, q1_diag, q2_diag[, terminal_success, lag_alpha]): what it is built from, its cache key
 
     @classmethod
-    def from_config(cls, config: ScenarioSettings, terminal_success: float = 1.0) -> PredictionModel:
+    def from_config(cls, config: ScenarioSettings, terminal_success: float = 1.0, lag: bool = False) -> PredictionModel:
         """The model of ``config``; ``terminal_success`` < 1 takes the terminal weight of the modified
-        Riccati equation at that success probability (:func:`terminal_weight`)."""
+        Riccati equation at that success probability (:func:`terminal_weight`); ``lag`` predicts
+        with the config's actuator lag (:func:`lag_matrices`; the state then has 8 entries, x~ and
+        the applied acceleration), where it has one."""
         ctl = config.control
+        alpha = lag_alpha(float(config.slot_s), float(config.disturbance.actuator_lag_s)) if lag else -1.0
         return _build_model(float(config.slot_s), int(ctl.horizon), tuple(ctl.q1_diag), tuple(ctl.q2_diag),
-                            float(terminal_success))
+                            float(terminal_success), alpha)
+
+    @property
+    def state_dim(self) -> int:
+        """Entries of the state the model predicts from: 6 (x~), 8 with the actuator lag (x~ and the
+        applied acceleration)."""
+        return int(self.c.shape[1])
 
     @classmethod
     def from_key(cls, key: tuple) -> PredictionModel:
-        """The model built from :attr:`key`'s values (slot_s, horizon, q1_diag, q2_diag[, terminal_success])."""
+        """The model built from :attr:`key`'s values (slot_s, horizon, q1_diag, q2_diag[, terminal_success, lag_alpha])."""
         return _build_model(*key)
 
     @property
@@ -281,12 +307,18 @@ class PredictionModel:
 
 @functools.lru_cache(maxsize=32)
 def _build_model(slot_s: float, horizon: int, q1_diag: tuple, q2_diag: tuple,
-                 terminal_success: float = 1.0) -> PredictionModel:
+                 terminal_success: float = 1.0, lag_alpha: float = -1.0) -> PredictionModel:
     a_aug, b_aug = augmented_matrices(slot_s)
     q1 = np.diag(np.asarray(q1_diag, dtype=float))
     q2 = np.diag(np.asarray(q2_diag, dtype=float))
     q3 = terminal_weight(a_aug, b_aug, q1, q2, terminal_success)
-    c, f = prediction_matrices(a_aug, b_aug, horizon)
+    if lag_alpha >= 0.0:  # predict the 8-state of lag_matrices, weigh its first six entries (x~)
+        a8, b8 = lag_matrices(slot_s, lag_alpha)
+        c8, f8 = prediction_matrices(a8, b8, horizon)
+        keep = (np.arange(8 * (horizon + 1)) % 8) < 6
+        c, f = c8[keep], f8[keep]
+    else:
+        c, f = prediction_matrices(a_aug, b_aug, horizon)
     q4, q5 = horizon_weights(q1, q2, q3, horizon)
     ftq4 = f.T @ q4
     arrays = dict(
@@ -296,7 +328,8 @@ def _build_model(slot_s: float, horizon: int, q1_diag: tuple, q2_diag: tuple,
     )
     for arr in arrays.values():
         arr.setflags(write=False)
-    key = (slot_s, horizon, q1_diag, q2_diag) + (() if terminal_success == 1.0 else (terminal_success,))
+    extra = (terminal_success, lag_alpha) if (terminal_success, lag_alpha) != (1.0, -1.0) else ()
+    key = (slot_s, horizon, q1_diag, q2_diag) + extra
     return PredictionModel(slot_s=slot_s, horizon=horizon, key=key, **arrays)
 
 

@@ -282,10 +282,11 @@ class OutageAwareMPC:
 
     @classmethod
     def from_config(cls, config: ScenarioConfig, backend: str = DEFAULT_BACKEND,
-                    terminal_success: float = 1.0) -> OutageAwareMPC:
-        """The MPC of ``config`` (``terminal_success``: :meth:`PredictionModel.from_config`)."""
+                    terminal_success: float = 1.0, lag: bool = False) -> OutageAwareMPC:
+        """The MPC of ``config`` (``terminal_success``, ``lag``: :meth:`PredictionModel.from_config`;
+        with ``lag`` and an actuator lag in the config, its states have 8 entries)."""
         ctl = config.control
-        return cls(PredictionModel.from_config(config, terminal_success), config.num_agvs, ctl.accel_max_mps2,
+        return cls(PredictionModel.from_config(config, terminal_success, lag), config.num_agvs, ctl.accel_max_mps2,
                    ctl.accel_increment_max_mps2, backend=backend, control_period=planning_period(config))
 
     def reset(self, which: np.ndarray | None = None) -> None:
@@ -309,13 +310,13 @@ class OutageAwareMPC:
         ``slot`` (the current slot n) is required when the MPC plans with a control period > 1:
         increments are then allowed only at the slots n + i where a command goes out
         (:func:`lawn_env.dynamics.command_mask`); a batch takes one slot per scenario (...,)."""
-        k = self.num_agvs
+        k, nx = self.num_agvs, self.model.state_dim
         window = self.model.horizon + 1
         lead = x_aug.shape[:-2]
-        if x_aug.shape[-2:] != (k, 6) or chi_ref.shape != lead + (k, window, 6):
+        if x_aug.shape[-2:] != (k, nx) or chi_ref.shape != lead + (k, window, 6):
             raise ValueError(f"x_aug has shape {x_aug.shape} and chi_ref {chi_ref.shape}; this MPC (num_agvs={k}, "
-                             f"horizon={self.model.horizon}) needs ({k}, 6) and ({k}, {window}, 6), with any leading "
-                             "batch axes (..., K, 6) and (..., K, N_p+1, 6)")
+                             f"horizon={self.model.horizon}) needs ({k}, {nx}) and ({k}, {window}, 6), with any leading "
+                             f"batch axes (..., K, {nx}) and (..., K, N_p+1, 6)")
         if self.control_period == 1:
             phase: Any = 0
         elif slot is None:
@@ -326,7 +327,7 @@ class OutageAwareMPC:
                 raise ValueError(f"slot has shape {phase.shape}; expected a scalar or one per scenario {lead}")
             phase = int(phase) if phase.ndim == 0 else phase
         n = self._n
-        flat_x = np.reshape(x_aug, (-1, 6))
+        flat_x = np.reshape(x_aug, (-1, nx))
         r = self.model.residual(flat_x, chi_ref.reshape(-1, window, 6))  # 2-D products over every problem
         lower = np.empty((flat_x.shape[0], 2 * n))
         upper = np.empty((flat_x.shape[0], 2 * n))

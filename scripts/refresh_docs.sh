@@ -5,6 +5,8 @@
 #   docs/REPRODUCTION.md, docs/figures/reproduction/   lawn figures (the paper's experiments)
 #   blocks benchmark (README), benchmark-nominal        lawn benchmark (+ docs/figures/benchmark.png)
 #   block gap (docs/experts.md)                         lawn gap (+ docs/figures/gap.png, convergence.png)
+#   blocks dv-mpc, dv-mpc-refinements (docs/experts.md), beyond-the-paper (docs/REPRODUCTION.md)   (--only dv)
+#                                                       benchmarks/dv_mpc.py: dv-mpc against rg-mpc on the suite
 #   blocks expert-speed, env-throughput, train-throughput, vector-step   benchmarks/*.py --markdown
 #   block parallel-scaling (docs/performance.md)        benchmarks/parallel_scaling.py (--only parallel)
 #   blocks step-side-by-side, v0-episodes (--only equations)   benchmarks/{step_side_by_side,v0_episodes}.py
@@ -40,7 +42,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --train) train=1 ;;
     --only) shift; while [ $# -gt 0 ] && [[ "$1" != --* ]]; do only+=("$1"); shift; done; continue ;;
-    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|speed|throughput|parallel|equations|qp|fleet|learned|suite|render ...]" >&2; exit 2 ;;
+    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|dv|speed|throughput|parallel|equations|qp|fleet|learned|suite|render ...]" >&2; exit 2 ;;
   esac
   shift
 done
@@ -69,6 +71,15 @@ if want gap; then
   splice gap runs/gap/gap_summary.md "lawn gap --policies ao-mpc rg-mpc --driver ao-mpc --episodes 5 --every 3 --seed 0"
   cp runs/gap/gap.png docs/figures/gap.png
   cp runs/gap/convergence.png docs/figures/convergence.png
+fi
+if want dv; then  # dv-mpc against rg-mpc: every suite task, two seed ranges (about 15 minutes on 2 cores)
+  "$py" benchmarks/dv_mpc.py --markdown runs/dv_mpc.md
+  splice dv-mpc runs/dv_mpc.md "python benchmarks/dv_mpc.py"
+  splice beyond-the-paper runs/dv_mpc.md "python benchmarks/dv_mpc.py"
+  refinements=(--tasks steady steady-low-power disturbed --episodes 40 --variant terminal_success=0.8
+               --variant terminal_success=0.6 --variant model_lag=0 --variant filter_measurements=0 --no-timing)
+  "$py" benchmarks/dv_mpc.py "${refinements[@]}" --markdown runs/dv_mpc_refinements.md
+  splice dv-mpc-refinements runs/dv_mpc_refinements.md "python benchmarks/dv_mpc.py ${refinements[*]}"
 fi
 if want speed; then
   "$py" benchmarks/expert_speed.py --tolerance-sweep --markdown runs/expert_speed.md

@@ -124,9 +124,9 @@ def test_limit_rows_lift_one_field_of_their_task(task):
         changed = {k for k in base if base[k] != lifted[k]}
         assert changed == ({key} if base[key] != value else set()), name
         policy, played, kwargs = resolve(name, config)
-        assert policy == "rg-mpc" and played == limit_config(name, config) and kwargs == LIMIT_SETTINGS.get(name, {})
-    for name, settings in NOISE.items():
-        assert resolve(name, config) == ("rg-mpc", config, settings)
+        assert policy == "dv-mpc" and played == limit_config(name, config) and kwargs == LIMIT_SETTINGS.get(name, {})
+    for name, (expert, settings) in NOISE.items():
+        assert name == f"noise:{expert}" and resolve(name, config) == (expert, config, settings)
     assert LIMITS["limit:fast-drone"][1] == 300.0  # the validated maximum of drone.max_speed_mps
     with pytest.raises(ValueError, match="unknown limit row 'limit:nope'"):
         limit_config("limit:nope", config)
@@ -145,11 +145,12 @@ def test_perfect_links_deliver_every_command_and_planners_see_it():
 
 
 def test_reference_rows_run_under_their_names_and_beat_or_tie_the_expert():
-    rows = evaluate([(p, "lawn/Joint-v0", ScenarioConfig(), 0, {}) for p in ("rg-mpc", *REFERENCE_ROWS)],
-                    progress=False)
+    rows = evaluate([(p, "lawn/Joint-v0", ScenarioConfig(), 0, {}) for p in ("dv-mpc", "rg-mpc", *REFERENCE_ROWS,
+                                                                             "noise:rg-mpc")], progress=False)
     cost = {r["policy"]: r["control_cost"] for r in rows}
-    assert set(cost) == {"rg-mpc", *REFERENCE_ROWS}
-    assert cost["limit:perfect-links"] < cost["rg-mpc"] and cost["limit:fast-drone"] < cost["rg-mpc"]
+    assert set(cost) == {"dv-mpc", "rg-mpc", "noise:rg-mpc", *REFERENCE_ROWS}
+    assert cost["limit:perfect-links"] < cost["dv-mpc"] and cost["limit:fast-drone"] < cost["dv-mpc"]
+    assert cost["noise:dv-mpc"] == pytest.approx(cost["dv-mpc"], rel=0.05)
     assert cost["noise:rg-mpc"] == pytest.approx(cost["rg-mpc"], rel=0.05)
 
 

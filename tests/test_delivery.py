@@ -102,8 +102,8 @@ def test_with_perfect_links_dv_mpc_decides_as_rg_mpc():
 
 
 def test_under_a_control_period_the_command_is_the_next_command_slots_increment():
-    config = DISTURBED
-    policy = make_policy("dv-mpc", config)
+    config = DISTURBED  # from the snapshots as observed: the tracker (tested below) off
+    policy = make_policy("dv-mpc", config, model_lag=False, filter_measurements=False)
     policy.reset(seed=0)
     reach = config.drone_reach_m
     mpc = OutageAwareMPC.from_config(config, backend="daqp")
@@ -176,3 +176,61 @@ def test_dv_mpc_is_a_registered_policy_name():
     from agents.policies import is_policy_name
 
     assert "dv-mpc" in policy_names() and is_policy_name("dv-mpc")
+
+
+def test_the_lag_aware_model_predicts_the_simulators_lagged_step():
+    """With the actuator lag (and nothing else) on, the lag-aware MPC's prediction of the next slot
+    is the simulator's state to rounding; the loss-free model's is not."""
+    from lawn_env.dynamics import PredictionModel
+
+    config = CFG.override({"disturbance.actuator_lag_s": 0.3})
+    model = PredictionModel.from_config(config, lag=True)
+    assert model.state_dim == 8 and PredictionModel.from_config(config).state_dim == 6
+    env = gym.make("lawn/Joint-v0", config=config.override({"channel.perfect_links": True})).unwrapped
+    env.reset(seed=4)
+    rng = np.random.default_rng(4)
+    for _ in range(12):
+        x8 = np.concatenate([env.sim.x_aug.copy(), env.sim.applied.copy()], axis=1)
+        u_prev = env.sim.x_aug[:, 4:6]  # increments that keep |u| inside the bound (no saturation)
+        du = np.clip(u_prev + rng.uniform(-0.5, 0.5, (4, 2)), -1.5, 1.5) - u_prev
+        dmu = np.zeros((4, config.control.horizon, 2))
+        dmu[:, 0] = du
+        predicted = (x8 @ model.c.T + dmu.reshape(4, -1) @ model.f.T).reshape(4, -1, 6)[:, 1]
+        action = env.actions.encode(lawn_env_decisions(du, env), env.sim.x_aug, None, env.sim.drone_position)
+        env.step(action)
+        assert np.allclose(predicted, env.sim.x_aug, atol=1e-5)
+
+
+def lawn_env_decisions(du, env):
+    from lawn_env.core import Decisions
+
+    return Decisions(du, np.full(4, env.config.power_budget_w / 4), env.sim.drone_position.copy())
+
+
+def test_the_tracker_follows_the_applied_acceleration_and_filters_the_measurements():
+    """Under `disturbed` the tracker's applied acceleration is the simulator's (to the observation's
+    float32 rounding) and its filtered positions are closer to the true ones than the measurements."""
+    config = DISTURBED
+    env = gym.make("lawn/Joint-v0", config=config).unwrapped
+    policy = make_policy("dv-mpc", config)
+    obs, _ = env.reset(seed=5)
+    policy.reset(seed=5)
+    tracker = policy.solver.tracker
+    assert tracker.lag_alpha is not None and tracker.filtering
+    measured, filtered = [], []
+    for slot in range(40):
+        action = policy.act(obs)
+        assert np.allclose(tracker.applied, env.sim.applied, atol=1e-6)
+        truth = env.sim.x_aug[:, 0:2]
+        measured.append(np.abs(env.snapshot().x_aug[:, 0:2] - truth).mean())
+        filtered.append(np.abs(tracker.estimate[:, 0:2] - truth).mean())
+        obs, *_ = env.step(action)
+    assert np.mean(filtered[5:]) < 0.7 * np.mean(measured[5:])
+
+
+def test_without_a_lag_or_measurement_noise_the_tracker_changes_nothing():
+    planner = DeliveryValuePlanner(presets.get("steady-gusty"))
+    assert planner.tracker.lag_alpha is None and not planner.tracker.filtering
+    assert planner.mpc.model.state_dim == 6
+    off = DeliveryValuePlanner(DISTURBED, DeliverySettings(model_lag=False, filter_measurements=False))
+    assert off.mpc.model.state_dim == 6 and off._state(_snapshots(1, seed=1, config=DISTURBED)[0]) is None

@@ -21,7 +21,9 @@ BLOCKS = {"benchmark": "README.md", "benchmark-nominal": "docs/policies.md", "ga
           "fast-drone-grid": "docs/benchmark.md", "parallel-scaling": "docs/performance.md",
           "parallel-scaling-16": "docs/performance.md", "step-side-by-side": "docs/performance.md",
           "v0-episodes": "docs/performance.md", "zoo-fleet": "docs/LEARNED.md",
-          "fleet-generalization": "docs/LEARNED.md", "fleet-decision": "docs/performance.md"}
+          "fleet-generalization": "docs/LEARNED.md", "fleet-decision": "docs/performance.md",
+          "dv-mpc": "docs/experts.md", "dv-mpc-refinements": "docs/experts.md",
+          "beyond-the-paper": "docs/REPRODUCTION.md"}
 
 
 def test_replace_block_rewrites_only_the_block_and_stamps_it(tmp_path):

@@ -307,12 +307,12 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     sizes = {3: 2, 5: 2}
     rows = run_generalization(fleet_agents(), sizes, workers=1, progress=False,
                               base=presets.get("default").override(num_slots=6))
-    assert {(r["policy"], r["task"]) for r in rows} == {(p, f"k{k}") for p in ("rg-mpc", "noise:rg-mpc", "zoo:fleet-comm")
+    assert {(r["policy"], r["task"]) for r in rows} == {(p, f"k{k}") for p in ("dv-mpc", "noise:dv-mpc", "zoo:fleet-comm")
                                                         for k in sizes}
     text = generalization_table(rows, fleet_agents(), sizes)
     lines = [line for line in text.splitlines() if line.startswith("| zoo:fleet-comm")]
     assert [line.split(" | ")[2] for line in lines] == ["3", "5"] and all("×" in line for line in lines)
-    assert sum(line.startswith("| noise:rg-mpc") for line in text.splitlines()) == 2
+    assert sum(line.startswith("| noise:dv-mpc") for line in text.splitlines()) == 2
 
 
 def test_a_multi_agent_fleet_run_ships_to_the_zoo_and_a_flat_policy_is_refused(tmp_path, monkeypatch):

@@ -56,16 +56,33 @@ def test_score_needs_references_that_separate_and_shared_seeds():
 
 
 def test_scores_by_policy_pairs_within_task_and_env():
-    rows = (_rows("epa", {0: 10.0, 1: 12.0}) + _rows("rg-mpc", {0: 4.0, 1: 6.0}) + _rows("x", {0: 7.0, 1: 9.0})
-            + _rows("epa", {0: 100.0, 1: 100.0}, task="k8") + _rows("rg-mpc", {0: 50.0, 1: 50.0}, task="k8")
+    rows = (_rows("epa", {0: 10.0, 1: 12.0}) + _rows("dv-mpc", {0: 4.0, 1: 6.0}) + _rows("x", {0: 7.0, 1: 9.0})
+            + _rows("epa", {0: 100.0, 1: 100.0}, task="k8") + _rows("dv-mpc", {0: 50.0, 1: 50.0}, task="k8")
             + _rows("x", {0: 50.0, 1: 50.0}, task="k8") + _rows("y", {0: 1.0}, env="lawn/Comm-v0"))
     scores = scores_by_policy(rows)
     assert scores[("default", "lawn/Joint-v0", "x")][0] == pytest.approx(50.0)
     assert scores[("k8", "lawn/Joint-v0", "x")][0] == pytest.approx(100.0)
     assert ("default", "lawn/Comm-v0", "y") not in scores  # no references on that env
     # references that do not separate give no score instead of an error mid-table
-    rows = _rows("epa", {0: 1.0, 1: 1.0}, task="t") + _rows("rg-mpc", {0: 2.0, 1: 2.0}, task="t")
+    rows = _rows("epa", {0: 1.0, 1: 1.0}, task="t") + _rows("dv-mpc", {0: 2.0, 1: 2.0}, task="t")
     assert scores_by_policy(rows) == {}
+
+
+def test_score_v1_stays_computable_beside_v2():
+    """v2 puts 100 at dv-mpc; v1, at rg-mpc, is computed from the same rows when they hold it."""
+    from training.score import SCORE_REFERENCES, SCORE_VERSION
+
+    assert SCORE_VERSION == 2 and SCORE_REFERENCES == {1: ("epa", "rg-mpc"), 2: ("epa", "dv-mpc")}
+    rows = (_rows("epa", {0: 10.0, 1: 12.0}) + _rows("rg-mpc", {0: 6.0, 1: 8.0}) + _rows("dv-mpc", {0: 4.0, 1: 6.0})
+            + _rows("x", {0: 7.0, 1: 9.0}))
+    v1, v2 = scores_by_policy(rows, version=1), scores_by_policy(rows, version=2)
+    assert v1[("default", "lawn/Joint-v0", "x")][0] == pytest.approx(75.0)
+    assert v2[("default", "lawn/Joint-v0", "x")][0] == pytest.approx(50.0)
+    assert v1[("default", "lawn/Joint-v0", "dv-mpc")][0] == pytest.approx(150.0)
+    with pytest.raises(ValueError, match=r"score version=3; valid: 1, 2"):
+        scores_by_policy(rows, version=3)
+    with pytest.raises(ValueError, match=r"run epa and rg-mpc on the same seeds"):
+        normalized_score({5: 1.0}, {0: 1.0}, {0: 0.5}, references=SCORE_REFERENCES[1])
 
 
 # ---------------------------------------------------------------------- anchors
@@ -115,13 +132,13 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     anchors = sorted({own_anchor(a) for a in agents})
     assert all(a.startswith("anchor:") for a in anchors)
     entries = learned_entries(agents)  # a repeated agent is one row
-    assert entries == [("rg-mpc", "lawn/Comm-v0"), ("epa", "lawn/Comm-v0"), *[(a, "lawn/Comm-v0") for a in anchors],
+    assert entries == [("dv-mpc", "lawn/Comm-v0"), ("epa", "lawn/Comm-v0"), *[(a, "lawn/Comm-v0") for a in anchors],
                        ("zoo:ppo-comm", "lawn/Comm-v0"), ("zoo:bc-comm", "lawn/Comm-v0")]
     with pytest.raises(ValueError, match="unknown zoo agent 'nope'"):
         run_learned_protocol(["zoo:nope"], tmp_path, episodes=3, workers=1, progress=False)
     table = run_learned_protocol(["zoo:ppo-comm"], tmp_path, episodes=3, workers=1, progress=False)
     lines = table.splitlines()
-    assert "vs own anchor (paired mean)" in lines[0] and "vs own anchor (geometric" in lines[0] and "score v1" in lines[0]
+    assert "vs own anchor (paired mean)" in lines[0] and "vs own anchor (geometric" in lines[0] and "score v2" in lines[0]
     agent = next(line for line in lines if line.startswith("| zoo:ppo-comm "))
     anchor = own_anchor("zoo:ppo-comm")
     assert f"| {anchor} |" in agent
@@ -133,7 +150,7 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     split = [float(r["transient_cost"]) + float(r["sustained_cost"]) - float(r["control_cost"]) for r in rows]
     assert max(map(abs, split)) < 1e-6
     assert any(line.startswith("| anchor:stake | lawn/Comm-v0 |") for line in lines)
-    assert any(line.startswith("| rg-mpc | lawn/Comm-v0 | – |") and "| 100.0 |" in line for line in lines)
+    assert any(line.startswith("| dv-mpc | lawn/Comm-v0 | – |") and "| 100.0 |" in line for line in lines)
     assert (tmp_path / "episodes.csv").exists() and "3 test seeds" in table
 
 
@@ -188,7 +205,7 @@ def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(t
     tasks = ["default", "wide-k8"]
     rows, skipped, _ = run_suite(policies, tasks, 1, tmp_path, workers=1, progress=False)
     assert {r["task"] for r in rows} == set(tasks)
-    assert {r["policy"] for r in rows} >= {"rg-mpc", "epa", "noise:rg-mpc", "limit:fast-drone", "limit:perfect-links"}
+    assert {r["policy"] for r in rows} >= {"dv-mpc", "epa", "noise:dv-mpc", "limit:fast-drone", "limit:perfect-links"}
     assert set(skipped) == {("wide-k8", "zoo:ppo-comm")}
     assert "expects observations of shape (335,)" in skipped[("wide-k8", "zoo:ppo-comm")]
     board, refs = suite_table(rows, policies, tasks, skipped)
@@ -223,15 +240,15 @@ def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
         expected = run_episode("rg-mpc", "lawn/Comm-v0", ScenarioConfig(), 7 + i)["control_cost"]
         assert float(np.sum(episode.infos["stage_cost"][1:])) == pytest.approx(expected, rel=1e-12)
         assert float(-np.sum(episode.rewards)) == pytest.approx(expected, rel=1e-12)
-    # Minari's normalized score is the package's score / 100 (epa and rg-mpc on the same seeds)
+    # Minari's normalized score is the package's score / 100 (epa and dv-mpc on the same seeds)
     from training.score import normalized_score
 
     costs = {p: {7 + i: run_episode(p, "lawn/Comm-v0", ScenarioConfig(), 7 + i)["control_cost"] for i in range(2)}
-             for p in ("epa", "rg-mpc")}
+             for p in ("epa", "dv-mpc")}
     returns = np.array([float(np.sum(e.rewards)) for e in episodes])
     recorded = {7 + i: -r for i, r in enumerate(returns)}
     assert minari.get_normalized_score(dataset, returns.mean()) == pytest.approx(
-        normalized_score(recorded, costs["epa"], costs["rg-mpc"])[0] / 100, rel=1e-9)
+        normalized_score(recorded, costs["epa"], costs["dv-mpc"])[0] / 100, rel=1e-9)
     env = dataset.recover_environment()
     assert env.spec.id == "lawn/Comm-v0"
     obs, _ = env.reset(seed=7)
@@ -312,15 +329,15 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
 
     anchor = own_anchor(f"bc:{runs / 'bc-comm' / 'seed-0'}")  # the hyperparameter file's interface: anchor:stake
     rows = table.splitlines()
-    assert "vs own anchor (paired)" in rows[0] and "score v1" in rows[0]
+    assert "vs own anchor (paired)" in rows[0] and "score v2" in rows[0]
     label = RECIPES["bc-comm"].label
-    assert [r.split(" | ")[0] for r in rows[2:6]] == ["| rg-mpc", "| epa", f"| {anchor}",
+    assert [r.split(" | ")[0] for r in rows[2:6]] == ["| dv-mpc", "| epa", f"| {anchor}",
                                                       f"| {label} (`zoo:bc-comm`, seed 0)"]
     assert rows[5].split(" | ")[3] == anchor
     doc = (tmp_path / "docs" / "LEARNED.md").read_text()
     assert f"| `bc-comm` (shipped) | 0 | {anchor} |" in doc and "3 test seeds (0-2)" in doc
     assert "| selected validation: vs rg-mpc (cost, episodes) |" in doc
-    assert f"`rg-mpc` itself against each anchor (the \"vs own anchor\" of a perfect clone of the expert): `{anchor}` on " \
+    assert f"`dv-mpc` itself against each anchor (the \"vs own anchor\" of a perfect clone of the expert): `{anchor}` on " \
            "lawn/Comm-v0 " in table
     episodes = (tmp_path / "docs" / "learned" / "episodes.csv").read_text()
     assert anchor in episodes and "stage_costs" not in episodes.splitlines()[0]
@@ -348,7 +365,7 @@ def test_zoo_stages_on_a_recorded_run(tmp_path):
     ev = evaluate_zoo(found, episodes=2, workers=1, progress=False)
     assert ev.envs == ["lawn/Comm-v0"] and {r["seed"] for r in ev.rows} == {0, 1}
     tables = zoo_tables(ev)
-    assert [row["label"] for row in tables.recipe_rows][:2] == ["rg-mpc", "epa"]
+    assert [row["label"] for row in tables.recipe_rows][:2] == ["dv-mpc", "epa"]
     assert len(tables.run_rows) == 2 and sum("(shipped)" in row["recipe"] for row in tables.run_rows) == 1
     assert len(tables.shipped) == 1 and tables.shipped[0].run_dir in found[0][1]
     table, per_run = render_zoo(tables)
@@ -369,7 +386,7 @@ def test_evaluate_prints_the_score_beside_the_cost(tmp_path, capsys):
     printed = capsys.readouterr().out
     header = next(line for line in printed.splitlines() if line.startswith("| policy"))
     row = next(line for line in printed.splitlines() if line.startswith("| pid "))
-    assert "score" in header and "(score: epa and rg-mpc on the same seeds)" in printed
+    assert "score" in header and "(score: epa and dv-mpc on the same seeds)" in printed
     cell = row.split("|")[header.split("|").index(next(c for c in header.split("|") if "score" in c))].strip()
     assert math.isfinite(float(cell.split()[0]))
     assert {r["policy"] for r in read_csv(out)} == {"pid"}  # references not written
@@ -377,9 +394,9 @@ def test_evaluate_prints_the_score_beside_the_cost(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "score" not in next(line for line in printed.splitlines() if line.startswith("| policy"))
     # a reference with other settings is another policy under the reference's name: no score against itself
-    assert main(["evaluate", "--policy", "rg-mpc", "--policy-arg", "psi_points=5", *common]) == 0
+    assert main(["evaluate", "--policy", "dv-mpc", "--policy-arg", "power_levels=30", *common]) == 0
     printed = capsys.readouterr().out
-    assert "no score: --policy-arg changes the reference rg-mpc itself" in printed
+    assert "no score: --policy-arg changes the reference dv-mpc itself" in printed
 
 
 def test_benchmark_protocol_flags_are_checked(tmp_path, capsys):
@@ -409,7 +426,7 @@ def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
     board = (out / "board.md").read_text()
     assert board.splitlines()[0] == "| policy | env | k3 | IQM over tasks [95 %] |"
     names = [line.split("|")[1].strip() for line in board.splitlines()[2:]]
-    assert names == ["noise:rg-mpc", "limit:fast-drone", "limit:perfect-links", "anchor:stake"]
+    assert names == ["noise:dv-mpc", "limit:fast-drone", "limit:perfect-links", "anchor:stake"]
     page = (docs / "LEADERBOARD.md").read_text()
     assert "This board runs `k3` only (`--tasks`)" in page and board.strip() in page
     assert "| k3 | lawn/Joint-v0 | 3 |" in (out / "references.md").read_text()

@@ -12,7 +12,7 @@ per step; the first info of an episode is the reset's). The env is made from a p
 (steps 1..T) is the episode's control cost, which ``lawn evaluate`` reports for that seed.
 
 The dataset carries Minari's reference scores: ``ref_min_score`` the mean return of ``epa`` and
-``ref_max_score`` that of ``rg-mpc`` on the same seeds, task and env (run beside the recording), so
+``ref_max_score`` that of the best expert (``dv-mpc``) on the same seeds, task and env (run beside the recording), so
 ``minari.get_normalized_score(dataset, returns)`` is the package's normalized score / 100
 (:mod:`training.score`: 0 equal power, 1 the best expert). Behaviour cloning trains from such a dataset (``lawn train --algo bc --dataset ID``,
 :func:`training.bc.dataset_transitions`). ``minari`` is in the ``data`` extra (``pip install -e '.[data]'``).
@@ -125,7 +125,7 @@ def _plain_spec(env_id: str, task: str) -> gym.envs.registration.EnvSpec:
 
 
 def _reference_returns(env_id: str, config: Any, seed: int, episodes: int) -> tuple[float, float]:
-    """The mean returns (minus the control cost: the v0 envs' reward) of ``epa`` and ``rg-mpc`` on the
+    """The mean returns (minus the control cost: the v0 envs' reward) of ``epa`` and the best expert on the
     dataset's seeds, task and env: Minari's ``ref_min_score`` and ``ref_max_score``."""
     from .evaluate import evaluate
     from .score import SCORE_HIGH, SCORE_LOW

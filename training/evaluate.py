@@ -85,7 +85,7 @@ def episode_row(policy: Policy, env_id: str, config: ScenarioConfig, seed: int,
 def build_policy(policy: str, config: ScenarioConfig, env_id: str | None = None,
                  policy_kwargs: Mapping[str, Any] | None = None) -> tuple[Policy, ScenarioConfig]:
     """The policy a row name plays and the config it plays on: a limit or noise-floor row
-    (:mod:`training.limits`) is ``rg-mpc`` on its lifted config or with its settings; any other
+    (:mod:`training.limits`) is an expert on its lifted config or with its settings; any other
     name is :func:`agents.make_policy` on ``config``."""
     name, played, kwargs = limits.resolve(policy, config, policy_kwargs)
     return make_policy(name, played, env_id=env_id, **kwargs), played

@@ -3,12 +3,13 @@
 
 Every shipped agent that reads the entity layout (:func:`fleet_agents`: ``agents/zoo/*`` trained
 with ``layout="entities"``) plays the default scenario with K AGVs on its own env, without
-retraining, for every K of :data:`FLEET_SIZES` (K -> test seeds 0..n-1), beside ``rg-mpc`` and the
-noise-floor row ``noise:rg-mpc`` (:mod:`training.limits`) on the same seeds and env. Per K the table
-gives the control cost, the geometric mean of the per-seed cost ratios against ``rg-mpc`` with its
-95 % bootstrap interval and the share of seeds won (the deciding statistic), the paired mean of the
-relative differences, and the median decision time of the agent and of ``rg-mpc``, measured in the
-same run by the same worker processes.
+retraining, for every K of :data:`FLEET_SIZES` (K -> test seeds 0..n-1), beside the best expert
+(:data:`~training.score.SCORE_HIGH`, ``dv-mpc``: on ``lawn/Comm-v0`` under the paper's law it plans as
+``rg-mpc``) and its noise-floor row (:mod:`training.limits`) on the same seeds and env. Per K the
+table gives the control cost, the geometric mean of the per-seed cost ratios against the expert with
+its 95 % bootstrap interval and the share of seeds won (the deciding statistic), the paired mean of
+the relative differences, and the median decision time of the agent and of the expert, measured in
+the same run by the same worker processes.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ __all__ = ["FLEET_SIZES", "TARGETS", "fleet_agents", "run_generalization", "gene
 
 #: Fleet size -> test seeds (0..n-1) of the table.
 FLEET_SIZES: dict[int, int] = {3: 100, 4: 100, 8: 100, 16: 40, 32: 40, 64: 20}
-#: Fleet size -> the largest geometric cost change against rg-mpc the fleet networks aim for
+#: Fleet size -> the largest geometric cost change against the best expert the fleet networks aim for
 #: (None: reported only).
 TARGETS: dict[int, float | None] = {3: 0.05, 4: 0.05, 8: 0.05, 16: 0.10, 32: 0.10, 64: None}
 _NOISE = next(iter(NOISE))
@@ -44,7 +45,7 @@ def fleet_agents() -> list[str]:
 
 def run_generalization(agents: Sequence[str], sizes: Mapping[int, int] = FLEET_SIZES, workers: int = 2,
                        progress: bool = True, base: ScenarioConfig | None = None) -> list[dict]:
-    """Full episodes of every agent, ``rg-mpc`` and ``noise:rg-mpc`` on the default task (or
+    """Full episodes of every agent, the best expert and its noise floor on the default task (or
     ``base``) with each fleet size (``task`` = ``k<K>``), every entry of one size in one pool so
     that decision times are measured side by side."""
     envs = list(dict.fromkeys(policy_env(a) for a in agents))

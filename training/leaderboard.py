@@ -3,10 +3,10 @@
 **Learned protocol** (``lawn benchmark --protocol learned``, the tables of ``lawn zoo build``):
 every agent plays full 120-slot episodes of the unmodified scenario on the test seeds
 0..:data:`~training.protocol.TEST_EPISODES`-1 (model selection uses the validation seeds
-500000 + i, training 1000000 + ...), beside ``rg-mpc``, ``epa`` and the zero action of every
+500000 + i, training 1000000 + ...), beside the best expert (:data:`~training.score.SCORE_HIGH`), ``epa`` and the zero action of every
 interface the agents act through (``anchor:NAME``, :mod:`agents.anchors`) on the same seeds and
 env. Each row reports the realized control cost, the normalized score (:mod:`training.score`),
-the paired relative difference against ``rg-mpc`` and against the agent's own anchor: what
+the paired relative difference against the expert and against the agent's own anchor: what
 learning adds is the last column.
 
 The task suite (``lawn benchmark --suite``) is :mod:`training.suite`; both share the rows and
@@ -127,7 +127,7 @@ def paired(rows: Sequence[Mapping], policy: str, reference: str, env: str) -> tu
 
 def protocol_cells(rows: Sequence[Mapping], scores: Mapping, policy: str, env: str) -> dict[str, str]:
     """The cells every learned-protocol table shows for ``policy`` on ``env``: its anchor, control
-    cost, score, paired difference against rg-mpc and against its own anchor, and its worst seed
+    cost, score, paired difference against the best expert and against its own anchor, and its worst seed
     against the anchor."""
     cost = costs_of(rows, policy, env)
     anchor = own_anchor(policy)
@@ -153,7 +153,7 @@ def learned_table(rows: Sequence[Mapping], entries: Sequence[tuple[str, str]],
     scores = scores_by_policy(rows)
     seeds = len({int(r["seed"]) for r in rows})
     lines = [f"| policy | env | acts around | control cost | transient | sustained | score v{SCORE_VERSION} [95 %] "
-             f"| vs rg-mpc (geometric, seeds won) | vs own anchor (geometric, seeds won) | vs rg-mpc (paired mean) "
+             f"| vs {SCORE_HIGH} (geometric, seeds won) | vs own anchor (geometric, seeds won) | vs {SCORE_HIGH} (paired mean) "
              f"| vs own anchor (paired mean) | worst seed vs own anchor |", "|" + "---|" * 12]
     for policy, env in entries:
         c = protocol_cells(rows, scores, policy, env)

@@ -28,12 +28,12 @@ __all__ = ["SUITE_POLICIES", "suite_policies", "run_suite", "suite_table", "stru
            "plot_profiles", "skipped_summary", "write_leaderboard"]
 
 #: Experts and baselines of the suite (global-mpc, seconds per slot, is the gap study's reference).
-SUITE_POLICIES = ("rg-mpc", "ao-mpc", "epa", "sf", "pid", "lqr", "heuristic", "anchor:stake", "anchor:distance")
+SUITE_POLICIES = ("dv-mpc", "rg-mpc", "ao-mpc", "epa", "sf", "pid", "lqr", "heuristic", "anchor:stake", "anchor:distance")
 
 
 def suite_policies() -> list[str]:
     """The experts, baselines and anchors of :data:`SUITE_POLICIES` (``anchor:hover`` left out: its
-    cost is thousands of times rg-mpc's) and every shipped agent."""
+    cost is thousands of times the experts') and every shipped agent."""
     return list(SUITE_POLICIES) + [f"zoo:{n}" for n in zoo_agents()]
 
 
@@ -91,7 +91,7 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
     """The leaderboard (score per task, the IQM over tasks with its stratified bootstrap interval)
     and the references' costs per task."""
     scores, inputs = scores_by_policy(rows), score_inputs(rows)
-    at = list(policies).index(SCORE_HIGH) + 1 if SCORE_HIGH in policies else 0  # the reference rows after rg-mpc
+    at = list(policies).index(SCORE_HIGH) + 1 if SCORE_HIGH in policies else 0  # the reference rows after the expert
     names = list(dict.fromkeys([*policies[:at], *REFERENCE_ROWS, *policies[at:]]))
     lines = ["| policy | env | " + " | ".join(tasks) + " | IQM over tasks [95 %] |", "|" + "---|" * (len(tasks) + 3)]
     for p in names:
@@ -122,8 +122,8 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
 
 
 def structure_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
-    """Per task, what decides it: ``rg-mpc``'s control cost, its transient and sustained parts (the
-    sustained share), the noise floor and the two headroom rows against ``rg-mpc`` (geometric,
+    """Per task, what decides it: the best expert's control cost, its transient and sustained parts (the
+    sustained share), the noise floor and the two headroom rows against it (geometric,
     :mod:`training.limits`), on ``lawn/Joint-v0``."""
     lines = [f"| task | {SCORE_HIGH} cost | transient | sustained (share) | "
              + " | ".join(f"{p} vs {SCORE_HIGH} (geometric, seeds won)" for p in REFERENCE_ROWS) + " |",
@@ -147,7 +147,7 @@ def structure_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
 def task_tables(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequence[str],
                 skipped: Mapping[tuple[str, str], str]) -> str:
     """One Markdown table per task: every row's control cost, its transient and sustained parts, the
-    score, and the comparison with ``rg-mpc`` on the same env (geometric, the deciding statistic,
+    score, and the comparison with the best expert on the same env (geometric, the deciding statistic,
     and the paired mean of relative differences)."""
     scores = scores_by_policy(rows)
     out = []
@@ -237,7 +237,8 @@ def write_leaderboard(path: Path, board: str, refs: str, skipped: Mapping[tuple[
         subset="" if list(tasks) == list(presets.SUITE) else
         f" This board runs {', '.join(f'`{t}`' for t in tasks)} only (`--tasks`).",
         board=board, reasons=": " + "; ".join(reasons) + "." if reasons else ".", split=f"slots 0-{transient_slots - 1}",
-        structure=structure, picture=picture, details=details, refs=refs)
+        structure=structure, picture=picture, details=details, refs=refs, low=SCORE_LOW, high=SCORE_HIGH,
+        refrows=", ".join(f"`{r}`" for r in REFERENCE_ROWS))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
@@ -257,13 +258,13 @@ these tasks). Every policy plays full episodes of the unmodified scenario on the
 measure how they generalize.
 
 Score v{score_version} (`training/score.py`), D4RL's normalized score adapted to a cost:
-100 × (mean cost of `epa` − mean cost) / (mean cost of `epa` − mean cost of `rg-mpc`), on the
+100 × (mean cost of `{low}` − mean cost) / (mean cost of `{low}` − mean cost of `{high}`), on the
 same seeds, task and env (the numerator paired per seed); 0 is the paper's equal-power baseline,
-100 the package's best expert, above 100 beats it. The interval is a 95 % paired bootstrap over
+100 the package's best expert, above 100 beats it (docs/benchmark.md, "Score versions"). The interval is a 95 % paired bootstrap over
 seeds. The last column is the headline, rliable's aggregate: the interquartile mean of the
 per-task scores with a 95 % stratified bootstrap interval (seeds resampled within each task).
 Experts, baselines, anchors and the reference rows act on `lawn/Joint-v0`; each learned agent on
-its own env. `noise:rg-mpc`, `limit:fast-drone` and `limit:perfect-links` are references, not
+its own env. {refrows} are references, not
 policies ([headroom rows](benchmark.md#headroom-and-noise-floor)).
 
 {board}
@@ -273,7 +274,7 @@ n/a: the policy cannot act on the task{reasons} –: no score
 
 ## What decides each task
 
-`rg-mpc`'s control cost split into the transient ({split}) and the sustained part, and the three
+`{high}`'s control cost split into the transient ({split}) and the sustained part, and the three
 reference rows against it, each as the geometric mean of the per-seed cost ratios − 1 with its
 95 % bootstrap interval and the share of seeds won (the deciding statistic): a difference between
 two policies smaller than the noise floor's is not one; the headroom rows say how much of the cost
@@ -284,7 +285,7 @@ the drone's reach and the links decide under the expert's own planning.
 ## Every row, per task
 
 Control cost, its transient and sustained parts (mean ± 95 % t-interval), the score, and the
-comparison with `rg-mpc` on the same env and seeds: geometric (deciding) and as the mean of per-seed
+comparison with `{high}` on the same env and seeds: geometric (deciding) and as the mean of per-seed
 relative differences (t-interval), which the few seeds where one cost is many times the other can
 dominate.
 

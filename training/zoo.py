@@ -154,14 +154,14 @@ def render_zoo(tables: ZooTables) -> tuple[str, str]:
     """Stage 3: the recipe table (with its note on seeds, sources and the expert against each
     anchor) and the per-run table, as Markdown."""
     head = [f"| agent | env | algorithm, budget per run | acts around | control cost | score v{SCORE_VERSION} [95 %] "
-            "| vs rg-mpc (paired) | vs own anchor (paired) | vs own anchor, mean over training seeds |", "|" + "---|" * 9]
+            f"| vs {SCORE_HIGH} (paired) | vs own anchor (paired) | vs own anchor, mean over training seeds |", "|" + "---|" * 9]
     runs_head = [f"| recipe | training seed | acts around | selected validation: vs rg-mpc (cost, episodes) "
-                 f"| score v{SCORE_VERSION} | vs rg-mpc (paired) | vs own anchor (paired) | worst test seed vs own "
+                 f"| score v{SCORE_VERSION} | vs {SCORE_HIGH} (paired) | vs own anchor (paired) | worst test seed vs own "
                  "anchor | wall time |", "|" + "---|" * 9]
     lines = head + ["| " + " | ".join(row[k] for k in _RECIPE_COLUMNS) + " |" for row in tables.recipe_rows]
     n = tables.episodes
     table = "\n".join(lines) + (f"\n\n{n} test seeds (0-{n - 1}); training runs made at: " + "; ".join(tables.sources)
-                                + ". `rg-mpc` itself against each anchor (the \"vs own anchor\" of a perfect clone of "
+                                + f". `{SCORE_HIGH}` itself against each anchor (the \"vs own anchor\" of a perfect clone of "
                                 "the expert): " + "; ".join(tables.floor) + ".")
     per_run = runs_head + ["| " + " | ".join(row[k] for k in _RUN_COLUMNS) + " |" for row in tables.run_rows]
     return table, "\n".join(per_run)

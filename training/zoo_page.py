@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from .recipes import RECIPES, SECTIONS
+from .score import SCORE_HIGH, SCORE_LOW, SCORE_VERSION
 
 __all__ = ["PAGE_BLOCKS", "FLEET_SECTION", "document", "merged_rows", "read_text", "write_atomic"]
 
@@ -72,8 +73,8 @@ shipped seed of a recipe) uses only the validation seeds 500000+i; training epis
 Each agent acts around the zero action of its interface ("acts around": `anchor:stake` or
 `anchor:distance`, `agents/anchors.py`), which is a row of its own on the same seeds; "vs own
 anchor" is the per-test-seed relative difference in control cost against it, averaged over the
-test seeds with a paired 95 % t-interval: what learning adds. "vs rg-mpc" is the same against the
-expert. The score is the normalized score v1 (`training/score.py`: 0 = `epa`, 100 = `rg-mpc`,
+test seeds with a paired 95 % t-interval: what learning adds. "vs {SCORE_HIGH}" is the same against the
+expert. The score is the normalized score v{SCORE_VERSION} (`training/score.py`: 0 = `{SCORE_LOW}`, 100 = `{SCORE_HIGH}`,
 95 % paired bootstrap interval). The last column averages "vs own anchor" per training run and
 gives a 95 % t-interval across the training seeds.
 

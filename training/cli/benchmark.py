@@ -30,7 +30,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
                          "shipped agent and the stake and distance anchors, beside the reference rows)")
     bm.add_argument("--protocol", choices=["paper", "learned"], default="paper",
                     help="paper (default): the policies on --episodes seeds of one scenario; learned: agents "
-                         "beside rg-mpc, epa and their own anchors on the 100 test seeds, with the normalized score")
+                         "beside the best expert, epa and their own anchors on the 100 test seeds, with the normalized score")
     bm.add_argument("--suite", action="store_true",
                     help="the task suite (lawn_env.presets.SUITE): normalized score of every policy on every task")
     bm.add_argument("--tasks", nargs="+", default=None, choices=presets.names(), metavar="TASK",
@@ -100,7 +100,7 @@ def _suite(args: argparse.Namespace) -> int:
     from ..suite import (plot_profiles, run_suite, skipped_summary, structure_table, suite_policies,
                                suite_table, task_tables, write_leaderboard)
     from ..protocol import TEST_EPISODES
-    from ..score import SCORE_VERSION
+    from ..score import SCORE_HIGH, SCORE_LOW, SCORE_VERSION
     from ..tables import read_csv
 
     episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
@@ -116,7 +116,7 @@ def _suite(args: argparse.Namespace) -> int:
     board, refs = suite_table(rows, policies, tasks, skipped)
     structure, details = structure_table(rows, tasks), task_tables(rows, policies, tasks, skipped)
     print(f"lawn benchmark --suite: {len(policies)} policies x {len(tasks)} tasks, {episodes} seeds each, "
-          f"{seconds / 60:.1f} min; normalized score v{SCORE_VERSION} [95 %] (0 = epa, 100 = rg-mpc)")
+          f"{seconds / 60:.1f} min; normalized score v{SCORE_VERSION} [95 %] (0 = {SCORE_LOW}, 100 = {SCORE_HIGH})")
     print(board)
     print(structure)
     for line in skipped_summary(skipped):

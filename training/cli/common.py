@@ -123,7 +123,8 @@ class Parents:
     def _policy_arg(p: argparse.ArgumentParser) -> None:
         p.add_argument("--policy-arg", action="append", default=[], metavar="KEY=VALUE",
                        help="policy setting, e.g. --policy-arg power_levels=60 for rg-mpc or tolerance=1e-3 for ao-mpc "
-                            "(repeatable; the fields of agents.ReducedSettings for rg-mpc, agents.AOSettings for the AO planners)")
+                            "(repeatable; the fields of agents.DeliverySettings for dv-mpc, agents.ReducedSettings for "
+                            "rg-mpc, agents.AOSettings for the AO planners)")
 
     def __call__(self, *names: str) -> list[argparse.ArgumentParser]:
         """New parent parsers of ``--debug`` and the named shared flags (``"workers"``, ``"quiet"``,

@@ -23,7 +23,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     ev.add_argument("--episodes", type=count, default=10, help="episodes, seeds --seed.. (default: %(default)s)")
     ev.add_argument("--out", required=True, help="rows file, .csv or .json")
     ev.add_argument("--no-score", action="store_true",
-                    help="skip the normalized score (which runs epa and rg-mpc on the same seeds)")
+                    help="skip the normalized score (which runs its references, epa and dv-mpc, on the same seeds)")
     ev.set_defaults(func=run)
 
 
