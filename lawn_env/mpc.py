@@ -454,14 +454,17 @@ class OutageAwareMPC:
         """The slot's QPs with the next command's increment held at zero: the command lost, the AGV
         keeping u[n-1] until the command after it (MODEL.md §4, "Planning under delivery"). The next
         command is the horizon's first increment that may be non-zero (:func:`command_mask`; the
-        first with commands every slot). Its phases are ``P .. 2P-1`` of the compiled pencils."""
+        first with commands every slot; none when the period outlasts the horizon, and then nothing
+        is held). Its phases are ``P .. 2P-1`` of the compiled pencils."""
         n, p = self._n, self.control_period
         phase = np.asarray(data.phase, dtype=np.int64)
         first = (p - phase) % p  # the horizon index of the next command: 0 on a command slot
         lower, upper = data.lower.copy(), data.upper.copy()
         held = np.zeros(data.lower.shape[:-1] + (2 * n,), dtype=bool)
-        axes = 2 * np.broadcast_to(first[..., None], data.constant.shape)[..., None] + np.arange(2)
+        first = np.broadcast_to(first[..., None], data.constant.shape)
+        axes = 2 * np.minimum(first, n - 1)[..., None] + np.arange(2)
         np.put_along_axis(held, axes, True, axis=-1)
+        held &= (first < n)[..., None]  # a period longer than the horizon: no command in it to hold
         lower[held], upper[held] = 0.0, 0.0
         lost_phase = int(phase) + p if phase.ndim == 0 else phase + p
         return SlotData(data.residual, data.linear, data.constant, lower, upper, lost_phase)
@@ -493,5 +496,6 @@ def _pencils(model_key: tuple, period: int) -> AxisPencils:
     masks = [command_mask(phase, model.horizon, period) for phase in range(period)]
     lost = [mask.copy() for mask in masks]  # phases P .. 2P-1: the next command held (lost_command)
     for phase, mask in enumerate(lost):
-        mask[(period - phase) % period] = False
+        if (period - phase) % period < model.horizon:  # a period longer than the horizon: maybe none in it
+            mask[(period - phase) % period] = False
     return AxisPencils.build(2.0 * model.q5, 2.0 * model.ftq4f, model.horizon, masks + lost)

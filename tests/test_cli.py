@@ -62,7 +62,7 @@ def test_evaluate_rejects_bad_inputs(tmp_path, capsys):
     assert "tolerance" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["evaluate", "--policy", "nope", "--out", str(tmp_path / "r.csv")])
-    assert "unknown policy 'nope'; valid: rg-mpc" in capsys.readouterr().err
+    assert "unknown policy 'nope'; valid: dv-mpc, rg-mpc" in capsys.readouterr().err
 
 
 def test_parallel_evaluation_matches_serial(tmp_path):

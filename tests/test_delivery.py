@@ -234,3 +234,20 @@ def test_without_a_lag_or_measurement_noise_the_tracker_changes_nothing():
     assert planner.mpc.model.state_dim == 6
     off = DeliveryValuePlanner(DISTURBED, DeliverySettings(model_lag=False, filter_measurements=False))
     assert off.mpc.model.state_dim == 6 and off._state(_snapshots(1, seed=1, config=DISTURBED)[0]) is None
+
+
+def test_a_control_period_longer_than_the_horizon_holds_nothing_it_cannot_see():
+    """With commands every 11 slots and a 10-slot horizon, some slots see no command in the horizon:
+    the lost and delivered values are then equal (nothing to lose), and dv-mpc still plans."""
+    config = CFG.override({"disturbance.control_period_slots": 11})
+    mpc = OutageAwareMPC.from_config(config)
+    for snap in _snapshots(2, seed=28, config=config):
+        for slot in (0, 1, 5):
+            data = mpc.prepare(snap.x_aug, snap.reference, slot)
+            delivered, lost = mpc.delivery_values(data)
+            if slot == 1:  # the next command at slot 11: horizon index 10, beyond it
+                assert np.allclose(lost, delivered.value)
+            else:
+                assert np.all(lost >= delivered.value - 1e-9)
+    env = gym.make("lawn/Joint-v0", config=config).unwrapped
+    rollout(env, make_policy("dv-mpc", config), 0, max_steps=13)

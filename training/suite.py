@@ -264,7 +264,8 @@ same seeds, task and env (the numerator paired per seed); 0 is the paper's equal
 seeds. The last column is the headline, rliable's aggregate: the interquartile mean of the
 per-task scores with a 95 % stratified bootstrap interval (seeds resampled within each task).
 Experts, baselines, anchors and the reference rows act on `lawn/Joint-v0`; each learned agent on
-its own env. {refrows} are references, not
+its own env. On `lawn/Comm-v0`, whose AGVs apply the paper's law, `{high}` plans as `rg-mpc`
+does (the power and the drone for those AGVs), so 100 on a Comm row is that planner's. {refrows} are references, not
 policies ([headroom rows](benchmark.md#headroom-and-noise-floor)).
 
 {board}
