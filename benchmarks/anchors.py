@@ -1,4 +1,4 @@
-"""How good the RL interface's zero action is (issue #9): the anchors a learner starts from,
+"""How good the RL interface's zero action is: the anchors a learner starts from,
 against ``rg-mpc`` on the same seeds, in one run.
 
 Every row plays full 120-slot episodes of the unmodified ``lawn/Comm-v0`` scenario and reports the
@@ -8,7 +8,7 @@ the rows the learned protocol puts beside every agent):
 
 * ``hover`` -- the v0 interface's zero action (the drone hovers at its start, equal power);
 * ``distance`` -- the anchored scheme with the distance prior (drone over the AGVs' centroid, the
-  split that equalizes every link's outage), the RL interface before issue #9's stake prior;
+  split that equalizes every link's outage), the RL interface before its stake prior;
 * ``stake`` -- the anchored scheme with the stake prior (``lawn_env.interface``), the RL
   interface's default: the zero action a learner of ``lawn/CommRL-v0`` or ``lawn/JointRL-v0``
   starts from.

@@ -11,7 +11,7 @@ test seeds.
 2. **Decision time** at K = 4 (the paper's paths) and K = 32 (``k32``): both planners decide on the
    same snapshots (an ``rg-mpc`` episode's), interleaved slot by slot, each keeping its own warm starts.
 
-Targets (issue #43): ``dv-mpc`` against ``rg-mpc`` at most -10 % on ``steady``, -45 % on
+Targets: ``dv-mpc`` against ``rg-mpc`` at most -10 % on ``steady``, -45 % on
 ``steady-low-power``, -7 % on ``steady-gusty``, -20 % on ``wide-k8``, each interval below zero, on both
 ranges; on ``default`` and ``disturbed`` not significantly worse (the interval's low end at most 1) and
 at most +2 %, on both ranges; half of the perfect-links headroom closed on every steady task; decision

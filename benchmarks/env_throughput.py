@@ -4,7 +4,7 @@ Unwrapped environments, pre-sampled actions, one core; each figure is the best o
 ``--repeats`` timed runs of ``--steps`` steps (resets between episodes are excluded from the
 timing). Then the native vector envs at N = 1024 (``--num-envs``) beside Gymnasium's
 CartPoleVectorEnv, resets included, and Joint-v0 at K = 32 with N = 256. Prints the tables and
-checks the targets of issues #2, #13 and #25:
+checks its targets:
 
 * ``lawn/Joint-v0`` at K = 4: at least 30,000 steps/s and within 4x of CartPole's step time;
 * ``lawn/Comm-v0`` at K = 4: at least 3,000 steps/s;
@@ -104,7 +104,7 @@ def main(argv=None) -> int:
     vrows = [("CartPoleVectorEnv", "-", measure_vector("CartPole-v1", n, args.vector_steps, vrep))]
     for k in (4, 32):
         vrows.append(("lawn/Joint-v0", k, measure_vector("lawn/Joint-v0", n, args.vector_steps, vrep, num_agvs=k)))
-    small = max(n // 4, 1)  # K = 32 at a quarter of the envs (#25's second vector figure)
+    small = max(n // 4, 1)  # K = 32 at a quarter of the envs (the second vector figure)
     vrows.append((f"lawn/Joint-v0 (N = {small})", 32,
                   measure_vector("lawn/Joint-v0", small, args.vector_steps, vrep, num_agvs=32)))
     # Comm-v0 solves N x K QPs per step: the compiled solver beside DAQP one QP at a time, same run

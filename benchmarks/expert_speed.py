@@ -10,8 +10,8 @@
    data, compiled once, Clarabel at tight tolerances); objectives are compared on the sample.
 
 Targets: ao-mpc median <= 2 ms at K = 4 and <= 30 ms at K = 32, the QP block at least 50x faster
-than CVXPY at equal objective (1e-6 relative) (issue #3); rg-mpc median <= 3 ms at K = 4 and
-<= 60 ms at K = 32 (issue #4).
+than CVXPY at equal objective (1e-6 relative); rg-mpc median <= 3 ms at K = 4 and
+<= 60 ms at K = 32.
 
 ``--tolerance-sweep`` adds the AO stopping tolerance's trade-off: decision time and J^ relative to
 a 60-iteration run, on the K = 4 slots.

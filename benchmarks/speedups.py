@@ -1,4 +1,4 @@
-"""Speed-ups of the compiled QP solver (issue #22), measured side by side with the code before it.
+"""Speed-ups of the compiled QP solver, measured side by side with the code before it.
 
 Each measurement runs in a fresh process once per tree (this checkout and ``--before``, a
 checkout of the commit before the change, made with ``git worktree add`` when missing), the two
@@ -13,7 +13,7 @@ what is reported (the machine's speed cancels out of it):
 * ``ppo``: SB3 PPO on ``lawn/CommRL-v0`` with ``--vec native`` (N = 64), env-steps/s, and SB3's
   own update time (the floor the env cannot remove).
 
-Targets (issue #22): Comm-v0 vector >= 0.0075x CartPoleVectorEnv; the RL vector envs >= 5x before;
+Targets: Comm-v0 vector >= 0.0075x CartPoleVectorEnv; the RL vector envs >= 5x before;
 rg-mpc >= 3x faster at K = 4 and 32; ao-mpc >= 2x; PPO on CommRL-v0 >= 1.5x before.
 
 Usage: ``python benchmarks/speedups.py [--before ../before] [--before-commit SHA] [--repeats 3]
@@ -34,7 +34,7 @@ from pathlib import Path
 from report import finish  # benchmarks/report.py, beside this script
 
 HERE = Path(__file__).resolve().parents[1]
-#: The commit before the compiled solver (issue #22).
+#: The commit before the compiled solver.
 BEFORE_COMMIT = "9f88288"
 
 

@@ -3,10 +3,10 @@
 Same algorithm settings for all (SB3's PPO defaults: MlpPolicy 64x64, n_steps 2048, one
 environment, no normalization), one torch thread, the same run; the figure is environment steps
 per second of wall time over ``--timesteps`` steps (best of ``--repeats``), model construction
-excluded. Target (issue #5): lawn/Joint-v0 trains at least half as fast as CartPole-v1. The RL
+excluded. Target: lawn/Joint-v0 trains at least half as fast as CartPole-v1. The RL
 interface ids (anchored actions: the MPC runs inside Joint as well) are timed beside them. Then
 PPO on lawn/Joint-v0 with 64 envs, SB3's DummyVecEnv beside lawn's native vector env
-(``lawn train --vec native``); target (issue #13): the native path >= 10,000 steps/s on 2 cores.
+(``lawn train --vec native``); target: the native path >= 10,000 steps/s on 2 cores.
 
 Usage: ``python benchmarks/train_throughput.py [--timesteps 10240] [--repeats 2]``
 """

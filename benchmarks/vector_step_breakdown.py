@@ -1,4 +1,4 @@
-"""Where a native vector env step spends its time (issue #13): each part of
+"""Where a native vector env step spends its time: each part of
 ``JointVectorEnv.step`` timed on its own at N envs, beside the whole step, in one run.
 
 Parts: checking the actions, decoding them, the slot's draws, the simulation step

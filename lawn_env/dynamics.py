@@ -246,7 +246,6 @@ class PredictionModel:
     q5: np.ndarray
     ftq4f: np.ndarray  # F' Q4 F, (2N_p, 2N_p)
     ftq4: np.ndarray  # F' Q4, (2N_p, 6(N_p+1))
-    q4c: np.ndarray  # Q4 C, (6(N_p+1), 6)
     increment_sum: np.ndarray  # T, (2N_p, 2N_p)
     q1_tiled: np.ndarray  # diag(Q1) repeated N_p times: Q4's diagonal blocks, (6 N_p,)
     key: tuple  # (slot_s, horizon, q1_diag, q2_diag[, terminal_success, lag_alpha]): what it is built from, its cache key
@@ -323,7 +322,7 @@ def _build_model(slot_s: float, horizon: int, q1_diag: tuple, q2_diag: tuple,
     ftq4 = f.T @ q4
     arrays = dict(
         a_aug=a_aug, b_aug=b_aug, q1=q1, q2=q2, q3=q3, c=c, f=f, q4=q4, q5=q5,
-        ftq4f=ftq4 @ f, ftq4=ftq4, q4c=q4 @ c, increment_sum=increment_sum_matrix(horizon),
+        ftq4f=ftq4 @ f, ftq4=ftq4, increment_sum=increment_sum_matrix(horizon),
         q1_tiled=np.tile(np.asarray(q1_diag, dtype=float), horizon),
     )
     for arr in arrays.values():

@@ -299,7 +299,7 @@ def test_linear_argmin_disc_box_beats_a_dense_sample(rng):
 @pytest.mark.parametrize("name", ["ao-mpc", "rg-mpc", "epa", "sf"])
 def test_returned_increments_are_the_exact_qp_optimum_at_the_returned_point(name, independent_qp):
     """Every planner that fixes control by the QP returns the QP's optimum at its own returned
-    (p, q): checked per AGV against an independent solver (MODEL.md §4; issue #10, finding 1).
+    (p, q): checked per AGV against an independent solver (MODEL.md §4).
     Snapshots come from an episode the policy drives itself (seed 5, default scenario)."""
     env = gym.make("lawn/Joint-v0", config=CFG).unwrapped
     policy = make_policy(name, CFG, seed=5)

@@ -105,7 +105,7 @@ def test_gap_command_writes_tables_and_figures(tmp_path, capsys):
 
 
 def test_bad_counts_seeds_and_specs_are_one_line_errors(tmp_path, capsys):
-    """Issue #12: bad numbers fail at parse time (exit 2, naming the argument); bad sweep specs are
+    """Bad numbers fail at parse time (exit 2, naming the argument); bad sweep specs are
     one line naming the file and what is wrong, never a traceback or a silent exit 0."""
     import pytest
 
@@ -129,7 +129,7 @@ def test_bad_counts_seeds_and_specs_are_one_line_errors(tmp_path, capsys):
 
 
 def test_an_unwritable_out_fails_before_any_episode(tmp_path, capsys, monkeypatch):
-    """Issue #12: the output location is checked before computing (a file where a folder is needed,
+    """The output location is checked before computing (a file where a folder is needed,
     a folder where a file is needed), with one line naming --out."""
     import training.evaluate
     import training.sweep

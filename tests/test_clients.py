@@ -1,4 +1,4 @@
-"""Outside clients run the environments for a few hundred steps (issue #11), each as its users
+"""Outside clients run the environments for a few hundred steps, each as its users
 call it. Slow (``pytest -m slow``); a client that is not installed is skipped with the reason
 (``pip install -e ".[compat]"`` installs TorchRL and Tianshou at versions that work with the
 CPU build of torch 2.13.0; ``".[rllib]"`` installs RLlib, which pins Gymnasium 1.2.2, so in an

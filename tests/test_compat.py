@@ -1,4 +1,4 @@
-"""What other RL libraries rely on (issue #11): copies, keyword errors, info schemas, PettingZoo's
+"""What other RL libraries rely on: copies, keyword errors, info schemas, PettingZoo's
 AEC form and tests, the registry's episode length. The clients themselves run in
 ``tests/test_clients.py`` (slow, skipped when they are not installed)."""
 

@@ -109,7 +109,7 @@ def test_channel_config_linear_values():
     ({"disturbance": {"measurement_noise_position_m": 1e40}}, "disturbance.measurement_noise_position_m"),
 ])
 def test_configs_the_code_cannot_run_are_rejected_naming_the_field(overrides, field):
-    """Issue #12: each of these validated before and crashed later (Riccati, root finding, overflow,
+    """Each of these validated before and crashed later (Riccati, root finding, overflow,
     inf observations); now the config names the field and the allowed range."""
     with pytest.raises(ValueError) as err:
         ScenarioConfig(**overrides)

@@ -80,7 +80,7 @@ def test_bad_actions_raise_clear_errors(env_id):
         env.step(np.zeros(n + 1))
     with pytest.raises(ValueError, match=f"dtype <U1.*expected real numbers of shape \\({n},\\), float32"):
         env.step(["a"] * n)
-    # what Gymnasium's Box.contains rejects is rejected, never reshaped or converted (issue #12)
+    # what Gymnasium's Box.contains rejects is rejected, never reshaped or converted
     for bad, what in ((np.zeros(n, dtype=complex), "complex128"), (np.zeros(n, dtype=bool), "bool"),
                       (np.full(n, "0.5"), "<U3"), (np.array([None] * n), "object")):
         with pytest.raises(ValueError, match=f"dtype {what}"):

@@ -1,5 +1,5 @@
 """The benchmark protocol: anchors, the normalized score, the learned protocol, the task suite,
-Minari datasets and behaviour cloning from them (issue #23)."""
+Minari datasets and behaviour cloning from them."""
 
 from __future__ import annotations
 

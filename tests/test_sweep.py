@@ -57,7 +57,7 @@ def test_sweep_survives_being_killed(tmp_path):
 
 
 def test_sweep_resume_is_keyed_by_the_resolved_config_and_refuses_foreign_tables(tmp_path):
-    """Issue #12: a changed ``set`` reruns instead of reusing rows; a table written by another
+    """A changed ``set`` reruns instead of reusing rows; a table written by another
     spec is refused with a clear message unless extended."""
     small = dict(SPEC, grid={"channel.blocklength": [256]}, policies=["epa"], seeds=2)
     table = tmp_path / "t.csv"
@@ -210,7 +210,7 @@ def _session_processes(sid: int) -> list[int]:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
 def test_killed_sweep_leaves_no_worker_processes(tmp_path, sig):
-    """Issue #12: killing `lawn sweep --workers 2` (SIGKILL or SIGTERM) leaves no process behind,
+    """Killing `lawn sweep --workers 2` (SIGKILL or SIGTERM) leaves no process behind,
     and the rows it finished are kept."""
     spec = dict(SPEC, seeds=6, set={"num_slots": 30})
     spec_file = tmp_path / "spec.json"
@@ -235,7 +235,7 @@ def test_killed_sweep_leaves_no_worker_processes(tmp_path, sig):
 @pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_sweep_killed_twenty_times_then_resumed_equals_the_clean_table(tmp_path):
-    """Issue #12: `lawn sweep --workers 2` killed at up to 20 random moments (SIGKILL or SIGTERM),
+    """`lawn sweep --workers 2` killed at up to 20 random moments (SIGKILL or SIGTERM),
     resumed each time, then finished, writes the same file as an uninterrupted sweep, byte for byte
     apart from the decision-time columns; no process outlives a kill. The kills stop once a run
     has finished the table; at least 5 of them must have interrupted it (the sweep is sized for

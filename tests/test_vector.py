@@ -1,4 +1,4 @@
-"""The native vector env (issue #13): lockstep with the single env, Gymnasium's vector
+"""The native vector env: lockstep with the single env, Gymnasium's vector
 conventions, spaces, errors."""
 
 import gymnasium as gym

@@ -61,7 +61,7 @@ class Recipe:
 #: Validation episodes of every zoo run (model selection; the test seeds are never used).
 ZOO_VALIDATION_EPISODES = 20
 #: Imitation at scale: 100,000 labels of rg-mpc, then 4 DAgger rounds of 10,000 on the clone's own
-#: states, a 256 x 256 network (issue #24: at 12,000 + 4 x 4,800 labels and 128 x 128 the clone was
+#: states, a 256 x 256 network (at 12,000 + 4 x 4,800 labels and 128 x 128 the clone was
 #: +2.8 % of rg-mpc on the test seeds; at this budget +0.1 %, 13-14 minutes a run two side by side).
 _BC_AT_SCALE = {"dagger_iterations": 4, "dagger_timesteps": 10_000,
                 "policy_kwargs": {"net_arch": [256, 256], "log_std_init": -1.0}}

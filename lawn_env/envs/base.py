@@ -42,10 +42,6 @@ class JointRole:
     """``lawn/Joint-v0``'s role: the actions decide the increments, the powers and the drone."""
 
     name = "joint"
-    info_keys: tuple[str, ...] = ()
-
-    def __init__(self, mpc: OutageAwareMPC | None = None):
-        del mpc  # nothing plans for the AGVs
 
     def reset(self, which: np.ndarray | None = None) -> None:
         """New episodes for the scenarios ``which`` (all when None)."""
@@ -68,7 +64,6 @@ class CommRole:
     interface's anchor, which shares this MPC (one per env)."""
 
     name = "comm"
-    info_keys = COMM_INFO_KEYS
 
     def __init__(self, mpc: OutageAwareMPC, law: str = "paper"):
         self.mpc = mpc
