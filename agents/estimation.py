@@ -37,8 +37,8 @@ class AGVTracker:
         self.lag_alpha = dynamics.lag_alpha(config.slot_s, d.actuator_lag_s) if lag and d.actuator_lag_s > 0 else None
         noise = (d.measurement_noise_position_m, d.measurement_noise_velocity_mps)
         self.filtering = filter and max(noise) > 0
-        a_aug, _ = dynamics.augmented_matrices(config.slot_s)
-        self._f, self._effect = a_aug[0:4, 0:4], a_aug[0:4, 4:6]  # [p, v] <- [p, v] and the acceleration
+        self._a_aug, self._b_aug = dynamics.augmented_matrices(config.slot_s)
+        self._f = self._a_aug[0:4, 0:4]  # [p, v] <- [p, v]: the covariance's transition
         pos, vel = (d.process_noise_position_m, d.process_noise_velocity_mps)
         self._q = np.diag([pos**2, pos**2, vel**2, vel**2])
         self._r = np.diag([noise[0] ** 2, noise[0] ** 2, noise[1] ** 2, noise[1] ** 2])
@@ -52,7 +52,8 @@ class AGVTracker:
     def state(self, x_aug: np.ndarray) -> np.ndarray:
         x_aug = np.array(x_aug, dtype=float)
         commanded = x_aug[:, ACCELERATION]  # u[n-1]: what the AGV was told in the slot before
-        moved = commanded if self.lag_alpha is None else self.lag_alpha * self.applied + (1 - self.lag_alpha) * commanded
+        moved = commanded if self.lag_alpha is None else dynamics.lagged_acceleration(self.applied, commanded,
+                                                                                        self.lag_alpha)
         if self.filtering:
             x_aug[:, 0:4] = self._filter(x_aug[:, 0:4], moved)
         self.applied = moved
@@ -67,7 +68,8 @@ class AGVTracker:
             self.estimate = measured.copy()
             return self.estimate
         f = self._f
-        predicted = self.estimate @ f.T + moved @ self._effect.T
+        moving = np.concatenate([self.estimate, moved], axis=1)  # [p, v] and the acceleration they moved with
+        predicted = dynamics.step_augmented(moving, np.zeros_like(moved), self._a_aug, self._b_aug)[:, 0:4]
         prior = f @ self.covariance @ f.T + self._q
         gain = np.linalg.solve(prior + self._r + 1e-12 * np.eye(4), prior).T  # P (P + R)^-1, P and R symmetric
         self.covariance = (np.eye(4) - gain) @ prior

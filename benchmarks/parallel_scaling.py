@@ -1,25 +1,26 @@
 """Parallel scaling of episode evaluation (training/pool.py): the pool's start beside the time per
 episode, the map's speed-up, and the whole ``lawn evaluate`` command side by side over worker counts.
 
-1. **The map.** One fixed batch of episodes, the paper protocol's six policies on the default task
-   (``lawn benchmark --episodes N``), played in this process (the reference) and by W processes for
-   each W of ``--workers`` (this one and W - 1 helpers, training/pool.py). Per W: the time per
-   episode, the speed-up over the reference, the machine's own ceiling (W independent processes each
-   playing the whole batch at once: W times the time alone over their mean time) and the helpers'
-   start (from nothing to every helper ready: an interpreter, lawn's imports and its kernel cache),
-   in seconds and in episodes of the reference. This process plays from the first moment, so a
-   helper's start costs the map only the episodes it does not play meanwhile.
-2. **The command.** ``lawn evaluate --policy rg-mpc --episodes 48`` (96 episodes with the score's
-   reference epa) timed whole, ``--workers 1`` and each W in turn (interleaved, ``--repeats`` times;
-   medians): what a user waits for, helpers' start, imports and kernel loading included. Target: 2
-   workers at least 1.5x faster than 1.
+1. **The map.** One fixed batch of episodes, ``lawn benchmark``'s default policies
+   (``agents.BENCHMARK_POLICIES``) on the default task (``lawn benchmark --episodes N``), played in
+   this process (the reference) and by W processes for each W of ``--workers`` (this one and W - 1
+   helpers, training/pool.py). Per W: the time per episode, the speed-up over the reference, the
+   machine's own ceiling (W independent processes each playing the whole batch at once: W times the
+   time alone over their mean time) and the helpers' start (from nothing to every helper ready: an
+   interpreter, lawn's imports and its kernel cache), in seconds and in episodes of the reference.
+   This process plays from the first moment, so a helper's start costs the map only the episodes it
+   does not play meanwhile.
+2. **The command.** ``lawn evaluate --policy rg-mpc --episodes 48`` (144 episodes with the score's
+   references epa and dv-mpc) timed whole, ``--workers 1`` and each W in turn (interleaved,
+   ``--repeats`` times; medians): what a user waits for, helpers' start, imports and kernel loading
+   included. Target: 2 workers at least 1.5x faster than 1.
 
 Speed targets are reported, met or missed (benchmarks/report.py); the rows of every W must equal the
 reference's (a check).
 
     python benchmarks/parallel_scaling.py [--episodes 16] [--workers 2 ...] [--repeats 3] [--markdown FILE]
 
-``--episodes`` is per policy (16: 96 episodes).
+``--episodes`` is per policy (16 seeds of each).
 """
 
 from __future__ import annotations

@@ -139,11 +139,13 @@ def lag_matrices(slot_s: float, lag_alpha: float) -> tuple[np.ndarray, np.ndarra
     a_aug, b_aug = augmented_matrices(slot_s)
     effect = a_aug[0:4, 4:6]  # how an acceleration moves position and velocity over a slot
     eye = np.eye(2)
+    # the lag's coefficients on the applied and the commanded acceleration, from the simulator's law
+    held, taken = lagged_acceleration(1.0, 0.0, lag_alpha), lagged_acceleration(0.0, 1.0, lag_alpha)
     a8, b8 = np.zeros((8, 8)), np.zeros((8, 2))
     a8[0:4, 0:4] = a_aug[0:4, 0:4]
-    a8[0:4, 4:6], a8[0:4, 6:8], b8[0:4] = (1.0 - lag_alpha) * effect, lag_alpha * effect, (1.0 - lag_alpha) * effect
+    a8[0:4, 4:6], a8[0:4, 6:8], b8[0:4] = taken * effect, held * effect, taken * effect
     a8[4:6, 4:6], b8[4:6] = eye, eye
-    a8[6:8, 4:6], a8[6:8, 6:8], b8[6:8] = (1.0 - lag_alpha) * eye, lag_alpha * eye, (1.0 - lag_alpha) * eye
+    a8[6:8, 4:6], a8[6:8, 6:8], b8[6:8] = taken * eye, held * eye, taken * eye
     return a8, b8
 
 

@@ -124,22 +124,6 @@ def test_under_a_control_period_the_command_is_the_next_command_slots_increment(
             assert "command_position" not in plan.info
 
 
-def test_comm_env_with_the_delivery_law_applies_the_psi_one_increments():
-    env = gym.make("lawn/Comm-v0", control={"law": "delivery"}).unwrapped
-    env.reset(seed=6)
-    env.action_space.seed(6)
-    independent = OutageAwareMPC.from_config(env.config, backend="osqp")
-    for _ in range(10):
-        a = env.action_space.sample()
-        x = env.sim.x_aug.copy()
-        ref = env.sim.reference_window().copy()
-        expected = independent.solve(x, ref, np.ones(4)).increments[:, 0]
-        _, _, _, _, info = env.step(a)
-        applied = np.where(info["delivered"][:, None], expected, 0.0)
-        assert np.allclose(info["applied_increment"], applied, atol=1e-6)
-        assert np.all(info["success_probability_planned"] < 1.0)  # the links as they are: only the law changed
-
-
 def test_dv_mpc_plans_for_the_law_the_comm_agvs_apply():
     """On lawn/Comm-v0 under the paper's law the AGVs apply the psi-scaled QP: dv-mpc's problem is
     then the paper's, which rg-mpc solves; under the delivery law it is the delivery value's."""

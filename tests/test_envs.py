@@ -220,8 +220,11 @@ def test_observation_is_order_one_under_a_reasonable_policy():
     assert worst < 4  # measured: 2.84 (a feature far above one would dominate a network's input)
 
 
-def test_comm_env_applies_the_mpc_first_increment():
-    env = gym.make("lawn/Comm-v0").unwrapped
+@pytest.mark.parametrize("law", ["paper", "delivery"])
+def test_comm_env_applies_the_mpc_first_increment(law):
+    """control.law="paper": the QP at each link's planned psi; "delivery": the same QP at psi = 1 (the
+    command as if it arrives), the links and the planned psi in info as they are."""
+    env = gym.make("lawn/Comm-v0", control={"law": law}).unwrapped
     env.reset(seed=6)
     env.action_space.seed(6)
     from lawn_env.mpc import OutageAwareMPC
@@ -234,9 +237,9 @@ def test_comm_env_applies_the_mpc_first_increment():
         power = lawn_env.spaces.DirectActions(env.config, "comm").decode(a, x, ref, env.sim.drone_position).power_w
         q_next = env.sim.drone_target(a[4:].astype(float) * env.config.drone.max_speed_mps)
         psi = env.sim.planning_success(power, q_next)
-        expected = independent.solve(x, ref, psi).increments[:, 0]
+        expected = independent.solve(x, ref, psi if law == "paper" else np.ones_like(psi)).increments[:, 0]
         _, _, _, _, info = env.step(a)
-        assert np.allclose(info["success_probability_planned"], psi)
+        assert np.allclose(info["success_probability_planned"], psi) and np.all(psi < 1.0)
         applied = np.where(info["delivered"][:, None], expected, 0.0)
         assert np.allclose(info["applied_increment"], applied, atol=1e-6)
         assert info["mpc_fallbacks"] == 0
