@@ -22,6 +22,7 @@ none of its own. It knows nothing about action or observation encodings; the env
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, NamedTuple, Sequence
 
 import numba
@@ -78,22 +79,60 @@ def _array(dtype, ndim: int, out: bool = False, layout: str = "A") -> numba.type
     return numba.types.Array(dtype, ndim, "C" if out else layout, readonly=not out)
 
 
+class SlotInputs(NamedTuple):
+    """What one slot reads: the state, the decisions and the draws of B scenarios (see :func:`_slot`)."""
+
+    x_aug: np.ndarray  # (B, K, 6)
+    increment: np.ndarray  # (B, K, 2)
+    send: np.ndarray  # (B,) or (1,): whether the slot sends its commands
+    power: np.ndarray  # (B, K)
+    drone_next: np.ndarray  # (B, 2)
+    fading: np.ndarray  # (B, K)
+    reference: np.ndarray  # (B, K, T, 6)
+    slot: np.ndarray  # (B,)
+    applied: np.ndarray  # (B, K, 2): the applied acceleration (actuator lag)
+    process_position: np.ndarray  # (B, K, 2), or (0, 0, 2) without process noise
+    process_velocity: np.ndarray
+    drone_prev: np.ndarray  # (B, 2)
+    totals: np.ndarray  # (B, 4 + 3K)
+
+
+class SlotOutputs(NamedTuple):
+    """What one slot writes, new arrays the caller allocates (a compiled function's returned arrays
+    cost more to hand back)."""
+
+    rows: np.ndarray  # (2, B, K, 8): [x~[n+1], du delivered] and [x~[n+1] - x~_ref[n+1], du]
+    terms: np.ndarray  # (B, K, 2): e' Q1 e, du' Q2 du
+    delivered: np.ndarray  # (B, K) bool
+    outage: np.ndarray  # (B, K)
+    applied_next: np.ndarray  # (B, K, 2), under lag
+    costs: np.ndarray  # (B, 3)
+    totals_next: np.ndarray  # (B, 4 + 3K)
+
+
 _F, _B, _I = numba.types.float64, numba.types.boolean, numba.types.int64
+_C = numba.types.Array(numba.from_dtype(SLOT_CONSTANTS), 1, "C", readonly=True)
 #: The slot kernel's one signature: every caller (single, parallel and vector envs; fixed and random
 #: paths; any role) converts to it, so the kernel compiles once instead of once per argument layout.
+#: The records cross as plain tuples (numba's dispatcher types a plain tuple in C, a NamedTuple in
+#: Python, about 2 us more per call) and are named on entry.
 _SLOT_SIGNATURE = numba.types.none(
-    _array(_F, 3), _array(_F, 3), _array(_B, 1), _array(_F, 2), _array(_F, 2), _array(_F, 2), _array(_F, 4),
-    _array(_I, 1), _array(_F, 3), _array(_F, 3), _array(_F, 3), _array(_F, 2), _array(_F, 2),
-    _array(_F, 2, layout="C"), _array(_F, 2, layout="C"), _array(_F, 2, layout="C"),
-    numba.types.Array(numba.from_dtype(SLOT_CONSTANTS), 1, "C", readonly=True),
-    _array(_F, 4, out=True), _array(_F, 3, out=True), _array(_B, 2, out=True), _array(_F, 2, out=True),
-    _array(_F, 3, out=True), _array(_F, 2, out=True), _array(_F, 2, out=True))
+    numba.types.Tuple([_array(_F, 3), _array(_F, 3), _array(_B, 1), _array(_F, 2), _array(_F, 2), _array(_F, 2),
+                       _array(_F, 4), _array(_I, 1), _array(_F, 3), _array(_F, 3), _array(_F, 3), _array(_F, 2),
+                       _array(_F, 2)]),
+    numba.types.Tuple([_array(_F, 2, layout="C")] * 3), _C,
+    numba.types.Tuple([_array(_F, 4, out=True), _array(_F, 3, out=True), _array(_B, 2, out=True),
+                       _array(_F, 2, out=True), _array(_F, 3, out=True), _array(_F, 2, out=True),
+                       _array(_F, 2, out=True)]))
 
 
 @numba.njit(cache=True, inline="always")
-def _links(x_aug, increment, send, power, drone_next, fading, c, outage, delivered, rows):  # pragma: no cover
+def _links(inp, c, out, rows):  # pragma: no cover - compiled
     """Step 1: per link, the outage argument at the drone's next position, the outage probability,
     the delivery, and the packed row [x~, du delivered] with du saturated (zero without a command)."""
+    x_aug, increment, send, power, drone_next, fading = (inp.x_aug, inp.increment, inp.send, inp.power,
+                                                         inp.drone_next, inp.fading)
+    outage, delivered = out.outage, out.delivered
     k = x_aug.shape[1]
     altitude_sq, c_d, c_ce, m, accel_max = c.altitude_sq, c.c_d, c.c_ce, c.m, c.accel_max
     for b in range(x_aug.shape[0]):
@@ -161,10 +200,12 @@ def _errors(packed, reference, slot, err, squares):  # pragma: no cover - compil
 
 
 @numba.njit(cache=True, inline="always")
-def _accumulate(terms, outage, delivered, err, send, power, drone_next, drone_prev, costs, totals):  # pragma: no cover
+def _accumulate(inp, out, err):  # pragma: no cover - compiled
     """Step 5: the slot's stage costs summed over AGVs (left to right) and the episode's running
-    sums (:data:`TOTALS`, ``totals`` holding the last slot's) advanced, the outage and power sums on
-    command slots only."""
+    sums (:data:`TOTALS`, ``out.totals_next`` holding the last slot's) advanced, the outage and
+    power sums on command slots only."""
+    terms, outage, delivered, costs, totals = out.terms, out.outage, out.delivered, out.costs, out.totals_next
+    send, power, drone_next, drone_prev = inp.send, inp.power, inp.drone_next, inp.drone_prev
     num, k = terms.shape[0], terms.shape[1]
     for b in range(num):
         sent = 1.0 if send[b % send.shape[0]] else 0.0
@@ -186,37 +227,29 @@ def _accumulate(terms, outage, delivered, err, send, power, drone_next, drone_pr
 
 
 @numba.njit([_SLOT_SIGNATURE], cache=True)
-def _slot(x_aug, increment, send, power, drone_next, fading, reference, slot, applied, process_position,
-          process_velocity, drone_prev, totals, step_t, cost_w, accel_effect_t, constants, rows_out, terms, delivered,
-          outage, applied_next, costs, totals_next):  # pragma: no cover - compiled
-    """One slot of B scenarios (see :func:`step`): 1. the links (:func:`_links`); 2. the transition, [x~[n+1], du] = [x~, du delivered] @ step_t (BLAS, as
-    numpy's ``@``); 3. the disturbance mode's actuator lag (``lag_alpha`` >= 0) and process noise
-    (where the arrays are not empty); 4. the packed error and the stage terms
-    (e' Q1 e, du' Q2 du) = err^2 @ cost_w; 5. the costs and the running sums.
-
-    Reads the state and the decisions (``send`` (B,) or (1,): whether the slot sends its
-    commands; ``process_*`` (B, K, 2), or (0, 0, 2) without process noise), the :class:`Packed`
-    matrices and the :data:`SLOT_CONSTANTS` record; writes the outputs, new arrays the caller
-    allocates (a compiled function's returned arrays cost more to hand back): ``rows_out``
-    (2, B, K, 8), the packed rows [x~[n+1], du delivered] and the packed error
-    [x~[n+1] - x~_ref[n+1], du]; ``terms`` (B, K, 2); ``delivered``, ``outage`` (B, K);
-    ``applied_next`` (B, K, 2; under lag); ``costs`` (B, 3); ``totals_next``."""
-    c = constants[0]
-    num, k = x_aug.shape[0], x_aug.shape[1]
+def _slot(inputs, packed, constants, outputs):  # pragma: no cover - compiled
+    """One slot of B scenarios (see :func:`step`): 1. the links (:func:`_links`); 2. the transition,
+    [x~[n+1], du] = [x~, du delivered] @ step_t (BLAS, as numpy's ``@``); 3. the disturbance mode's
+    actuator lag (``lag_alpha`` >= 0) and process noise (where the arrays are not empty); 4. the
+    packed error and the stage terms (e' Q1 e, du' Q2 du) = err^2 @ cost_w; 5. the costs and the
+    running sums. Reads ``inputs`` (the :class:`SlotInputs` fields), the :class:`Packed` matrices
+    and the :data:`SLOT_CONSTANTS` record; writes ``outputs`` (the :class:`SlotOutputs` fields)."""
+    inp, mat, out, c = SlotInputs(*inputs), Packed(*packed), SlotOutputs(*outputs), constants[0]
+    num, k = inp.x_aug.shape[0], inp.x_aug.shape[1]
     n = num * k
     rows = np.empty((n, 8))
-    _links(x_aug, increment, send, power, drone_next, fading, c, outage, delivered, rows)
-    packed, err = rows_out[0], rows_out[1]
-    flat = packed.reshape((n, 8))
-    np.dot(rows, step_t, flat)
+    _links(inp, c, out, rows)
+    packed_rows, err = out.rows[0], out.rows[1]
+    flat = packed_rows.reshape((n, 8))
+    np.dot(rows, mat.step_t, flat)
     if c.lag_alpha >= 0.0:
-        _lag(x_aug, applied, c.lag_alpha, applied_next, flat, accel_effect_t)
-    _process_noise(packed, process_position, process_velocity)
+        _lag(inp.x_aug, inp.applied, c.lag_alpha, out.applied_next, flat, mat.accel_effect_t)
+    _process_noise(packed_rows, inp.process_position, inp.process_velocity)
     squares = np.empty((n, 8))
-    _errors(packed, reference, slot, err, squares)
-    np.dot(squares, cost_w, terms.reshape((n, 2)))
-    totals_next[:] = totals
-    _accumulate(terms, outage, delivered, err, send, power, drone_next, drone_prev, costs, totals_next)
+    _errors(packed_rows, inp.reference, inp.slot, err, squares)
+    np.dot(squares, mat.cost_w, out.terms.reshape((n, 2)))
+    out.totals_next[:] = inp.totals
+    _accumulate(inp, out, err)
 
 
 #: The columns of ``SimState.totals`` (B, 4 + 3K): the episode's running sums of the tracking
@@ -295,6 +328,11 @@ class SimParams:
                                            *link.coefficients, link.m)], dtype=SLOT_CONSTANTS)),
             every_slot=np.ones(1, dtype=bool),
         )
+
+    @cached_property
+    def packed_args(self) -> tuple:
+        """:attr:`packed` as the plain tuple the slot kernel takes."""
+        return tuple(self.packed)
 
     @property
     def command_period(self) -> int:
@@ -495,12 +533,11 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     delivered, outage_p = np.empty((num, k), np.bool_), np.empty((num, k))
     applied = state.applied if params.lag_alpha < 0.0 else np.empty((num, k, 2))
     costs, totals = np.empty((num, 3)), np.empty(state.totals.shape)
-    step_t, cost_w, accel_effect_t = params.packed
-    _slot(x_aug, increment, send, power, drone_next, draws.fading, state.reference, state.slot, state.applied,
-          _NO_NOISE if draws.process_position is None else draws.process_position,
-          _NO_NOISE if draws.process_velocity is None else draws.process_velocity, state.drone_position,
-          state.totals, step_t, cost_w, accel_effect_t, params.constants, rows, terms, delivered, outage_p, applied,
-          costs, totals)
+    inputs = (x_aug, increment, send, power, drone_next, draws.fading, state.reference, state.slot, state.applied,
+              _NO_NOISE if draws.process_position is None else draws.process_position,
+              _NO_NOISE if draws.process_velocity is None else draws.process_velocity, state.drone_position,
+              state.totals)  # SlotInputs' fields
+    _slot(inputs, params.packed_args, params.constants, (rows, terms, delivered, outage_p, applied, costs, totals))
     packed, err = rows[0], rows[1]
     x_next, error, applied_increment, slot = packed[:, :, 0:6], err[:, :, 0:6], packed[:, :, 6:8], state.slot + 1
     x_obs, error_obs = x_next, error

@@ -44,6 +44,8 @@ DAQP stays the test oracle (tests/test_qp.py).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -136,83 +138,142 @@ class AxisPencils:
         Returns ``z`` (M, 2N_p), ``objective`` (M,) (``1/2 z'Pz + q'z``), ``iterations`` (M,),
         ``settled`` (M,) bool."""
         c = np.ascontiguousarray  # one argument layout: the solver compiles once, not once per caller's views
-        return solve_stack(c(s, dtype=np.float64), c(q, dtype=np.float64), c(lower, dtype=np.float64),
-                           c(upper, dtype=np.float64), c(phase, dtype=np.int64), self.free, self.num_free,
-                           self.group_end, self.w, self.lam, self.g, self.p0, self.p1, active, float(tol), int(max_iter))
+        stack = (c(s, dtype=np.float64), c(q, dtype=np.float64), c(lower, dtype=np.float64),
+                 c(upper, dtype=np.float64), c(phase, dtype=np.int64))
+        return solve_stack(stack, self.arrays, active, float(tol), int(max_iter))
+
+    @cached_property
+    def arrays(self) -> tuple:
+        """The :class:`Pencils` fields, as the plain tuple :func:`solve_stack` takes."""
+        return (self.free, self.num_free, self.group_end, self.w, self.lam, self.g, self.p0, self.p1)
 
 
-# The compiled functions below name the arrays of one axis problem alike. The scratch arrays are
-# allocated once per call of solve_stack and reused by every problem:
-#   wv, gv        the pencil of the problem's (phase, axis): W (n, n) and G = A W (m, n), m = 2 n
-#   n, nf         padded and free variables: loops run over j < nf; row j is z_j, row n + j the
-#                 running sum sum_{i<=j} z_i (padded rows are never read)
-#   s             the problem's psi^2; d (n,) = 1 / (1 + s lambda): (s P1 + P0)^-1 = W diag(d) W'
-#   qa            (n,) the linear term on the free variables
-#   lo, up        (m,) the rows' bounds; tlo, tup how far a row may pass them, tol * max(1, |bound|)
-#   z0, az0       the unconstrained minimizer and its row values; zz the current point; y scratch
-#   rows, sgn     the working set: its rows and their sides (+1 upper, -1 lower), the first nw entries
-#   lmb           their multipliers; lst the set's equality-constrained multipliers
-#   member        (m,) int8: which rows are in the set
-#   chol, cinv    lower Cholesky factor of the set's dual Hessian M_WW, the inverses of its diagonal
-#                 (multiplications, not divisions, in the solves)
-#   rhs, col      scratch; col holds L^-1 M_W,r of the row r last offered to the set
-# Only solve_stack allocates. The functions it calls are compiled without numba's reference counts
-# (_nrt=False, as numba compiles its own allocation-free helpers): they keep no array beyond their
-# call, and the counts numba would add for every array argument, on branches its pruning pass cannot
-# pair, cost more than the arithmetic of these short loops. They take plain arrays, not named tuples
-# of them: a call passes every field of every array it is given, so a tuple's unused arrays would
-# cost on every call, and inlining every call instead lengthens the first compilation.
+# The compiled functions below take a few named records (NamedTuples of arrays, which numba passes
+# as structs) instead of long positional lists:
+#   Stack       the M problems: s (M,) = psi^2, q (M, 2n), lower, upper (M, 4n), phase (M,)
+#   Pencils     AxisPencils' arrays: free, num_free, group_end, w, lam, g, p0, p1
+#   AxisProblem one axis problem's pencil: w (n, n) and g = A W (m, n) of its (phase, axis),
+#               d (n,) = 1 / (1 + s lambda) so that (s P1 + P0)^-1 = W diag(d) W', the padded and
+#               free sizes n and nf (loops run over j < nf; row j is z_j, row n + j the running sum
+#               sum_{i<=j} z_i; padded rows are never read)
+#   Rows        the rows' bounds lo, up (m,) and how far a row may pass them, tlo, tup
+#               (tol * max(1, |bound|))
+#   Point       qa (n,) the linear term on the free variables, z0 and az0 the unconstrained minimizer
+#               and its row values, zz the current point, y scratch
+#   WorkingSet  rows, sgn: the set's rows and their sides (+1 upper, -1 lower), the first nw entries;
+#               lmb their multipliers, lst the set's equality-constrained multipliers; member (m,)
+#               int8: which rows are in the set; chol, cinv: lower Cholesky factor of the set's dual
+#               Hessian M_WW and the inverses of its diagonal (multiplications, not divisions, in the
+#               solves); rhs, col scratch (col holds L^-1 M_W,r of the row r last offered to the set)
+# The scratch is allocated once per call of solve_stack and reused by every problem; only
+# solve_stack allocates. Stack and Pencils cross from Python as plain tuples (numba's dispatcher
+# types a plain tuple in C, a NamedTuple in Python, about 1 us more per call) and are named on entry.
+# The functions solve_stack calls are compiled without numba's reference counts (_nrt=False, as
+# numba compiles its own allocation-free helpers): they keep no array beyond their call, and the
+# counts numba would add for every array argument cost more than the arithmetic of these short loops.
 _kernel = numba.njit(cache=True, error_model="numpy", _nrt=False)
 
 
+class Stack(NamedTuple):
+    s: np.ndarray
+    q: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    phase: np.ndarray
+
+
+class Pencils(NamedTuple):
+    free: np.ndarray
+    num_free: np.ndarray
+    group_end: np.ndarray
+    w: np.ndarray
+    lam: np.ndarray
+    g: np.ndarray
+    p0: np.ndarray
+    p1: np.ndarray
+
+
+class AxisProblem(NamedTuple):
+    w: np.ndarray
+    g: np.ndarray
+    d: np.ndarray
+    n: int
+    nf: int
+
+
+class Rows(NamedTuple):
+    lo: np.ndarray
+    up: np.ndarray
+    tlo: np.ndarray
+    tup: np.ndarray
+
+
+class Point(NamedTuple):
+    qa: np.ndarray
+    z0: np.ndarray
+    zz: np.ndarray
+    y: np.ndarray
+    az0: np.ndarray
+
+
+class WorkingSet(NamedTuple):
+    rows: np.ndarray
+    sgn: np.ndarray
+    lmb: np.ndarray
+    member: np.ndarray
+    chol: np.ndarray
+    cinv: np.ndarray
+    lst: np.ndarray
+    rhs: np.ndarray
+    col: np.ndarray
+
+
 @numba.njit(cache=True, error_model="numpy")
-def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray, phase: np.ndarray,
-                free: np.ndarray, num_free: np.ndarray, group_end: np.ndarray, w: np.ndarray, lam: np.ndarray,
-                g: np.ndarray, p0: np.ndarray, p1: np.ndarray, active: np.ndarray, tol: float,
+def solve_stack(stack: tuple, pencils: tuple, active: np.ndarray, tol: float,
                 max_iter: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
-    """Compiled loop over M AGV problems x 2 axes (see :meth:`AxisPencils.solve`). The reduced
-    constraint rows are ``z_j`` (row j) and ``sum_{i<=j} z_i`` (row n + j), j < n_F: their values
-    are computed from that structure (:attr:`AxisPencils.a` documents it; the tests check it).
-    Returns (z, objective, iterations, settled) as :meth:`AxisPencils.solve`."""
-    num = s.shape[0]
-    n = w.shape[2]
+    """Compiled loop over M AGV problems x 2 axes (see :meth:`AxisPencils.solve`): ``stack`` holds
+    the :class:`Stack` fields, ``pencils`` the :class:`Pencils` fields. The reduced constraint rows
+    are ``z_j`` (row j) and ``sum_{i<=j} z_i`` (row n + j), j < n_F: their values are computed from
+    that structure (:attr:`AxisPencils.a` documents it; the tests check it). Returns (z, objective,
+    iterations, settled) as :meth:`AxisPencils.solve`."""
+    st, pen = Stack(*stack), Pencils(*pencils)
+    num = st.s.shape[0]
+    n = pen.w.shape[2]
     m = 2 * n
     z_out = np.zeros((num, 2 * n))
     obj_out = np.zeros(num)
     it_out = np.zeros(num, dtype=np.int64)
     ok_out = np.zeros(num, dtype=np.bool_)
-    # scratch, allocated once per call (the names of the notes above)
-    qa, d, z0, zz, y = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    lo, up, tlo, tup, az0 = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
-    rows, sgn, lmb, member = np.empty(m, dtype=np.int64), np.empty(m), np.zeros(m), np.zeros(m, dtype=np.int8)
-    chol, cinv, lst, rhs, col = np.zeros((m, m)), np.zeros(m), np.empty(m), np.empty(m), np.empty(m)
+    d = np.empty(n)
+    bd = Rows(np.empty(m), np.empty(m), np.empty(m), np.empty(m))
+    pt = Point(np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m))
+    ws = WorkingSet(np.empty(m, dtype=np.int64), np.empty(m), np.zeros(m), np.zeros(m, dtype=np.int8),
+                    np.zeros((m, m)), np.zeros(m), np.empty(m), np.empty(m), np.empty(m))
     for i in range(num):
-        ph = phase[i]
-        nf = num_free[ph]
+        ph = st.phase[i]
+        nf = pen.num_free[ph]
         total_it = 0
         good = True
         obj = 0.0
         for ax in range(2):
-            wv = w[ph, ax]
-            gv = g[ph, ax]
-            _reduce_axis(q, lower, upper, free, group_end, i, ph, ax, n, nf, tol, qa, lo, up, tlo, tup)
-            _unconstrained_minimizer(wv, lam, ph, ax, s[i], n, nf, qa, d, y, z0, az0)
-            nw = _start_set(gv, d, n, nf, lo, up, az0, active, i, ax, rows, sgn, lmb, member, chol, cinv, col)
-            nw, it, done = _iterate(wv, gv, d, n, nf, lo, up, tlo, tup, z0, zz, y, az0, rows, sgn, lmb, member,
-                                    chol, cinv, lst, rhs, col, nw, max_iter)
+            ap = AxisProblem(pen.w[ph, ax], pen.g[ph, ax], d, n, nf)
+            _reduce_axis(st, pen, i, ax, ap, tol, pt, bd)
+            _unconstrained_minimizer(ap, pen.lam[ph, ax], st.s[i], pt)
+            nw = _start_set(ap, bd, pt, ws, active[i, ax])
+            nw, it, done = _iterate(ap, bd, pt, ws, nw, max_iter)
             total_it += it
             if not done:
                 good = False
                 continue
-            _refine(wv, gv, d, n, nf, lo, up, tlo, tup, zz, y, az0, rows, sgn, nw, chol, cinv, lst, rhs)
+            _refine(ap, bd, pt, ws, nw)
             for t in range(nw):
-                active[i, ax, rows[t]] = np.int8(sgn[t])
-            obj = _add_objective(p0, p1, ph, ax, s[i], nf, qa, zz, obj)
+                active[i, ax, ws.rows[t]] = np.int8(ws.sgn[t])
+            obj = _add_objective(pen.p0[ph, ax], pen.p1[ph, ax], st.s[i], nf, pt, obj)
             if not np.isfinite(obj):  # non-finite data (a caller's NaN or inf): the fallback decides
                 good = False
                 continue
             for j in range(nf):  # an active increment bound met exactly, not to rounding
-                z_out[i, 2 * free[ph, j] + ax] = min(max(zz[j], lo[j]), up[j])
+                z_out[i, 2 * pen.free[ph, j] + ax] = min(max(pt.zz[j], bd.lo[j]), bd.up[j])
         obj_out[i] = obj
         it_out[i] = total_it
         ok_out[i] = good
@@ -226,114 +287,116 @@ def solve_stack(s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarr
 
 
 @_kernel
-def _reduce_axis(q, lower, upper, free, group_end, i, ph, ax, n, nf, tol, qa, lo, up, tlo,
-                 tup):  # pragma: no cover - compiled
-    """Problem ``i``'s linear term ``qa``, row bounds ``lo``, ``up`` and feasibility thresholds
-    ``tlo``, ``tup`` on the free variables of axis ``ax`` (phase ``ph``). The running-sum rows
+def _reduce_axis(st, pen, i, ax, ap, tol, pt, bd):  # pragma: no cover - compiled
+    """Problem ``i``'s linear term ``pt.qa``, row bounds ``bd.lo``, ``bd.up`` and feasibility
+    thresholds ``bd.tlo``, ``bd.tup`` on the free variables of axis ``ax``. The running-sum rows
     between two free increments are one row with the tightest of their bounds."""
+    n, nf, ph = ap.n, ap.nf, st.phase[i]
+    q, lower, upper, lo, up = st.q, st.lower, st.upper, bd.lo, bd.up
     for j in range(nf):
-        h = free[ph, j]
-        qa[j] = q[i, 2 * h + ax]
+        h = pen.free[ph, j]
+        pt.qa[j] = q[i, 2 * h + ax]
         lo[j] = lower[i, 2 * h + ax]
         up[j] = upper[i, 2 * h + ax]
         lrow = -np.inf
         urow = np.inf
-        for r in range(h, group_end[ph, j]):
+        for r in range(h, pen.group_end[ph, j]):
             lrow = max(lrow, lower[i, 2 * n + 2 * r + ax])
             urow = min(urow, upper[i, 2 * n + 2 * r + ax])
         lo[n + j] = lrow
         up[n + j] = urow
     for j in range(nf):  # feasibility thresholds, relative to the bound
         for r in (j, n + j):
-            tup[r] = tol * max(1.0, abs(up[r]))
-            tlo[r] = tol * max(1.0, abs(lo[r]))
+            bd.tup[r] = tol * max(1.0, abs(up[r]))
+            bd.tlo[r] = tol * max(1.0, abs(lo[r]))
 
 
 @_kernel
-def _unconstrained_minimizer(wv, lam, ph, ax, s, n, nf, qa, d, y, z0, az0):  # pragma: no cover - compiled
-    """``d = 1 / (1 + s lambda)``, the unconstrained minimizer ``z0 = -W diag(d) W' q``
-    and its row values ``az0`` (the increments and their running sums)."""
+def _unconstrained_minimizer(ap, lam, s, pt):  # pragma: no cover - compiled
+    """``d = 1 / (1 + s lambda)`` (``lam`` the pencil's eigenvalues), the unconstrained minimizer
+    ``z0 = -W diag(d) W' q`` and its row values ``az0`` (the increments and their running sums)."""
+    wv, d, n, nf, y = ap.w, ap.d, ap.n, ap.nf, pt.y
     for j in range(nf):
-        d[j] = 1.0 / (1.0 + s * lam[ph, ax, j])
+        d[j] = 1.0 / (1.0 + s * lam[j])
     for j in range(nf):
         acc = 0.0
         for k in range(nf):
-            acc += wv[k, j] * qa[k]
+            acc += wv[k, j] * pt.qa[k]
         y[j] = -acc * d[j]
     run = 0.0
     for k in range(nf):
         acc = 0.0
         for j in range(nf):
             acc += wv[k, j] * y[j]
-        z0[k] = acc
+        pt.z0[k] = acc
         run += acc
-        az0[k] = acc
-        az0[n + k] = run
+        pt.az0[k] = acc
+        pt.az0[n + k] = run
 
 
 @_kernel
-def _start_set(gv, d, n, nf, lo, up, az0, active, i, ax, rows, sgn, lmb, member, chol, cinv,
-               col):  # pragma: no cover - compiled
-    """The first working set: the rows of ``active[i, ax]`` (the problem's previous working set,
-    cleared as it is read), then the rows the unconstrained minimizer violates, each taken while
-    the set stays linearly independent. All start with zero multipliers: feasible for the dual, so
-    any set is a valid start. Returns the set's size."""
+def _start_set(ap, bd, pt, ws, previous):  # pragma: no cover - compiled
+    """The first working set: the rows of ``previous`` (the problem's previous working set, (m,)
+    int8 sides, cleared as it is read), then the rows the unconstrained minimizer violates, each
+    taken while the set stays linearly independent. All start with zero multipliers: feasible for
+    the dual, so any set is a valid start. Returns the set's size."""
+    n, nf = ap.n, ap.nf
     nw = 0
-    member[:] = 0
+    ws.member[:] = 0
     for r in range(2 * n):
-        side = active[i, ax, r]
+        side = previous[r]
         if side == 0:
             continue
-        active[i, ax, r] = 0
+        previous[r] = 0
         if r % n >= nf:
             continue
-        if _append(gv, d, rows, sgn, nw, r, float(side), chol, cinv, col, nf):
-            nw = _push(rows, sgn, lmb, member, nw, r, float(side), 0.0)
+        if _append(ap, ws, nw, r, float(side)):
+            nw = _push(ws, nw, r, float(side), 0.0)
     for r in range(2 * n):
-        if r % n >= nf or member[r]:
+        if r % n >= nf or ws.member[r]:
             continue
         side = 0.0
-        if az0[r] > up[r]:
+        if pt.az0[r] > bd.up[r]:
             side = 1.0
-        elif az0[r] < lo[r]:
+        elif pt.az0[r] < bd.lo[r]:
             side = -1.0
-        if side != 0.0 and _append(gv, d, rows, sgn, nw, r, side, chol, cinv, col, nf):
-            nw = _push(rows, sgn, lmb, member, nw, r, side, 0.0)
+        if side != 0.0 and _append(ap, ws, nw, r, side):
+            nw = _push(ws, nw, r, side, 0.0)
     return nw
 
 
 @_kernel
-def _iterate(wv, gv, d, n, nf, lo, up, tlo, tup, z0, zz, y, az0, rows, sgn, lmb, member, chol, cinv, lst, rhs, col,
-             nw, max_iter):  # pragma: no cover - compiled
+def _iterate(ap, bd, pt, ws, nw, max_iter):  # pragma: no cover - compiled
     """The dual active-set iterations from a start set of ``nw`` rows: (the final set's size, the
-    iterations, whether the problem is solved), a solved problem's point in ``zz``. Unsolved: the
+    iterations, whether the problem is solved), a solved problem's point in ``pt.zz``. Unsolved: the
     iteration cap, or a dependent row whose multiplier can grow without limit (inconsistent
     constraints)."""
+    lmb, lst = ws.lmb, ws.lst
     it = 0
     while it < max_iter:
         it += 1
-        _equality_multipliers(lo, up, az0, rows, sgn, nw, chol, cinv, rhs, lst)
+        _equality_multipliers(bd, pt, ws, nw)
         blocking, step = _first_to_zero(lmb, lst, nw)
         if blocking >= 0 and step == 0.0 and _all_zero(lmb, nw):
-            nw = _drop_negative(gv, d, nf, rows, sgn, lmb, member, nw, chol, cinv, lst)
+            nw = _drop_negative(ap, ws, nw)
             continue
         if blocking >= 0:  # step towards lst until a multiplier reaches zero, drop it
             for t in range(nw):
                 lmb[t] += step * (lst[t] - lmb[t])
-            _drop_factor_row(chol, cinv, nw, blocking)
-            member[rows[blocking]] = 0
-            nw = _remove(rows, sgn, lmb, nw, blocking)
+            _drop_factor_row(ws.chol, ws.cinv, nw, blocking)
+            ws.member[ws.rows[blocking]] = 0
+            nw = _remove(ws, nw, blocking)
             continue
         for t in range(nw):
             lmb[t] = lst[t]
-        add_row, add_side = _most_violated(wv, gv, d, n, nf, lo, up, tlo, tup, z0, zz, y, rows, sgn, lmb, member, nw)
+        add_row, add_side = _most_violated(ap, bd, pt, ws, nw)
         if add_row < 0:
             return nw, it, True
-        member[add_row] = 1
-        if _append(gv, d, rows, sgn, nw, add_row, add_side, chol, cinv, col, nf):
-            nw = _push(rows, sgn, lmb, member, nw, add_row, add_side, 0.0)
+        ws.member[add_row] = 1
+        if _append(ap, ws, nw, add_row, add_side):
+            nw = _push(ws, nw, add_row, add_side, 0.0)
             continue
-        exchanged = _exchange_dependent(gv, d, nf, rows, sgn, lmb, member, nw, chol, cinv, col, rhs, add_row, add_side)
+        exchanged = _exchange_dependent(ap, ws, nw, add_row, add_side)
         if exchanged < 0:
             return nw, it, False
         nw = exchanged
@@ -341,12 +404,12 @@ def _iterate(wv, gv, d, n, nf, lo, up, tlo, tup, z0, zz, y, az0, rows, sgn, lmb,
 
 
 @_kernel
-def _equality_multipliers(lo, up, az0, rows, sgn, nw, chol, cinv, rhs, lst):  # pragma: no cover - compiled
+def _equality_multipliers(bd, pt, ws, nw):  # pragma: no cover - compiled
     """The working set's equality-constrained multipliers: ``M_WW lst = -(slack of z0)``."""
     for t in range(nw):
-        r = rows[t]
-        rhs[t] = (az0[r] - up[r]) if sgn[t] > 0 else (lo[r] - az0[r])
-    _chol_solve(chol, cinv, nw, rhs, lst)
+        r = ws.rows[t]
+        ws.rhs[t] = (pt.az0[r] - bd.up[r]) if ws.sgn[t] > 0 else (bd.lo[r] - pt.az0[r])
+    _chol_solve(ws.chol, ws.cinv, nw, ws.rhs, ws.lst)
 
 
 @_kernel
@@ -373,28 +436,30 @@ def _all_zero(values, nw):  # pragma: no cover - compiled
 
 
 @_kernel
-def _drop_negative(gv, d, nf, rows, sgn, lmb, member, nw, chol, cinv, lst):  # pragma: no cover - compiled
+def _drop_negative(ap, ws, nw):  # pragma: no cover - compiled
     """At a zero start (multipliers all zero) every row with a negative multiplier ``lst`` can
     leave at once: the multipliers stay zero, feasible for the dual. The factor is rebuilt; returns
     the set's new size."""
+    rows, sgn = ws.rows, ws.sgn
     keep = 0
     for t in range(nw):
-        if lst[t] < 0.0:
-            member[rows[t]] = 0
+        if ws.lst[t] < 0.0:
+            ws.member[rows[t]] = 0
         else:
             rows[keep] = rows[t]
             sgn[keep] = sgn[t]
-            lmb[keep] = 0.0
+            ws.lmb[keep] = 0.0
             keep += 1
-    _factor(gv, d, rows, sgn, keep, chol, cinv, nf)
+    _factor(ap, ws, keep)
     return keep
 
 
 @_kernel
-def _most_violated(wv, gv, d, n, nf, lo, up, tlo, tup, z0, zz, y, rows, sgn, lmb, member,
-                   nw):  # pragma: no cover - compiled
+def _most_violated(ap, bd, pt, ws, nw):  # pragma: no cover - compiled
     """The primal point ``zz = z0 - W D G_W' (sgn lmb)`` and the row it violates most beyond the
     row's threshold: (row, side +1 upper / -1 lower); (-1, 0.0) when it violates none."""
+    wv, gv, d, n, nf, y = ap.w, ap.g, ap.d, ap.n, ap.nf, pt.y
+    rows, sgn, lmb, member = ws.rows, ws.sgn, ws.lmb, ws.member
     for k in range(nf):
         acc = 0.0
         for t in range(nw):
@@ -405,32 +470,32 @@ def _most_violated(wv, gv, d, n, nf, lo, up, tlo, tup, z0, zz, y, rows, sgn, lmb
     add_side = 0.0
     run = 0.0
     for k in range(nf):
-        acc = z0[k]
+        acc = pt.z0[k]
         for j in range(nf):
             acc -= wv[k, j] * y[j]
-        zz[k] = acc
+        pt.zz[k] = acc
         run += acc
         for r, v in ((k, acc), (n + k, run)):
             if member[r]:  # held as an equality (to rounding) by the working set
                 continue
-            over = v - up[r]
-            if over > tup[r] and over > worst:
+            over = v - bd.up[r]
+            if over > bd.tup[r] and over > worst:
                 worst, add_row, add_side = over, r, 1.0
-            under = lo[r] - v
-            if under > tlo[r] and under > worst:
+            under = bd.lo[r] - v
+            if under > bd.tlo[r] and under > worst:
                 worst, add_row, add_side = under, r, -1.0
     return add_row, add_side
 
 
 @_kernel
-def _exchange_dependent(gv, d, nf, rows, sgn, lmb, member, nw, chol, cinv, col, rhs, r,
-                        side):  # pragma: no cover - compiled
+def _exchange_dependent(ap, ws, nw, r, side):  # pragma: no cover - compiled
     """Row ``r`` (side ``side``, already marked in ``member``) depends on the working set's rows
     (``col`` holds ``L^-1 M_W,r``): move along the null direction of the set's rows (z unchanged,
     the new multiplier grows) until a multiplier of the set reaches zero, and exchange that row for
     ``r``. Returns the set's size, or -1 when no multiplier limits the step (the constraints are
     inconsistent)."""
-    _chol_solve_l(chol, cinv, nw, col, rhs)  # rhs = M_WW^-1 M_W,r
+    rhs, lmb = ws.rhs, ws.lmb
+    _chol_solve_l(ws.chol, ws.cinv, nw, ws.col, rhs)  # rhs = M_WW^-1 M_W,r
     blocking = -1
     step = 0.0
     for t in range(nw):
@@ -443,16 +508,15 @@ def _exchange_dependent(gv, d, nf, rows, sgn, lmb, member, nw, chol, cinv, col, 
         return -1
     for t in range(nw):
         lmb[t] -= step * rhs[t]
-    member[rows[blocking]] = 0
-    nw = _remove(rows, sgn, lmb, nw, blocking)
-    nw = _push(rows, sgn, lmb, member, nw, r, side, step)
-    _factor(gv, d, rows, sgn, nw, chol, cinv, nf)
+    ws.member[ws.rows[blocking]] = 0
+    nw = _remove(ws, nw, blocking)
+    nw = _push(ws, nw, r, side, step)
+    _factor(ap, ws, nw)
     return nw
 
 
 @_kernel
-def _refine(wv, gv, d, n, nf, lo, up, tlo, tup, zz, y, az0, rows, sgn, nw, chol, cinv, lst,
-            rhs):  # pragma: no cover - compiled
+def _refine(ap, bd, pt, ws, nw):  # pragma: no cover - compiled
     """One step of iterative refinement of ``zz``: ``z = z0 - (...)`` loses digits to cancellation
     when |z0| >> |z| (small Q2, far from the reference); project z back onto the working set's
     equalities, ``dz = P^-1 A_W' mu`` with ``M_WW mu = (bound - A z)_W``, unless the residual is
@@ -460,6 +524,7 @@ def _refine(wv, gv, d, n, nf, lo, up, tlo, tup, zz, y, az0, rows, sgn, nw, chol,
     sums of z."""
     if nw == 0:
         return
+    n, nf, zz, az0, rows, sgn, rhs, lst = ap.n, ap.nf, pt.zz, pt.az0, ws.rows, ws.sgn, ws.rhs, ws.lst
     run = 0.0
     for k in range(nf):
         run += zz[k]
@@ -468,34 +533,34 @@ def _refine(wv, gv, d, n, nf, lo, up, tlo, tup, zz, y, az0, rows, sgn, nw, chol,
     for t in range(nw):
         r = rows[t]
         v = zz[r] if r < n else az0[r]
-        rhs[t] = sgn[t] * ((up[r] if sgn[t] > 0 else lo[r]) - v)
-        if abs(rhs[t]) > 0.01 * (tup[r] if sgn[t] > 0 else tlo[r]):
+        rhs[t] = sgn[t] * ((bd.up[r] if sgn[t] > 0 else bd.lo[r]) - v)
+        if abs(rhs[t]) > 0.01 * (bd.tup[r] if sgn[t] > 0 else bd.tlo[r]):
             off = True
     if not off:
         return
-    _chol_solve(chol, cinv, nw, rhs, lst)
+    _chol_solve(ws.chol, ws.cinv, nw, rhs, lst)
     for k in range(nf):
         acc = 0.0
         for t in range(nw):
-            acc += gv[rows[t], k] * sgn[t] * lst[t]
-        y[k] = acc * d[k]
+            acc += ap.g[rows[t], k] * sgn[t] * lst[t]
+        pt.y[k] = acc * ap.d[k]
     for k in range(nf):
         acc = 0.0
         for j in range(nf):
-            acc += wv[k, j] * y[j]
+            acc += ap.w[k, j] * pt.y[j]
         zz[k] += acc
 
 
 @_kernel
-def _add_objective(p0, p1, ph, ax, s, nf, qa, zz, obj):  # pragma: no cover - compiled
-    """``obj`` plus the axis problem's objective ``1/2 z'(s P1 + P0) z + q'z`` at ``zz``, term by
-    term (P0 is diagonal)."""
-    p1v = p1[ph, ax]
+def _add_objective(p0, p1, s, nf, pt, obj):  # pragma: no cover - compiled
+    """``obj`` plus the axis problem's objective ``1/2 z'(s P1 + P0) z + q'z`` at ``pt.zz``, term by
+    term (``p0``, ``p1`` the pencil's; P0 is diagonal)."""
+    zz = pt.zz
     for k in range(nf):
         acc = 0.0
         for j in range(nf):
-            acc += p1v[k, j] * zz[j]
-        obj += zz[k] * (0.5 * (s * acc + p0[ph, ax, k, k] * zz[k]) + qa[k])
+            acc += p1[k, j] * zz[j]
+        obj += zz[k] * (0.5 * (s * acc + p0[k, k] * zz[k]) + pt.qa[k])
     return obj
 
 
@@ -508,9 +573,10 @@ def _dual_entry(gv, d, r1, s1, r2, s2, nf):  # pragma: no cover - compiled
 
 
 @_kernel
-def _append(gv, d, rows, sgn, nw, r, side, chol, cinv, col, nf):  # pragma: no cover - compiled
+def _append(ap, ws, nw, r, side):  # pragma: no cover - compiled
     """Extend the Cholesky factor by row ``r`` (side ``side``); False (factor unchanged, ``col``
     holding ``L^-1 M_W,r``) when the row is linearly dependent on the working set's rows."""
+    gv, d, nf, rows, sgn, chol, cinv, col = ap.g, ap.d, ap.nf, ws.rows, ws.sgn, ws.chol, ws.cinv, ws.col
     for t in range(nw):
         acc = _dual_entry(gv, d, rows[t], sgn[t], r, side, nf)
         for u in range(t):
@@ -530,19 +596,20 @@ def _append(gv, d, rows, sgn, nw, r, side, chol, cinv, col, nf):  # pragma: no c
 
 
 @_kernel
-def _push(rows, sgn, lmb, member, nw, r, side, mult):  # pragma: no cover - compiled
+def _push(ws, nw, r, side, mult):  # pragma: no cover - compiled
     """Row ``r`` (side ``side``, multiplier ``mult``) joins the working set, whose factor the caller
     has extended; returns the set's new size."""
-    rows[nw] = r
-    sgn[nw] = side
-    lmb[nw] = mult
-    member[r] = 1
+    ws.rows[nw] = r
+    ws.sgn[nw] = side
+    ws.lmb[nw] = mult
+    ws.member[r] = 1
     return nw + 1
 
 
 @_kernel
-def _factor(gv, d, rows, sgn, nw, chol, cinv, nf):  # pragma: no cover - compiled
+def _factor(ap, ws, nw):  # pragma: no cover - compiled
     """Cholesky factor of the working set's dual Hessian from scratch."""
+    gv, d, nf, rows, sgn, chol, cinv = ap.g, ap.d, ap.nf, ws.rows, ws.sgn, ws.chol, ws.cinv
     for t in range(nw):
         for u in range(t + 1):
             acc = _dual_entry(gv, d, rows[t], sgn[t], rows[u], sgn[u], nf)
@@ -580,7 +647,9 @@ def _drop_factor_row(chol, cinv, nw, t):  # pragma: no cover - compiled
 
 
 @_kernel
-def _remove(rows, sgn, lmb, nw, t):  # pragma: no cover - compiled
+def _remove(ws, nw, t):  # pragma: no cover - compiled
+    """Entry ``t`` leaves the working set's rows, sides and multipliers; returns the set's new size."""
+    rows, sgn, lmb = ws.rows, ws.sgn, ws.lmb
     for u in range(t, nw - 1):
         rows[u] = rows[u + 1]
         sgn[u] = sgn[u + 1]
