@@ -259,17 +259,16 @@ OBS_CODEC = np.dtype([("state", "i8"), ("error", "i8"), ("reference", "i8"), ("r
 
 
 @numba.njit(cache=True)
-def _encode_rows(out, table, slot, x_obs, error_obs, drone, outage, delivered, power, reference, codec, num_slots,
-                 bound, clip_table):  # pragma: no cover - compiled
+def _encode_rows(out, table, slot, state, reference, codec, num_slots, bound, clip_table):  # pragma: no cover - compiled
     """Every observation row, each feature computed in float64 as :meth:`ObservationLayout.encode`
-    documents, rounded once to float32 and clipped to ``bound`` in float32 (``codec``: the
-    layout's :data:`OBS_CODEC` record). The slot-dependent features (the reference windows, slot n / N) are the slot's row of the fixed
+    documents, rounded once to float32 and clipped to ``bound`` in float32 (``state``: the scenarios'
+    observed states, errors, drone positions, last outage probabilities, deliveries and powers;
+    ``codec``: the layout's :data:`OBS_CODEC` record). The slot-dependent features (the reference windows, slot n / N) are the slot's row of the fixed
     path set's ``table`` when it has rows (clipped too with ``clip_table``), else computed here from
     each scenario's ``reference`` (B, K, T, 6) as :meth:`ObservationLayout.scaled_windows` does."""
-    state = (x_obs, error_obs, drone, outage, delivered, power)
     off = sc = codec[0]
-    k, b32 = x_obs.shape[1], np.float32(bound)
-    for b in range(x_obs.shape[0]):
+    k, b32 = state[0].shape[1], np.float32(bound)
+    for b in range(state[0].shape[0]):
         if table.shape[0] > 1:
             out[b, :] = table[slot[b]]
             if clip_table:
@@ -445,8 +444,9 @@ class ObservationLayout:
         st = sim.state
         out = np.empty((sim.num_envs, self.size), np.float32)
         rows, peak = (self._no_table, 0.0) if table is None else table
-        _encode_rows(out, rows, st.slot, st.x_obs, st.error_obs, st.drone_position, st.last_outage_probability,
-                     st.last_delivered, st.last_power_w, st.reference, self._codec, self.num_slots,
+        state = (st.x_obs, st.error_obs, st.drone_position, st.last_outage_probability, st.last_delivered,
+                 st.last_power_w)
+        _encode_rows(out, rows, st.slot, state, st.reference, self._codec, self.num_slots,
                      np.inf if bound is None else bound,
                      bound is not None and peak > bound)  # the table's features clipped only where they exceed it
         return out
