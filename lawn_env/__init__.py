@@ -50,7 +50,7 @@ def central_env_id(env_id: str) -> str:
 
 
 #: No registered time limit: the envs end their episodes themselves at ``num_slots`` (truncation),
-#: and a made env's ``spec.max_episode_steps`` reports that length (``LawnEnvBase.spec``). A
+#: and a made env's ``spec.max_episode_steps`` reports that length (``LawnEnv.spec``). A
 #: registered limit could only disagree with a caller's ``num_slots``, and Gymnasium's native
 #: vector entry points admit no extra registered wrappers to reconcile the two.
 _EPISODE = dict(disable_env_checker=False)

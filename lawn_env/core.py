@@ -36,7 +36,7 @@ from .dynamics import POSITION, PredictionModel, initial_state, measure, packed_
 POS, VEL, ACCEL = dynamics.POSITION.start, dynamics.VELOCITY.start, dynamics.ACCELERATION.start
 
 __all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Snapshot", "Simulation", "ScenarioView", "Trail",
-           "draw_slot", "reset", "step", "episode_metrics", "control_costs", "link_outage", "link_success",
+           "draw_slot", "reset", "step", "step_rows", "episode_metrics", "control_costs", "link_outage", "link_success",
            "SLOT_CONSTANTS", "TOTALS"]
 
 
@@ -549,6 +549,43 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     return new, record
 
 
+#: The state's arrays with a leading batch axis that a step replaces (the reference and the paths it
+#: never changes); ``x_obs`` and ``error_obs`` may be the same arrays as ``x_aug`` and ``tracking_error``.
+_STEPPED = ("x_aug", "tracking_error", "x_obs", "error_obs", "applied", "drone_position", "slot", "last_power_w",
+            "last_delivered", "last_outage_probability", "totals")
+
+
+def step_rows(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDraws,
+              rows: np.ndarray) -> tuple[SimState, SlotRecord]:
+    """:func:`step` of the scenarios ``rows`` (a (B,) mask) alone, with their rows of the decisions
+    and of the draws (drawn for every scenario, so each scenario's numbers do not depend on which
+    others step); the other scenarios keep their state, and their record rows are zeros. A vector
+    env's scenarios restarted this slot do not step."""
+    idx = np.flatnonzero(rows)
+    sub = SimState(**{name: getattr(state, name)[idx] for name in (*_STEPPED, "reference")},
+                   paths=[state.paths[i] for i in idx.tolist()])
+    if state.x_obs is state.x_aug:  # without measurement noise, the observed state is the true one
+        sub.x_obs = sub.x_aug
+    if state.error_obs is state.tracking_error:
+        sub.error_obs = sub.tracking_error
+    taken = Decisions(*(None if a is None else np.asarray(a)[idx] for a in decisions))
+    new_sub, record = step(params, sub, taken, SlotDraws(*(None if d is None else d[idx] for d in draws)))
+    merged: dict[str, Any] = {}
+    for name in _STEPPED:
+        new = getattr(new_sub, name)
+        if name == "x_obs" and new is new_sub.x_aug:
+            merged[name] = merged["x_aug"]
+        elif name == "error_obs" and new is new_sub.tracking_error:
+            merged[name] = merged["tracking_error"]
+        else:
+            merged[name] = getattr(state, name).copy()
+            merged[name][idx] = new
+    full = SlotRecord(*(np.zeros((state.num_envs,) + a.shape[1:], a.dtype) for a in record))
+    for whole, part in zip(full, record):
+        whole[idx] = part
+    return SimState(**merged, reference=state.reference, paths=state.paths), full
+
+
 def control_costs(state: SimState, rows: Any = slice(None)) -> np.ndarray:
     """The control cost so far of the scenarios ``rows`` (default: all, (B,)): the running sums of
     their tracking and effort costs."""
@@ -628,21 +665,14 @@ class Simulation:
         """This slot's randomness for every scenario (:func:`draw_slot`)."""
         return draw_slot(rng, self.params, self.num_envs)
 
-    def step(self, decisions: Decisions, draws: SlotDraws) -> SlotRecord:
-        """One slot of every scenario (:func:`step`); the new state replaces the old."""
-        self.state, record = step(self.params, self.state, decisions, draws)
+    def step(self, decisions: Decisions, draws: SlotDraws, rows: np.ndarray | None = None) -> SlotRecord:
+        """One slot of every scenario (:func:`step`), or of the scenarios ``rows`` (a mask) alone
+        (:func:`step_rows`); the new state replaces the old."""
+        if rows is None or rows.all():
+            self.state, record = step(self.params, self.state, decisions, draws)
+        else:
+            self.state, record = step_rows(self.params, self.state, decisions, draws, rows)
         return record
-
-    def revert_rows(self, before: SimState, rows: np.ndarray) -> None:
-        """Put the scenarios ``rows`` (a mask) back to ``before``, the state a :meth:`step` started
-        from (a vector env's restarted scenarios, whose slot did not happen). The current state's
-        arrays are the step's own (new ones), so ``before`` is unchanged."""
-        state = self.state
-        for name in (*STATE_ARRAYS, "slot"):  # the reference is never a step's own: skipped below
-            new, old = getattr(state, name), getattr(before, name)
-            if new is not old:
-                new[rows] = old[rows]
-        state.totals[rows] = before.totals[rows]
 
     def reference_windows(self) -> np.ndarray:
         """Reference augmented states at slots n..n+N_p of every scenario: (B, K, N_p+1, 6)."""

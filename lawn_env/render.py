@@ -115,7 +115,7 @@ class Renderer:
 
 def plot_episode(sim: ScenarioView, trail: Trail, path: str | Path, title: str | None = None) -> None:
     """Save a PNG (or any matplotlib format, by extension) of one scenario's finished or running
-    episode: a single env's ``env.unwrapped.sim`` and ``env.unwrapped.trail``."""
+    episode: a single env's ``env.unwrapped.sim`` and ``env.unwrapped.engine.trail``."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

@@ -210,7 +210,7 @@ def test_renders_the_chosen_env_with_its_trails():
         envs.step(zero)
     frame = envs.render()
     assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
-    trail = envs.unwrapped.trail
+    trail = envs.unwrapped.engine.trail
     assert len(trail.trajectories()["agv_position"]) == 4 and trail.view.slot == 3
     np.testing.assert_array_equal(trail.view.x_aug, envs.unwrapped.sim.x_aug[2])
     envs.step(zero), envs.step(zero)  # the end, then the autoreset: the trails start over

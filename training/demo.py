@@ -22,7 +22,7 @@ def run_demo(seed: int, out_dir: Path, config: ScenarioConfig | str | None = Non
     metrics["decision_time_median_s"] = episode.decision_time_median_s
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))
-    plot_episode(env.unwrapped.sim, env.unwrapped.trail, out_dir / "paths.png",
+    plot_episode(env.unwrapped.sim, env.unwrapped.engine.trail, out_dir / "paths.png",
                  title=f"lawn/Joint-v0, scripted heuristic, seed {seed}: cost {metrics['control_cost']:.0f}")
     env.close()
     return metrics

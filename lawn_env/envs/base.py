@@ -1,24 +1,25 @@
 """What every environment runs: the one env-step template over the one simulation core.
 
 :class:`Engine` holds B scenarios (:class:`~lawn_env.core.Simulation`), the observation layout, the
-interface and the role, and does a step's work for all of them: decode the actions, let the role
-decide what it decides (:class:`JointRole`: the actions decide everything; :class:`CommRole`: the
-outage-aware MPC decides the increments), advance the core with the slot's draws, then the
-rewards and termination (:meth:`Engine.outcome`, the one place for reward, termination and the
-terminal penalty), the info (:meth:`Engine.info`, the one info builder) and the observations.
-``lawn/Joint-v0``, ``lawn/Comm-v0`` and the PettingZoo env are its B = 1 views (:class:`LawnEnvBase`,
-:class:`~lawn_env.envs.parallel.LawnParallelEnv`); the native vector envs its B = N views.
+interface and the role (a strategy: :class:`JointRole`, the actions decide everything;
+:class:`CommRole`, the outage-aware MPC decides the increments). :meth:`Engine.step` is the step's
+stages in order for every environment: decode the actions and let the role decide the rest
+(:meth:`Engine.decide`), advance the core with the slot's draws (the scenarios of a mask), then the
+rewards, termination and truncation (:meth:`Engine.outcome`); the info (:meth:`Engine.info`) and
+the observations (:meth:`Engine.observe`) are read after it. ``lawn/Joint-v0`` and ``lawn/Comm-v0``
+(:class:`LawnEnv`) and the PettingZoo env are B = 1 engines behind their APIs, the native vector
+envs B = N ones.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Sequence
+from typing import Any, NamedTuple, Sequence
 
 import gymnasium as gym
 import numpy as np
 
-from ..core import Decisions, ScenarioView, Simulation, SlotDraws, SlotRecord, Snapshot, Trail, link_success
+from ..core import Decisions, Simulation, SlotDraws, SlotRecord, Snapshot, Trail, link_success
 from ..config import ScenarioConfig
 from ..dynamics import POSITION
 from ..entities import EntityLayout
@@ -27,7 +28,8 @@ from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
 from ..spaces import ObservationLayout, check_action
 
-__all__ = ["Engine", "EngineAccess", "JointRole", "CommRole", "ROLE_TYPES", "LawnEnvBase", "INFO_KEYS", "COMM_INFO_KEYS"]
+__all__ = ["Engine", "EngineAccess", "JointRole", "CommRole", "ROLE_TYPES", "LawnEnv", "SlotResult", "INFO_KEYS",
+           "COMM_INFO_KEYS"]
 
 
 #: The info keys every step and reset of the central environments (and the parallel env's "drone")
@@ -94,14 +96,24 @@ class CommRole:
 ROLE_TYPES = {"joint": JointRole, "comm": CommRole}
 
 
+class SlotResult(NamedTuple):
+    """What :meth:`Engine.step` returns for B scenarios: the core's record, the role's info keys,
+    the rewards (B, M), and which scenarios terminate and are truncated (B,)."""
+
+    record: SlotRecord
+    extra: dict
+    reward: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+
+
 class Engine:
-    """B scenarios of one config, one role and one interface (module docstring). A step is its
-    named steps in order, which every view runs: :meth:`decide` (decode the actions; the role
-    decides the rest), :meth:`simulate` (one slot of the core), :meth:`observe`, :meth:`outcome`
-    (rewards, termination, truncation) and :meth:`info`."""
+    """B scenarios of one config, one role and one interface (module docstring). ``trail_row``:
+    the scenario whose positions are kept slot by slot (:class:`~lawn_env.core.Trail`: what
+    :meth:`render` draws and :meth:`trajectories` returns); None keeps none."""
 
     def __init__(self, config: ScenarioConfig, role: str, interface: InterfaceLike = None, num_envs: int = 1,
-                 qp_backend: str = DEFAULT_BACKEND):
+                 qp_backend: str = DEFAULT_BACKEND, trail_row: int | None = 0):
         if role not in ROLE_TYPES:
             raise ValueError(f"role={role!r}; valid: {', '.join(ROLE_TYPES)}")
         self.config = config
@@ -120,6 +132,14 @@ class Engine:
         #: The entity layout of the interface's ``layout="entities"`` (:mod:`lawn_env.entities`); None: flat.
         self.entities = (EntityLayout(config, role, self.interface.obs_bound) if self.interface.layout == "entities"
                          else None)
+        self.trail: Trail | None = None
+        if trail_row is not None:
+            self.keep_trail(trail_row)
+        self._renderer: Any = None
+
+    def keep_trail(self, row: int) -> None:
+        """Keep scenario ``row``'s positions slot by slot from its next reset (:attr:`trail`)."""
+        self.trail = Trail(self.sim.row(row))
 
     @property
     def observation_space(self) -> gym.spaces.Space:
@@ -138,6 +158,8 @@ class Engine:
         self.sim.reset(rngs, which)
         self.actions.reset(which)
         self.role.reset(which)
+        if self.trail is not None and (which is None or which[self.trail.view.i]):
+            self.trail.restart()
 
     def check(self, actions: Any, name: str = "action", batch: bool = True) -> np.ndarray:
         """Actions in the interface's layout checked (:func:`~lawn_env.spaces.check_action`): the
@@ -153,9 +175,30 @@ class Engine:
         decision = self.actions.decode(actions, sim.x_obs, windows, sim.drone_position, sim.slot)
         return self.role.decide(sim, decision, windows)
 
-    def simulate(self, decisions: Decisions, draws: SlotDraws) -> SlotRecord:
-        """One slot of every scenario with the slot's draws."""
-        return self.sim.step(decisions, draws)
+    def step(self, actions: np.ndarray, draws: SlotDraws, active: np.ndarray | None = None,
+             per_agent: bool = False) -> SlotResult:
+        """The step's stages for checked actions (B, size) and the slot's draws: the decisions
+        (:meth:`decide`), one slot of the core for the scenarios ``active`` (a (B,) mask; all when
+        None: the others, restarted this step, keep their first slot, their rewards and flags zero
+        and their warm starts cold), the trail, then the rewards, termination and truncation
+        (:meth:`outcome`) of the stage costs (B, 1), or with ``per_agent`` of the stage cost and
+        each AGV's (B, 1 + K), as the multi-agent env rewards its agents."""
+        decisions, extra = self.decide(actions)
+        record = self.sim.step(decisions, draws, active)
+        if active is not None and not active.all():
+            cold = ~active
+            self.actions.reset(cold)
+            self.role.reset(cold)
+        if self.trail is not None and (active is None or active[self.trail.view.i]):
+            self.trail.record()
+        costs = record.stage_cost
+        if per_agent:
+            costs = np.concatenate([costs, record.tracking_cost + record.effort_cost], axis=1)
+        reward, terminated, truncated = self.outcome(costs)
+        if active is not None:
+            reward[~active] = 0.0
+            terminated, truncated = terminated & active, truncated & active
+        return SlotResult(record, extra, reward, terminated, truncated)
 
     def outcome(self, costs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rewards for the slot's stage costs (B, M) (M = 1 for the central envs, 1 + K for the
@@ -213,12 +256,44 @@ class Engine:
         return flat if self.entities is None else self.entities.observe(flat)
 
 
+    # ------------------------------------------------------------------ one scenario's view
+    def snapshot(self) -> Snapshot:
+        """The trail's scenario's full state for external planners (:class:`lawn_env.core.Snapshot`)."""
+        if not self.sim.started:
+            raise RuntimeError("call reset() before snapshot()")
+        return self.trail.view.snapshot()
+
+    def render(self, render_mode: str | None, human_ok: bool = True) -> np.ndarray | None:
+        """An RGB frame (H, W, 3) of the trail's scenario: area, references, trails, links coloured
+        by outage probability (``render_mode`` "rgb_array"; "human" shows it in a window)."""
+        if render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'"
+                            + (" or 'human'" if human_ok else ""))
+            return None
+        if not self.sim.started:
+            raise RuntimeError("call reset() before render()")
+        if self._renderer is None:
+            from ..render import Renderer
+
+            self._renderer = Renderer(self.config, human=render_mode == "human")
+        return self._renderer.draw(self.trail.view, self.trail)
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def check_render_mode(render_mode: str | None, valid: Sequence[str]) -> None:
+    if render_mode is not None and render_mode not in valid:
+        raise ValueError(f"render_mode={render_mode!r}; valid: {list(valid)} or None")
+
+
 class EngineAccess:
     """What every env over an :class:`Engine` (``self.engine``) exposes of it, single and vector
-    alike: the MPC of ``lawn/Comm-v0``'s role, its last solve time, and closing the renderer."""
+    alike: the MPC of ``lawn/Comm-v0``'s role, its last solve time, the entity layout."""
 
     engine: Engine
-    _renderer: Any
 
     @property
     def last_mpc_solve_time_s(self) -> float:
@@ -235,82 +310,26 @@ class EngineAccess:
         """The MPC that drives the AGVs of every scenario (``lawn/Comm-v0``; None otherwise)."""
         return getattr(self.engine.role, "mpc", None)
 
-    def _close_renderer(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
 
-
-class EngineView(EngineAccess):
-    """What the B = 1 views of the engine share (the Gymnasium envs and the PettingZoo env): config
-    resolution, the engine, the scenario's accessors (``sim``), the trail, snapshot, render, close."""
+class LawnEnv(EngineAccess, gym.Env):
+    """``lawn/Joint-v0`` and ``lawn/Comm-v0`` (their classes set ``role``): an engine of one
+    scenario behind Gymnasium's API."""
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 4}
-
-    def _setup_view(self, config, render_mode, overrides, interface=None, role: str = "joint",
-                    qp_backend: str = DEFAULT_BACKEND) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode={render_mode!r}; valid: {self.metadata['render_modes']} or None")
-        self.config = resolve_config(config, **overrides)
-        self.render_mode = render_mode
-        self.engine = Engine(self.config, role, interface, 1, qp_backend)
-        self.sim: ScenarioView = self.engine.sim.row(0)
-        self.layout = self.engine.layout
-        self.interface = self.engine.interface
-        self.actions = self.engine.actions
-        self.trail = Trail(self.sim)
-        self._renderer = None
-
-    def _restart(self, rng: np.random.Generator) -> None:
-        self.engine.reset([rng])
-        self.trail.restart()
-
-    def _simulate(self, decisions: Decisions) -> SlotRecord:
-        """One slot with the slot's draws from the env's own generator, recorded in the trail."""
-        record = self.engine.simulate(decisions, self.engine.sim.draw(self.np_random))
-        self.trail.record()
-        return record
-
-    def snapshot(self) -> Snapshot:
-        """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
-        if not self.engine.sim.started:
-            raise RuntimeError("call reset() before snapshot()")
-        return self.sim.snapshot()
-
-    def trajectories(self) -> dict:
-        """The current episode's drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions."""
-        return self.trail.trajectories()
-
-    def render(self) -> np.ndarray | None:
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
-            return None
-        if not self.engine.sim.started:
-            raise RuntimeError("call reset() before render()")
-        if self._renderer is None:
-            from ..render import Renderer
-
-            self._renderer = Renderer(self.config, human=self.render_mode == "human")
-        return self._renderer.draw(self.sim, self.trail)
-
-    def close(self) -> None:
-        self._close_renderer()
-
-
-class LawnEnvBase(EngineView, gym.Env):
-    """Common machinery of ``lawn/Joint-v0`` and ``lawn/Comm-v0`` (not registered itself): the
-    engine with B = 1."""
-
     role = "joint"
 
     def __init__(self, config: ConfigLike = None, render_mode: str | None = None,
                  interface: InterfaceLike = None, qp_backend: str = DEFAULT_BACKEND, **overrides: Any):
-        self._setup_view(config, render_mode, overrides, interface, self.role, qp_backend)
+        check_render_mode(render_mode, self.metadata["render_modes"])
+        self.config = resolve_config(config, **overrides)
+        self.render_mode = render_mode
+        self.engine = Engine(self.config, self.role, interface, 1, qp_backend)
+        self.sim = self.engine.trail.view
+        self.layout, self.interface, self.actions = self.engine.layout, self.engine.interface, self.engine.actions
         self.num_agvs = self.config.num_agvs
         self.observation_space, self.action_space = self.engine.observation_space, self.engine.action_space
         self._done = True
 
-    # ------------------------------------------------------------------ gym API
     @property
     def spec(self) -> gym.envs.registration.EnvSpec | None:
         """The ``EnvSpec`` ``gym.make`` gave this env, with ``max_episode_steps`` = ``num_slots``:
@@ -326,7 +345,7 @@ class LawnEnvBase(EngineView, gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
-        self._restart(self.np_random)
+        self.engine.reset([self.np_random])
         self._done = False
         if self.render_mode == "human":
             self.render()
@@ -336,24 +355,35 @@ class LawnEnvBase(EngineView, gym.Env):
         if self._done:
             raise RuntimeError("the episode has ended (or reset() was never called); call reset() before step()")
         engine = self.engine
-        decisions, extra = engine.decide(engine.check(action, batch=False)[None])
-        record = self._simulate(decisions)
+        result = engine.step(engine.check(action, batch=False)[None], engine.sim.draw(self.np_random))
         obs = self._observation()
-        reward, terminated, truncated = engine.outcome(record.stage_cost)
-        terminated, truncated = bool(terminated[0]), bool(truncated[0])
-        info = engine.info(record, extra, i=0)
+        terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
+        info = engine.info(result.record, result.extra, i=0)
         if truncated or terminated:
             self._done = True
             info["episode_metrics"] = self.sim.episode_metrics()
         if self.render_mode == "human":
             self.render()
-        return obs, float(reward[0, 0]), terminated, truncated, info
+        return obs, float(result.reward[0, 0]), terminated, truncated, info
 
     def _observation(self) -> np.ndarray | dict[str, np.ndarray]:
         """This scenario's observation in the interface's layout."""
         obs = self.engine.observe()
         return obs[0] if self.entities is None else {key: value[0] for key, value in obs.items()}
 
-    # ------------------------------------------------------------------ extras
+    def snapshot(self) -> Snapshot:
+        """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
+        return self.engine.snapshot()
+
+    def trajectories(self) -> dict:
+        """The current episode's drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions."""
+        return self.engine.trail.trajectories()
+
     def episode_metrics(self) -> dict:
         return self.sim.episode_metrics()
+
+    def render(self) -> np.ndarray | None:
+        return self.engine.render(self.render_mode)
+
+    def close(self) -> None:
+        self.engine.close()

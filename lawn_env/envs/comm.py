@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from .base import LawnEnvBase
+from .base import LawnEnv
 
 __all__ = ["CommEnv"]
 
 
-class CommEnv(LawnEnvBase):
+class CommEnv(LawnEnv):
     """
     ## Description
 

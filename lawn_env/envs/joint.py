@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from .base import LawnEnvBase
+from .base import LawnEnv
 
 __all__ = ["JointEnv"]
 
 
-class JointEnv(LawnEnvBase):
+class JointEnv(LawnEnv):
     """
     ## Description
 

@@ -10,16 +10,18 @@ from gymnasium.utils import seeding
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
+from ..core import Snapshot
 from ..entities import MAX_AGVS
 from ..interface import InterfaceLike
-from ..presets import ConfigLike
+from ..mpc import DEFAULT_BACKEND
+from ..presets import ConfigLike, resolve_config
 from ..spaces import check_action
-from .base import EngineView
+from .base import Engine, EngineAccess, check_render_mode
 
 __all__ = ["LawnParallelEnv", "parallel_env", "raw_env", "env"]
 
 
-class LawnParallelEnv(EngineView, ParallelEnv):
+class LawnParallelEnv(EngineAccess, ParallelEnv):
     """
     ## Description
 
@@ -94,7 +96,12 @@ class LawnParallelEnv(EngineView, ParallelEnv):
                 raise ValueError(f"max_cycles={max_cycles!r} and num_slots={overrides['num_slots']!r} disagree; "
                                  "give one of them (max_cycles is PettingZoo's name for num_slots)")
             overrides = {**overrides, "num_slots": max_cycles}
-        self._setup_view(config, render_mode, overrides, interface, "joint")
+        check_render_mode(render_mode, self.metadata["render_modes"])
+        self.config = resolve_config(config, **overrides)
+        self.render_mode = render_mode
+        self.engine = Engine(self.config, "joint", interface, 1, DEFAULT_BACKEND)
+        self.sim = self.engine.trail.view
+        self.layout, self.interface, self.actions = self.engine.layout, self.engine.interface, self.engine.actions
         self.max_cycles = self.config.num_slots
         k = self.config.num_agvs
         self.possible_agents = ["drone"] + [f"agv_{i}" for i in range(k)]
@@ -152,7 +159,7 @@ class LawnParallelEnv(EngineView, ParallelEnv):
         if seed is not None:
             self._np_random, _ = seeding.np_random(seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
-        self._restart(self._np_random)
+        self.engine.reset([self._np_random])
         self._agv_terms = (np.zeros(self.config.num_agvs), np.zeros(self.config.num_agvs))
         self.agents = list(self.possible_agents)
         observations = self._observations()
@@ -196,17 +203,15 @@ class LawnParallelEnv(EngineView, ParallelEnv):
         unknown = [a for a in actions if a not in self._action_spaces]
         if missing or unknown:
             raise ValueError(f"actions: missing agents {missing}, unknown agents {unknown}; expected {self.agents}")
-        decisions, extra = self.engine.decide(self._central_action(actions)[None])
-        record = self._simulate(decisions)
-        per_agv = record.tracking_cost[0] + record.effort_cost[0]
-        costs = np.concatenate([record.costs[:, 2], per_agv])[None]
-        agent_rewards, terminated, truncated = self.engine.outcome(costs)
-        terminated, truncated = bool(terminated[0]), bool(truncated[0])
+        engine = self.engine
+        result = engine.step(self._central_action(actions)[None], engine.sim.draw(self._np_random), per_agent=True)
+        record, agent_rewards = result.record, result.reward
+        terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
         rewards = {"drone": float(agent_rewards[0, 0])}
         for agent, i in self._agv_index.items():
             rewards[agent] = float(agent_rewards[0, i + 1])
         self._agv_terms = (record.tracking_cost[0], record.effort_cost[0])
-        infos = self._infos(self.engine.info(record, extra, i=0))
+        infos = self._infos(engine.info(record, result.extra, i=0))
         observations = self._observations()
         terminations = {a: terminated for a in self.agents}
         truncations = {a: truncated for a in self.agents}
@@ -257,10 +262,21 @@ class LawnParallelEnv(EngineView, ParallelEnv):
         """MODEL.md §6's metrics of the episode so far (the central envs put them in the last info)."""
         return self.sim.episode_metrics()
 
+    def snapshot(self) -> Snapshot:
+        """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
+        return self.engine.snapshot()
+
+    def trajectories(self) -> dict:
+        """The current episode's drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions."""
+        return self.engine.trail.trajectories()
+
     def render(self, *args: Any, **kwargs: Any) -> np.ndarray | None:
         """As the central environments' ``render()``; extra arguments (RLlib's
         ``ParallelPettingZooEnv.render()`` passes a mode) are ignored: ``render_mode`` decides."""
-        return super().render()
+        return self.engine.render(self.render_mode)
+
+    def close(self) -> None:
+        self.engine.close()
 
 
 def parallel_env(config: ConfigLike = None, render_mode: str | None = None,

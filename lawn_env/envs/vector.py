@@ -43,7 +43,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..core import SlotDraws, Trail, control_costs
+from ..core import SlotDraws, control_costs
 from ..interface import InterfaceLike
 from ..mpc import DEFAULT_BACKEND
 from ..presets import ConfigLike, resolve_config
@@ -70,16 +70,16 @@ class JointVectorEnv(EngineAccess, VectorEnv):
             raise ValueError(f"autoreset_mode={autoreset_mode!r}; valid: {', '.join(modes)}")
         self.metadata = dict(self.metadata, autoreset_mode=mode)
         self.config = resolve_config(config, **overrides)
-        self.engine = Engine(self.config, self.role, interface, num_envs, qp_backend)
+        self.engine = Engine(self.config, self.role, interface, num_envs, qp_backend, trail_row=None)
         self.sim = self.engine.sim
+        if not (isinstance(render_env, (int, np.integer)) and 0 <= render_env < self.sim.num_envs):
+            raise ValueError(f"render_env={render_env!r}: the index of the env to render, in [0, {self.sim.num_envs - 1}]")
+        if render_mode:
+            self.engine.keep_trail(int(render_env))
         self.interface, self.layout, self.actions = self.engine.interface, self.engine.layout, self.engine.actions
         self.num_envs = self.sim.num_envs
-        if not (isinstance(render_env, (int, np.integer)) and 0 <= render_env < self.num_envs):
-            raise ValueError(f"render_env={render_env!r}: the index of the env to render, in [0, {self.num_envs - 1}]")
         self.render_mode = render_mode
         self.render_env = int(render_env)
-        self.trail = Trail(self.sim.row(self.render_env)) if render_mode else None
-        self._renderer = None
         self.num_agvs = self.config.num_agvs
         self.single_observation_space = self.engine.observation_space
         self.single_action_space = self.engine.action_space
@@ -112,8 +112,6 @@ class JointVectorEnv(EngineAccess, VectorEnv):
             self._rngs = [self.np_random] + [np.random.default_rng(int(self.np_random.integers(2**62)))
                                              for _ in range(self.num_envs - 1)]
         self.engine.reset(self._rngs)
-        if self.trail is not None:
-            self.trail.restart()
         self._done[:] = False
         self._started = True
         return self.engine.observe(), self.engine.info()
@@ -131,24 +129,14 @@ class JointVectorEnv(EngineAccess, VectorEnv):
         if restart.all():  # no slot this step: every scenario is at its first observation
             self._done = zeros
             return engine.observe(), np.zeros(self.num_envs), zeros, zeros.copy(), engine.info()
-        before = sim.state
-        decisions, extra = engine.decide(a)
-        record = engine.simulate(decisions, self._draw())
-        if restart.any():  # the restarted scenarios stay at their first slot, their warm starts cold
-            sim.revert_rows(before, restart)
-            engine.actions.reset(restart)
-            engine.role.reset(restart)
-        if self.trail is not None and not restart[self.render_env]:
-            self.trail.record()
-        reward, terminated, truncated = engine.outcome(record.stage_cost)
-        reward, terminated, truncated = reward[:, 0], terminated & ~restart, truncated & ~restart
+        result = engine.step(a, self._draw(), active=~restart if restart.any() else None)
+        record, reward, terminated, truncated = result.record, result.reward[:, 0], result.terminated, result.truncated
         ended = truncated | terminated
-        info = engine.info(record, extra)
+        info = engine.info(record, result.extra)
         if restart.any():  # restarted rows describe their new episode
             fresh = engine.info()
             for key, value in fresh.items():
                 info[key] = np.where(restart.reshape((-1,) + (1,) * (value.ndim - 1)), value, info[key])
-            reward[restart] = 0.0
         if ended.any():
             metrics = np.full(self.num_envs, None, dtype=object)
             rows = np.flatnonzero(ended)
@@ -170,25 +158,16 @@ class JointVectorEnv(EngineAccess, VectorEnv):
     def _restart(self, which: np.ndarray) -> None:
         """New episodes for the envs ``which`` (autoreset), each from its own generator."""
         self.engine.reset(self._rngs, which)
-        if self.trail is not None and which[self.render_env]:
-            self.trail.restart()
 
     def render(self) -> np.ndarray | None:
-        """An RGB frame (H, W, 3) of env ``render_env``: area, references, trails, links colored by
+        """An RGB frame (H, W, 3) of env ``render_env``: area, references, trails, links coloured by
         outage probability, as the single env draws it."""
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
-            return None
-        if not self._started:
+        if self.render_mode is not None and not self._started:
             raise RuntimeError("call reset() before render()")
-        if self._renderer is None:
-            from ..render import Renderer
-
-            self._renderer = Renderer(self.config)
-        return self._renderer.draw(self.trail.view, self.trail)
+        return self.engine.render(self.render_mode, human_ok=False)
 
     def close_extras(self, **kwargs: Any) -> None:
-        self._close_renderer()
+        self.engine.close()
 
 
 class CommVectorEnv(JointVectorEnv):
