@@ -67,18 +67,20 @@ class CommRole:
 
     name = "comm"
 
-    def __init__(self, mpc: OutageAwareMPC, law: str = "paper"):
+    def __init__(self, mpc: OutageAwareMPC, law: str = "paper", planning_state: str = "measured"):
         self.mpc = mpc
         self.law = law  # control.law: the QP at the planned psi ("paper") or at psi = 1 ("delivery")
+        self.planning_state = planning_state  # "true": lawn/Comm-v0's MPC, which planned from the true state
         self.last_solve_time_s = float("nan")
 
     def reset(self, which: np.ndarray | None = None) -> None:
         self.mpc.reset(which)  # a new episode starts without the old one's warm starts
 
     def decide(self, sim: Simulation, decision: Decisions, windows: np.ndarray | None) -> tuple[Decisions, dict]:
-        psi = link_success(sim.x_obs, decision.drone_next, decision.power_w, sim.params.planning_link)
+        x = sim.x_obs if self.planning_state == "measured" else sim.x_aug
+        psi = link_success(x, decision.drone_next, decision.power_w, sim.params.planning_link)
         planned = psi if self.law == "paper" else np.ones_like(psi)  # control.law: as if delivered
-        solution = self.mpc.solve(sim.x_obs, windows, planned, sim.slot)
+        solution = self.mpc.solve(x, windows, planned, sim.slot)
         self.last_solve_time_s = solution.solve_time_s  # not in info: infos must be deterministic
         extra = {"mpc_iterations": solution.iterations.astype(np.int64),
                  "mpc_fallbacks": np.count_nonzero(solution.status, axis=-1).astype(np.int64),
@@ -88,12 +90,18 @@ class CommRole:
     def reset_info(self, sim: Simulation) -> dict:
         b, k = sim.num_envs, sim.num_agvs
         return {"mpc_iterations": np.zeros((b, k), dtype=np.int64), "mpc_fallbacks": np.zeros(b, dtype=np.int64),
-                "success_probability_planned": link_success(sim.x_obs, sim.drone_position, sim.last_power_w,
-                                                            sim.params.planning_link)}
+                "success_probability_planned": link_success(
+                    sim.x_obs if self.planning_state == "measured" else sim.x_aug, sim.drone_position,
+                    sim.last_power_w, sim.params.planning_link)}
 
 
 #: The roles by name: what the actions decide (:data:`lawn_env.spaces.ROLES`).
 ROLE_TYPES = {"joint": JointRole, "comm": CommRole}
+
+
+#: The state the Comm role's MPC plans from: "measured" (what every planner has: the true state
+#: without measurement noise) or "true" (``lawn/Comm-v0``'s, kept for its episodes).
+PLANNING_STATES = ("measured", "true")
 
 
 class SlotResult(NamedTuple):
@@ -113,7 +121,7 @@ class Engine:
     :meth:`render` draws and :meth:`trajectories` returns); None keeps none."""
 
     def __init__(self, config: ScenarioConfig, role: str, interface: InterfaceLike = None, num_envs: int = 1,
-                 qp_backend: str = DEFAULT_BACKEND, trail_row: int | None = 0):
+                 qp_backend: str = DEFAULT_BACKEND, trail_row: int | None = 0, planning_state: str = "measured"):
         if role not in ROLE_TYPES:
             raise ValueError(f"role={role!r}; valid: {', '.join(ROLE_TYPES)}")
         self.config = config
@@ -125,7 +133,9 @@ class Engine:
         mpc = None
         if role == "comm":  # one MPC per env: the anchor's when it has one
             mpc = self.actions.mpc or OutageAwareMPC.from_config(config, backend=qp_backend)
-        self.role = JointRole() if role == "joint" else CommRole(mpc, config.control.law)
+        if planning_state not in PLANNING_STATES:
+            raise ValueError(f"planning_state={planning_state!r}; valid: {', '.join(PLANNING_STATES)}")
+        self.role = JointRole() if role == "joint" else CommRole(mpc, config.control.law, planning_state)
         self.needs_windows = role == "comm" or self.actions.needs_reference
         self.slot_table = self.layout.slot_table(self.sim.params.fixed_reference)
         self._no_termination = np.zeros(self.num_envs, dtype=bool)
@@ -317,13 +327,14 @@ class LawnEnv(EngineAccess, gym.Env):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 4}
     role = "joint"
+    planning_state = "measured"
 
     def __init__(self, config: ConfigLike = None, render_mode: str | None = None,
                  interface: InterfaceLike = None, qp_backend: str = DEFAULT_BACKEND, **overrides: Any):
         check_render_mode(render_mode, self.metadata["render_modes"])
         self.config = resolve_config(config, **overrides)
         self.render_mode = render_mode
-        self.engine = Engine(self.config, self.role, interface, 1, qp_backend)
+        self.engine = Engine(self.config, self.role, interface, 1, qp_backend, planning_state=self.planning_state)
         self.sim = self.engine.trail.view
         self.layout, self.interface, self.actions = self.engine.layout, self.engine.interface, self.engine.actions
         self.num_agvs = self.config.num_agvs

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+from typing import Any
+
+from ..interface import InterfaceLike
+from ..mpc import DEFAULT_BACKEND
+from ..presets import ConfigLike
 from .base import LawnEnv
 
 __all__ = ["CommEnv"]
@@ -83,3 +88,8 @@ class CommEnv(LawnEnv):
     """
 
     role = "comm"
+
+    def __init__(self, config: ConfigLike = None, render_mode: str | None = None, interface: InterfaceLike = None,
+                 qp_backend: str = DEFAULT_BACKEND, planning_state: str = "measured", **overrides: Any):
+        self.planning_state = planning_state
+        super().__init__(config, render_mode, interface, qp_backend, **overrides)
