@@ -408,7 +408,9 @@ def test_start_at_anchor_makes_the_untrained_policy_play_the_zero_action(algo):
 
 @pytest.mark.parametrize("bad, message", [
     ("learnin_rate=1e-4", "unknown PPO hyperparameters \\['learnin_rate'\\]"),
-    ("n_envs=0", "--hp n_envs=0: must be an integer >= 1"),
+    ("n_envs=0", "--hp n_envs=0: should be greater than or equal to 1 \\(allowed: an integer >= 1\\)"),
+    ("init_log_std=\"low\"", "--hp init_log_std='low': should be a valid number"),
+    ("normalize=\"yes\"", "--hp normalize='yes': should be a valid boolean"),
     ("actor_warmup_steps=abc", "--hp actor_warmup_steps='abc'"),
     ("policy=Foo", "--hp policy='Foo': PPO takes"),
     ("seed=3", "unknown PPO hyperparameters \\['seed'\\]"),
@@ -509,17 +511,17 @@ def test_the_spec_names_the_bad_field_its_value_and_what_is_allowed(tmp_path, ch
     assert not (tmp_path / "r").exists()  # a spec writes nothing
 
 
-def test_the_spec_is_frozen_and_replace_checks_again(tmp_path):
+def test_the_spec_is_frozen_and_a_replaced_copy_is_checked_again(tmp_path):
     import dataclasses
 
     spec = TrainSpec(algo="ppo", env_id="lawn/Joint-v0", timesteps=64, out_dir=str(tmp_path))
     assert spec.out_dir == tmp_path and spec.config == ScenarioConfig() and spec.vec == "dummy"
     with pytest.raises(dataclasses.FrozenInstanceError):
         spec.seed = 1
-    assert spec.replace(seed=5).seed == 5 and spec.seed == 0
+    assert dataclasses.replace(spec, seed=5).seed == 5 and spec.seed == 0
     with pytest.raises(ValueError, match="timesteps=-1"):
-        spec.replace(timesteps=-1)
-    params, version = spec.replace(n_envs=3, interface="v0").hyperparams()
+        dataclasses.replace(spec, timesteps=-1)
+    params, version = dataclasses.replace(spec, n_envs=3, interface="v0").hyperparams()
     assert params["n_envs"] == 3 and params["interface"]["action_scheme"] == "direct" and version >= 1
 
 

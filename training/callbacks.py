@@ -1,15 +1,12 @@
 """Stable-Baselines3 callbacks of ``lawn train`` (validation on the real objective, checkpoints at
 rollout boundaries, actor warm-up) and the checkpoints a run resumes from.
 
-A checkpoint is taken at a rollout boundary, after the algorithm has trained on every step it has
-collected (SB3 calls ``on_rollout_start`` after ``train()``), so a resumed run repeats no update
-and loses none. One checkpoint is a directory ``checkpoints/<steps>/`` holding ``model.zip`` (with
-the optimizer state and counters), ``vecnormalize.pkl`` when the run normalizes,
-``replay_buffer.pkl`` for SAC and TD3, the validation-selected model as it stood, and
-``state.json``: steps, updates, wall time and the length in bytes of every history file
-(``learning_curve.csv``, ``monitor/*.csv``). It is written to a temporary directory and renamed
-into place (a kill while writing leaves the previous one intact); only the newest is kept.
-Resuming truncates the history files to their checkpointed lengths and appends from there.
+A checkpoint is taken after the algorithm has trained on every step it collected (SB3 calls
+``on_rollout_start`` after ``train()``), so a resumed run repeats no update and loses none. It is
+``checkpoints/<steps>/``: the model, its normalization statistics, an off-policy replay buffer,
+the validation-selected model, and ``state.json`` (steps, updates, wall time, the byte length of
+every history file), written to a temporary directory and renamed into place; only the newest is
+kept. Resuming truncates the history files to those lengths and appends from there.
 """
 
 from __future__ import annotations

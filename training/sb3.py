@@ -1,18 +1,12 @@
 """Stable-Baselines3 runs of ``lawn train``: the training envs, the model and the learning loop.
 
-* :func:`make_train_env`: a seeded SB3 VecEnv of single envs, of lawn's batched vector env
-  (:class:`NativeVecEnv`, ``--vec native``) or of the PettingZoo env (:func:`make_marl_vec_env`),
-  with optional ``VecNormalize``.
-* :class:`NativeVecEnv` runs :class:`lawn_env.envs.vector.JointVectorEnv` or ``CommVectorEnv`` with
-  same-step autoreset, SB3's convention: the step that ends an episode returns the next episode's
-  first observation, the final one in ``infos[i]["terminal_observation"]``.
-* :func:`make_marl_vec_env`: multi-agent training by parameter sharing. SuperSuit pads every agent's
-  observation and action to a common size and appends a one-hot agent indicator, then flattens the
-  agents into a vector env; the drone's outputs come from the same network conditioned on its
-  indicator. In the interface's entity layout every agent already sees the whole fleet and which
-  entity it is (``policy: FleetPolicy``, :class:`agents.fleet.FleetPolicy`): only the drone's
-  action is padded.
-* :func:`setup` and :func:`learn`: a run (new, or resumed from a checkpoint) and its training.
+:func:`make_train_env` makes a seeded SB3 VecEnv of single envs, of lawn's batched vector env
+(:class:`NativeVecEnv`: same-step autoreset, SB3's convention) or of the PettingZoo env
+(:func:`make_marl_vec_env`: parameter sharing; SuperSuit pads the agents' observations and actions
+and appends a one-hot agent indicator, or in the entity layout, where every agent sees the fleet
+and which entity it is, pads the drone's action only), with optional ``VecNormalize``.
+:func:`train_sb3`, :func:`setup` and :func:`learn` make a run (new, or resumed from a checkpoint)
+and train it.
 """
 
 from __future__ import annotations

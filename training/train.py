@@ -1,14 +1,12 @@
 """``lawn train``: a typed run spec (:class:`TrainSpec`), the algorithm registry (:data:`ALGORITHMS`)
 and the runs they make (the ``rl`` extra trains; this module imports without it).
 
-A run directory holds the model (``model.zip``, ``vecnormalize.pkl``), the model selected on the
-validation seeds (``best_model.zip``, ``best_vecnormalize.pkl``: :mod:`training.protocol`), the
-spec that made it (``spec.json``), ``run.json`` (algorithm, env, seed, timesteps, interface,
-versions), ``config.json``, the resolved hyperparameters (``hyperparams.json``: the file's
-``training/hyperparams/<algo>.yml`` entry and the ``--hp`` overrides), the validation history on
-full episodes of the unmodified scenario (``learning_curve.csv``/``.png``,
-``validation_start.json``), ``summary.md``, the newest checkpoint (``checkpoints/<N>/``,
-:mod:`training.callbacks`; ``--resume``) and TensorBoard logs (``tb/``).
+A run directory holds ``spec.json`` (the spec that made it), ``run.json`` (algorithm, env, seed,
+timesteps, interface, versions), ``config.json``, ``hyperparams.json`` (the entry of
+``hyperparams/<algo>.yml`` with the ``--hp`` overrides), the model (``model.zip``,
+``vecnormalize.pkl``), the model selected on the validation seeds (``best_model.zip``), the
+validation history (``learning_curve.csv``, :mod:`training.protocol`), the newest checkpoint
+(``checkpoints/<N>/``, :mod:`training.callbacks`; ``--resume``) and TensorBoard logs (``tb/``).
 """
 
 from __future__ import annotations
@@ -21,7 +19,7 @@ from pathlib import Path
 from typing import Annotated, Any, Callable, Literal, Mapping
 
 import gymnasium as gym
-from pydantic import ConfigDict, Field, TypeAdapter
+from pydantic import ConfigDict, Field, StrictBool, TypeAdapter
 from pydantic.dataclasses import dataclass
 
 from agents.runs import read_json, read_run
@@ -53,18 +51,20 @@ _SET_BY_LAWN = {"self", "env", "policy", "seed", "verbose", "tensorboard_log"}
 
 
 # ---------------------------------------------------------------- the options of an SB3 run
-@dataclasses.dataclass
+@raises_config_errors(prefix="--hp ", noun="lawn train option")
+@dataclass(config=ConfigDict(extra="forbid", arbitrary_types_allowed=True))
 class RunOptions:
-    """What :func:`split_params` found: ``lawn train``'s own options and the SB3 keyword arguments."""
+    """``lawn train``'s own options of an SB3 run (:data:`LAWN_KEYS`), checked, and the SB3 keyword
+    arguments (:func:`split_params`)."""
 
-    n_envs: int = 1
-    normalize: bool | dict = False
+    n_envs: Annotated[int, Field(ge=1, strict=True)] = 1
+    normalize: StrictBool | dict[str, Any] = False
     policy: Any = "MlpPolicy"
     interface: Any = None
-    actor_warmup_steps: int = 0
-    init_log_std: float | None = None
+    actor_warmup_steps: Annotated[int, Field(ge=0, strict=True)] = 0
+    init_log_std: Annotated[float, Field(ge=-20, strict=True)] | None = None
     start_at_anchor: bool = False
-    algo_kwargs: dict = dataclasses.field(default_factory=dict)
+    algo_kwargs: dict[str, Any] = Field(default_factory=dict)
 
 
 def lr_schedule(value: Any, key: str = "learning_rate") -> Any:
@@ -78,29 +78,14 @@ def lr_schedule(value: Any, key: str = "learning_rate") -> Any:
     return value
 
 
-def _number(params: dict, key: str, kind: type, low: float) -> None:
-    if key not in params:
-        return
-    value = params[key]
-    try:
-        number = kind(value)
-    except (TypeError, ValueError):
-        number = None
-    if number is None or isinstance(value, bool) or number != value and kind is int or number < low:
-        raise ValueError(f"--hp {key}={value!r}: must be {'an integer' if kind is int else 'a number'} >= {low:g}")
-    params[key] = number
-
-
-def _check_normalize(normalize: Any) -> None:
-    if isinstance(normalize, Mapping):
+def _check_normalize(normalize: bool | dict) -> None:
+    if isinstance(normalize, dict):
         from stable_baselines3.common.vec_env import VecNormalize
 
         allowed = sorted(k for k in inspect.signature(VecNormalize.__init__).parameters if k not in ("self", "venv"))
         unknown = sorted(set(normalize) - set(allowed))
         if unknown:
             raise ValueError(f"--hp normalize: unknown VecNormalize options {unknown}; valid: {', '.join(allowed)}")
-    elif not isinstance(normalize, bool):
-        raise ValueError(f"--hp normalize={normalize!r}: true, false or a dict of VecNormalize options")
 
 
 def _policy(algo: str, env_id: str, options: RunOptions, cls: type) -> Any:
@@ -128,15 +113,11 @@ def split_params(algo: str, env_id: str, params: Mapping[str, Any]) -> RunOption
     the key, the value and what is allowed."""
     cls = ALGORITHMS[algo].load()
     params = dict(params)
-    _number(params, "n_envs", int, 1)
-    _number(params, "actor_warmup_steps", int, 0)
-    _number(params, "init_log_std", float, -20)
     for key, algos in LAWN_KEYS.items():
         if key in params and algos is not None and algo not in algos:
             raise ValueError(f"--hp {key}: applies to {', '.join(algos)}, not {algo}")
-    _check_normalize(params.get("normalize", False))
     options = RunOptions(**{k: params.pop(k) for k in list(params) if k in LAWN_KEYS})
-    options.start_at_anchor = bool(options.start_at_anchor)
+    _check_normalize(options.normalize)
     options.policy = _policy(algo, env_id, options, cls)
     for key in ("learning_rate", "clip_range"):
         if key in params:
@@ -222,19 +203,10 @@ class TrainSpec:
             params["interface"] = resolve_interface(params.get("interface", "v0")).to_dict()
         return params, version
 
-    def replace(self, **changes: Any) -> TrainSpec:
-        """A copy with ``changes``, checked again."""
-        return TrainSpec(**{**self.to_dict(raw=True), **changes})
-
-    def to_dict(self, raw: bool = False) -> dict[str, Any]:
-        """The fields: as they are, or (``raw=False``) as JSON values (the ``spec.json`` of a run)."""
-        if raw:
-            return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        return TypeAdapter(TrainSpec).dump_python(self, mode="json")
-
     def write(self) -> None:
-        """``spec.json`` in the run directory."""
-        (self.out_dir / "spec.json").write_text(json.dumps(self.to_dict(), indent=2))
+        """``spec.json`` in the run directory (``TrainSpec(**json.load(...))`` is the spec again)."""
+        fields = TypeAdapter(TrainSpec).dump_python(self, mode="json")
+        (self.out_dir / "spec.json").write_text(json.dumps(fields, indent=2))
 
 
 # ---------------------------------------------------------------- the registry
@@ -327,8 +299,8 @@ def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: st
 
     if len(set(seeds)) != len(seeds) or not seeds:
         raise ValueError(f"--seeds {seeds}: give one or more distinct seeds")
-    specs = [spec.replace(seed=s, out_dir=spec.out_dir / f"seed-{s}", progress=spec.progress and workers <= 1)
-             for s in seeds]
+    progress = spec.progress and workers <= 1
+    specs = [dataclasses.replace(spec, seed=s, out_dir=spec.out_dir / f"seed-{s}", progress=progress) for s in seeds]
     summaries = sorted(execute(train, specs, workers, backend), key=lambda r: seeds.index(r["seed"]))
     best = [s["best_validation_cost"] for s in summaries]
     mean, half = mean_ci(best)
