@@ -158,6 +158,8 @@ def test_behaviour_cloning_reduces_loss_and_warm_starts_ppo(tmp_path):
     assert history[0]["losses"][-1] < history[0]["losses"][0]
     assert history[1]["samples"] == 156
     assert summary["bc_loss_last"] < summary["bc_loss_first"]
+    with pytest.raises(ValueError, match="bc runs are not resumable"):
+        resume(out, timesteps=10_000)
     metrics = _run_episode(make_policy(f"bc:{out}"), "lawn/Comm-v0")
     assert np.isfinite(metrics["control_cost"])
     # PPO started from the cloned policy: same weights before any update

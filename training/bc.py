@@ -38,8 +38,8 @@ from .provenance import provenance
 if TYPE_CHECKING:
     import minari
 
-__all__ = ["collect", "label_transitions", "fit", "BCSettings", "bc_settings", "train_bc", "BC_TARGETS", "create_dataset",
-           "load_dataset", "dataset_transitions", "DATA_EXTRA"]
+__all__ = ["collect", "label_transitions", "fit", "BCSettings", "bc_settings", "train_bc", "BC_TARGETS",
+           "create_dataset", "load_dataset", "dataset_transitions", "DATA_EXTRA"]
 
 #: The algorithms whose policy network behaviour cloning fits (the ``target`` hyperparameter).
 BC_TARGETS = ("ppo", "sac")
@@ -204,7 +204,8 @@ class BCSettings:
     policy_kwargs: dict
 
     def to_dict(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)} | {"interface": self.interface.to_dict()}
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return fields | {"interface": self.interface.to_dict()}
 
 
 def bc_settings(params: Mapping[str, Any]) -> BCSettings:

@@ -122,16 +122,15 @@ def make_marl_vec_env(config: ScenarioConfig, n_envs: int, seed: int, interface:
 def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, normalize: bool | Mapping[str, Any],
                    monitor_dir: Path | None, vecnormalize_path: Path | None = None, **kwargs: Any) -> Any:
     """A seeded SB3 VecEnv (Monitor-wrapped) with optional VecNormalize (``normalize``: true or its
-    options; ``vecnormalize_path``: saved statistics). Keywords: ``interface``, ``training``
-    (default True; False freezes the statistics and leaves rewards raw), ``append_monitor``
+    options; ``vecnormalize_path``: saved statistics). Keywords: ``interface``, ``append_monitor``
     (continue the monitor logs of a resumed run) and ``vec`` (``"native"``: :class:`NativeVecEnv`,
     episode statistics through ``VecMonitor``, no monitor files)."""
     from stable_baselines3.common.env_util import make_vec_env
 
-    unknown = set(kwargs) - {"interface", "training", "append_monitor", "vec"}
+    unknown = set(kwargs) - {"interface", "append_monitor", "vec"}
     if unknown:
         raise TypeError(f"make_train_env: unexpected keywords {sorted(unknown)}")
-    interface, training = kwargs.get("interface"), kwargs.get("training", True)
+    interface = kwargs.get("interface")
     if kwargs.get("vec", "dummy") == "native":
         venv = VecMonitor(NativeVecEnv(config, n_envs, env_id, interface=interface))
         venv.seed(seed)
@@ -143,12 +142,9 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
                             monitor_dir=str(monitor_dir) if monitor_dir else None,
                             monitor_kwargs={"override_existing": not kwargs.get("append_monitor", False)})
     if vecnormalize_path is not None:
-        venv = VecNormalize.load(str(vecnormalize_path), venv)
-        venv.training = training
-    elif normalize:
-        venv = VecNormalize(venv, training=training, **(dict(normalize) if isinstance(normalize, Mapping) else {}))
-    if isinstance(venv, VecNormalize) and not training:
-        venv.norm_reward = False
+        return VecNormalize.load(str(vecnormalize_path), venv)
+    if normalize:
+        return VecNormalize(venv, **(dict(normalize) if isinstance(normalize, Mapping) else {}))
     return venv
 
 
@@ -238,9 +234,8 @@ def setup(record: dict, options: Any, config: ScenarioConfig, out_dir: Path, sta
     wall_before = float(record.get("wall_time_s", 0.0))
     hooks = []
     if record["env"] != "CartPole-v1":
-        hooks.append(ControlCostValidation(record["env"], config, options.interface, episodes=int(record["eval_episodes"]),
-                                           every=max(int(record["eval_every"]), 1), out_dir=out_dir,
-                                           seed_base=VALIDATION_SEED_BASE))
+        hooks.append(ControlCostValidation(record["env"], config, options.interface, int(record["eval_episodes"]),
+                                           max(int(record["eval_every"]), 1), out_dir, VALIDATION_SEED_BASE))
     hooks.append(RunCheckpoint(out_dir, max(int(record["checkpoint_every"]), 1), wall_time_before=wall_before))
     if options.actor_warmup_steps > 0:
         hooks.append(ActorWarmup(options.actor_warmup_steps))

@@ -34,9 +34,9 @@ __all__ = ["ALGORITHMS", "ALGOS", "Algorithm", "TRAIN_ENV_IDS", "NATIVE_ENV_IDS"
            "TRAIN_SEED_BASE", "VALIDATION_SEED_BASE"]
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
-_LAWN = ("lawn/Joint-v0", "lawn/Comm-v0")
+_LAWN, _CARTPOLE = ("lawn/Joint-v0", "lawn/Comm-v0"), "CartPole-v1"
 #: Environment ids ``lawn train`` accepts; ``lawn/Parallel-v0`` is the PettingZoo env (parameter sharing).
-TRAIN_ENV_IDS = (*ENV_IDS, PARALLEL_ENV_ID, "CartPole-v1")
+TRAIN_ENV_IDS = (*ENV_IDS, PARALLEL_ENV_ID, _CARTPOLE)
 #: The ids registered with a native vector env (``--vec native``: :class:`training.sb3.NativeVecEnv`).
 NATIVE_ENV_IDS = tuple(i for i in (*ENV_IDS, *RL_ENV_IDS) if gym.spec(i).vector_entry_point is not None)
 
@@ -95,7 +95,8 @@ def _policy(algo: str, env_id: str, options: RunOptions, cls: type) -> Any:
     if fleet and algo not in ("ppo", "a2c"):
         raise ValueError(f"--hp policy=FleetPolicy is an actor-critic policy: ppo or a2c, not {algo}")
     if not fleet and isinstance(policy, str) and policy not in getattr(cls, "policy_aliases", {}):
-        raise ValueError(f"--hp policy={policy!r}: {cls.__name__} takes {', '.join([*cls.policy_aliases, 'FleetPolicy'])}")
+        allowed = ", ".join([*cls.policy_aliases, "FleetPolicy"])
+        raise ValueError(f"--hp policy={policy!r}: {cls.__name__} takes {allowed}")
     if env_id == PARALLEL_ENV_ID and not fleet and options.interface is not None \
             and resolve_interface(options.interface).layout == "entities":
         raise ValueError(f"--hp policy={policy!r}: the multi-agent env's entity layout trains --hp policy=FleetPolicy "
@@ -267,7 +268,7 @@ class Algorithm:
 #: any fleet size, saved as a PPO model: :mod:`training.fleet`) and ``bc`` (behaviour cloning:
 #: :mod:`training.bc`).
 ALGORITHMS: dict[str, Algorithm] = {
-    "ppo": Algorithm("stable_baselines3:PPO", (*_LAWN, PARALLEL_ENV_ID, "CartPole-v1"), "ppo.yml", _check_sb3, _run_sb3),
+    "ppo": Algorithm("stable_baselines3:PPO", (*_LAWN, PARALLEL_ENV_ID, _CARTPOLE), "ppo.yml", _check_sb3, _run_sb3),
     "a2c": Algorithm("stable_baselines3:A2C", (*_LAWN, PARALLEL_ENV_ID), "a2c.yml", _check_sb3, _run_sb3),
     "sac": Algorithm("stable_baselines3:SAC", _LAWN, "sac.yml", _check_sb3, _run_sb3),
     "td3": Algorithm("stable_baselines3:TD3", _LAWN, "td3.yml", _check_sb3, _run_sb3),
@@ -335,11 +336,12 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
     out_dir = Path(out_dir)
     run = read_run(out_dir, "--resume")
     record = dict(run.record)
+    trainer = record.get("trainer", record["algo"])
+    if trainer not in ALGORITHMS or ALGORITHMS[trainer].run is not _run_sb3:
+        raise ValueError(f"--resume {out_dir}: {trainer} runs are not resumable (no checkpoints); rerun lawn train")
     for key in ("algo", "env", "seed", "timesteps", "checkpoint_every", "eval_every", "eval_episodes"):
         if key not in record:
             raise ValueError(f"--resume {out_dir}: run.json has no {key!r} (not written by lawn train)")
-    if record["algo"] == "bc":
-        raise ValueError("behaviour cloning runs are not resumable; rerun lawn train --algo bc")
     params = read_json(out_dir / "hyperparams.json", "--resume", "the run directory is incomplete")
     config = run.load_config("--resume", "the run directory is incomplete")
     target = int(record["timesteps"]) if timesteps is None else int(timesteps)
