@@ -17,8 +17,8 @@ from lawn_env import ScenarioConfig  # noqa: E402
 from training.cli import main  # noqa: E402
 from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 
-from training.checkpoints import latest_checkpoint  # noqa: E402
-from training.train import load_hyperparams, resume, train  # noqa: E402
+from training.callbacks import latest_checkpoint  # noqa: E402
+from training.train import TrainSpec, load_hyperparams, resume, train  # noqa: E402
 
 SMALL = ScenarioConfig(num_slots=12)
 FAST = {"ppo": {"n_steps": 64, "batch_size": 64, "n_epochs": 2}, "a2c": {"n_steps": 8},
@@ -30,8 +30,11 @@ def _train(tmp_path, algo, env_id="lawn/Joint-v0", steps=256, name=None, **kwarg
     out = tmp_path / (name or f"{algo}-{env_id.split('/')[-1]}")
     hp = {**FAST.get(algo, {}), **kwargs.pop("hp_overrides", {})}
     n_envs = kwargs.pop("n_envs", 2 if algo in ("ppo", "a2c") else 1)
-    summary = train(algo, env_id, SMALL, steps, 3, out, hp_overrides=hp, n_envs=n_envs, eval_every=128,
-                    eval_episodes=1, checkpoint_every=128, progress=False, **kwargs)
+    callbacks = kwargs.pop("callbacks", None)
+    spec = TrainSpec(algo=algo, env_id=env_id, config=SMALL, timesteps=steps, seed=3, out_dir=out, hp_overrides=hp,
+                     n_envs=n_envs, eval_every=128, eval_episodes=1, checkpoint_every=128, progress=False, **kwargs)
+    summary = train(spec, callbacks=callbacks)
+    assert TrainSpec(**json.loads((out / "spec.json").read_text())) == spec  # the run records what made it
     return out, summary
 
 
@@ -155,16 +158,18 @@ def test_behaviour_cloning_reduces_loss_and_warm_starts_ppo(tmp_path):
     assert history[0]["losses"][-1] < history[0]["losses"][0]
     assert history[1]["samples"] == 156
     assert summary["bc_loss_last"] < summary["bc_loss_first"]
+    with pytest.raises(ValueError, match="bc runs are not resumable"):
+        resume(out, timesteps=10_000)
     metrics = _run_episode(make_policy(f"bc:{out}"), "lawn/Comm-v0")
     assert np.isfinite(metrics["control_cost"])
     # PPO started from the cloned policy: same weights before any update
     from stable_baselines3 import PPO
 
-    from training.train import _init_from, make_train_env
+    from training.sb3 import init_from, make_train_env
 
     env = make_train_env("lawn/Comm-v0", SMALL, 1, 0, {"norm_obs": True}, None)
     model = PPO("MlpPolicy", env, policy_kwargs={"net_arch": [128, 128], "log_std_init": -1.0}, seed=0)
-    _init_from(model, out, env)
+    init_from(model, out, env)
     cloned = PPO.load(str(out / "model.zip"))
     for p, q in zip(model.policy.parameters(), cloned.policy.parameters()):
         assert np.array_equal(p.detach().numpy(), q.detach().numpy())
@@ -190,7 +195,8 @@ def test_errors_name_the_problem(tmp_path, capsys):
     with pytest.raises(ValueError, match="unknown env id 'lawn/Nope-v0'"):
         load_hyperparams("ppo", "lawn/Nope-v0")
     with pytest.raises(ValueError, match="unknown PPO hyperparameters \\['lerning_rate'\\]"):
-        train("ppo", "lawn/Joint-v0", SMALL, 64, 0, tmp_path / "x", hp_overrides={"lerning_rate": 1e-3}, progress=False)
+        TrainSpec(algo="ppo", env_id="lawn/Joint-v0", timesteps=64, out_dir=tmp_path / "x",
+                  hp_overrides={"lerning_rate": 1e-3})
     with pytest.raises(ValueError, match="not a lawn train run directory"):
         make_policy(f"sb3:{tmp_path / 'missing'}")
     with pytest.raises(ValueError, match="unknown policy prefix 'zz'"):
@@ -247,9 +253,10 @@ def test_plain_v0_interface_on_request(tmp_path):
 def test_several_training_seeds_in_one_command(tmp_path):
     from training.train import train_seeds
 
-    result = train_seeds([3, 4], tmp_path / "multi", workers=1, progress=False, algo="ppo", env_id="lawn/Joint-v0",
-                         config=SMALL, timesteps=128, hp_overrides=FAST["ppo"], n_envs=2, eval_every=128,
-                         eval_episodes=1, checkpoint_every=128)
+    spec = TrainSpec(algo="ppo", env_id="lawn/Joint-v0", config=SMALL, timesteps=128, out_dir=tmp_path / "multi",
+                     hp_overrides=FAST["ppo"], n_envs=2, eval_every=128, eval_episodes=1, checkpoint_every=128,
+                     progress=False)
+    result = train_seeds(spec, [3, 4], workers=1)
     for s in (3, 4):
         run = json.loads((tmp_path / "multi" / f"seed-{s}" / "run.json").read_text())
         assert run["seed"] == s and (tmp_path / "multi" / f"seed-{s}" / "learning_curve.png").exists()
@@ -260,7 +267,7 @@ def test_several_training_seeds_in_one_command(tmp_path):
     assert saved["best_validation_cost_mean"] == pytest.approx(np.mean(best))
     assert np.isfinite(saved["best_validation_cost_ci95"])
     with pytest.raises(ValueError, match="distinct seeds"):
-        train_seeds([1, 1], tmp_path / "dup", algo="ppo", env_id="lawn/Joint-v0", config=SMALL, timesteps=64)
+        train_seeds(spec, [1, 1])
 
 
 def test_exported_agent_loads_as_zoo_name(tmp_path, monkeypatch):
@@ -345,8 +352,6 @@ def test_a_sigkilled_lawn_train_resumes_to_the_uninterrupted_counts(tmp_path):
     import sys
     import time
 
-    from training.checkpoints import latest_checkpoint
-
     def cmd(out):
         return [sys.executable, "-m", "training.cli", "train", "--algo", "ppo", "--env", "lawn/Joint-v0",
                 "--timesteps", "2048", "--seed", "3", "--out", str(out), "--n-envs", "2", "--eval-every", "256",
@@ -388,8 +393,8 @@ def test_recipe_commands_parse_as_lawn_train():
 
 @pytest.mark.parametrize("algo", ["sac", "ppo"])
 def test_start_at_anchor_makes_the_untrained_policy_play_the_zero_action(algo):
-    from training.options import start_at_anchor
-    from training.train import algorithm_class
+    from agents.runs import algorithm_class
+    from training.sb3 import start_at_anchor
 
     env = gym.make("lawn/CommRL-v0", num_slots=4)
     model = algorithm_class(algo)("MlpPolicy", env, seed=0, **({"learning_starts": 10} if algo == "sac" else {}))
@@ -405,7 +410,9 @@ def test_start_at_anchor_makes_the_untrained_policy_play_the_zero_action(algo):
 
 @pytest.mark.parametrize("bad, message", [
     ("learnin_rate=1e-4", "unknown PPO hyperparameters \\['learnin_rate'\\]"),
-    ("n_envs=0", "--hp n_envs=0: must be an integer >= 1"),
+    ("n_envs=0", "--hp n_envs=0: should be greater than or equal to 1 \\(allowed: an integer >= 1\\)"),
+    ("init_log_std=\"low\"", "--hp init_log_std='low': should be a valid number"),
+    ("normalize=\"yes\"", "--hp normalize='yes': should be a valid boolean"),
     ("actor_warmup_steps=abc", "--hp actor_warmup_steps='abc'"),
     ("policy=Foo", "--hp policy='Foo': PPO takes"),
     ("seed=3", "unknown PPO hyperparameters \\['seed'\\]"),
@@ -427,7 +434,7 @@ def test_a_failed_lawn_train_leaves_nothing_and_the_corrected_command_runs(tmp_p
 
 
 def test_the_valid_keys_are_the_public_ones():
-    from training.options import split_params
+    from training.train import split_params
 
     with pytest.raises(ValueError) as info:
         split_params("ppo", "lawn/Joint-v0", {"learnin_rate": 1e-4})
@@ -480,3 +487,73 @@ def test_zoo_lists_each_agents_real_trainer(capsys):
     block = printed.split("zoo:bc-comm")[1].split("zoo:")[0]
     assert "bc, a ppo network" in block
     assert ", ppo)" in printed.split("zoo:ppo-comm ")[1].split("zoo:")[0]
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"algo": "ddpg"}, "algo='ddpg': unknown algorithm; valid: ppo, a2c, sac, td3, fleet, bc"),
+    ({"timesteps": 0}, "timesteps=0: should be greater than or equal to 1"),
+    ({"timesteps": "many"}, "timesteps='many'"),
+    ({"hp_overrides": {"lerning_rate": 1e-3}}, "unknown PPO hyperparameters \\['lerning_rate'\\]; valid: .*learning_rate"),
+    ({"algo": "bc", "hp_overrides": {"epoch": 3}}, "unknown bc hyperparameters \\['epoch'\\]; valid: .*epochs"),
+    ({"algo": "sac", "env_id": "CartPole-v1"}, "env_id='CartPole-v1': sac trains on lawn/Joint-v0, lawn/Comm-v0"),
+    ({"env_id": "lawn/Nope-v0"}, "env_id='lawn/Nope-v0': ppo trains on"),
+    ({"vec": "fast"}, "vec='fast': should be 'dummy' or 'native'"),
+    ({"vec": "native", "env_id": "lawn/Parallel-v0"}, "--vec native runs lawn/Joint-v0"),
+    ({"dataset": "lawn/x-v0"}, "only behaviour cloning"),
+    ({"eval_episodes": 0}, "eval_episodes=0"),
+    ({"seed": -1}, "seed=-1"),
+    ({"hp": {}}, "unknown TrainSpec field 'hp'.*valid TrainSpec fields: algo, env_id"),
+])
+def test_the_spec_names_the_bad_field_its_value_and_what_is_allowed(tmp_path, change, message):
+    from lawn_env import ConfigError
+
+    base = dict(algo="ppo", env_id="lawn/Joint-v0", timesteps=64, out_dir=tmp_path / "r")
+    with pytest.raises(ConfigError, match=message):
+        TrainSpec(**{**base, **change})
+    assert not (tmp_path / "r").exists()  # a spec writes nothing
+
+
+def test_the_spec_is_frozen_and_a_replaced_copy_is_checked_again(tmp_path):
+    import dataclasses
+
+    spec = TrainSpec(algo="ppo", env_id="lawn/Joint-v0", timesteps=64, out_dir=str(tmp_path))
+    assert spec.out_dir == tmp_path and spec.config == ScenarioConfig() and spec.vec == "dummy"
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        spec.seed = 1
+    assert dataclasses.replace(spec, seed=5).seed == 5 and spec.seed == 0
+    with pytest.raises(ValueError, match="timesteps=-1"):
+        dataclasses.replace(spec, timesteps=-1)
+    params, version = dataclasses.replace(spec, n_envs=3, interface="v0").hyperparams()
+    assert params["n_envs"] == 3 and params["interface"]["action_scheme"] == "direct" and version >= 1
+
+
+def test_the_registry_matches_the_hyperparameter_files_and_the_loaders():
+    """Every algorithm has an entry for exactly the envs it trains on in its own file; an SB3
+    algorithm's learner is the class that ``sb3:DIR`` loads its runs with; no other name trains."""
+    import yaml
+
+    from agents.runs import ALGORITHMS as LOADERS
+    from training.train import ALGORITHMS, ALGOS, HYPERPARAMS_DIR, TRAIN_ENV_IDS
+
+    assert ALGOS == ("ppo", "a2c", "sac", "td3", "fleet", "bc")
+    for name, algo in ALGORITHMS.items():
+        data = yaml.safe_load((HYPERPARAMS_DIR / algo.hyperparams).read_text())
+        assert set(data) - {"version"} == set(algo.envs), name
+        assert set(algo.envs) <= set(TRAIN_ENV_IDS)
+        if algo.learner.startswith("stable_baselines3:"):
+            assert LOADERS[name][0] == algo.learner
+            assert algo.load().__name__ == name.upper()
+        else:
+            assert callable(algo.load())
+    with pytest.raises(ValueError, match="unknown algorithm 'ddpg'; valid: ppo, a2c, sac, td3, fleet, bc"):
+        load_hyperparams("ddpg", "lawn/Joint-v0")
+
+
+def test_rl_zoo_reads_the_recipes_module():
+    import training.recipes as recipes
+
+    assert set(recipes.hyperparams) == {"lawn/JointRL-v0", "lawn/CommRL-v0"}
+    entry = next(iter(recipes.hyperparams.values()))
+    assert "interface" not in entry and entry["policy"] == "MlpPolicy" and isinstance(entry["normalize"], str)
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        recipes.nope

@@ -1,16 +1,12 @@
-"""Behaviour cloning of an expert, with optional DAgger relabelling (``lawn train --algo bc``).
+"""Behaviour cloning of an expert with DAgger relabelling (``lawn train --algo bc``), and episodes
+of any policy as a Minari dataset (``lawn dataset create``, the ``data`` extra) to clone from.
 
-1. Roll out the expert (``rg-mpc`` by default) for ``timesteps`` transitions of seeded episodes
-   and record (observation, action) pairs.
-2. Fit the policy network of an SB3 algorithm (``target``: PPO or SAC) by mean-squared error
-   between its deterministic action and the expert's, on observations normalized with the
-   expert data's running mean and variance (saved as ``vecnormalize.pkl``).
-3. DAgger: run the cloned policy for ``dagger_timesteps`` more transitions, label the states it
-   visits with the expert's actions, add them to the data set and fit again; ``dagger_iterations``
-   times.
-
-The result is an SB3 model in the run directory's usual layout, so ``lawn evaluate --policy
-bc:DIR`` and ``lawn train --algo ppo --init-from DIR`` use it directly.
+Cloning fits the policy network of an SB3 algorithm (``target``: PPO or SAC) by mean-squared error
+to the expert's actions (``rg-mpc`` by default, live or from a dataset) on normalized observations;
+each DAgger round lets the clone drive, labels the states it visits with the expert's actions and
+fits again. A dataset holds seeded, full episodes of the unmodified scenario (seed ``seed + i``);
+its reference scores are ``epa``'s and ``dv-mpc``'s mean returns on the same seeds, so
+``minari.get_normalized_score`` is :mod:`training.score`'s score / 100.
 """
 
 from __future__ import annotations
@@ -18,33 +14,45 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
-from pathlib import Path
-from typing import Any, Iterable, Mapping
+import warnings
+from typing import TYPE_CHECKING, Any, Iterable, Mapping
 
 import gymnasium as gym
 import numpy as np
 
+import lawn_env
 from agents import Step, make_policy, rollout
+from agents.errors import MissingExtra
 from agents.learned import ObsNormalizer, SB3Policy
 from agents.rollouts import Actor
 from agents.runs import algorithm_class
-from lawn_env import ObservationLayout, ScenarioConfig
-from lawn_env.presets import resolve_config
+from lawn_env import ENV_IDS, ObservationLayout, ScenarioConfig, presets
 from lawn_env.interface import InterfaceLike, RLInterface, action_codec, resolve_interface
+from lawn_env.presets import resolve_config
 from lawn_env.spaces import check_action
 
-__all__ = ["collect", "label_transitions", "fit", "train_bc_run", "BC_TARGETS"]
+from .protocol import (TRAIN_SEED_BASE, VALIDATION_SEED_BASE, append_learning_curve, limit_torch_threads, versions,
+                       write_learning_curve)
+from .provenance import provenance
+
+if TYPE_CHECKING:
+    import minari
+
+__all__ = ["collect", "label_transitions", "fit", "BCSettings", "bc_settings", "train_bc", "BC_TARGETS",
+           "create_dataset", "load_dataset", "dataset_transitions", "DATA_EXTRA"]
 
 #: The algorithms whose policy network behaviour cloning fits (the ``target`` hyperparameter).
 BC_TARGETS = ("ppo", "sac")
+DATA_EXTRA = "datasets need the data extra (minari): pip install -e '.[data]' (bash scripts/setup.sh full installs it)"
+#: Datasets record the v0 envs (the RL ids reshape the reward and end episodes early).
+DATASET_ENV_IDS = ("lawn/Joint-v0", "lawn/Comm-v0")
 
 
 def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, interface: InterfaceLike,
             actor: Actor | None = None) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """``steps`` transitions of seeded episodes (seed, seed + 1, ...) of the v0 env; states visited by
-    ``actor`` (a v0 policy, default the expert) and labelled with the expert's action there
-    (:func:`label_transitions`). Returns the observations as the learner sees them (the
-    interface's clipping), the labels and the costs of the episodes that ended."""
+    """``steps`` transitions of seeded episodes (seed, seed + 1, ...) of the v0 env, the states ``actor``
+    (default: the expert) visits labelled with the expert's action (:func:`label_transitions`), and
+    the costs of the episodes that ended."""
     env = gym.make(env_id, config=config)
     expert = make_policy(expert_name, config, env_id=env_id)
     driver = _Labelling(expert, actor)
@@ -73,10 +81,9 @@ def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, s
 
 def label_transitions(config: ScenarioConfig, env_id: str, interface: InterfaceLike,
                       episodes: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Behaviour-cloning pairs from v0 transitions: per episode (in order), the v0 observations
-    (T, n) and the v0 actions (T, m) chosen there, whoever chose them (a live expert, a Minari
-    dataset). Returns the observations as the learner sees them (the interface's clipping) and the
-    actions re-expressed in the interface's scheme (decode as v0, encode in the scheme)."""
+    """Behaviour-cloning pairs from v0 episodes ((T, n) observations, (T, m) actions, whoever chose
+    them): the observations as the learner sees them (the interface's clipping) and the actions in
+    the interface's scheme (decoded as v0, encoded in the scheme)."""
     iface = resolve_interface(interface)
     role = "joint" if env_id == "lawn/Joint-v0" else "comm"
     v0, scheme = action_codec(config, role, None), action_codec(config, role, iface)
@@ -129,8 +136,7 @@ def fit(model: Any, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_siz
     policy = model.policy
     params = list(model.policy.actor.parameters()) if hasattr(policy, "actor") else list(policy.parameters())
     optimizer = torch.optim.Adam(params, lr=learning_rate)
-    x = torch.as_tensor(obs)
-    y = torch.as_tensor(actions)
+    x, y = torch.as_tensor(obs), torch.as_tensor(actions)
     rng = np.random.default_rng(seed)
     losses = []
 
@@ -153,34 +159,39 @@ def fit(model: Any, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_siz
 
 def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, steps: int, interface: InterfaceLike
                         ) -> tuple[np.ndarray, np.ndarray, list[float], list, str | None]:
-    """The first ``steps`` transitions of a Minari dataset (``lawn dataset create``) as
-    behaviour-cloning pairs (:func:`label_transitions`), with the control costs and seeds of the
-    episodes they come from and the policy that recorded them (the dataset's ``algorithm_name``).
-    The dataset must hold episodes of ``env_id`` with ``config``."""
-    from .datasets import dataset_task, episodes_of, load_dataset
-
+    """The first ``steps`` transitions of a Minari dataset of ``env_id`` with ``config`` as pairs
+    (:func:`label_transitions`), the control costs and seeds of their episodes and the policy that
+    recorded them (the dataset's ``algorithm_name``)."""
     dataset = load_dataset(dataset_id)
-    recorded_env, recorded_config = dataset_task(dataset)
+    spec = dataset.spec.env_spec
+    recorded_env, recorded_config = spec.id, (spec.kwargs or {}).get("config", "default")
     if recorded_env != env_id:
         raise ValueError(f"--dataset {dataset_id!r} holds episodes of {recorded_env}; this run trains on {env_id}")
     if resolve_config(recorded_config) != config:
         raise ValueError(f"--dataset {dataset_id!r} was recorded with config {recorded_config!r}, not this run's "
                          "scenario: pass the same --preset/--set")
     chosen, seeds, costs, left = [], [], [], steps
-    for (seed, obs, actions), episode in zip(episodes_of(dataset), dataset.iterate_episodes()):
+    metadata = dataset.storage.get_episode_metadata(dataset.episode_indices)
+    for episode, meta in zip(dataset.iterate_episodes(), metadata):
         if left <= 0:
             break
+        obs, actions = np.asarray(episode.observations, dtype=np.float32)[:-1], np.asarray(episode.actions, np.float32)
         chosen.append((obs[:left], actions[:left]))
-        seeds.append(seed)
+        seeds.append(meta.get("seed"))
         costs.append(float(np.sum(episode.infos["stage_cost"][1:])))
         left -= len(actions)
     obs, labels = label_transitions(config, env_id, interface, chosen)
     return obs, labels, costs, seeds, dataset.storage.metadata.get("algorithm_name")
 
 
+#: A BC run's hyperparameters and their defaults (``bc.yml`` and ``--hp``).
+_BC_KEYS = {"expert": "rg-mpc", "target": "ppo", "interface": "v0", "epochs": 30, "batch_size": 256,
+            "learning_rate": 1e-3, "dagger_iterations": 0, "dagger_timesteps": 1200, "policy_kwargs": {}}
+
+
 @dataclasses.dataclass(frozen=True)
-class _Settings:
-    """A BC run's hyperparameters, resolved (:func:`_settings`)."""
+class BCSettings:
+    """A BC run's hyperparameters, resolved (:func:`bc_settings`)."""
 
     expert: str
     target: str
@@ -193,45 +204,32 @@ class _Settings:
     policy_kwargs: dict
 
     def to_dict(self) -> dict:
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        out["interface"] = self.interface.to_dict()
-        return out
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return fields | {"interface": self.interface.to_dict()}
 
 
-def _settings(params: Mapping[str, Any]) -> _Settings:
-    """The hyperparameters of a BC run, with a clear error for an unknown one."""
-    p = dict(params)
-    p.pop("n_envs", None)  # expert rollouts run in one environment
-    target = p.pop("target", "ppo")
-    if target not in BC_TARGETS:
-        raise ValueError(f"bc target {target!r}; valid: {', '.join(BC_TARGETS)}")
-    policy_kwargs = p.pop("policy_kwargs", {})
-    if target == "sac":
-        policy_kwargs = {k: v for k, v in policy_kwargs.items() if k != "log_std_init"}
-    st = _Settings(target=target, expert=p.pop("expert", "rg-mpc"), epochs=int(p.pop("epochs", 30)),
-                   batch_size=int(p.pop("batch_size", 256)), learning_rate=float(p.pop("learning_rate", 1e-3)),
-                   dagger_iterations=int(p.pop("dagger_iterations", 0)),
-                   dagger_timesteps=int(p.pop("dagger_timesteps", 1200)),
-                   interface=resolve_interface(p.pop("interface", "v0")), policy_kwargs=policy_kwargs)
-    if p:
-        raise ValueError(f"unknown bc hyperparameters {sorted(p)}; valid: expert, target, interface, epochs, "
-                         "batch_size, learning_rate, dagger_iterations, dagger_timesteps, policy_kwargs")
-    return st
+def bc_settings(params: Mapping[str, Any]) -> BCSettings:
+    """The hyperparameters of a BC run (expert rollouts run in one env: ``n_envs`` is ignored), with a
+    clear error for an unknown one or an unknown ``target``."""
+    p = {**_BC_KEYS, **{k: v for k, v in params.items() if k != "n_envs"}}
+    if p["target"] not in BC_TARGETS:
+        raise ValueError(f"bc target {p['target']!r}; valid: {', '.join(BC_TARGETS)}")
+    unknown = sorted(set(p) - set(_BC_KEYS))
+    if unknown:
+        raise ValueError(f"unknown bc hyperparameters {unknown}; valid: {', '.join(_BC_KEYS)}")
+    kwargs = p["policy_kwargs"]
+    if p["target"] == "sac":
+        kwargs = {k: v for k, v in kwargs.items() if k != "log_std_init"}
+    return BCSettings(expert=p["expert"], target=p["target"], interface=resolve_interface(p["interface"]),
+                      epochs=int(p["epochs"]), batch_size=int(p["batch_size"]),
+                      learning_rate=float(p["learning_rate"]), dagger_iterations=int(p["dagger_iterations"]),
+                      dagger_timesteps=int(p["dagger_timesteps"]), policy_kwargs=kwargs)
 
 
-def _write_records(out_dir: Path, config: ScenarioConfig, st: _Settings, spec: dict, history: list) -> None:
-    """config.json, hyperparams.json, run.json and bc_losses.json of a BC run."""
-    (out_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
-    (out_dir / "hyperparams.json").write_text(json.dumps(st.to_dict(), indent=2))
-    (out_dir / "run.json").write_text(json.dumps(spec, indent=2))
-    (out_dir / "bc_losses.json").write_text(json.dumps(history, indent=2))
-
-
-def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: _Settings, expert: str, obs: np.ndarray,
+def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: BCSettings, expert: str, obs: np.ndarray,
                        actions: np.ndarray, seed: int, episode_seed: int):
-    """Fit the clone to the expert's transitions, then the DAgger rounds (the clone drives, the
-    expert labels); the normalizing env (its statistics fixed from the expert's observations), the
-    model, every observation and the losses of every round."""
+    """Fit the clone, then the DAgger rounds (the clone drives, the expert labels); the normalizing
+    env (statistics of the expert's observations), the model, every observation, every round's losses."""
     from stable_baselines3.common.running_mean_std import RunningMeanStd
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
@@ -258,56 +256,145 @@ def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: _Settings, exper
     return venv, model, obs, history
 
 
-def train_bc_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int, out_dir: Path,
-                 params: Mapping[str, Any], version: int, progress: bool = True, dataset: str | None = None,
-                 eval_episodes: int = 5) -> dict:
-    """Clone, DAgger, save; one validation of the clone on ``eval_episodes`` validation seeds."""
+def _expert_data(spec: Any, st: BCSettings, episode_seed: int) -> tuple:
+    """The expert's transitions: live rollouts, or the dataset's episodes (DAgger rounds then ask the
+    policy that recorded them live); with the expert's costs, the dataset record and the expert."""
+    if spec.dataset is None:
+        obs, actions, costs = collect(spec.env_id, spec.config, st.expert, spec.timesteps, episode_seed, st.interface)
+        return obs, actions, costs, None, st.expert
+    obs, actions, costs, seeds, recorded = dataset_transitions(spec.dataset, spec.env_id, spec.config, spec.timesteps,
+                                                               st.interface)
+    if st.dagger_iterations and recorded != st.expert:  # relabelling by another policy would mix two experts
+        raise ValueError(f"--dataset {spec.dataset!r} holds episodes of {recorded}, DAgger's expert is {st.expert}: "
+                         f"pass --hp expert={recorded} or --hp dagger_iterations=0")
+    return obs, actions, costs, {"id": spec.dataset, "episode_seeds": seeds}, recorded or "unrecorded"
+
+
+def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> dict:
+    """Clone, DAgger and save the run of ``spec`` (a :class:`training.train.TrainSpec`); one
+    validation of the clone on ``spec.eval_episodes`` validation seeds."""
     from .callbacks import ControlCostValidation
-    from .protocol import (
-        TRAIN_SEED_BASE,
-        VALIDATION_SEED_BASE,
-        append_learning_curve,
-        limit_torch_threads,
-        versions,
-        write_learning_curve,
-    )
 
     limit_torch_threads()
-    if env_id not in ("lawn/Joint-v0", "lawn/Comm-v0"):
-        raise ValueError(f"behaviour cloning runs on lawn/Joint-v0 or lawn/Comm-v0, not {env_id!r}")
-    st = _settings(params)
-    target, expert, interface = st.target, st.expert, st.interface
-    out_dir = Path(out_dir)
+    st = bc_settings(params)
+    out_dir = spec.out_dir
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    episode_seed = TRAIN_SEED_BASE + 1000 * seed  # expert episodes never use test or validation seeds
-    if dataset is None:
-        obs, actions, expert_costs = collect(env_id, config, expert, timesteps, episode_seed, interface)
-    else:  # the dataset's episodes are the expert data; DAgger rounds ask the same policy live
-        obs, actions, expert_costs, dataset_seeds, recorded = dataset_transitions(dataset, env_id, config, timesteps,
-                                                                                  interface)
-        if st.dagger_iterations and recorded != expert:  # relabelling by another policy would mix two experts
-            raise ValueError(f"--dataset {dataset!r} holds episodes of {recorded}, DAgger's expert is {expert}: "
-                             f"pass --hp expert={recorded} or --hp dagger_iterations=0")
-        expert = recorded or "unrecorded"  # the policy whose actions are cloned
-    venv, model, obs, history = _clone_with_dagger(env_id, config, st, expert, obs, actions, seed, episode_seed)
+    episode_seed = TRAIN_SEED_BASE + 1000 * spec.seed  # expert episodes never use test or validation seeds
+    obs, actions, expert_costs, dataset, expert = _expert_data(spec, st, episode_seed)
+    venv, model, obs, history = _clone_with_dagger(spec.env_id, spec.config, st, expert, obs, actions, spec.seed,
+                                                   episode_seed)
     elapsed = time.perf_counter() - start
     model.save(str(out_dir / "model.zip"))
     venv.save(str(out_dir / "vecnormalize.pkl"))
-    spec = {"algo": target, "target": target, "trainer": "bc", "env": env_id, "seed": seed, "timesteps": timesteps,
-            "interface": interface.to_dict(),
-            "num_timesteps": int(len(obs)), "hyperparams_version": version, "wall_time_s": elapsed,
-            "eval_episodes": eval_episodes,
-            "expert_mean_control_cost": float(np.mean(expert_costs)) if expert_costs else None,
-            "dataset": None if dataset is None else {"id": dataset, "episode_seeds": dataset_seeds},
-            "versions": versions()}
-    _write_records(out_dir, config, dataclasses.replace(st, expert=expert), spec, history)
-    validation = ControlCostValidation(env_id, config, interface.to_dict(), episodes=eval_episodes, every=1,
-                                       out_dir=out_dir, seed_base=VALIDATION_SEED_BASE)
+    record = {"algo": st.target, "target": st.target, "trainer": "bc", "env": spec.env_id, "seed": spec.seed,
+              "timesteps": spec.timesteps, "interface": st.interface.to_dict(), "num_timesteps": int(len(obs)),
+              "hyperparams_version": version, "wall_time_s": elapsed, "eval_episodes": spec.eval_episodes,
+              "expert_mean_control_cost": float(np.mean(expert_costs)) if expert_costs else None,
+              "dataset": dataset, "versions": versions()}
+    (out_dir / "config.json").write_text(json.dumps(spec.config.to_dict(), indent=2))
+    (out_dir / "hyperparams.json").write_text(json.dumps(dataclasses.replace(st, expert=expert).to_dict(), indent=2))
+    (out_dir / "run.json").write_text(json.dumps(record, indent=2))
+    (out_dir / "bc_losses.json").write_text(json.dumps(history, indent=2))
+    validation = ControlCostValidation(spec.env_id, spec.config, st.interface.to_dict(), episodes=spec.eval_episodes,
+                                       every=1, out_dir=out_dir, seed_base=VALIDATION_SEED_BASE)
     validation.model = model
     (out_dir / "learning_curve.csv").unlink(missing_ok=True)
     append_learning_curve(out_dir, len(obs), validation.validate())
-    summary = write_learning_curve(out_dir, spec)
+    summary = write_learning_curve(out_dir, record)
     summary.update(bc_loss_first=history[0]["losses"][0], bc_loss_last=history[-1]["losses"][-1])
     venv.close()
     return summary
+
+
+def _minari():
+    try:
+        import minari
+    except ImportError:
+        raise MissingExtra(DATA_EXTRA) from None
+    return minari
+
+
+def _step_data_callback():
+    from minari import StepDataCallback
+
+    class LawnStepData(StepDataCallback):
+        """The env's per-step info without ``episode_metrics`` (present on the last step only)."""
+
+        def __call__(self, env, **kwargs):
+            data = super().__call__(env, **kwargs)
+            data["info"] = {k: np.asarray(v) for k, v in data["info"].items() if k != "episode_metrics"}
+            return data
+
+    return LawnStepData
+
+
+def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_id: str, task: str = "default",
+                   progress: bool = True) -> "minari.MinariDataset":
+    """Record ``episodes`` seeded episodes of ``policy`` on ``env_id`` (the scenario of preset ``task``)
+    as the Minari dataset ``dataset_id``; returns the ``MinariDataset``."""
+    minari = _minari()
+    from minari import DataCollector
+    from tqdm.auto import tqdm
+
+    if env_id not in DATASET_ENV_IDS:
+        raise ValueError(f"--env {env_id!r}: datasets record {' or '.join(DATASET_ENV_IDS)} (the unmodified "
+                         f"scenario every policy acts on); registered ids: {', '.join(ENV_IDS)}")
+    if episodes < 1 or seed < 0:
+        raise ValueError(f"episodes={episodes}, seed={seed}: episodes must be >= 1 and the seed >= 0")
+    _check_dataset_id(dataset_id)
+    config = presets.get(task)
+    agent = make_policy(policy, config, env_id=env_id)  # fails fast on a bad name or a mismatched agent
+    if dataset_id in minari.list_local_datasets():
+        raise ValueError(f"--dataset-id {dataset_id!r} already exists under MINARI_DATASETS_PATH; choose another id "
+                         f"or delete it (minari delete {dataset_id})")
+    low, high = _reference_returns(env_id, config, seed, episodes)
+    env = DataCollector(gym.make(env_id, config=task), step_data_callback=_step_data_callback(), record_infos=True)
+    for i in tqdm(range(episodes), desc=f"dataset {dataset_id}", unit="ep", disable=None if progress else True):
+        rollout(env, agent, seed + i)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="`author_email` is set to None")
+        plain = gym.make(env_id, config=task)  # the recorded env without the recorder: Minari checks the scores
+        dataset = env.create_dataset(
+            dataset_id=dataset_id, eval_env=plain.spec, algorithm_name=policy, author="lawn dataset create",
+            code_permalink=provenance(),
+            description=f"{episodes} full episodes (seeds {seed}-{seed + episodes - 1}) of {policy} on {env_id}, "
+                        f"task {task!r}: the unmodified scenario",
+            requirements=[f"lawn=={lawn_env.__version__}"], ref_min_score=low, ref_max_score=high)
+    plain.close()
+    env.close()
+    return dataset
+
+
+def _check_dataset_id(dataset_id: str) -> None:
+    """ValueError naming ``--dataset-id`` unless the id has Minari's form ``(NAMESPACE/)NAME-vN``."""
+    from minari.utils import parse_dataset_id
+
+    try:
+        name, version = parse_dataset_id(dataset_id)[1:]
+    except (ValueError, TypeError):
+        name = version = None
+    if not name or version is None:
+        raise ValueError(f"--dataset-id {dataset_id!r}: Minari ids have the form NAMESPACE/NAME-vN (the namespace "
+                         "optional), e.g. lawn/comm/rg-mpc-v0")
+
+
+def _reference_returns(env_id: str, config: Any, seed: int, episodes: int) -> tuple[float, float]:
+    """Minari's ``ref_min_score`` and ``ref_max_score``: the mean returns of ``epa`` and ``dv-mpc``."""
+    from .evaluate import evaluate
+    from .score import SCORE_HIGH, SCORE_LOW
+
+    tasks = [(p, env_id, config, seed + i, {}) for p in (SCORE_LOW, SCORE_HIGH) for i in range(episodes)]
+    rows = evaluate(tasks, progress=False)
+    low, high = (-float(np.mean([r["control_cost"] for r in rows if r["policy"] == p])) for p in (SCORE_LOW, SCORE_HIGH))
+    return low, high
+
+
+def load_dataset(dataset_id: str) -> "minari.MinariDataset":
+    """``minari.load_dataset``, naming the extra when minari is missing and the local ids otherwise."""
+    minari = _minari()
+    local = minari.list_local_datasets()
+    if dataset_id not in local:
+        raise ValueError(f"unknown dataset {dataset_id!r} under MINARI_DATASETS_PATH; local datasets: "
+                         f"{', '.join(local) or 'none'} (lawn dataset create records one)")
+    return minari.load_dataset(dataset_id)

@@ -1,11 +1,23 @@
-"""Stable-Baselines3 callbacks of ``lawn train``: validation on the real objective, checkpoints at
-rollout boundaries, actor warm-up."""
+"""Stable-Baselines3 callbacks of ``lawn train`` (validation on the real objective, checkpoints at
+rollout boundaries, actor warm-up) and the checkpoints a run resumes from.
+
+A checkpoint is taken after the algorithm has trained on every step it collected (SB3 calls
+``on_rollout_start`` after ``train()``), so a resumed run repeats no update and loses none. It is
+``checkpoints/<steps>/``: the model, its normalization statistics, an off-policy replay buffer,
+the validation-selected model, and ``state.json`` (steps, updates, wall time, the byte length of
+every history file), written to a temporary directory and renamed into place; only the newest is
+kept. Resuming truncates the history files to those lengths and appends from there.
+"""
 
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 
@@ -13,12 +25,128 @@ from agents.learned import ObsNormalizer, SB3Policy, marl_policy
 from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
 from lawn_env.interface import InterfaceLike
 
-from .checkpoints import write_checkpoint
 from .evaluate import episode_row
 from .protocol import (append_learning_curve, read_learning_curve, selected_validation, validation_reference,
                        validation_row)
 
-__all__ = ["ControlCostValidation", "RunCheckpoint", "ActorWarmup"]
+__all__ = ["ControlCostValidation", "RunCheckpoint", "ActorWarmup", "Checkpoint", "latest_checkpoint",
+           "write_checkpoint", "restore_history", "clear_history"]
+
+#: Files of a run directory that only ever grow (appended rows), relative to the run directory.
+HISTORY_FILES = ("learning_curve.csv", "monitor/*.csv")
+#: The validation-selected model, restored with its checkpoint.
+BEST_FILES = ("best_model.zip", "best_vecnormalize.pkl")
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """One complete checkpoint directory."""
+
+    path: Path
+    steps: int
+    state: dict
+
+    @property
+    def model(self) -> Path:
+        return self.path / "model.zip"
+
+    @property
+    def vecnormalize(self) -> Path | None:
+        path = self.path / "vecnormalize.pkl"
+        return path if path.exists() else None
+
+    @property
+    def replay_buffer(self) -> Path | None:
+        path = self.path / "replay_buffer.pkl"
+        return path if path.exists() else None
+
+
+def _history(out_dir: Path) -> dict[str, int]:
+    sizes = {}
+    for pattern in HISTORY_FILES:
+        for path in sorted(out_dir.glob(pattern)):
+            sizes[path.relative_to(out_dir).as_posix()] = path.stat().st_size
+    return sizes
+
+
+def write_checkpoint(out_dir: Path, model: Any, state: dict) -> Checkpoint:
+    """Save ``model`` (and its normalization statistics and replay buffer) with the run's history
+    lengths as ``checkpoints/<steps>/``, atomically; older checkpoints are removed."""
+    out_dir = Path(out_dir)
+    root = out_dir / "checkpoints"
+    root.mkdir(parents=True, exist_ok=True)
+    steps = int(model.num_timesteps)
+    tmp = root / f".tmp-{steps}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
+    model.save(str(tmp / "model.zip"))
+    venv = model.get_vec_normalize_env()
+    if venv is not None:
+        venv.save(str(tmp / "vecnormalize.pkl"))
+    if getattr(model, "replay_buffer", None) is not None:
+        model.save_replay_buffer(str(tmp / "replay_buffer.pkl"))
+    for name in BEST_FILES:
+        if (out_dir / name).exists():
+            shutil.copy2(out_dir / name, tmp / name)
+    state = dict(state, steps=steps, updates=int(getattr(model, "_n_updates", 0)), history=_history(out_dir))
+    (tmp / "state.json").write_text(json.dumps(state, indent=2))
+    final = root / str(steps)
+    if final.exists():
+        shutil.rmtree(final)
+    os.replace(tmp, final)
+    for other in root.iterdir():
+        if other == final:
+            continue
+        if other.is_dir():
+            shutil.rmtree(other, ignore_errors=True)
+        else:
+            other.unlink()
+    return Checkpoint(final, steps, state)
+
+
+def latest_checkpoint(out_dir: Path) -> Checkpoint | None:
+    """The newest complete checkpoint of a run directory, or None."""
+    found = []
+    for path in (Path(out_dir) / "checkpoints").glob("*/state.json"):
+        if not path.parent.name.isdigit() or not (path.parent / "model.zip").exists():
+            continue
+        try:
+            state = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue  # not complete: the rename makes this unlikely, but never trust it
+        found.append(Checkpoint(path.parent, int(path.parent.name), state))
+    return max(found, key=lambda c: c.steps) if found else None
+
+
+def restore_history(out_dir: Path, checkpoint: Checkpoint) -> None:
+    """Cut every history file back to its length at the checkpoint (dropping files started after
+    it) and put back the validation-selected model of that moment."""
+    out_dir = Path(out_dir)
+    kept = checkpoint.state.get("history", {})
+    for pattern in HISTORY_FILES:
+        for path in out_dir.glob(pattern):
+            size = kept.get(path.relative_to(out_dir).as_posix())
+            if size is None:
+                path.unlink()
+            else:
+                with open(path, "r+b") as fh:
+                    fh.truncate(size)
+    for name in BEST_FILES:
+        saved = checkpoint.path / name
+        if saved.exists():
+            shutil.copy2(saved, out_dir / name)
+        elif (out_dir / name).exists():
+            (out_dir / name).unlink()
+
+
+def clear_history(out_dir: Path) -> None:
+    """Remove everything a run wrote while training (before a restart from scratch)."""
+    out_dir = Path(out_dir)
+    for pattern in HISTORY_FILES + BEST_FILES + ("model.zip", "vecnormalize.pkl", "learning_curve.png", "summary.md"):
+        for path in out_dir.glob(pattern):
+            path.unlink()
+    for name in ("checkpoints", "tb"):
+        shutil.rmtree(out_dir / name, ignore_errors=True)
 
 
 def _next_mark(steps: int, every: int) -> int:
@@ -106,7 +234,7 @@ class ControlCostValidation(BaseCallback):
 
 
 class RunCheckpoint(BaseCallback):
-    """A checkpoint (:mod:`training.checkpoints`) at the first rollout boundary at least ``every``
+    """A checkpoint (:func:`write_checkpoint`) at the first rollout boundary at least ``every``
     steps after the previous one, and one at the end of training. ``state`` goes into each
     checkpoint's ``state.json``; its ``wall_time_s`` is the run's wall time so far."""
 

@@ -1,6 +1,12 @@
 """The recipes of the shipped learned agents (:data:`RECIPES`, keyed by name): how each is trained
-(``lawn train`` arguments, training seeds, hyperparameters, the recipe it starts from), and
-``lawn zoo train`` (:func:`train_recipes`), which trains the missing runs of each."""
+(``lawn train`` arguments, training seeds, hyperparameters, the recipe it starts from);
+``lawn zoo train`` (:func:`train_recipes`), which trains the missing runs of each; and lawn's PPO
+hyperparameters in rl-baselines3-zoo's form (:func:`zoo_hyperparams`)::
+
+    python -m rl_zoo3.train --algo ppo --env lawn/CommRL-v0 --gym-packages lawn_env --conf-file training.recipes
+
+(``--conf-file`` takes a module with a ``hyperparams`` attribute: this one's, made when read.)
+"""
 
 from __future__ import annotations
 
@@ -11,12 +17,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agents.runs import read_run
-from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
+from typing import Any
+
+from lawn_env import PARALLEL_ENV_ID, RL_ENV_IDS, ScenarioConfig, central_env_id
 
 from .evaluate import pool_map
-from .train import train_task
+from .train import LAWN_KEYS, TrainSpec, load_hyperparams, train
 
-__all__ = ["Recipe", "RECIPES", "SECTIONS", "recipe", "finished", "train_recipes", "ZOO_VALIDATION_EPISODES"]
+__all__ = ["Recipe", "RECIPES", "SECTIONS", "recipe", "finished", "train_recipes", "ZOO_VALIDATION_EPISODES",
+           "zoo_hyperparams"]
 
 
 @dataclass(frozen=True)
@@ -44,6 +53,14 @@ class Recipe:
     @property
     def evaluated_on(self) -> str:
         return central_env_id(self.env_id)
+
+    def spec(self, runs: Path, seed: int) -> TrainSpec:
+        """The run of ``seed`` under ``runs`` (``runs/<name>/seed-<s>``; a fine-tune starts from its
+        source recipe's run of the same seed)."""
+        return TrainSpec(algo=self.algo, env_id=self.env_id, config=self.config, timesteps=self.timesteps, seed=seed,
+                         out_dir=runs / self.name / f"seed-{seed}", hp_overrides=dict(self.hp),
+                         eval_every=self.eval_every, eval_episodes=ZOO_VALIDATION_EPISODES, progress=False,
+                         vec=self.vec, init_from=runs / self.init_from / f"seed-{seed}" if self.init_from else None)
 
     def command(self) -> str:
         parts = [f"lawn train --algo {self.algo} --env {self.env_id} --timesteps {self.timesteps}",
@@ -81,7 +98,7 @@ _SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_
 #: network's own; one training seed (a run is about 25 minutes, two side by side on 2 cores).
 _FLEET_SEEDS = (0,)
 
-#: Multi-agent PPO with the fleet network (training/marl.py): every agent sees the fleet and which
+#: Multi-agent PPO with the fleet network (training/sb3.py): every agent sees the fleet and which
 #: entity it is, and acts with its own row; started at the anchor (the heads zeroed), small steps.
 _MARL_FLEET = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,
                "start_at_anchor": True, "n_steps": 64, "batch_size": 256, "learning_rate": "lin_1e-4",
@@ -144,7 +161,7 @@ def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, 
     chosen = [recipe(n) for n in names] if names else list(RECIPES.values())
     done: list[Path] = []
     for phase in (False, True):
-        tasks = []
+        specs = []
         for r in chosen:
             if bool(r.init_from) != phase:
                 continue
@@ -155,10 +172,38 @@ def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, 
                     continue
                 if out.exists():
                     shutil.rmtree(out)  # an unfinished run: start it again from scratch
-                tasks.append(dict(algo=r.algo, env_id=r.env_id, config=r.config, timesteps=r.timesteps, seed=s,
-                                  out_dir=out, hp_overrides=dict(r.hp), eval_every=r.eval_every,
-                                  eval_episodes=ZOO_VALIDATION_EPISODES,
-                                  progress=False, vec=r.vec,
-                                  init_from=runs / r.init_from / f"seed-{s}" if r.init_from else None))
-        pool_map(train_task, tasks, workers, progress, desc="training runs")
+                specs.append(r.spec(runs, s))
+        pool_map(train, specs, workers, progress, desc="training runs")
     return done
+
+
+def zoo_hyperparams(algo: str = "ppo") -> dict[str, dict[str, Any]]:
+    """rl-zoo3's hyperparameters of ``algo`` for every RL id whose base env's entry in lawn's file
+    trains on the RL interface: the keys only ``lawn train`` knows dropped, the dicts written as
+    rl-zoo3 expects them (strings it evaluates) and the budget (``n_timesteps``) of the shipped
+    agent's plain recipe on that env."""
+    plain = [r for r in RECIPES.values() if r.algo == algo and not r.hp and r.init_from is None]
+    budgets = {r.env_id: r.timesteps for r in plain}
+    if len(budgets) != len(plain):
+        raise ValueError(f"more than one plain {algo} recipe per env: {[r.name for r in plain]}")
+    zoo_keys = {"n_envs", "normalize", "policy"}  # rl-zoo3 reads these three itself
+    out = {}
+    for rl_id, base in RL_ENV_IDS.items():
+        params, _ = load_hyperparams(algo, base)
+        if params.get("interface", "rl") != "rl":
+            continue
+        zoo = {k: v for k, v in params.items() if k in zoo_keys or k not in LAWN_KEYS}
+        if base in budgets:
+            zoo["n_timesteps"] = budgets[base]
+        for key in ("normalize", "policy_kwargs"):
+            if isinstance(zoo.get(key), dict):
+                zoo[key] = f"dict({', '.join(f'{k}={v!r}' for k, v in zoo[key].items())})"
+        out[rl_id] = zoo
+    return out
+
+
+def __getattr__(name: str) -> Any:
+    """``hyperparams``: what ``--conf-file training.recipes`` gives rl-zoo3 (PPO), made when read."""
+    if name == "hyperparams":
+        return zoo_hyperparams("ppo")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -24,7 +24,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..datasets import create_dataset
+    from ..bc import create_dataset
 
     dataset = create_dataset(args.policy, args.env, args.episodes, args.seed, args.dataset_id, task=args.task,
                              progress=not args.quiet)

@@ -63,16 +63,25 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"lawn train needs {', '.join(missing)} (or --resume DIR)")
     if args.timesteps is None:
         raise ValueError("lawn train needs --timesteps")
-    kwargs = dict(algo=args.algo, env_id=args.env, config=config_of(args), timesteps=args.timesteps,
-                  hp_overrides=parse_overrides(args.hp, "--hp"), n_envs=args.n_envs, eval_every=args.eval_every,
-                  eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every,
-                  init_from=Path(args.init_from) if args.init_from else None, interface=args.interface,
-                  vec=args.vec, dataset=args.dataset)
-    if args.seeds:
-        return _seeds(args, kwargs)
-    from ..train import train
+    from ..train import TrainSpec, train, train_seeds
 
-    _report(train(seed=args.seed, out_dir=Path(args.out), progress=not args.quiet, **kwargs), args.out)
+    spec = TrainSpec(algo=args.algo, env_id=args.env, config=config_of(args), timesteps=args.timesteps,
+                     seed=args.seed, out_dir=Path(args.out), hp_overrides=parse_overrides(args.hp, "--hp"),
+                     n_envs=args.n_envs, interface=args.interface, vec=args.vec, eval_every=args.eval_every,
+                     eval_episodes=args.eval_episodes, checkpoint_every=args.checkpoint_every,
+                     init_from=Path(args.init_from) if args.init_from else None, dataset=args.dataset,
+                     progress=not args.quiet)
+    if not args.seeds:
+        _report(train(spec), args.out)
+        return 0
+    result = train_seeds(spec, args.seeds, workers=args.workers, backend=args.backend)
+    print(f"lawn train: {args.algo} on {args.env}, seeds {args.seeds}")
+    for r in result["runs"]:
+        print(f"  seed {r['seed']}: best validation cost {r['best_validation_cost']:.6g} "
+              f"at {r['best_at_timesteps']} steps, {r['timesteps']} steps in {r['wall_time_s']:.0f} s")
+    print(f"  across seeds: {result['best_validation_cost_mean']:.6g} ± "
+          f"{result['best_validation_cost_ci95']:.3g} (95 % interval)")
+    print(f"wrote {args.out}/seed-*/ and {args.out}/seeds.json")
     return 0
 
 
@@ -84,21 +93,6 @@ def _resume(args: argparse.Namespace) -> int:
     print(f"lawn train: resumed {args.resume} from its checkpoint at {start} steps" if start is not None else
           f"lawn train: {args.resume} had no checkpoint; trained it again from the start")
     _report(summary, args.resume)
-    return 0
-
-
-def _seeds(args: argparse.Namespace, kwargs: dict) -> int:
-    from ..train import train_seeds
-
-    result = train_seeds(args.seeds, Path(args.out), workers=args.workers, progress=not args.quiet,
-                         backend=args.backend, **kwargs)
-    print(f"lawn train: {args.algo} on {args.env}, seeds {args.seeds}")
-    for r in result["runs"]:
-        print(f"  seed {r['seed']}: best validation cost {r['best_validation_cost']:.6g} "
-              f"at {r['best_at_timesteps']} steps, {r['timesteps']} steps in {r['wall_time_s']:.0f} s")
-    print(f"  across seeds: {result['best_validation_cost_mean']:.6g} ± "
-          f"{result['best_validation_cost_ci95']:.3g} (95 % interval)")
-    print(f"wrote {args.out}/seed-*/ and {args.out}/seeds.json")
     return 0
 
 

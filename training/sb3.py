@@ -1,0 +1,317 @@
+"""Stable-Baselines3 runs of ``lawn train``: the training envs, the model and the learning loop.
+
+:func:`make_train_env` makes a seeded SB3 VecEnv of single envs, of lawn's batched vector env
+(:class:`NativeVecEnv`: same-step autoreset, SB3's convention) or of the PettingZoo env
+(:func:`make_marl_vec_env`: parameter sharing; SuperSuit pads the agents' observations and actions
+and appends a one-hot agent indicator, or in the entity layout, where every agent sees the fleet
+and which entity it is, pads the drone's action only), with optional ``VecNormalize``.
+:func:`train_sb3`, :func:`setup` and :func:`learn` make a run (new, or resumed from a checkpoint)
+and train it.
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv
+
+from agents.learned import load_saved
+from agents.runs import algorithm_class, read_run
+from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, parallel_env
+from lawn_env.interface import InterfaceLike
+
+from .callbacks import ActorWarmup, Checkpoint, ControlCostValidation, RunCheckpoint
+from .protocol import TRAIN_SEED_BASE, VALIDATION_SEED_BASE, limit_torch_threads, versions, write_learning_curve
+
+__all__ = ["NativeVecEnv", "make_marl_vec_env", "make_train_env", "train_sb3", "setup", "learn", "init_from",
+           "start_at_anchor"]
+
+
+class NativeVecEnv(VecEnv):
+    """``n_envs`` scenarios of ``env_id`` (an id with a native vector env) in one batched
+    simulation, on ``interface`` (an RL id's default: ``"rl"``)."""
+
+    def __init__(self, config: ScenarioConfig, n_envs: int, env_id: str = "lawn/Joint-v0",
+                 interface: InterfaceLike = None):
+        kwargs = {} if interface is None else {"interface": interface}  # None keeps the id's own (RL ids: "rl")
+        self.venv = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", config=config,
+                                 autoreset_mode="SameStep", **kwargs)
+        super().__init__(n_envs, self.venv.single_observation_space, self.venv.single_action_space)
+        self._seed: int | None = None
+        self._actions: np.ndarray | None = None
+        self.render_mode = None
+
+    def reset(self) -> np.ndarray:
+        obs, _ = self.venv.reset(seed=self._seed)
+        self._seed = None
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = actions  # SB3 clips Box actions before stepping; the env rejects what it cannot take
+
+    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
+        obs, reward, terminated, truncated, info = self.venv.step(self._actions)
+        done = terminated | truncated
+        infos: list[dict[str, Any]] = [{"stage_cost": float(c)} for c in info["stage_cost"]]
+        for i in np.flatnonzero(done).tolist():
+            infos[i]["terminal_observation"] = info["final_obs"][i]
+            infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+        return obs, reward.astype(np.float32), done, infos
+
+    def seed(self, seed: int | None = None) -> list[int | None]:
+        self._seed = seed
+        return [None if seed is None else seed + i for i in range(self.num_envs)]
+
+    def close(self) -> None:
+        self.venv.close()
+
+    # attribute access as SB3's VecEnvs offer it (one batched env: the same answer for every index)
+    def get_attr(self, attr_name: str, indices: Any = None) -> list:
+        return [getattr(self.venv, attr_name)] * len(self._get_indices(indices))
+
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        setattr(self.venv, attr_name, value)
+
+    def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list:
+        raise NotImplementedError(f"env_method({method_name!r}): the native vector env has no per-env objects")
+
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+        return [False] * len(self._get_indices(indices))
+
+
+def make_marl_vec_env(config: ScenarioConfig, n_envs: int, seed: int, interface: InterfaceLike = None) -> Any:
+    """An SB3 VecEnv with one sub-environment per agent per copy of the PettingZoo env, seeded."""
+    import supersuit as ss
+    from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
+
+    class _Seeded(SB3VecEnvWrapper):
+        """SuperSuit's SB3 adapter with SB3's ``seed`` (the next reset uses it)."""
+
+        _next_seed = None
+
+        def seed(self, seed: int | None = None) -> list:
+            self._next_seed = seed
+            return [seed]
+
+        def reset(self, seed: int | None = None, options: Any = None) -> Any:
+            seed = seed if seed is not None else self._next_seed
+            self._next_seed = None
+            observations, self.reset_infos = self.venv.reset(seed=seed)
+            return observations
+
+    env = parallel_env(config, interface=interface)
+    if env.entities is None:
+        env = ss.agent_indicator_v0(ss.pad_action_space_v0(ss.pad_observations_v0(env)), type_only=False)
+    else:
+        env = ss.pad_action_space_v0(env)
+    venv = ss.concat_vec_envs_v1(ss.pettingzoo_env_to_vec_env_v1(env), n_envs, num_cpus=0, base_class="gymnasium")
+    wrapped = _Seeded(venv)
+    wrapped.seed(seed)
+    return wrapped
+
+
+def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, normalize: bool | Mapping[str, Any],
+                   monitor_dir: Path | None, vecnormalize_path: Path | None = None, **kwargs: Any) -> Any:
+    """A seeded SB3 VecEnv (Monitor-wrapped) with optional VecNormalize (``normalize``: true or its
+    options; ``vecnormalize_path``: saved statistics). Keywords: ``interface``, ``append_monitor``
+    (continue the monitor logs of a resumed run) and ``vec`` (``"native"``: :class:`NativeVecEnv`,
+    episode statistics through ``VecMonitor``, no monitor files)."""
+    from stable_baselines3.common.env_util import make_vec_env
+
+    unknown = set(kwargs) - {"interface", "append_monitor", "vec"}
+    if unknown:
+        raise TypeError(f"make_train_env: unexpected keywords {sorted(unknown)}")
+    interface = kwargs.get("interface")
+    if kwargs.get("vec", "dummy") == "native":
+        venv = VecMonitor(NativeVecEnv(config, n_envs, env_id, interface=interface))
+        venv.seed(seed)
+    elif env_id == PARALLEL_ENV_ID:
+        venv = make_marl_vec_env(config, n_envs, seed, interface=interface)
+    else:
+        env_kwargs = {} if env_id == "CartPole-v1" else {"config": config, "interface": interface}
+        venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs,
+                            monitor_dir=str(monitor_dir) if monitor_dir else None,
+                            monitor_kwargs={"override_existing": not kwargs.get("append_monitor", False)})
+    if vecnormalize_path is not None:
+        return VecNormalize.load(str(vecnormalize_path), venv)
+    if normalize:
+        return VecNormalize(venv, **(dict(normalize) if isinstance(normalize, Mapping) else {}))
+    return venv
+
+
+def train_sb3(spec: Any, params: dict, options: Any, version: int, callbacks: list | None = None) -> dict:
+    """Train the SB3 run of ``spec`` (a :class:`training.train.TrainSpec`) with its resolved
+    hyperparameters and their checked :class:`~training.train.RunOptions`; a model SB3 refuses to
+    build leaves nothing of the run behind."""
+    if spec.init_from is not None:
+        _check_init_from(spec.init_from, spec.algo, params)
+    record = {"algo": spec.algo, "env": spec.env_id, "seed": spec.seed, "timesteps": spec.timesteps,
+              "hyperparams_version": version, "interface": params.get("interface"), "eval_every": spec.eval_every,
+              "eval_episodes": spec.eval_episodes, "checkpoint_every": spec.checkpoint_every,
+              "init_from": str(spec.init_from) if spec.init_from else None, "vec": spec.vec, "versions": versions()}
+    out_dir = spec.out_dir
+    existed = out_dir.exists()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = [out_dir / name for name in ("config.json", "hyperparams.json", "run.json", "spec.json", "monitor", "tb")]
+    (out_dir / "config.json").write_text(json.dumps(spec.config.to_dict(), indent=2))
+    (out_dir / "hyperparams.json").write_text(json.dumps(params, indent=2))
+    (out_dir / "run.json").write_text(json.dumps(record, indent=2))
+    spec.write()
+    try:
+        run = setup(record, options, spec.config, out_dir, None, callbacks)
+    except BaseException:
+        if not existed:
+            shutil.rmtree(out_dir, ignore_errors=True)
+        for path in written:
+            shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
+        raise
+    return learn(run, progress=spec.progress)
+
+
+def _net_arch(params: Mapping[str, Any]) -> Any:
+    """The ``net_arch`` of a run's hyperparameters (None: SB3's default)."""
+    return (params.get("policy_kwargs") or {}).get("net_arch")
+
+
+def _check_init_from(init_from: Path, algo: str, params: Mapping[str, Any]) -> None:
+    """``--init-from``: a finished run of the same algorithm, interface and network as this run's."""
+    source = read_run(init_from, "--init-from")
+    theirs = source.record.get("target", source.record.get("algo"))
+    if theirs != algo:
+        raise ValueError(f"--init-from {init_from}: it holds a {theirs} policy, not {algo}")
+    if not (init_from / "model.zip").exists():
+        raise ValueError(f"--init-from {init_from}: no model.zip there (the run did not finish)")
+    if source.interface != params.get("interface"):
+        raise ValueError(f"--init-from {init_from}: it was trained with interface {source.interface}, "
+                         f"this run uses {params.get('interface')}; pass the same --interface")
+    hp_file = init_from / "hyperparams.json"
+    theirs = _net_arch(json.loads(hp_file.read_text())) if hp_file.exists() else None
+    if theirs is not None and theirs != _net_arch(params):
+        raise ValueError(f"--init-from {init_from}: its network is net_arch={theirs}, this run builds "
+                         f"net_arch={_net_arch(params)}; pass --hp 'policy_kwargs={{\"net_arch\": {theirs}}}'")
+
+
+@dataclass
+class Run:
+    """A run ready to learn: its record (``run.json``), model, env, callbacks and where it writes."""
+
+    record: dict
+    model: Any
+    env: Any
+    hooks: list
+    out_dir: Path
+    wall_before: float
+    resumed: bool
+
+
+def setup(record: dict, options: Any, config: ScenarioConfig, out_dir: Path, start: Checkpoint | None,
+          callbacks: list | None = None) -> Run:
+    """The env, the model and the callbacks of a run (new, or resumed from ``start``); ``options``
+    are its checked :class:`training.train.RunOptions`."""
+    from stable_baselines3.common.utils import set_random_seed
+
+    limit_torch_threads()
+    done_steps = start.steps if start else 0
+    env_seed = TRAIN_SEED_BASE + 1000 * int(record["seed"]) + done_steps  # a resumed run: fresh, seeded episodes
+    set_random_seed(env_seed)
+    env = make_train_env(record["env"], config, options.n_envs, env_seed, options.normalize, out_dir / "monitor",
+                         vecnormalize_path=start.vecnormalize if start else None, interface=options.interface,
+                         append_monitor=start is not None, vec=record.get("vec", "dummy"))
+    try:
+        model = _model(record, env, start, out_dir, options)
+    except BaseException:
+        env.close()
+        raise
+    wall_before = float(record.get("wall_time_s", 0.0))
+    hooks = []
+    if record["env"] != "CartPole-v1":
+        hooks.append(ControlCostValidation(record["env"], config, options.interface, int(record["eval_episodes"]),
+                                           max(int(record["eval_every"]), 1), out_dir, VALIDATION_SEED_BASE))
+    hooks.append(RunCheckpoint(out_dir, max(int(record["checkpoint_every"]), 1), wall_time_before=wall_before))
+    if options.actor_warmup_steps > 0:
+        hooks.append(ActorWarmup(options.actor_warmup_steps))
+    return Run(record, model, env, hooks + list(callbacks or []), out_dir, wall_before, start is not None)
+
+
+def learn(run: Run, progress: bool) -> dict:
+    """Train a set-up run to its timestep target; save the model, its statistics and the curve."""
+    model, env, out_dir = run.model, run.env, run.out_dir
+    remaining = int(run.record["timesteps"]) - model.num_timesteps
+    began = time.perf_counter()
+    if remaining > 0:
+        model.learn(total_timesteps=remaining, callback=run.hooks, reset_num_timesteps=not run.resumed,
+                    progress_bar=progress, tb_log_name="run")
+    elapsed = time.perf_counter() - began
+    model.save(str(out_dir / "model.zip"))
+    if isinstance(env, VecNormalize):
+        env.save(str(out_dir / "vecnormalize.pkl"))
+    record = dict(run.record, num_timesteps=int(model.num_timesteps), updates=int(getattr(model, "_n_updates", 0)),
+                  wall_time_s=float(elapsed + run.wall_before))
+    (out_dir / "run.json").write_text(json.dumps(record, indent=2))
+    summary = write_learning_curve(out_dir, record)
+    env.close()
+    return summary
+
+
+def _model(record: dict, env: Any, start: Checkpoint | None, out_dir: Path, options: Any) -> Any:
+    """The model a run trains: its checkpoint's, or a new one (from a cloned run's weights, at the
+    anchor, with the fine-tuning's exploration noise as the options ask)."""
+    cls = algorithm_class(record["algo"])
+    if start:
+        model = load_saved(lambda p: cls.load(p, env=env, tensorboard_log=str(out_dir / "tb")), start.model,
+                           "checkpoint model")
+        if start.replay_buffer is not None:
+            model.load_replay_buffer(str(start.replay_buffer))
+        return model
+    model = cls(options.policy, env, seed=int(record["seed"]) if record["env"] != PARALLEL_ENV_ID else None, verbose=0,
+                tensorboard_log=str(out_dir / "tb"), **options.algo_kwargs)
+    if record.get("init_from"):
+        init_from(model, Path(record["init_from"]), env)
+    elif options.start_at_anchor:
+        start_at_anchor(model, record["algo"])
+    if options.init_log_std is not None:  # exploration noise of a fine-tuned policy (after the cloned weights)
+        import torch
+
+        with torch.no_grad():
+            model.policy.log_std.fill_(float(options.init_log_std))
+    return model
+
+
+def init_from(model: Any, source: Path, env: Any) -> None:
+    """Start from a behaviour-cloned policy of the same algorithm (its weights and obs statistics)."""
+    other = load_saved(type(model).load, source / "model.zip", "--init-from model")
+    model.policy.load_state_dict(other.policy.state_dict())
+    norm_path = source / "vecnormalize.pkl"
+    if isinstance(env, VecNormalize) and norm_path.exists():
+        with open(norm_path, "rb") as fh:
+            env.obs_rms = pickle.load(fh).obs_rms
+
+
+def start_at_anchor(model: Any, algo: str) -> None:
+    """``start_at_anchor``: the policy's output layer starts at zero weights and bias, so that its
+    deterministic action is the zero action: the run starts at its interface's anchor, and model
+    selection, which validates the start, compares what training finds against the anchor itself
+    (SAC's untrained mean acts far from zero; PPO's orthogonal init with gain 0.01 near zero but
+    not at it). A run started ``--init-from`` keeps the weights it loads."""
+    import torch
+
+    def heads() -> list:  # a fleet network's means are its two heads' outputs (its action_net is the identity)
+        net = model.policy.mlp_extractor
+        return [net.agv_head, net.drone_head] if hasattr(net, "agv_head") else [model.policy.action_net]
+
+    layers = {"sac": lambda: [model.actor.mu], "ppo": heads}
+    if algo not in layers:
+        raise ValueError(f"start_at_anchor: supported for {', '.join(layers)}, not {algo!r}")
+    with torch.no_grad():
+        for layer in layers[algo]():
+            layer.weight.zero_()
+            layer.bias.zero_()
