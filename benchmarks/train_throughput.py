@@ -49,7 +49,7 @@ def measure_vec(mode: str, n_envs: int, timesteps: int, repeats: int) -> float:
     from stable_baselines3 import PPO
 
     from lawn_env import ScenarioConfig
-    from training.train import make_train_env
+    from training.sb3 import make_train_env
 
     torch.set_num_threads(1)
     best = 0.0

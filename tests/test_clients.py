@@ -31,17 +31,17 @@ def test_cleanrl_style_async_vector_loop():
 
 def test_rl_zoo3_trains_ppo_from_lawns_hyperparameters(tmp_path):
     """rl-zoo3's command line as the clients page gives it: the ids from ``--gym-packages``, the
-    hyperparameters from ``--conf-file training.rl_zoo`` (lawn's own PPO file in rl-zoo3's form)."""
+    hyperparameters from ``--conf-file training.recipes`` (lawn's own PPO file in rl-zoo3's form)."""
     pytest.importorskip("rl_zoo3", reason="rl-zoo3 not installed (pip install -e '.[compat]')")
     import subprocess
     import sys
 
-    from training.rl_zoo import hyperparams
+    from training.recipes import hyperparams
 
     assert set(hyperparams) == {"lawn/CommRL-v0", "lawn/JointRL-v0"}
     assert all(h["n_timesteps"] > 0 and "interface" not in h for h in hyperparams.values())
     done = subprocess.run([sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", "lawn/CommRL-v0",
-                           "--gym-packages", "lawn_env", "--conf-file", "training.rl_zoo", "-n", "2048",
+                           "--gym-packages", "lawn_env", "--conf-file", "training.recipes", "-n", "2048",
                            "--eval-freq", "-1", "--seed", "0", "--log-folder", str(tmp_path)],
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]

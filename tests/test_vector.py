@@ -258,8 +258,8 @@ def test_sb3_trains_on_the_native_vector_env(tmp_path):
     pytest.importorskip("stable_baselines3")
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from training.train import train
-    from training.vec import NativeVecEnv
+    from training.sb3 import NativeVecEnv
+    from training.train import TrainSpec, train
 
     venv = VecMonitor(NativeVecEnv(ScenarioConfig(num_slots=4), 2))
     venv.seed(0)
@@ -268,18 +268,20 @@ def test_sb3_trains_on_the_native_vector_env(tmp_path):
         obs, reward, done, infos = venv.step(np.zeros((2, venv.action_space.shape[0]), dtype=np.float32))
     assert done.all() and infos[0]["TimeLimit.truncated"] and "episode" in infos[0]
     assert infos[0]["terminal_observation"].shape == obs[0].shape and obs[0][-1] == 0.0
-    summary = train("ppo", "lawn/Joint-v0", ScenarioConfig(num_slots=12), 256, 0, tmp_path / "run", n_envs=4,
-                    hp_overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, eval_every=128, eval_episodes=1,
-                    checkpoint_every=128, progress=False, interface="v0", vec="native")
+    summary = train(TrainSpec(algo="ppo", env_id="lawn/Joint-v0", config=ScenarioConfig(num_slots=12), timesteps=256,
+                              seed=0, out_dir=tmp_path / "run", n_envs=4,
+                              hp_overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, eval_every=128,
+                              eval_episodes=1, checkpoint_every=128, progress=False, interface="v0", vec="native"))
     assert summary["timesteps"] == 256 and summary["best_validation_cost"] > 0
     # the training protocol's default (the RL interface) on Comm-v0's native vector env
-    summary = train("ppo", "lawn/Comm-v0", ScenarioConfig(num_slots=12), 128, 0, tmp_path / "comm", n_envs=4,
-                    hp_overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, eval_every=128, eval_episodes=1,
-                    checkpoint_every=128, progress=False, vec="native")
+    summary = train(TrainSpec(algo="ppo", env_id="lawn/Comm-v0", config=ScenarioConfig(num_slots=12), timesteps=128,
+                              seed=0, out_dir=tmp_path / "comm", n_envs=4,
+                              hp_overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, eval_every=128,
+                              eval_episodes=1, checkpoint_every=128, progress=False, vec="native"))
     assert summary["timesteps"] == 128 and summary["best_validation_cost"] > 0
-    with pytest.raises(ValueError, match="--vec native runs lawn/Joint-v0"):
-        train("ppo", "lawn/Parallel-v0", ScenarioConfig(num_slots=12), 64, 0, tmp_path / "rl", n_envs=2,
-              progress=False, vec="native")
+    with pytest.raises(ValueError, match="native"):
+        TrainSpec(algo="ppo", env_id="lawn/Parallel-v0", config=ScenarioConfig(num_slots=12), timesteps=64, seed=0,
+                  out_dir=tmp_path / "rl", n_envs=2, progress=False, vec="native")
 
 
 @pytest.mark.parametrize("env_id, anchor", [("lawn/Joint-v0", {}), ("lawn/Comm-v0", {}),
