@@ -143,7 +143,7 @@ class FleetPolicy(ActorCriticPolicy):
         if not isinstance(observation_space, spaces.Dict) or "agvs" not in observation_space.spaces:
             raise ValueError("FleetPolicy reads the entity layout: make the env with interface={'layout': 'entities'} "
                              f"(got an observation space {observation_space})")
-        self.fleet = dict(width=int(width), heads=int(heads), layers=int(layers))
+        self.fleet = {"width": int(width), "heads": int(heads), "layers": int(layers)}
         kwargs.setdefault("features_extractor_class", EntityFeatures)
         super().__init__(observation_space, action_space, lr_schedule, **kwargs)
 

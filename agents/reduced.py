@@ -50,8 +50,8 @@ from lawn_env.errors import raises_config_errors
 from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
 
 from .estimation import AGVTracker
-from .problem import Plan, SlotProblem
 from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
+from .problem import Plan, SlotProblem
 
 __all__ = ["ReducedProblem", "ValueTable", "ReducedSettings", "ReducedGradientPlanner", "GlobalPlanner",
            "GlobalSettings", "DeliveryProblem", "DeliveryValue", "DeliverySettings", "DeliveryValuePlanner"]
@@ -150,7 +150,7 @@ class ReducedProblem(SlotProblem):
         return ev
 
     # ------------------------------------------------------------------ tabulated search
-    def table(self, psi_grid: np.ndarray) -> "ValueTable":
+    def table(self, psi_grid: np.ndarray) -> ValueTable:
         """V_k and its envelope slope at every psi of ``psi_grid`` for every AGV: one batched solve."""
         psi = np.repeat(np.asarray(psi_grid, dtype=float)[:, None], self.x_aug.shape[0], axis=1)
         values, slopes, _ = self.values_at_psi(psi)
@@ -169,7 +169,7 @@ class ReducedProblem(SlotProblem):
         best = int(np.argmin(values))
         return float(values[best]), alloc[best] * (self.budget / levels), positions[best]
 
-    def _split(self, table: "ValueTable", positions: np.ndarray, levels: int):
+    def _split(self, table: ValueTable, positions: np.ndarray, levels: int):
         units = np.arange(levels + 1) * (self.budget / levels)
         d2 = self.link.distance_sq(positions[:, None, :], self.agv_xy[None, :, :])  # (n, K)
         psi = self.link.success_sq(units[None, None, :], d2[:, :, None])
@@ -243,7 +243,7 @@ class DeliveryProblem(ReducedProblem):
         psi = np.asarray(psi, dtype=float)
         return self.lost - psi * self.worth, np.broadcast_to(-self.worth, psi.shape), self.delivered
 
-    def table(self, psi_grid: np.ndarray) -> "DeliveryValue":
+    def table(self, psi_grid: np.ndarray) -> DeliveryValue:
         """The exact V_k(psi) (linear: no table to interpolate)."""
         return DeliveryValue(self.lost, self.worth)
 
@@ -440,8 +440,8 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
         if self._moves(snapshot.slot) == 1:
             return plan
         target = plan.drone_position  # where the next command goes out from: one move toward it now
-        step = project_disc_box(target, np.asarray(snapshot.drone_position, dtype=float), float(self.config.drone_reach_m),
-                                tuple(self.config.area_m))
+        step = project_disc_box(target, np.asarray(snapshot.drone_position, dtype=float),
+                                float(self.config.drone_reach_m), tuple(self.config.area_m))
         return replace(plan, drone_position=step, info={**plan.info, "command_position": target})
 
 

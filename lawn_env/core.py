@@ -21,9 +21,10 @@ none of its own. It knows nothing about action or observation encodings; the env
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, NamedTuple, Sequence
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
@@ -35,8 +36,8 @@ from .dynamics import POSITION, PredictionModel, initial_state, measure, packed_
 #: Offsets of the augmented state's parts (:data:`lawn_env.dynamics.POSITION`, ...) for the kernels.
 POS, VEL, ACCEL = dynamics.POSITION.start, dynamics.VELOCITY.start, dynamics.ACCELERATION.start
 
-__all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Snapshot", "Simulation", "ScenarioView", "Trail",
-           "draw_slot", "reset", "step", "episode_metrics", "control_costs", "link_outage", "link_success",
+__all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Snapshot", "Simulation", "ScenarioView",
+           "Trail", "draw_slot", "reset", "step", "episode_metrics", "control_costs", "link_outage", "link_success",
            "SLOT_CONSTANTS", "TOTALS"]
 
 
@@ -324,7 +325,8 @@ class SimParams:
             power_budget_w=config.power_budget_w, drone_start=np.array(config.drone.start_m, dtype=float),
             envelope=envelope, fixed_paths=fixed_paths, fixed_reference=fixed,
             disturbance=d, disturbed=d.active,
-            lag_alpha=lag_alpha, constants=_readonly(np.array([(lag_alpha, config.control.accel_max_mps2, link.altitude_sq,
+            lag_alpha=lag_alpha,
+            constants=_readonly(np.array([(lag_alpha, config.control.accel_max_mps2, link.altitude_sq,
                                            *link.coefficients, link.m)], dtype=SLOT_CONSTANTS)),
             every_slot=np.ones(1, dtype=bool),
         )
@@ -420,7 +422,7 @@ def empty_state(params: SimParams, num: int) -> SimState:
     """B scenarios before their first reset (zeros; :func:`reset` starts them)."""
     k, steps = params.num_agvs, params.steps
     fixed = params.fixed_reference
-    reference = np.broadcast_to(fixed, (num,) + fixed.shape) if fixed is not None else np.zeros((num, k, steps, 6))
+    reference = np.broadcast_to(fixed, (num, *fixed.shape)) if fixed is not None else np.zeros((num, k, steps, 6))
     x = np.zeros((num, k, 6))
     return SimState(
         x_aug=x, tracking_error=np.zeros((num, k, 6)), x_obs=x, error_obs=np.zeros((num, k, 6)),
@@ -574,8 +576,8 @@ def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np
     columns = zip(n.tolist(), control_costs(state, rows).tolist(), t[:, 0].tolist(), t[:, 1].tolist(),
                   np.sqrt(sq_error.sum(axis=1) / (n * k)).tolist(), np.sqrt(sq_error / n[:, None]).tolist(),
                   (outages.sum(axis=1) / nk).tolist(), (t[:, 2] / nk).tolist(), (outages / per).tolist(),
-                  (power / n[:, None]).tolist(), t[:, 3].tolist())
-    return [dict(zip(_METRICS, values)) for values in columns]
+                  (power / n[:, None]).tolist(), t[:, 3].tolist(), strict=True)
+    return [dict(zip(_METRICS, values, strict=True)) for values in columns]
 
 
 _METRICS = ("slots", "control_cost", "tracking_cost", "effort_cost", "rmse_m", "rmse_per_agv_m", "outage_rate",

@@ -74,7 +74,7 @@ def _bounds(metadata: Sequence[Any]) -> str:
     return ""
 
 
-def describe_allowed(annotation: Any, metadata: Sequence[Any] = ()) -> str:
+def describe_allowed(annotation: Any, metadata: Sequence[Any] = ()) -> str:  # noqa: PLR0911 - one return per kind of type
     """What a field of this type and these constraints allows, in words: ``an integer in [1, 256]``,
     ``one of 'auto', 'paper', 'random'``, ``a sequence of 6 numbers``, ``a number in (0, 1] or None``."""
     origin, args = typing.get_origin(annotation), typing.get_args(annotation)
@@ -144,12 +144,12 @@ def _locate(cls: Any, loc: tuple) -> tuple[list[str], Any, Any, tuple]:
     owner, names, field = cls, [], None
     for i, part in enumerate(loc):
         fields = _fields(owner) if owner is not None else {}
-        if i == 0 and isinstance(part, int) and part < len(fields):  # a positional argument
-            part = list(fields)[part]
-        if not (isinstance(part, str) and part in fields):
+        positional = i == 0 and isinstance(part, int) and part < len(fields)
+        name = list(fields)[part] if positional else part
+        if not (isinstance(name, str) and name in fields):
             return names, field, owner, loc[i:]
-        names.append(part)
-        field = fields[part]
+        names.append(name)
+        field = fields[name]
         owner = field.annotation if isinstance(field.annotation, type) and dataclasses.is_dataclass(field.annotation) \
             else None
     return names, field, owner, ()
@@ -179,8 +179,8 @@ class _Report:
         cls, prefix = self.cls, self.prefix
         if kind == "unexpected_positional_argument":  # one line, however many arguments are too many
             fields = list(_fields(cls))
-            self.positional[:] = [f"{len(self.args)} positional arguments {self.args!r}: {cls.__name__} takes at most "
-                                  f"{len(fields)} (allowed: {', '.join(fields)} in this order, or as keywords)"]
+            self.positional[:] = [(f"{len(self.args)} positional arguments {self.args!r}: {cls.__name__} takes at "
+                                   f"most {len(fields)} (allowed: {', '.join(fields)} in this order, or as keywords)")]
             return
         names, field, owner, rest = _locate(cls, loc)
         if kind in ("unexpected_keyword_argument", "extra_forbidden"):

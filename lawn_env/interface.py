@@ -55,7 +55,8 @@ control cost of full episodes of the unmodified scenario.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Mapping
+from collections.abc import Mapping
+from typing import Annotated, Any, Literal
 
 import gymnasium as gym
 import numpy as np
@@ -64,15 +65,15 @@ from pydantic.dataclasses import dataclass
 
 from .channel import LinkParams
 from .config import ScenarioConfig
-from .errors import raises_config_errors
 from .core import Decisions
 from .drone import toward
 from .dynamics import ACCELERATION, POSITION, PredictionModel, saturate_increment
+from .errors import raises_config_errors
 from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
 from .spaces import ActionCodec, DirectActions
 
-__all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FLOOR", "resolve_interface", "action_codec",
-           "AnchoredActions", "InterfaceLike"]
+__all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FLOOR", "resolve_interface",
+           "action_codec", "AnchoredActions", "InterfaceLike"]
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 
@@ -99,7 +100,8 @@ class RLInterface:
     power_anchor: Literal["distance", "stake"] = "distance"
     """Anchored power prior: ``distance`` (equal outage) or ``stake`` (by what each command is worth)."""
     power_log_range: PositiveFloat = 2.0
-    """Anchored power: weights ``prior exp(a * power_log_range)``; links differ at most by e^(2 range) from the prior."""
+    """Anchored power: weights ``prior exp(a * power_log_range)``; links differ at most by e^(2 range) from the
+    prior."""
     residual_scale: PositiveFloat = 1.0
     """Anchored increments: residual ``a * residual_scale * Delta-a_max`` on the tracking controller."""
     layout: Literal["flat", "entities"] = "flat"
@@ -114,7 +116,7 @@ class RLInterface:
     ``power_anchor="distance"`` decoding an action uses no MPC at all."""
 
     @model_validator(mode="after")
-    def _check(self) -> "RLInterface":
+    def _check(self) -> RLInterface:
         if self.termination_distance_m is not None and self.reward != "scaled":
             raise ValueError(
                 f"termination_distance_m={self.termination_distance_m} needs reward='scaled' (got "
@@ -285,8 +287,8 @@ class AnchoredActions(ActionCodec):
     def power_prior(self, x_aug: np.ndarray, drone_next: np.ndarray, data: SlotData | None = None) -> np.ndarray:
         """The anchored power split's weights, (..., K) (any leading batch axes; the zero action's
         powers are ``P_max prior / sum(prior)``): ``d_k^2`` from the drone's next position, or with
-        ``power_anchor="stake"`` ``(w_k d_k^(2a))^(1/(a+1))`` (a the outage law's order) for the stakes ``w_k`` of the slot's
-        prepared MPC ``data`` (module docstring), scaled so that the largest weight is 1."""
+        ``power_anchor="stake"`` ``(w_k d_k^(2a))^(1/(a+1))`` (a the outage law's order) for the stakes ``w_k`` of the
+        slot's prepared MPC ``data`` (module docstring), scaled so that the largest weight is 1."""
         return self._prior(self._distance_sq(x_aug, drone_next), data)
 
     def _prior(self, d2: np.ndarray, data: SlotData | None) -> np.ndarray:

@@ -19,7 +19,7 @@ import functools
 import hashlib
 from pathlib import Path
 
-import numba.core.caching as caching
+from numba.core import caching
 
 __all__ = ["install", "package_stamp"]
 

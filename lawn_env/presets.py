@@ -6,7 +6,8 @@ Register more with :func:`register` (a duplicate name raises).
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from .config import ChannelConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 
@@ -69,7 +70,7 @@ register("imperfect-csi", ScenarioConfig(channel=ChannelConfig(ce_error_var=1e-4
 # the cost falls in the first slots, the AGVs' recovery from their initial offsets while the drone
 # flies in from the area's edge. A steady start removes that transient: the drone starts at the
 # area's centre (above the paper paths' starts) and every AGV on its reference.
-_STEADY = dict(drone=DroneConfig(start_m=(100.0, 100.0)), reference=ReferenceConfig(initial_offset_std_m=0.0))
+_STEADY = {"drone": DroneConfig(start_m=(100.0, 100.0)), "reference": ReferenceConfig(initial_offset_std_m=0.0)}
 #: A steady start on the default scenario: the cost is the links' and the planner's, slot after slot.
 register("steady", ScenarioConfig(**_STEADY))
 #: A steady start at -2 dBW: far links fail often, and where the power goes decides the cost.

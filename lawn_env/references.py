@@ -26,8 +26,9 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -64,7 +65,7 @@ class TimeWarp:
     nu: float = 0.0
     phi: float = 0.0
 
-    def scaled(self, factor: float) -> "TimeWarp":
+    def scaled(self, factor: float) -> TimeWarp:
         """The warp run ``factor`` times as fast: theta(factor t)."""
         return TimeWarp(w=self.w * factor, theta0=self.theta0, a=self.a, nu=self.nu * factor, phi=self.phi)
 
@@ -197,7 +198,7 @@ class RoundedRectangle(_Curve):
         s = np.mod(theta, perimeter)
         # the segment of each point: searchsorted(starts, s, side="right") - 1 over a leading path axis
         idx = np.clip((starts[:, None, :] <= s[..., None]).sum(axis=-1) - 1, 0, starts.shape[1] - 1)
-        c = np.empty(s.shape + (2,))
+        c = np.empty((*s.shape, 2))
         d1 = np.empty_like(c)
         d2 = np.zeros_like(c)
         for i in range(starts.shape[1]):
@@ -252,7 +253,7 @@ class Sinusoid(_Curve):
 def _periodic_spline(waypoints: tuple[tuple[float, float], ...]) -> tuple[CubicSpline, float]:
     """The periodic cubic spline through ``waypoints`` by chord length, and its period (cached:
     a path is evaluated many times while it is fitted, and time scaling keeps its waypoints)."""
-    pts = np.asarray(waypoints + (waypoints[0],), dtype=float)
+    pts = np.asarray((*waypoints, waypoints[0]), dtype=float)
     chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
     return CubicSpline(chord, pts, bc_type="periodic"), chord[-1]
 
@@ -269,7 +270,7 @@ class SplinePath(_Curve):
 
     @classmethod
     def curves(cls, paths: Sequence[_Curve], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        out = [np.empty(theta.shape + (2,)) for _ in range(3)]
+        out = [np.empty((*theta.shape, 2)) for _ in range(3)]
         for i, p in enumerate(paths):  # one spline per path (waypoint counts differ)
             spline, period = p._spline()
             s = np.mod(theta[i], period)
@@ -341,12 +342,12 @@ def fit_envelopes(paths: list, envelope: Envelope, max_rounds: int = 60) -> list
             return out
         candidates = [replace(paths[i], warp=paths[i].warp.scaled(factor[i])) for i in todo]
         fits_now = _violations(evaluate_paths(candidates, t), envelope.accel_max, envelope.increment_max) <= 1.0
-        for i, cand, ok in zip(todo, candidates, fits_now.tolist()):
+        for i, cand, ok in zip(todo, candidates, fits_now.tolist(), strict=True):
             if ok:
                 out[i] = cand
             else:
                 factor[i] *= 0.98
-        todo = [i for i, ok in zip(todo, fits_now.tolist()) if not ok]
+        todo = [i for i, ok in zip(todo, fits_now.tolist(), strict=True) if not ok]
     for i in todo:  # extreme configs: halvings from the last factor
         out[i] = slowed_until(paths[i], fits, factor[i])
     return out
@@ -461,7 +462,8 @@ def _random_path(rng: np.random.Generator, family: str, area_m, margin: float = 
         cx, cy = rng.uniform(x0 + 0.3 * width, x1 - 0.3 * width), rng.uniform(y0 + 0.3 * height, y1 - 0.3 * height)
         angles = np.sort(rng.uniform(0, 2 * math.pi, n))
         radii = rng.uniform(0.08, 0.25, n) * min(width, height)
-        pts = tuple((float(cx + r * math.cos(a)), float(cy + r * math.sin(a))) for a, r in zip(angles, radii))
+        pts = tuple((float(cx + r * math.cos(a)), float(cy + r * math.sin(a)))
+                    for a, r in zip(angles, radii, strict=True))
         return SplinePath(waypoints=pts, warp=TimeWarp(w=speed, theta0=rng.uniform(0, 50), a=var * speed / nu,
                                                        nu=nu, phi=rng.uniform(0, 2 * math.pi)))
     raise ValueError(f"unknown reference family {family!r}; valid: {', '.join(FAMILIES)}")
@@ -505,12 +507,11 @@ def sample_paths(rngs: Sequence[np.random.Generator], num_agvs: int, families: S
         if envelope is not None:
             candidates = fit_envelopes(candidates, envelope)
         inside = _inside_many(evaluate_paths(candidates, t), area_m, margin).tolist()
-        for i, path, ok in zip(live, candidates, inside):
+        for i, path, ok in zip(live, candidates, inside, strict=True):
             tries[i] += 1
             if ok or tries[i] == max_tries:
-                if not ok:  # every draw left the area: the last one, slowed until it stays inside
-                    path = slowed_until(path, lambda p: _inside(p.evaluate(t), area_m, margin))
-                paths[i].append(path)
+                # if every draw left the area: the last one, slowed until it stays inside
+                paths[i].append(path if ok else slowed_until(path, lambda p: _inside(p.evaluate(t), area_m, margin)))
                 tries[i] = 0
         live = [i for i in live if len(paths[i]) < num_agvs]
     return paths
