@@ -40,7 +40,6 @@ __all__ = [
 _PYDANTIC = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True, use_attribute_docstrings=True)
 
 PositiveFloat = Annotated[float, Field(gt=0)]
-Probability = Annotated[float, Field(gt=0, lt=1)]
 PositiveInt = Annotated[int, Field(ge=1, strict=True)]
 
 #: Reference-path families of :mod:`lawn_env.references` (MODEL.md §1).

@@ -33,8 +33,8 @@ from . import channel, drone, dynamics, references
 from .config import DisturbanceConfig, ScenarioConfig
 from .dynamics import POSITION, PredictionModel, initial_state, measure, packed_step_matrices
 
-#: Offsets of the augmented state's parts (:data:`lawn_env.dynamics.POSITION`, ...) for the kernels.
-POS, VEL, ACCEL = dynamics.POSITION.start, dynamics.VELOCITY.start, dynamics.ACCELERATION.start
+# the first columns of dynamics.POSITION / VELOCITY / ACCELERATION in x~, as integers the kernels can index with
+_POS0, _VEL0, _ACCEL0 = dynamics.POSITION.start, dynamics.VELOCITY.start, dynamics.ACCELERATION.start
 
 __all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Snapshot", "Simulation", "ScenarioView",
            "Trail", "draw_slot", "reset", "step", "episode_metrics", "control_costs", "link_outage", "link_success",
@@ -140,8 +140,8 @@ def _links(inp, c, out, rows):  # pragma: no cover - compiled
         sending = send[b % send.shape[0]]
         for i in range(k):
             r = b * k + i
-            d2 = channel.link_distance_sq(x_aug[b, i, POS] - drone_next[b, 0], x_aug[b, i, POS + 1] - drone_next[b, 1],
-                                          altitude_sq)
+            d2 = channel.link_distance_sq(x_aug[b, i, _POS0] - drone_next[b, 0],
+                                          x_aug[b, i, _POS0 + 1] - drone_next[b, 1], altitude_sq)
             x = channel.link_argument(d2, power[b, i], c_d, c_ce)
             outage[b, i] = channel.outage_law(m, x, channel.OUTAGE)
             ok = channel.command_delivered(fading[b, i], x)
@@ -149,7 +149,7 @@ def _links(inp, c, out, rows):  # pragma: no cover - compiled
             for j in range(6):
                 rows[r, j] = x_aug[b, i, j]
             for a in range(2):
-                du = dynamics.saturate(x_aug[b, i, ACCEL + a], increment[b, i, a], accel_max) if sending else 0.0
+                du = dynamics.saturate(x_aug[b, i, _ACCEL0 + a], increment[b, i, a], accel_max) if sending else 0.0
                 rows[r, 6 + a] = du * (1.0 if ok else 0.0)
 
 
@@ -163,7 +163,7 @@ def _lag(x_aug, applied, lag_alpha, applied_next, flat, accel_effect_t):  # prag
         for i in range(k):
             r = b * k + i
             for a in range(2):
-                commanded = x_aug[b, i, ACCEL + a] + flat[r, 6 + a]
+                commanded = x_aug[b, i, _ACCEL0 + a] + flat[r, 6 + a]
                 applied_next[b, i, a] = dynamics.lagged_acceleration(applied[b, i, a], commanded, lag_alpha)
                 gap[r, a] = applied_next[b, i, a] - commanded
     correction = gap @ accel_effect_t
@@ -179,11 +179,11 @@ def _process_noise(packed, process_position, process_velocity):  # pragma: no co
     for b in range(process_position.shape[0]):
         for i in range(k):
             for a in range(2):
-                packed[b, i, POS + a] += process_position[b, i, a]
+                packed[b, i, _POS0 + a] += process_position[b, i, a]
     for b in range(process_velocity.shape[0]):
         for i in range(k):
             for a in range(2):
-                packed[b, i, VEL + a] += process_velocity[b, i, a]
+                packed[b, i, _VEL0 + a] += process_velocity[b, i, a]
 
 
 @numba.njit(cache=True, inline="always")

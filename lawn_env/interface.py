@@ -56,15 +56,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
-from pydantic import ConfigDict, Field, model_validator
+from pydantic import ConfigDict, model_validator
 from pydantic.dataclasses import dataclass
 
 from .channel import LinkParams
-from .config import ScenarioConfig
+from .config import PositiveFloat, ScenarioConfig
 from .core import Decisions
 from .drone import toward
 from .dynamics import ACCELERATION, POSITION, PredictionModel, saturate_increment
@@ -74,8 +74,6 @@ from .spaces import ActionCodec, DirectActions
 
 __all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FLOOR", "resolve_interface",
            "action_codec", "AnchoredActions", "InterfaceLike"]
-
-PositiveFloat = Annotated[float, Field(gt=0)]
 
 
 @raises_config_errors("interface.", "interface field")
