@@ -288,7 +288,7 @@ class SimParams:
     max_speed: float
     power_budget_w: float
     drone_start: np.ndarray  # (2,)
-    envelope: references.Envelope
+    envelope: references.Envelope | None  # None: the paths are not fitted into the AGVs' envelope
     fixed_paths: list | None
     fixed_reference: np.ndarray | None  # (K, T, 6) of the fixed path set
     disturbance: DisturbanceConfig
@@ -307,7 +307,8 @@ class SimParams:
         q1 = np.asarray(config.control.q1_diag, dtype=float)
         q2 = np.asarray(config.control.q2_diag, dtype=float)
         packed_t, packed_w = packed_step_matrices(model.a_aug, model.b_aug, q1, q2)
-        area = tuple(float(v) for v in config.area_m)
+        x0, x1, y0, y1 = config.area_m
+        area = (float(x0), float(x1), float(y0), float(y1))
         envelope = references.Envelope.from_config(config, steps)
         fixed_paths = references.paper_paths(k, area, envelope) if config.uses_paper_paths else None
         fixed = references.reference_table(fixed_paths, steps, config.slot_s) if fixed_paths is not None else None
@@ -373,7 +374,7 @@ def draw_slot(rng: np.random.Generator, params: SimParams, num: int = 1) -> Slot
         return SlotDraws(fading)
     pos = rng.normal(0.0, d.process_noise_position_m, (num, k, 2)) if d.process_noise_position_m > 0 else None
     vel = rng.normal(0.0, d.process_noise_velocity_mps, (num, k, 2)) if d.process_noise_velocity_mps > 0 else None
-    meas = (None, None)
+    meas: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
     if params.measurement_noise:
         meas = (rng.normal(0.0, d.measurement_noise_position_m, (num, k, 2)),
                 rng.normal(0.0, d.measurement_noise_velocity_mps, (num, k, 2)))
@@ -543,7 +544,7 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     packed, err = rows[0], rows[1]
     x_next, error, applied_increment, slot = packed[:, :, 0:6], err[:, :, 0:6], packed[:, :, 6:8], state.slot + 1
     x_obs, error_obs = x_next, error
-    if draws.measurement_position is not None:
+    if draws.measurement_position is not None and draws.measurement_velocity is not None:  # drawn together
         x_obs, error_obs = measure(x_next, error, draws.measurement_position, draws.measurement_velocity)
     new = SimState(x_next, error, x_obs, error_obs, applied, drone_next, slot, power, delivered, outage_p,
                    state.reference, state.paths, totals)  # SimState's field order
@@ -608,6 +609,20 @@ class Simulation:
     :class:`SimParams` and the current :class:`SimState`, advanced by :func:`step` and restarted
     by :func:`reset`. The state's arrays read as attributes (``sim.x_aug`` (B, K, 6), ...)."""
 
+    # the state's arrays, properties set after the class from STATE_ARRAYS (every scenario's)
+    x_aug: np.ndarray
+    tracking_error: np.ndarray
+    x_obs: np.ndarray
+    error_obs: np.ndarray
+    applied: np.ndarray
+    drone_position: np.ndarray
+    last_power_w: np.ndarray
+    last_delivered: np.ndarray
+    last_outage_probability: np.ndarray
+    reference: np.ndarray
+    slot: np.ndarray
+    paths: list
+
     def __init__(self, config: ScenarioConfig, num_envs: int = 1):
         if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
             raise ValueError(f"num_envs={num_envs!r}: must be an integer >= 1")
@@ -667,6 +682,18 @@ class Simulation:
 class ScenarioView:
     """Scenario ``i`` of a :class:`Simulation` as single-scenario arrays (views of row i): what
     the renderer, the planners' snapshots and the single environments' accessors read."""
+
+    # the state's arrays, properties set after the class from STATE_ARRAYS (row i's)
+    x_aug: np.ndarray
+    tracking_error: np.ndarray
+    x_obs: np.ndarray
+    error_obs: np.ndarray
+    applied: np.ndarray
+    drone_position: np.ndarray
+    last_power_w: np.ndarray
+    last_delivered: np.ndarray
+    last_outage_probability: np.ndarray
+    reference: np.ndarray
 
     def __init__(self, sim: Simulation, i: int):
         self._sim, self.i = sim, int(i)
@@ -745,8 +772,8 @@ def _row_array(name: str) -> property:
 for _name in STATE_ARRAYS:
     setattr(Simulation, _name, _state_array(_name))
     setattr(ScenarioView, _name, _row_array(_name))
-Simulation.slot = _state_array("slot")
-Simulation.paths = _state_array("paths")
+for _name in ("slot", "paths"):
+    setattr(Simulation, _name, _state_array(_name))
 
 
 class Trail:

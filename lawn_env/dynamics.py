@@ -108,9 +108,14 @@ class ScenarioSettings(Protocol):
     """What this module reads of a scenario's config (a :class:`lawn_env.config.ScenarioConfig`,
     which validates itself with this module: a protocol, so the two do not import each other)."""
 
-    slot_s: float
-    control: Any  # horizon, q1_diag, q2_diag
-    disturbance: Any  # control_period_slots, period_aware_planning
+    @property
+    def slot_s(self) -> float: ...
+
+    @property
+    def control(self) -> Any: ...  # horizon, q1_diag, q2_diag
+
+    @property
+    def disturbance(self) -> Any: ...  # control_period_slots, period_aware_planning
 
 
 def agv_matrices(slot_s: float) -> tuple[np.ndarray, np.ndarray]:

@@ -231,7 +231,7 @@ class AnchoredActions(ActionCodec):
         self._link = LinkParams.from_config(config, planning=True)
         self._stake = interface.power_anchor == "stake"
         self._delivery = config.control.law == "delivery"  # the anchor MPC plans as the Comm AGVs do
-        self._lqr_model = None
+        self._lqr_model: PredictionModel | None = None
         lqr = role == "joint" and interface.increment_anchor == "lqr"
         if (role == "joint" and not lqr) or self._stake:  # the residual's controller, and the stakes
             self.mpc = OutageAwareMPC.from_config(config, backend=mpc_backend)
@@ -295,6 +295,7 @@ class AnchoredActions(ActionCodec):
         if data is None:
             raise ValueError("power_anchor='stake' weighs the links by the slot's stakes: pass data, the slot's "
                              "prepared MPC data (layout.mpc.prepare(x_aug, reference, slot))")
+        assert self.mpc is not None  # built whenever the stake prior is on
         stake = self.mpc.command_stakes(data)
         floor = STAKE_FLOOR * stake.mean(axis=-1, keepdims=True)
         stake = np.where(floor > 0, np.maximum(stake, floor), 1.0)  # no stake anywhere: by distance alone
@@ -318,6 +319,7 @@ class AnchoredActions(ActionCodec):
             return saturate_increment(x_aug[..., ACCELERATION], free, self._accel_max)
         start = "stakes" if self._stake else None
         psi = np.ones(d2.shape) if self._delivery else self._link.success_sq(power_w, d2)
+        assert self.mpc is not None and data is not None  # the MPC anchor: built, and _prepare gave its data
         return self.mpc.solve_prepared(data, psi, start_from=start).increments[..., 0, :].copy()
 
     # ------------------------------------------------------------------ encode

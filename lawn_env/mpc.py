@@ -255,7 +255,8 @@ class OutageAwareMPC:
         self.backend = self._make_backend(backend)
         # increment bounds per slot phase: zero where move blocking holds the acceleration
         self._box_upper = np.stack([np.repeat(np.where(mask, self.accel_increment_max, 0.0), 2) for mask in masks])
-        self._last_bounds = None  # the reference backends' last bounds (their workspaces keep them)
+        # the reference backends' last bounds (their workspaces keep them)
+        self._last_bounds: tuple[np.ndarray, np.ndarray] | None = None
 
     def _make_backend(self, name: str):
         if name == "compiled":

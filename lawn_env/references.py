@@ -28,7 +28,7 @@ import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -77,7 +77,7 @@ class TimeWarp:
         return theta, dtheta, ddtheta
 
 
-def _warps(paths) -> tuple[np.ndarray, ...]:
+def _warps(paths: Sequence[_Curve]) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """theta, theta', theta'' of the paths' warps at times ``t``: a function of t -> three (G, T)."""
     w = np.array([[p.warp.w] for p in paths])
     theta0 = np.array([[p.warp.theta0] for p in paths])
@@ -85,7 +85,8 @@ def _warps(paths) -> tuple[np.ndarray, ...]:
     nu = np.array([[p.warp.nu] for p in paths])
     phi = np.array([[p.warp.phi] for p in paths])
 
-    def at(t: np.ndarray):  # TimeWarp.__call__, the same operations over a leading path axis
+    # TimeWarp.__call__, the same operations over a leading path axis
+    def at(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         arg = nu * t + phi
         sin = np.sin(arg)  # each sine and cosine once: they are most of the cost
         theta = theta0 + w * t + a * sin
@@ -97,14 +98,19 @@ def _warps(paths) -> tuple[np.ndarray, ...]:
 
 
 class _Curve:
+    """A reference path: every family is a frozen dataclass with a ``warp`` (the declarations say so to
+    the type checker: :func:`dataclasses.replace` takes any path)."""
+
     warp: TimeWarp
+    __dataclass_fields__: ClassVar[dict[str, Any]]
 
     @classmethod
-    def curves(cls, paths: list, theta: np.ndarray):  # pragma: no cover - interface
+    def curves(cls, paths: Sequence[Any], theta: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - interface
         """c, c', c'' of the paths (all of this family) at their parameters ``theta`` (G, T): (G, T, 2) each."""
         raise NotImplementedError
 
-    def curve(self, theta: np.ndarray):
+    def curve(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """c, c', c'' at parameters ``theta`` (T,): (T, 2) each."""
         c, d1, d2 = type(self).curves([self], np.asarray(theta, dtype=float)[None])
         return c[0], d1[0], d2[0]
@@ -189,7 +195,7 @@ class RoundedRectangle(_Curve):
         ]
 
     @classmethod
-    def curves(cls, paths: Sequence[_Curve], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def curves(cls, paths: Sequence[RoundedRectangle], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         segs = [p._segments() for p in paths]
         lengths = np.array([[s[1] for s in seg] for seg in segs])
         starts = np.stack([np.concatenate([[0.0], np.cumsum(row)[:-1]]) for row in lengths])
@@ -235,7 +241,7 @@ class Sinusoid(_Curve):
     phase: float = 0.0
 
     @classmethod
-    def curves(cls, paths: Sequence[_Curve], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def curves(cls, paths: Sequence[Sinusoid], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         u = np.array([[[math.cos(p.heading), math.sin(p.heading)]] for p in paths])  # (G, 1, 2)
         n = np.stack([-u[..., 1], u[..., 0]], axis=-1)
         k = np.array([[p.wavenumber] for p in paths])
@@ -269,13 +275,13 @@ class SplinePath(_Curve):
         return _periodic_spline(self.waypoints)
 
     @classmethod
-    def curves(cls, paths: Sequence[_Curve], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def curves(cls, paths: Sequence[SplinePath], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         out = [np.empty((*theta.shape, 2)) for _ in range(3)]
         for i, p in enumerate(paths):  # one spline per path (waypoint counts differ)
             spline, period = p._spline()
             s = np.mod(theta[i], period)
             out[0][i], out[1][i], out[2][i] = spline(s), spline(s, 1), spline(s, 2)
-        return tuple(out)
+        return out[0], out[1], out[2]
 
 
 FAMILIES = {
@@ -495,7 +501,7 @@ def sample_paths(rngs: Sequence[np.random.Generator], num_agvs: int, families: S
     t = np.linspace(0.0, duration_s, max(2, int(min(duration_s, 1e5) * 4) + 1))
     margin = min(margin_m, 0.05 * min(area_m[1] - area_m[0], area_m[3] - area_m[2]))
     paths: list[list[_Curve]] = [[] for _ in rngs]
-    family = [None] * len(rngs)
+    family = [""] * len(rngs)  # each scenario's family, drawn at its first try
     tries = [0] * len(rngs)
     live = [i for i in range(len(rngs)) if num_agvs > 0]
     while live:

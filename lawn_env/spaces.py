@@ -30,6 +30,7 @@ from .dynamics import POSITION
 if TYPE_CHECKING:
     from .config import ScenarioConfig
     from .core import Simulation
+    from .mpc import OutageAwareMPC
 
 __all__ = [
     "ObservationLayout",
@@ -170,7 +171,7 @@ class ActionCodec:
     #: Whether decoding needs the reference window.
     needs_reference = False
     #: The MPC the scheme's anchor plans with (None: none).
-    mpc = None
+    mpc: OutageAwareMPC | None = None
 
     def __init__(self, config: ScenarioConfig, role: str = "joint"):
         if role not in ROLES:
@@ -183,7 +184,8 @@ class ActionCodec:
         self.limits = np.array([(config.control.accel_increment_max_mps2, config.power_budget_w,
                                  config.drone.max_speed_mps, config.slot_s, *config.area_m)], dtype=ACTION_LIMITS)
         self.limits.setflags(write=False)
-        self.area = tuple(float(v) for v in config.area_m)
+        x0, x1, y0, y1 = config.area_m
+        self.area = (float(x0), float(x1), float(y0), float(y1))
 
     def reset(self, which: np.ndarray | None = None) -> None:
         """Start an episode (``which``: a mask over a batch's scenarios, all when None)."""
