@@ -332,6 +332,7 @@ class AOSolver:
         if "control" in blocks:
             self._solve_controls(prob, point)
             row[0] = point.value
+        assert point.dmu is not None  # the first control block ran, or the increments were given
         coef = prob.coefficients(point.dmu)
         if "power" in blocks:
             point.power_w, point.value, its = self.power_block(coef, prob.distance_sq(point.drone_position),
@@ -363,6 +364,7 @@ def _check_blocks(blocks: Sequence[str], increments: np.ndarray | None) -> None:
 def _to_plan(prob: SlotProblem, point: _Point, before_final: float, start: float) -> Plan:
     """The AO's result as a :class:`Plan` (``before_final``: J^ before the closing control block)."""
     p, q = point.power_w, point.drone_position
+    assert point.dmu is not None  # the control block ran, or the increments were given
     return Plan(
         increments=point.dmu,
         power_w=p,

@@ -183,9 +183,10 @@ class SB3Policy(InterfacePolicy):
         x = self.interface.observe(raw.copy())
         if self.normalizer is not None:
             x = self.normalizer.normalize_obs(x)
+        inputs: np.ndarray | dict[str, np.ndarray] = x  # the network's: a dict under the entity layout
         if self.entities is not None:
-            x = {key: value[0] for key, value in self.entities.observe(x[None]).items()}
-        action = np.clip(np.asarray(self._predict(x), dtype=np.float64), -1.0, 1.0)
+            inputs = {key: value[0] for key, value in self.entities.observe(x[None]).items()}
+        action = np.clip(np.asarray(self._predict(inputs), dtype=np.float64), -1.0, 1.0)
         if self.entities is not None:
             action = self.entities.to_flat_actions(action)
         return self.to_v0(action, raw)
@@ -230,7 +231,7 @@ class MARLPolicy(InterfacePolicy):
 
     @classmethod
     def from_run(cls, path: str | Path, config: ScenarioConfig | None = None, env_id: str | None = None,
-                 seed: int | None = None) -> MARLPolicy:
+                 seed: int | None = None) -> InterfacePolicy:
         path = Path(path)
         run = read_run(path, require_model=True)
         if run.env != PARALLEL_ENV_ID:

@@ -152,7 +152,7 @@ class SFPolicy(PlannerPolicy):
     def plan(self, snapshot: Snapshot) -> Plan:
         c = self.config
         q_next = move_drone(snapshot.drone_position, self.speed_mps * self.heading, c.drone.max_speed_mps, c.slot_s,
-                            tuple(c.area_m))
+                            c.area_m)
         return self.solver.solve(snapshot, blocks=("control", "power"), drone_position=q_next)
 
 

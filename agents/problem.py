@@ -74,7 +74,7 @@ class SlotProblem:
                                           self.reference, snapshot.slot)
         self.budget = config.power_budget_w
         self.reach = float(config.drone_reach_m)
-        self.area = tuple(config.area_m)
+        self.area = config.area_m
 
     # ------------------------------------------------------------------ pieces of J^
     def coefficients(self, dmu: np.ndarray) -> Coefficients:
