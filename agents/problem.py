@@ -6,6 +6,7 @@ the coefficients of J^ per AGV, and the plan a planner returns (:class:`Plan`)."
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -37,7 +38,7 @@ class Plan:
     objective_trace: np.ndarray  # (iterations, 3)
     iterations: int
     solve_time_s: float
-    info: dict = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
 
 
 #: L, S, W of J^_k = L psi^2 + 2 S psi + W per AGV (paper, P4), each (K,).
