@@ -5,9 +5,9 @@ of them; ``POLICIES`` is the registry; ``rollout(env, policy, seed)`` runs one e
 
 from .anchors import ANCHORS, AnchorPolicy, anchor_name
 from .ao import AOSettings, AOSolver, expected_cost
-from .problem import Plan
 from .base import Planner
 from .policies import BENCHMARK_POLICIES, PAPER_POLICIES, POLICIES, Policy, make_policy, policy_names
+from .problem import Plan
 from .reduced import DeliverySettings, DeliveryValuePlanner, GlobalPlanner, ReducedGradientPlanner, ReducedSettings
 from .rollouts import Episode, Step, rollout
 from .scripted import HeuristicPolicy

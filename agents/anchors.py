@@ -53,7 +53,7 @@ class InterfacePolicy(Policy):
         self.scheme = action_codec(self.config, role, self.interface)
         self.v0 = action_codec(self.config, role, None)
 
-    def _on_reset(self, rng) -> None:
+    def _on_reset(self, rng: np.random.Generator) -> None:
         self.scheme.reset()
 
     def to_v0(self, action: np.ndarray, obs: np.ndarray) -> np.ndarray:

@@ -33,8 +33,9 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Annotated, Sequence
+from typing import Annotated
 
 import numpy as np
 import numpy.typing as npt
@@ -210,7 +211,7 @@ class AOSolver:
         grad = objective.gradient(state)
         trial = self._memory.get("pgd_trial")  # the last BB step of this slot, if any
         iterations = 0
-        for iterations in range(1, s.pgd_max_iterations + 1):
+        for iterations in range(1, s.pgd_max_iterations + 1):  # noqa: B007 - the count is read after the loop
             gnorm = math.sqrt(float(grad @ grad))
             if gnorm == 0.0:
                 break
@@ -247,7 +248,7 @@ class AOSolver:
         # the safeguard's backtracking starts from twice the last accepted fraction (kept across the
         # AO iterations of a slot)
         t_start = self._memory.get("sca_t", 1.0)
-        for iterations in range(1, s.sca_max_iterations + 1):
+        for iterations in range(1, s.sca_max_iterations + 1):  # noqa: B007 - the count is read after the loop
             grad = objective.gradient(q)
             target = linear_argmin_disc_box(grad, prob.q_prev, prob.reach, prob.area)
             step = target - q
@@ -331,6 +332,7 @@ class AOSolver:
         if "control" in blocks:
             self._solve_controls(prob, point)
             row[0] = point.value
+        assert point.dmu is not None  # the first control block ran, or the increments were given
         coef = prob.coefficients(point.dmu)
         if "power" in blocks:
             point.power_w, point.value, its = self.power_block(coef, prob.distance_sq(point.drone_position),
@@ -362,6 +364,7 @@ def _check_blocks(blocks: Sequence[str], increments: np.ndarray | None) -> None:
 def _to_plan(prob: SlotProblem, point: _Point, before_final: float, start: float) -> Plan:
     """The AO's result as a :class:`Plan` (``before_final``: J^ before the closing control block)."""
     p, q = point.power_w, point.drone_position
+    assert point.dmu is not None  # the control block ran, or the increments were given
     return Plan(
         increments=point.dmu,
         power_w=p,

@@ -10,8 +10,8 @@ import numpy as np
 
 from lawn_env import ObservationLayout
 from lawn_env.core import Snapshot
-from lawn_env.spaces import DirectActions
 from lawn_env.presets import ConfigLike, resolve_config
+from lawn_env.spaces import DirectActions
 
 if TYPE_CHECKING:
     from .problem import Plan

@@ -15,7 +15,7 @@ module is imported only when used.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numba
 import numpy as np
@@ -28,15 +28,21 @@ from torch import nn
 __all__ = ["EntityFeatures", "FleetNet", "FleetAgentNet", "FleetPolicy", "FleetInference"]
 
 
+def _shape(space: spaces.Space[Any]) -> tuple[int, ...]:
+    """A Box's shape (gymnasium types ``Space.shape`` as optional; the entity layout's spaces are Boxes)."""
+    assert space.shape is not None
+    return space.shape
+
+
 class EntityFeatures(BaseFeaturesExtractor):
     """The entity observation as one flat tensor ``[agvs, globals, mask]`` (and ``me``, the
     multi-agent env's one-hot of the acting entity), which :class:`FleetNet` splits back into its
     parts (SB3's policies pass one tensor from the extractor on)."""
 
     def __init__(self, observation_space: spaces.Dict):
-        rows, features = observation_space["agvs"].shape
+        rows, features = _shape(observation_space["agvs"])
         self.keys = ["globals", "mask"] + (["me"] if "me" in observation_space.spaces else [])
-        super().__init__(observation_space, rows * features + sum(observation_space[k].shape[0] for k in self.keys))
+        super().__init__(observation_space, rows * features + sum(_shape(observation_space[k])[0] for k in self.keys))
 
     def forward(self, observations: dict[str, th.Tensor]) -> th.Tensor:
         return th.cat([observations["agvs"].flatten(1), *(observations[k] for k in self.keys)], dim=1)
@@ -143,27 +149,33 @@ class FleetPolicy(ActorCriticPolicy):
         if not isinstance(observation_space, spaces.Dict) or "agvs" not in observation_space.spaces:
             raise ValueError("FleetPolicy reads the entity layout: make the env with interface={'layout': 'entities'} "
                              f"(got an observation space {observation_space})")
-        self.fleet = dict(width=int(width), heads=int(heads), layers=int(layers))
+        self.fleet = {"width": int(width), "heads": int(heads), "layers": int(layers)}
         kwargs.setdefault("features_extractor_class", EntityFeatures)
         super().__init__(observation_space, action_space, lr_schedule, **kwargs)
 
     def _build_mlp_extractor(self) -> None:
-        rows, features = self.observation_space["agvs"].shape
-        num_globals = self.observation_space["globals"].shape[0]
-        if "me" in self.observation_space.spaces:  # one agent of the multi-agent env: its own row
-            if self.observation_space["me"].shape != (rows + 1,) or self.action_space.shape[0] < 2:
+        # SB3 types the extractor as its MlpExtractor; this policy builds its own network in its place (the
+        # hook SB3 documents for custom networks), hence the ignores below
+        obs_space = cast(spaces.Dict, self.observation_space)  # checked in __init__
+        rows, features = _shape(obs_space["agvs"])
+        num_globals = _shape(obs_space["globals"])[0]
+        actions = _shape(self.action_space)[0]
+        if "me" in obs_space.spaces:  # one agent of the multi-agent env: its own row
+            if obs_space["me"].shape != (rows + 1,) or actions < 2:
                 raise ValueError(f"FleetPolicy for one agent needs obs['me'] of shape ({rows + 1},) (the drone, then "
                                  f"the {rows} rows) and an action of 2 or more entries; got "
-                                 f"{self.observation_space['me'].shape} and {self.action_space.shape}")
-            self.mlp_extractor = FleetAgentNet(rows, features, num_globals, self.action_space.shape[0], **self.fleet)
+                                 f"{obs_space['me'].shape} and {self.action_space.shape}")
+            self.mlp_extractor = FleetAgentNet(rows, features, num_globals, actions, **self.fleet)  # type: ignore[assignment]
             return
-        per_agv = (self.action_space.shape[0] - 2) // rows
-        self.mlp_extractor = FleetNet(rows, features, num_globals, per_agv, **self.fleet)
+        per_agv = (actions - 2) // rows
+        self.mlp_extractor = FleetNet(rows, features, num_globals, per_agv, **self.fleet)  # type: ignore[assignment]
 
     def _build(self, lr_schedule: Any) -> None:
         super()._build(lr_schedule)
         self.action_net = nn.Identity()  # the means are FleetNet's rows: shared weights, any order
-        self.optimizer = self.optimizer_class(self.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
+        # as SB3's own _build: optimizer_class is typed as torch's Optimizer base, whose __init__ takes no lr
+        self.optimizer = self.optimizer_class(  # type: ignore[call-arg]
+            self.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         return {**super()._get_constructor_parameters(), **self.fleet}
@@ -267,11 +279,11 @@ class FleetInference:
             raise ValueError("FleetInference copies the Gaussian mean of a FleetPolicy that reads EntityFeatures; got "
                              f"use_sde={policy.use_sde}, squash_output={policy.squash_output}, features extractor "
                              f"{type(policy.features_extractor).__name__}")
-        net = policy.mlp_extractor
+        net = cast(FleetNet, policy.mlp_extractor)  # what FleetPolicy builds
         self.rows, self.per_agv = net.rows, net.per_agv
-        self.agv = [_linear(net.agv_encoder[i]) for i in (0, 2)]
-        self.glob = [_linear(net.global_encoder[i]) for i in (0, 2)]
-        self.attention = [_Attention(layer) for layer in net.attention]
+        self.agv = [_linear(cast(nn.Linear, net.agv_encoder[i])) for i in (0, 2)]  # _mlp's Linear layers
+        self.glob = [_linear(cast(nn.Linear, net.global_encoder[i])) for i in (0, 2)]
+        self.attention = [_Attention(cast(nn.TransformerEncoderLayer, layer)) for layer in net.attention]
         self.agv_head, self.drone_head = _linear(net.agv_head), _linear(net.drone_head)
 
     @staticmethod

@@ -14,8 +14,9 @@ from __future__ import annotations
 import json
 import pickle
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -28,8 +29,8 @@ from .base import COMM, JOINT, Policy
 from .errors import MissingExtra
 from .runs import RL_EXTRA, RunDir, algorithm_class, policy_network_class, read_json, read_run
 
-__all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "marl_policy", "LOADERS", "learned_name_forms", "ZOO_DIR", "zoo_agents",
-           "export_agent"]
+__all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "marl_policy", "LOADERS", "learned_name_forms", "ZOO_DIR",
+           "zoo_agents", "export_agent"]
 
 #: Shipped agents: one folder per agent (``lawn zoo`` lists them).
 ZOO_DIR = Path(__file__).parent / "zoo"
@@ -104,7 +105,7 @@ class ObsNormalizer:
         return cls(venv.obs_rms.mean, venv.obs_rms.var, venv.clip_obs, venv.epsilon)
 
     @classmethod
-    def load(cls, path: Path) -> "ObsNormalizer | None":
+    def load(cls, path: Path) -> ObsNormalizer | None:
         """From ``vecnormalize.pkl`` (a run directory) or ``normalizer.npz`` (a shipped agent)."""
         path = Path(path)
         if not path.exists():
@@ -182,9 +183,10 @@ class SB3Policy(InterfacePolicy):
         x = self.interface.observe(raw.copy())
         if self.normalizer is not None:
             x = self.normalizer.normalize_obs(x)
+        inputs: np.ndarray | dict[str, np.ndarray] = x  # the network's: a dict under the entity layout
         if self.entities is not None:
-            x = {key: value[0] for key, value in self.entities.observe(x[None]).items()}
-        action = np.clip(np.asarray(self._predict(x), dtype=np.float64), -1.0, 1.0)
+            inputs = {key: value[0] for key, value in self.entities.observe(x[None]).items()}
+        action = np.clip(np.asarray(self._predict(inputs), dtype=np.float64), -1.0, 1.0)
         if self.entities is not None:
             action = self.entities.to_flat_actions(action)
         return self.to_v0(action, raw)
@@ -229,7 +231,7 @@ class MARLPolicy(InterfacePolicy):
 
     @classmethod
     def from_run(cls, path: str | Path, config: ScenarioConfig | None = None, env_id: str | None = None,
-                 seed: int | None = None) -> MARLPolicy:
+                 seed: int | None = None) -> InterfacePolicy:
         path = Path(path)
         run = read_run(path, require_model=True)
         if run.env != PARALLEL_ENV_ID:

@@ -24,7 +24,8 @@ Registered names (``make_policy(name, config)``):
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -35,11 +36,17 @@ from lawn_env.dynamics import command_mask, planning_period
 from lawn_env.presets import ConfigLike, resolve_config
 
 from .ao import AOSettings, AOSolver
-from .problem import Plan
 from .base import COMM, JOINT, Policy
 from .learned import LOADERS, learned_name_forms
-from .reduced import (DeliverySettings, DeliveryValuePlanner, GlobalPlanner, GlobalSettings, ReducedGradientPlanner,
-                      ReducedSettings)
+from .problem import Plan
+from .reduced import (
+    DeliverySettings,
+    DeliveryValuePlanner,
+    GlobalPlanner,
+    GlobalSettings,
+    ReducedGradientPlanner,
+    ReducedSettings,
+)
 from .scripted import HeuristicPolicy
 from .tracking import PIDGains, lqr_gain, lqr_rollout, pid_rollout
 
@@ -145,7 +152,7 @@ class SFPolicy(PlannerPolicy):
     def plan(self, snapshot: Snapshot) -> Plan:
         c = self.config
         q_next = move_drone(snapshot.drone_position, self.speed_mps * self.heading, c.drone.max_speed_mps, c.slot_s,
-                            tuple(c.area_m))
+                            c.area_m)
         return self.solver.solve(snapshot, blocks=("control", "power"), drone_position=q_next)
 
 
@@ -255,7 +262,7 @@ POLICIES: dict[str, Any] = {
 PAPER_POLICIES = ("ao-mpc", "epa", "sf", "pid", "lqr")
 #: What ``lawn benchmark`` compares by default: the package's best expert, the paper's per-slot
 #: problem solved exactly, and the paper's set.
-BENCHMARK_POLICIES = ("dv-mpc", "rg-mpc") + PAPER_POLICIES
+BENCHMARK_POLICIES = ("dv-mpc", "rg-mpc", *PAPER_POLICIES)
 
 
 def policy_names() -> list[str]:

@@ -6,6 +6,7 @@ the coefficients of J^ per AGV, and the plan a planner returns (:class:`Plan`)."
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -37,7 +38,7 @@ class Plan:
     objective_trace: np.ndarray  # (iterations, 3)
     iterations: int
     solve_time_s: float
-    info: dict = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
 
 
 #: L, S, W of J^_k = L psi^2 + 2 S psi + W per AGV (paper, P4), each (K,).
@@ -74,7 +75,7 @@ class SlotProblem:
                                           self.reference, snapshot.slot)
         self.budget = config.power_budget_w
         self.reach = float(config.drone_reach_m)
-        self.area = tuple(config.area_m)
+        self.area = config.area_m
 
     # ------------------------------------------------------------------ pieces of J^
     def coefficients(self, dmu: np.ndarray) -> Coefficients:

@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
-from typing import Annotated
+from typing import Annotated, Protocol
 
 import numba
 import numpy as np
@@ -50,8 +50,8 @@ from lawn_env.errors import raises_config_errors
 from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
 
 from .estimation import AGVTracker
-from .problem import Plan, SlotProblem
 from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
+from .problem import Plan, SlotProblem
 
 __all__ = ["ReducedProblem", "ValueTable", "ReducedSettings", "ReducedGradientPlanner", "GlobalPlanner",
            "GlobalSettings", "DeliveryProblem", "DeliveryValue", "DeliverySettings", "DeliveryValuePlanner"]
@@ -150,13 +150,14 @@ class ReducedProblem(SlotProblem):
         return ev
 
     # ------------------------------------------------------------------ tabulated search
-    def table(self, psi_grid: np.ndarray) -> "ValueTable":
+    def table(self, psi_grid: np.ndarray | None) -> ValueFunction:
         """V_k and its envelope slope at every psi of ``psi_grid`` for every AGV: one batched solve."""
+        assert psi_grid is not None  # the planners of this problem tabulate on psi_points
         psi = np.repeat(np.asarray(psi_grid, dtype=float)[:, None], self.x_aug.shape[0], axis=1)
         values, slopes, _ = self.values_at_psi(psi)
         return ValueTable(psi_grid, values, slopes)
 
-    def grid_search(self, table: ValueTable, positions: np.ndarray, levels: int, coarse_levels: int | None = None,
+    def grid_search(self, table: ValueFunction, positions: np.ndarray, levels: int, coarse_levels: int | None = None,
                     keep: int = 4) -> tuple[float, np.ndarray, np.ndarray]:
         """Best (p, q) of the tabulated Phi over ``positions`` (n, 2) and power splits in units of
         P_max / levels (exact on that grid, min-plus DP). With ``coarse_levels`` every position is
@@ -169,11 +170,18 @@ class ReducedProblem(SlotProblem):
         best = int(np.argmin(values))
         return float(values[best]), alloc[best] * (self.budget / levels), positions[best]
 
-    def _split(self, table: "ValueTable", positions: np.ndarray, levels: int):
+    def _split(self, table: ValueFunction, positions: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
         units = np.arange(levels + 1) * (self.budget / levels)
         d2 = self.link.distance_sq(positions[:, None, :], self.agv_xy[None, :, :])  # (n, K)
         psi = self.link.success_sq(units[None, None, :], d2[:, :, None])
         return min_plus_allocation(table(psi))  # tabulated V_k for every (position, AGV, power level)
+
+
+class ValueFunction(Protocol):
+    """V_k(psi) for psi of shape (..., K, L) (AGVs on axis -2) or (K,): what the grid search reads
+    (:class:`ValueTable`, :class:`DeliveryValue`)."""
+
+    def __call__(self, psi: np.ndarray) -> np.ndarray: ...
 
 
 class ValueTable:
@@ -243,7 +251,7 @@ class DeliveryProblem(ReducedProblem):
         psi = np.asarray(psi, dtype=float)
         return self.lost - psi * self.worth, np.broadcast_to(-self.worth, psi.shape), self.delivered
 
-    def table(self, psi_grid: np.ndarray) -> "DeliveryValue":
+    def table(self, psi_grid: np.ndarray | None) -> DeliveryValue:
         """The exact V_k(psi) (linear: no table to interpolate)."""
         return DeliveryValue(self.lost, self.worth)
 
@@ -330,10 +338,35 @@ class DeliverySettings:
     qp_backend: str = DEFAULT_BACKEND
 
 
-class _ReducedPlannerBase:
-    settings_class = ReducedSettings
+class _PlannerSettings(Protocol):
+    """What :class:`_ReducedPlannerBase` reads of its planner's settings."""
 
-    def __init__(self, config: ScenarioConfig, settings=None):
+    @property
+    def qp_backend(self) -> str: ...
+    @property
+    def drone_spacing_m(self) -> float: ...
+    @property
+    def max_drone_points(self) -> int: ...
+    @property
+    def power_levels(self) -> int: ...
+    @property
+    def refine_iterations(self) -> int: ...
+
+
+class _SearchSettings(_PlannerSettings, Protocol):
+    """What :class:`ReducedGradientPlanner`'s coarse search reads besides (rg-mpc's and dv-mpc's)."""
+
+    @property
+    def coarse_power_levels(self) -> int: ...
+    @property
+    def keep_positions(self) -> int: ...
+
+
+class _ReducedPlannerBase:
+    settings_class: type[_PlannerSettings] = ReducedSettings
+    settings: _PlannerSettings
+
+    def __init__(self, config: ScenarioConfig, settings: _PlannerSettings | None = None):
         self.config = config
         self.settings = settings if settings is not None else self.settings_class()
         self.mpc = OutageAwareMPC.from_config(config, backend=self.settings.qp_backend)
@@ -352,20 +385,22 @@ class _ReducedPlannerBase:
                     objective=best.phi, objective_trace=trace, iterations=1, solve_time_s=time.perf_counter() - start,
                     info=info)
 
+
+class ReducedGradientPlanner(_ReducedPlannerBase):
+    """``rg-mpc``: coarse tabulated search, then projected gradient on the exact Phi."""
+
+    settings: _SearchSettings  # ReducedSettings (DeliveryValuePlanner: DeliverySettings)
+
+    def __init__(self, config: ScenarioConfig, settings: _SearchSettings | None = None):
+        super().__init__(config, settings)
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # previous slot's (p, velocity)
+
     def _search(self, problem: ReducedProblem) -> Evaluation:
         s = self.settings
         table = problem.table(self.psi_grid)
         positions = disc_box_grid(problem.q_prev, problem.reach, problem.area, s.drone_spacing_m, s.max_drone_points)
         _, p, q = problem.grid_search(table, positions, s.power_levels, s.coarse_power_levels, s.keep_positions)
         return problem.evaluate(p, q)
-
-
-class ReducedGradientPlanner(_ReducedPlannerBase):
-    """``rg-mpc``: coarse tabulated search, then projected gradient on the exact Phi."""
-
-    def __init__(self, config: ScenarioConfig, settings: ReducedSettings | None = None):
-        super().__init__(config, settings)
-        self._last: tuple[np.ndarray, np.ndarray] | None = None  # previous slot's (p, velocity)
 
     def reset(self) -> None:
         super().reset()
@@ -403,6 +438,7 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
     straight for it (``info["command_position"]``)."""
 
     settings_class = DeliverySettings
+    settings: DeliverySettings
 
     def __init__(self, config: ScenarioConfig, settings: DeliverySettings | None = None):
         super().__init__(config, settings)
@@ -440,8 +476,8 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
         if self._moves(snapshot.slot) == 1:
             return plan
         target = plan.drone_position  # where the next command goes out from: one move toward it now
-        step = project_disc_box(target, np.asarray(snapshot.drone_position, dtype=float), float(self.config.drone_reach_m),
-                                tuple(self.config.area_m))
+        step = project_disc_box(target, np.asarray(snapshot.drone_position, dtype=float),
+                                float(self.config.drone_reach_m), self.config.area_m)
         return replace(plan, drone_position=step, info={**plan.info, "command_position": target})
 
 
@@ -449,6 +485,7 @@ class GlobalPlanner(_ReducedPlannerBase):
     """``global-mpc``: fine tabulated search, exact power split on a grid, exact polish."""
 
     settings_class = GlobalSettings
+    settings: GlobalSettings
 
     def __init__(self, config: ScenarioConfig, settings: GlobalSettings | None = None):
         super().__init__(config, settings)

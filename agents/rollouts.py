@@ -11,8 +11,9 @@ decision time or a seed means the same thing in each of them.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Protocol
+from typing import Any, Protocol, cast
 
 import gymnasium as gym
 import numpy as np
@@ -28,6 +29,12 @@ class Actor(Protocol):
     def reset(self, seed: int | None = None) -> None: ...
 
     def act(self, obs: np.ndarray) -> np.ndarray: ...
+
+
+class _Snapshots(Protocol):
+    """A lawn environment (unwrapped): its state as a planner's :class:`Snapshot`."""
+
+    def snapshot(self) -> Snapshot: ...
 
 
 @dataclass(frozen=True)
@@ -48,7 +55,7 @@ class Episode:
     """What a rollout produced: its length, how it ended, the last step's info and the decision
     times of every slot."""
 
-    seed: int
+    seed: int | None
     length: int
     terminated: bool
     truncated: bool
@@ -88,7 +95,7 @@ def rollout(env: gym.Env, policy: Actor, seed: int | None, *, on_step: Callable[
     decision_s: list[float] = []
     terminated = truncated = False
     while True:
-        snapshot = env.unwrapped.snapshot() if snapshots else None
+        snapshot = cast(_Snapshots, env.unwrapped).snapshot() if snapshots else None
         start = time.perf_counter()
         action = policy.act(obs)
         decision_s.append(time.perf_counter() - start)

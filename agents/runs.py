@@ -9,11 +9,15 @@ import importlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from lawn_env import PARALLEL_ENV_ID, ScenarioConfig
 
 from .errors import MissingExtra
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.base_class import BaseAlgorithm
+    from stable_baselines3.common.policies import BasePolicy
 
 __all__ = ["ALGORITHMS", "RL_EXTRA", "RunDir", "algorithm_class", "policy_network_class", "read_json", "read_run"]
 
@@ -30,7 +34,7 @@ ALGORITHMS: dict[str, tuple[str, str]] = {
 RL_EXTRA = "bash scripts/setup.sh full, or pip install torch==2.13.0 && pip install -e '.[rl]'"
 
 
-def _import(spec: str) -> type:
+def _import(spec: str) -> Any:  # the class named by spec, known at run time
     module, name = spec.split(":")
     try:
         return getattr(importlib.import_module(module), name)
@@ -43,14 +47,14 @@ def _check_algorithm(algo: str, where: str) -> None:
         raise ValueError(f"{where}unknown algorithm {algo!r}; valid: {', '.join(ALGORITHMS)}")
 
 
-def algorithm_class(algo: str, where: str = "") -> type:
+def algorithm_class(algo: str, where: str = "") -> type[BaseAlgorithm]:
     """The SB3 algorithm class of ``algo`` (``ppo``, ``a2c``, ``sac``, ``td3``); ``where`` prefixes the
     error (the file or option the name came from)."""
     _check_algorithm(algo, where)
     return _import(ALGORITHMS[algo][0])
 
 
-def policy_network_class(algo: str, where: str = "") -> type:
+def policy_network_class(algo: str, where: str = "") -> type[BasePolicy]:
     """The class of the network a shipped agent of ``algo`` keeps (:data:`ALGORITHMS`)."""
     _check_algorithm(algo, where)
     return _import(ALGORITHMS[algo][1])
@@ -70,7 +74,8 @@ def read_json(path: Path, context: str = "", missing: str = "") -> Any:
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{prefix}{path} is not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+        raise ValueError(f"{prefix}{path} is not valid JSON (line {exc.lineno}, column {exc.colno}: "
+                         f"{exc.msg})") from None
 
 
 @dataclass(frozen=True)

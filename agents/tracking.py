@@ -55,7 +55,7 @@ def pid_rollout(x_aug: np.ndarray, reference: np.ndarray, integral: np.ndarray, 
     x = x_aug.copy()
     integ = integral.copy()
     out = np.empty((x.shape[0], model.horizon, 2))
-    first_integral = None
+    first_integral: np.ndarray | None = None
     for i in range(model.horizon):
         ref = reference[:, i]
         e_pos = ref[:, POSITION] - x[:, POSITION]
@@ -68,6 +68,7 @@ def pid_rollout(x_aug: np.ndarray, reference: np.ndarray, integral: np.ndarray, 
             du = np.zeros_like(du)
         out[:, i] = du
         x = step_augmented(x, du, model.a_aug, model.b_aug)
+    assert first_integral is not None  # the horizon has at least one step
     return out, first_integral
 
 

@@ -6,17 +6,19 @@ builds the PettingZoo environment. The physics lives in :mod:`lawn_env.channel`,
 :mod:`lawn_env.dynamics`, :mod:`lawn_env.drone` and :mod:`lawn_env.references`.
 """
 
+from typing import Any
+
 from . import kernel_cache
 
 kernel_cache.install()  # before any kernel is decorated: their cache follows every source file they use
 
 from gymnasium.envs.registration import register, registry
 
-from . import channel, dynamics, drone, presets, references
+from . import channel, drone, dynamics, presets, references
 from .config import ChannelConfig, ControlConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 from .core import Simulation, Snapshot
-from .errors import ConfigError, UnknownConfigKeyError
 from .envs import CommEnv, JointEnv, LawnParallelEnv, MixedFleetEnv, env, parallel_env, raw_env
+from .errors import ConfigError, UnknownConfigKeyError
 from .interface import RL_INTERFACE, RLInterface, action_codec
 from .presets import resolve_config
 from .spaces import ObservationLayout
@@ -53,7 +55,7 @@ def central_env_id(env_id: str) -> str:
 #: and a made env's ``spec.max_episode_steps`` reports that length (``LawnEnv.spec``). A
 #: registered limit could only disagree with a caller's ``num_slots``, and Gymnasium's native
 #: vector entry points admit no extra registered wrappers to reconcile the two.
-_EPISODE = dict(disable_env_checker=False)
+_EPISODE: dict[str, Any] = {"disable_env_checker": False}
 #: Native vector envs (``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")``).
 VECTOR_ENTRY_POINTS = {"lawn/Joint-v0": "lawn_env.envs.vector:JointVectorEnv",
                        "lawn/Comm-v0": "lawn_env.envs.vector:CommVectorEnv"}

@@ -229,12 +229,12 @@ class LinkParams:
         with (``LinkParams.from_config(config, planning=True)``)."""
         return self.success_at(self.outage_argument_sq(power_w, distance_sq_m2))
 
-    def success_slope_term(self, x: npt.ArrayLike) -> np.ndarray:
+    def success_slope_term(self, x: np.ndarray | float) -> np.ndarray:
         """g = (-d psi / dx) (x - x_ce) >= 0 at outage arguments ``x``: d psi/dp = g / p and
         d psi/d(d^2) = -g / d^2 (x falls with p and grows with d^2; x_ce is the part power cannot remove)."""
         return _law(float(self.m), x, DENSITY) * (x - self.coefficients[1])
 
-    def success_power_slope(self, x: npt.ArrayLike, power_w: npt.ArrayLike) -> np.ndarray:
+    def success_power_slope(self, x: np.ndarray | float, power_w: npt.ArrayLike) -> np.ndarray:
         """d psi / d p (1/W) at outage arguments ``x`` of powers ``power_w`` (floored at
         ``POWER_FLOOR_W`` as the arguments were)."""
         return self.success_slope_term(x) / power_w

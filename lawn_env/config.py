@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import dataclasses
 import typing
-from typing import Annotated, Any, Literal, Mapping
+from collections.abc import Mapping
+from typing import Annotated, Any, Literal
 
 import numpy as np
-
 from pydantic import ConfigDict, Field, model_validator
 from pydantic.dataclasses import dataclass
 
@@ -40,7 +40,6 @@ __all__ = [
 _PYDANTIC = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True, use_attribute_docstrings=True)
 
 PositiveFloat = Annotated[float, Field(gt=0)]
-Probability = Annotated[float, Field(gt=0, lt=1)]
 PositiveInt = Annotated[int, Field(ge=1, strict=True)]
 
 #: Reference-path families of :mod:`lawn_env.references` (MODEL.md §1).
@@ -139,7 +138,7 @@ class ControlConfig:
     "Planning under delivery": a lost command is seen at the next slot and replanned) *(decided)*."""
 
     @model_validator(mode="after")
-    def _check_weights(self) -> "ControlConfig":
+    def _check_weights(self) -> ControlConfig:
         if any(w < 0 or w > 1e6 for w in self.q1_diag) or min(self.q1_diag[:2]) <= 0:
             raise ValueError(f"control.q1_diag={self.q1_diag}: entries must lie in [0, 1e6] and the two position "
                              "weights be > 0 (the DARE of the terminal weight needs the position error in the cost; "
@@ -170,7 +169,7 @@ class ReferenceConfig:
     demands up to ~4 a_max at its corners."""
 
     @model_validator(mode="after")
-    def _check_families(self) -> "ReferenceConfig":
+    def _check_families(self) -> ReferenceConfig:
         if not self.families:
             raise ValueError("reference.families=(): give at least one of " + ", ".join(REFERENCE_FAMILIES))
         unknown = [f for f in self.families if f not in REFERENCE_FAMILIES]
@@ -255,7 +254,7 @@ class ScenarioConfig:
     disturbance: DisturbanceConfig = dataclasses.field(default_factory=DisturbanceConfig)
 
     @model_validator(mode="after")
-    def _check_scenario(self) -> "ScenarioConfig":
+    def _check_scenario(self) -> ScenarioConfig:
         x0, x1, y0, y1 = self.area_m
         if not (x1 > x0 and y1 > y0):
             raise ValueError(f"area_m={self.area_m}: need x_min < x_max and y_min < y_max")
@@ -328,14 +327,14 @@ class ScenarioConfig:
         return _to_plain(dataclasses.asdict(self))
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "ScenarioConfig":
+    def from_dict(cls, data: Mapping[str, Any]) -> ScenarioConfig:
         """Build from a nested dict; unknown keys raise :class:`UnknownConfigKeyError` naming them."""
         if not isinstance(data, Mapping):
             raise TypeError(f"config must be a mapping, got {type(data).__name__}")
         _check_keys(cls, data, "")
         return cls(**dict(data))
 
-    def override(self, overrides: Mapping[str, Any] | None = None, **kwargs: Any) -> "ScenarioConfig":
+    def override(self, overrides: Mapping[str, Any] | None = None, **kwargs: Any) -> ScenarioConfig:
         """Return a copy with fields replaced.
 
         Keys are top-level field names, dotted paths (``"channel.blocklength"``), or a section
@@ -351,8 +350,8 @@ class ScenarioConfig:
             for depth, part in enumerate(parts):
                 if not isinstance(node, dict) or part not in node:
                     where = ".".join(parts[: depth + 1])
-                    raise UnknownConfigKeyError(f"unknown config key {where!r} (unexpected keyword argument {where!r}); "
-                                                f"valid keys: {_valid_keys(self)}", [where])
+                    raise UnknownConfigKeyError(f"unknown config key {where!r} (unexpected keyword argument "
+                                                f"{where!r}); valid keys: {_valid_keys(self)}", [where])
                 if depth == len(parts) - 1:
                     if isinstance(node[part], dict) and isinstance(value, Mapping):
                         for sub in value:

@@ -21,9 +21,10 @@ none of its own. It knows nothing about action or observation encodings; the env
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, NamedTuple, Sequence
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
@@ -32,11 +33,12 @@ from . import channel, drone, dynamics, references
 from .config import DisturbanceConfig, ScenarioConfig
 from .dynamics import POSITION, PredictionModel, initial_state, measure, packed_step_matrices
 
-#: Offsets of the augmented state's parts (:data:`lawn_env.dynamics.POSITION`, ...) for the kernels.
-POS, VEL, ACCEL = dynamics.POSITION.start, dynamics.VELOCITY.start, dynamics.ACCELERATION.start
+# the first columns of dynamics.POSITION / VELOCITY / ACCELERATION in x~, as integers the kernels can index with
+_POS0, _VEL0, _ACCEL0 = dynamics.POSITION.start, dynamics.VELOCITY.start, dynamics.ACCELERATION.start
 
-__all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Snapshot", "Simulation", "ScenarioView", "Trail",
-           "draw_slot", "reset", "step", "step_rows", "episode_metrics", "control_costs", "link_outage", "link_success",
+__all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Snapshot", "Simulation", "ScenarioView",
+           "Trail", "draw_slot", "reset", "step", "step_rows", "episode_metrics", "control_costs", "link_outage",
+           "link_success",
            "SLOT_CONSTANTS", "TOTALS"]
 
 
@@ -139,8 +141,8 @@ def _links(inp, c, out, rows):  # pragma: no cover - compiled
         sending = send[b % send.shape[0]]
         for i in range(k):
             r = b * k + i
-            d2 = channel.link_distance_sq(x_aug[b, i, POS] - drone_next[b, 0], x_aug[b, i, POS + 1] - drone_next[b, 1],
-                                          altitude_sq)
+            d2 = channel.link_distance_sq(x_aug[b, i, _POS0] - drone_next[b, 0],
+                                          x_aug[b, i, _POS0 + 1] - drone_next[b, 1], altitude_sq)
             x = channel.link_argument(d2, power[b, i], c_d, c_ce)
             outage[b, i] = channel.outage_law(m, x, channel.OUTAGE)
             ok = channel.command_delivered(fading[b, i], x)
@@ -148,7 +150,7 @@ def _links(inp, c, out, rows):  # pragma: no cover - compiled
             for j in range(6):
                 rows[r, j] = x_aug[b, i, j]
             for a in range(2):
-                du = dynamics.saturate(x_aug[b, i, ACCEL + a], increment[b, i, a], accel_max) if sending else 0.0
+                du = dynamics.saturate(x_aug[b, i, _ACCEL0 + a], increment[b, i, a], accel_max) if sending else 0.0
                 rows[r, 6 + a] = du * (1.0 if ok else 0.0)
 
 
@@ -162,7 +164,7 @@ def _lag(x_aug, applied, lag_alpha, applied_next, flat, accel_effect_t):  # prag
         for i in range(k):
             r = b * k + i
             for a in range(2):
-                commanded = x_aug[b, i, ACCEL + a] + flat[r, 6 + a]
+                commanded = x_aug[b, i, _ACCEL0 + a] + flat[r, 6 + a]
                 applied_next[b, i, a] = dynamics.lagged_acceleration(applied[b, i, a], commanded, lag_alpha)
                 gap[r, a] = applied_next[b, i, a] - commanded
     correction = gap @ accel_effect_t
@@ -178,11 +180,11 @@ def _process_noise(packed, process_position, process_velocity):  # pragma: no co
     for b in range(process_position.shape[0]):
         for i in range(k):
             for a in range(2):
-                packed[b, i, POS + a] += process_position[b, i, a]
+                packed[b, i, _POS0 + a] += process_position[b, i, a]
     for b in range(process_velocity.shape[0]):
         for i in range(k):
             for a in range(2):
-                packed[b, i, VEL + a] += process_velocity[b, i, a]
+                packed[b, i, _VEL0 + a] += process_velocity[b, i, a]
 
 
 @numba.njit(cache=True, inline="always")
@@ -287,7 +289,7 @@ class SimParams:
     max_speed: float
     power_budget_w: float
     drone_start: np.ndarray  # (2,)
-    envelope: references.Envelope
+    envelope: references.Envelope | None  # None: the paths are not fitted into the AGVs' envelope
     fixed_paths: list | None
     fixed_reference: np.ndarray | None  # (K, T, 6) of the fixed path set
     disturbance: DisturbanceConfig
@@ -306,7 +308,8 @@ class SimParams:
         q1 = np.asarray(config.control.q1_diag, dtype=float)
         q2 = np.asarray(config.control.q2_diag, dtype=float)
         packed_t, packed_w = packed_step_matrices(model.a_aug, model.b_aug, q1, q2)
-        area = tuple(float(v) for v in config.area_m)
+        x0, x1, y0, y1 = config.area_m
+        area = (float(x0), float(x1), float(y0), float(y1))
         envelope = references.Envelope.from_config(config, steps)
         fixed_paths = references.paper_paths(k, area, envelope) if config.uses_paper_paths else None
         fixed = references.reference_table(fixed_paths, steps, config.slot_s) if fixed_paths is not None else None
@@ -324,7 +327,8 @@ class SimParams:
             power_budget_w=config.power_budget_w, drone_start=np.array(config.drone.start_m, dtype=float),
             envelope=envelope, fixed_paths=fixed_paths, fixed_reference=fixed,
             disturbance=d, disturbed=d.active,
-            lag_alpha=lag_alpha, constants=_readonly(np.array([(lag_alpha, config.control.accel_max_mps2, link.altitude_sq,
+            lag_alpha=lag_alpha,
+            constants=_readonly(np.array([(lag_alpha, config.control.accel_max_mps2, link.altitude_sq,
                                            *link.coefficients, link.m)], dtype=SLOT_CONSTANTS)),
             every_slot=np.ones(1, dtype=bool),
         )
@@ -371,7 +375,7 @@ def draw_slot(rng: np.random.Generator, params: SimParams, num: int = 1) -> Slot
         return SlotDraws(fading)
     pos = rng.normal(0.0, d.process_noise_position_m, (num, k, 2)) if d.process_noise_position_m > 0 else None
     vel = rng.normal(0.0, d.process_noise_velocity_mps, (num, k, 2)) if d.process_noise_velocity_mps > 0 else None
-    meas = (None, None)
+    meas: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
     if params.measurement_noise:
         meas = (rng.normal(0.0, d.measurement_noise_position_m, (num, k, 2)),
                 rng.normal(0.0, d.measurement_noise_velocity_mps, (num, k, 2)))
@@ -420,7 +424,7 @@ def empty_state(params: SimParams, num: int) -> SimState:
     """B scenarios before their first reset (zeros; :func:`reset` starts them)."""
     k, steps = params.num_agvs, params.steps
     fixed = params.fixed_reference
-    reference = np.broadcast_to(fixed, (num,) + fixed.shape) if fixed is not None else np.zeros((num, k, steps, 6))
+    reference = np.broadcast_to(fixed, (num, *fixed.shape)) if fixed is not None else np.zeros((num, k, steps, 6))
     x = np.zeros((num, k, 6))
     return SimState(
         x_aug=x, tracking_error=np.zeros((num, k, 6)), x_obs=x, error_obs=np.zeros((num, k, 6)),
@@ -541,7 +545,7 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     packed, err = rows[0], rows[1]
     x_next, error, applied_increment, slot = packed[:, :, 0:6], err[:, :, 0:6], packed[:, :, 6:8], state.slot + 1
     x_obs, error_obs = x_next, error
-    if draws.measurement_position is not None:
+    if draws.measurement_position is not None and draws.measurement_velocity is not None:  # drawn together
         x_obs, error_obs = measure(x_next, error, draws.measurement_position, draws.measurement_velocity)
     new = SimState(x_next, error, x_obs, error_obs, applied, drone_next, slot, power, delivered, outage_p,
                    state.reference, state.paths, totals)  # SimState's field order
@@ -611,8 +615,8 @@ def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np
     columns = zip(n.tolist(), control_costs(state, rows).tolist(), t[:, 0].tolist(), t[:, 1].tolist(),
                   np.sqrt(sq_error.sum(axis=1) / (n * k)).tolist(), np.sqrt(sq_error / n[:, None]).tolist(),
                   (outages.sum(axis=1) / nk).tolist(), (t[:, 2] / nk).tolist(), (outages / per).tolist(),
-                  (power / n[:, None]).tolist(), t[:, 3].tolist())
-    return [dict(zip(_METRICS, values)) for values in columns]
+                  (power / n[:, None]).tolist(), t[:, 3].tolist(), strict=True)
+    return [dict(zip(_METRICS, values, strict=True)) for values in columns]
 
 
 _METRICS = ("slots", "control_cost", "tracking_cost", "effort_cost", "rmse_m", "rmse_per_agv_m", "outage_rate",
@@ -642,6 +646,20 @@ class Simulation:
     """B scenarios of one config (``num_envs``, 1 for the single environments): the frozen
     :class:`SimParams` and the current :class:`SimState`, advanced by :func:`step` and restarted
     by :func:`reset`. The state's arrays read as attributes (``sim.x_aug`` (B, K, 6), ...)."""
+
+    # the state's arrays, properties set after the class from STATE_ARRAYS (every scenario's)
+    x_aug: np.ndarray
+    tracking_error: np.ndarray
+    x_obs: np.ndarray
+    error_obs: np.ndarray
+    applied: np.ndarray
+    drone_position: np.ndarray
+    last_power_w: np.ndarray
+    last_delivered: np.ndarray
+    last_outage_probability: np.ndarray
+    reference: np.ndarray
+    slot: np.ndarray
+    paths: list
 
     def __init__(self, config: ScenarioConfig, num_envs: int = 1):
         if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
@@ -695,6 +713,18 @@ class Simulation:
 class ScenarioView:
     """Scenario ``i`` of a :class:`Simulation` as single-scenario arrays (views of row i): what
     the renderer, the planners' snapshots and the single environments' accessors read."""
+
+    # the state's arrays, properties set after the class from STATE_ARRAYS (row i's)
+    x_aug: np.ndarray
+    tracking_error: np.ndarray
+    x_obs: np.ndarray
+    error_obs: np.ndarray
+    applied: np.ndarray
+    drone_position: np.ndarray
+    last_power_w: np.ndarray
+    last_delivered: np.ndarray
+    last_outage_probability: np.ndarray
+    reference: np.ndarray
 
     def __init__(self, sim: Simulation, i: int):
         self._sim, self.i = sim, int(i)
@@ -773,8 +803,8 @@ def _row_array(name: str) -> property:
 for _name in STATE_ARRAYS:
     setattr(Simulation, _name, _state_array(_name))
     setattr(ScenarioView, _name, _row_array(_name))
-Simulation.slot = _state_array("slot")
-Simulation.paths = _state_array("paths")
+for _name in ("slot", "paths"):
+    setattr(Simulation, _name, _state_array(_name))
 
 
 class Trail:

@@ -46,11 +46,11 @@ def hypot(a: float, b: float) -> float:  # pragma: no cover - compiled
     reproduces the interpreter's value to the last bit whenever the larger magnitude is a normal
     number (when both are subnormal, to a subnormal's last place or two)."""
     x0, x1 = abs(a), abs(b)
-    found_nan = x0 != x0 or x1 != x1
+    found_nan = math.isnan(x0) or math.isnan(x1)
     top = 0.0
-    if x0 == x0 and x0 > top:
+    if not math.isnan(x0) and x0 > top:
         top = x0
-    if x1 == x1 and x1 > top:
+    if not math.isnan(x1) and x1 > top:
         top = x1
     if math.isinf(top):
         return top
@@ -86,16 +86,18 @@ def hypot(a: float, b: float) -> float:  # pragma: no cover - compiled
 @numba.njit(cache=True, inline="always")
 def _clip(v, lo, hi):  # pragma: no cover - compiled
     """Python's ``min(max(v, lo), hi)``, signed zeros and all."""
-    if lo > v:
+    if lo > v:  # noqa: PLR1730 - numba's max/min differ from Python's on signed zeros and NaN
         v = lo
-    if hi < v:
+    if hi < v:  # noqa: PLR1730
         v = hi
     return v
 
 
 @numba.njit(cache=True)
-def move_rows(position: np.ndarray, velocity: np.ndarray, max_speed: float, slot_s: float, x0: float, x1: float,
-              y0: float, y1: float, out: np.ndarray) -> None:  # pragma: no cover - compiled
+def move_rows(  # noqa: PLR0913 - a compiled kernel (up to 12 arguments)
+    position: np.ndarray, velocity: np.ndarray, max_speed: float, slot_s: float, x0: float, x1: float,
+    y0: float, y1: float, out: np.ndarray,
+) -> None:  # pragma: no cover - compiled
     """The compiled rule of :func:`move_drone` on rows: positions and velocities (B, 2), the next
     positions written to ``out`` (B, 2); other kernels call it."""
     for i in range(position.shape[0]):
@@ -108,7 +110,7 @@ def move_rows(position: np.ndarray, velocity: np.ndarray, max_speed: float, slot
 
 
 @numba.njit(cache=True)
-def _toward(position, target, max_speed, slot_s, x0, x1, y0, y1, out):  # pragma: no cover - compiled
+def _toward(position, target, max_speed, slot_s, x0, x1, y0, y1, out):  # noqa: PLR0913  # pragma: no cover - compiled
     reach = max_speed * slot_s
     velocity = np.empty((position.shape[0], 2))
     for i in range(position.shape[0]):

@@ -108,9 +108,14 @@ class ScenarioSettings(Protocol):
     """What this module reads of a scenario's config (a :class:`lawn_env.config.ScenarioConfig`,
     which validates itself with this module: a protocol, so the two do not import each other)."""
 
-    slot_s: float
-    control: Any  # horizon, q1_diag, q2_diag
-    disturbance: Any  # control_period_slots, period_aware_planning
+    @property
+    def slot_s(self) -> float: ...
+
+    @property
+    def control(self) -> Any: ...  # horizon, q1_diag, q2_diag
+
+    @property
+    def disturbance(self) -> Any: ...  # control_period_slots, period_aware_planning
 
 
 def agv_matrices(slot_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -136,7 +141,7 @@ def lag_matrices(slot_s: float, lag_alpha: float) -> tuple[np.ndarray, np.ndarra
     in the slot before), the input Delta-u. The AGV commands ``u = u[n-1] + Delta-u``, applies
     ``a = alpha a[n-1] + (1 - alpha) u`` and moves with it, as the simulator's slot does (its
     acceleration columns of A~ take ``a`` in place of ``u``). Returns (A (8, 8), B (8, 2))."""
-    a_aug, b_aug = augmented_matrices(slot_s)
+    a_aug, _ = augmented_matrices(slot_s)
     effect = a_aug[0:4, 4:6]  # how an acceleration moves position and velocity over a slot
     eye = np.eye(2)
     # the lag's coefficients on the applied and the commanded acceleration, from the simulator's law
@@ -250,7 +255,8 @@ class PredictionModel:
     ftq4: np.ndarray  # F' Q4, (2N_p, 6(N_p+1))
     increment_sum: np.ndarray  # T, (2N_p, 2N_p)
     q1_tiled: np.ndarray  # diag(Q1) repeated N_p times: Q4's diagonal blocks, (6 N_p,)
-    key: tuple  # (slot_s, horizon, q1_diag, q2_diag[, terminal_success, lag_alpha]): what it is built from, its cache key
+    # (slot_s, horizon, q1_diag, q2_diag[, terminal_success, lag_alpha]): what it is built from, its cache key
+    key: tuple
 
     @classmethod
     def from_config(cls, config: ScenarioSettings, terminal_success: float = 1.0, lag: bool = False) -> PredictionModel:
@@ -271,7 +277,8 @@ class PredictionModel:
 
     @classmethod
     def from_key(cls, key: tuple) -> PredictionModel:
-        """The model built from :attr:`key`'s values (slot_s, horizon, q1_diag, q2_diag[, terminal_success, lag_alpha])."""
+        """The model built from :attr:`key`'s values (slot_s, horizon, q1_diag, q2_diag[, terminal_success,
+        lag_alpha])."""
         return _build_model(*key)
 
     @property
@@ -290,7 +297,7 @@ class PredictionModel:
         2-D product over all leading axes: numpy's stacked (B, K, 6) @ (6, m) is several times slower)."""
         lead = x_aug.shape[:-1]
         flat = np.reshape(x_aug, (-1, x_aug.shape[-1])) @ self.c.T
-        return flat.reshape(lead + (-1,)) - chi_ref.reshape(lead + (-1,))
+        return flat.reshape((*lead, -1)) - chi_ref.reshape((*lead, -1))
 
     def cost_to_go(self, r: np.ndarray) -> np.ndarray:
         """r' Q4 r for residuals r (..., 6(N_p+1)): Q4 = diag(Q1 x N_p, Q3) with Q1 diagonal, so the
@@ -322,15 +329,15 @@ def _build_model(slot_s: float, horizon: int, q1_diag: tuple, q2_diag: tuple,
         c, f = prediction_matrices(a_aug, b_aug, horizon)
     q4, q5 = horizon_weights(q1, q2, q3, horizon)
     ftq4 = f.T @ q4
-    arrays = dict(
-        a_aug=a_aug, b_aug=b_aug, q1=q1, q2=q2, q3=q3, c=c, f=f, q4=q4, q5=q5,
-        ftq4f=ftq4 @ f, ftq4=ftq4, increment_sum=increment_sum_matrix(horizon),
-        q1_tiled=np.tile(np.asarray(q1_diag, dtype=float), horizon),
-    )
+    arrays = {
+        "a_aug": a_aug, "b_aug": b_aug, "q1": q1, "q2": q2, "q3": q3, "c": c, "f": f, "q4": q4, "q5": q5,
+        "ftq4f": ftq4 @ f, "ftq4": ftq4, "increment_sum": increment_sum_matrix(horizon),
+        "q1_tiled": np.tile(np.asarray(q1_diag, dtype=float), horizon),
+    }
     for arr in arrays.values():
         arr.setflags(write=False)
     extra = (terminal_success, lag_alpha) if (terminal_success, lag_alpha) != (1.0, -1.0) else ()
-    key = (slot_s, horizon, q1_diag, q2_diag) + extra
+    key = (slot_s, horizon, q1_diag, q2_diag, *extra)
     return PredictionModel(slot_s=slot_s, horizon=horizon, key=key, **arrays)
 
 
@@ -365,7 +372,7 @@ def cost_coefficients(model: PredictionModel, linear: np.ndarray, constant: np.n
     r'Q4 r (K,) (see :meth:`lawn_env.mpc.OutageAwareMPC.prepare`); the one implementation of the
     coefficients of P4. The envelope derivative of the QP's value in psi is ``2 psi L + 2 S``.
     ``dmu`` (..., K, N_p, 2) may carry leading axes of its own (one per psi value of a table)."""
-    z = dmu.reshape(dmu.shape[:-2] + (-1,))
+    z = dmu.reshape((*dmu.shape[:-2], -1))
     lcoef = ((z @ model.ftq4f) * z).sum(axis=-1)
     scoef = (linear * z).sum(axis=-1)
     wcoef = ((z @ model.q5) * z).sum(axis=-1) + constant

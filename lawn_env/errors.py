@@ -51,7 +51,8 @@ def _number(x: Any) -> str:
 
 
 def _bounds(metadata: Sequence[Any]) -> str:
-    lo = hi = None
+    lo: tuple[str, Any] | None = None
+    hi: tuple[str, Any] | None = None
     for m in metadata:
         if isinstance(m, annotated_types.Ge):
             lo = ("[", m.ge)
@@ -74,7 +75,7 @@ def _bounds(metadata: Sequence[Any]) -> str:
     return ""
 
 
-def describe_allowed(annotation: Any, metadata: Sequence[Any] = ()) -> str:
+def describe_allowed(annotation: Any, metadata: Sequence[Any] = ()) -> str:  # noqa: PLR0911 - one return per kind of type
     """What a field of this type and these constraints allows, in words: ``an integer in [1, 256]``,
     ``one of 'auto', 'paper', 'random'``, ``a sequence of 6 numbers``, ``a number in (0, 1] or None``."""
     origin, args = typing.get_origin(annotation), typing.get_args(annotation)
@@ -107,7 +108,7 @@ def _fields(cls: Any) -> dict[str, Any]:
 _MISSING = object()
 
 
-def _given(cls: Any, args: tuple, kwargs: Mapping[str, Any], names: Sequence[str]) -> Any:
+def _given(cls: Any, args: tuple[Any, ...], kwargs: Mapping[str, Any], names: Sequence[str]) -> Any:
     """The value the caller gave at the field path ``names`` (positional or keyword, through nested
     dicts and dataclasses), or ``_MISSING``."""
     if not names:
@@ -137,25 +138,26 @@ def _reason(msg: str) -> str:
     return msg[:1].lower() + msg[1:] if msg[1:2].islower() else msg
 
 
-def _locate(cls: Any, loc: tuple) -> tuple[list[str], Any, Any, tuple]:
+def _locate(cls: Any, loc: tuple[Any, ...]) -> tuple[list[str], Any, Any, tuple[Any, ...]]:
     """Walk an error's ``loc`` through the (nested) dataclass fields of ``cls``: the field names on
     the way, the last field's ``FieldInfo`` (None at the root), the dataclass it holds (None for a
     leaf) and what is left of ``loc`` past the fields (tuple indices, an unknown key)."""
-    owner, names, field = cls, [], None
+    owner, field = cls, None
+    names: list[str] = []
     for i, part in enumerate(loc):
         fields = _fields(owner) if owner is not None else {}
-        if i == 0 and isinstance(part, int) and part < len(fields):  # a positional argument
-            part = list(fields)[part]
-        if not (isinstance(part, str) and part in fields):
+        positional = i == 0 and isinstance(part, int) and part < len(fields)
+        name = list(fields)[part] if positional else part
+        if not (isinstance(name, str) and name in fields):
             return names, field, owner, loc[i:]
-        names.append(part)
-        field = fields[part]
+        names.append(name)
+        field = fields[name]
         owner = field.annotation if isinstance(field.annotation, type) and dataclasses.is_dataclass(field.annotation) \
             else None
     return names, field, owner, ()
 
 
-def _reason_at(kind: str, msg: str, rest: tuple, value: Any) -> str:
+def _reason_at(kind: str, msg: str, rest: tuple[Any, ...], value: Any) -> str:
     """Why a field's value is refused, in words: tuple entries by index, a short tuple by its length."""
     if rest and isinstance(rest[0], int) and kind == "missing":
         return f"has {len(value) if isinstance(value, Sequence) else 'too few'} entries"
@@ -167,7 +169,7 @@ def _reason_at(kind: str, msg: str, rest: tuple, value: Any) -> str:
 class _Report:
     """The problems of one ``ValidationError``, gathered by field (:func:`readable_errors`)."""
 
-    def __init__(self, cls: Any, args: tuple, kwargs: Mapping[str, Any], prefix: str):
+    def __init__(self, cls: Any, args: tuple[Any, ...], kwargs: Mapping[str, Any], prefix: str):
         self.cls, self.args, self.kwargs, self.prefix = cls, args, kwargs, prefix
         self.unknown: list[tuple[str, str, str]] = []  # (dotted key, the keyword, valid keys there)
         self.problems: dict[str, dict[str, Any]] = {}  # dotted field -> value, reasons, allowed
@@ -179,8 +181,8 @@ class _Report:
         cls, prefix = self.cls, self.prefix
         if kind == "unexpected_positional_argument":  # one line, however many arguments are too many
             fields = list(_fields(cls))
-            self.positional[:] = [f"{len(self.args)} positional arguments {self.args!r}: {cls.__name__} takes at most "
-                                  f"{len(fields)} (allowed: {', '.join(fields)} in this order, or as keywords)"]
+            self.positional[:] = [(f"{len(self.args)} positional arguments {self.args!r}: {cls.__name__} takes at "
+                                   f"most {len(fields)} (allowed: {', '.join(fields)} in this order, or as keywords)")]
             return
         names, field, owner, rest = _locate(cls, loc)
         if kind in ("unexpected_keyword_argument", "extra_forbidden"):
@@ -203,7 +205,7 @@ class _Report:
         if reason not in entry["reasons"]:
             entry["reasons"].append(reason)
 
-    def error(self, noun: str, fallback: list[Mapping[str, Any]]) -> ConfigError:
+    def error(self, noun: str, fallback: Sequence[Mapping[str, Any]]) -> ConfigError:
         parts = [f"{p}={e['value']!r}: {', '.join(e['reasons'])}"
                  + (f" (allowed: {e['allowed']})" if e["allowed"] else "") for p, e in self.problems.items()]
         parts += self.remarks + self.positional
@@ -221,7 +223,7 @@ class _Report:
         return ConfigError(f"invalid {name}: " + "; ".join(parts), list(self.problems))
 
 
-def readable_errors(cls: Any, exc: ValidationError, args: tuple = (), kwargs: Mapping[str, Any] | None = None,
+def readable_errors(cls: Any, exc: ValidationError, args: tuple[Any, ...] = (), kwargs: Mapping[str, Any] | None = None,
                     prefix: str = "", noun: str = "config key") -> ConfigError:
     """The :class:`ConfigError` (or :class:`UnknownConfigKeyError`) for pydantic's ``exc``, raised
     building ``cls(*args, **kwargs)``: one line naming every bad field by its dotted path

@@ -55,26 +55,25 @@ control cost of full episodes of the unmodified scenario.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Mapping
+from collections.abc import Mapping
+from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
-from pydantic import ConfigDict, Field, model_validator
+from pydantic import ConfigDict, model_validator
 from pydantic.dataclasses import dataclass
 
 from .channel import LinkParams
-from .config import ScenarioConfig
-from .errors import raises_config_errors
+from .config import PositiveFloat, ScenarioConfig
 from .core import Decisions
 from .drone import toward
 from .dynamics import ACCELERATION, POSITION, PredictionModel, saturate_increment
+from .errors import raises_config_errors
 from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
 from .spaces import ActionCodec, DirectActions
 
-__all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FLOOR", "resolve_interface", "action_codec",
-           "AnchoredActions", "InterfaceLike"]
-
-PositiveFloat = Annotated[float, Field(gt=0)]
+__all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FLOOR", "resolve_interface",
+           "action_codec", "AnchoredActions", "InterfaceLike"]
 
 
 @raises_config_errors("interface.", "interface field")
@@ -99,7 +98,8 @@ class RLInterface:
     power_anchor: Literal["distance", "stake"] = "distance"
     """Anchored power prior: ``distance`` (equal outage) or ``stake`` (by what each command is worth)."""
     power_log_range: PositiveFloat = 2.0
-    """Anchored power: weights ``prior exp(a * power_log_range)``; links differ at most by e^(2 range) from the prior."""
+    """Anchored power: weights ``prior exp(a * power_log_range)``; links differ at most by e^(2 range) from the
+    prior."""
     residual_scale: PositiveFloat = 1.0
     """Anchored increments: residual ``a * residual_scale * Delta-a_max`` on the tracking controller."""
     layout: Literal["flat", "entities"] = "flat"
@@ -114,7 +114,7 @@ class RLInterface:
     ``power_anchor="distance"`` decoding an action uses no MPC at all."""
 
     @model_validator(mode="after")
-    def _check(self) -> "RLInterface":
+    def _check(self) -> RLInterface:
         if self.termination_distance_m is not None and self.reward != "scaled":
             raise ValueError(
                 f"termination_distance_m={self.termination_distance_m} needs reward='scaled' (got "
@@ -231,7 +231,7 @@ class AnchoredActions(ActionCodec):
         self._link = LinkParams.from_config(config, planning=True)
         self._stake = interface.power_anchor == "stake"
         self._delivery = config.control.law == "delivery"  # the anchor MPC plans as the Comm AGVs do
-        self._lqr_model = None
+        self._lqr_model: PredictionModel | None = None
         lqr = role == "joint" and interface.increment_anchor == "lqr"
         if (role == "joint" and not lqr) or self._stake:  # the residual's controller, and the stakes
             self.mpc = OutageAwareMPC.from_config(config, backend=mpc_backend)
@@ -285,8 +285,8 @@ class AnchoredActions(ActionCodec):
     def power_prior(self, x_aug: np.ndarray, drone_next: np.ndarray, data: SlotData | None = None) -> np.ndarray:
         """The anchored power split's weights, (..., K) (any leading batch axes; the zero action's
         powers are ``P_max prior / sum(prior)``): ``d_k^2`` from the drone's next position, or with
-        ``power_anchor="stake"`` ``(w_k d_k^(2a))^(1/(a+1))`` (a the outage law's order) for the stakes ``w_k`` of the slot's
-        prepared MPC ``data`` (module docstring), scaled so that the largest weight is 1."""
+        ``power_anchor="stake"`` ``(w_k d_k^(2a))^(1/(a+1))`` (a the outage law's order) for the stakes ``w_k`` of the
+        slot's prepared MPC ``data`` (module docstring), scaled so that the largest weight is 1."""
         return self._prior(self._distance_sq(x_aug, drone_next), data)
 
     def _prior(self, d2: np.ndarray, data: SlotData | None) -> np.ndarray:
@@ -295,6 +295,7 @@ class AnchoredActions(ActionCodec):
         if data is None:
             raise ValueError("power_anchor='stake' weighs the links by the slot's stakes: pass data, the slot's "
                              "prepared MPC data (layout.mpc.prepare(x_aug, reference, slot))")
+        assert self.mpc is not None  # built whenever the stake prior is on
         stake = self.mpc.command_stakes(data)
         floor = STAKE_FLOOR * stake.mean(axis=-1, keepdims=True)
         stake = np.where(floor > 0, np.maximum(stake, floor), 1.0)  # no stake anywhere: by distance alone
@@ -318,6 +319,7 @@ class AnchoredActions(ActionCodec):
             return saturate_increment(x_aug[..., ACCELERATION], free, self._accel_max)
         start = "stakes" if self._stake else None
         psi = np.ones(d2.shape) if self._delivery else self._link.success_sq(power_w, d2)
+        assert self.mpc is not None and data is not None  # the MPC anchor: built, and _prepare gave its data
         return self.mpc.solve_prepared(data, psi, start_from=start).increments[..., 0, :].copy()
 
     # ------------------------------------------------------------------ encode

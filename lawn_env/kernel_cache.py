@@ -18,8 +18,9 @@ from __future__ import annotations
 import functools
 import hashlib
 from pathlib import Path
+from typing import Any
 
-import numba.core.caching as caching
+from numba.core import caching
 
 __all__ = ["install", "package_stamp"]
 
@@ -41,8 +42,9 @@ def package_stamp() -> str:
 def _stamped(locator: type) -> type:
     """``locator`` whose stamp, for a file of this package, adds :func:`package_stamp`."""
 
-    class PackageStamped(locator):
-        def get_source_stamp(self):
+    # a class built on a class known only at run time: mypy sees its base as Any
+    class PackageStamped(locator):  # type: ignore[misc]
+        def get_source_stamp(self) -> Any:
             stamp = super().get_source_stamp()
             if Path(self._py_file).resolve().parent == PACKAGE:
                 return stamp, package_stamp()

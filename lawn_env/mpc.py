@@ -28,7 +28,7 @@ from __future__ import annotations
 import functools
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -114,8 +114,9 @@ class _OsqpBackend:
     """One persistent ``osqp.OSQP`` per problem index, warm-started, polished, tight tolerances."""
 
     name = "osqp"
-    settings = dict(eps_abs=1e-10, eps_rel=1e-10, polishing=True, polish_refine_iter=10,
-                    max_iter=50000, verbose=False, warm_starting=True)
+    settings: ClassVar[dict[str, Any]] = {"eps_abs": 1e-10, "eps_rel": 1e-10, "polishing": True,
+                                          "polish_refine_iter": 10, "max_iter": 50000, "verbose": False,
+                                          "warm_starting": True}
 
     def __init__(self, constraint_matrix: np.ndarray):
         import osqp
@@ -160,7 +161,8 @@ class _QpsolversBackend:
 
         if solver not in qpsolvers.available_solvers:
             raise ValueError(
-                f"backend 'qpsolvers:{solver}': solver not installed; available: {', '.join(qpsolvers.available_solvers)}"
+                f"backend 'qpsolvers:{solver}': solver not installed; "
+                f"available: {', '.join(qpsolvers.available_solvers)}"
             )
         self._qpsolvers = qpsolvers
         self._solver = solver
@@ -253,7 +255,8 @@ class OutageAwareMPC:
         self.backend = self._make_backend(backend)
         # increment bounds per slot phase: zero where move blocking holds the acceleration
         self._box_upper = np.stack([np.repeat(np.where(mask, self.accel_increment_max, 0.0), 2) for mask in masks])
-        self._last_bounds = None  # the reference backends' last bounds (their workspaces keep them)
+        # the reference backends' last bounds (their workspaces keep them)
+        self._last_bounds: tuple[np.ndarray, np.ndarray] | None = None
 
     def _make_backend(self, name: str):
         if name == "compiled":
@@ -313,10 +316,10 @@ class OutageAwareMPC:
         k, nx = self.num_agvs, self.model.state_dim
         window = self.model.horizon + 1
         lead = x_aug.shape[:-2]
-        if x_aug.shape[-2:] != (k, nx) or chi_ref.shape != lead + (k, window, 6):
+        if x_aug.shape[-2:] != (k, nx) or chi_ref.shape != (*lead, k, window, 6):
             raise ValueError(f"x_aug has shape {x_aug.shape} and chi_ref {chi_ref.shape}; this MPC (num_agvs={k}, "
-                             f"horizon={self.model.horizon}) needs ({k}, {nx}) and ({k}, {window}, 6), with any leading "
-                             f"batch axes (..., K, {nx}) and (..., K, N_p+1, 6)")
+                             f"horizon={self.model.horizon}) needs ({k}, {nx}) and ({k}, {window}, 6), with any "
+                             f"leading batch axes (..., K, {nx}) and (..., K, N_p+1, 6)")
         if self.control_period == 1:
             phase: Any = 0
         elif slot is None:
@@ -339,13 +342,13 @@ class OutageAwareMPC:
         u_prev = np.tile(flat_x[:, ACCELERATION], self.model.horizon)  # u[n-1] repeated over the horizon
         np.subtract(self.accel_max, u_prev, out=upper[:, n:])
         np.subtract(-self.accel_max, u_prev, out=lower[:, n:])
-        shape = lead + (k,)
+        shape = (*lead, k)
         return SlotData(
-            residual=r.reshape(shape + (-1,)),
-            linear=(r @ self.model.ftq4.T).reshape(shape + (n,)),  # F' Q4 r, so H = 2 psi (F' Q4 r)'
+            residual=r.reshape((*shape, -1)),
+            linear=(r @ self.model.ftq4.T).reshape((*shape, n)),  # F' Q4 r, so H = 2 psi (F' Q4 r)'
             constant=self.model.cost_to_go(r).reshape(shape),
-            lower=lower.reshape(shape + (2 * n,)),
-            upper=upper.reshape(shape + (2 * n,)),
+            lower=lower.reshape((*shape, 2 * n)),
+            upper=upper.reshape((*shape, 2 * n)),
             phase=phase,
         )
 
@@ -385,8 +388,8 @@ class OutageAwareMPC:
                                  f"{data.constant.shape}, with any leading axes of its own") from None
             psi = np.broadcast_to(psi, lead)
             count = int(np.prod(lead))
-            lower = _writable(np.broadcast_to(data.lower, lead + (2 * n,)).reshape(count, 2 * n))
-            upper = _writable(np.broadcast_to(data.upper, lead + (2 * n,)).reshape(count, 2 * n))
+            lower = _writable(np.broadcast_to(data.lower, (*lead, 2 * n)).reshape(count, 2 * n))
+            upper = _writable(np.broadcast_to(data.upper, (*lead, 2 * n)).reshape(count, 2 * n))
             phase = np.broadcast_to(np.asarray(data.phase, dtype=np.int64)[..., None], lead).reshape(count)
         q = ((2.0 * psi)[..., None] * data.linear).reshape(count, n)  # H' = 2 psi F'Q4 r
         s = (psi * psi).reshape(count)
@@ -402,7 +405,7 @@ class OutageAwareMPC:
         if self.control_period > 1:  # the blocked increments exactly zero (reference solvers return ~1e-14)
             z = np.clip(z, lower[:, :n], upper[:, :n])
         return MPCSolution(
-            increments=z.reshape(lead + (self.model.horizon, 2)),
+            increments=z.reshape((*lead, self.model.horizon, 2)),
             value=fval.reshape(lead) + data.constant,
             status=status.reshape(lead),
             iterations=iterations.reshape(lead),
@@ -460,7 +463,7 @@ class OutageAwareMPC:
         phase = np.asarray(data.phase, dtype=np.int64)
         first = (p - phase) % p  # the horizon index of the next command: 0 on a command slot
         lower, upper = data.lower.copy(), data.upper.copy()
-        held = np.zeros(data.lower.shape[:-1] + (2 * n,), dtype=bool)
+        held = np.zeros((*data.lower.shape[:-1], 2 * n), dtype=bool)
         first = np.broadcast_to(first[..., None], data.constant.shape)
         axes = 2 * np.minimum(first, n - 1)[..., None] + np.arange(2)
         np.put_along_axis(held, axes, True, axis=-1)

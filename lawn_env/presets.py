@@ -6,7 +6,8 @@ Register more with :func:`register` (a duplicate name raises).
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from .config import ChannelConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 
@@ -14,7 +15,7 @@ __all__ = ["PRESETS", "SUITE", "SUITE_V1", "SUITE_VERSION", "get", "names", "reg
 
 PRESETS: dict[str, ScenarioConfig] = {}
 #: What every ``config=`` argument takes: a ScenarioConfig, a dict of its fields, a preset name or None.
-ConfigLike = ScenarioConfig | Mapping | str | None
+ConfigLike = ScenarioConfig | Mapping[str, Any] | str | None
 
 
 def register(name: str, config: ScenarioConfig) -> None:
@@ -69,17 +70,18 @@ register("imperfect-csi", ScenarioConfig(channel=ChannelConfig(ce_error_var=1e-4
 # the cost falls in the first slots, the AGVs' recovery from their initial offsets while the drone
 # flies in from the area's edge. A steady start removes that transient: the drone starts at the
 # area's centre (above the paper paths' starts) and every AGV on its reference.
-_STEADY = dict(drone=DroneConfig(start_m=(100.0, 100.0)), reference=ReferenceConfig(initial_offset_std_m=0.0))
+_STEADY_DRONE = DroneConfig(start_m=(100.0, 100.0))
+_STEADY_REFERENCE = ReferenceConfig(initial_offset_std_m=0.0)
 #: A steady start on the default scenario: the cost is the links' and the planner's, slot after slot.
-register("steady", ScenarioConfig(**_STEADY))
+register("steady", ScenarioConfig(drone=_STEADY_DRONE, reference=_STEADY_REFERENCE))
 #: A steady start at -2 dBW: far links fail often, and where the power goes decides the cost.
-register("steady-low-power", ScenarioConfig(power_budget_dbw=-2.0, **_STEADY))
+register("steady-low-power", ScenarioConfig(power_budget_dbw=-2.0, drone=_STEADY_DRONE, reference=_STEADY_REFERENCE))
 #: A steady start under the drone's wind and gusts and the AGVs' process noise (the ``disturbed``
 #: preset's, without its actuator lag, measurement noise and halved command rate): a light
 #: disturbance that keeps pushing the AGVs off their paths.
 register("steady-gusty", ScenarioConfig(disturbance=DisturbanceConfig(
     wind_mps=(2.0, 2.5), wind_gust_std_mps=1.0, process_noise_position_m=0.05, process_noise_velocity_mps=0.05),
-    **_STEADY))
+    drone=_STEADY_DRONE, reference=_STEADY_REFERENCE))
 #: Eight AGVs on random paths over a 300 m square at +3 dBW, the drone starting at its centre and the
 #: AGVs on their references: a fleet wider than one position serves well.
 register("wide-k8", ScenarioConfig(num_agvs=8, area_m=(0.0, 300.0, 0.0, 300.0), power_budget_dbw=3.0,

@@ -429,7 +429,7 @@ def _first_to_zero(lmb, lst, nw):  # pragma: no cover - compiled
 
 @_kernel
 def _all_zero(values, nw):  # pragma: no cover - compiled
-    for t in range(nw):
+    for t in range(nw):  # noqa: SIM110 - numba compiles the loop, not all() over a generator
         if values[t] != 0.0:
             return False
     return True

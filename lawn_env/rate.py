@@ -25,7 +25,7 @@ LOG2E = 1.0 / math.log(2.0)
 
 def _dispersion_factor(blocklength: float, bler: float, paper_form: bool) -> float:
     """sqrt(1/l) Q^{-1}(eps) [log2 e]: the coefficient of sqrt(V) in the FBL rate."""
-    qinv = -special.ndtri(bler)  # Q^{-1}(eps) = -Phi^{-1}(eps), exact for small eps
+    qinv = -float(special.ndtri(bler))  # Q^{-1}(eps) = -Phi^{-1}(eps), exact for small eps
     factor = qinv / math.sqrt(blocklength)
     return factor if paper_form else factor * LOG2E
 
@@ -54,7 +54,7 @@ def rate_turning_point(blocklength: float, bler: float, paper_form: bool = False
     log2(e) form (the paper's equation) and ``c ln 2`` for the paper's printed form; so
     ``(1+G)^2 = 1/2 + sqrt(1/4 + c^2)``.
     """
-    c = -special.ndtri(bler) / math.sqrt(blocklength)
+    c = -float(special.ndtri(bler)) / math.sqrt(blocklength)
     if paper_form:
         c *= math.log(2.0)
     return math.sqrt(0.5 + math.sqrt(0.25 + c * c)) - 1.0
@@ -63,7 +63,7 @@ def rate_turning_point(blocklength: float, bler: float, paper_form: bool = False
 @functools.lru_cache(maxsize=256)
 def _snr_threshold_cached(rate: float, blocklength: float, bler: float, paper_form: bool) -> float:
     if math.isinf(blocklength):
-        return 2.0**rate - 1.0
+        return float(2.0**rate) - 1.0
     lo = rate_turning_point(blocklength, bler, paper_form)
     # R(G) >= log2(1+G) - factor, so G_hi = 2^(rate + factor) - 1 has R(G_hi) >= rate.
     hi = 2.0 ** (rate + _dispersion_factor(blocklength, bler, paper_form) + 1.0)
@@ -71,7 +71,7 @@ def _snr_threshold_cached(rate: float, blocklength: float, bler: float, paper_fo
     def f(g: float) -> float:
         return float(fbl_rate(g, blocklength, bler, paper_form)) - rate
 
-    return optimize.brentq(f, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps, maxiter=500)
+    return float(optimize.brentq(f, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps, maxiter=500))
 
 
 def snr_threshold(rate: float, blocklength: float, bler: float, paper_form: bool = False) -> float:

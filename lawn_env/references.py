@@ -26,8 +26,9 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -64,7 +65,7 @@ class TimeWarp:
     nu: float = 0.0
     phi: float = 0.0
 
-    def scaled(self, factor: float) -> "TimeWarp":
+    def scaled(self, factor: float) -> TimeWarp:
         """The warp run ``factor`` times as fast: theta(factor t)."""
         return TimeWarp(w=self.w * factor, theta0=self.theta0, a=self.a, nu=self.nu * factor, phi=self.phi)
 
@@ -76,7 +77,7 @@ class TimeWarp:
         return theta, dtheta, ddtheta
 
 
-def _warps(paths) -> tuple[np.ndarray, ...]:
+def _warps(paths: Sequence[_Curve]) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """theta, theta', theta'' of the paths' warps at times ``t``: a function of t -> three (G, T)."""
     w = np.array([[p.warp.w] for p in paths])
     theta0 = np.array([[p.warp.theta0] for p in paths])
@@ -84,7 +85,8 @@ def _warps(paths) -> tuple[np.ndarray, ...]:
     nu = np.array([[p.warp.nu] for p in paths])
     phi = np.array([[p.warp.phi] for p in paths])
 
-    def at(t: np.ndarray):  # TimeWarp.__call__, the same operations over a leading path axis
+    # TimeWarp.__call__, the same operations over a leading path axis
+    def at(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         arg = nu * t + phi
         sin = np.sin(arg)  # each sine and cosine once: they are most of the cost
         theta = theta0 + w * t + a * sin
@@ -96,14 +98,19 @@ def _warps(paths) -> tuple[np.ndarray, ...]:
 
 
 class _Curve:
+    """A reference path: every family is a frozen dataclass with a ``warp`` (the declarations say so to
+    the type checker: :func:`dataclasses.replace` takes any path)."""
+
     warp: TimeWarp
+    __dataclass_fields__: ClassVar[dict[str, Any]]
 
     @classmethod
-    def curves(cls, paths: list, theta: np.ndarray):  # pragma: no cover - interface
+    def curves(cls, paths: Sequence[Any], theta: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - interface
         """c, c', c'' of the paths (all of this family) at their parameters ``theta`` (G, T): (G, T, 2) each."""
         raise NotImplementedError
 
-    def curve(self, theta: np.ndarray):
+    def curve(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """c, c', c'' at parameters ``theta`` (T,): (T, 2) each."""
         c, d1, d2 = type(self).curves([self], np.asarray(theta, dtype=float)[None])
         return c[0], d1[0], d2[0]
@@ -188,7 +195,7 @@ class RoundedRectangle(_Curve):
         ]
 
     @classmethod
-    def curves(cls, paths: Sequence[_Curve], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def curves(cls, paths: Sequence[RoundedRectangle], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         segs = [p._segments() for p in paths]
         lengths = np.array([[s[1] for s in seg] for seg in segs])
         starts = np.stack([np.concatenate([[0.0], np.cumsum(row)[:-1]]) for row in lengths])
@@ -197,7 +204,7 @@ class RoundedRectangle(_Curve):
         s = np.mod(theta, perimeter)
         # the segment of each point: searchsorted(starts, s, side="right") - 1 over a leading path axis
         idx = np.clip((starts[:, None, :] <= s[..., None]).sum(axis=-1) - 1, 0, starts.shape[1] - 1)
-        c = np.empty(s.shape + (2,))
+        c = np.empty((*s.shape, 2))
         d1 = np.empty_like(c)
         d2 = np.zeros_like(c)
         for i in range(starts.shape[1]):
@@ -234,7 +241,7 @@ class Sinusoid(_Curve):
     phase: float = 0.0
 
     @classmethod
-    def curves(cls, paths: Sequence[_Curve], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def curves(cls, paths: Sequence[Sinusoid], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         u = np.array([[[math.cos(p.heading), math.sin(p.heading)]] for p in paths])  # (G, 1, 2)
         n = np.stack([-u[..., 1], u[..., 0]], axis=-1)
         k = np.array([[p.wavenumber] for p in paths])
@@ -252,7 +259,7 @@ class Sinusoid(_Curve):
 def _periodic_spline(waypoints: tuple[tuple[float, float], ...]) -> tuple[CubicSpline, float]:
     """The periodic cubic spline through ``waypoints`` by chord length, and its period (cached:
     a path is evaluated many times while it is fitted, and time scaling keeps its waypoints)."""
-    pts = np.asarray(waypoints + (waypoints[0],), dtype=float)
+    pts = np.asarray((*waypoints, waypoints[0]), dtype=float)
     chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
     return CubicSpline(chord, pts, bc_type="periodic"), chord[-1]
 
@@ -268,13 +275,13 @@ class SplinePath(_Curve):
         return _periodic_spline(self.waypoints)
 
     @classmethod
-    def curves(cls, paths: Sequence[_Curve], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        out = [np.empty(theta.shape + (2,)) for _ in range(3)]
+    def curves(cls, paths: Sequence[SplinePath], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        out = [np.empty((*theta.shape, 2)) for _ in range(3)]
         for i, p in enumerate(paths):  # one spline per path (waypoint counts differ)
             spline, period = p._spline()
             s = np.mod(theta[i], period)
             out[0][i], out[1][i], out[2][i] = spline(s), spline(s, 1), spline(s, 2)
-        return tuple(out)
+        return out[0], out[1], out[2]
 
 
 FAMILIES = {
@@ -341,12 +348,12 @@ def fit_envelopes(paths: list, envelope: Envelope, max_rounds: int = 60) -> list
             return out
         candidates = [replace(paths[i], warp=paths[i].warp.scaled(factor[i])) for i in todo]
         fits_now = _violations(evaluate_paths(candidates, t), envelope.accel_max, envelope.increment_max) <= 1.0
-        for i, cand, ok in zip(todo, candidates, fits_now.tolist()):
+        for i, cand, ok in zip(todo, candidates, fits_now.tolist(), strict=True):
             if ok:
                 out[i] = cand
             else:
                 factor[i] *= 0.98
-        todo = [i for i, ok in zip(todo, fits_now.tolist()) if not ok]
+        todo = [i for i, ok in zip(todo, fits_now.tolist(), strict=True) if not ok]
     for i in todo:  # extreme configs: halvings from the last factor
         out[i] = slowed_until(paths[i], fits, factor[i])
     return out
@@ -461,7 +468,8 @@ def _random_path(rng: np.random.Generator, family: str, area_m, margin: float = 
         cx, cy = rng.uniform(x0 + 0.3 * width, x1 - 0.3 * width), rng.uniform(y0 + 0.3 * height, y1 - 0.3 * height)
         angles = np.sort(rng.uniform(0, 2 * math.pi, n))
         radii = rng.uniform(0.08, 0.25, n) * min(width, height)
-        pts = tuple((float(cx + r * math.cos(a)), float(cy + r * math.sin(a))) for a, r in zip(angles, radii))
+        pts = tuple((float(cx + r * math.cos(a)), float(cy + r * math.sin(a)))
+                    for a, r in zip(angles, radii, strict=True))
         return SplinePath(waypoints=pts, warp=TimeWarp(w=speed, theta0=rng.uniform(0, 50), a=var * speed / nu,
                                                        nu=nu, phi=rng.uniform(0, 2 * math.pi)))
     raise ValueError(f"unknown reference family {family!r}; valid: {', '.join(FAMILIES)}")
@@ -493,7 +501,7 @@ def sample_paths(rngs: Sequence[np.random.Generator], num_agvs: int, families: S
     t = np.linspace(0.0, duration_s, max(2, int(min(duration_s, 1e5) * 4) + 1))
     margin = min(margin_m, 0.05 * min(area_m[1] - area_m[0], area_m[3] - area_m[2]))
     paths: list[list[_Curve]] = [[] for _ in rngs]
-    family = [None] * len(rngs)
+    family = [""] * len(rngs)  # each scenario's family, drawn at its first try
     tries = [0] * len(rngs)
     live = [i for i in range(len(rngs)) if num_agvs > 0]
     while live:
@@ -505,12 +513,11 @@ def sample_paths(rngs: Sequence[np.random.Generator], num_agvs: int, families: S
         if envelope is not None:
             candidates = fit_envelopes(candidates, envelope)
         inside = _inside_many(evaluate_paths(candidates, t), area_m, margin).tolist()
-        for i, path, ok in zip(live, candidates, inside):
+        for i, path, ok in zip(live, candidates, inside, strict=True):
             tries[i] += 1
             if ok or tries[i] == max_tries:
-                if not ok:  # every draw left the area: the last one, slowed until it stays inside
-                    path = slowed_until(path, lambda p: _inside(p.evaluate(t), area_m, margin))
-                paths[i].append(path)
+                # if every draw left the area: the last one, slowed until it stays inside
+                paths[i].append(path if ok else slowed_until(path, lambda p: _inside(p.evaluate(t), area_m, margin)))
                 tries[i] = 0
         live = [i for i in live if len(paths[i]) < num_agvs]
     return paths

@@ -30,6 +30,7 @@ from .dynamics import POSITION
 if TYPE_CHECKING:
     from .config import ScenarioConfig
     from .core import Simulation
+    from .mpc import OutageAwareMPC
 
 __all__ = [
     "ObservationLayout",
@@ -170,7 +171,7 @@ class ActionCodec:
     #: Whether decoding needs the reference window.
     needs_reference = False
     #: The MPC the scheme's anchor plans with (None: none).
-    mpc = None
+    mpc: OutageAwareMPC | None = None
 
     def __init__(self, config: ScenarioConfig, role: str = "joint"):
         if role not in ROLES:
@@ -183,7 +184,8 @@ class ActionCodec:
         self.limits = np.array([(config.control.accel_increment_max_mps2, config.power_budget_w,
                                  config.drone.max_speed_mps, config.slot_s, *config.area_m)], dtype=ACTION_LIMITS)
         self.limits.setflags(write=False)
-        self.area = tuple(float(v) for v in config.area_m)
+        x0, x1, y0, y1 = config.area_m
+        self.area = (float(x0), float(x1), float(y0), float(y1))
 
     def reset(self, which: np.ndarray | None = None) -> None:
         """Start an episode (``which``: a mask over a batch's scenarios, all when None)."""
@@ -259,13 +261,16 @@ OBS_CODEC = np.dtype([("state", "i8"), ("error", "i8"), ("reference", "i8"), ("r
 
 
 @numba.njit(cache=True)
-def _encode_rows(out, table, slot, state, reference, codec, num_slots, bound, clip_table):  # pragma: no cover - compiled
+def _encode_rows(  # noqa: PLR0913 - a compiled kernel (up to 12 arguments)
+    out, table, slot, state, reference, codec, num_slots, bound, clip_table,
+):  # pragma: no cover - compiled
     """Every observation row, each feature computed in float64 as :meth:`ObservationLayout.encode`
     documents, rounded once to float32 and clipped to ``bound`` in float32 (``state``: the scenarios'
     observed states, errors, drone positions, last outage probabilities, deliveries and powers;
-    ``codec``: the layout's :data:`OBS_CODEC` record). The slot-dependent features (the reference windows, slot n / N) are the slot's row of the fixed
-    path set's ``table`` when it has rows (clipped too with ``clip_table``), else computed here from
-    each scenario's ``reference`` (B, K, T, 6) as :meth:`ObservationLayout.scaled_windows` does."""
+    ``codec``: the layout's :data:`OBS_CODEC` record). The slot-dependent features (the reference windows,
+    slot n / N) are the slot's row of the fixed path set's ``table`` when it has rows (clipped too with
+    ``clip_table``), else computed here from each scenario's ``reference`` (B, K, T, 6) as
+    :meth:`ObservationLayout.scaled_windows` does."""
     off = sc = codec[0]
     k, b32 = state[0].shape[1], np.float32(bound)
     for b in range(state[0].shape[0]):
@@ -339,9 +344,9 @@ class ObservationLayout:
 
     Per AGV k (``agv_features = 17 + 6 (N_p + 1)`` floats):
 
-    ==================  ==========================================================  =====================================
+    ==================  ==========================================================  ====================================
     slice               content                                                     scaling
-    ==================  ==========================================================  =====================================
+    ==================  ==========================================================  ====================================
     0:2                 AGV position                                                (p - area center) / area half-extent
     2:4                 AGV velocity                                                / 5 m/s
     4:6                 previous acceleration u[n-1]                                / a_max
@@ -352,7 +357,7 @@ class ObservationLayout:
     next 1              outage probability of the last transmission                 probability
     next 1              last command delivered                                      0 or 1
     next 1              last power                                                  / P_max
-    ==================  ==========================================================  =====================================
+    ==================  ==========================================================  ====================================
 
     Global features (3, at the end): drone position (2, like AGV positions), slot n / N.
     :meth:`decode` recovers the planner's state (the snapshot's arrays) from an observation.
@@ -390,8 +395,10 @@ class ObservationLayout:
             start += width
         self.agv_features = start
         self.size = self.num_agvs * self.agv_features + self.global_features
-        self._ref_scale = np.array([1 / POSITION_ERROR_SCALE_M] * 2 + [1 / VELOCITY_SCALE_MPS] * 2 + [1 / self.accel_max] * 2)
-        self._state_scale = np.concatenate([1 / self.half_extent, [1 / VELOCITY_SCALE_MPS] * 2, [1 / self.accel_max] * 2])
+        self._ref_scale = np.array([1 / POSITION_ERROR_SCALE_M] * 2 + [1 / VELOCITY_SCALE_MPS] * 2
+                                   + [1 / self.accel_max] * 2)
+        self._state_scale = np.concatenate([1 / self.half_extent, [1 / VELOCITY_SCALE_MPS] * 2,
+                                            [1 / self.accel_max] * 2])
         self._state_shift = np.concatenate([self.center, np.zeros(4)])
         self._no_table = np.zeros((1, self.size), dtype=np.float32)
         codec = np.zeros(1, dtype=OBS_CODEC)  # filled by name: the table's order is free
@@ -418,7 +425,7 @@ class ObservationLayout:
     def reference_windows(self, reference: np.ndarray, start: int = 0, stop: int | None = None) -> np.ndarray:
         """Scaled windows for slots ``start:stop`` (default: every slot): (K, slots, 6 (N_p+1)),
         positions relative to slot n's."""
-        k, steps, _ = reference.shape
+        _, steps, _ = reference.shape
         last = steps - self.window + 1
         stop = last if stop is None else min(stop, last)
         idx = np.arange(start, stop)[:, None] + np.arange(self.window)[None, :]
@@ -430,7 +437,7 @@ class ObservationLayout:
         win = windows.copy()
         win[..., POSITION] -= windows[..., 0:1, POSITION]
         win *= self._ref_scale
-        return win.reshape(win.shape[:-2] + (-1,))
+        return win.reshape((*win.shape[:-2], -1))
 
     def encode(self, sim: Simulation, bound: float | None = None, table: SlotTable | None = None) -> np.ndarray:
         """Observations of every scenario of a :class:`~lawn_env.core.Simulation` at its current
@@ -504,7 +511,7 @@ class ObservationLayout:
             "x_aug": x_aug,
             "reference": win,
             "drone_position": obs[k : k + 2] * self.half_extent + self.center,
-            "slot": int(round(obs[-1] * self.num_slots)),
+            "slot": round(float(obs[-1]) * self.num_slots),
             "last_power_w": blocks[:, self.slices["power"]] * self.power_budget_w,
             "outage_probability": blocks[:, self.slices["outage_probability"]],
         }
