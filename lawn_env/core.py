@@ -572,8 +572,9 @@ def step_rows(params: SimParams, state: SimState, decisions: Decisions, draws: S
         sub.x_obs = sub.x_aug
     if state.error_obs is state.tracking_error:
         sub.error_obs = sub.tracking_error
-    taken = Decisions(*(None if a is None else np.asarray(a)[idx] for a in decisions))
-    new_sub, record = step(params, sub, taken, SlotDraws(*(None if d is None else d[idx] for d in draws)))
+    taken = Decisions(*[None if a is None else np.asarray(a)[idx] for a in decisions])  # type: ignore[arg-type]
+    sub_draws = SlotDraws(*[None if d is None else d[idx] for d in draws])  # type: ignore[arg-type]
+    new_sub, record = step(params, sub, taken, sub_draws)
     merged: dict[str, Any] = {}
     for name in _STEPPED:
         new = getattr(new_sub, name)
@@ -584,8 +585,8 @@ def step_rows(params: SimParams, state: SimState, decisions: Decisions, draws: S
         else:
             merged[name] = getattr(state, name).copy()
             merged[name][idx] = new
-    full = SlotRecord(*(np.zeros((state.num_envs,) + a.shape[1:], a.dtype) for a in record))
-    for whole, part in zip(full, record):
+    full = SlotRecord(*(np.zeros((state.num_envs, *a.shape[1:]), a.dtype) for a in record))
+    for whole, part in zip(full, record, strict=True):
         whole[idx] = part
     return SimState(**merged, reference=state.reference, paths=state.paths), full
 

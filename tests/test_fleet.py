@@ -183,19 +183,18 @@ def test_lawn_train_fleet_runs_dagger_and_its_network_drives_any_k(tmp_path):
     and that drives the unmodified v0 env at K = 8; a bad hyperparameter is named."""
     from agents import make_policy, rollout
     from lawn_env import presets
-    from training.train import train
+    from training.train import TrainSpec, train
 
     config = presets.get("default").override(num_agvs=4, num_slots=8)
     hp = {"fleet_sizes": [3, 4], "epochs": 2, "dagger_iterations": 1, "dagger_timesteps": 8, "width": 16, "heads": 2}
-    summary = train("fleet", "lawn/Comm-v0", config, 16, 0, tmp_path / "run", hp_overrides=hp, eval_episodes=1,
-                    progress=False)
+    summary = train(TrainSpec(algo="fleet", env_id="lawn/Comm-v0", config=config, timesteps=16, seed=0, out_dir=tmp_path / "run", hp_overrides=hp, eval_episodes=1, progress=False))
     assert summary["bc_loss_last"] < summary["bc_loss_first"]
     wide = config.override(num_agvs=8)
     policy = make_policy(f"sb3:{tmp_path / 'run'}", wide, env_id="lawn/Comm-v0")
     run = rollout(gym.make("lawn/Comm-v0", config=wide), policy, seed=3)
     assert run.metrics["slots"] == 8 and np.isfinite(run.metrics["control_cost"])
     with pytest.raises(ValueError, match="unknown fleet hyperparameters"):
-        train("fleet", "lawn/Comm-v0", config, 16, 0, tmp_path / "bad", hp_overrides={"width_": 8}, progress=False)
+        train(TrainSpec(algo="fleet", env_id="lawn/Comm-v0", config=config, timesteps=16, seed=0, out_dir=tmp_path / "bad", hp_overrides={"width_": 8}, progress=False))
     assert not (tmp_path / "bad").exists()  # nothing written
 
 
@@ -207,7 +206,7 @@ def test_each_agent_of_the_multi_agent_env_gets_its_own_row_of_one_network():
     import torch
 
     from agents.fleet import FleetInference
-    from training.marl import make_marl_vec_env
+    from training.sb3 import make_marl_vec_env
 
     k = 4
     venv = make_marl_vec_env(lawn_env.ScenarioConfig(num_agvs=k), 1, 0, interface={"base": "rl", "layout": "entities"})
@@ -230,7 +229,7 @@ def test_each_agent_of_the_multi_agent_env_gets_its_own_row_of_one_network():
     np.testing.assert_allclose(again[1:], actions[1:][perm], atol=1e-5)
     values = model.policy.predict_values(model.policy.obs_to_tensor(obs)[0]).detach().numpy()[:, 0]
     assert len(set(np.round(values, 6))) == k + 1  # each agent's own token
-    from training.options import start_at_anchor
+    from training.sb3 import start_at_anchor
 
     start_at_anchor(model, "ppo")  # the heads zeroed: every agent's action is its anchor's (zero)
     assert not model.predict(obs, deterministic=True)[0].any()
@@ -243,20 +242,19 @@ def test_multi_agent_ppo_trains_the_fleet_network_and_drives_any_k(tmp_path):
     the unmodified ``lawn/Joint-v0`` at K = 6 (``marl:DIR``)."""
     from agents import make_policy, rollout
     from lawn_env import presets
-    from training.train import train
+    from training.train import TrainSpec, train
 
     config = presets.get("default").override(num_agvs=3, num_slots=8)
     hp = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,
           "start_at_anchor": True, "n_envs": 1, "n_steps": 16, "batch_size": 32,
           "policy_kwargs": {"width": 16, "heads": 2, "layers": 1}}
-    train("ppo", "lawn/Parallel-v0", config, 64, 0, tmp_path / "run", hp_overrides=hp, eval_episodes=1, progress=False)
+    train(TrainSpec(algo="ppo", env_id="lawn/Parallel-v0", config=config, timesteps=64, seed=0, out_dir=tmp_path / "run", hp_overrides=hp, eval_episodes=1, progress=False))
     wide = config.override(num_agvs=6)
     policy = make_policy(f"marl:{tmp_path / 'run'}", wide, env_id="lawn/Joint-v0")
     run = rollout(gym.make("lawn/Joint-v0", config=wide), policy, seed=3)
     assert run.metrics["slots"] == 8 and np.isfinite(run.metrics["control_cost"])
     with pytest.raises(ValueError, match="ppo or a2c"):
-        train("sac", "lawn/Comm-v0", config, 64, 0, tmp_path / "bad", hp_overrides={"policy": "FleetPolicy"},
-              progress=False)
+        train(TrainSpec(algo="sac", env_id="lawn/Comm-v0", config=config, timesteps=64, seed=0, out_dir=tmp_path / "bad", hp_overrides={"policy": "FleetPolicy"}, progress=False))
     assert not (tmp_path / "bad").exists()
 
 
@@ -274,14 +272,13 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     from lawn_env import ScenarioConfig, presets
     from training.generalization import fleet_agents, generalization_table, run_generalization
     from training.tables import read_csv
-    from training.train import train
+    from training.train import TrainSpec, train
 
     tiny = dataclasses.replace(recipes_module.RECIPES["fleet-comm"], timesteps=16)
     monkeypatch.setitem(recipes_module.RECIPES, "fleet-comm", tiny)
     runs, docs = tmp_path / "runs", tmp_path / "docs"
     hp = {"fleet_sizes": [3, 4], "epochs": 1, "dagger_iterations": 0, "width": 16, "heads": 2}
-    train("fleet", "lawn/Comm-v0", ScenarioConfig(), 16, 0, runs / "fleet-comm" / "seed-0", hp_overrides=hp,
-          eval_episodes=1, progress=False)
+    train(TrainSpec(algo="fleet", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=16, seed=0, out_dir=runs / "fleet-comm" / "seed-0", hp_overrides=hp, eval_episodes=1, progress=False))
     (docs / "learned").mkdir(parents=True)
     page = "# Learned\n\nkept\n\n<!-- zoo-fleet:begin -->\nold\n<!-- zoo-fleet:end -->\n\nkept too\n"
     (docs / "LEARNED.md").write_text(page)
@@ -322,12 +319,12 @@ def test_a_multi_agent_fleet_run_ships_to_the_zoo_and_a_flat_policy_is_refused(t
     import agents.learned as learned
     from agents import make_policy
     from lawn_env import presets
-    from training.train import train
+    from training.train import TrainSpec, train
 
     config = presets.get("default").override(num_agvs=3, num_slots=6)
     hp = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,
           "n_envs": 1, "n_steps": 16, "batch_size": 32, "policy_kwargs": {"width": 16, "heads": 2, "layers": 1}}
-    train("ppo", "lawn/Parallel-v0", config, 32, 0, tmp_path / "run", hp_overrides=hp, eval_episodes=1, progress=False)
+    train(TrainSpec(algo="ppo", env_id="lawn/Parallel-v0", config=config, timesteps=32, seed=0, out_dir=tmp_path / "run", hp_overrides=hp, eval_episodes=1, progress=False))
     monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
     learned.export_agent(tmp_path / "run", tmp_path / "zoo" / "marl-fleet", {"label": "tiny", "name": "marl-fleet",
                                                                               "evaluated_on": "lawn/Joint-v0"})
@@ -338,8 +335,7 @@ def test_a_multi_agent_fleet_run_ships_to_the_zoo_and_a_flat_policy_is_refused(t
     obs, _ = gym.make("lawn/Joint-v0", config=wide).reset(seed=0)
     assert policy.entities.num_agvs == 5 and policy.act(obs).shape == (17,)
     with pytest.raises(ValueError, match="policy=FleetPolicy"):
-        train("ppo", "lawn/Parallel-v0", config, 32, 0, tmp_path / "flat", progress=False,
-              hp_overrides={**hp, "policy": "MultiInputPolicy"})
+        train(TrainSpec(algo="ppo", env_id="lawn/Parallel-v0", config=config, timesteps=32, seed=0, out_dir=tmp_path / "flat", progress=False, hp_overrides={**hp, "policy": "MultiInputPolicy"}))
     assert not (tmp_path / "flat").exists()
 
 

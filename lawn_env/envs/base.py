@@ -14,13 +14,14 @@ envs B = N ones.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, NamedTuple, Sequence
+from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
 
-from ..core import Decisions, Simulation, SlotDraws, SlotRecord, Snapshot, Trail, link_success
 from ..config import ScenarioConfig
+from ..core import Decisions, Simulation, SlotDraws, SlotRecord, Snapshot, Trail, link_success
 from ..dynamics import POSITION
 from ..entities import EntityLayout
 from ..interface import InterfaceLike, RLInterface, action_codec, resolve_interface
@@ -77,6 +78,7 @@ class CommRole:
         self.mpc.reset(which)  # a new episode starts without the old one's warm starts
 
     def decide(self, sim: Simulation, decision: Decisions, windows: np.ndarray | None) -> tuple[Decisions, dict]:
+        assert windows is not None  # the engine passes them to a role that plans
         x = sim.x_obs if self.planning_state == "measured" else sim.x_aug
         psi = link_success(x, decision.drone_next, decision.power_w, sim.params.planning_link)
         planned = psi if self.law == "paper" else np.ones_like(psi)  # control.law: as if delivered
@@ -130,12 +132,12 @@ class Engine:
         self.num_envs = self.sim.num_envs
         self.layout = ObservationLayout(config)
         self.actions = action_codec(config, role, self.interface, mpc_backend=qp_backend)
-        mpc = None
-        if role == "comm":  # one MPC per env: the anchor's when it has one
-            mpc = self.actions.mpc or OutageAwareMPC.from_config(config, backend=qp_backend)
         if planning_state not in PLANNING_STATES:
             raise ValueError(f"planning_state={planning_state!r}; valid: {', '.join(PLANNING_STATES)}")
-        self.role = JointRole() if role == "joint" else CommRole(mpc, config.control.law, planning_state)
+        self.role: JointRole | CommRole = JointRole()
+        if role == "comm":  # one MPC per env: the anchor's when it has one
+            mpc = self.actions.mpc or OutageAwareMPC.from_config(config, backend=qp_backend)
+            self.role = CommRole(mpc, config.control.law, planning_state)
         self.needs_windows = role == "comm" or self.actions.needs_reference
         self.slot_table = self.layout.slot_table(self.sim.params.fixed_reference)
         self._no_termination = np.zeros(self.num_envs, dtype=bool)
@@ -150,6 +152,13 @@ class Engine:
     def keep_trail(self, row: int) -> None:
         """Keep scenario ``row``'s positions slot by slot from its next reset (:attr:`trail`)."""
         self.trail = Trail(self.sim.row(row))
+
+    @property
+    def kept_trail(self) -> Trail:
+        """The trail (:meth:`keep_trail`); an engine without one raises ``RuntimeError``."""
+        if self.trail is None:
+            raise RuntimeError("this engine keeps no trail: render_mode=None (or trail_row=None)")
+        return self.trail
 
     @property
     def observation_space(self) -> gym.spaces.Space:
@@ -259,7 +268,7 @@ class Engine:
         """Every scenario's flat observation as the agent sees it (B, size) float32."""
         return self.layout.encode(self.sim, self.interface.obs_bound, self.slot_table)
 
-    def observe(self) -> np.ndarray | dict[str, np.ndarray]:
+    def observe(self) -> Observation:
         """Every scenario's observation in the interface's layout: (B, size) float32, or the entity
         layout's dict of (B, ...) arrays."""
         flat = self.observe_flat()
@@ -271,7 +280,7 @@ class Engine:
         """The trail's scenario's full state for external planners (:class:`lawn_env.core.Snapshot`)."""
         if not self.sim.started:
             raise RuntimeError("call reset() before snapshot()")
-        return self.trail.view.snapshot()
+        return self.kept_trail.view.snapshot()
 
     def render(self, render_mode: str | None, human_ok: bool = True) -> np.ndarray | None:
         """An RGB frame (H, W, 3) of the trail's scenario: area, references, trails, links coloured
@@ -286,7 +295,8 @@ class Engine:
             from ..render import Renderer
 
             self._renderer = Renderer(self.config, human=render_mode == "human")
-        return self._renderer.draw(self.trail.view, self.trail)
+        trail = self.kept_trail
+        return self._renderer.draw(trail.view, trail)
 
     def close(self) -> None:
         if self._renderer is not None:
@@ -294,7 +304,13 @@ class Engine:
             self._renderer = None
 
 
-def check_render_mode(render_mode: str | None, valid: Sequence[str]) -> None:
+#: The render modes of the single and multi-agent envs.
+RENDER_MODES = ("human", "rgb_array")
+#: An observation in the interface's layout: a flat array, or the entity layout's dict of arrays.
+Observation = np.ndarray | dict[str, np.ndarray]
+
+
+def check_render_mode(render_mode: str | None, valid: Sequence[str] = RENDER_MODES) -> None:
     if render_mode is not None and render_mode not in valid:
         raise ValueError(f"render_mode={render_mode!r}; valid: {list(valid)} or None")
 
@@ -325,17 +341,17 @@ class LawnEnv(EngineAccess, gym.Env):
     """``lawn/Joint-v0`` and ``lawn/Comm-v0`` (their classes set ``role``): an engine of one
     scenario behind Gymnasium's API."""
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 4}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 4}
     role = "joint"
     planning_state = "measured"
 
     def __init__(self, config: ConfigLike = None, render_mode: str | None = None,
                  interface: InterfaceLike = None, qp_backend: str = DEFAULT_BACKEND, **overrides: Any):
-        check_render_mode(render_mode, self.metadata["render_modes"])
+        check_render_mode(render_mode)
         self.config = resolve_config(config, **overrides)
         self.render_mode = render_mode
         self.engine = Engine(self.config, self.role, interface, 1, qp_backend, planning_state=self.planning_state)
-        self.sim = self.engine.trail.view
+        self.sim = self.engine.kept_trail.view
         self.layout, self.interface, self.actions = self.engine.layout, self.engine.interface, self.engine.actions
         self.num_agvs = self.config.num_agvs
         self.observation_space, self.action_space = self.engine.observation_space, self.engine.action_space
@@ -353,7 +369,7 @@ class LawnEnv(EngineAccess, gym.Env):
             value = dataclasses.replace(value, max_episode_steps=self.config.num_slots)
         self.__dict__["_spec"] = value
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Observation, dict[str, Any]]:
         super().reset(seed=seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
         self.engine.reset([self.np_random])
@@ -362,7 +378,7 @@ class LawnEnv(EngineAccess, gym.Env):
             self.render()
         return self._observation(), self.engine.info(i=0)
 
-    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    def step(self, action: np.ndarray) -> tuple[Observation, float, bool, bool, dict[str, Any]]:
         if self._done:
             raise RuntimeError("the episode has ended (or reset() was never called); call reset() before step()")
         engine = self.engine
@@ -377,10 +393,10 @@ class LawnEnv(EngineAccess, gym.Env):
             self.render()
         return obs, float(result.reward[0, 0]), terminated, truncated, info
 
-    def _observation(self) -> np.ndarray | dict[str, np.ndarray]:
+    def _observation(self) -> Observation:
         """This scenario's observation in the interface's layout."""
         obs = self.engine.observe()
-        return obs[0] if self.entities is None else {key: value[0] for key, value in obs.items()}
+        return {key: value[0] for key, value in obs.items()} if isinstance(obs, dict) else obs[0]
 
     def snapshot(self) -> Snapshot:
         """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
@@ -388,7 +404,7 @@ class LawnEnv(EngineAccess, gym.Env):
 
     def trajectories(self) -> dict:
         """The current episode's drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions."""
-        return self.engine.trail.trajectories()
+        return self.engine.kept_trail.trajectories()
 
     def episode_metrics(self) -> dict:
         return self.sim.episode_metrics()

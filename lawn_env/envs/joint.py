@@ -22,11 +22,11 @@ class JointEnv(LawnEnv):
 
     ``Box(-1, 1, (3K + 2,), float32)``:
 
-    | index        | meaning                              | scaling                                              |
-    |--------------|--------------------------------------|------------------------------------------------------|
-    | 0 .. 2K-1    | increment Delta-u of AGV k (x, y)    | ``a * Delta-a_max`` m/s^2, then saturated so ``abs(u) <= a_max`` |
-    | 2K .. 3K-1   | power weight of link k               | ``w = (a+1)/2``, ``p = P_max w / max(1, sum w)``      |
-    | 3K .. 3K+1   | drone velocity (x, y)                | ``a * V_max`` m/s, clipped to norm V_max, kept in area |
+    | index      | meaning                           | scaling                                                     |
+    |------------|-----------------------------------|-------------------------------------------------------------|
+    | 0 .. 2K-1  | increment Delta-u of AGV k (x, y) | ``a * Delta-a_max`` m/s^2, saturated to ``abs(u) <= a_max`` |
+    | 2K .. 3K-1 | power weight of link k            | ``w = (a+1)/2``, ``p = P_max w / max(1, sum w)``            |
+    | 3K .. 3K+1 | drone velocity (x, y)             | ``a * V_max`` m/s, clipped to norm V_max, kept in area      |
 
     Actions outside [-1, 1], NaN, or of the wrong size raise ``ValueError``. With
     ``interface="rl"`` (or ``RLInterface(action_scheme="anchored")``) the same box is measured

@@ -9,8 +9,8 @@ generator and plays that episode on the env of that size. A network that reads t
 from __future__ import annotations
 
 import numbers
-from collections.abc import Iterable, Mapping
-from typing import Any, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -18,6 +18,7 @@ import numpy as np
 from ..entities import MAX_AGVS
 from ..interface import InterfaceLike, resolve_interface
 from ..presets import ConfigLike, resolve_config
+from .base import LawnEnv, Observation
 
 __all__ = ["MixedFleetEnv"]
 
@@ -29,7 +30,8 @@ def _fleet_sizes(fleet_sizes: Any) -> list[int]:
     if isinstance(fleet_sizes, (str, bytes, Mapping)) or not isinstance(fleet_sizes, Iterable):
         raise ValueError(f"fleet_sizes={fleet_sizes!r}: expected {allowed}")
     given = [k.item() if isinstance(k, np.generic) else k for k in fleet_sizes]  # numpy scalars as Python's
-    bad = [k for k in given if isinstance(k, bool) or not isinstance(k, numbers.Integral) or not 1 <= k <= MAX_AGVS]
+    bad = [k for k in given
+           if isinstance(k, bool) or not isinstance(k, numbers.Integral) or not 1 <= int(k) <= MAX_AGVS]
     if not given:
         raise ValueError(f"fleet_sizes={fleet_sizes!r} is empty; expected {allowed}")
     if bad:
@@ -57,19 +59,21 @@ class MixedFleetEnv(gym.Env):
         iface = resolve_interface(interface).to_dict() | {"layout": "entities"}
         base = resolve_config(config, **overrides)
         self.fleet_sizes = tuple(sizes)
-        self.envs = {k: gym.make(env_id, config=base.override(num_agvs=k), interface=iface).unwrapped for k in sizes}
+        self.envs: dict[int, LawnEnv] = {
+            k: gym.make(env_id, config=base.override(num_agvs=k), interface=iface).unwrapped  # type: ignore[misc]
+            for k in sizes}
         first = self.envs[sizes[0]]  # the entity layout's spaces do not depend on K
         self.observation_space, self.action_space = first.observation_space, first.action_space
         self.env = first
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict[str, Any]]:
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Observation, dict[str, Any]]:
         super().reset(seed=seed)
         k = int(self.np_random.choice(self.fleet_sizes))
         self.env = self.envs[k]
         obs, info = self.env.reset(seed=int(self.np_random.integers(2**31)), options=options)
         return obs, {**info, "num_agvs": k}
 
-    def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict[str, Any]]:
+    def step(self, action: np.ndarray) -> tuple[Observation, float, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
         return obs, reward, terminated, truncated, {**info, "num_agvs": self.env.num_agvs}
 

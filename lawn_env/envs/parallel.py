@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -16,7 +17,7 @@ from ..interface import InterfaceLike
 from ..mpc import DEFAULT_BACKEND
 from ..presets import ConfigLike, resolve_config
 from ..spaces import check_action
-from .base import Engine, EngineAccess, check_render_mode
+from .base import RENDER_MODES, Engine, EngineAccess, check_render_mode
 
 __all__ = ["LawnParallelEnv", "parallel_env", "raw_env", "env"]
 
@@ -86,7 +87,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
       do not depend on K, the power split decided by the AGVs' own power weights.
     """
 
-    metadata = {"name": "lawn_v0", "render_modes": ["human", "rgb_array"], "render_fps": 4, "is_parallelizable": True}
+    metadata = {"name": "lawn_v0", "render_modes": list(RENDER_MODES), "render_fps": 4, "is_parallelizable": True}
 
     def __init__(self, config: ConfigLike = None, render_mode: str | None = None,
                  interface: InterfaceLike = None, max_cycles: int | None = None,
@@ -96,11 +97,11 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
                 raise ValueError(f"max_cycles={max_cycles!r} and num_slots={overrides['num_slots']!r} disagree; "
                                  "give one of them (max_cycles is PettingZoo's name for num_slots)")
             overrides = {**overrides, "num_slots": max_cycles}
-        check_render_mode(render_mode, self.metadata["render_modes"])
+        check_render_mode(render_mode)
         self.config = resolve_config(config, **overrides)
         self.render_mode = render_mode
         self.engine = Engine(self.config, "joint", interface, 1, DEFAULT_BACKEND)
-        self.sim = self.engine.trail.view
+        self.sim = self.engine.kept_trail.view
         self.layout, self.interface, self.actions = self.engine.layout, self.engine.interface, self.engine.actions
         self.max_cycles = self.config.num_slots
         k = self.config.num_agvs
@@ -117,7 +118,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
 
     def _flat_spaces(self, k: int) -> None:
         agv_size = self.layout.agv_features + self.layout.global_features
-        self._observation_spaces = {
+        self._observation_spaces: dict[str, gym.spaces.Space] = {
             "drone": self.interface.observation_space(self.layout.size),
             **{a: self.interface.observation_space(agv_size) for a in self._agv_index},
         }
@@ -130,9 +131,10 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
         """Every agent sees the entity observation and which entity it is (``me``: one-hot, the
         drone first, then the AGVs' rows); an AGV acts with its entity row, the drone with its move."""
         entities = self.entities
+        assert entities is not None  # the entity layout's spaces
         space = gym.spaces.Dict({**entities.observation_space.spaces,
                                  "me": gym.spaces.Box(0.0, 1.0, shape=(MAX_AGVS + 1,), dtype=np.float32)})
-        self._observation_spaces = {a: space for a in self.possible_agents}
+        self._observation_spaces = dict.fromkeys(self.possible_agents, space)
         self._me = {a: np.eye(MAX_AGVS + 1, dtype=np.float32)[j] for j, a in enumerate(self.possible_agents)}
         for me in self._me.values():
             me.flags.writeable = False
@@ -213,8 +215,8 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
         self._agv_terms = (record.tracking_cost[0], record.effort_cost[0])
         infos = self._infos(engine.info(record, result.extra, i=0))
         observations = self._observations()
-        terminations = {a: terminated for a in self.agents}
-        truncations = {a: truncated for a in self.agents}
+        terminations = dict.fromkeys(self.agents, terminated)
+        truncations = dict.fromkeys(self.agents, truncated)
         if truncated or terminated:
             self.agents = []
         if self.render_mode == "human":
@@ -238,8 +240,10 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
         return joint
 
     def _observations(self) -> dict:
-        if self.entities is not None:  # fresh arrays every step, shared read-only by the agents (not copied K + 1 times)
-            shared = {key: value[0] for key, value in self.engine.observe().items()}
+        if self.entities is not None:  # fresh arrays every step, shared read-only by the agents (not K + 1 copies)
+            entity_obs = self.engine.observe()
+            assert isinstance(entity_obs, dict)  # the entity layout's observation
+            shared = {key: value[0] for key, value in entity_obs.items()}
             for value in shared.values():
                 value.flags.writeable = False
             return {a: {**shared, "me": self._me[a]} for a in self.possible_agents}
@@ -268,7 +272,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
 
     def trajectories(self) -> dict:
         """The current episode's drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions."""
-        return self.engine.trail.trajectories()
+        return self.engine.kept_trail.trajectories()
 
     def render(self, *args: Any, **kwargs: Any) -> np.ndarray | None:
         """As the central environments' ``render()``; extra arguments (RLlib's

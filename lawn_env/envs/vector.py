@@ -38,7 +38,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -47,7 +46,7 @@ from ..core import SlotDraws, control_costs
 from ..interface import InterfaceLike
 from ..mpc import DEFAULT_BACKEND
 from ..presets import ConfigLike, resolve_config
-from .base import Engine, EngineAccess
+from .base import Engine, EngineAccess, Observation
 
 __all__ = ["CommVectorEnv", "JointVectorEnv"]
 
@@ -73,7 +72,8 @@ class JointVectorEnv(EngineAccess, VectorEnv):
         self.engine = Engine(self.config, self.role, interface, num_envs, qp_backend, trail_row=None)
         self.sim = self.engine.sim
         if not (isinstance(render_env, (int, np.integer)) and 0 <= render_env < self.sim.num_envs):
-            raise ValueError(f"render_env={render_env!r}: the index of the env to render, in [0, {self.sim.num_envs - 1}]")
+            last = self.sim.num_envs - 1
+            raise ValueError(f"render_env={render_env!r}: the index of the env to render, in [0, {last}]")
         if render_mode:
             self.engine.keep_trail(int(render_env))
         self.interface, self.layout, self.actions = self.engine.interface, self.engine.layout, self.engine.actions
@@ -96,7 +96,7 @@ class JointVectorEnv(EngineAccess, VectorEnv):
 
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | list[int] | None = None,
-              options: dict | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+              options: dict | None = None) -> tuple[Observation, dict[str, Any]]:
         if isinstance(seed, (list, tuple)):
             if len(seed) != self.num_envs:
                 raise ValueError(f"seed: a list of {len(seed)} seeds for {self.num_envs} envs")
@@ -116,7 +116,7 @@ class JointVectorEnv(EngineAccess, VectorEnv):
         self._started = True
         return self.engine.observe(), self.engine.info()
 
-    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+    def step(self, actions: np.ndarray) -> tuple[Observation, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if not self._started:
             raise RuntimeError("call reset() before step()")
         engine, sim = self.engine, self.sim
@@ -140,7 +140,7 @@ class JointVectorEnv(EngineAccess, VectorEnv):
         if ended.any():
             metrics = np.full(self.num_envs, None, dtype=object)
             rows = np.flatnonzero(ended)
-            for i, values in zip(rows.tolist(), sim.episode_metrics(rows)):
+            for i, values in zip(rows.tolist(), sim.episode_metrics(rows), strict=True):
                 metrics[i] = values
             info["episode_metrics"], info["_episode_metrics"] = metrics, ended
             info["episode_control_cost"] = np.where(ended, control_costs(sim.state), 0.0)
@@ -159,7 +159,7 @@ class JointVectorEnv(EngineAccess, VectorEnv):
         """New episodes for the envs ``which`` (autoreset), each from its own generator."""
         self.engine.reset(self._rngs, which)
 
-    def render(self) -> np.ndarray | None:
+    def render(self) -> np.ndarray | None:  # type: ignore[override]  # one env's frame (render_env), not a tuple
         """An RGB frame (H, W, 3) of env ``render_env``: area, references, trails, links coloured by
         outage probability, as the single env draws it."""
         if self.render_mode is not None and not self._started:
