@@ -9,12 +9,7 @@
 #                                                       benchmarks/dv_mpc.py: dv-mpc against rg-mpc on the suite
 #   blocks expert-speed, env-throughput, train-throughput, vector-step   benchmarks/*.py --markdown
 #   block parallel-scaling (docs/performance.md)        benchmarks/parallel_scaling.py (--only parallel)
-#   blocks step-side-by-side, v0-episodes (--only equations)   benchmarks/{step_side_by_side,v0_episodes}.py
-#                                                       (side by side with the commit before the
-#                                                       equations-once refactor, in a git worktree ../before-equations)
-#   blocks numba-jit, qp-speed, speedups (--only qp)      benchmarks/{numba_jit,qp_speed,speedups}.py
-#                                                       (speedups: side by side with the commit before
-#                                                       the compiled solver, in a git worktree ../before)
+#   blocks numba-jit, qp-speed (--only qp)              benchmarks/{numba_jit,qp_speed}.py
 #   block fleet-decision (docs/performance.md; --only fleet)   benchmarks/fleet_decision.py
 #   block anchors (docs/rl.md; with learned)            benchmarks/anchors.py --markdown
 #   docs/LEARNED.md                                     lawn zoo build (needs the training runs in
@@ -42,7 +37,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --train) train=1 ;;
     --only) shift; while [ $# -gt 0 ] && [[ "$1" != --* ]]; do only+=("$1"); shift; done; continue ;;
-    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|dv|speed|throughput|parallel|equations|qp|fleet|learned|suite|render ...]" >&2; exit 2 ;;
+    *) echo "usage: scripts/refresh_docs.sh [--train] [--only figures|benchmark|gap|dv|speed|throughput|parallel|qp|fleet|learned|suite|render ...]" >&2; exit 2 ;;
   esac
   shift
 done
@@ -97,19 +92,11 @@ if want parallel; then  # the 16-core block (parallel-scaling-16) is measured on
   "$py" benchmarks/parallel_scaling.py --markdown runs/parallel_scaling.md
   splice parallel-scaling runs/parallel_scaling.md "python benchmarks/parallel_scaling.py"
 fi
-if want equations; then
-  "$py" benchmarks/step_side_by_side.py --markdown runs/step_side_by_side.md
-  splice step-side-by-side runs/step_side_by_side.md "python benchmarks/step_side_by_side.py"
-  "$py" benchmarks/v0_episodes.py --markdown runs/v0_episodes.md
-  splice v0-episodes runs/v0_episodes.md "python benchmarks/v0_episodes.py"
-fi
 if want qp; then
   "$py" benchmarks/numba_jit.py --markdown runs/numba_jit.md
   splice numba-jit runs/numba_jit.md "python benchmarks/numba_jit.py"
   "$py" benchmarks/qp_speed.py --markdown runs/qp_speed.md
   splice qp-speed runs/qp_speed.md "python benchmarks/qp_speed.py"
-  "$py" benchmarks/speedups.py --markdown runs/speedups.md
-  splice speedups runs/speedups.md "python benchmarks/speedups.py"
 fi
 if want fleet; then
   "$py" benchmarks/fleet_decision.py --markdown runs/fleet_decision.md

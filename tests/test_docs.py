@@ -17,10 +17,9 @@ BLOCKS = {"benchmark": "README.md", "benchmark-nominal": "docs/policies.md", "ga
           "expert-speed": "docs/experts.md", "anchors": "docs/rl.md", "zoo-drift": "docs/training.md",
           "train-throughput": "docs/training.md", "env-throughput": "docs/performance.md",
           "vector-step": "docs/performance.md", "numba-jit": "docs/performance.md",
-          "qp-speed": "docs/performance.md", "speedups": "docs/performance.md",
+          "qp-speed": "docs/performance.md",
           "fast-drone-grid": "docs/benchmark.md", "parallel-scaling": "docs/performance.md",
-          "parallel-scaling-16": "docs/performance.md", "step-side-by-side": "docs/performance.md",
-          "v0-episodes": "docs/performance.md", "zoo-fleet": "docs/LEARNED.md",
+          "parallel-scaling-16": "docs/performance.md", "zoo-fleet": "docs/LEARNED.md",
           "fleet-generalization": "docs/LEARNED.md", "fleet-decision": "docs/performance.md",
           "dv-mpc": "docs/experts.md", "dv-mpc-refinements": "docs/experts.md",
           "beyond-the-paper": "docs/REPRODUCTION.md"}
