@@ -131,13 +131,13 @@ def test_bad_counts_seeds_and_specs_are_one_line_errors(tmp_path, capsys):
 def test_an_unwritable_out_fails_before_any_episode(tmp_path, capsys, monkeypatch):
     """The output location is checked before computing (a file where a folder is needed,
     a folder where a file is needed), with one line naming --out."""
-    import training.evaluate
+    import training.results.run
     import training.sweep
 
     def no_work(*args, **kwargs):
         raise AssertionError("episodes ran before --out was checked")
 
-    monkeypatch.setattr(training.evaluate, "pool_map", no_work)
+    monkeypatch.setattr(training.results.run, "pool_map", no_work)
     monkeypatch.setattr(training.sweep, "execute", no_work)
     blocker = tmp_path / "a-file"
     blocker.write_text("")

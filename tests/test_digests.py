@@ -7,7 +7,7 @@ import json
 import pytest
 
 from training import digests
-from training.readme import ROOT, block_body, first_table
+from training.pages import ROOT, block_body, first_table
 
 RECORDED = json.loads(digests.DIGESTS.read_text())
 
@@ -31,10 +31,10 @@ def test_a_table_row_replays_its_recorded_episodes(row):
 def test_a_changed_episode_changes_its_digest(monkeypatch):
     """One slot's stage cost moved in its tenth significant digit changes the digest; a last-bit
     difference does not."""
-    import training.evaluate
+    import training.results.run
 
     record = digests.episode_record("epa", 0)
-    real = training.evaluate.run_episode
+    real = training.results.run.run_episode
 
     def moved(scale):
         def run(*args, **kwargs):
@@ -45,7 +45,7 @@ def test_a_changed_episode_changes_its_digest(monkeypatch):
             return row
         return run
 
-    monkeypatch.setattr(training.evaluate, "run_episode", moved(1 + 1e-8))
+    monkeypatch.setattr(training.results.run, "run_episode", moved(1 + 1e-8))
     assert digests.episode_record("epa", 0)["digest"] != record["digest"]
-    monkeypatch.setattr(training.evaluate, "run_episode", moved(1 + 1e-15))
+    monkeypatch.setattr(training.results.run, "run_episode", moved(1 + 1e-15))
     assert digests.episode_record("epa", 0)["digest"] == record["digest"]

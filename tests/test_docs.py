@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from training.readme import block_names, find_block, pages, replace_block
+from training.pages import block_names, find_block, pages, replace_block
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Every generated block and the page that holds it.

@@ -272,8 +272,9 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     import training.zoo as zoo
     from agents import make_policy
     from lawn_env import ScenarioConfig, presets
-    from training.generalization import fleet_agents, generalization_table, run_generalization
-    from training.tables import read_csv
+    from training.benchmark import fleet_agents, run_generalization
+    from training.results.report import generalization_table
+    from training.results.run import read_csv
     from training.train import train
 
     tiny = dataclasses.replace(recipes_module.RECIPES["fleet-comm"], timesteps=16)
@@ -351,8 +352,8 @@ def test_the_suite_writes_the_table_over_fleet_sizes_for_the_shipped_fleet_netwo
 
     from training.cli import main
     from training.cli.benchmark import _fleet_sizes
-    from training.generalization import FLEET_SIZES
-    from training.tables import read_csv
+    from training.benchmark import FLEET_SIZES
+    from training.results.run import read_csv
 
     args = argparse.Namespace(episodes=1, workers=1, quiet=True)
     block = _fleet_sizes(args, ["rg-mpc", "zoo:fleet-comm"], tmp_path)

@@ -13,8 +13,8 @@ import pytest
 
 from agents import ANCHORS, AnchorPolicy, anchor_name, make_policy
 from lawn_env import ScenarioConfig, presets
-from training.evaluate import run_episode
-from training.score import normalized_score, scores_by_policy
+from training.results.run import run_episode
+from training.results.stats import normalized_score, scores_by_policy
 
 
 # ---------------------------------------------------------------------- normalized score
@@ -70,7 +70,7 @@ def test_scores_by_policy_pairs_within_task_and_env():
 
 def test_score_v1_stays_computable_beside_v2():
     """v2 puts 100 at dv-mpc; v1, at rg-mpc, is computed from the same rows when they hold it."""
-    from training.score import SCORE_REFERENCES, SCORE_VERSION
+    from training.results.stats import SCORE_REFERENCES, SCORE_VERSION
 
     assert SCORE_VERSION == 2 and SCORE_REFERENCES == {1: ("epa", "rg-mpc"), 2: ("epa", "dv-mpc")}
     rows = (_rows("epa", {0: 10.0, 1: 12.0}) + _rows("rg-mpc", {0: 6.0, 1: 8.0}) + _rows("dv-mpc", {0: 4.0, 1: 6.0})
@@ -125,8 +125,12 @@ def test_anchor_names_and_errors():
 # ---------------------------------------------------------------------- the learned protocol
 def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     pytest.importorskip("stable_baselines3")
-    from training.leaderboard import costs_of, learned_entries, own_anchor, run_learned_protocol
-    from training.tables import fmt_geometric, fmt_paired, paired_difference, paired_geometric, read_csv
+    from training.benchmark import run_learned_protocol
+    from training.results.run import learned_entries, own_anchor
+    from training.results.stats import costs_of
+    from training.results.report import fmt_geometric, fmt_paired
+    from training.results.run import read_csv
+    from training.results.stats import paired_difference, paired_geometric
 
     agents = ["zoo:ppo-comm", "zoo:bc-comm", "zoo:ppo-comm"]
     anchors = sorted({own_anchor(a) for a in agents})
@@ -199,7 +203,8 @@ def test_suite_tasks_are_presets_with_their_own_scenarios():
 
 def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(tmp_path):
     pytest.importorskip("stable_baselines3")
-    from training.suite import run_suite, suite_table
+    from training.benchmark import run_suite
+    from training.results.report import suite_table
 
     policies = ["anchor:stake", "zoo:ppo-comm"]
     tasks = ["default", "wide-k8"]
@@ -241,7 +246,7 @@ def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
         assert float(np.sum(episode.infos["stage_cost"][1:])) == pytest.approx(expected, rel=1e-12)
         assert float(-np.sum(episode.rewards)) == pytest.approx(expected, rel=1e-12)
     # Minari's normalized score is the package's score / 100 (epa and dv-mpc on the same seeds)
-    from training.score import normalized_score
+    from training.results.stats import normalized_score
 
     costs = {p: {7 + i: run_episode(p, "lawn/Comm-v0", ScenarioConfig(), 7 + i)["control_cost"] for i in range(2)}
              for p in ("epa", "dv-mpc")}
@@ -325,7 +330,7 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
           out_dir=runs / "bc-comm" / "seed-0", hp_overrides={"epochs": 1, "dagger_iterations": 0}, progress=False)
     table = build_zoo(runs, tmp_path / "docs" / "LEARNED.md", workers=1, progress=False, episodes=3,
                       target=tmp_path / "zoo")
-    from training.leaderboard import own_anchor
+    from training.results.run import own_anchor
 
     anchor = own_anchor(f"bc:{runs / 'bc-comm' / 'seed-0'}")  # the hyperparameter file's interface: anchor:stake
     rows = table.splitlines()
@@ -378,7 +383,7 @@ def test_zoo_stages_on_a_recorded_run(tmp_path):
 # ---------------------------------------------------------------------- the command line
 def test_evaluate_prints_the_score_beside_the_cost(tmp_path, capsys):
     from training.cli import main
-    from training.tables import read_csv
+    from training.results.run import read_csv
 
     out = tmp_path / "rows.csv"
     common = ["--episodes", "3", "--set", "num_slots=15", "--workers", "1", "--quiet", "--out", str(out)]

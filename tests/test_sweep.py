@@ -125,7 +125,7 @@ def test_quick_figures_are_built_from_their_tables(tmp_path):
     with pytest.raises(ValueError, match="unknown figures"):
         make_figures(["fig9"], tmp_path)
     from training.experiments import check_claims, format_claims, read_claims, write_claims
-    from training.reproduction import write_reproduction
+    from training.experiments.reproduction import write_reproduction
 
     with pytest.raises(FileNotFoundError, match="run `lawn figures"):
         write_reproduction(tmp_path, tmp_path / "docs")  # the page reads the claims' results, not the tables
@@ -146,7 +146,7 @@ def test_quick_figures_are_built_from_their_tables(tmp_path):
 
 def test_paired_claims_use_the_same_seeds_and_their_intervals():
     from training.experiments.base import multi_claim, paired_claim
-    from training.tables import paired_difference, verdict
+    from training.results.stats import paired_difference, verdict
 
     a = {0: 90.0, 1: 180.0, 2: 95.0, 3: 9.0}
     b = {0: 100.0, 1: 200.0, 2: 100.0, 4: 1.0}  # seed 3 and 4 unpaired: ignored
@@ -312,7 +312,7 @@ def test_sweep_reruns_when_policy_arguments_or_the_version_change(tmp_path, monk
 
 def test_summarize_sweep_gives_the_mean_and_interval_per_point_and_policy():
     from training.sweep import summarize_sweep
-    from training.tables import mean_ci
+    from training.results.stats import mean_ci
 
     rows = [{"g": g, "policy": p, "control_cost": c, "rmse_m": 1.0, "outage_rate": 0.0}
             for g, p, c in [(1, "a", 10.0), (1, "a", 14.0), (1, "b", 3.0), (2, "a", 5.0), (2, "a", 7.0)]]

@@ -29,7 +29,7 @@ ENV_ID = "lawn/Joint-v0"
 def _rows() -> tuple[str, ...]:
     from agents import BENCHMARK_POLICIES
 
-    from .limits import REFERENCE_ROWS
+    from .results.run import REFERENCE_ROWS
 
     return (*BENCHMARK_POLICIES, *REFERENCE_ROWS)
 
@@ -48,7 +48,7 @@ def episode_record(policy: str, seed: int) -> dict:
     """One seeded episode of a table row on the default task: its digest and its control cost."""
     from lawn_env import ScenarioConfig
 
-    from .evaluate import run_episode
+    from .results.run import run_episode
 
     row = run_episode(policy, ENV_ID, ScenarioConfig(), seed)
     values = [_digits(c) for c in json.loads(row["stage_costs"])] + [_digits(row["outage_rate"]),

@@ -25,7 +25,7 @@ from agents import Step, make_policy, rollout
 from agents.ao import AOSettings, AOSolver
 from lawn_env import ScenarioConfig
 
-from .evaluate import write_rows
+from .results.run import write_rows
 
 __all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "global_power_shares", "format_gap_table",
            "convergence", "format_convergence", "plot_gaps", "plot_convergence", "write_gap_outputs"]
@@ -72,7 +72,7 @@ def _gap_task(task):
 
 def run_gap(policies: Sequence[str], driver: str, config: ScenarioConfig, episodes: int, seed: int, every: int,
             workers: int = 1, progress: bool = True, global_settings: Mapping[str, Any] | None = None) -> list[dict]:
-    from .evaluate import pool_map
+    from .pool import pool_map
 
     tasks = [(tuple(policies), driver, config, seed + i, every, dict(global_settings or {})) for i in range(episodes)]
     rows = []

@@ -9,7 +9,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from ..tables import fmt_paired, mean_ci, paired_difference, verdict
+from ..results.report import fmt_paired
+from ..results.stats import mean_ci, paired_difference, verdict
 
 __all__ = [
     "Claim",

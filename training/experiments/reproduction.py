@@ -1,6 +1,6 @@
-"""``docs/REPRODUCTION.md``: its fixed text and its writer (:func:`write_reproduction`), which reads
-the claims' results that ``lawn figures`` wrote (``OUT/claims.json``), the build times it recorded
-and its figures, and nothing else.
+"""The generated blocks of ``docs/REPRODUCTION.md`` (:func:`write_reproduction`), from the claims'
+results that ``lawn figures`` wrote (``OUT/claims.json``), the build times it recorded and its
+figures, and nothing else; the page's prose is the page's.
 
 ``EXPLANATIONS`` maps a claim-key prefix to why that claim does not hold here; each names the test
 or command that demonstrates the mechanism. A claim that does not hold and has no explanation is
@@ -15,56 +15,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Mapping, Sequence
 
 if TYPE_CHECKING:
-    from .experiments import Claim
+    from .base import Claim
 
-__all__ = ["INTRO", "BEYOND", "EXPLANATIONS", "write_reproduction"]
+__all__ = ["EXPLANATIONS", "write_reproduction"]
 
-
-INTRO = """
-# Reproducing the paper's experiments
-
-One command regenerates every experiment of MODEL.md §7, this page and its figures:
-
-```bash
-lawn figures --out runs/figures --docs docs   # the full set (40 seeds behind every claim)
-lawn figures rate blocklength --out runs/figures    # some of them
-lawn figures --quick --out runs/quick               # reduced seeds, grids and episodes (the tests run it)
-```
-
-(`bash scripts/refresh_docs.sh` runs it together with every other generated table of the README and the docs.)
-Each experiment (`training/experiments/<name>.py`, one `Experiment` record per figure) is a set of tidy tables
-(`runs/figures/data/<table>.csv`: one row per episode with its config, the metrics of MODEL.md §6,
-the realized stage cost of every slot and the software version), a plot that reads only those
-tables, and the paper's claims about it, checked on the same tables. Rerunning skips finished rows,
-so an interrupted run resumes.
-
-The regime (MODEL.md §8): at the paper's nominal point (R_th = 1 bit/s/Hz at 0 dBW) every link's
-outage is 1e-8 to 1e-5 and the policies tie, so the figures sit where outage matters: rate and
-blocklength at the project's decided R_th = 10 (varied around it), CDF at R_th = 1 with power budgets
-of −30 to −15 dBW, and CE at R_th = 1 and −30 dBW, where the noise term σ²d²/(α0 p) is comparable
-to the CE error ρ (at 0 dBW it is below 3e-3 everywhere, so the CE error sets a power-independent
-outage floor: the second CE panel shows it). Reference paths respect the AGVs' envelope (MODEL.md §1)
-and planners plan with the control period (MODEL.md §7).
-"""
-
-#: The section after the paper's claims: the package's answer to the objective's mis-model, a block
-#: that ``python benchmarks/dv_mpc.py`` fills (kept when this page is rewritten).
-BEYOND = """
-## Beyond the paper's objective
-
-The verdicts above compare the paper's policies on the paper's objective. That objective, Ĵ, is the
-MPC cost of the *expected* trajectory, so the command it sends shrinks with the link's success
-probability ψ. But a command acts only if it arrives, and a lost one is seen and replanned at the next
-slot. The expected cost of a slot's decision for AGV k is therefore ψ_k V_k^del + (1 − ψ_k) V_k^lost.
-- V^del is the MPC's value with the command delivered.
-- V^lost is its value with the command held at zero.
-
-Minimising it sends each command as if it arrives (the ψ = 1 MPC: the certainty-equivalent form of
-optimal control under acknowledged losses, Schenato et al. 2007). It spends power and position where
-delivery is worth most: the largest Σ_k ψ_k (V_k^lost − V_k^del). That planner is `dv-mpc` (MODEL.md §4,
-"Planning under delivery"; the derivation and its approximations are on the experts page,
-docs/experts.md). On the paper's default scenario and on every task of the suite, against `rg-mpc`,
-the paper's per-slot problem solved exactly, with the same search and refinement:"""
 
 _SLOT_NOISE = """One slot's realized cost is dominated by that slot's fading draw and by where each
 AGV happens to be on its path; its seed-to-seed spread is far larger than the episode cost's, so even 40
@@ -145,22 +99,18 @@ def _explained(claims: Sequence[Claim], explanations: Mapping[str, str]) -> list
 
 
 def write_reproduction(out: Path, docs: Path, explanations: Mapping[str, str] | None = None) -> Path:
-    """Write ``docs/REPRODUCTION.md`` from what ``lawn figures --out OUT`` left there: the claims'
-    results (``claims.json``), the build times it recorded when it ran the tables' rows
-    (``timings.json``) and the figures (copied to ``docs/figures/reproduction/``). Every claim that
-    does not hold gets the explanation keyed by its claim key's prefix in ``explanations`` (default
-    :data:`EXPLANATIONS`)."""
-    from .experiments import EXPERIMENTS, format_claims, read_claims, tally
-    from .provenance import provenance
-    from .readme import block_body
+    """Fill the blocks ``reproduction`` and ``reproduction-figures`` of ``docs/REPRODUCTION.md``
+    from what ``lawn figures --out OUT`` left there: the claims' results (``claims.json``), the
+    build times it recorded when it ran the tables' rows (``timings.json``) and the figures (copied
+    to ``docs/figures/reproduction/``). Every claim that does not hold gets the explanation keyed by
+    its claim key's prefix in ``explanations`` (default :data:`EXPLANATIONS`)."""
+    from ..pages import replace_body
+    from . import EXPERIMENTS, format_claims, read_claims, tally
 
     out, docs = Path(out), Path(docs)
+    path = docs / "REPRODUCTION.md"
     claims = read_claims(out)
-    fig_dir = docs / "figures" / "reproduction"
-    fig_dir.mkdir(parents=True, exist_ok=True)
-    for png in sorted(out.glob("*.png")):
-        shutil.copy2(png, fig_dir / png.name)
-    lines = [INTRO.strip(), "", f"Generated by `lawn figures --out {out} --docs {docs}` at {provenance()}."]
+    lines = []
     record = out / "timings.json"
     timings = json.loads(record.read_text()) if record.exists() else {}
     if timings:
@@ -172,10 +122,13 @@ def write_reproduction(out: Path, docs: Path, explanations: Mapping[str, str] | 
     lines += ["", "## The paper's claims, checked", "", _METHOD, "", tally(claims), "", format_claims(claims), "",
               "## Where the results differ from the paper, and why", ""]
     lines += _explained(claims, EXPLANATIONS if explanations is None else explanations)
-    path = docs / "REPRODUCTION.md"
-    lines += [BEYOND.strip(), "", "<!-- beyond-the-paper:begin -->", block_body(path, "beyond-the-paper"),
-              "<!-- beyond-the-paper:end -->", ""]
-    lines += ["## Figures", ""]
-    lines += [f"![{p.stem}](figures/reproduction/{p.name})" for p in sorted(out.glob("*.png"))]
-    path.write_text("\n".join(lines) + "\n")
+    figures = "\n".join(f"![{p.stem}](figures/reproduction/{p.name})" for p in sorted(out.glob("*.png")))
+    source = f"lawn figures --out {out} --docs {docs}"
+    text = replace_body(path.read_text(), "reproduction", "\n".join(lines), source, where=str(path))
+    text = replace_body(text, "reproduction-figures", figures, source, where=str(path))  # both found: now write
+    fig_dir = docs / "figures" / "reproduction"
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    for png in sorted(out.glob("*.png")):
+        shutil.copy2(png, fig_dir / png.name)
+    path.write_text(text)
     return path
