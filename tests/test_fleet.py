@@ -274,7 +274,7 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     from lawn_env import ScenarioConfig, presets
     from training.benchmark import fleet_agents, run_generalization
     from training.results.report import generalization_table
-    from training.results.run import read_csv
+    from training.results.run import Play, read_csv
     from training.train import train
 
     tiny = dataclasses.replace(recipes_module.RECIPES["fleet-comm"], timesteps=16)
@@ -306,7 +306,7 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     policy = make_policy("zoo:fleet-comm", ScenarioConfig(num_agvs=7), env_id="lawn/Comm-v0")
     assert policy.entities.num_agvs == 7
     sizes = {3: 2, 5: 2}
-    rows = run_generalization(fleet_agents(), sizes, workers=1, progress=False,
+    rows = run_generalization(fleet_agents(), sizes, Play(1, False),
                               base=presets.get("default").override(num_slots=6))
     assert {(r["policy"], r["task"]) for r in rows} == {(p, f"k{k}") for p in ("dv-mpc", "noise:dv-mpc", "zoo:fleet-comm")
                                                         for k in sizes}
@@ -353,9 +353,9 @@ def test_the_suite_writes_the_table_over_fleet_sizes_for_the_shipped_fleet_netwo
     from training.cli import main
     from training.cli.benchmark import _fleet_sizes
     from training.benchmark import FLEET_SIZES
-    from training.results.run import read_csv
+    from training.results.run import TRANSIENT_SLOTS, read_csv
 
-    args = argparse.Namespace(episodes=1, workers=1, quiet=True)
+    args = argparse.Namespace(episodes=1, workers=1, quiet=True, transient_slots=TRANSIENT_SLOTS)
     block = _fleet_sizes(args, ["rg-mpc", "zoo:fleet-comm"], tmp_path)
     rows = read_csv(tmp_path / "fleet_sizes.csv")
     assert {r["task"] for r in rows if r["policy"] == "zoo:fleet-comm"} == {f"k{k}" for k in FLEET_SIZES}

@@ -14,7 +14,7 @@ import pytest
 
 from agents import ANCHORS, AnchorPolicy, anchor_name, make_policy
 from lawn_env import ScenarioConfig, presets
-from training.pages import ROOT
+from training.pages import ROOT, first_table
 from training.results.run import run_episode
 from training.results.stats import normalized_score, scores_by_policy
 
@@ -436,10 +436,11 @@ def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
     assert "1 policies x 1 tasks, 3 seeds each" in printed
     board = (out / "board.md").read_text()
     assert board.splitlines()[0] == "| policy | env | k3 | IQM over tasks [95 %] |"
-    names = [line.split("|")[1].strip() for line in board.splitlines()[2:]]
+    names = [line.split("|")[1].strip() for line in first_table(board)[2:]]
     assert names == ["noise:dv-mpc", "limit:fast-drone", "limit:perfect-links", "anchor:stake"]
     page = (docs / "LEADERBOARD.md").read_text()
     assert board.strip() in page and (out / "structure.md").read_text().strip() in page
+    assert "1 policies x 1 tasks (k3), test seeds 0-2" in board and (docs / "figures" / "suite-per-slot.png").exists()
     assert "| k3 | lawn/Joint-v0 | 3 |" in (out / "references.md").read_text()
 
 

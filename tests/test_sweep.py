@@ -1,6 +1,7 @@
 import csv
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -9,6 +10,8 @@ import time
 import gymnasium as gym
 import numpy as np
 import pytest
+
+from training.pages import ROOT
 
 from lawn_env import DisturbanceConfig, ScenarioConfig
 from training.experiments import EXPERIMENTS, make_figures
@@ -127,6 +130,8 @@ def test_quick_figures_are_built_from_their_tables(tmp_path):
     from training.experiments import check_claims, format_claims, read_claims, write_claims
     from training.experiments.reproduction import write_reproduction
 
+    (tmp_path / "docs").mkdir()
+    shutil.copy2(ROOT / "docs" / "REPRODUCTION.md", tmp_path / "docs" / "REPRODUCTION.md")  # the page's blocks
     with pytest.raises(FileNotFoundError, match="run `lawn figures"):
         write_reproduction(tmp_path, tmp_path / "docs")  # the page reads the claims' results, not the tables
     claims = check_claims(tmp_path)

@@ -2,7 +2,12 @@
 (:mod:`.results.run`), compute (:mod:`.results.stats`), write the tables (:mod:`.results.report`).
 
 * **Paper protocol** (:func:`run_benchmark`): the policies on the same seeds of one scenario,
-  compared with the first per seed (paired mean and geometric ratio) and scored.
+  compared with the first per seed (paired mean and geometric ratio) and scored. Every row of the
+  README's table (its default policies and the reference rows) replays two recorded episodes
+  (:func:`digest_records`, ``tests/data/episode_digests.json``: every slot's stage cost, the outage
+  rate and the RMSE to 10 significant digits, hashed), so a change of any policy's episodes is
+  deliberate or a test failure; ``python -m training.benchmark --write-digests`` records them
+  beside the table.
 * **Learned protocol** (:func:`run_learned_protocol`, the tables of ``lawn zoo build``): every agent
   on the test seeds 0..TEST_EPISODES-1 of the unmodified default scenario beside the best expert,
   ``epa`` and the zero action of every interface the agents act through (``anchor:NAME``): what
@@ -18,11 +23,15 @@
 
 from __future__ import annotations
 
+import argparse
+import hashlib
+import json
+import sys
 import time
 from pathlib import Path
 from typing import Mapping, Sequence
 
-from agents import make_policy
+from agents import BENCHMARK_POLICIES, make_policy
 from agents.base import JOINT
 from agents.errors import MissingExtra
 from agents.learned import zoo_agents
@@ -31,15 +40,21 @@ from lawn_env import ScenarioConfig, presets
 from .protocol import TEST_EPISODES
 from .results.report import learned_table, plot_summary, summary_markdown
 from .results.run import (NOISE, REFERENCE_ROWS, Play, build_policy, evaluate, learned_entries, policy_env,
-                          run_entries, write_rows)
+                          run_entries, run_episode, write_rows)
 from .results.stats import (SCORE_HIGH, SCORE_LOW, paired_cost_difference, paired_cost_geometric,
                             scores_by_policy, summarize)
 
-__all__ = ["run_benchmark", "run_learned_protocol", "SUITE_POLICIES", "suite_policies", "run_suite", "FLEET_SIZES",
+__all__ = ["run_benchmark", "README_ROWS", "DIGESTS", "DIGEST_SEEDS", "episode_record", "digest_records",
+           "run_learned_protocol", "SUITE_POLICIES", "suite_policies", "run_suite", "FLEET_SIZES",
            "fleet_agents", "run_generalization"]
 
 #: Experts and baselines of the suite (global-mpc, seconds per slot, is the gap study's reference).
 SUITE_POLICIES = ("dv-mpc", "rg-mpc", "ao-mpc", "epa", "sf", "pid", "lqr", "heuristic", "anchor:stake", "anchor:distance")
+#: The rows of the README's table: lawn benchmark's default policies and the reference rows.
+README_ROWS = (*BENCHMARK_POLICIES, *REFERENCE_ROWS)
+#: Their recorded episodes (seeds DIGEST_SEEDS of the default task on lawn/Joint-v0).
+DIGESTS = Path(__file__).resolve().parent.parent / "tests" / "data" / "episode_digests.json"
+DIGEST_SEEDS = (0, 1)
 #: Fleet size -> test seeds (0..n-1) of the fleet-size table.
 FLEET_SIZES: dict[int, int] = {3: 100, 4: 100, 8: 100, 16: 40, 32: 40, 64: 20}
 
@@ -74,6 +89,19 @@ def run_benchmark(policies: Sequence[str], env_id: str, config: ScenarioConfig, 
     plot_summary(summary, out_dir / "benchmark.png",
                  title=f"{env_id}, K={config.num_agvs}, {episodes} seeds from {seed}: mean ± 95 % interval")
     return rows, summary
+
+
+def episode_record(policy: str, seed: int) -> dict:
+    """One seeded episode of a README row on the default task: its digest and its control cost."""
+    row = run_episode(policy, JOINT, ScenarioConfig(), seed)
+    values = [f"{float(x):.10g}" for x in (*json.loads(row["stage_costs"]), row["outage_rate"], row["rmse_m"])]
+    return {"seed": seed, "control_cost": float(f"{float(row['control_cost']):.10g}"),
+            "digest": hashlib.sha256(" ".join(values).encode()).hexdigest()[:16]}
+
+
+def digest_records(rows: Sequence[str] = README_ROWS) -> dict[str, list[dict]]:
+    """Every row's episodes (:func:`episode_record`), by row name."""
+    return {name: [episode_record(name, s) for s in DIGEST_SEEDS] for name in rows}
 
 
 def run_learned_protocol(agents: Sequence[str], out_dir: Path, episodes: int = TEST_EPISODES, play: Play = Play(),
@@ -160,3 +188,27 @@ def run_generalization(agents: Sequence[str], sizes: Mapping[int, int] = FLEET_S
         entries = [(p, env) for env in envs for p in (SCORE_HIGH, noise)] + [(a, policy_env(a)) for a in agents]
         rows += run_entries(entries, config, range(int(seeds)), play, task=f"k{k}", desc=f"fleet sizes: K = {k}")
     return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m training.benchmark [--write-digests]``: compare the README rows' episodes with the
+    recorded ones (exit 1 naming the rows that changed), or record them."""
+    parser = argparse.ArgumentParser(prog="python -m training.benchmark", description=main.__doc__.split(":")[0])
+    parser.add_argument("--write-digests", action="store_true", help=f"rewrite {DIGESTS.name}")
+    args = parser.parse_args(argv)
+    now = digest_records()
+    if args.write_digests:
+        DIGESTS.parent.mkdir(parents=True, exist_ok=True)
+        tmp = DIGESTS.with_suffix(".tmp")
+        tmp.write_text(json.dumps(now, indent=1) + "\n")
+        tmp.replace(DIGESTS)
+        print(f"wrote {DIGESTS}: {len(now)} rows x {len(DIGEST_SEEDS)} episodes")
+        return 0
+    recorded = json.loads(DIGESTS.read_text()) if DIGESTS.exists() else {}
+    changed = [name for name in now if recorded.get(name) != now[name]]
+    print("unchanged" if not changed else f"changed: {', '.join(changed)}")
+    return 1 if changed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -8,7 +8,6 @@ import argparse
 import shutil
 from pathlib import Path
 
-import lawn_env
 from lawn_env import presets
 
 from . import COMMAND_HELP

@@ -2,34 +2,12 @@
 differences and the geometric mean of cost ratios with a bootstrap interval), the verdict of a
 claim, and the normalized score with its interquartile mean over tasks.
 
-**The normalized score** (D4RL's convention, adapted to a cost).
-
-Score version 2 (:data:`SCORE_VERSION`). On one task and environment, over the seeds evaluated,
-with ``E_i`` the control cost of ``epa`` (the paper's equal-power baseline), ``R_i`` that of
-``dv-mpc`` (the package's best expert, the delivery-value planner) and ``x_i`` the policy's, all on
-seed ``i``::
-
-    s_i   = 100 * (E_i - x_i) / mean_j (E_j - R_j)
-    score = mean_i s_i = 100 * (mean E - mean x) / (mean E - mean R)
-
-0 is EPA, 100 is ``dv-mpc``, above 100 beats it, below 0 is worse than equal power. Version 1 put
-100 at ``rg-mpc``, the paper's per-slot problem solved exactly; ``dv-mpc`` plans each command as if
-it arrives and beats it on the suite's tasks (docs/benchmark.md, "Score versions"), so v2 moved the
-100 there. v1 stays computable: :data:`SCORE_REFERENCES` and the ``version`` argument of
-:func:`score_inputs` and :func:`scores_by_policy`.
-
-The numerator is paired (the same seed's EPA cost), the denominator is the mean reference gap over
-the seeds: the per-seed gap ``E_i - R_i`` spans orders of magnitude across seeds, and EPA can cost
-less than the expert on some seeds (docs/LEADERBOARD.md, the references table), so a per-seed ratio
-would be dominated by a few seeds or undefined. The 95 % interval is a paired bootstrap over seeds (the triples
-``(E_i, R_i, x_i)`` resampled together, so the denominator's own uncertainty is in it;
-``scipy.stats.bootstrap``, percentile method, a fixed seed).
-
-The reference costs are not constants: they are the two reference policies' realized costs on
-the same seeds, task and environment, run beside the policy (``lawn evaluate`` runs both beside
-the evaluated policy, ``lawn benchmark --protocol learned`` and ``--suite`` add them to every env
-they run). The references' code is versioned with the package; docs/LEADERBOARD.md lists their
-mean costs per task.
+**The normalized score** (v2, :data:`SCORE_VERSION`; docs/benchmark.md defines it and says why):
+on one task and env, with ``E_i``, ``R_i`` and ``x_i`` the costs of ``epa``, ``dv-mpc`` and the
+policy on seed ``i``, ``score = 100 * (mean E - mean x) / (mean E - mean R)`` (0 is EPA, 100 the
+best expert); the 95 % interval is a paired bootstrap of the triples over seeds. The references are
+run beside the policy on the same seeds, never stored. v1 (100 at ``rg-mpc``) stays computable:
+:data:`SCORE_REFERENCES` and the ``version`` arguments.
 """
 
 from __future__ import annotations
@@ -179,12 +157,11 @@ def summarize(rows: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_MET
 
 def paired_cost_difference(rows: list[dict], reference: str, metric: str = "control_cost") -> dict[str, tuple[float, float]]:
     """Per policy: mean and 95 % t-interval half-width of the per-seed relative difference
-    ``(x - x_ref) / x_ref`` against ``reference`` on the seeds both ran (a paired comparison,
-    :func:`paired_difference`)."""
-    ref = {r["seed"]: float(r[metric]) for r in rows if r["policy"] == reference}
+    ``(x - x_ref) / x_ref`` against ``reference`` on the seeds both ran (:func:`paired_difference`)."""
+    ref = costs_of(rows, reference, metric=metric)
     out = {}
     for name in dict.fromkeys(r["policy"] for r in rows):
-        mean, half, n = paired_difference({r["seed"]: float(r[metric]) for r in rows if r["policy"] == name}, ref)
+        mean, half, n = paired_difference(costs_of(rows, name, metric=metric), ref)
         if n > 1:
             out[name] = (mean, half)
     return out
@@ -193,21 +170,21 @@ def paired_cost_difference(rows: list[dict], reference: str, metric: str = "cont
 def paired_cost_geometric(rows: list[dict], reference: str, metric: str = "control_cost") -> dict[str, Geometric]:
     """Per policy: the geometric mean of its per-seed cost ratios against ``reference`` with a 95 %
     bootstrap interval and the share of seeds won (:func:`paired_geometric`)."""
-    ref = {r["seed"]: float(r[metric]) for r in rows if r["policy"] == reference}
+    ref = costs_of(rows, reference, metric=metric)
     out = {}
     for name in dict.fromkeys(r["policy"] for r in rows):
-        mine = {r["seed"]: float(r[metric]) for r in rows if r["policy"] == name}
+        mine = costs_of(rows, name, metric=metric)
         if name != reference and any(s in ref for s in mine):
             out[name] = paired_geometric(mine, ref)
     return out
 
 
-def costs_of(rows: Sequence[Mapping], policy: str, env: str, task: str | None = None,
+def costs_of(rows: Sequence[Mapping], policy: str, env: str | None = None, task: str | None = None,
              metric: str = "control_cost") -> dict[int, float]:
-    """``metric`` (default: the control cost) per seed of ``policy`` on ``env`` (and ``task``, when
+    """``metric`` (default: the control cost) per seed of ``policy`` (on ``env`` and ``task``, when
     given) in evaluation rows."""
-    return {int(r["seed"]): float(r[metric]) for r in rows
-            if r["policy"] == policy and r["env"] == env and (task is None or r.get("task", "default") == task)}
+    return {int(r["seed"]): float(r[metric]) for r in rows if r["policy"] == policy
+            and (env is None or r["env"] == env) and (task is None or r.get("task", "default") == task)}
 
 
 def geometric(rows: Sequence[Mapping], policy: str, reference: str, env: str, task: str | None = None) -> Geometric:
