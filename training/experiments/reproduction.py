@@ -2,14 +2,14 @@
 results that ``lawn figures`` wrote (``OUT/claims.json``), the build times it recorded and its
 figures, and nothing else; the page's prose is the page's.
 
-``EXPLANATIONS`` maps a claim-key prefix to why that claim does not hold here; each names the test
-or command that demonstrates the mechanism. A claim that does not hold and has no explanation is
-listed as "not yet explained" in the document.
+``EXPLANATIONS`` maps a claim-key prefix to the page's section that says why that claim does not
+hold here. A claim that does not hold and has no such section is listed as "not yet explained".
 """
 
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING, Mapping, Sequence
@@ -20,56 +20,30 @@ if TYPE_CHECKING:
 __all__ = ["EXPLANATIONS", "write_reproduction"]
 
 
-_SLOT_NOISE = """One slot's realized cost is dominated by that slot's fading draw and by where each
-AGV happens to be on its path; its seed-to-seed spread is far larger than the episode cost's, so even 40
-seeds rarely resolve a difference on it. The episode-cost rows of the same comparison are the
-meaningful ones."""
-
-_AO = """The paper's AO is no better than equal power per slot on this scenario: on the states of an
-EPA-driven episode its returned J^ is above EPA's on some slots, while the reduced-problem expert's
-never is (`tests/test_reduced.py::test_paper_ao_is_no_better_than_epa_per_slot_where_rg_mpc_is`).
-Its power block starts from equal power and stalls, and Algorithm 2's stopping rule ends the descent
-far above the optimum (the convergence rows above). With references the AGVs can follow, the
-tracking part of the cost is small and these per-slot losses decide the comparison; `rg-mpc`, which
-solves the same per-slot problem to the optimum, wins the same comparison (the `rg-mpc` row)."""
-
+#: Why a claim does not hold here: its key's longest prefix -> the heading of the section of
+#: docs/REPRODUCTION.md that gives the reason (the page's prose; each names the test or command that
+#: shows the mechanism).
+_SLOT = "One slot's cost does not resolve a difference"
+_AO = "The AO is no better than equal power per slot"
 EXPLANATIONS = {
-    "convergence.optimum": """The AO's objective never increases (the paper's argument holds with
-MODEL.md §4's safeguard), but it stops on a slow descent far above the optimum: block-coordinate
-descent on strongly coupled blocks, where each power or drone step can raise ψ only a little before
-the next QP. The reduced-problem expert reaches the global reference at the same slots (the value
-in brackets). Tested by `tests/test_reduced.py::test_rg_mpc_is_never_worse_than_the_paper_ao_on_sampled_slots`;
-measured over 200 slots by `lawn gap` (the optimality-gap page, docs/experts.md).""",
-    "convergence.few-iterations": """At this slot the descent is slow enough that Algorithm 2's rule
-(relative decrease per iteration below 1e-2) needs more than ten iterations; see the row above for
-how far from the optimum it still is.""",
-    "ce.slowest-growth": """The differences in growth are a few centimetres against the MPC-based
-baselines and are dominated by the one lost AGV against EPA; 40 seeds do not resolve them. The level
-comparison ("lowest RMSE") is resolved.""",
-    "ce.expert-lowest-slot": _SLOT_NOISE,
-    "rate.rises-slot": _SLOT_NOISE,
-    "rate.steeper-slot": _SLOT_NOISE,
-    "ce.expert-lowest": _AO + """ Here the predictive PID and LQR, whose power and drone are optimized by
-the same blocks but whose increments need no coupled descent, track better than the AO.""",
-    "blocklength.beats-epa-slot": _SLOT_NOISE,
-    "blocklength.beats-sf-slot": _SLOT_NOISE,
+    "convergence.optimum": "The AO stops far above the optimum",
+    "convergence.few-iterations": "The AO needs more than ten iterations at some slots",
+    "ce.slowest-growth": "Differences in RMSE growth of a few centimetres",
+    "ce.expert-lowest-slot": _SLOT,
+    "rate.rises-slot": _SLOT,
+    "rate.steeper-slot": _SLOT,
+    "ce.expert-lowest": "The predictive baselines track better than the AO",
+    "blocklength.beats-epa-slot": _SLOT,
+    "blocklength.beats-sf-slot": _SLOT,
     "blocklength.beats-epa-slot.ao-mpc": _AO,  # at 40 seeds the AO's loss shows on one slot too
     "blocklength.beats-sf-slot.ao-mpc": _AO,
     "blocklength.beats-epa": _AO,
     "blocklength.beats-sf": _AO,
     "disturbance.beats-epa": _AO,
     "paths.epa-worse": _AO,
-    "paths.k3-shorter": """The claim holds for the paper's AO, whose drone takes small SCA steps. `rg-mpc`
-moves the drone wherever the one-slot objective is lower, however little, and nothing in the
-paper's objective charges for flying (MODEL.md §4), so its path length is set by that repositioning,
-several times EPA's and the AO's (`runs/figures/data/paths-k4.csv`), not by how many AGVs it
-serves.""",
-    "paths.epa-longer": """The claim holds for the paper's AO. `rg-mpc` moves the drone wherever the
-one-slot objective is lower, however little, and nothing in the paper's objective charges for flying
-(MODEL.md §4), so its drone flies several times further than EPA's while its cost is lower (the
-disturbance rows).""",
+    "paths.k3-shorter": "The rg-mpc drone flies further",
+    "paths.epa-longer": "The rg-mpc drone flies further",
 }
-
 
 _METHOD = ("Each comparison is paired: the same seeds (references, initial offsets, fading draws) for both sides; "
            "relative differences are per seed, then averaged, with a 95 % t-interval. *holds*: the interval lies on "
@@ -77,33 +51,42 @@ _METHOD = ("Each comparison is paired: the same seeds (references, initial offse
            "marked \"project's check\" are this project's own findings, not the paper's claims.")
 
 
-def _explained(claims: Sequence[Claim], explanations: Mapping[str, str]) -> list[str]:
-    """Every claim that does not hold, grouped under the explanation of its key's longest prefix;
-    those without one listed as not yet explained."""
-    missing, groups = [], {}  # explanation text -> the claims it explains, in table order
+def heading_anchor(heading: str) -> str:
+    """The anchor MyST gives a heading (``myst_heading_anchors``): lower case, punctuation dropped,
+    spaces to hyphens."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def _explained(claims: Sequence[Claim], explanations: Mapping[str, str], page: str) -> list[str]:
+    """Every claim that does not hold, grouped under a link to the section of ``page`` that explains
+    its key's longest prefix; those without one, or whose section the page lacks, listed as not yet
+    explained."""
+    headings = set(re.findall(r"^#{2,3} (.+)$", page, flags=re.MULTILINE))
+    missing, groups = [], {}  # heading -> the claims it explains, in table order
     for c in claims:
         if c.verdict == "holds":
             continue
         prefix = next((k for k in sorted(explanations, key=len, reverse=True) if c.key.startswith(k)), None)
-        if prefix is None:
+        if prefix is None or explanations[prefix] not in headings:
             missing.append(c.key)
         else:
-            groups.setdefault(explanations[prefix].strip(), []).append(c)
+            groups.setdefault(explanations[prefix], []).append(c)
     lines = []
-    for text, members in groups.items():
+    for heading, members in groups.items():
         names = "; ".join(f"{c.figure}: {c.claim} [{c.metric}] ({c.verdict})" for c in members)
-        lines += [f"* *{names}.*", "", "  " + text.replace("\n", "\n  "), ""]
+        lines.append(f"* *{names}.* Why: [{heading}](#{heading_anchor(heading)}).")
     if missing:
-        lines += ["* **Not yet explained:** " + ", ".join(missing), ""]
+        lines.append("* **Not yet explained:** " + ", ".join(missing))
     return lines
 
 
 def write_reproduction(out: Path, docs: Path, explanations: Mapping[str, str] | None = None) -> Path:
-    """Fill the blocks ``reproduction`` and ``reproduction-figures`` of ``docs/REPRODUCTION.md``
-    from what ``lawn figures --out OUT`` left there: the claims' results (``claims.json``), the
+    """Fill the blocks ``reproduction``, ``reproduction-misses`` and ``reproduction-figures`` of
+    ``docs/REPRODUCTION.md`` from what ``lawn figures --out OUT`` left there: the claims' results (``claims.json``), the
     build times it recorded when it ran the tables' rows (``timings.json``) and the figures (copied
     to ``docs/figures/reproduction/``). Every claim that does not hold gets the explanation keyed by
-    its claim key's prefix in ``explanations`` (default :data:`EXPLANATIONS`)."""
+    its claim key's prefix in ``explanations`` (prefix -> the page's section heading; default
+    :data:`EXPLANATIONS`)."""
     from ..pages import replace_body
     from . import EXPERIMENTS, format_claims, read_claims, tally
 
@@ -119,13 +102,14 @@ def write_reproduction(out: Path, docs: Path, explanations: Mapping[str, str] | 
                      + ").")
     lines += ["", "## Settings", "", "| figure | setting |", "|---|---|"]
     lines += [f"| {e.name} | {e.setting} |" for e in EXPERIMENTS.values()]
-    lines += ["", "## The paper's claims, checked", "", _METHOD, "", tally(claims), "", format_claims(claims), "",
-              "## Where the results differ from the paper, and why", ""]
-    lines += _explained(claims, EXPLANATIONS if explanations is None else explanations)
+    lines += ["", "## The paper's claims, checked", "", _METHOD, "", tally(claims), "", format_claims(claims)]
+    page = path.read_text()
+    misses = _explained(claims, EXPLANATIONS if explanations is None else explanations, page)
     figures = "\n".join(f"![{p.stem}](figures/reproduction/{p.name})" for p in sorted(out.glob("*.png")))
     source = f"lawn figures --out {out} --docs {docs}"
-    text = replace_body(path.read_text(), "reproduction", "\n".join(lines), source, where=str(path))
-    text = replace_body(text, "reproduction-figures", figures, source, where=str(path))  # both found: now write
+    text = replace_body(page, "reproduction", "\n".join(lines), source, where=str(path))
+    text = replace_body(text, "reproduction-misses", "\n".join(misses), source, where=str(path))
+    text = replace_body(text, "reproduction-figures", figures, source, where=str(path))  # all found: now write
     fig_dir = docs / "figures" / "reproduction"
     fig_dir.mkdir(parents=True, exist_ok=True)
     for png in sorted(out.glob("*.png")):
