@@ -441,6 +441,14 @@ def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
     page = (docs / "LEADERBOARD.md").read_text()
     assert board.strip() in page and (out / "structure.md").read_text().strip() in page
     assert "1 policies x 1 tasks (k3), test seeds 0-2" in board and (docs / "figures" / "suite-per-slot.png").exists()
+    from training.results.report import format_score
+    from training.results.run import read_csv
+    from training.results.stats import scores_by_policy
+
+    scores = scores_by_policy(read_csv(out / "episodes.csv"))  # the board's scores are the episodes' statistics
+    for line in first_table(board)[2:]:
+        policy, env, cell = (c.strip() for c in line.strip("|").split("|")[:3])
+        assert cell == format_score(scores.get(("k3", env, policy))), policy
     assert "| k3 | lawn/Joint-v0 | 3 |" in (out / "references.md").read_text()
 
 

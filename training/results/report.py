@@ -18,7 +18,7 @@ from .run import NOISE, REFERENCE_ROWS, TRANSIENT_SLOTS, is_reference_row, own_a
 from .stats import (SCORE_HIGH, SCORE_LOW, SCORE_VERSION, SUMMARY_METRICS, Geometric, aggregate_score, costs_of,
                     geometric, mean_ci, paired, paired_difference, score_inputs, scores_by_policy)
 
-__all__ = ["fmt_pct", "fmt_num", "fmt_geometric", "fmt_paired", "format_score", "RESULT_METRICS", "TIMING_METRICS",
+__all__ = ["fmt_pct", "fmt_num", "fmt_stat", "fmt_geometric", "fmt_paired", "format_score", "RESULT_METRICS", "TIMING_METRICS",
            "format_table", "summary_markdown", "plot_summary", "mean_cell", "protocol_cells", "learned_table",
            "suite_table", "structure_table", "task_tables", "plot_profiles", "skipped_summary", "TARGETS",
            "generalization_table"]
@@ -95,7 +95,7 @@ def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMA
         for key, _ in metrics:
             scale = 1e3 if key.startswith("decision_time") else 1.0
             mean, half = entry[key] * scale, entry[f"{key}_ci95"] * scale
-            cells.append(f"{_fmt(mean)} ± {_fmt(half)}")
+            cells.append(f"{fmt_stat(mean)} ± {fmt_stat(half)}")
         if scores:
             cells.insert(3, format_score(scores.get(entry[by])))
         if paired:
@@ -107,7 +107,9 @@ def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMA
     return "\n".join(lines)
 
 
-def _fmt(x: float) -> str:
+def fmt_stat(x: float) -> str:
+    """A statistic in a summary cell: four significant digits below 10, thousands separated below 1e5,
+    three significant digits beyond; ``n/a`` when not finite."""
     if not math.isfinite(x):
         return "n/a"
     if x == 0 or 1e-2 <= abs(x) < 1e5:
@@ -196,7 +198,7 @@ def learned_table(rows: Sequence[Mapping], entries: Sequence[tuple[str, str]],
     split = rows[0]["transient_slots"]
     lines += ["", f"{seeds} test seeds; control cost split into the transient (slots 0-{split - 1}) and the sustained "
               f"part (slots {split} on); score v{SCORE_VERSION}: 0 = {SCORE_LOW}, 100 = {SCORE_HIGH} "
-              "(training/score.py); geometric columns (the deciding statistic, docs/benchmark.md): the geometric "
+              "(training/results/stats.py); geometric columns (the deciding statistic, docs/benchmark.md): the geometric "
               "mean of the per-seed cost ratios - 1 with its 95 % bootstrap interval and the share of seeds won; "
               "paired-mean columns: the mean per-seed relative difference and its 95 % t-interval."]
     return "\n".join(lines)
