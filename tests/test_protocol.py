@@ -128,10 +128,9 @@ def test_anchor_names_and_errors():
 def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     pytest.importorskip("stable_baselines3")
     from training.benchmark import run_learned_protocol
-    from training.results.run import learned_entries, own_anchor
-    from training.results.stats import costs_of
     from training.results.report import fmt_geometric, fmt_paired
-    from training.results.run import read_csv
+    from training.results.run import Play, learned_entries, own_anchor, read_csv
+    from training.results.stats import costs_of
     from training.results.stats import paired_difference, paired_geometric
 
     agents = ["zoo:ppo-comm", "zoo:bc-comm", "zoo:ppo-comm"]
@@ -141,8 +140,8 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     assert entries == [("dv-mpc", "lawn/Comm-v0"), ("epa", "lawn/Comm-v0"), *[(a, "lawn/Comm-v0") for a in anchors],
                        ("zoo:ppo-comm", "lawn/Comm-v0"), ("zoo:bc-comm", "lawn/Comm-v0")]
     with pytest.raises(ValueError, match="unknown zoo agent 'nope'"):
-        run_learned_protocol(["zoo:nope"], tmp_path, episodes=3, workers=1, progress=False)
-    table = run_learned_protocol(["zoo:ppo-comm"], tmp_path, episodes=3, workers=1, progress=False)
+        run_learned_protocol(["zoo:nope"], tmp_path, episodes=3, play=Play(1, False))
+    table = run_learned_protocol(["zoo:ppo-comm"], tmp_path, episodes=3, play=Play(1, False))
     lines = table.splitlines()
     assert "vs own anchor (paired mean)" in lines[0] and "vs own anchor (geometric" in lines[0] and "score v2" in lines[0]
     agent = next(line for line in lines if line.startswith("| zoo:ppo-comm "))
@@ -206,11 +205,12 @@ def test_suite_tasks_are_presets_with_their_own_scenarios():
 def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(tmp_path):
     pytest.importorskip("stable_baselines3")
     from training.benchmark import run_suite
+    from training.results.run import Play
     from training.results.report import suite_table
 
     policies = ["anchor:stake", "zoo:ppo-comm"]
     tasks = ["default", "wide-k8"]
-    rows, skipped, _ = run_suite(policies, tasks, 1, tmp_path, workers=1, progress=False)
+    rows, skipped, _ = run_suite(policies, tasks, 1, tmp_path, Play(1, False))
     assert {r["task"] for r in rows} == set(tasks)
     assert {r["policy"] for r in rows} >= {"dv-mpc", "epa", "noise:dv-mpc", "limit:fast-drone", "limit:perfect-links"}
     assert set(skipped) == {("wide-k8", "zoo:ppo-comm")}

@@ -37,6 +37,10 @@ __all__ = ["Block", "blocks", "replace_block", "replace_body", "block_body", "bl
            "first_table", "check_block", "refresh"]
 
 ROOT = Path(__file__).resolve().parent.parent
+#: The order in which refresh runs the groups' commands: the agents are built (``learned``) before the
+#: suite plays them; a group not listed runs last.
+GROUP_ORDER = ("figures", "benchmark", "gap", "dv", "speed", "throughput", "parallel", "qp", "fleet", "learned",
+               "suite")
 _BEGIN = re.compile(r'^<!-- ([\w.-]+):begin((?: [a-z]+="[^"]*")*) -->$', flags=re.MULTILINE)
 
 
@@ -159,11 +163,12 @@ def _selected(only: list[str] | None, root: Path) -> list[Block]:
 
 
 def refresh(only: list[str] | None = None, root: Path = ROOT, dry_run: bool = False) -> list[str]:
-    """Run each distinct command of the selected blocks once, in page order and one at a time, then
+    """Run each distinct command of the selected blocks once, by :data:`GROUP_ORDER` and one at a time, then
     splice each block's table and copy its figures; a failed command's blocks stay as they are.
     Returns the commands that failed."""
     by_cmd: dict[str, list[Block]] = {}
-    for b in _selected(only, root):
+    rank = {group: i for i, group in enumerate(GROUP_ORDER)}
+    for b in sorted(_selected(only, root), key=lambda b: rank.get(b.group, len(rank))):  # stable: page order within
         by_cmd.setdefault(b.cmd, []).append(b)
     failed = []
     for cmd, members in by_cmd.items():
@@ -171,7 +176,9 @@ def refresh(only: list[str] | None = None, root: Path = ROOT, dry_run: bool = Fa
         if dry_run:
             continue
         env = dict(os.environ, PATH=os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")]))
-        if subprocess.run(["bash", "-c", cmd], cwd=root, env=env).returncode != 0:  # lawn, python: this environment's
+        ran = subprocess.run(["bash", "-c", cmd], cwd=root, env=env).returncode == 0  # lawn, python: this environment's
+        wanted = [root / b.table for b in members if b.table] + [root / src for b in members for src in b.copy[::2]]
+        if not ran or not all(path.exists() for path in wanted):  # nothing spliced from a failed command
             failed.append(cmd)
             continue
         for b in members:
