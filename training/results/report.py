@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -16,7 +16,7 @@ from agents.learned import zoo_agents
 
 from .run import NOISE, REFERENCE_ROWS, TRANSIENT_SLOTS, is_reference_row, own_anchor, policy_env
 from .stats import (SCORE_HIGH, SCORE_LOW, SCORE_VERSION, SUMMARY_METRICS, Geometric, aggregate_score, costs_of,
-                    geometric, mean_ci, paired, paired_difference, score_inputs, scores_by_policy)
+                    geometric, mean_ci, paired, score_inputs, scores_by_policy)
 
 __all__ = ["fmt_pct", "fmt_num", "fmt_stat", "fmt_geometric", "fmt_paired", "format_score", "RESULT_METRICS", "TIMING_METRICS",
            "format_table", "summary_markdown", "plot_summary", "mean_cell", "protocol_cells", "learned_table",
@@ -31,6 +31,14 @@ TIMING_METRICS = tuple(m for m in SUMMARY_METRICS if m[0].startswith("decision_t
 #: (None: reported only).
 TARGETS: dict[int, float | None] = {3: 0.05, 4: 0.05, 8: 0.05, 16: 0.10, 32: 0.10, 64: None}
 _NOISE = next(iter(NOISE))
+#: The cost columns of the per-task and learned tables.
+_COSTS = ("control_cost", "transient_cost", "sustained_cost")
+
+
+def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
+    """A Markdown table of string cells."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return "\n".join(lines + ["| " + " | ".join(cells) + " |" for cells in rows])
 
 
 def fmt_pct(x: float, sign: bool = True) -> str:
@@ -89,7 +97,7 @@ def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMA
         header.append(f"cost vs {reference} (paired)")
     if geometric:
         header.append(f"cost vs {reference} (geometric [95 %], seeds won)")
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    table = []
     for entry in summary:
         cells = [str(entry[by]), str(entry["episodes"])]
         for key, _ in metrics:
@@ -103,8 +111,8 @@ def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMA
             cells.append("–" if entry[by] == reference else f"{mean * 100:+.1f} % ± {half * 100:.1f} %")
         if geometric:
             cells.append("–" if entry[by] == reference else fmt_geometric(geometric.get(entry[by])))
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        table.append(cells)
+    return markdown_table(header, table)
 
 
 def fmt_stat(x: float) -> str:
@@ -181,22 +189,24 @@ def protocol_cells(rows: Sequence[Mapping], scores: Mapping, policy: str, env: s
     return cells
 
 
+_LEARNED_CELLS = ("anchor", "cost", "transient", "sustained", "score", "geo_ref", "geo_anchor", "vs_ref", "vs_anchor",
+                  "worst")
+
+
 def learned_table(rows: Sequence[Mapping], entries: Sequence[tuple[str, str]],
                   labels: Mapping[str, str] | None = None) -> str:
     """The learned protocol's Markdown table of ``entries`` from their rows."""
     scores = scores_by_policy(rows)
     seeds = len({int(r["seed"]) for r in rows})
-    lines = [f"| policy | env | acts around | control cost | transient | sustained | score v{SCORE_VERSION} [95 %] "
-             f"| vs {SCORE_HIGH} (geometric, seeds won) | vs own anchor (geometric, seeds won) | vs {SCORE_HIGH} (paired mean) "
-             f"| vs own anchor (paired mean) | worst seed vs own anchor |", "|" + "---|" * 12]
+    header = ["policy", "env", "acts around", "control cost", "transient", "sustained", f"score v{SCORE_VERSION} [95 %]",
+              f"vs {SCORE_HIGH} (geometric, seeds won)", "vs own anchor (geometric, seeds won)",
+              f"vs {SCORE_HIGH} (paired mean)", "vs own anchor (paired mean)", "worst seed vs own anchor"]
+    table = []
     for policy, env in entries:
         c = protocol_cells(rows, scores, policy, env)
-        name = (labels or {}).get(policy, policy)
-        lines.append(f"| {name} | {env} | {c['anchor']} | {c['cost']} | {c['transient']} | {c['sustained']} "
-                     f"| {c['score']} | {c['geo_ref']} | {c['geo_anchor']} | {c['vs_ref']} | {c['vs_anchor']} "
-                     f"| {c['worst']} |")
+        table.append([(labels or {}).get(policy, policy), env, *(c[k] for k in _LEARNED_CELLS)])
     split = rows[0]["transient_slots"]
-    lines += ["", f"{seeds} test seeds; control cost split into the transient (slots 0-{split - 1}) and the sustained "
+    lines = [markdown_table(header, table), "", f"{seeds} test seeds; control cost split into the transient (slots 0-{split - 1}) and the sustained "
               f"part (slots {split} on); score v{SCORE_VERSION}: 0 = {SCORE_LOW}, 100 = {SCORE_HIGH} "
               "(training/results/stats.py); geometric columns (the deciding statistic, docs/benchmark.md): the geometric "
               "mean of the per-seed cost ratios - 1 with its 95 % bootstrap interval and the share of seeds won; "
@@ -211,7 +221,7 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
     scores, inputs = scores_by_policy(rows), score_inputs(rows)
     at = list(policies).index(SCORE_HIGH) + 1 if SCORE_HIGH in policies else 0  # the reference rows after the expert
     names = list(dict.fromkeys([*policies[:at], *REFERENCE_ROWS, *policies[at:]]))
-    lines = ["| policy | env | " + " | ".join(tasks) + " | IQM over tasks [95 %] |", "|" + "---|" * (len(tasks) + 3)]
+    board = []
     for p in names:
         env = JOINT if is_reference_row(p) else policy_env(p)
         if is_reference_row(p) and not any(r["policy"] == p for r in rows):
@@ -222,9 +232,8 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
             cells.append("n/a" if (task, p) in skipped else format_score(score))
         iqm, lo, hi, n = aggregate_score({t: inputs[(t, env, p)] for t in tasks if (t, env, p) in inputs})
         overall = "–" if n == 0 else format_score((iqm, lo, hi, n)) + ("" if n == len(tasks) else f" ({n} task{'s' * (n != 1)})")
-        lines.append(f"| {p} | {env} | " + " | ".join(cells) + f" | {overall} |")
-    refs = [f"| task | env | episodes | {SCORE_LOW} cost | {SCORE_HIGH} cost | gap (mean) | per-seed gap / {SCORE_HIGH} cost, "
-            f"min to max | seeds where {SCORE_LOW} costs no more |", "|" + "---|" * 8]
+        board.append([p, env, *cells, overall])
+    refs = []
     for task in tasks:
         for env in dict.fromkeys(r["env"] for r in rows if r.get("task") == task):
             low, high = costs_of(rows, SCORE_LOW, env, task), costs_of(rows, SCORE_HIGH, env, task)
@@ -233,33 +242,35 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
             lo, hi = mean_ci(low.values()), mean_ci(high.values())
             gap = lo[0] - hi[0]
             per_seed = [(low[s] - high[s]) / high[s] for s in low if s in high]
-            refs.append(f"| {task} | {env} | {len(low)} | {fmt_num(lo[0])} ± {fmt_num(lo[1])} "
-                        f"| {fmt_num(hi[0])} ± {fmt_num(hi[1])} | {fmt_num(gap)} "
-                        f"| {fmt_pct(min(per_seed))} to {fmt_pct(max(per_seed))} | {sum(g <= 0 for g in per_seed)} |")
-    return "\n".join(lines), "\n".join(refs)
+            refs.append([task, env, str(len(low)), f"{fmt_num(lo[0])} ± {fmt_num(lo[1])}",
+                         f"{fmt_num(hi[0])} ± {fmt_num(hi[1])}", fmt_num(gap),
+                         f"{fmt_pct(min(per_seed))} to {fmt_pct(max(per_seed))}", str(sum(g <= 0 for g in per_seed))])
+    return (markdown_table(["policy", "env", *tasks, "IQM over tasks [95 %]"], board),
+            markdown_table(["task", "env", "episodes", f"{SCORE_LOW} cost", f"{SCORE_HIGH} cost", "gap (mean)",
+                            f"per-seed gap / {SCORE_HIGH} cost, min to max", f"seeds where {SCORE_LOW} costs no more"],
+                           refs))
 
 
 def structure_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
     """Per task, what decides it: the best expert's control cost, its transient and sustained parts (the
     sustained share), the noise floor and the two headroom rows against it (geometric,
     :mod:`.run`), on ``lawn/Joint-v0``."""
-    lines = [f"| task | {SCORE_HIGH} cost | transient | sustained (share) | "
-             + " | ".join(f"{p} vs {SCORE_HIGH} (geometric, seeds won)" for p in REFERENCE_ROWS) + " |",
-             "|" + "---|" * (4 + len(REFERENCE_ROWS))]
+    table = []
     for task in tasks:
         high = [r for r in rows if r["policy"] == SCORE_HIGH and r["env"] == JOINT and r.get("task") == task]
         if not high:
             continue
         total = sum(float(r["control_cost"]) for r in high)
         share = sum(float(r["sustained_cost"]) for r in high) / total
-        cells = [mean_cell(rows, SCORE_HIGH, JOINT, task, m) for m in ("control_cost", "transient_cost",
-                                                                       "sustained_cost")]
+        cells = [mean_cell(rows, SCORE_HIGH, JOINT, task, m) for m in _COSTS]
         cells[2] += f" ({share * 100:.0f} %)"
         for p in REFERENCE_ROWS:
             cost = costs_of(rows, p, JOINT, task)
             cells.append(fmt_geometric(geometric(rows, p, SCORE_HIGH, JOINT, task)) if cost else "–")
-        lines.append(f"| {task} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        table.append([task, *cells])
+    header = ["task", f"{SCORE_HIGH} cost", "transient", "sustained (share)",
+              *(f"{p} vs {SCORE_HIGH} (geometric, seeds won)" for p in REFERENCE_ROWS)]
+    return markdown_table(header, table)
 
 
 def task_tables(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequence[str],
@@ -270,23 +281,22 @@ def task_tables(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
     scores = scores_by_policy(rows)
     out = []
     for task in tasks:
-        lines = [f"**{task}**", "", f"| policy | env | control cost | transient | sustained | score v{SCORE_VERSION} "
-                 f"[95 %] | vs {SCORE_HIGH} (geometric, seeds won) | vs {SCORE_HIGH} (paired mean) |",
-                 "|" + "---|" * 8]
+        table = []
         names = list(dict.fromkeys([SCORE_HIGH, SCORE_LOW, *REFERENCE_ROWS, *policies]))
         for env in dict.fromkeys(r["env"] for r in rows if r.get("task") == task):
             for p in names:
                 if (task, p) in skipped or not costs_of(rows, p, env, task):
                     continue
-                cells = [mean_cell(rows, p, env, task, m) for m in ("control_cost", "transient_cost", "sustained_cost")]
-                cells.append(format_score(scores.get((task, env, p))))
+                cells = [mean_cell(rows, p, env, task, m) for m in _COSTS] + [format_score(scores.get((task, env, p)))]
                 if p == SCORE_HIGH:
                     cells += ["–", "–"]
                 else:
-                    mean, half, _ = paired_difference(costs_of(rows, p, env, task), costs_of(rows, SCORE_HIGH, env, task))
-                    cells += [fmt_geometric(geometric(rows, p, SCORE_HIGH, env, task)), fmt_paired(mean, half)]
-                lines.append(f"| {p} | {env} | " + " | ".join(cells) + " |")
-        out.append("\n".join(lines))
+                    cells += [fmt_geometric(geometric(rows, p, SCORE_HIGH, env, task)),
+                              fmt_paired(*paired(rows, p, SCORE_HIGH, env, task))]
+                table.append([p, env, *cells])
+        header = ["policy", "env", "control cost", "transient", "sustained", f"score v{SCORE_VERSION} [95 %]",
+                  f"vs {SCORE_HIGH} (geometric, seeds won)", f"vs {SCORE_HIGH} (paired mean)"]
+        out.append(f"**{task}**\n\n" + markdown_table(header, table))
     return "\n\n".join(out)
 
 
@@ -358,24 +368,24 @@ def _target_cell(k: int, change: float) -> str:
 def generalization_table(rows: Sequence[Mapping], agents: Sequence[str], sizes: Mapping[int, int]
                          ) -> str:
     """The Markdown table: per env, per K, the noise-floor row and every agent."""
-    lines = [f"| policy | env | K | seeds | control cost | {SCORE_HIGH} cost | vs {SCORE_HIGH} (geometric [95 %], "
-             f"seeds won) | vs {SCORE_HIGH} (paired mean) | target | decision time (ms) | {SCORE_HIGH} decision "
-             f"time (ms) | {SCORE_HIGH} / policy time |", "|" + "---|" * 12]
+    table = []
     envs = list(dict.fromkeys(policy_env(a) for a in agents))
     targeted = _trained_for_every_size(agents)
     for env in envs:
         for policy in [_NOISE, *(a for a in agents if policy_env(a) == env)]:
             for k in sizes:
                 task = f"k{k}"
-                mine, ref = costs_of(rows, policy, env, task), costs_of(rows, SCORE_HIGH, env, task)
-                if not mine or not ref:
+                mine = costs_of(rows, policy, env, task)
+                if not mine or not costs_of(rows, SCORE_HIGH, env, task):
                     continue
                 g = geometric(rows, policy, SCORE_HIGH, env, task)
-                mean, half, _ = paired_difference(mine, ref)
                 ms, ref_ms = _decision_ms(rows, policy, env, task), _decision_ms(rows, SCORE_HIGH, env, task)
-                target = _target_cell(k, g.change) if policy in targeted else "–"
-                lines.append(f"| {policy} | {env} | {k} | {len(mine)} | {mean_cell(rows, policy, env, task, 'control_cost')} "
-                             f"| {mean_cell(rows, SCORE_HIGH, env, task, 'control_cost')} | {fmt_geometric(g)} "
-                             f"| {fmt_paired(mean, half)} | {target} | {ms:.3g} | {ref_ms:.3g} "
-                             f"| {ref_ms / ms:.1f}× |")
-    return "\n".join(lines)
+                table.append([policy, env, str(k), str(len(mine)), mean_cell(rows, policy, env, task, "control_cost"),
+                              mean_cell(rows, SCORE_HIGH, env, task, "control_cost"), fmt_geometric(g),
+                              fmt_paired(*paired(rows, policy, SCORE_HIGH, env, task)),
+                              _target_cell(k, g.change) if policy in targeted else "–", f"{ms:.3g}", f"{ref_ms:.3g}",
+                              f"{ref_ms / ms:.1f}×"])
+    header = ["policy", "env", "K", "seeds", "control cost", f"{SCORE_HIGH} cost",
+              f"vs {SCORE_HIGH} (geometric [95 %], seeds won)", f"vs {SCORE_HIGH} (paired mean)", "target",
+              "decision time (ms)", f"{SCORE_HIGH} decision time (ms)", f"{SCORE_HIGH} / policy time"]
+    return markdown_table(header, table)

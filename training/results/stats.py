@@ -193,9 +193,11 @@ def geometric(rows: Sequence[Mapping], policy: str, reference: str, env: str, ta
     return paired_geometric(costs_of(rows, policy, env, task), costs_of(rows, reference, env, task))
 
 
-def paired(rows: Sequence[Mapping], policy: str, reference: str, env: str) -> tuple[float, float]:
-    """Mean per-seed relative difference of ``policy``'s cost against ``reference``'s and its 95 % half-width."""
-    mean, half, _ = paired_difference(costs_of(rows, policy, env), costs_of(rows, reference, env))
+def paired(rows: Sequence[Mapping], policy: str, reference: str, env: str, task: str | None = None
+           ) -> tuple[float, float]:
+    """Mean per-seed relative difference of ``policy``'s cost against ``reference``'s (on ``env``, and
+    ``task`` when given) and its 95 % half-width."""
+    mean, half, _ = paired_difference(costs_of(rows, policy, env, task), costs_of(rows, reference, env, task))
     return mean, half
 
 
