@@ -28,6 +28,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -164,8 +165,8 @@ def _selected(only: list[str] | None, root: Path) -> list[Block]:
 
 def refresh(only: list[str] | None = None, root: Path = ROOT, dry_run: bool = False) -> list[str]:
     """Run each distinct command of the selected blocks once, by :data:`GROUP_ORDER` and one at a time, then
-    splice each block's table and copy its figures; a failed command's blocks stay as they are.
-    Returns the commands that failed."""
+    splice each block's table and copy its figures; the blocks of a command that failed, or left a
+    table or figure it did not write this time, stay as they are. Returns the commands that failed."""
     by_cmd: dict[str, list[Block]] = {}
     rank = {group: i for i, group in enumerate(GROUP_ORDER)}
     for b in sorted(_selected(only, root), key=lambda b: rank.get(b.group, len(rank))):  # stable: page order within
@@ -176,9 +177,10 @@ def refresh(only: list[str] | None = None, root: Path = ROOT, dry_run: bool = Fa
         if dry_run:
             continue
         env = dict(os.environ, PATH=os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")]))
+        start = time.time() - 1  # file times have a coarse clock on some file systems
         ran = subprocess.run(["bash", "-c", cmd], cwd=root, env=env).returncode == 0  # lawn, python: this environment's
         wanted = [root / b.table for b in members if b.table] + [root / src for b in members for src in b.copy[::2]]
-        if not ran or not all(path.exists() for path in wanted):  # nothing spliced from a failed command
+        if not ran or not all(p.exists() and p.stat().st_mtime >= start for p in wanted):  # failed, or a stale file
             failed.append(cmd)
             continue
         for b in members:
