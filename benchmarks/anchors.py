@@ -26,9 +26,9 @@ from pathlib import Path
 
 from agents import ANCHORS
 from lawn_env import ScenarioConfig
-from training.evaluate import evaluate
+from training.results.run import evaluate
 from training.protocol import VALIDATION_SEED_BASE
-from training.tables import mean_ci, paired_difference
+from training.results.stats import mean_ci, paired_difference
 
 ENV_ID = "lawn/Comm-v0"
 

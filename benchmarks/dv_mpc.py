@@ -33,8 +33,9 @@ import lawn_env  # noqa: F401
 from agents import make_policy, rollout
 from lawn_env import presets
 from report import finish  # benchmarks/report.py, beside this script
-from training.evaluate import evaluate
-from training.tables import Geometric, fmt_geometric, paired_geometric
+from training.results.run import evaluate
+from training.results.report import fmt_geometric
+from training.results.stats import Geometric, paired_geometric
 
 JOINT = "lawn/Joint-v0"
 #: Per task: the largest change against rg-mpc that meets the target (None: not worse, at most +2 %).

@@ -1,4 +1,4 @@
-"""The drone grid of the ``limit:fast-drone`` row (training/limits.py): ``rg-mpc`` at the config's
+"""The drone grid of the ``limit:fast-drone`` row (training/results/run.py): ``rg-mpc`` at the config's
 largest speed (300 m/s, a 150 m reach) with its drone grid capped at several point counts, against
 ``rg-mpc`` at 15 m/s on the same seeds. Prints, per task and cap, the wall time of the episodes and
 the row's headroom (geometric mean of the per-seed cost ratios - 1, 95 % bootstrap interval); the
@@ -13,9 +13,10 @@ import argparse
 import time
 
 from lawn_env import presets
-from training.evaluate import evaluate
-from training.limits import LIMIT_SETTINGS
-from training.tables import fmt_geometric, paired_geometric
+from training.results.run import evaluate
+from training.results.report import fmt_geometric
+from training.results.run import LIMIT_SETTINGS
+from training.results.stats import paired_geometric
 
 DEFAULT_CAP = 10_000  # agents.reduced.ReducedSettings.max_drone_points
 

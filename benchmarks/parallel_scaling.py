@@ -39,7 +39,7 @@ from report import finish  # benchmarks/report.py, beside this script
 from agents import BENCHMARK_POLICIES
 from lawn_env import ScenarioConfig
 from training import pool
-from training.evaluate import evaluate
+from training.results.run import evaluate
 
 TARGET_COMMAND = 1.5
 COMMAND = ["evaluate", "--policy", "rg-mpc", "--episodes", "48", "--quiet"]

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from lawn_env import ScenarioConfig
-from training.evaluate import evaluate
+from training.results.run import evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -12,10 +12,10 @@ from scipy import stats
 
 import lawn_env
 from lawn_env import ScenarioConfig, presets
-from training.evaluate import TRANSIENT_SLOTS, build_policy, evaluate, split_cost
-from training.limits import LIMIT_SETTINGS, LIMITS, NOISE, REFERENCE_ROWS, limit_config, resolve
-from training.score import aggregate_score, normalized_score
-from training.tables import paired_difference, paired_geometric
+from training.results.run import TRANSIENT_SLOTS, build_policy, evaluate, split_cost
+from training.results.run import LIMIT_SETTINGS, LIMITS, NOISE, REFERENCE_ROWS, limit_config, resolve
+from training.results.stats import aggregate_score, normalized_score
+from training.results.stats import paired_difference, paired_geometric
 
 
 def _flat(tree: dict, prefix: str = "") -> dict:

@@ -88,6 +88,36 @@ def test_benchmark_writes_table_and_plot(tmp_path, capsys):
     assert "control cost" in capsys.readouterr().out
 
 
+def test_the_benchmark_table_is_its_episodes_statistics(tmp_path):
+    """summary.md's results table is the statistics of episodes.csv: its columns, one row per policy
+    in order, each mean ± 95 % interval and the paired and geometric comparisons with the first
+    policy recomputed from the rows."""
+    from training.pages import first_table
+    from training.results.report import RESULT_METRICS, fmt_geometric, fmt_stat
+    from training.results.run import read_csv
+    from training.results.stats import mean_ci, paired_cost_difference, paired_cost_geometric
+
+    out = tmp_path / "bench"
+    policies = ["epa", "pid", "sf"]
+    assert main(["benchmark", "--policies", *policies, "--episodes", "3", "--out", str(out), "--set", "num_slots=10",
+                 "--quiet", "--workers", "1"]) == 0
+    rows = [{**r, "seed": int(r["seed"])} for r in read_csv(out / "episodes.csv")]
+    table = [[c.strip() for c in line.strip("|").split("|")] for line in first_table((out / "summary.md").read_text())]
+    assert table[0] == ["policy", "episodes", *(label for _, label in RESULT_METRICS), "cost vs epa (paired)",
+                        "cost vs epa (geometric [95 %], seeds won)"]
+    assert [r[0] for r in table[2:]] == policies and all(r[1] == "3" for r in table[2:])
+    paired, geometric = paired_cost_difference(rows, "epa"), paired_cost_geometric(rows, "epa")
+    for cells in table[2:]:
+        mine = [r for r in rows if r["policy"] == cells[0]]
+        for (key, _), cell in zip(RESULT_METRICS, cells[2:]):
+            mean, half = mean_ci(float(r[key]) for r in mine)
+            assert cell == f"{fmt_stat(mean)} ± {fmt_stat(half)}", (cells[0], key)
+        if cells[0] != "epa":
+            mean, half = paired[cells[0]]
+            assert cells[-2] == f"{mean * 100:+.1f} % ± {half * 100:.1f} %"
+            assert cells[-1] == fmt_geometric(geometric[cells[0]])
+
+
 def test_gap_command_writes_tables_and_figures(tmp_path, capsys):
     out = tmp_path / "gap"
     args = ["gap", "--policies", "ao-mpc", "rg-mpc", "--episodes", "1", "--every", "4", "--set", "num_slots=8",
@@ -131,13 +161,13 @@ def test_bad_counts_seeds_and_specs_are_one_line_errors(tmp_path, capsys):
 def test_an_unwritable_out_fails_before_any_episode(tmp_path, capsys, monkeypatch):
     """The output location is checked before computing (a file where a folder is needed,
     a folder where a file is needed), with one line naming --out."""
-    import training.evaluate
+    import training.results.run
     import training.sweep
 
     def no_work(*args, **kwargs):
         raise AssertionError("episodes ran before --out was checked")
 
-    monkeypatch.setattr(training.evaluate, "pool_map", no_work)
+    monkeypatch.setattr(training.results.run, "pool_map", no_work)
     monkeypatch.setattr(training.sweep, "execute", no_work)
     blocker = tmp_path / "a-file"
     blocker.write_text("")

@@ -1,4 +1,4 @@
-"""Every row of the README's benchmark table replays its recorded episodes (training/digests.py):
+"""Every row of the README's benchmark table replays its recorded episodes (training/benchmark.py):
 a change that moves any policy's episodes (ao-mpc and sf included) fails here until the digests and
 the tables are regenerated in the same commit (scripts/refresh_docs.sh --only benchmark)."""
 
@@ -6,21 +6,21 @@ import json
 
 import pytest
 
-from training import digests
-from training.readme import ROOT, block_body, first_table
+from training import benchmark
+from training.pages import ROOT, block_body, first_table
 
-RECORDED = json.loads(digests.DIGESTS.read_text())
+RECORDED = json.loads(benchmark.DIGESTS.read_text())
 
 
 def test_the_digests_cover_every_row_of_the_readme_table():
     rows = [line.split("|")[1].strip() for line in first_table(block_body(ROOT / "README.md", "benchmark"))[2:]]
-    assert rows == list(digests.ROWS) == list(RECORDED)
-    assert all([r["seed"] for r in RECORDED[name]] == list(digests.SEEDS) for name in RECORDED)
+    assert rows == list(benchmark.README_ROWS) == list(RECORDED)
+    assert all([r["seed"] for r in RECORDED[name]] == list(benchmark.DIGEST_SEEDS) for name in RECORDED)
 
 
 @pytest.mark.parametrize("row", list(RECORDED))
 def test_a_table_row_replays_its_recorded_episodes(row):
-    now = [digests.episode_record(row, seed) for seed in digests.SEEDS]
+    now = [benchmark.episode_record(row, seed) for seed in benchmark.DIGEST_SEEDS]
     for before, after in zip(RECORDED[row], now):
         assert after == before, (
             f"{row}, seed {before['seed']}: control cost {after['control_cost']} now, {before['control_cost']} "
@@ -31,10 +31,10 @@ def test_a_table_row_replays_its_recorded_episodes(row):
 def test_a_changed_episode_changes_its_digest(monkeypatch):
     """One slot's stage cost moved in its tenth significant digit changes the digest; a last-bit
     difference does not."""
-    import training.evaluate
+    import training.benchmark
 
-    record = digests.episode_record("epa", 0)
-    real = training.evaluate.run_episode
+    record = benchmark.episode_record("epa", 0)
+    real = training.benchmark.run_episode
 
     def moved(scale):
         def run(*args, **kwargs):
@@ -45,7 +45,7 @@ def test_a_changed_episode_changes_its_digest(monkeypatch):
             return row
         return run
 
-    monkeypatch.setattr(training.evaluate, "run_episode", moved(1 + 1e-8))
-    assert digests.episode_record("epa", 0)["digest"] != record["digest"]
-    monkeypatch.setattr(training.evaluate, "run_episode", moved(1 + 1e-15))
-    assert digests.episode_record("epa", 0)["digest"] == record["digest"]
+    monkeypatch.setattr(training.benchmark, "run_episode", moved(1 + 1e-8))
+    assert benchmark.episode_record("epa", 0)["digest"] != record["digest"]
+    monkeypatch.setattr(training.benchmark, "run_episode", moved(1 + 1e-15))
+    assert benchmark.episode_record("epa", 0)["digest"] == record["digest"]

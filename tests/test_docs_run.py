@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from markdown_it import MarkdownIt
 
-from training.readme import pages
+from training.pages import pages
 
 ROOT = Path(__file__).resolve().parent.parent
 OPTIONS = {"slow"}

@@ -270,8 +270,9 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     import training.zoo as zoo
     from agents import make_policy
     from lawn_env import ScenarioConfig, presets
-    from training.generalization import fleet_agents, generalization_table, run_generalization
-    from training.tables import read_csv
+    from training.benchmark import fleet_agents, run_generalization
+    from training.results.report import generalization_table
+    from training.results.run import Play, read_csv
     from training.train import TrainSpec, train
 
     tiny = dataclasses.replace(recipes_module.RECIPES["fleet-comm"], timesteps=16)
@@ -302,7 +303,7 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     policy = make_policy("zoo:fleet-comm", ScenarioConfig(num_agvs=7), env_id="lawn/Comm-v0")
     assert policy.entities.num_agvs == 7
     sizes = {3: 2, 5: 2}
-    rows = run_generalization(fleet_agents(), sizes, workers=1, progress=False,
+    rows = run_generalization(fleet_agents(), sizes, Play(1, False),
                               base=presets.get("default").override(num_slots=6))
     assert {(r["policy"], r["task"]) for r in rows} == {(p, f"k{k}") for p in ("dv-mpc", "noise:dv-mpc", "zoo:fleet-comm")
                                                         for k in sizes}
@@ -347,10 +348,10 @@ def test_the_suite_writes_the_table_over_fleet_sizes_for_the_shipped_fleet_netwo
 
     from training.cli import main
     from training.cli.benchmark import _fleet_sizes
-    from training.generalization import FLEET_SIZES
-    from training.tables import read_csv
+    from training.benchmark import FLEET_SIZES
+    from training.results.run import TRANSIENT_SLOTS, read_csv
 
-    args = argparse.Namespace(episodes=1, workers=1, quiet=True)
+    args = argparse.Namespace(episodes=1, workers=1, quiet=True, transient_slots=TRANSIENT_SLOTS)
     block = _fleet_sizes(args, ["rg-mpc", "zoo:fleet-comm"], tmp_path)
     rows = read_csv(tmp_path / "fleet_sizes.csv")
     assert {r["task"] for r in rows if r["policy"] == "zoo:fleet-comm"} == {f"k{k}" for k in FLEET_SIZES}

@@ -4,6 +4,7 @@ Minari datasets and behaviour cloning from them."""
 from __future__ import annotations
 
 import dataclasses
+import shutil
 import json
 import math
 
@@ -13,8 +14,9 @@ import pytest
 
 from agents import ANCHORS, AnchorPolicy, anchor_name, make_policy
 from lawn_env import ScenarioConfig, presets
-from training.evaluate import run_episode
-from training.score import normalized_score, scores_by_policy
+from training.pages import ROOT, first_table
+from training.results.run import run_episode
+from training.results.stats import normalized_score, scores_by_policy
 
 
 # ---------------------------------------------------------------------- normalized score
@@ -70,7 +72,7 @@ def test_scores_by_policy_pairs_within_task_and_env():
 
 def test_score_v1_stays_computable_beside_v2():
     """v2 puts 100 at dv-mpc; v1, at rg-mpc, is computed from the same rows when they hold it."""
-    from training.score import SCORE_REFERENCES, SCORE_VERSION
+    from training.results.stats import SCORE_REFERENCES, SCORE_VERSION
 
     assert SCORE_VERSION == 2 and SCORE_REFERENCES == {1: ("epa", "rg-mpc"), 2: ("epa", "dv-mpc")}
     rows = (_rows("epa", {0: 10.0, 1: 12.0}) + _rows("rg-mpc", {0: 6.0, 1: 8.0}) + _rows("dv-mpc", {0: 4.0, 1: 6.0})
@@ -125,8 +127,11 @@ def test_anchor_names_and_errors():
 # ---------------------------------------------------------------------- the learned protocol
 def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     pytest.importorskip("stable_baselines3")
-    from training.leaderboard import costs_of, learned_entries, own_anchor, run_learned_protocol
-    from training.tables import fmt_geometric, fmt_paired, paired_difference, paired_geometric, read_csv
+    from training.benchmark import run_learned_protocol
+    from training.results.report import fmt_geometric, fmt_paired
+    from training.results.run import Play, learned_entries, own_anchor, read_csv
+    from training.results.stats import costs_of
+    from training.results.stats import paired_difference, paired_geometric
 
     agents = ["zoo:ppo-comm", "zoo:bc-comm", "zoo:ppo-comm"]
     anchors = sorted({own_anchor(a) for a in agents})
@@ -135,8 +140,8 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     assert entries == [("dv-mpc", "lawn/Comm-v0"), ("epa", "lawn/Comm-v0"), *[(a, "lawn/Comm-v0") for a in anchors],
                        ("zoo:ppo-comm", "lawn/Comm-v0"), ("zoo:bc-comm", "lawn/Comm-v0")]
     with pytest.raises(ValueError, match="unknown zoo agent 'nope'"):
-        run_learned_protocol(["zoo:nope"], tmp_path, episodes=3, workers=1, progress=False)
-    table = run_learned_protocol(["zoo:ppo-comm"], tmp_path, episodes=3, workers=1, progress=False)
+        run_learned_protocol(["zoo:nope"], tmp_path, episodes=3, play=Play(1, False))
+    table = run_learned_protocol(["zoo:ppo-comm"], tmp_path, episodes=3, play=Play(1, False))
     lines = table.splitlines()
     assert "vs own anchor (paired mean)" in lines[0] and "vs own anchor (geometric" in lines[0] and "score v2" in lines[0]
     agent = next(line for line in lines if line.startswith("| zoo:ppo-comm "))
@@ -199,11 +204,13 @@ def test_suite_tasks_are_presets_with_their_own_scenarios():
 
 def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(tmp_path):
     pytest.importorskip("stable_baselines3")
-    from training.suite import run_suite, suite_table
+    from training.benchmark import run_suite
+    from training.results.run import Play
+    from training.results.report import suite_table
 
     policies = ["anchor:stake", "zoo:ppo-comm"]
     tasks = ["default", "wide-k8"]
-    rows, skipped, _ = run_suite(policies, tasks, 1, tmp_path, workers=1, progress=False)
+    rows, skipped, _ = run_suite(policies, tasks, 1, tmp_path, Play(1, False))
     assert {r["task"] for r in rows} == set(tasks)
     assert {r["policy"] for r in rows} >= {"dv-mpc", "epa", "noise:dv-mpc", "limit:fast-drone", "limit:perfect-links"}
     assert set(skipped) == {("wide-k8", "zoo:ppo-comm")}
@@ -241,7 +248,7 @@ def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
         assert float(np.sum(episode.infos["stage_cost"][1:])) == pytest.approx(expected, rel=1e-12)
         assert float(-np.sum(episode.rewards)) == pytest.approx(expected, rel=1e-12)
     # Minari's normalized score is the package's score / 100 (epa and dv-mpc on the same seeds)
-    from training.score import normalized_score
+    from training.results.stats import normalized_score
 
     costs = {p: {7 + i: run_episode(p, "lawn/Comm-v0", ScenarioConfig(), 7 + i)["control_cost"] for i in range(2)}
              for p in ("epa", "dv-mpc")}
@@ -321,11 +328,13 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     from training.zoo import RECIPES, build_zoo
 
     runs = tmp_path / "runs"
+    (tmp_path / "docs").mkdir()
+    shutil.copy2(ROOT / "docs" / "LEARNED.md", tmp_path / "docs" / "LEARNED.md")  # the page's blocks
     train(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=0,
           out_dir=runs / "bc-comm" / "seed-0", hp_overrides={"epochs": 1, "dagger_iterations": 0}, progress=False)
     table = build_zoo(runs, tmp_path / "docs" / "LEARNED.md", workers=1, progress=False, episodes=3,
                       target=tmp_path / "zoo")
-    from training.leaderboard import own_anchor
+    from training.results.run import own_anchor
 
     anchor = own_anchor(f"bc:{runs / 'bc-comm' / 'seed-0'}")  # the hyperparameter file's interface: anchor:stake
     rows = table.splitlines()
@@ -378,7 +387,7 @@ def test_zoo_stages_on_a_recorded_run(tmp_path):
 # ---------------------------------------------------------------------- the command line
 def test_evaluate_prints_the_score_beside_the_cost(tmp_path, capsys):
     from training.cli import main
-    from training.tables import read_csv
+    from training.results.run import read_csv
 
     out = tmp_path / "rows.csv"
     common = ["--episodes", "3", "--set", "num_slots=15", "--workers", "1", "--quiet", "--out", str(out)]
@@ -419,16 +428,27 @@ def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
     from training.cli import main
 
     out, docs = tmp_path / "suite", tmp_path / "docs"
+    docs.mkdir()
+    shutil.copy2(ROOT / "docs" / "LEADERBOARD.md", docs / "LEADERBOARD.md")  # the page's blocks
     assert main(["benchmark", "--suite", "--tasks", "k3", "--policies", "anchor:stake", "--episodes", "3",
                  "--workers", "1", "--quiet", "--out", str(out), "--docs", str(docs)]) == 0
     printed = capsys.readouterr().out
     assert "1 policies x 1 tasks, 3 seeds each" in printed
     board = (out / "board.md").read_text()
     assert board.splitlines()[0] == "| policy | env | k3 | IQM over tasks [95 %] |"
-    names = [line.split("|")[1].strip() for line in board.splitlines()[2:]]
+    names = [line.split("|")[1].strip() for line in first_table(board)[2:]]
     assert names == ["noise:dv-mpc", "limit:fast-drone", "limit:perfect-links", "anchor:stake"]
     page = (docs / "LEADERBOARD.md").read_text()
-    assert "This board runs `k3` only (`--tasks`)" in page and board.strip() in page
+    assert board.strip() in page and (out / "structure.md").read_text().strip() in page
+    assert "1 policies x 1 tasks (k3), test seeds 0-2" in board and (docs / "figures" / "suite-per-slot.png").exists()
+    from training.results.report import format_score
+    from training.results.run import read_csv
+    from training.results.stats import scores_by_policy
+
+    scores = scores_by_policy(read_csv(out / "episodes.csv"))  # the board's scores are the episodes' statistics
+    for line in first_table(board)[2:]:
+        policy, env, cell = (c.strip() for c in line.strip("|").split("|")[:3])
+        assert cell == format_score(scores.get(("k3", env, policy))), policy
     assert "| k3 | lawn/Joint-v0 | 3 |" in (out / "references.md").read_text()
 
 

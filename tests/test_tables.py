@@ -1,4 +1,4 @@
-"""training.tables: the one CSV writer and reader of the reports and the summary statistics."""
+"""training.results (run, stats): the one CSV writer and reader of the reports and the summary statistics."""
 
 import math
 
@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from training.tables import mean_ci, parse_bool, read_csv, write_csv
+from training.results.run import parse_bool, read_csv, write_csv
+from training.results.stats import mean_ci
 
 
 @pytest.mark.parametrize("atomic", [False, True])

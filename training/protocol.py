@@ -20,9 +20,9 @@ import numpy as np
 import lawn_env
 from agents import make_policy
 
-from .evaluate import episode_row
+from .results.run import episode_row, read_csv
 from .provenance import provenance
-from .tables import mean_ci, paired_difference, read_csv
+from .results.stats import mean_ci, paired_difference
 
 __all__ = ["TRAIN_SEED_BASE", "VALIDATION_SEED_BASE", "TEST_EPISODES", "VALIDATION_REFERENCE", "CURVE_FIELDS",
            "limit_torch_threads", "versions", "read_learning_curve", "selection_key", "selected_validation",

@@ -1,8 +1,10 @@
-"""Animations of one episode (``lawn render``): the env's own ``rgb_array`` frames, one per slot,
-written by imageio (GIF through Pillow, MP4 through imageio-ffmpeg)."""
+"""One episode shown: its animation (``lawn render``: the env's own ``rgb_array`` frames, one per
+slot, written by imageio, GIF through Pillow, MP4 through imageio-ffmpeg) and the demo (``lawn
+demo``: the scripted heuristic's episode, its metrics and paths)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -10,10 +12,10 @@ import gymnasium as gym
 import numpy as np
 
 import lawn_env
-from agents import make_policy, rollout
+from agents import HeuristicPolicy, make_policy, rollout
 from lawn_env import ScenarioConfig
 
-__all__ = ["FORMATS", "check_output", "record_frames", "write_animation", "render_episode"]
+__all__ = ["FORMATS", "check_output", "record_frames", "write_animation", "render_episode", "run_demo"]
 
 #: Animation formats by file extension.
 FORMATS = (".gif", ".mp4")
@@ -97,3 +99,20 @@ def render_episode(policy: str, out: Path, env_id: str | None = None, seed: int 
     frames, metrics, env_id = record_frames(policy, env_id, seed, config, every, progress, **policy_args)
     path = write_animation(frames, out, fps)
     return {**metrics, "env_id": env_id, "frames": len(frames), "out": str(path)}
+
+
+def run_demo(seed: int, out_dir: Path, config: ScenarioConfig | str | None = None,
+             overrides: dict | None = None) -> dict:
+    """Run one episode, write ``metrics.json`` and ``paths.png`` into ``out_dir``; return the metrics."""
+    env = gym.make("lawn/Joint-v0", config=config, **(overrides or {}))
+    episode = rollout(env, HeuristicPolicy(env.unwrapped.config), seed)
+    metrics = dict(episode.metrics)
+    metrics["decision_time_median_s"] = episode.decision_time_median_s
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    from lawn_env.render import plot_episode
+
+    plot_episode(env.unwrapped.sim, env.unwrapped.engine.kept_trail, out_dir / "paths.png",
+                 title=f"lawn/Joint-v0, scripted heuristic, seed {seed}: cost {metrics['control_cost']:.0f}")
+    env.close()
+    return metrics

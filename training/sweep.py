@@ -36,7 +36,8 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 import lawn_env
 from lawn_env import presets
 
-from .tables import mean_ci, read_csv, write_csv
+from .results.run import read_csv, write_csv
+from .results.stats import mean_ci
 
 __all__ = ["SweepSpec", "SweepTableError", "load_spec", "expand", "run_sweep", "read_table", "read_rows",
            "config_hash", "summarize_sweep"]
@@ -198,7 +199,7 @@ def read_table(path: Path) -> list[dict]:
 
 
 def _run(task) -> dict:
-    from .evaluate import run_episode
+    from .results.run import run_episode
 
     point, policy, seed, env_id, cfg_dict, policy_kwargs, sweep_name = task
     cfg = lawn_env.ScenarioConfig.from_dict(cfg_dict)
@@ -308,7 +309,7 @@ def execute(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int, backen
         return
     from concurrent.futures import FIRST_COMPLETED, wait
 
-    from .evaluate import worker_pool
+    from .pool import worker_pool
 
     with worker_pool(workers) as pool:
         pending = {pool.submit(fn, t) for t in tasks}

@@ -1,6 +1,6 @@
 """The shipped learned agents: how they compare and what is exported, in four stages a test can
 call one by one: :func:`evaluate_zoo` (every finished run of every recipe of
-:mod:`training.recipes` by the learned protocol, :mod:`training.leaderboard`: full 120-slot
+:mod:`training.recipes` by the learned protocol, :mod:`training.benchmark`: full 120-slot
 episodes of the unmodified scenario on 100 test seeds, realized control cost, paired with
 ``rg-mpc`` and with the agent's own anchor on the same seeds, normalized score), :func:`zoo_tables`
 (the table cells and the run each recipe ships, selected on the validation seeds),
@@ -13,10 +13,11 @@ shipped agents; ``scripts/train_agents.sh`` runs train and build."""
 from __future__ import annotations
 
 import math
+import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -24,14 +25,12 @@ from agents.learned import ZOO_DIR, export_agent, zoo_agents
 from agents.runs import RunDir, read_run
 from lawn_env import ScenarioConfig
 
-from .evaluate import evaluate
-from .leaderboard import learned_entries, own_anchor, paired, protocol_cells, run_entries
+from .pages import block_names, replace_body
 from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
-from .score import SCORE_HIGH, SCORE_VERSION, scores_by_policy
-from .readme import block_body, block_names, replace_body
 from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe, train_recipes
-from .tables import fmt_num, fmt_paired, fmt_pct, mean_ci, read_csv, write_csv
-from .zoo_page import PAGE_BLOCKS, document, merged_rows, read_text, write_atomic
+from .results.report import fmt_num, fmt_paired, fmt_pct, protocol_cells
+from .results.run import Play, evaluate, learned_entries, own_anchor, read_csv, run_entries, write_csv
+from .results.stats import SCORE_HIGH, SCORE_VERSION, mean_ci, paired, scores_by_policy
 
 __all__ = ["Recipe", "RECIPES", "recipe", "train_recipes", "finished_runs", "evaluate_zoo", "zoo_tables", "render_zoo",
            "plot_curves", "export_zoo", "build_zoo", "format_zoo_list", "ZooEvaluation", "ZooTables", "Shipped"]
@@ -93,10 +92,10 @@ def finished_runs(runs: Path, recipes: Mapping[str, Recipe] | None = None) -> li
 
 def evaluate_zoo(found: list[tuple[Recipe, list[Path]]], episodes: int = TEST_EPISODES, workers: int = 2,
                  progress: bool = True) -> ZooEvaluation:
-    """Stage 1: every run by the learned protocol on test seeds 0..episodes-1 (:mod:`training.leaderboard`)."""
+    """Stage 1: every run by the learned protocol on test seeds 0..episodes-1 (:func:`training.results.run.run_entries`)."""
     run = {d: read_run(d) for _, dirs in found for d in dirs}
     entries = learned_entries([run[d].policy_name for _, dirs in found for d in dirs])
-    rows = run_entries(entries, ScenarioConfig(), range(episodes), workers, progress, desc="zoo benchmark")
+    rows = run_entries(entries, ScenarioConfig(), range(episodes), Play(workers, progress), desc="zoo benchmark")
     return ZooEvaluation(found, run, entries, rows, scores_by_policy(rows), episodes)
 
 
@@ -204,11 +203,14 @@ def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True
         raise ValueError(f"{runs}: no finished recipe runs (lawn zoo train --runs {runs} trains them)")
     rendered = {section: render_zoo(tables) for section, (_, tables) in built.items()}
     page = read_text(out_doc)
+    source = "lawn zoo build" + (f" --only {' '.join(names)}" if names else "")
     if "main" in built:
-        page = _main_page(built["main"][0], rendered["main"], out_doc, episodes, workers)
+        for name, text in zip(("zoo-main", "zoo-runs"), rendered["main"]):
+            page = replace_body(page, name, text, source=source, where=str(out_doc))
     if "fleet" in built:
-        page = replace_body(page, "zoo-fleet", "\n\n".join(rendered["fleet"]),
-                            source="lawn zoo build" + (f" --only {' '.join(names)}" if names else ""))
+        page = replace_body(page, "zoo-fleet", "\n\n".join(rendered["fleet"]), source=source, where=str(out_doc))
+    if "main" in built:
+        _plot_main_curves(built["main"][0], out_doc, workers)
     rows = merged_rows(read_csv(out_doc.parent / "learned" / "episodes.csv"), built)
     write_csv(rows, out_doc.parent / "learned" / "episodes.csv", atomic=True)
     write_atomic(out_doc, page)
@@ -218,16 +220,14 @@ def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True
     return "\n\n".join(table for table, _ in rendered.values())
 
 
-def _main_page(ev: ZooEvaluation, rendered: tuple[str, str], out_doc: Path, episodes: int, workers: int) -> str:
-    """The page with the main tables (and its learning curves drawn); the generated blocks it holds
-    keep their text."""
+def _plot_main_curves(ev: ZooEvaluation, out_doc: Path, workers: int) -> None:
+    """The main section's learning curves (``learned/curves.png`` beside the page), with rg-mpc's
+    cost on the first ten validation seeds."""
     reference = {env: evaluate([("rg-mpc", env, ScenarioConfig(), VALIDATION_SEED_BASE + i, {}) for i in range(10)],
                                workers=workers, progress=False) for env in ev.envs}
     (out_doc.parent / "learned").mkdir(parents=True, exist_ok=True)
     plot_curves(ev.found, {env: float(np.mean([r["control_cost"] for r in rs])) for env, rs in reference.items()},
                 out_doc.parent / "learned" / "curves.png")
-    blocks = {name: block_body(out_doc, name) for name in PAGE_BLOCKS}
-    return document(*rendered, episodes, blocks)
 
 
 def plot_curves(found: list[tuple[Recipe, list[Path]]], reference: dict[str, float], path: Path) -> None:
@@ -311,3 +311,40 @@ def format_zoo_list() -> str:
                      f"{bench.get('score', [math.nan])[0]:.1f}")
         lines.append(f"  trained with: {rec.get('command')}")
     return "\n".join(lines)
+
+
+def read_text(path: Path) -> str:
+    """The file's text, empty when it does not exist."""
+    return Path(path).read_text() if Path(path).exists() else ""
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` through a temporary file renamed over ``path``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _run_of(policy: str) -> str | None:
+    """The recipe a learned row's run belongs to (``PREFIX:.../<recipe>/seed-<s>``), else None."""
+    path = Path(policy.partition(":")[2])
+    return path.parent.name if policy.partition(":")[0] in ("sb3", "bc", "marl") and path.name.startswith("seed-") \
+        else None
+
+
+def merged_rows(old: list[dict], built: Mapping[str, tuple[Any, Any]]) -> list[dict]:
+    """The episodes of the rebuilt sections (each (policy, env, seed) once: the sections share
+    their references), with, when a section was not rebuilt, the recorded episodes the new ones do
+    not replace, less the rebuilt sections' runs."""
+    new: dict[tuple, dict] = {}
+    for ev, _ in built.values():
+        for row in ev.rows:
+            new.setdefault((row["policy"], row["env"], str(row["seed"])), row)
+    if all(section in built for section in SECTIONS):
+        return list(new.values())
+    rebuilt = {name for name, r in RECIPES.items() if r.section in built}
+    columns = list(next(iter(new.values())))
+    kept = [{k: r.get(k, "") for k in columns} for r in old
+            if (r["policy"], r["env"], str(r["seed"])) not in new and _run_of(r["policy"]) not in rebuilt]
+    return kept + list(new.values())

@@ -1,19 +1,6 @@
 """The ``lawn`` command line: one module per subcommand (its parser builder ``add`` and its
 ``run``), the shared flags as parent parsers and one policy-name type (:mod:`.common`).
-
-``lawn demo``: one seeded episode of ``lawn/Joint-v0`` under a scripted policy.
-``lawn render``: one seeded episode of any policy as an animation (GIF or MP4).
-``lawn evaluate``: any registered policy on seeded episodes, one row per episode (CSV/JSON).
-``lawn benchmark``: the expert and the baselines on the same seeds, a table and a bar plot;
-``--protocol learned`` the learned agents beside their anchors on 100 test seeds, ``--suite`` the
-task suite's leaderboard (normalized scores, training/score.py).
-``lawn dataset create``: a policy's episodes as a Minari dataset.
-``lawn gap``: per-slot optimality gap of planners against the global reference, and the AO's
-convergence at chosen slots.
-``lawn train``: Stable-Baselines3 agents, behaviour cloning and multi-agent training (rl extra).
-``lawn zoo``: the shipped learned agents (list, train their recipes, build the table).
-``lawn sweep``: a grid of config fields x policies x seeds into a tidy, resumable table.
-``lawn figures``: the paper's experiments from tables (running missing sweeps).
+Each subcommand's one line is :data:`COMMAND_HELP` (``lawn --help`` lists them).
 """
 
 from __future__ import annotations

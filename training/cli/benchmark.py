@@ -1,13 +1,13 @@
 """``lawn benchmark``: the expert and the baselines on the same seeds, a table and a bar plot;
 ``--protocol learned``: the learned agents beside their anchors on the 100 test seeds; ``--suite``:
-the task suite's leaderboard (normalized scores, :mod:`training.score`)."""
+the task suite's leaderboard (normalized scores, :mod:`training.results.stats`)."""
 
 from __future__ import annotations
 
 import argparse
+import shutil
 from pathlib import Path
 
-import lawn_env
 from lawn_env import presets
 
 from . import COMMAND_HELP
@@ -17,7 +17,7 @@ from .common import Parents, comparison_env, config_of, count, included, policy_
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     from agents import BENCHMARK_POLICIES
 
-    from ..limits import REFERENCE_ROWS
+    from ..results.run import REFERENCE_ROWS
 
     bm = sub.add_parser("benchmark", parents=p("workers", "quiet", "seed", "config", "split"),
                         help=COMMAND_HELP["benchmark"],
@@ -51,8 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from agents import BENCHMARK_POLICIES
 
     from ..benchmark import run_benchmark
-    from ..evaluate import build_policy
-    from ..limits import REFERENCE_ROWS
+    from ..results.run import REFERENCE_ROWS, build_policy
 
     if not args.suite and (args.tasks or args.docs):
         raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
@@ -66,8 +65,7 @@ def run(args: argparse.Namespace) -> int:
     for name in args.policies:
         build_policy(name, cfg, args.env)  # fail fast
     args.episodes = args.episodes or 20
-    run_benchmark(args.policies, args.env, cfg, args.episodes, args.seed, Path(args.out), workers=args.workers,
-                  progress=not args.quiet, transient_slots=args.transient_slots)
+    run_benchmark(args.policies, args.env, cfg, args.episodes, args.seed, Path(args.out), _play(args))
     print(f"lawn benchmark: {args.env}, preset {args.preset}, K={cfg.num_agvs}, {args.episodes} seeds from "
           f"{args.seed}; mean ± 95 % interval")
     print((Path(args.out) / "summary.md").read_text().rstrip())
@@ -92,70 +90,88 @@ def _check_fixed_protocol(args: argparse.Namespace) -> None:
                          "was trained on, experts, baselines and anchors on lawn/Joint-v0)")
 
 
+def _play(args: argparse.Namespace):
+    from ..results.run import Play
+
+    return Play(args.workers, not args.quiet, args.transient_slots)
+
+
+#: The suite's tables: the file each is written to in --out, and the block of --docs DIR/LEADERBOARD.md.
+SUITE_TABLES = {"board": "suite-board", "structure": "suite-structure", "tasks": "suite-tasks",
+                "references": "suite-references"}
+
+
 def _suite(args: argparse.Namespace) -> int:
     from lawn_env.presets import SUITE
 
-    from ..generalization import fleet_agents
-    from ..readme import block_names, replace_block
-    from ..suite import (plot_profiles, run_suite, skipped_summary, structure_table, suite_policies,
-                               suite_table, task_tables, write_leaderboard)
+    from ..benchmark import fleet_agents, run_suite, suite_policies
+    from ..pages import block_names, replace_block
     from ..protocol import TEST_EPISODES
-    from ..score import SCORE_HIGH, SCORE_LOW, SCORE_VERSION
-    from ..tables import read_csv
+    from ..results.report import plot_profiles, skipped_summary, structure_table, suite_table, task_tables
+    from ..results.run import read_csv
+    from ..results.stats import SCORE_HIGH, SCORE_LOW, SCORE_VERSION
 
     episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
     tasks = args.tasks or list(SUITE)
     policies = list(args.policies or suite_policies()) + included(args.include)
-    learned = Path(args.docs or ".") / "LEARNED.md"
-    if args.docs and set(fleet_agents()) & set(policies) and \
-            "fleet-generalization" not in block_names(learned.read_text() if learned.exists() else ""):
-        raise ValueError(f"--docs {args.docs}: {learned} has no generated block 'fleet-generalization' for the "
-                         "fleet networks' table over fleet sizes")
-    rows, skipped, seconds = run_suite(policies, tasks, episodes, out, workers=args.workers, progress=not args.quiet,
-                                       transient_slots=args.transient_slots)
+    pages = {"LEADERBOARD.md": list(SUITE_TABLES.values())}
+    if set(fleet_agents()) & set(policies):
+        pages["LEARNED.md"] = ["fleet-generalization"]
+    for page, names in pages.items() if args.docs else ():  # a missing block fails before any episode
+        path = Path(args.docs) / page
+        missing = [n for n in names if n not in block_names(path.read_text() if path.exists() else "")]
+        if missing:
+            raise ValueError(f"--docs {args.docs}: {path} has no generated block {', '.join(missing)}")
+    rows, skipped, seconds = run_suite(policies, tasks, episodes, out, _play(args))
     board, refs = suite_table(rows, policies, tasks, skipped)
-    structure, details = structure_table(rows, tasks), task_tables(rows, policies, tasks, skipped)
+    reasons = skipped_summary(skipped)
+    board += (f"\n\n{len(policies)} policies x {len(tasks)} tasks ({', '.join(tasks)}), test seeds 0-{episodes - 1}, "
+              f"{seconds / 60:.1f} min with {args.workers} workers. n/a: the policy cannot act on the task"
+              + (": " + "; ".join(reasons) + "." if reasons else ".")
+              + " –: no score (the references do not separate on that task's seeds).")
+    tables = {"board": board, "references": refs, "structure": structure_table(rows, tasks),
+              "tasks": task_tables(rows, policies, tasks, skipped)}
     print(f"lawn benchmark --suite: {len(policies)} policies x {len(tasks)} tasks, {episodes} seeds each, "
           f"{seconds / 60:.1f} min; normalized score v{SCORE_VERSION} [95 %] (0 = {SCORE_LOW}, 100 = {SCORE_HIGH})")
     print(board)
-    print(structure)
-    for line in skipped_summary(skipped):
-        print(f"  n/a {line}")
-    for name, text in (("board", board), ("references", refs), ("structure", structure), ("tasks", details)):
+    print(tables["structure"])
+    for name, text in tables.items():
         (out / f"{name}.md").write_text(text + "\n")
     plot_profiles(read_csv(out / "per_slot.csv"), out / "per_slot.png", tasks, args.transient_slots)
     print(f"wrote {out}/episodes.csv, per_slot.csv, board.md (the scores), references.md (the references' costs), "
           "structure.md (cost structure, noise floor, headroom), tasks.md (every row per task) and per_slot.png")
     fleet = _fleet_sizes(args, policies, out)
     if args.docs:
-        figure = plot_profiles(read_csv(out / "per_slot.csv"), Path(args.docs) / "figures" / "suite-per-slot.png", tasks,
-                               args.transient_slots)
-        doc = write_leaderboard(Path(args.docs) / "LEADERBOARD.md", board, refs, skipped, episodes, seconds,
-                                args.workers, tasks, structure=structure, details=details, figure=figure,
-                                transient_slots=args.transient_slots)
-        print(f"wrote {doc} and {figure}")
+        source = "lawn benchmark --suite --docs " + args.docs
+        for name, text in tables.items():
+            replace_block(Path(args.docs) / "LEADERBOARD.md", SUITE_TABLES[name], text, source=source)
+        (Path(args.docs) / "figures").mkdir(parents=True, exist_ok=True)
+        shutil.copy2(out / "per_slot.png", Path(args.docs) / "figures" / "suite-per-slot.png")
         if fleet:
-            replace_block(learned, "fleet-generalization", fleet, source="lawn benchmark --suite --docs docs")
-            print(f"wrote {learned} (the fleet networks on K = 3 ... 64)")
+            replace_block(Path(args.docs) / "LEARNED.md", "fleet-generalization", fleet, source=source)
+        print(f"wrote the suite's blocks of {args.docs}/LEADERBOARD.md" + (" and LEARNED.md" if fleet else ""))
     return 0
 
 
 def _fleet_sizes(args: argparse.Namespace, policies: list[str], out: Path) -> str:
-    """The fleet networks among ``policies`` on every fleet size of the generalization table
-    (:mod:`training.generalization`; ``--episodes`` caps its seeds per size); writes
+    """The fleet networks among ``policies`` on every fleet size of the fleet-size table
+    (:func:`training.benchmark.run_generalization`; ``--episodes`` caps its seeds per size); writes
     ``fleet_sizes.csv`` and ``.md``, returns the block (empty without fleet networks)."""
     import time
 
-    from ..evaluate import write_rows
-    from ..generalization import FLEET_SIZES, fleet_agents, generalization_block, run_generalization
+    from ..benchmark import FLEET_SIZES, fleet_agents, run_generalization
+    from ..results.report import generalization_table
+    from ..results.run import write_rows
 
     agents = [p for p in fleet_agents() if p in policies]
     if not agents:
         return ""
     start = time.perf_counter()
     sizes = {k: min(n, args.episodes) if args.episodes else n for k, n in FLEET_SIZES.items()}
-    rows = run_generalization(agents, sizes, workers=args.workers, progress=not args.quiet)
-    block = generalization_block(rows, agents, (time.perf_counter() - start) / 60, args.workers, sizes)
+    rows = run_generalization(agents, sizes, _play(args))
+    seeds = ", ".join(f"K = {k}: {n}" for k, n in sizes.items())
+    block = (f"Test seeds 0..n-1 per fleet size ({seeds}); {args.workers} worker processes, "
+             f"{(time.perf_counter() - start) / 60:.1f} min.\n\n" + generalization_table(rows, agents, sizes))
     write_rows(rows, out / "fleet_sizes.csv")
     (out / "fleet_sizes.md").write_text(block + "\n")
     print(block)
@@ -164,12 +180,11 @@ def _fleet_sizes(args: argparse.Namespace, policies: list[str], out: Path) -> st
 
 
 def _learned(args: argparse.Namespace) -> int:
-    from ..leaderboard import run_learned_protocol
+    from ..benchmark import run_learned_protocol
     from ..protocol import TEST_EPISODES
 
     episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
-    table = run_learned_protocol(list(args.policies or []) + included(args.include), out, episodes,
-                                 workers=args.workers, progress=not args.quiet, transient_slots=args.transient_slots)
+    table = run_learned_protocol(list(args.policies or []) + included(args.include), out, episodes, _play(args))
     print(f"lawn benchmark --protocol learned: test seeds 0-{episodes - 1}, full unmodified episodes")
     print(table)
     print(f"wrote {out}/episodes.csv and {out}/summary.md")

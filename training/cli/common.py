@@ -55,11 +55,11 @@ comparison_env.__name__ = "env id"
 
 def policy_name(value: str) -> str:
     """argparse type: a registered policy, a learned agent's name (``zoo:``, ``sb3:``, ...) or a
-    benchmark reference row (``limit:...``, ``noise:...``, :mod:`training.limits`)."""
+    benchmark reference row (``limit:...``, ``noise:...``, :mod:`training.results.run`)."""
     from agents.learned import learned_name_forms
     from agents.policies import is_policy_name, policy_names
 
-    from ..limits import REFERENCE_ROWS, is_reference_row
+    from ..results.run import REFERENCE_ROWS, is_reference_row
 
     if not (is_policy_name(value) or is_reference_row(value)):
         raise argparse.ArgumentTypeError(
@@ -73,7 +73,7 @@ def policy_help(prefix: str = "") -> str:
     from agents import policy_names
     from agents.learned import learned_name_forms
 
-    from ..limits import REFERENCE_ROWS
+    from ..results.run import REFERENCE_ROWS
 
     return (f"{prefix}{', '.join(policy_names())}, or {learned_name_forms(' / ')} for learned agents; "
             f"the benchmark's reference rows {', '.join(REFERENCE_ROWS)} (docs/benchmark.md)")
@@ -113,7 +113,7 @@ class Parents:
 
     @staticmethod
     def _split(p: argparse.ArgumentParser) -> None:
-        from ..evaluate import TRANSIENT_SLOTS
+        from ..results.run import TRANSIENT_SLOTS
 
         p.add_argument("--transient-slots", type=_int_at_least(1), default=TRANSIENT_SLOTS, metavar="N",
                        help="the transient/sustained split of each episode's control cost: slots 0..N-1 and N on "

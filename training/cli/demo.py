@@ -17,7 +17,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..demo import run_demo
+    from ..render import run_demo
 
     cfg = config_of(args)
     metrics = run_demo(args.seed, Path(args.out), config=cfg)

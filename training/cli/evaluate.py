@@ -28,8 +28,9 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..evaluate import build_policy, evaluate, format_table, paired_cost_geometric, summarize, write_rows
-    from ..score import SCORE_HIGH, SCORE_LOW, scores_by_policy
+    from ..results.report import format_table
+    from ..results.run import build_policy, evaluate, write_rows
+    from ..results.stats import SCORE_HIGH, SCORE_LOW, paired_cost_geometric, scores_by_policy, summarize
 
     cfg = config_of(args)
     out = Path(args.out)

@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     write_claims(claims, out)
     print(format_claims([c for c in claims if not args.names or c.figure in args.names]))
     if args.docs:
-        from ..reproduction import write_reproduction
+        from ..experiments.reproduction import write_reproduction
 
         print(f"wrote {write_reproduction(out, Path(args.docs))}")
     return 0

@@ -1,5 +1,5 @@
 """``lawn gap``: the per-slot optimality gap of planners against the global reference, and the AO's
-convergence at chosen slots (the analysis is :mod:`training.gap`'s)."""
+convergence at chosen slots (the analysis is :mod:`training.experiments.gap`'s)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from .common import Parents, config_of, count, parse_overrides, policy_help, pol
 
 
 def add(sub: argparse._SubParsersAction, p: Parents) -> None:
-    from ..gap import CONVERGENCE_SLOTS
+    from ..experiments.gap import CONVERGENCE_SLOTS
 
     gp = sub.add_parser("gap", parents=p("workers", "quiet", "seed", "config"),
                         help=COMMAND_HELP["gap"])
@@ -35,7 +35,9 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
 def run(args: argparse.Namespace) -> int:
     from agents import make_policy
 
-    from ..gap import (
+    from ..results.run import Play
+
+    from ..experiments.gap import (
         convergence,
         format_convergence,
         format_gap_table,
@@ -56,8 +58,8 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--policies {name}: the gap compares planners' per-slot plans, and {name} does not "
                              "plan (the experts, the baselines and global-mpc do; a learned agent can drive: --driver)")
     make_policy("global-mpc", cfg, **global_settings)
-    rows = run_gap(args.policies, args.driver, cfg, args.episodes, args.seed, args.every, workers=args.workers,
-                   progress=not args.quiet, global_settings=global_settings)
+    seeds = range(args.seed, args.seed + args.episodes)
+    rows = run_gap(args.policies, args.driver, cfg, seeds, args.every, Play(args.workers, not args.quiet), global_settings)
     summary = summarize_gaps(rows)
     conv = convergence(cfg, args.convergence_slots, seed=args.seed, driver=args.driver,
                        global_settings=global_settings) if args.convergence_slots else []

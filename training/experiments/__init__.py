@@ -1,11 +1,11 @@
 """The paper's experiments (MODEL.md §7), one module each: its sweep specs (full and ``--quick``),
 the builders of its other tables, its plot (reading only those tables) and its claims, checked with
-paired per-seed differences and 95 % t-intervals (:func:`training.tables.paired_difference`), in
+paired per-seed differences and 95 % t-intervals (:func:`training.results.stats.paired_difference`), in
 one :class:`Experiment` record (``EXPERIMENT``). :mod:`.runner` runs any of them:
 ``lawn figures [NAME...] --out DIR`` runs the missing rows into ``DIR/data/<table>.csv`` (resuming
 partial tables), writes ``DIR/<name>.png`` and ``.pdf`` and the claims' results
 (``DIR/claims.json``, ``DIR/claims.md``); with ``--docs DOCS`` it writes ``DOCS/REPRODUCTION.md``
-from those results (:func:`training.reproduction.write_reproduction`).
+from those results (:func:`training.experiments.reproduction.write_reproduction`).
 
 Where the paper evaluates one slot (its rate, blocklength and CE figures use "a selected time slot",
 n = 11), the claims are checked on the episode's realized control cost *and* on the realized stage

@@ -9,7 +9,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from ..tables import fmt_paired, mean_ci, paired_difference, verdict
+from ..results.report import fmt_paired
+from ..results.stats import mean_ci, paired_difference, verdict
 
 __all__ = [
     "Claim",
@@ -142,21 +143,10 @@ def values(rows: Sequence[Mapping], key: str) -> list[float]:
 
 
 # ---------------------------------------------------------------------- claims
-def paired_claim(
-    figure: str,
-    key: str,
-    claim: str,
-    metric: str,
-    a: Mapping,
-    b: Mapping,
-    expect: str,
-    relative: bool = True,
-    fmt: Callable[[float, float], str] | None = None,
-) -> Claim:
-    """A claim on one paired per-seed comparison of ``a`` against ``b``."""
-    mean, half, n = paired_difference(a, b, relative=relative)
-    value = (fmt or fmt_paired)(mean, half)
-    return Claim(figure, key, claim, metric, value, verdict(mean, half, expect), n)
+def paired_claim(figure: str, key: str, claim: str, metric: str, a: Mapping, b: Mapping, expect: str) -> Claim:
+    """A claim on one paired per-seed comparison of ``a`` against ``b`` (relative differences)."""
+    mean, half, n = paired_difference(a, b)
+    return Claim(figure, key, claim, metric, fmt_paired(mean, half), verdict(mean, half, expect), n)
 
 
 def combine(verdicts: Sequence[str]) -> str:

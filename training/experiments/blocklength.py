@@ -6,7 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..tables import fmt_paired, paired_difference
+from ..results.report import fmt_paired
+from ..results.stats import paired_difference
 from .base import (SEEDS, EXPERTS, QUICK_SET, REPORT_SLOT, STYLE, Claim, Experiment, by_seed, cell, curve, label_axes,
                    multi_claim, new_figure, paired_claim, pick, save, seeds, slot_cost, spec, values)
 

@@ -6,7 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..tables import fmt_paired, paired_difference, verdict
+from ..results.report import fmt_paired
+from ..results.stats import paired_difference, verdict
 from .base import (SEEDS, EXPERTS, QUICK_SET, Claim, Experiment, by_seed, cell, label_axes, new_figure, paired_claim, pick,
                    save, seeds, spec, values)
 

@@ -10,7 +10,7 @@ from .base import QUICK_SET, Claim, Experiment
 def _convergence_table(out: Path, quick: bool) -> list[dict]:
     from lawn_env import ScenarioConfig
 
-    from ..gap import CONVERGENCE_SLOTS, convergence
+    from .gap import CONVERGENCE_SLOTS, convergence
 
     cfg = ScenarioConfig(**QUICK_SET) if quick else ScenarioConfig()
     slots = CONVERGENCE_SLOTS[:2] if quick else CONVERGENCE_SLOTS
@@ -19,7 +19,7 @@ def _convergence_table(out: Path, quick: bool) -> list[dict]:
 
 
 def _convergence_plot(tables, path: Path) -> None:
-    from ..gap import plot_convergence
+    from .gap import plot_convergence
 
     rows = [
         {

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..tables import mean_ci, parse_bool
+from ..results.run import parse_bool
+from ..results.stats import mean_ci
 from .base import (SEEDS, EXPERTS, QUICK_SET, STYLE, Claim, Experiment, by_seed, cell, curve, label_axes, multi_claim,
                    new_figure, paired_claim, pick, save, seeds, spec, values)
 from .traces import plot_traces, trace_rows

@@ -20,7 +20,7 @@ def tables_of(
     exp: Experiment, out: Path, quick: bool = False, workers: int = 1, progress: bool = False, run: bool = True
 ) -> dict[str, list[dict]]:
     """The experiment's tables in ``out/data`` (with ``run``: their missing rows run first)."""
-    from ..evaluate import write_rows
+    from ..results.run import write_rows
     from ..sweep import SweepTableError, read_rows, read_table, run_sweep
 
     tables = {}

@@ -25,7 +25,7 @@ from agents import Step, make_policy, rollout
 from agents.ao import AOSettings, AOSolver
 from lawn_env import ScenarioConfig
 
-from .evaluate import write_rows
+from ..results.run import Play, write_rows
 
 __all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "global_power_shares", "format_gap_table",
            "convergence", "format_convergence", "plot_gaps", "plot_convergence", "write_gap_outputs"]
@@ -70,13 +70,14 @@ def _gap_task(task):
     return gap_episode(*task)
 
 
-def run_gap(policies: Sequence[str], driver: str, config: ScenarioConfig, episodes: int, seed: int, every: int,
-            workers: int = 1, progress: bool = True, global_settings: Mapping[str, Any] | None = None) -> list[dict]:
-    from .evaluate import pool_map
+def run_gap(policies: Sequence[str], driver: str, config: ScenarioConfig, seeds: Sequence[int], every: int,
+            play: Play = Play(), global_settings: Mapping[str, Any] | None = None) -> list[dict]:
+    """:func:`gap_episode` of every seed (``play``'s workers and progress bar), its rows in seed order."""
+    from ..pool import pool_map
 
-    tasks = [(tuple(policies), driver, config, seed + i, every, dict(global_settings or {})) for i in range(episodes)]
+    tasks = [(tuple(policies), driver, config, s, every, dict(global_settings or {})) for s in seeds]
     rows = []
-    for episode_rows in pool_map(_gap_task, tasks, workers, progress, desc="gap"):
+    for episode_rows in pool_map(_gap_task, tasks, play.workers, play.progress, desc="gap"):
         rows.extend(episode_rows)
     return rows
 

@@ -1,0 +1,391 @@
+"""Markdown tables and figures from evaluation rows and their statistics (:mod:`.stats`): the
+cells' formats, the benchmark's summary, the learned protocol's table, the suite's board,
+references, cost structure and per-task tables, the fleet-size table, and their figures. Nothing
+here plays an episode; the pages' prose around the tables lives in ``docs/``."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from agents.base import JOINT
+from agents.learned import zoo_agents
+
+from .run import NOISE, REFERENCE_ROWS, TRANSIENT_SLOTS, is_reference_row, own_anchor, policy_env
+from .stats import (SCORE_HIGH, SCORE_LOW, SCORE_VERSION, SUMMARY_METRICS, Geometric, aggregate_score, costs_of,
+                    geometric, mean_ci, paired, score_inputs, scores_by_policy)
+
+__all__ = ["fmt_pct", "fmt_num", "fmt_stat", "fmt_geometric", "fmt_paired", "format_score", "RESULT_METRICS", "TIMING_METRICS",
+           "format_table", "summary_markdown", "plot_summary", "mean_cell", "protocol_cells", "learned_table",
+           "suite_table", "structure_table", "task_tables", "plot_profiles", "skipped_summary", "TARGETS",
+           "generalization_table"]
+
+#: The summary's deterministic metrics (the same seeds give the same digits on any machine) and its
+#: measured ones (this machine's clock), in two tables.
+RESULT_METRICS = tuple(m for m in SUMMARY_METRICS if not m[0].startswith("decision_time"))
+TIMING_METRICS = tuple(m for m in SUMMARY_METRICS if m[0].startswith("decision_time"))
+#: Fleet size -> the largest geometric cost change against the best expert the fleet networks aim for
+#: (None: reported only).
+TARGETS: dict[int, float | None] = {3: 0.05, 4: 0.05, 8: 0.05, 16: 0.10, 32: 0.10, 64: None}
+_NOISE = next(iter(NOISE))
+#: The cost columns of the per-task and learned tables.
+_COSTS = ("control_cost", "transient_cost", "sustained_cost")
+
+
+def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
+    """A Markdown table of string cells."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return "\n".join(lines + ["| " + " | ".join(cells) + " |" for cells in rows])
+
+
+def fmt_pct(x: float, sign: bool = True) -> str:
+    """A fraction as a percentage: ``+3.8 %`` (``3.8 %`` without the sign); ``n/a`` when not finite."""
+    if not math.isfinite(x):
+        return "n/a"
+    return f"{x * 100:+.1f} %" if sign else f"{x * 100:.1f} %"
+
+
+def fmt_num(x: float) -> str:
+    """A cost: thousands separated below 1e5, three significant digits above; ``n/a`` when not finite."""
+    if not math.isfinite(x):
+        return "n/a"
+    return f"{x:,.0f}" if abs(x) < 1e5 else f"{x:.3g}"
+
+
+def fmt_geometric(g: Geometric | None, wins: bool = True) -> str:
+    """A geometric comparison: ``-17.5 % [-25.0, -9.1] (wins 61 %)``; ``n/a`` when undefined."""
+    if g is None or not math.isfinite(g.ratio):
+        return "n/a"
+    text = fmt_pct(g.change)
+    if math.isfinite(g.low) and math.isfinite(g.high):
+        text += f" [{(g.low - 1) * 100:+.1f}, {(g.high - 1) * 100:+.1f}]"
+    return text + (f" (wins {g.won * 100:.0f} %)" if wins else "")
+
+
+def fmt_paired(mean: float, half: float) -> str:
+    """A paired relative difference with its 95 % half-width: ``+3.8 % ± 4.7 %``."""
+    if not math.isfinite(mean):
+        return "n/a"
+    return fmt_pct(mean) + ("" if not math.isfinite(half) else f" ± {fmt_pct(half, sign=False)}")
+
+
+def format_score(score: tuple[float, float, float, int] | None) -> str:
+    """``96.8 [91.2, 101.5]`` (the interval omitted when undefined), ``–`` for no score."""
+    if score is None or not math.isfinite(score[0]):
+        return "–"
+    mean, lo, hi = score[:3]
+    if not (math.isfinite(lo) and math.isfinite(hi)) or f"{lo:.1f}" == f"{hi:.1f}":
+        return f"{mean:.1f}"
+    return f"{mean:.1f} [{lo:.1f}, {hi:.1f}]"
+
+
+def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy",
+                 paired: dict[str, tuple[float, float]] | None = None, reference: str | None = None,
+                 scores: Mapping[str, tuple] | None = None, geometric: Mapping[str, Geometric] | None = None) -> str:
+    """A Markdown table: mean ± 95 % interval per metric (decision time in ms), optionally the
+    normalized score (``scores``: policy -> :func:`.stats.normalized_score`), the paired
+    relative cost difference against ``reference`` (``paired``: mean of per-seed relative
+    differences, t-interval) and the geometric one (``geometric``: the deciding statistic,
+    docs/benchmark.md)."""
+    header = [by, "episodes"] + [label.replace("(s)", "(ms)") for _, label in metrics]
+    if scores:
+        header.insert(3, f"score v{SCORE_VERSION} [95 %]")
+    if paired:
+        header.append(f"cost vs {reference} (paired)")
+    if geometric:
+        header.append(f"cost vs {reference} (geometric [95 %], seeds won)")
+    table = []
+    for entry in summary:
+        cells = [str(entry[by]), str(entry["episodes"])]
+        for key, _ in metrics:
+            scale = 1e3 if key.startswith("decision_time") else 1.0
+            mean, half = entry[key] * scale, entry[f"{key}_ci95"] * scale
+            cells.append(f"{fmt_stat(mean)} ± {fmt_stat(half)}")
+        if scores:
+            cells.insert(3, format_score(scores.get(entry[by])))
+        if paired:
+            mean, half = paired.get(entry[by], (math.nan, math.nan))
+            cells.append("–" if entry[by] == reference else f"{mean * 100:+.1f} % ± {half * 100:.1f} %")
+        if geometric:
+            cells.append("–" if entry[by] == reference else fmt_geometric(geometric.get(entry[by])))
+        table.append(cells)
+    return markdown_table(header, table)
+
+
+def fmt_stat(x: float) -> str:
+    """A statistic in a summary cell: four significant digits below 10, thousands separated below 1e5,
+    three significant digits beyond; ``n/a`` when not finite."""
+    if not math.isfinite(x):
+        return "n/a"
+    if x == 0 or 1e-2 <= abs(x) < 1e5:
+        return f"{x:.4g}" if abs(x) < 10 else f"{x:,.1f}" if abs(x) < 1000 else f"{x:,.0f}"
+    return f"{x:.3g}"
+
+
+def summary_markdown(summary: list[dict], paired: dict, reference: str, scores: dict, geometric: dict) -> str:
+    """The benchmark's summary as Markdown: the results table, which the same seeds reproduce digit
+    for digit on any machine, then each policy's decision time, which is this machine's."""
+    results = format_table(summary, metrics=RESULT_METRICS, paired=paired, reference=reference, scores=scores,
+                           geometric=geometric)
+    timing = format_table(summary, metrics=TIMING_METRICS)
+    return f"{results}\n\nDecision time (median per episode; mean ± 95 % interval over the episodes), measured on the " \
+           f"machine that ran it:\n\n{timing}\n"
+
+
+def plot_summary(summary: list[dict], path: Path, title: str = "") -> None:
+    """Bar chart of each summary metric with its 95 % interval."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(16, 3.6), dpi=110)
+    FigureCanvasAgg(fig)
+    names = [entry["policy"] for entry in summary]
+    colors = [f"C{i}" for i in range(len(names))]
+    for j, (key, label) in enumerate(SUMMARY_METRICS):
+        ax = fig.add_subplot(1, len(SUMMARY_METRICS), j + 1)
+        scale = 1e3 if key.startswith("decision_time") else 1.0
+        means = [entry[key] * scale for entry in summary]
+        errs = [entry[f"{key}_ci95"] * scale for entry in summary]
+        ax.bar(names, means, yerr=errs, color=colors, capsize=4)
+        ax.set_title(label.replace("(s)", "(ms)"), fontsize=10)
+        ax.tick_params(axis="x", labelrotation=45, labelsize=8)
+        positive = [m for m in means if m > 0]
+        if key.endswith("_cost") and positive and max(positive) > 20 * min(positive):
+            ax.set_yscale("log")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+
+
+def mean_cell(rows: Sequence[Mapping], policy: str, env: str, task: str | None, metric: str) -> str:
+    """``mean ± 95 % half-width`` of ``metric`` over the seeds of ``policy`` on ``env`` (and ``task``)."""
+    mean, half = mean_ci(costs_of(rows, policy, env, task, metric).values())
+    return f"{fmt_num(mean)} ± {fmt_num(half)}"
+
+
+def protocol_cells(rows: Sequence[Mapping], scores: Mapping, policy: str, env: str) -> dict[str, str]:
+    """The cells every learned-protocol table shows for ``policy`` on ``env``: its anchor, control
+    cost, score, paired difference against the best expert and against its own anchor, and its worst seed
+    against the anchor."""
+    cost = costs_of(rows, policy, env)
+    anchor = own_anchor(policy)
+    cells = {"anchor": anchor or "–", "cost": mean_cell(rows, policy, env, None, "control_cost"),
+             "score": format_score(scores.get(("default", env, policy))),
+             "vs_ref": "–" if policy == SCORE_HIGH else fmt_paired(*paired(rows, policy, SCORE_HIGH, env)),
+             "vs_anchor": "–", "worst": "–", "geo_ref": "–", "geo_anchor": "–"}
+    cells["transient"] = mean_cell(rows, policy, env, None, "transient_cost")
+    cells["sustained"] = mean_cell(rows, policy, env, None, "sustained_cost")
+    if policy != SCORE_HIGH:
+        cells["geo_ref"] = fmt_geometric(geometric(rows, policy, SCORE_HIGH, env))
+    if anchor is not None:
+        base = costs_of(rows, anchor, env)
+        cells["vs_anchor"] = fmt_paired(*paired(rows, policy, anchor, env))
+        cells["geo_anchor"] = fmt_geometric(geometric(rows, policy, anchor, env))
+        cells["worst"] = fmt_pct(max((cost[s] - base[s]) / base[s] for s in cost if s in base))
+    return cells
+
+
+_LEARNED_CELLS = ("anchor", "cost", "transient", "sustained", "score", "geo_ref", "geo_anchor", "vs_ref", "vs_anchor",
+                  "worst")
+
+
+def learned_table(rows: Sequence[Mapping], entries: Sequence[tuple[str, str]],
+                  labels: Mapping[str, str] | None = None) -> str:
+    """The learned protocol's Markdown table of ``entries`` from their rows."""
+    scores = scores_by_policy(rows)
+    seeds = len({int(r["seed"]) for r in rows})
+    header = ["policy", "env", "acts around", "control cost", "transient", "sustained", f"score v{SCORE_VERSION} [95 %]",
+              f"vs {SCORE_HIGH} (geometric, seeds won)", "vs own anchor (geometric, seeds won)",
+              f"vs {SCORE_HIGH} (paired mean)", "vs own anchor (paired mean)", "worst seed vs own anchor"]
+    table = []
+    for policy, env in entries:
+        c = protocol_cells(rows, scores, policy, env)
+        table.append([(labels or {}).get(policy, policy), env, *(c[k] for k in _LEARNED_CELLS)])
+    split = rows[0]["transient_slots"]
+    lines = [markdown_table(header, table), "", f"{seeds} test seeds; control cost split into the transient (slots 0-{split - 1}) and the sustained "
+              f"part (slots {split} on); score v{SCORE_VERSION}: 0 = {SCORE_LOW}, 100 = {SCORE_HIGH} "
+              "(training/results/stats.py); geometric columns (the deciding statistic, docs/benchmark.md): the geometric "
+              "mean of the per-seed cost ratios - 1 with its 95 % bootstrap interval and the share of seeds won; "
+              "paired-mean columns: the mean per-seed relative difference and its 95 % t-interval."]
+    return "\n".join(lines)
+
+
+def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequence[str],
+                skipped: Mapping[tuple[str, str], str]) -> tuple[str, str]:
+    """The leaderboard (score per task, the IQM over tasks with its stratified bootstrap interval)
+    and the references' costs per task."""
+    scores, inputs = scores_by_policy(rows), score_inputs(rows)
+    at = list(policies).index(SCORE_HIGH) + 1 if SCORE_HIGH in policies else 0  # the reference rows after the expert
+    names = list(dict.fromkeys([*policies[:at], *REFERENCE_ROWS, *policies[at:]]))
+    board = []
+    for p in names:
+        env = JOINT if is_reference_row(p) else policy_env(p)
+        if is_reference_row(p) and not any(r["policy"] == p for r in rows):
+            continue
+        cells = []
+        for task in tasks:
+            score = scores.get((task, env, p))
+            cells.append("n/a" if (task, p) in skipped else format_score(score))
+        iqm, lo, hi, n = aggregate_score({t: inputs[(t, env, p)] for t in tasks if (t, env, p) in inputs})
+        overall = "–" if n == 0 else format_score((iqm, lo, hi, n)) + ("" if n == len(tasks) else f" ({n} task{'s' * (n != 1)})")
+        board.append([p, env, *cells, overall])
+    refs = []
+    for task in tasks:
+        for env in dict.fromkeys(r["env"] for r in rows if r.get("task") == task):
+            low, high = costs_of(rows, SCORE_LOW, env, task), costs_of(rows, SCORE_HIGH, env, task)
+            if not low or not high:
+                continue
+            lo, hi = mean_ci(low.values()), mean_ci(high.values())
+            gap = lo[0] - hi[0]
+            per_seed = [(low[s] - high[s]) / high[s] for s in low if s in high]
+            refs.append([task, env, str(len(low)), f"{fmt_num(lo[0])} ± {fmt_num(lo[1])}",
+                         f"{fmt_num(hi[0])} ± {fmt_num(hi[1])}", fmt_num(gap),
+                         f"{fmt_pct(min(per_seed))} to {fmt_pct(max(per_seed))}", str(sum(g <= 0 for g in per_seed))])
+    return (markdown_table(["policy", "env", *tasks, "IQM over tasks [95 %]"], board),
+            markdown_table(["task", "env", "episodes", f"{SCORE_LOW} cost", f"{SCORE_HIGH} cost", "gap (mean)",
+                            f"per-seed gap / {SCORE_HIGH} cost, min to max", f"seeds where {SCORE_LOW} costs no more"],
+                           refs))
+
+
+def structure_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
+    """Per task, what decides it: the best expert's control cost, its transient and sustained parts (the
+    sustained share), the noise floor and the two headroom rows against it (geometric,
+    :mod:`.run`), on ``lawn/Joint-v0``."""
+    table = []
+    for task in tasks:
+        high = [r for r in rows if r["policy"] == SCORE_HIGH and r["env"] == JOINT and r.get("task") == task]
+        if not high:
+            continue
+        total = sum(float(r["control_cost"]) for r in high)
+        share = sum(float(r["sustained_cost"]) for r in high) / total
+        cells = [mean_cell(rows, SCORE_HIGH, JOINT, task, m) for m in _COSTS]
+        cells[2] += f" ({share * 100:.0f} %)"
+        for p in REFERENCE_ROWS:
+            cost = costs_of(rows, p, JOINT, task)
+            cells.append(fmt_geometric(geometric(rows, p, SCORE_HIGH, JOINT, task)) if cost else "–")
+        table.append([task, *cells])
+    header = ["task", f"{SCORE_HIGH} cost", "transient", "sustained (share)",
+              *(f"{p} vs {SCORE_HIGH} (geometric, seeds won)" for p in REFERENCE_ROWS)]
+    return markdown_table(header, table)
+
+
+def task_tables(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequence[str],
+                skipped: Mapping[tuple[str, str], str]) -> str:
+    """One Markdown table per task: every row's control cost, its transient and sustained parts, the
+    score, and the comparison with the best expert on the same env (geometric, the deciding statistic,
+    and the paired mean of relative differences)."""
+    scores = scores_by_policy(rows)
+    out = []
+    for task in tasks:
+        table = []
+        names = list(dict.fromkeys([SCORE_HIGH, SCORE_LOW, *REFERENCE_ROWS, *policies]))
+        for env in dict.fromkeys(r["env"] for r in rows if r.get("task") == task):
+            for p in names:
+                if (task, p) in skipped or not costs_of(rows, p, env, task):
+                    continue
+                cells = [mean_cell(rows, p, env, task, m) for m in _COSTS] + [format_score(scores.get((task, env, p)))]
+                if p == SCORE_HIGH:
+                    cells += ["–", "–"]
+                else:
+                    cells += [fmt_geometric(geometric(rows, p, SCORE_HIGH, env, task)),
+                              fmt_paired(*paired(rows, p, SCORE_HIGH, env, task))]
+                table.append([p, env, *cells])
+        header = ["policy", "env", "control cost", "transient", "sustained", f"score v{SCORE_VERSION} [95 %]",
+                  f"vs {SCORE_HIGH} (geometric, seeds won)", f"vs {SCORE_HIGH} (paired mean)"]
+        out.append(f"**{task}**\n\n" + markdown_table(header, table))
+    return "\n\n".join(out)
+
+
+def plot_profiles(per_slot: Sequence[Mapping], path: Path, tasks: Sequence[str],
+                  transient_slots: int = TRANSIENT_SLOTS) -> Path:
+    """The mean stage cost per slot of the experts, baselines, anchors, reference rows and agents on
+    ``lawn/Joint-v0`` (the agents on their own env), one panel per task, log scale; from the rows of
+    ``per_slot.csv`` (:func:`per_slot_profile`)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    cols = min(3, len(tasks))
+    nrows = -(-len(tasks) // cols)
+    fig = Figure(figsize=(5.2 * cols, 3.6 * nrows), dpi=100)
+    FigureCanvasAgg(fig)
+    policies = list(dict.fromkeys(str(r["policy"]) for r in per_slot))
+    styles = {p: (f"C{i % 10}", "-" if i < 10 else "--") for i, p in enumerate(policies)}
+    for j, task in enumerate(tasks):
+        ax = fig.add_subplot(nrows, cols, j + 1)
+        for p in policies:
+            mine = [r for r in per_slot if r["task"] == task and r["policy"] == p
+                    and (r["env"] == JOINT or p.startswith(("zoo:", "sb3:", "bc:", "marl:")))]
+            if not mine:
+                continue
+            color, line = styles[p]
+            ax.plot([int(r["slot"]) for r in mine], [float(r["mean_stage_cost"]) for r in mine], line, color=color,
+                    lw=1.0, label=p)
+        ax.axvline(transient_slots - 0.5, color="0.6", lw=0.8, ls=":")
+        ax.set_yscale("log")
+        ax.set_title(task, fontsize=10)
+        ax.set_xlabel("slot", fontsize=8)
+        ax.set_ylabel("mean stage cost", fontsize=8)
+        ax.tick_params(labelsize=7)
+    handles, labels = fig.axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(6, len(labels)), fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0.04 + 0.02 * (len(labels) // 6), 1, 1))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
+
+
+def skipped_summary(skipped: Mapping[tuple[str, str], str]) -> list[str]:
+    """One line per task of the policies that cannot act there, with the first one's reason."""
+    by_task: dict[str, list[str]] = {}
+    for task, policy in skipped:
+        by_task.setdefault(task, []).append(policy)
+    return [f"on `{task}`: {', '.join(ps)} ({skipped[(task, ps[0])]})" for task, ps in by_task.items()]
+
+
+def _decision_ms(rows: Sequence[Mapping], policy: str, env: str, task: str) -> float:
+    return 1e3 * float(np.median(list(costs_of(rows, policy, env, task, "decision_time_median_s").values())))
+
+
+def _trained_for_every_size(agents: Sequence[str]) -> set[str]:
+    """The agents the targets are for: the fleet networks trained on mixed fleets (``lawn train
+    --algo fleet``), not the multi-agent ones trained at one size."""
+    records = zoo_agents()
+    return {a for a in agents if records.get(a.partition(":")[2], {}).get("trainer") == "fleet"}
+
+
+def _target_cell(k: int, change: float) -> str:
+    target = TARGETS.get(k)
+    if target is None:
+        return "reported"
+    return f"≤ {target * 100:+.0f} %: {'met' if change <= target else 'missed'}"
+
+
+def generalization_table(rows: Sequence[Mapping], agents: Sequence[str], sizes: Mapping[int, int]
+                         ) -> str:
+    """The Markdown table: per env, per K, the noise-floor row and every agent."""
+    table = []
+    envs = list(dict.fromkeys(policy_env(a) for a in agents))
+    targeted = _trained_for_every_size(agents)
+    for env in envs:
+        for policy in [_NOISE, *(a for a in agents if policy_env(a) == env)]:
+            for k in sizes:
+                task = f"k{k}"
+                mine = costs_of(rows, policy, env, task)
+                if not mine or not costs_of(rows, SCORE_HIGH, env, task):
+                    continue
+                g = geometric(rows, policy, SCORE_HIGH, env, task)
+                ms, ref_ms = _decision_ms(rows, policy, env, task), _decision_ms(rows, SCORE_HIGH, env, task)
+                table.append([policy, env, str(k), str(len(mine)), mean_cell(rows, policy, env, task, "control_cost"),
+                              mean_cell(rows, SCORE_HIGH, env, task, "control_cost"), fmt_geometric(g),
+                              fmt_paired(*paired(rows, policy, SCORE_HIGH, env, task)),
+                              _target_cell(k, g.change) if policy in targeted else "–", f"{ms:.3g}", f"{ref_ms:.3g}",
+                              f"{ref_ms / ms:.1f}×"])
+    header = ["policy", "env", "K", "seeds", "control cost", f"{SCORE_HIGH} cost",
+              f"vs {SCORE_HIGH} (geometric [95 %], seeds won)", f"vs {SCORE_HIGH} (paired mean)", "target",
+              "decision time (ms)", f"{SCORE_HIGH} decision time (ms)", f"{SCORE_HIGH} / policy time"]
+    return markdown_table(header, table)
