@@ -234,7 +234,7 @@ def datasets_path(tmp_path, monkeypatch):
 def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
     import minari
 
-    from training.datasets import create_dataset
+    from training.bc import create_dataset
 
     create_dataset("rg-mpc", "lawn/Comm-v0", episodes=2, seed=7, dataset_id="lawn/test/rg-mpc-v0", progress=False)
     dataset = minari.load_dataset("lawn/test/rg-mpc-v0")
@@ -264,7 +264,7 @@ def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
 
 
 def test_dataset_errors_name_the_problem(datasets_path):
-    from training.datasets import create_dataset, load_dataset
+    from training.bc import create_dataset, load_dataset
 
     with pytest.raises(ValueError, match="datasets record lawn/Joint-v0 or lawn/Comm-v0"):
         create_dataset("rg-mpc", "lawn/CommRL-v0", 1, 0, "lawn/test/x-v0")
@@ -282,7 +282,7 @@ def test_dataset_errors_name_the_problem(datasets_path):
 
 def test_bc_data_from_a_dataset_equals_live_labelling(datasets_path):
     from training.bc import collect, dataset_transitions
-    from training.datasets import create_dataset
+    from training.bc import create_dataset
 
     create_dataset("rg-mpc", "lawn/Joint-v0", 2, 11, "lawn/test/live-v0", progress=False)
     cfg = ScenarioConfig()
@@ -304,34 +304,33 @@ def test_bc_from_a_dataset_is_the_clone_of_live_labelling(datasets_path, tmp_pat
     import torch
     from stable_baselines3 import PPO
 
-    from training.datasets import create_dataset
+    from training.bc import create_dataset
     from training.protocol import TRAIN_SEED_BASE
-    from training.train import train
+    from training.train import TrainSpec, train
 
     create_dataset("rg-mpc", "lawn/Comm-v0", 1, TRAIN_SEED_BASE, "lawn/test/bc-v0", progress=False)
     common = dict(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=0,
                   hp_overrides={"epochs": 2}, progress=False)
-    train(out_dir=tmp_path / "live", **common)
-    train(out_dir=tmp_path / "data", dataset="lawn/test/bc-v0", **common)
+    train(TrainSpec(out_dir=tmp_path / "live", **common))
+    train(TrainSpec(out_dir=tmp_path / "data", dataset="lawn/test/bc-v0", **common))
     live = PPO.load(str(tmp_path / "live" / "model.zip")).policy.state_dict()
     data = PPO.load(str(tmp_path / "data" / "model.zip")).policy.state_dict()
     assert all(torch.equal(live[k], data[k]) for k in live)
     with pytest.raises(ValueError, match="holds episodes of lawn/Comm-v0; this run trains on lawn/Joint-v0"):
-        train(out_dir=tmp_path / "x", dataset="lawn/test/bc-v0", **{**common, "env_id": "lawn/Joint-v0"})
+        train(TrainSpec(out_dir=tmp_path / "x", dataset="lawn/test/bc-v0", **{**common, "env_id": "lawn/Joint-v0"}))
     with pytest.raises(ValueError, match="only behaviour cloning"):
-        train(out_dir=tmp_path / "y", dataset="lawn/test/bc-v0", **{**common, "algo": "ppo"})
+        TrainSpec(out_dir=tmp_path / "y", dataset="lawn/test/bc-v0", **{**common, "algo": "ppo"})
 
 
 def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     pytest.importorskip("stable_baselines3")
-    from training.train import train
+    from training.train import TrainSpec, train
     from training.zoo import RECIPES, build_zoo
 
     runs = tmp_path / "runs"
     (tmp_path / "docs").mkdir()
     shutil.copy2(ROOT / "docs" / "LEARNED.md", tmp_path / "docs" / "LEARNED.md")  # the page's blocks
-    train(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=0,
-          out_dir=runs / "bc-comm" / "seed-0", hp_overrides={"epochs": 1, "dagger_iterations": 0}, progress=False)
+    train(TrainSpec(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=0, out_dir=runs / "bc-comm" / "seed-0", hp_overrides={"epochs": 1, "dagger_iterations": 0}, progress=False))
     table = build_zoo(runs, tmp_path / "docs" / "LEARNED.md", workers=1, progress=False, episodes=3,
                       target=tmp_path / "zoo")
     from training.results.run import own_anchor
@@ -359,7 +358,7 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
 def test_zoo_stages_on_a_recorded_run(tmp_path):
     """The zoo's stages one by one: finished runs, evaluation, table rows, render, export."""
     pytest.importorskip("stable_baselines3")
-    from training.train import train
+    from training.train import TrainSpec, train
     from training.zoo import RECIPES, evaluate_zoo, export_zoo, finished_runs, render_zoo, zoo_tables
 
     runs = tmp_path / "runs"
@@ -367,8 +366,7 @@ def test_zoo_stages_on_a_recorded_run(tmp_path):
         finished_runs(runs)
     tiny = {"bc-comm": dataclasses.replace(RECIPES["bc-comm"], seeds=(0, 1), timesteps=120)}
     for s in (0, 1):
-        train(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=s,
-              out_dir=runs / "bc-comm" / f"seed-{s}", hp_overrides={"epochs": 1, "dagger_iterations": 0}, progress=False)
+        train(TrainSpec(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=s, out_dir=runs / "bc-comm" / f"seed-{s}", hp_overrides={"epochs": 1, "dagger_iterations": 0}, progress=False))
     found = finished_runs(runs, tiny)
     assert [(r.name, [d.name for d in dirs]) for r, dirs in found] == [("bc-comm", ["seed-0", "seed-1"])]
     ev = evaluate_zoo(found, episodes=2, workers=1, progress=False)
@@ -494,14 +492,14 @@ def test_train_recipes_skips_finished_runs_restarts_unfinished_ones_and_trains_f
     phases = []
 
     def fake_pool_map(fn, tasks, workers, progress, desc=""):
-        assert fn is recipes_module.train_task
-        phases.append([(t["out_dir"].parent.name, t["seed"], t["init_from"]) for t in tasks])
+        assert fn is recipes_module.train
+        phases.append([(t.out_dir.parent.name, t.seed, t.init_from) for t in tasks])
         for t in tasks:  # the unfinished run was deleted before its task was made
-            assert not t["out_dir"].exists()
-            t["out_dir"].mkdir(parents=True)
-            (t["out_dir"] / "run.json").write_text(json.dumps({"trainer": "bc" if t["algo"] == "bc" else "sb3",
-                                                                "num_timesteps": t["timesteps"], "algo": "ppo",
-                                                                "env": t["env_id"], "seed": t["seed"]}))
+            assert not t.out_dir.exists()
+            t.out_dir.mkdir(parents=True)
+            (t.out_dir / "run.json").write_text(json.dumps({"trainer": "bc" if t.algo == "bc" else "sb3",
+                                                            "num_timesteps": t.timesteps, "algo": "ppo",
+                                                            "env": t.env_id, "seed": t.seed}))
         return []
 
     monkeypatch.setattr(recipes_module, "pool_map", fake_pool_map)

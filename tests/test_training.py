@@ -214,11 +214,11 @@ def test_errors_name_the_problem(tmp_path, capsys):
 
 
 def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_path):
-    from training.evaluate import episode_row
+    from training.results.run import episode_row
     from training.train import VALIDATION_SEED_BASE
 
     from training.protocol import read_learning_curve
-    from training.tables import paired_difference
+    from training.results.stats import paired_difference
 
     out, summary = _train(tmp_path, "ppo", "lawn/Comm-v0", steps=256, name="rl")
     curve = read_learning_curve(out)

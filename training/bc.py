@@ -381,8 +381,8 @@ def _check_dataset_id(dataset_id: str) -> None:
 
 def _reference_returns(env_id: str, config: Any, seed: int, episodes: int) -> tuple[float, float]:
     """Minari's ``ref_min_score`` and ``ref_max_score``: the mean returns of ``epa`` and ``dv-mpc``."""
-    from .evaluate import evaluate
-    from .score import SCORE_HIGH, SCORE_LOW
+    from .results.run import evaluate
+    from .results.stats import SCORE_HIGH, SCORE_LOW
 
     tasks = [(p, env_id, config, seed + i, {}) for p in (SCORE_LOW, SCORE_HIGH) for i in range(episodes)]
     rows = evaluate(tasks, progress=False)

@@ -25,7 +25,7 @@ from agents.learned import ObsNormalizer, SB3Policy, marl_policy
 from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
 from lawn_env.interface import InterfaceLike
 
-from .evaluate import episode_row
+from .results.run import episode_row
 from .protocol import (append_learning_curve, read_learning_curve, selected_validation, validation_reference,
                        validation_row)
 

@@ -21,7 +21,7 @@ from typing import Any
 
 from lawn_env import PARALLEL_ENV_ID, RL_ENV_IDS, ScenarioConfig, central_env_id
 
-from .evaluate import pool_map
+from .pool import pool_map
 from .train import LAWN_KEYS, TrainSpec, load_hyperparams, train
 
 __all__ = ["Recipe", "RECIPES", "SECTIONS", "recipe", "finished", "train_recipes", "ZOO_VALIDATION_EPISODES",

@@ -296,7 +296,7 @@ def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: st
     or Ray with ``backend="ray"``, as ``lawn sweep``) and summarize the selected models' validation
     costs across seeds (mean and 95 % interval)."""
     from .sweep import execute
-    from .tables import mean_ci
+    from .results.stats import mean_ci
 
     if len(set(seeds)) != len(seeds) or not seeds:
         raise ValueError(f"--seeds {seeds}: give one or more distinct seeds")
