@@ -11,7 +11,7 @@ zero action on the same seeds, so the benchmark tables carry it as a row of its 
 ``anchor:distance``    the anchored scheme with the distance prior (d_k^2): equal outage on every link
 ``anchor:stake``       the anchored scheme with the stake prior: the RL interface's default
 ``anchor:NAME-lqr``    either prior with the LQR baseline's increments under the Joint residual
-                       (``increment_anchor="lqr"``; on Comm-v0 the same as ``anchor:NAME``)
+                       (``increment_anchor="lqr"``; on Comm-v1 the same as ``anchor:NAME``)
 =====================  ======================================================================
 
 The zero action of the anchored scheme depends on the scheme, the power prior and the increment
@@ -66,7 +66,7 @@ class InterfacePolicy(Policy):
 
 
 class AnchorPolicy(InterfacePolicy):
-    """The zero action of the named anchor (:data:`ANCHORS`) on ``lawn/Joint-v0`` or ``lawn/Comm-v0``."""
+    """The zero action of the named anchor (:data:`ANCHORS`) on ``lawn/Joint-v1`` or ``lawn/Comm-v1``."""
 
     env_ids = (JOINT, COMM)
 

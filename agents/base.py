@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 
 __all__ = ["Policy", "Planner", "JOINT", "COMM"]
 
-JOINT, COMM = "lawn/Joint-v0", "lawn/Comm-v0"
+JOINT, COMM = "lawn/Joint-v1", "lawn/Comm-v1"
 
 
 class Planner(Protocol):

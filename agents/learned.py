@@ -129,7 +129,7 @@ class ObsNormalizer:
 
 
 class SB3Policy(InterfacePolicy):
-    """A trained single-agent network acting on ``lawn/Joint-v0`` or ``lawn/Comm-v0``.
+    """A trained single-agent network acting on ``lawn/Joint-v1`` or ``lawn/Comm-v1``.
 
     ``network(obs) -> action`` is any deterministic SB3 predictor (a model or a bare policy);
     observations pass through the training interface's clipping and the normalizer, actions
@@ -206,7 +206,7 @@ def _predictor(network: Any) -> Any:
 
 
 class MARLPolicy(InterfacePolicy):
-    """A parameter-shared multi-agent policy driving ``lawn/Joint-v0`` from the central observation:
+    """A parameter-shared multi-agent policy driving ``lawn/Joint-v1`` from the central observation:
     each agent's observation is rebuilt as SuperSuit built it in training (padding, one-hot agent
     indicator), the agents' actions are assembled into the central action of the training scheme
     and carried to the v0 action like :class:`SB3Policy`."""
@@ -290,7 +290,7 @@ def _built_for(policy: Any, shape: tuple[int, ...], fleet: bool) -> str:
 
 def marl_policy(network: Any, config: ScenarioConfig, interface: InterfaceLike, normalizer: ObsNormalizer | None,
                 seed: int | None, label: str, config_given: bool = True) -> InterfacePolicy:
-    """A multi-agent network on ``lawn/Joint-v0``: :class:`MARLPolicy`, or for the entity layout
+    """A multi-agent network on ``lawn/Joint-v1``: :class:`MARLPolicy`, or for the entity layout
     (a fleet network, which computes every agent's row at once) :class:`SB3Policy`."""
     if resolve_interface(interface).layout == "entities":
         from .fleet import FleetPolicy

@@ -217,7 +217,7 @@ class DVMPCPolicy(PlannerPolicy):
     """The delivery-value expert (agents.reduced.DeliveryValuePlanner): each command planned as if it
     arrives (the psi = 1 MPC), power and the drone chosen to maximise the expected worth of the
     commands delivered, ``sum_k psi_k (V_k^lost - V_k^del)``. It plans (p, q) for the increments the
-    AGVs apply: on ``lawn/Comm-v0`` under the paper's law (``control.law="paper"``, the env's AGVs
+    AGVs apply: on ``lawn/Comm-v1`` under the paper's law (``control.law="paper"``, the env's AGVs
     apply the psi-scaled QP) that is the paper's problem: it plans as ``rg-mpc`` (its settings are
     then :class:`~agents.ReducedSettings`)."""
 
@@ -282,7 +282,7 @@ def make_policy(name: str, config: ConfigLike = None, env_id: str | None = None,
                 seed: int | None = None, **kwargs: Any) -> Policy:
     """Build a registered policy for ``config`` driving ``env_id``.
 
-    ``env_id`` defaults to ``lawn/Joint-v0`` (for trained agents: the env they were trained on).
+    ``env_id`` defaults to ``lawn/Joint-v1`` (for trained agents: the env they were trained on).
     Unknown names raise ``ValueError`` listing the valid ones; unknown or invalid settings raise
     ``ValueError`` naming the setting.
     """

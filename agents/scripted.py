@@ -1,4 +1,4 @@
-"""A simple scripted policy for ``lawn/Joint-v0``: the demo's driver and a sanity baseline.
+"""A simple scripted policy for ``lawn/Joint-v1``: the demo's driver and a sanity baseline.
 
 It reads only the observation (decoded with :class:`lawn_env.ObservationLayout`):
 

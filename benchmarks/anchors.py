@@ -1,7 +1,7 @@
 """How good the RL interface's zero action is: the anchors a learner starts from,
 against ``rg-mpc`` on the same seeds, in one run.
 
-Every row plays full 120-slot episodes of the unmodified ``lawn/Comm-v0`` scenario and reports the
+Every row plays full 120-slot episodes of the unmodified ``lawn/Comm-v1`` scenario and reports the
 realized control cost (mean and 95 % interval over seeds) and the paired per-seed difference
 against ``rg-mpc``. The rows are the anchor policies of :mod:`agents.anchors` (``anchor:NAME``,
 the rows the learned protocol puts beside every agent):
@@ -10,7 +10,7 @@ the rows the learned protocol puts beside every agent):
 * ``distance`` -- the anchored scheme with the distance prior (drone over the AGVs' centroid, the
   split that equalizes every link's outage), the RL interface before its stake prior;
 * ``stake`` -- the anchored scheme with the stake prior (``lawn_env.interface``), the RL
-  interface's default: the zero action a learner of ``lawn/CommRL-v0`` or ``lawn/JointRL-v0``
+  interface's default: the zero action a learner of ``lawn/CommRL-v1`` or ``lawn/JointRL-v1``
   starts from.
 
 The seeds are the validation seeds (``training.protocol.VALIDATION_SEED_BASE`` on): the anchor was
@@ -30,7 +30,7 @@ from training.results.run import evaluate
 from training.protocol import VALIDATION_SEED_BASE
 from training.results.stats import mean_ci, paired_difference
 
-ENV_ID = "lawn/Comm-v0"
+ENV_ID = "lawn/Comm-v1"
 
 
 def episode_costs(anchor: str, seeds: list[int], workers: int) -> dict[int, float]:

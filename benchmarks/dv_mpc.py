@@ -37,7 +37,7 @@ from training.results.run import evaluate
 from training.results.report import fmt_geometric
 from training.results.stats import Geometric, paired_geometric
 
-JOINT = "lawn/Joint-v0"
+JOINT = "lawn/Joint-v1"
 #: Per task: the largest change against rg-mpc that meets the target (None: not worse, at most +2 %).
 TARGETS: dict[str, float | None] = {"steady": -0.10, "steady-low-power": -0.45, "steady-gusty": -0.07,
                                     "wide-k8": -0.20, "default": None, "disturbed": None}
@@ -139,7 +139,7 @@ def main(argv=None) -> int:
         parser.error(f"--ranges {a} {b}: the ranges of {args.episodes} seeds overlap")
     started = time.perf_counter()
     table = cost_table(args.tasks, args.episodes, [a, b], args.workers, args.variant)
-    lines = [f"`dv-mpc` against `rg-mpc` on `lawn/Joint-v0`, {args.episodes} seeds per range (seeds {a}.. and {b}..): "
+    lines = [f"`dv-mpc` against `rg-mpc` on `lawn/Joint-v1`, {args.episodes} seeds per range (seeds {a}.. and {b}..): "
              "geometric mean of the per-seed cost ratios − 1 [95 % bootstrap], seeds won; the worst seed's ratio; the "
              "noise floor (`noise:rg-mpc` against `rg-mpc`); on the steady tasks the perfect-links headroom "
              "(`limit:perfect-links` against `rg-mpc`, first range) and the share of it `dv-mpc` closes.", "",

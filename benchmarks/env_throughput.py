@@ -3,13 +3,13 @@
 Unwrapped environments, pre-sampled actions, one core; each figure is the best of
 ``--repeats`` timed runs of ``--steps`` steps (resets between episodes are excluded from the
 timing). Then the native vector envs at N = 1024 (``--num-envs``) beside Gymnasium's
-CartPoleVectorEnv, resets included, and Joint-v0 at K = 32 with N = 256. Prints the tables and
+CartPoleVectorEnv, resets included, and Joint-v1 at K = 32 with N = 256. Prints the tables and
 checks its targets:
 
-* ``lawn/Joint-v0`` at K = 4: at least 30,000 steps/s and within 4x of CartPole's step time;
-* ``lawn/Comm-v0`` at K = 4: at least 3,000 steps/s;
-* the native vector envs at N = 1024: Joint-v0 at K = 4 at least 1,000,000 env-steps/s and 0.1x
-  CartPoleVectorEnv's, at K = 32 at least 150,000, Comm-v0 at least 100,000 at K = 4 (its
+* ``lawn/Joint-v1`` at K = 4: at least 30,000 steps/s and within 4x of CartPole's step time;
+* ``lawn/Comm-v1`` at K = 4: at least 3,000 steps/s;
+* the native vector envs at N = 1024: Joint-v1 at K = 4 at least 1,000,000 env-steps/s and 0.1x
+  CartPoleVectorEnv's, at K = 32 at least 150,000, Comm-v1 at least 100,000 at K = 4 (its
   compiled QP solver beside DAQP one QP at a time in the same run).
 
 Usage: ``python benchmarks/env_throughput.py [--steps 20000] [--repeats 5] [--json out.json]``
@@ -82,15 +82,15 @@ def main(argv=None) -> int:
     parser.add_argument("--vector-steps", type=int, default=240,
                         help="batched steps per timed vector run (default 240: two episodes, one reset wave)")
     parser.add_argument("--comm-vector-steps", type=int, default=130,
-                        help="batched steps per timed Comm-v0 vector run (default 130: one reset wave)")
+                        help="batched steps per timed Comm-v1 vector run (default 130: one reset wave)")
     args = parser.parse_args(argv)
 
     rows = []
     cartpole = measure("CartPole-v1", args.steps, args.repeats)
     rows.append(("CartPole-v1", "-", cartpole))
-    for env_id in ("lawn/Joint-v0", "lawn/Comm-v0"):
+    for env_id in ("lawn/Joint-v1", "lawn/Comm-v1"):
         for k in (4, 32):
-            steps = args.steps if (env_id == "lawn/Joint-v0" or k == 4) else max(args.steps // 10, 500)
+            steps = args.steps if (env_id == "lawn/Joint-v1" or k == 4) else max(args.steps // 10, 500)
             rows.append((env_id, k, measure(env_id, steps, args.repeats, num_agvs=k)))
 
     print(f"python {platform.python_version()}, numpy {np.__version__}, gymnasium {gym.__version__}, "
@@ -103,29 +103,29 @@ def main(argv=None) -> int:
     vrep = min(args.repeats, 2)  # K = 32 draws random paths at every reset: minutes per run
     vrows = [("CartPoleVectorEnv", "-", measure_vector("CartPole-v1", n, args.vector_steps, vrep))]
     for k in (4, 32):
-        vrows.append(("lawn/Joint-v0", k, measure_vector("lawn/Joint-v0", n, args.vector_steps, vrep, num_agvs=k)))
+        vrows.append(("lawn/Joint-v1", k, measure_vector("lawn/Joint-v1", n, args.vector_steps, vrep, num_agvs=k)))
     small = max(n // 4, 1)  # K = 32 at a quarter of the envs (the second vector figure)
-    vrows.append((f"lawn/Joint-v0 (N = {small})", 32,
-                  measure_vector("lawn/Joint-v0", small, args.vector_steps, vrep, num_agvs=32)))
-    # Comm-v0 solves N x K QPs per step: the compiled solver beside DAQP one QP at a time, same run
-    for label, backend in (("lawn/Comm-v0", "compiled"), ("lawn/Comm-v0 (DAQP per QP)", "daqp")):
-        vrows.append((label, 4, measure_vector("lawn/Comm-v0", n, args.comm_vector_steps, vrep, qp_backend=backend)))
+    vrows.append((f"lawn/Joint-v1 (N = {small})", 32,
+                  measure_vector("lawn/Joint-v1", small, args.vector_steps, vrep, num_agvs=32)))
+    # Comm-v1 solves N x K QPs per step: the compiled solver beside DAQP one QP at a time, same run
+    for label, backend in (("lawn/Comm-v1", "compiled"), ("lawn/Comm-v1 (DAQP per QP)", "daqp")):
+        vrows.append((label, 4, measure_vector("lawn/Comm-v1", n, args.comm_vector_steps, vrep, qp_backend=backend)))
     print(f"native vector envs, N = {n} (env-steps/s, resets included)")
     for env_id, k, rate in vrows:
         print(f"{env_id:<28}{k!s:>4}{rate:>14,.0f}{vrows[0][2] / rate:>10.1f}x CartPoleVectorEnv time")
 
-    joint4 = next(r for e, k, r in rows if e == "lawn/Joint-v0" and k == 4)
-    comm4 = next(r for e, k, r in rows if e == "lawn/Comm-v0" and k == 4)
+    joint4 = next(r for e, k, r in rows if e == "lawn/Joint-v1" and k == 4)
+    comm4 = next(r for e, k, r in rows if e == "lawn/Comm-v1" and k == 4)
     vector = {(label, k): rate for label, k, rate in vrows}  # the vector rows by label, not by position
-    cartpole_vec, vjoint4, vjoint32 = vector["CartPoleVectorEnv", "-"], vector["lawn/Joint-v0", 4], vector["lawn/Joint-v0", 32]
+    cartpole_vec, vjoint4, vjoint32 = vector["CartPoleVectorEnv", "-"], vector["lawn/Joint-v1", 4], vector["lawn/Joint-v1", 32]
     checks = [
-        ("Joint-v0 K=4 >= 30,000 steps/s", joint4 >= 30000),
-        ("Joint-v0 K=4 within 4x of CartPole step time", cartpole / joint4 <= 4.0),
-        ("Comm-v0 K=4 >= 3,000 steps/s", comm4 >= 3000),
-        (f"vector Joint-v0 K=4, N={n} >= 1,000,000 env-steps/s", vjoint4 >= 1e6),
-        (f"vector Joint-v0 K=4, N={n} >= 0.1x CartPoleVectorEnv env-steps/s", vjoint4 >= 0.1 * cartpole_vec),
-        (f"vector Joint-v0 K=32, N={n} >= 150,000 env-steps/s", vjoint32 >= 1.5e5),
-        (f"vector Comm-v0 K=4, N={n} >= 100,000 env-steps/s", vector["lawn/Comm-v0", 4] >= 1e5),
+        ("Joint-v1 K=4 >= 30,000 steps/s", joint4 >= 30000),
+        ("Joint-v1 K=4 within 4x of CartPole step time", cartpole / joint4 <= 4.0),
+        ("Comm-v1 K=4 >= 3,000 steps/s", comm4 >= 3000),
+        (f"vector Joint-v1 K=4, N={n} >= 1,000,000 env-steps/s", vjoint4 >= 1e6),
+        (f"vector Joint-v1 K=4, N={n} >= 0.1x CartPoleVectorEnv env-steps/s", vjoint4 >= 0.1 * cartpole_vec),
+        (f"vector Joint-v1 K=32, N={n} >= 150,000 env-steps/s", vjoint32 >= 1.5e5),
+        (f"vector Comm-v1 K=4, N={n} >= 100,000 env-steps/s", vector["lawn/Comm-v1", 4] >= 1e5),
     ]
     for mark in marks([], checks):  # speed targets: reported, never an error
         print(mark)

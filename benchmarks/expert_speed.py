@@ -1,7 +1,7 @@
 """Decision time of the experts, and the QP block beside a CVXPY formulation of the same QP.
 
 1. Each expert (``ao-mpc``, the paper's AO, and ``rg-mpc``, the reduced-problem expert) drives
-   ``lawn/Joint-v0`` closed loop; each slot's decision is timed (median and p95) at K = 4 (paper
+   ``lawn/Joint-v1`` closed loop; each slot's decision is timed (median and p95) at K = 4 (paper
    paths, 2 episodes) and K = 32 (random paths, 1 episode).
 2. The control block (the K QPs P3 at each plan's success probabilities) is solved at every slot
    of those episodes, in order, by the package's path (``OutageAwareMPC``: the compiled solver of
@@ -38,7 +38,7 @@ from report import marks  # benchmarks/report.py, beside this script
 
 def closed_loop(config: ScenarioConfig, episodes: int, slots: int | None = None, policy_name: str = "ao-mpc"):
     """Run an expert; return per-slot decision times and (snapshot, plan) pairs."""
-    env = gym.make("lawn/Joint-v0", config=config).unwrapped
+    env = gym.make("lawn/Joint-v1", config=config).unwrapped
     policy = make_policy(policy_name, config)
     times, pairs = [], []
     for ep in range(episodes):

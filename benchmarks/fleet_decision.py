@@ -2,7 +2,7 @@
 
 ``agents.fleet.FleetInference`` replaces the torch forward pass of a fleet network
 (``agents.fleet.FleetPolicy``) for one observation; the torch module stays the oracle
-(tests/test_fleet.py). This script times, for fleets of 4 to 64 AGVs on ``lawn/Joint-v0``'s
+(tests/test_fleet.py). This script times, for fleets of 4 to 64 AGVs on ``lawn/Joint-v1``'s
 entity layout, the forward pass both ways (interleaved, the median of repeated blocks) on the
 states of one rg-mpc episode, with the shipped size of the network (``training/hyperparams/fleet.yml``:
 width 32, 4 heads, 2 layers; random weights: the time does not depend on them), and rg-mpc's own
@@ -37,8 +37,8 @@ def _states(k: int) -> tuple[list, list, object]:
     from lawn_env.interface import resolve_interface
 
     config = ScenarioConfig(num_agvs=k)
-    env = gym.make("lawn/Joint-v0", config=config)
-    expert = make_policy("rg-mpc", config, env_id="lawn/Joint-v0")
+    env = gym.make("lawn/Joint-v1", config=config)
+    expert = make_policy("rg-mpc", config, env_id="lawn/Joint-v1")
     obs, _ = env.reset(seed=0)
     expert.reset(0)
     iface = resolve_interface({"base": "rl", "layout": "entities"})
@@ -90,7 +90,7 @@ def main(argv=None) -> int:
     parser.add_argument("--markdown", help="also write the table to this file")
     args = parser.parse_args(argv)
     lines = [f"Fleet network of the shipped size (width {WIDTH}, {HEADS} heads, {LAYERS} layers) on "
-             f"`lawn/Joint-v0`'s entity layout, one observation at a time, one thread, {STATES} states of an rg-mpc "
+             f"`lawn/Joint-v1`'s entity layout, one observation at a time, one thread, {STATES} states of an rg-mpc "
              f"episode, median of {REPEATS} interleaved blocks; rg-mpc's decision: the median over the same "
              "states, as it decided them in the episode (the forward pass alone, not the whole decision: "
              "docs/LEARNED.md's table over fleet sizes times whole decisions side by side):", "",

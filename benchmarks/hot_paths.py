@@ -4,7 +4,7 @@ Made to be run side by side with another commit (two checkouts, interleaved runs
 quoted): each figure is the median over ``--repeats`` timed runs of a fixed, seeded workload, and
 ``--json`` writes them for the comparison. The workloads:
 
-* ``joint-step``, ``comm-step``: ``lawn/Joint-v0`` (zero action) and ``lawn/Comm-v0`` (its MPC's QPs
+* ``joint-step``, ``comm-step``: ``lawn/Joint-v1`` (zero action) and ``lawn/Comm-v1`` (its MPC's QPs
   every step) at K = 4, one env, microseconds per step;
 * ``joint-vector``, ``comm-vector``: the native vector envs at N = 256, microseconds per vector step;
 * ``rg-mpc``, ``dv-mpc``: one decision of each expert on the default task, milliseconds.
@@ -63,7 +63,7 @@ def _vector_steps(env_id: str, num_envs: int):
 def _decisions(policy_name: str):
     from agents import make_policy
 
-    env = gym.make("lawn/Joint-v0").unwrapped
+    env = gym.make("lawn/Joint-v1").unwrapped
     policy = make_policy(policy_name, config=env.config)
     obs, _ = env.reset(seed=0)
 
@@ -80,10 +80,10 @@ def main(argv=None) -> int:
     parser.add_argument("--json", help="also write the figures to this JSON file")
     args = parser.parse_args(argv)
     figures = {
-        "joint-step (us)": 1e6 * _time(_env_steps("lawn/Joint-v0"), 4000, args.repeats),
-        "comm-step (us)": 1e6 * _time(_env_steps("lawn/Comm-v0"), 1000, args.repeats),
-        "joint-vector N=256 (us)": 1e6 * _time(_vector_steps("lawn/Joint-v0", 256), 200, args.repeats),
-        "comm-vector N=256 (us)": 1e6 * _time(_vector_steps("lawn/Comm-v0", 256), 40, args.repeats),
+        "joint-step (us)": 1e6 * _time(_env_steps("lawn/Joint-v1"), 4000, args.repeats),
+        "comm-step (us)": 1e6 * _time(_env_steps("lawn/Comm-v1"), 1000, args.repeats),
+        "joint-vector N=256 (us)": 1e6 * _time(_vector_steps("lawn/Joint-v1", 256), 200, args.repeats),
+        "comm-vector N=256 (us)": 1e6 * _time(_vector_steps("lawn/Comm-v1", 256), 40, args.repeats),
         "rg-mpc decision (ms)": 1e3 * _time(_decisions("rg-mpc"), 40, args.repeats),
         "dv-mpc decision (ms)": 1e3 * _time(_decisions("dv-mpc"), 40, args.repeats),
     }

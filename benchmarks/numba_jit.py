@@ -3,8 +3,8 @@
 Each figure is a fresh Python process (``NUMBA_CACHE_DIR`` a new empty folder, so the user's own
 cache is left alone), first with an empty cache (numba compiles and writes the cache), then again
 with the cache written (numba loads the compiled kernels). Two uses: the QP kernel alone (import
-``lawn_env`` and solve one slot of ``lawn/Comm-v0``'s QPs), and a whole first episode step (import
-``lawn_env`` and ``agents``, make ``lawn/Joint-v0``, reset, one ``rg-mpc`` decision and one step:
+``lawn_env`` and solve one slot of ``lawn/Comm-v1``'s QPs), and a whole first episode step (import
+``lawn_env`` and ``agents``, make ``lawn/Joint-v1``, reset, one ``rg-mpc`` decision and one step:
 every kernel a first ``gym.make`` user meets). Medians of ``--repeats``.
 
 Usage: ``python benchmarks/numba_jit.py [--repeats 3] [--markdown out.md]``
@@ -37,7 +37,7 @@ start = time.perf_counter()
 import gymnasium as gym
 import lawn_env
 from agents import make_policy
-env = gym.make("lawn/Joint-v0")
+env = gym.make("lawn/Joint-v1")
 obs, _ = env.reset(seed=0)
 expert = make_policy("rg-mpc")
 expert.reset(seed=0)

@@ -47,7 +47,7 @@ COMMAND = ["evaluate", "--policy", "rg-mpc", "--episodes", "48", "--quiet"]
 
 def _batch(episodes: int) -> list[tuple]:
     config = ScenarioConfig()
-    return [(p, "lawn/Joint-v0", config, s, {}) for p in BENCHMARK_POLICIES for s in range(episodes)]
+    return [(p, "lawn/Joint-v1", config, s, {}) for p in BENCHMARK_POLICIES for s in range(episodes)]
 
 
 def _solo(episodes: int) -> float:

@@ -1,6 +1,6 @@
-"""The MPC's QPs: the compiled solver beside DAQP one QP at a time, on QPs of a Comm-v0 rollout.
+"""The MPC's QPs: the compiled solver beside DAQP one QP at a time, on QPs of a Comm-v1 rollout.
 
-A ``lawn/Comm-v0`` native vector env (N = ``--num-envs``, K = 4, random actions, seeded) runs
+A ``lawn/Comm-v1`` native vector env (N = ``--num-envs``, K = 4, random actions, seeded) runs
 ``--steps`` steps; every step's QP stack (the data and psi its MPC solves) is captured. Then, in the
 same run:
 
@@ -36,7 +36,7 @@ from report import finish  # benchmarks/report.py, beside this script
 
 
 def capture(num_envs: int, steps: int, seed: int = 0):
-    envs = gym.make_vec("lawn/Comm-v0", num_envs=num_envs, vectorization_mode="vector_entry_point")
+    envs = gym.make_vec("lawn/Comm-v1", num_envs=num_envs, vectorization_mode="vector_entry_point")
     mpc = envs.unwrapped.mpc
     stacks = []
     real = mpc.solve_prepared
@@ -159,7 +159,7 @@ def main(argv=None) -> int:
             ("DAQP's own C time (from its info)", daqp_own)]
     speedup = daqp_wall / (warm_s / count)
     head = (f"python {platform.python_version()}, numpy {np.__version__}, {platform.machine()}; "
-            f"{len(stacks)} steps of lawn/Comm-v0, N = {args.num_envs}, K = 4: {count:,} AGV-QPs "
+            f"{len(stacks)} steps of lawn/Comm-v1, N = {args.num_envs}, K = 4: {count:,} AGV-QPs "
             f"({2 * count:,} axis QPs); warm iterations per AGV-QP median {np.median(iters):.0f}, "
             f"p95 {np.percentile(iters, 95):.0f}; fallbacks {fallbacks}; "
             f"max |objective - DAQP| / max(1, |DAQP|) on {len(errors):,} sampled QPs: {max(errors):.1e}")

@@ -3,9 +3,9 @@
 Same algorithm settings for all (SB3's PPO defaults: MlpPolicy 64x64, n_steps 2048, one
 environment, no normalization), one torch thread, the same run; the figure is environment steps
 per second of wall time over ``--timesteps`` steps (best of ``--repeats``), model construction
-excluded. Target: lawn/Joint-v0 trains at least half as fast as CartPole-v1. The RL
+excluded. Target: lawn/Joint-v1 trains at least half as fast as CartPole-v1. The RL
 interface ids (anchored actions: the MPC runs inside Joint as well) are timed beside them. Then
-PPO on lawn/Joint-v0 with 64 envs, SB3's DummyVecEnv beside lawn's native vector env
+PPO on lawn/Joint-v1 with 64 envs, SB3's DummyVecEnv beside lawn's native vector env
 (``lawn train --vec native``); target: the native path >= 10,000 steps/s on 2 cores.
 
 Usage: ``python benchmarks/train_throughput.py [--timesteps 10240] [--repeats 2]``
@@ -43,7 +43,7 @@ VEC_PPO = {"n_steps": 32, "batch_size": 512, "n_epochs": 4}
 
 
 def measure_vec(mode: str, n_envs: int, timesteps: int, repeats: int) -> float:
-    """PPO env-steps per second on lawn/Joint-v0 (v0) with ``n_envs`` copies: SB3's DummyVecEnv of
+    """PPO env-steps per second on lawn/Joint-v1 (v0) with ``n_envs`` copies: SB3's DummyVecEnv of
     single envs (``mode="dummy"``) or lawn's batched vector env (``"native"``)."""
     import torch
     from stable_baselines3 import PPO
@@ -54,7 +54,7 @@ def measure_vec(mode: str, n_envs: int, timesteps: int, repeats: int) -> float:
     torch.set_num_threads(1)
     best = 0.0
     for r in range(repeats):
-        venv = make_train_env("lawn/Joint-v0", ScenarioConfig(), n_envs, r, False, None, interface="v0", vec=mode)
+        venv = make_train_env("lawn/Joint-v1", ScenarioConfig(), n_envs, r, False, None, interface="v0", vec=mode)
         model = PPO("MlpPolicy", venv, seed=r, verbose=0, device="cpu", **VEC_PPO)
         start = time.perf_counter()
         model.learn(total_timesteps=timesteps)
@@ -76,25 +76,25 @@ def main(argv=None) -> int:
     print(f"python {platform.python_version()}, torch {torch.__version__}, stable-baselines3 "
           f"{stable_baselines3.__version__}, one torch thread")
     rates = {env_id: measure(env_id, args.timesteps, args.repeats)
-             for env_id in ("CartPole-v1", "lawn/Joint-v0", "lawn/Comm-v0", "lawn/JointRL-v0", "lawn/CommRL-v0")}
+             for env_id in ("CartPole-v1", "lawn/Joint-v1", "lawn/Comm-v1", "lawn/JointRL-v1", "lawn/CommRL-v1")}
     base = rates["CartPole-v1"]
     print(f"{'env':<16}{'PPO steps/s':>14}{'vs CartPole':>13}")
     for env_id, rate in rates.items():
         print(f"{env_id:<16}{rate:>14,.0f}{rate / base:>12.2f}x")
     vec = {mode: measure_vec(mode, 64, args.vec_timesteps, args.repeats) for mode in ("dummy", "native")}
-    print(f"PPO on lawn/Joint-v0, 64 envs ({VEC_PPO}): DummyVecEnv {vec['dummy']:,.0f} steps/s, "
+    print(f"PPO on lawn/Joint-v1, 64 envs ({VEC_PPO}): DummyVecEnv {vec['dummy']:,.0f} steps/s, "
           f"native vector env {vec['native']:,.0f} steps/s ({vec['native'] / vec['dummy']:.1f}x)")
-    ok = rates["lawn/Joint-v0"] >= 0.5 * base
+    ok = rates["lawn/Joint-v1"] >= 0.5 * base
     ok_vec = vec["native"] >= 10_000
-    targets = marks([], [("lawn/Joint-v0 PPO throughput >= half of CartPole-v1's", ok),
-                         ("lawn/Joint-v0 PPO on the native vector env (N = 64) >= 10,000 steps/s", ok_vec)])
+    targets = marks([], [("lawn/Joint-v1 PPO throughput >= half of CartPole-v1's", ok),
+                         ("lawn/Joint-v1 PPO on the native vector env (N = 64) >= 10,000 steps/s", ok_vec)])
     print("\n".join(targets))
     if args.markdown:
         lines = [f"python {platform.python_version()}, torch {torch.__version__}, stable-baselines3 "
                  f"{stable_baselines3.__version__}, one torch thread:", "",
                  "| env | PPO steps/s | vs CartPole |", "|---|---|---|"]
         lines += [f"| {e} | {r:,.0f} | {r / base:.2f}× |" for e, r in rates.items()]
-        lines += ["", "PPO on lawn/Joint-v0 (v0 interface), 64 envs, n_steps 32, batch 512, 4 epochs:", "",
+        lines += ["", "PPO on lawn/Joint-v1 (v0 interface), 64 envs, n_steps 32, batch 512, 4 epochs:", "",
                   "| vector env | PPO steps/s |", "|---|---|",
                   f"| SB3 DummyVecEnv of 64 single envs | {vec['dummy']:,.0f} |",
                   f"| lawn's native vector env (`--vec native`) | {vec['native']:,.0f} |"]

@@ -2,7 +2,7 @@
 
 Tracking only: perfect links (the ``paper-nominal`` preset, where outage is ~1e-6), equal power,
 hovering drone, so the gains are judged on control alone. Objective: mean realized control cost
-over seeds 0..2 of ``lawn/Joint-v0``. Prints the best gains and the ten best rows.
+over seeds 0..2 of ``lawn/Joint-v1``. Prints the best gains and the ten best rows.
 
 Usage: ``python benchmarks/tune_pid.py``
 """
@@ -48,7 +48,7 @@ class TrackingPID:
 
 
 def episode_cost(kp: float, ki: float, kd: float, seed: int) -> float:
-    env = gym.make("lawn/Joint-v0", config=presets.get("paper-nominal")).unwrapped
+    env = gym.make("lawn/Joint-v1", config=presets.get("paper-nominal")).unwrapped
     return rollout(env, TrackingPID(env, PIDGains(kp=kp, ki=ki, kd=kd, integral_limit=10.0)), seed).metrics["control_cost"]
 
 

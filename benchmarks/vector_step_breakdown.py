@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=5, help="timings per part; the best counts (default: 5)")
     parser.add_argument("--markdown", help="also write the README's table of this run to this file")
     args = parser.parse_args(argv)
-    envs = gym.make_vec("lawn/Joint-v0", num_envs=args.num_envs, vectorization_mode="vector_entry_point",
+    envs = gym.make_vec("lawn/Joint-v1", num_envs=args.num_envs, vectorization_mode="vector_entry_point",
                         num_agvs=args.num_agvs)
     env = envs.unwrapped
     envs.reset(seed=0)
@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
         ("simulation step", lambda: core.step(sim.params, state, decisions, draws)),
         ("observation (encode)", lambda: engine.observe()),
     ]
-    print(f"lawn/Joint-v0 vector env, N = {args.num_envs}, K = {args.num_agvs}: microseconds per batched step")
+    print(f"lawn/Joint-v1 vector env, N = {args.num_envs}, K = {args.num_agvs}: microseconds per batched step")
     print(f"{'part':45s} {'us/step':>10s} {'env-steps/s alone':>18s}")
     rows = []
     for name, fn in parts:
@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name:45s} {best * 1e6:10.1f} {args.num_envs / best:18,.0f}")
     envs.close()
     if args.markdown:
-        lines = [f"`lawn/Joint-v0` vector env, N = {args.num_envs}, K = {args.num_agvs} "
+        lines = [f"`lawn/Joint-v1` vector env, N = {args.num_envs}, K = {args.num_agvs} "
                  f"(best of {args.repeats} timings of {args.number} calls):", "",
                  "| part of a step | µs per batched step | env-steps/s it alone allows |", "|---|---|---|"]
         lines += [f"| {name} | {best * 1e6:,.0f} | {args.num_envs / best:,.0f} |" for name, best in rows]

@@ -1,10 +1,10 @@
-"""Single-file PPO (CleanRL style) for lawn/JointRL-v0 on Gymnasium >= 1.0.
+"""Single-file PPO (CleanRL style) for lawn/JointRL-v1 on Gymnasium >= 1.0.
 
     python examples/ppo_lawn.py --total-timesteps 200000 --num-envs 4 --seed 1
 
 It trains on the RL interface (anchored actions, a bounded reward, termination: docs/rl.md), logs
 every finished episode's return and length, and ends with what counts: the realized control cost of
-full episodes of the unmodified scenario (lawn/Joint-v0's physics, the same seeds) under the
+full episodes of the unmodified scenario (lawn/Joint-v1's physics, the same seeds) under the
 trained policy and under the zero action of the same interface (``--eval-episodes``).
 
 Gymnasium 1.x: SyncVectorEnv's default ``autoreset_mode`` is NEXT_STEP: the step that ends an episode
@@ -36,7 +36,7 @@ EVAL_SEED_BASE = 500_000  # lawn's validation seeds (training/protocol.py): neve
 
 @dataclass
 class Args:
-    env_id: str = "lawn/JointRL-v0"
+    env_id: str = "lawn/JointRL-v1"
     """the Gymnasium id to train on"""
     seed: int = 1
     """seed of the experiment (sub-env i is reset with seed + i)"""

@@ -1,8 +1,9 @@
 """lawn_env: wireless predictive control over low-altitude networks, as RL environments.
 
-``import lawn_env`` registers ``lawn/Joint-v0`` and ``lawn/Comm-v0`` with Gymnasium
-(``gym.make("lawn_env:lawn/Joint-v0")`` works without the import). ``lawn_env.parallel_env``
-builds the PettingZoo environment. The physics lives in :mod:`lawn_env.channel`,
+``import lawn_env`` registers ``lawn/Joint-v1`` and ``lawn/Comm-v1`` with Gymnasium
+(``gym.make("lawn_env:lawn/Joint-v1")`` works without the import), and the v0 ids, whose
+episodes the version histories (:class:`~lawn_env.JointEnv`, :class:`~lawn_env.CommEnv`) tell apart.
+``lawn_env.parallel_env`` builds the PettingZoo environment. The physics lives in :mod:`lawn_env.channel`,
 :mod:`lawn_env.dynamics`, :mod:`lawn_env.drone` and :mod:`lawn_env.references`.
 """
 
@@ -27,22 +28,22 @@ __version__ = "0.1.0"
 
 #: Registered environment ids and their entry points: the one registry the CLI reads.
 ENV_IDS = {
-    "lawn/Joint-v0": "lawn_env.envs.joint:JointEnv",
-    "lawn/Comm-v0": "lawn_env.envs.comm:CommEnv",
+    "lawn/Joint-v1": "lawn_env.envs.joint:JointEnv",
+    "lawn/Comm-v1": "lawn_env.envs.comm:CommEnv",
 }
 
 #: The same environments with the RL interface (``interface="rl"``, :mod:`lawn_env.interface`):
 #: for training; comparisons always run the ids of :data:`ENV_IDS`.
 RL_ENV_IDS = {
-    "lawn/JointRL-v0": "lawn/Joint-v0",
-    "lawn/CommRL-v0": "lawn/Comm-v0",
+    "lawn/JointRL-v1": "lawn/Joint-v1",
+    "lawn/CommRL-v1": "lawn/Comm-v1",
 }
 
 #: The multi-agent environment's id (PettingZoo has no registry; :func:`lawn_env.parallel_env` builds
 #: it) and the central environment each multi-agent id mirrors: its episodes are that env's under
 #: the same decisions, and learned multi-agent policies are evaluated on it.
 PARALLEL_ENV_ID = "lawn/Parallel-v0"
-PARALLEL_ENV_IDS = {PARALLEL_ENV_ID: "lawn/Joint-v0"}
+PARALLEL_ENV_IDS = {PARALLEL_ENV_ID: "lawn/Joint-v1"}
 
 
 def central_env_id(env_id: str) -> str:
@@ -57,8 +58,8 @@ def central_env_id(env_id: str) -> str:
 #: vector entry points admit no extra registered wrappers to reconcile the two.
 _EPISODE: dict[str, Any] = {"disable_env_checker": False}
 #: Native vector envs (``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")``).
-VECTOR_ENTRY_POINTS = {"lawn/Joint-v0": "lawn_env.envs.vector:JointVectorEnv",
-                       "lawn/Comm-v0": "lawn_env.envs.vector:CommVectorEnv"}
+VECTOR_ENTRY_POINTS = {"lawn/Joint-v1": "lawn_env.envs.vector:JointVectorEnv",
+                       "lawn/Comm-v1": "lawn_env.envs.vector:CommVectorEnv"}
 for _env_id, _entry_point in ENV_IDS.items():
     if _env_id not in registry:
         register(id=_env_id, entry_point=_entry_point, vector_entry_point=VECTOR_ENTRY_POINTS.get(_env_id),
@@ -68,9 +69,24 @@ for _env_id, _base in RL_ENV_IDS.items():
         register(id=_env_id, entry_point=ENV_IDS[_base], vector_entry_point=VECTOR_ENTRY_POINTS.get(_base),
                  kwargs={"interface": "rl"}, **_EPISODE)
 
+#: The earlier versions, kept registered (Gymnasium warns that they are out of date): the same classes
+#: with v0's episodes where the code can give them. ``lawn/Comm-v0``'s MPC plans from the true state
+#: under measurement noise; neither v0 id has a native vector env, so ``gym.make_vec`` steps v0
+#: scenarios side by side with their own generators (Gymnasium's ``SyncVectorEnv``), as v0's did.
+LEGACY_ENV_IDS = {
+    "lawn/Joint-v0": ("lawn/Joint-v1", {}),
+    "lawn/Comm-v0": ("lawn/Comm-v1", {"planning_state": "true"}),
+    "lawn/JointRL-v0": ("lawn/Joint-v1", {"interface": "rl"}),
+    "lawn/CommRL-v0": ("lawn/Comm-v1", {"interface": "rl", "planning_state": "true"}),
+}
+for _env_id, (_base, _kwargs) in LEGACY_ENV_IDS.items():
+    if _env_id not in registry:
+        register(id=_env_id, entry_point=ENV_IDS[_base], kwargs=_kwargs, **_EPISODE)
+
 __all__ = [
     "ENV_IDS",
     "RL_ENV_IDS",
+    "LEGACY_ENV_IDS",
     "PARALLEL_ENV_ID",
     "PARALLEL_ENV_IDS",
     "central_env_id",

@@ -79,7 +79,7 @@ class ChannelConfig:
     ce_error_var: Annotated[float, Field(ge=0, lt=1)] = 0.0
     """Normalized channel-estimation error variance rho, in [0, 1) (MODEL.md §2)."""
     ce_aware_planning: bool = True
-    """Planners inside the package (the Comm-v0 MPC, experts) use rho in their outage model;
+    """Planners inside the package (the Comm-v1 MPC, experts) use rho in their outage model;
     False makes them CSI-unaware (they plan with rho = 0) *(decided)*."""
     perfect_links: bool = False
     """Every command is delivered: the SNR threshold G_th is 0, so the outage probability is 0 on
@@ -131,8 +131,8 @@ class ControlConfig:
     """Increment bound per axis per slot, m/s^2, at least 0.001 and at most 2 a_max (actions are
     scaled by it) *(decided)*."""
     law: Literal["paper", "delivery"] = "paper"
-    """The increments the AGVs of ``lawn/Comm-v0`` apply (the MPC the environment solves for them;
-    ``lawn/Joint-v0``'s actions carry the increments): ``"paper"``, the paper's QP P3 at the link's
+    """The increments the AGVs of ``lawn/Comm-v1`` apply (the MPC the environment solves for them;
+    ``lawn/Joint-v1``'s actions carry the increments): ``"paper"``, the paper's QP P3 at the link's
     planned success probability psi (its expected-trajectory cost scales the command with psi);
     ``"delivery"``, the same QP at psi = 1, the command planned as if it arrives (MODEL.md §4,
     "Planning under delivery": a lost command is seen at the next slot and replanned) *(decided)*."""
@@ -211,7 +211,7 @@ class DisturbanceConfig:
     their last acceleration and nothing is transmitted [2]."""
     period_aware_planning: bool = True
     """The planners know ``control_period_slots`` *(decided, MODEL.md §7)*: the MPC (experts,
-    baselines, ``lawn/Comm-v0``'s controller) and the PID/LQR rollouts plan with move blocking, an
+    baselines, ``lawn/Comm-v1``'s controller) and the PID/LQR rollouts plan with move blocking, an
     increment only at the slots where a command goes out, held in between. False is the ablation
     where they plan as if they commanded every slot."""
 

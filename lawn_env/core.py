@@ -385,7 +385,7 @@ def draw_slot(rng: np.random.Generator, params: SimParams, num: int = 1) -> Slot
 class Decisions(NamedTuple):
     """A slot's decisions for B scenarios: increments to send (B, K, 2) m/s^2 (saturated by the
     step), feasible powers (B, K) W, the drone's next positions (B, 2) m; or one scenario's, the same
-    without the B axis. An action decoded for ``lawn/Comm-v0``'s role has ``increment`` None (the
+    without the B axis. An action decoded for ``lawn/Comm-v1``'s role has ``increment`` None (the
     MPC decides it: :class:`lawn_env.envs.base.CommRole`)."""
 
     increment: np.ndarray | None
@@ -763,7 +763,7 @@ class ScenarioView:
 
     def planning_success(self, power_w: np.ndarray, drone_position: np.ndarray) -> np.ndarray:
         """psi of the planners' link model (CSI-aware or not, see ChannelConfig) at the measured
-        positions (what the planners, ``lawn/Comm-v0``'s MPC among them, plan from)."""
+        positions (what the planners, ``lawn/Comm-v1``'s MPC among them, plan from)."""
         return link_success(self.x_obs, np.asarray(drone_position, dtype=float), power_w, self.planning_link)
 
     def drone_target(self, velocity_mps: np.ndarray) -> np.ndarray:

@@ -1,8 +1,8 @@
 """The opt-in RL interface: action schemes, a bounded reward, termination and clipped features.
 
-The v0 environments are the paper's benchmark and stay as they are: raw actions, reward minus
-the realized stage cost, no termination, unclipped features. A learner started there sits in a
-failure basin (the zero action hovers at the start with equal power; lost commands keep an AGV
+The benchmark environments (their default, the v0 interface) are the paper's benchmark and stay
+as they are: raw actions, reward minus the realized stage cost, no termination, unclipped features. A learner
+started there sits in a failure basin (the zero action hovers at the start with equal power; lost commands keep an AGV
 accelerating; single slots cost up to 1e7), so every environment also takes
 ``interface=RLInterface(...)`` (or ``interface="rl"`` for :data:`RL_INTERFACE`), which changes
 *how the agent talks to the scenario*, never the scenario:
@@ -30,7 +30,7 @@ accelerating; single slots cost up to 1e7), so every environment also takes
 
     Increments (Joint): a residual ``a * residual_scale * Delta-a_max`` on the first increment
     of the outage-aware MPC at each link's planned success probability (the QP P3 that drives
-    the AGVs of ``lawn/Comm-v0``, :class:`lawn_env.mpc.OutageAwareMPC`), clipped to the control
+    the AGVs of ``lawn/Comm-v1``, :class:`lawn_env.mpc.OutageAwareMPC`), clipped to the control
     set; or, with ``increment_anchor="lqr"``, on the LQR baseline's first increment (no QP: the
     from-scratch recipe's anchor, with the distance prior an interface without the expert's MPC).
     (A cheaper anchor, the unconstrained MPC's linear gain saturated afterwards, costs many times
@@ -47,7 +47,7 @@ accelerating; single slots cost up to 1e7), so every environment also takes
   at ``±OBS_LIMIT`` (1e6: an AGV a million half-areas away), so observations stay finite and
   inside the declared space in episodes of any length.
 
-Evaluation never uses the interface: learned policies are wrapped to act on the v0
+Evaluation never uses the interface: learned policies are wrapped to act on the benchmark
 environments (:class:`agents.learned.SB3Policy`), and every comparison reports the realized
 control cost of full episodes of the unmodified scenario.
 """
@@ -173,9 +173,9 @@ STAKE_FLOOR = 1e-3
 #: Saturation of observation features without ``obs_clip`` (normalized units).
 OBS_LIMIT = 1e6
 
-#: The paper's benchmark interface (what ``lawn/Joint-v0`` and ``lawn/Comm-v0`` use by default).
+#: The paper's benchmark interface (what ``lawn/Joint-v1`` and ``lawn/Comm-v1`` use by default).
 V0_INTERFACE = RLInterface()
-#: The RL-ready interface (``interface="rl"``; the ids ``lawn/JointRL-v0`` and ``lawn/CommRL-v0``).
+#: The RL-ready interface (``interface="rl"``; the ids ``lawn/JointRL-v1`` and ``lawn/CommRL-v1``).
 RL_INTERFACE = RLInterface(action_scheme="anchored", reward="scaled", termination_distance_m=25.0, obs_clip=10.0,
                            power_anchor="stake")
 _NAMED = {"v0": V0_INTERFACE, "rl": RL_INTERFACE}

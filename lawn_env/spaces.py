@@ -149,8 +149,8 @@ def _first_outside(a):  # pragma: no cover - compiled
 ACTION_LIMITS = np.dtype([("increment_max", "f8"), ("power_budget", "f8"), ("max_speed", "f8"), ("slot_s", "f8"),
                           ("x0", "f8"), ("x1", "f8"), ("y0", "f8"), ("y1", "f8")])
 
-#: What an action of each role decides: ``joint`` (increments, power, drone: Joint-v0),
-#: ``comm`` (power and drone: Comm-v0 and the parallel env's drone).
+#: What an action of each role decides: ``joint`` (increments, power, drone: Joint-v1),
+#: ``comm`` (power and drone: Comm-v1 and the parallel env's drone).
 ROLES = ("joint", "comm")
 
 

@@ -31,9 +31,9 @@ fi
 if [ ${#only[@]} -eq 0 ] || [[ " ${only[*]} " == *" render "* ]]; then
   lawn=.venv/bin/lawn
   mkdir -p docs/figures/episodes
-  "$lawn" render --policy rg-mpc --env lawn/Joint-v0 --seed 0 --every 2 --out docs/figures/episodes/rg-mpc.gif
-  "$lawn" render --policy zoo:ppo-comm --env lawn/Comm-v0 --seed 0 --every 2 --out docs/figures/episodes/zoo-comm.gif
-  "$lawn" render --policy rg-mpc --env lawn/Joint-v0 --preset disturbed --seed 0 --every 2 \
+  "$lawn" render --policy rg-mpc --env lawn/Joint-v1 --seed 0 --every 2 --out docs/figures/episodes/rg-mpc.gif
+  "$lawn" render --policy zoo:ppo-comm --env lawn/Comm-v1 --seed 0 --every 2 --out docs/figures/episodes/zoo-comm.gif
+  "$lawn" render --policy rg-mpc --env lawn/Joint-v1 --preset disturbed --seed 0 --every 2 \
     --out docs/figures/episodes/rg-mpc-disturbed.gif
 fi
 echo "refresh_docs: done; review with git diff README.md docs/"

@@ -21,7 +21,7 @@ def _slot_problem(solver, snap):
 
 def _snapshots(count, seed=0, config=CFG):
     """Snapshots along random-action episodes, with extra random offsets and accelerations."""
-    env = gym.make("lawn/Joint-v0", config=config).unwrapped
+    env = gym.make("lawn/Joint-v1", config=config).unwrapped
     env.action_space.seed(seed)
     rng = np.random.default_rng(seed)
     out = []
@@ -139,7 +139,7 @@ FAST_POLICIES = [n for n in policy_names() if n != "global-mpc"]
 
 @pytest.mark.parametrize("name", FAST_POLICIES)
 def test_every_policy_runs_a_full_episode(name):
-    env = gym.make("lawn/Joint-v0")
+    env = gym.make("lawn/Joint-v1")
     policy = make_policy(name, env.unwrapped.config, seed=1)
     obs, _ = env.reset(seed=1)
     policy.reset(1)
@@ -154,8 +154,8 @@ def test_every_policy_runs_a_full_episode(name):
 
 @pytest.mark.parametrize("name", ["rg-mpc", "ao-mpc", "epa", "sf", "pid", "lqr"])
 def test_comm_variant_runs(name):
-    env = gym.make("lawn/Comm-v0", num_slots=15)
-    policy = make_policy(name, env.unwrapped.config, env_id="lawn/Comm-v0")
+    env = gym.make("lawn/Comm-v1", num_slots=15)
+    policy = make_policy(name, env.unwrapped.config, env_id="lawn/Comm-v1")
     obs, _ = env.reset(seed=0)
     policy.reset(0)
     done = False
@@ -167,7 +167,7 @@ def test_comm_variant_runs(name):
 
 
 def test_act_from_observation_equals_plan_from_snapshot():
-    env = gym.make("lawn/Joint-v0").unwrapped
+    env = gym.make("lawn/Joint-v1").unwrapped
     obs, _ = env.reset(seed=2)
     env.action_space.seed(2)
     for _ in range(5):
@@ -184,7 +184,7 @@ def test_act_from_observation_equals_plan_from_snapshot():
 
 def test_sb3_evaluate_policy_accepts_our_policies():
     sb3 = pytest.importorskip("stable_baselines3.common.evaluation")
-    env = gym.make("lawn/Joint-v0", num_slots=10)
+    env = gym.make("lawn/Joint-v1", num_slots=10)
     policy = make_policy("epa", env.unwrapped.config)
     mean, std = sb3.evaluate_policy(policy, env, n_eval_episodes=2, deterministic=True)
     assert np.isfinite(mean) and mean < 0
@@ -215,8 +215,8 @@ def test_registry_errors():
         make_policy("ao-mpc", CFG, tolerance=-1.0)
     with pytest.raises(ValueError, match="bogus"):
         make_policy("epa", CFG, bogus=1)
-    with pytest.raises(ValueError, match="drives lawn/Joint-v0"):
-        make_policy("heuristic", CFG, env_id="lawn/Comm-v0")
+    with pytest.raises(ValueError, match="drives lawn/Joint-v1"):
+        make_policy("heuristic", CFG, env_id="lawn/Comm-v1")
     with pytest.raises(ValueError, match="env_id"):
         make_policy("ao-mpc", CFG, env_id="CartPole-v1")
     with pytest.raises(ValueError, match="kp"):
@@ -301,7 +301,7 @@ def test_returned_increments_are_the_exact_qp_optimum_at_the_returned_point(name
     """Every planner that fixes control by the QP returns the QP's optimum at its own returned
     (p, q): checked per AGV against an independent solver (MODEL.md §4).
     Snapshots come from an episode the policy drives itself (seed 5, default scenario)."""
-    env = gym.make("lawn/Joint-v0", config=CFG).unwrapped
+    env = gym.make("lawn/Joint-v1", config=CFG).unwrapped
     policy = make_policy(name, CFG, seed=5)
     obs, _ = env.reset(seed=5)
     policy.reset(5)
@@ -341,8 +341,8 @@ def test_period_aware_planning_keeps_tracking_where_the_unaware_ablation_collaps
     from training.results.run import run_episode
 
     base = presets.get("paper-nominal").override(num_slots=60, **{"disturbance.control_period_slots": 3})
-    aware = run_episode("epa", "lawn/Joint-v0", base, 0)
-    unaware = run_episode("epa", "lawn/Joint-v0", base.override(**{"disturbance.period_aware_planning": False}), 0)
+    aware = run_episode("epa", "lawn/Joint-v1", base, 0)
+    unaware = run_episode("epa", "lawn/Joint-v1", base.override(**{"disturbance.period_aware_planning": False}), 0)
     assert aware["rmse_m"] < 1.0 < 5 * aware["rmse_m"] < unaware["rmse_m"]
 
 
@@ -351,7 +351,7 @@ def test_rollout_hooks_stop_and_cap_the_episode_and_see_the_state_acted_in():
     from agents import rollout
 
     cfg = ScenarioConfig(num_slots=12)
-    env = gym.make("lawn/Joint-v0", config=cfg)
+    env = gym.make("lawn/Joint-v1", config=cfg)
     policy = make_policy("heuristic", cfg)
     costs = []
     full = rollout(env, policy, 3, on_step=lambda step: costs.append(step.info["stage_cost"]))

@@ -52,7 +52,7 @@ def test_split_cost_edges_and_errors():
         with pytest.raises(ValueError, match="transient_slots"):
             split_cost([1.0], bad)
     with pytest.raises(ValueError, match="transient_slots=-2"):
-        evaluate([("epa", "lawn/Joint-v0", ScenarioConfig(), 0, {})], progress=False, transient_slots=-2)
+        evaluate([("epa", "lawn/Joint-v1", ScenarioConfig(), 0, {})], progress=False, transient_slots=-2)
 
 
 # ---------------------------------------------------------------------- the geometric comparison
@@ -134,8 +134,8 @@ def test_limit_rows_lift_one_field_of_their_task(task):
 
 def test_perfect_links_deliver_every_command_and_planners_see_it():
     config = ScenarioConfig().override({"channel.perfect_links": True})
-    env = gym.make("lawn/Joint-v0", config=config)
-    policy, _ = build_policy("limit:perfect-links", ScenarioConfig(), "lawn/Joint-v0")
+    env = gym.make("lawn/Joint-v1", config=config)
+    policy, _ = build_policy("limit:perfect-links", ScenarioConfig(), "lawn/Joint-v1")
     obs, info = env.reset(seed=1)
     policy.reset(seed=1)
     for _ in range(10):
@@ -145,7 +145,7 @@ def test_perfect_links_deliver_every_command_and_planners_see_it():
 
 
 def test_reference_rows_run_under_their_names_and_beat_or_tie_the_expert():
-    rows = evaluate([(p, "lawn/Joint-v0", ScenarioConfig(), 0, {}) for p in ("dv-mpc", "rg-mpc", *REFERENCE_ROWS,
+    rows = evaluate([(p, "lawn/Joint-v1", ScenarioConfig(), 0, {}) for p in ("dv-mpc", "rg-mpc", *REFERENCE_ROWS,
                                                                              "noise:rg-mpc")], progress=False)
     cost = {r["policy"]: r["control_cost"] for r in rows}
     assert set(cost) == {"dv-mpc", "rg-mpc", "noise:rg-mpc", *REFERENCE_ROWS}
@@ -159,8 +159,8 @@ def test_reference_rows_run_under_their_names_and_beat_or_tie_the_expert():
 def test_suite_tasks_resolve_validate_and_run_an_episode(task):
     config = presets.get(task)
     assert ScenarioConfig.from_dict(config.to_dict()) == config
-    env = gym.make("lawn/Joint-v0", config=task)
-    policy, _ = build_policy("epa", config, "lawn/Joint-v0")
+    env = gym.make("lawn/Joint-v1", config=task)
+    policy, _ = build_policy("epa", config, "lawn/Joint-v1")
     obs, _ = env.reset(seed=0)
     policy.reset(seed=0)
     done, slots = False, 0

@@ -46,10 +46,10 @@ def test_evaluate_writes_rows_csv_and_json(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "| epa | 2 |" in printed
     jout = tmp_path / "rows.json"
-    assert main(["evaluate", "--policy", "pid", "--env", "lawn/Comm-v0", "--episodes", "1", "--out", str(jout),
+    assert main(["evaluate", "--policy", "pid", "--env", "lawn/Comm-v1", "--episodes", "1", "--out", str(jout),
                  "--set", "num_slots=8", "--quiet"]) == 0
     data = json.loads(jout.read_text())
-    assert data[0]["env"] == "lawn/Comm-v0" and data[0]["slots"] == 8
+    assert data[0]["env"] == "lawn/Comm-v1" and data[0]["slots"] == 8
 
 
 def test_evaluate_rejects_bad_inputs(tmp_path, capsys):
@@ -251,12 +251,12 @@ def test_the_top_level_help_imports_nothing_of_lawn():
 
 def test_comparisons_refuse_an_rl_id_naming_its_v0_id(tmp_path, capsys):
     with pytest.raises(SystemExit):
-        main(["evaluate", "--policy", "epa", "--env", "lawn/JointRL-v0", "--out", str(tmp_path / "r.csv")])
+        main(["evaluate", "--policy", "epa", "--env", "lawn/JointRL-v1", "--out", str(tmp_path / "r.csv")])
     err = capsys.readouterr().err
-    assert "RL interface of 'lawn/Joint-v0'" in err and "pass --env lawn/Joint-v0" in err
+    assert "RL interface of 'lawn/Joint-v1'" in err and "pass --env lawn/Joint-v1" in err
     with pytest.raises(SystemExit):
         main(["benchmark", "--env", "lawn/Nope-v0", "--out", str(tmp_path / "b")])
-    assert "unknown env id 'lawn/Nope-v0'; valid: lawn/Joint-v0, lawn/Comm-v0" in capsys.readouterr().err
+    assert "unknown env id 'lawn/Nope-v0'; valid: lawn/Joint-v1, lawn/Comm-v1" in capsys.readouterr().err
 
 
 def test_one_episode_commands_say_so_and_render_is_quiet(tmp_path, monkeypatch):

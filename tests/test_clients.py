@@ -16,7 +16,7 @@ def test_cleanrl_style_async_vector_loop():
     and steps them with autoreset; async workers import nothing but what the id names."""
     import gymnasium as gym
 
-    envs = gym.vector.AsyncVectorEnv([lambda: gym.make("lawn_env:lawn/CommRL-v0") for _ in range(2)],
+    envs = gym.vector.AsyncVectorEnv([lambda: gym.make("lawn_env:lawn/CommRL-v1") for _ in range(2)],
                                      context="spawn")
     obs, infos = envs.reset(seed=0)
     assert obs.shape == (2, envs.single_observation_space.shape[0])
@@ -38,14 +38,14 @@ def test_rl_zoo3_trains_ppo_from_lawns_hyperparameters(tmp_path):
 
     from training.recipes import hyperparams
 
-    assert set(hyperparams) == {"lawn/CommRL-v0", "lawn/JointRL-v0"}
+    assert set(hyperparams) == {"lawn/CommRL-v1", "lawn/JointRL-v1"}
     assert all(h["n_timesteps"] > 0 and "interface" not in h for h in hyperparams.values())
-    done = subprocess.run([sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", "lawn/CommRL-v0",
+    done = subprocess.run([sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", "lawn/CommRL-v1",
                            "--gym-packages", "lawn_env", "--conf-file", "training.recipes", "-n", "2048",
                            "--eval-freq", "-1", "--seed", "0", "--log-folder", str(tmp_path)],
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert (tmp_path / "ppo" / "lawn-CommRL-v0_1" / "lawn-CommRL-v0.zip").exists()
+    assert (tmp_path / "ppo" / "lawn-CommRL-v1_1" / "lawn-CommRL-v1.zip").exists()
     assert "('normalize', 'dict(norm_obs=True" in done.stdout  # lawn's VecNormalize settings were read
 
 
@@ -54,7 +54,7 @@ def test_torchrl_gym_env_specs_and_infos():
     from torchrl.envs.libs.gym import GymEnv
     from torchrl.envs.utils import check_env_specs
 
-    env = GymEnv("lawn_env:lawn/Comm-v0", num_slots=20)  # TorchRL passes frameskip= first: a TypeError
+    env = GymEnv("lawn_env:lawn/Comm-v1", num_slots=20)  # TorchRL passes frameskip= first: a TypeError
     env.set_info_dict_reader()  # every info key, read with the reset info's shapes and dtypes
     check_env_specs(env)
     data = env.rollout(200, break_when_any_done=False)
@@ -78,7 +78,7 @@ def test_tianshou_vector_env():
     import gymnasium as gym
     from tianshou.env import DummyVectorEnv
 
-    envs = DummyVectorEnv([lambda: gym.make("lawn_env:lawn/JointRL-v0") for _ in range(2)])
+    envs = DummyVectorEnv([lambda: gym.make("lawn_env:lawn/JointRL-v1") for _ in range(2)])
     for i, space in enumerate(envs.action_space):
         space.seed(i)
     obs, info = envs.reset()

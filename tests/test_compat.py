@@ -71,7 +71,7 @@ def test_a_copied_parallel_env_continues_like_the_original():
 
 
 def test_unknown_keywords_raise_a_type_error_naming_the_key():
-    for make in (lambda: gym.make("lawn/Comm-v0", frameskip=4), lambda: lawn_env.parallel_env(frameskip=4)):
+    for make in (lambda: gym.make("lawn/Comm-v1", frameskip=4), lambda: lawn_env.parallel_env(frameskip=4)):
         # TorchRL retries without frameskip= on a TypeError saying "unexpected keyword argument 'frameskip'"
         with pytest.raises(TypeError, match="unknown config key 'frameskip' \\(unexpected keyword argument "
                                             "'frameskip'\\); valid keys: num_agvs") as err:
@@ -91,7 +91,7 @@ def _schema(info):
     return out
 
 
-@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0", "lawn/CommRL-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v1", "lawn/Comm-v1", "lawn/CommRL-v1"])
 def test_reset_and_step_infos_share_keys_shapes_and_dtypes(env_id):
     env = gym.make(env_id, num_slots=5)
     _, info0 = env.reset(seed=0)
@@ -110,7 +110,7 @@ def test_reset_and_step_infos_share_keys_shapes_and_dtypes(env_id):
 
 def test_the_three_envs_share_the_info_schema():
     schemas = []
-    for make in (lambda: gym.make("lawn/Joint-v0"), lambda: gym.make("lawn/Comm-v0")):
+    for make in (lambda: gym.make("lawn/Joint-v1"), lambda: gym.make("lawn/Comm-v1")):
         _, info = make().reset(seed=0)
         schemas.append({k: v for k, v in _schema(info).items() if k in INFO_KEYS})
     par = lawn_env.parallel_env()
@@ -147,7 +147,7 @@ def test_the_spec_carries_the_episode_length_and_agrees_with_num_slots():
     for env_id in ALL_IDS:
         assert gym.spec(env_id).max_episode_steps is None and not gym.spec(env_id).additional_wrappers
         assert gym.make(env_id).spec.max_episode_steps == ScenarioConfig().num_slots
-    env = gym.make("lawn/Joint-v0", num_slots=150)
+    env = gym.make("lawn/Joint-v1", num_slots=150)
     assert env.spec.max_episode_steps == 150
     env.reset(seed=0)
     steps, done = 0, False
@@ -155,6 +155,6 @@ def test_the_spec_carries_the_episode_length_and_agrees_with_num_slots():
         _, _, terminated, truncated, _ = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         steps, done = steps + 1, terminated or truncated
     assert steps == 150
-    assert gym.make("lawn/Comm-v0", num_slots=60, max_episode_steps=60).spec.max_episode_steps == 60
+    assert gym.make("lawn/Comm-v1", num_slots=60, max_episode_steps=60).spec.max_episode_steps == 60
     # the module:id form registers the ids in processes that never imported lawn_env
-    assert gym.make("lawn_env:lawn/Comm-v0").spec.max_episode_steps == 120
+    assert gym.make("lawn_env:lawn/Comm-v1").spec.max_episode_steps == 120

@@ -128,7 +128,7 @@ def test_accepted_edge_configs_run():
                 ScenarioConfig(power_budget_dbw=-100, num_slots=5), ScenarioConfig(power_budget_dbw=60, num_slots=5),
                 ScenarioConfig(control={"q1_diag": (1, 1, 0, 0, 0, 0), "q2_diag": (1e6, 1e6)}, num_slots=5)):
         PredictionModel.from_config(cfg)
-        env = gym.make("lawn/Joint-v0", config=cfg)
+        env = gym.make("lawn/Joint-v1", config=cfg)
         obs, _ = env.reset(seed=0)
         env.action_space.seed(0)
         for _ in range(5):

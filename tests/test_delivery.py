@@ -94,7 +94,7 @@ def test_with_perfect_links_dv_mpc_decides_as_rg_mpc():
     config = CFG.override({"channel.perfect_links": True})
     costs = {}
     for name in ("dv-mpc", "rg-mpc"):
-        env = gym.make("lawn/Joint-v0", config=config).unwrapped
+        env = gym.make("lawn/Joint-v1", config=config).unwrapped
         slots = []
         rollout(env, make_policy(name, config), 3, max_steps=15, on_step=lambda step: slots.append(step.info["stage_cost"]))
         costs[name] = np.array(slots)
@@ -125,11 +125,11 @@ def test_under_a_control_period_the_command_is_the_next_command_slots_increment(
 
 
 def test_dv_mpc_plans_for_the_law_the_comm_agvs_apply():
-    """On lawn/Comm-v0 under the paper's law the AGVs apply the psi-scaled QP: dv-mpc's problem is
+    """On lawn/Comm-v1 under the paper's law the AGVs apply the psi-scaled QP: dv-mpc's problem is
     then the paper's, which rg-mpc solves; under the delivery law it is the delivery value's."""
-    paper = make_policy("dv-mpc", CFG, env_id="lawn/Comm-v0")
-    delivery = make_policy("dv-mpc", CFG.override({"control.law": "delivery"}), env_id="lawn/Comm-v0")
-    rg = make_policy("rg-mpc", CFG, env_id="lawn/Comm-v0")
+    paper = make_policy("dv-mpc", CFG, env_id="lawn/Comm-v1")
+    delivery = make_policy("dv-mpc", CFG.override({"control.law": "delivery"}), env_id="lawn/Comm-v1")
+    rg = make_policy("rg-mpc", CFG, env_id="lawn/Comm-v1")
     for policy in (paper, delivery, rg):
         policy.reset(seed=0)
     for snap in _snapshots(3, seed=27):
@@ -170,7 +170,7 @@ def test_the_lag_aware_model_predicts_the_simulators_lagged_step():
     config = CFG.override({"disturbance.actuator_lag_s": 0.3})
     model = PredictionModel.from_config(config, lag=True)
     assert model.state_dim == 8 and PredictionModel.from_config(config).state_dim == 6
-    env = gym.make("lawn/Joint-v0", config=config.override({"channel.perfect_links": True})).unwrapped
+    env = gym.make("lawn/Joint-v1", config=config.override({"channel.perfect_links": True})).unwrapped
     env.reset(seed=4)
     rng = np.random.default_rng(4)
     for _ in range(12):
@@ -195,7 +195,7 @@ def test_the_tracker_follows_the_applied_acceleration_and_filters_the_measuremen
     """Under `disturbed` the tracker's applied acceleration is the simulator's (to the observation's
     float32 rounding) and its filtered positions are closer to the true ones than the measurements."""
     config = DISTURBED
-    env = gym.make("lawn/Joint-v0", config=config).unwrapped
+    env = gym.make("lawn/Joint-v1", config=config).unwrapped
     policy = make_policy("dv-mpc", config)
     obs, _ = env.reset(seed=5)
     policy.reset(seed=5)
@@ -233,5 +233,5 @@ def test_a_control_period_longer_than_the_horizon_holds_nothing_it_cannot_see():
                 assert np.allclose(lost, delivered.value)
             else:
                 assert np.all(lost >= delivered.value - 1e-9)
-    env = gym.make("lawn/Joint-v0", config=config).unwrapped
+    env = gym.make("lawn/Joint-v1", config=config).unwrapped
     rollout(env, make_policy("dv-mpc", config), 0, max_steps=13)

@@ -164,12 +164,12 @@ def test_the_site_builds_in_strict_mode(tmp_path):
         return " ".join(re.sub(r"<[^>]+>", " ", (site / page).read_text()).split())
 
     joint = text("envs/joint.html")
-    assert "Box(-1.0, 1.0, (14,), float32)" in joint and "Version History" in joint and "JointRL-v0" in joint
+    assert "Box(-1.0, 1.0, (14,), float32)" in joint and "Version History" in joint and "JointRL-v1" in joint
     import gymnasium as gym
 
     import lawn_env  # noqa: F401  (the ids)
 
-    shape = gym.make("lawn/JointRL-v0").observation_space.shape  # computed at build time: the page holds the code's
+    shape = gym.make("lawn/JointRL-v1").observation_space.shape  # computed at build time: the page holds the code's
     assert str(shape) in joint
     config = text("configuration.html")
     assert "channel.blocklength" in config and "disturbance.control_period_slots" in config

@@ -9,7 +9,7 @@ from gymnasium.utils.env_checker import check_env
 import lawn_env
 from lawn_env.entities import MAX_AGVS, EntityLayout
 
-IDS = ["lawn/Joint-v0", "lawn/Comm-v0"]
+IDS = ["lawn/Joint-v1", "lawn/Comm-v1"]
 
 
 def _make(env_id, k, base="v0", **kwargs):
@@ -99,7 +99,7 @@ def test_action_round_trips_and_the_codec_decodes_the_present_rows(role):
 
 
 def test_the_native_vector_env_takes_the_layout():
-    envs = gym.make_vec("lawn/Comm-v0", num_envs=3, vectorization_mode="vector_entry_point",
+    envs = gym.make_vec("lawn/Comm-v1", num_envs=3, vectorization_mode="vector_entry_point",
                         interface={"layout": "entities"}, num_agvs=6, reference={"path_set": "random"})
     obs, _ = envs.reset(seed=0)
     assert envs.observation_space.contains(obs)
@@ -113,9 +113,9 @@ def test_the_native_vector_env_takes_the_layout():
 
 def test_bad_layouts_and_fleets_raise_errors_that_name_them():
     with pytest.raises(ValueError, match="layout"):
-        gym.make("lawn/Joint-v0", interface={"layout": "graph"})
+        gym.make("lawn/Joint-v1", interface={"layout": "graph"})
     with pytest.raises(ValueError, match="MAX_AGVS=64"):
-        _make("lawn/Joint-v0", 65, reference={"path_set": "random"})
+        _make("lawn/Joint-v1", 65, reference={"path_set": "random"})
     with pytest.raises(ValueError, match="layout"):
         lawn_env.parallel_env(interface={"layout": "rows"})
     with pytest.raises(ValueError, match="MAX_AGVS=64"):
@@ -136,7 +136,7 @@ def test_mixed_fleets_draw_k_per_episode_deterministically():
     """MixedFleetEnv: Gymnasium's checker passes; the same seed draws the same K and plays the same
     episode; the draws cover the sizes; each episode is the env of its K (identical spaces)."""
     sizes = (3, 5, 8)
-    env = lawn_env.MixedFleetEnv("lawn/Comm-v0", fleet_sizes=sizes)
+    env = lawn_env.MixedFleetEnv("lawn/Comm-v1", fleet_sizes=sizes)
     check_env(env, skip_render_check=True)
     seen, rng = set(), np.random.default_rng(0)
     actions = rng.uniform(-1, 1, (3,) + env.action_space.shape).astype(np.float32)

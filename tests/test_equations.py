@@ -33,7 +33,7 @@ from agents import make_policy
 
 cfg = presets.get("default")
 out = {"origin": lawn_env.__file__}
-env = gym.make("lawn/Joint-v0").unwrapped
+env = gym.make("lawn/Joint-v1").unwrapped
 env.reset(seed=1)
 snap = env.snapshot()
 action = np.linspace(-0.5, 0.5, env.action_space.shape[0]).astype(np.float32)
@@ -47,7 +47,7 @@ out["applied"] = info["applied_increment"].tolist()
 model = PredictionModel.from_config(cfg)
 out["a_aug"], out["b_aug"], out["lqr_gain"] = model.a_aug.tolist(), model.b_aug.tolist(), model.lqr_gain.tolist()
 
-comm = gym.make("lawn/Comm-v0").unwrapped
+comm = gym.make("lawn/Comm-v1").unwrapped
 comm.reset(seed=1)
 snap = comm.snapshot()
 _, _, _, _, info = comm.step(np.zeros(6, dtype=np.float32))

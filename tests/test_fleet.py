@@ -17,7 +17,7 @@ from lawn_env.entities import EntityLayout  # noqa: E402
 from lawn_env.entities import MAX_AGVS  # noqa: E402
 
 
-def _env(env_id="lawn/Joint-v0", k=5):
+def _env(env_id="lawn/Joint-v1", k=5):
     return gym.make(env_id, interface={"base": "rl", "layout": "entities"}, num_agvs=k,
                     reference={"path_set": "random"})
 
@@ -31,7 +31,7 @@ def _rows(action, per_agv):
     return action[..., : MAX_AGVS * per_agv].reshape(action.shape[:-1] + (MAX_AGVS, per_agv)), action[..., -2:]
 
 
-@pytest.mark.parametrize("env_id, per_agv", [("lawn/Joint-v0", 3), ("lawn/Comm-v0", 1)])
+@pytest.mark.parametrize("env_id, per_agv", [("lawn/Joint-v1", 3), ("lawn/Comm-v1", 1)])
 def test_permuting_the_agvs_permutes_their_actions(env_id, per_agv):
     k = 5
     env = _env(env_id, k)
@@ -105,15 +105,15 @@ def test_the_compiled_inference_gives_the_torch_networks_actions():
         np.testing.assert_allclose(got, expected, atol=2e-5)
         assert np.all(_rows(expected, 3)[0][~mask] == 0.0) and np.abs(expected).max() > 0.1  # torch: zero padding
     with pytest.raises(TypeError, match="FleetPolicy"):
-        FleetInference(PPO("MlpPolicy", gym.make("lawn/JointRL-v0"), n_steps=32, batch_size=32).policy)
+        FleetInference(PPO("MlpPolicy", gym.make("lawn/JointRL-v1"), n_steps=32, batch_size=32).policy)
 
 
 def test_the_flat_layout_is_refused_with_a_clear_error():
     with pytest.raises(ValueError, match="entity layout"):
-        PPO(FleetPolicy, gym.make("lawn/JointRL-v0"))
+        PPO(FleetPolicy, gym.make("lawn/JointRL-v1"))
 
 
-@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v1", "lawn/Comm-v1"])
 def test_a_fleet_network_acts_on_the_unmodified_v0_envs_of_any_k(env_id):
     """SB3Policy carries an entity-layout network to the flat v0 env of any K: the v0 action it
     hands the env is the network's entity action gathered and decoded as in training."""
@@ -130,7 +130,7 @@ def test_a_fleet_network_acts_on_the_unmodified_v0_envs_of_any_k(env_id):
         obs, _ = v0.reset(seed=k)
         twin_obs, _ = twin.reset(seed=k)
         policy.reset(seed=k)
-        scheme = action_codec(config, "joint" if env_id == "lawn/Joint-v0" else "comm", iface)
+        scheme = action_codec(config, "joint" if env_id == "lawn/Joint-v1" else "comm", iface)
         for _ in range(3):
             action = policy.act(obs)
             assert v0.action_space.contains(action)
@@ -155,12 +155,12 @@ def test_dagger_labels_the_expert_and_fitting_lowers_the_loss():
 
     iface = {"base": "rl", "layout": "entities"}
     configs = [presets.get("default").override(num_agvs=k, num_slots=12) for k in (3, 4)]
-    obs, actions, present = fleet_pairs("lawn/Comm-v0", configs[0], 6, 0, iface)
+    obs, actions, present = fleet_pairs("lawn/Comm-v1", configs[0], 6, 0, iface)
     assert obs["agvs"].shape[0] == 6 and present.sum(axis=1).tolist() == [3 + 2] * 6
     assert not actions[~present].any()
-    env = gym.make("lawn/Comm-v0", config=configs[0])
+    env = gym.make("lawn/Comm-v1", config=configs[0])
     o, _ = env.reset(seed=0)
-    expert = make_policy("rg-mpc", configs[0], env_id="lawn/Comm-v0")
+    expert = make_policy("rg-mpc", configs[0], env_id="lawn/Comm-v1")
     expert.reset(seed=0)
     snap = env.unwrapped.snapshot()
     want = expert.actions.decode(expert.act(o), snap.x_aug, snap.reference, snap.drone_position, snap.slot)
@@ -170,11 +170,11 @@ def test_dagger_labels_the_expert_and_fitting_lowers_the_loss():
                         snap.drone_position, snap.slot)
     np.testing.assert_allclose(got.power_w, want.power_w, rtol=1e-4)
 
-    model = _model(_env("lawn/Comm-v0", 4))
-    data = dagger_round(None, "lawn/Comm-v0", configs, 12, 0, iface)
+    model = _model(_env("lawn/Comm-v1", 4))
+    data = dagger_round(None, "lawn/Comm-v1", configs, 12, 0, iface)
     losses = fit_fleet(model, *data, epochs=5, batch_size=8, learning_rate=3e-3, seed=0)
     assert losses[-1] < 0.5 * losses[0]
-    more = dagger_round(model, "lawn/Comm-v0", configs, 6, 50, iface)
+    more = dagger_round(model, "lawn/Comm-v1", configs, 6, 50, iface)
     assert more[0]["agvs"].shape[0] == 12 and set(more[0]["mask"].sum(axis=1).tolist()) == {3.0, 4.0}
 
 
@@ -187,14 +187,14 @@ def test_lawn_train_fleet_runs_dagger_and_its_network_drives_any_k(tmp_path):
 
     config = presets.get("default").override(num_agvs=4, num_slots=8)
     hp = {"fleet_sizes": [3, 4], "epochs": 2, "dagger_iterations": 1, "dagger_timesteps": 8, "width": 16, "heads": 2}
-    summary = train(TrainSpec(algo="fleet", env_id="lawn/Comm-v0", config=config, timesteps=16, seed=0, out_dir=tmp_path / "run", hp_overrides=hp, eval_episodes=1, progress=False))
+    summary = train(TrainSpec(algo="fleet", env_id="lawn/Comm-v1", config=config, timesteps=16, seed=0, out_dir=tmp_path / "run", hp_overrides=hp, eval_episodes=1, progress=False))
     assert summary["bc_loss_last"] < summary["bc_loss_first"]
     wide = config.override(num_agvs=8)
-    policy = make_policy(f"sb3:{tmp_path / 'run'}", wide, env_id="lawn/Comm-v0")
-    run = rollout(gym.make("lawn/Comm-v0", config=wide), policy, seed=3)
+    policy = make_policy(f"sb3:{tmp_path / 'run'}", wide, env_id="lawn/Comm-v1")
+    run = rollout(gym.make("lawn/Comm-v1", config=wide), policy, seed=3)
     assert run.metrics["slots"] == 8 and np.isfinite(run.metrics["control_cost"])
     with pytest.raises(ValueError, match="unknown fleet hyperparameters"):
-        train(TrainSpec(algo="fleet", env_id="lawn/Comm-v0", config=config, timesteps=16, seed=0, out_dir=tmp_path / "bad", hp_overrides={"width_": 8}, progress=False))
+        train(TrainSpec(algo="fleet", env_id="lawn/Comm-v1", config=config, timesteps=16, seed=0, out_dir=tmp_path / "bad", hp_overrides={"width_": 8}, progress=False))
     assert not (tmp_path / "bad").exists()  # nothing written
 
 
@@ -239,7 +239,7 @@ def test_each_agent_of_the_multi_agent_env_gets_its_own_row_of_one_network():
 def test_multi_agent_ppo_trains_the_fleet_network_and_drives_any_k(tmp_path):
     """``lawn train --algo ppo --env lawn/Parallel-v0`` with ``policy: FleetPolicy`` in the entity
     layout: started at the anchor (its heads zeroed), it trains at K = 3 and its network drives
-    the unmodified ``lawn/Joint-v0`` at K = 6 (``marl:DIR``)."""
+    the unmodified ``lawn/Joint-v1`` at K = 6 (``marl:DIR``)."""
     from agents import make_policy, rollout
     from lawn_env import presets
     from training.train import TrainSpec, train
@@ -250,11 +250,11 @@ def test_multi_agent_ppo_trains_the_fleet_network_and_drives_any_k(tmp_path):
           "policy_kwargs": {"width": 16, "heads": 2, "layers": 1}}
     train(TrainSpec(algo="ppo", env_id="lawn/Parallel-v0", config=config, timesteps=64, seed=0, out_dir=tmp_path / "run", hp_overrides=hp, eval_episodes=1, progress=False))
     wide = config.override(num_agvs=6)
-    policy = make_policy(f"marl:{tmp_path / 'run'}", wide, env_id="lawn/Joint-v0")
-    run = rollout(gym.make("lawn/Joint-v0", config=wide), policy, seed=3)
+    policy = make_policy(f"marl:{tmp_path / 'run'}", wide, env_id="lawn/Joint-v1")
+    run = rollout(gym.make("lawn/Joint-v1", config=wide), policy, seed=3)
     assert run.metrics["slots"] == 8 and np.isfinite(run.metrics["control_cost"])
     with pytest.raises(ValueError, match="ppo or a2c"):
-        train(TrainSpec(algo="sac", env_id="lawn/Comm-v0", config=config, timesteps=64, seed=0, out_dir=tmp_path / "bad", hp_overrides={"policy": "FleetPolicy"}, progress=False))
+        train(TrainSpec(algo="sac", env_id="lawn/Comm-v1", config=config, timesteps=64, seed=0, out_dir=tmp_path / "bad", hp_overrides={"policy": "FleetPolicy"}, progress=False))
     assert not (tmp_path / "bad").exists()
 
 
@@ -279,11 +279,11 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     monkeypatch.setitem(recipes_module.RECIPES, "fleet-comm", tiny)
     runs, docs = tmp_path / "runs", tmp_path / "docs"
     hp = {"fleet_sizes": [3, 4], "epochs": 1, "dagger_iterations": 0, "width": 16, "heads": 2}
-    train(TrainSpec(algo="fleet", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=16, seed=0, out_dir=runs / "fleet-comm" / "seed-0", hp_overrides=hp, eval_episodes=1, progress=False))
+    train(TrainSpec(algo="fleet", env_id="lawn/Comm-v1", config=ScenarioConfig(), timesteps=16, seed=0, out_dir=runs / "fleet-comm" / "seed-0", hp_overrides=hp, eval_episodes=1, progress=False))
     (docs / "learned").mkdir(parents=True)
     page = "# Learned\n\nkept\n\n<!-- zoo-fleet:begin -->\nold\n<!-- zoo-fleet:end -->\n\nkept too\n"
     (docs / "LEARNED.md").write_text(page)
-    other = {"policy": "bc:runs/agents/bc-comm/seed-0", "env": "lawn/Comm-v0", "seed": "0", "control_cost": "1.0"}
+    other = {"policy": "bc:runs/agents/bc-comm/seed-0", "env": "lawn/Comm-v1", "seed": "0", "control_cost": "1.0"}
     (docs / "learned" / "episodes.csv").write_text(",".join(other) + "\n" + ",".join(other.values()) + "\n")
     table = zoo.build_zoo(runs, docs / "LEARNED.md", workers=1, progress=False, episodes=2, target=tmp_path / "zoo",
                           only=["fleet-comm"])
@@ -300,7 +300,7 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
 
     monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
     assert fleet_agents() == ["zoo:fleet-comm"]
-    policy = make_policy("zoo:fleet-comm", ScenarioConfig(num_agvs=7), env_id="lawn/Comm-v0")
+    policy = make_policy("zoo:fleet-comm", ScenarioConfig(num_agvs=7), env_id="lawn/Comm-v1")
     assert policy.entities.num_agvs == 7
     sizes = {3: 2, 5: 2}
     rows = run_generalization(fleet_agents(), sizes, Play(1, False),
@@ -315,7 +315,7 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
 
 def test_a_multi_agent_fleet_run_ships_to_the_zoo_and_a_flat_policy_is_refused(tmp_path, monkeypatch):
     """The zoo exports a multi-agent fleet network as a fleet network (its own class loads it) and
-    ``zoo:NAME`` drives lawn/Joint-v0 with it at another K; the multi-agent entity layout refuses a
+    ``zoo:NAME`` drives lawn/Joint-v1 with it at another K; the multi-agent entity layout refuses a
     policy other than FleetPolicy before anything is written."""
     import agents.learned as learned
     from agents import make_policy
@@ -328,12 +328,12 @@ def test_a_multi_agent_fleet_run_ships_to_the_zoo_and_a_flat_policy_is_refused(t
     train(TrainSpec(algo="ppo", env_id="lawn/Parallel-v0", config=config, timesteps=32, seed=0, out_dir=tmp_path / "run", hp_overrides=hp, eval_episodes=1, progress=False))
     monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
     learned.export_agent(tmp_path / "run", tmp_path / "zoo" / "marl-fleet", {"label": "tiny", "name": "marl-fleet",
-                                                                              "evaluated_on": "lawn/Joint-v0"})
+                                                                              "evaluated_on": "lawn/Joint-v1"})
     record = json.loads((tmp_path / "zoo" / "marl-fleet" / "agent.json").read_text())
     assert record["algo"] == "fleet" and record["trainer"] == "ppo"  # a fleet network, trained by PPO
     wide = config.override(num_agvs=5)
-    policy = make_policy("zoo:marl-fleet", wide, env_id="lawn/Joint-v0")
-    obs, _ = gym.make("lawn/Joint-v0", config=wide).reset(seed=0)
+    policy = make_policy("zoo:marl-fleet", wide, env_id="lawn/Joint-v1")
+    obs, _ = gym.make("lawn/Joint-v1", config=wide).reset(seed=0)
     assert policy.entities.num_agvs == 5 and policy.act(obs).shape == (17,)
     with pytest.raises(ValueError, match="policy=FleetPolicy"):
         train(TrainSpec(algo="ppo", env_id="lawn/Parallel-v0", config=config, timesteps=32, seed=0, out_dir=tmp_path / "flat", progress=False, hp_overrides={**hp, "policy": "MultiInputPolicy"}))

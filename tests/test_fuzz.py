@@ -116,7 +116,7 @@ def check_config(ov: dict) -> str:
     try:
         with hang_guard(120), warnings.catch_warnings():
             warnings.simplefilter("ignore")  # numerical warnings are allowed, wrong results are not
-            for env_id in ("lawn/Joint-v0", "lawn/Comm-v0"):
+            for env_id in ("lawn/Joint-v1", "lawn/Comm-v1"):
                 env = gym.make(env_id, config=cfg)
                 env.action_space.seed(0)
                 obs, _ = env.reset(seed=0)
@@ -128,7 +128,7 @@ def check_config(ov: dict) -> str:
                     if terminated or truncated:
                         break
             _check_vector_envs(cfg)
-            env = gym.make("lawn/Joint-v0", config=cfg)
+            env = gym.make("lawn/Joint-v1", config=cfg)
             obs, _ = env.reset(seed=0)
             for name in ("rg-mpc", "ao-mpc"):
                 policy = make_policy(name, config=cfg)
@@ -146,7 +146,7 @@ def check_config(ov: dict) -> str:
 def _check_vector_envs(cfg) -> None:
     """The native vector envs on a config that validates (the disturbance mode included): they run,
     finite and inside their spaces, the batched QPs never failing an episode."""
-    for env_id, interface in (("lawn/Joint-v0", "v0"), ("lawn/Comm-v0", "rl")):
+    for env_id, interface in (("lawn/Joint-v1", "v0"), ("lawn/Comm-v1", "rl")):
         envs = gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point", config=cfg,
                             interface=interface)
         envs.action_space.seed(1)
@@ -217,7 +217,7 @@ def test_observations_stay_finite_and_in_their_space_under_long_drift():
     cfg = ScenarioConfig(num_slots=8_000)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no overflow anywhere
-        for env_id in ("lawn/Joint-v0", "lawn/Comm-v0"):
+        for env_id in ("lawn/Joint-v1", "lawn/Comm-v1"):
             env = gym.make(env_id, config=cfg, max_episode_steps=None)
             obs, _ = env.reset(seed=0)
             action = np.ones(env.action_space.shape, dtype=np.float32)
@@ -249,7 +249,7 @@ def _bad_or_odd_actions(size: int):
     )
 
 
-ENV_VARIANTS = [("lawn/Joint-v0", "v0"), ("lawn/Comm-v0", "v0"), ("lawn/Joint-v0", "rl"), ("lawn/Comm-v0", "rl")]
+ENV_VARIANTS = [("lawn/Joint-v1", "v0"), ("lawn/Comm-v1", "v0"), ("lawn/Joint-v1", "rl"), ("lawn/Comm-v1", "rl")]
 
 
 @pytest.mark.parametrize("env_id, interface", ENV_VARIANTS)
@@ -332,7 +332,7 @@ def _fake_run(tmp, kind: str):
     """A run directory damaged in one way."""
     run = tmp / f"run-{kind}"
     run.mkdir(exist_ok=True)
-    spec = {"algo": "ppo", "env": "lawn/Comm-v0", "seed": 0, "timesteps": 100, "checkpoint_every": 10,
+    spec = {"algo": "ppo", "env": "lawn/Comm-v1", "seed": 0, "timesteps": 100, "checkpoint_every": 10,
             "eval_every": 10, "eval_episodes": 1, "interface": None}
     (run / "run.json").write_text("{garbage" if kind == "bad-json" else json.dumps(spec))
     config = ScenarioConfig().to_dict()
@@ -366,7 +366,7 @@ def bad_command_lines(draw, tmp):
         "benchmark": ["benchmark", "--policies", "epa", "--episodes", "1", "--out", out, "--quiet"],
         "gap": ["gap", "--episodes", "1", "--out", out, "--quiet"],
         "sweep": ["sweep", str(tmp / "spec.yml"), "--out", out + ".csv", "--quiet"],
-        "train": ["train", "--algo", "ppo", "--env", "lawn/Comm-v0", "--timesteps", "64", "--out", out, "--quiet"],
+        "train": ["train", "--algo", "ppo", "--env", "lawn/Comm-v1", "--timesteps", "64", "--out", out, "--quiet"],
     }
     command = draw(st.sampled_from(sorted(base)))
     argv = list(base[command])

@@ -20,7 +20,7 @@ def _message(call) -> tuple[BaseException, str]:
 
 # ---------------------------------------------------------------------- 1. config values
 @pytest.mark.parametrize("call, needles", [
-    (lambda: gym.make("lawn/Joint-v0", num_agvs=0),
+    (lambda: gym.make("lawn/Joint-v1", num_agvs=0),
      ["num_agvs=0", "greater than or equal to 1", "allowed: an integer in [1, 256]"]),
     (lambda: ScenarioConfig(num_agvs="x"), ["num_agvs='x'", "valid integer", "allowed: an integer in [1, 256]"]),
     (lambda: ScenarioConfig(channel={"blocklength": -1}), ["channel.blocklength=-1", "allowed: an integer >= 1"]),
@@ -37,7 +37,7 @@ def _message(call) -> tuple[BaseException, str]:
     (lambda: ChannelConfig(blocklength=0), ["channel.blocklength=0", "allowed: an integer >= 1"]),
     (lambda: ScenarioConfig(area_m=(10, 0, 0, 10)), ["area_m=(10.0, 0.0, 0.0, 10.0)", "need x_min < x_max"]),
     (lambda: ControlConfig(q2_diag=(1.0, 0.0)), ["control.q2_diag=(1.0, 0.0)", "[1e-6, 1e6]"]),
-    (lambda: gym.make("lawn/Joint-v0", interface={"cost_clip": -1}),
+    (lambda: gym.make("lawn/Joint-v1", interface={"cost_clip": -1}),
      ["interface.cost_clip=-1", "allowed: a number > 0"]),
     (lambda: make_policy("ao-mpc", max_iterations=0), ["AOSettings", "max_iterations=0", "allowed: an integer >= 1"]),
 ])
@@ -110,7 +110,7 @@ def test_learned_policies_check_the_observation_shape_like_the_planners():
         with pytest.raises(ValueError, match=r"^observation has shape \(10,\); expected \(335,\)$"):
             policy.act(np.zeros(10, np.float32))
     # an observation of another fleet size says which K the agent was trained at
-    env = gym.make("lawn/Joint-v0", num_agvs=3)
+    env = gym.make("lawn/Joint-v1", num_agvs=3)
     obs, _ = env.reset(seed=0)
     with pytest.raises(ValueError, match=r"^observation has shape \(252,\); expected \(335,\): zoo:bc-joint was built "
                                          r"for K = 4 \(its training config\) and this observation is of K = 3"):
@@ -118,10 +118,10 @@ def test_learned_policies_check_the_observation_shape_like_the_planners():
 
 
 def test_a_fleet_agent_acts_at_the_env_k_given_its_config_and_says_how_otherwise():
-    """zoo:ppo-marl-fleet-k16 (trained at K = 16) on lawn/Joint-v0 (K = 4): with the env's config it
+    """zoo:ppo-marl-fleet-k16 (trained at K = 16) on lawn/Joint-v1 (K = 4): with the env's config it
     acts there; built from its own config it raises naming K = 16 and the keyword to pass."""
     pytest.importorskip("stable_baselines3")
-    env = gym.make("lawn/Joint-v0")
+    env = gym.make("lawn/Joint-v1")
     obs, _ = env.reset(seed=0)
     with pytest.raises(ValueError) as err:
         make_policy("zoo:ppo-marl-fleet-k16").act(obs)
@@ -146,7 +146,7 @@ def test_a_fleet_agent_acts_at_the_env_k_given_its_config_and_says_how_otherwise
     (dict(fleet_sizes=[3, 4.0, True, 0, 65]), ["the entries [4.0, True, 0, 65] are not allowed"]),
     (dict(fleet_sizes=np.array([3, 65])), ["fleet_sizes=[3, 65]", "the entry 65"]),
     (dict(fleet_sizes=[3], num_agvs=5), ["num_agvs=5", "fleet_sizes=[...]"]),
-    (dict(env_id="lawn/Parallel-v0"), ["env_id='lawn/Parallel-v0'", "'lawn/Joint-v0', 'lawn/Comm-v0'"]),
+    (dict(env_id="lawn/Parallel-v0"), ["env_id='lawn/Parallel-v0'", "'lawn/Joint-v1', 'lawn/Comm-v1'"]),
     (dict(fleet_sizes=[3], channel={"blocklength": 0}), ["channel.blocklength=0", "allowed: an integer >= 1"]),
 ])
 def test_mixed_fleet_env_validates_its_arguments(kwargs, needles):
@@ -155,13 +155,13 @@ def test_mixed_fleet_env_validates_its_arguments(kwargs, needles):
 
 
 def test_mixed_fleet_env_takes_numpy_sizes():
-    env = MixedFleetEnv("lawn/Comm-v0", fleet_sizes=np.array([4, 3, 4]))
+    env = MixedFleetEnv("lawn/Comm-v1", fleet_sizes=np.array([4, 3, 4]))
     assert env.fleet_sizes == (3, 4) and all(type(k) is int for k in env.fleet_sizes)
 
 
 # ---------------------------------------------------------------------- 5. out-of-range actions
 def test_an_action_error_counts_the_bad_entries_and_says_the_list_is_cut():
-    env = gym.make("lawn/Joint-v0")
+    env = gym.make("lawn/Joint-v1")
     env.reset(seed=0)
     _, text = _message(lambda: env.step(np.full(14, 2.0, np.float32)))
     assert f"14 action entries are outside [-1, 1] or not finite; the first {SHOWN_BAD_ENTRIES}: entries " \

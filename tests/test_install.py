@@ -61,7 +61,7 @@ def test_a_wheel_in_a_foreign_repository_reports_lawns_commit_and_caches_outside
     subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(wheel)],
                    check=True, capture_output=True, timeout=300)
     assert (site / "training" / "_build_info.json").exists()
-    child = ("import training.provenance as p, lawn_env, gymnasium as gym; gym.make('lawn/Joint-v0').reset(seed=0); "
+    child = ("import training.provenance as p, lawn_env, gymnasium as gym; gym.make('lawn/Joint-v1').reset(seed=0); "
              "print(p.__file__); print(p.provenance())")
     env = dict(os.environ, PYTHONPATH=str(site), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
     out = subprocess.run([sys.executable, "-c", child], cwd=tmp_path / "project", env=env, capture_output=True,

@@ -34,10 +34,10 @@ def test_registered_ids_are_the_v0_envs_with_the_rl_interface():
         env = gym.make(rl_id).unwrapped
         assert env.interface == RL_INTERFACE and type(env) is type(gym.make(base).unwrapped)
         assert env.observation_space.high[0] == RL_INTERFACE.obs_clip
-    assert gym.make("lawn/Joint-v0").unwrapped.interface == RLInterface()
+    assert gym.make("lawn/Joint-v1").unwrapped.interface == RLInterface()
 
 
-@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v1", "lawn/Comm-v1"])
 def test_reward_is_the_scaled_clipped_cost(env_id):
     iface = RLInterface(action_scheme="anchored", reward="scaled", cost_scale=7.0, cost_clip=30.0)
     env = gym.make(env_id, config=SHORT, interface=iface)
@@ -59,7 +59,7 @@ def test_reward_is_the_scaled_clipped_cost(env_id):
 def test_termination_fires_exactly_past_the_bound_and_never_pays():
     bound = 4.0
     iface = RLInterface(reward="scaled", termination_distance_m=bound)
-    env = gym.make("lawn/Joint-v0", interface=iface).unwrapped
+    env = gym.make("lawn/Joint-v1", interface=iface).unwrapped
     env.reset(seed=0)
     action = np.zeros(env.action_space.shape, np.float32)
     action[0] = 1.0  # AGV 0 keeps accelerating away from its track
@@ -91,11 +91,11 @@ def test_termination_needs_the_bounded_reward():
     with pytest.raises(ValueError, match="valid names: v0, rl"):
         resolve_interface("fancy")
     with pytest.raises(ValueError, match="obs_clip"):
-        gym.make("lawn/Comm-v0", interface={"obs_clip": 0})
+        gym.make("lawn/Comm-v1", interface={"obs_clip": 0})
 
 
 def test_observations_are_clipped():
-    env = gym.make("lawn/Joint-v0", interface={"obs_clip": 0.5})
+    env = gym.make("lawn/Joint-v1", interface={"obs_clip": 0.5})
     obs, _ = env.reset(seed=0)
     for _ in range(10):
         obs, *_ = env.step(np.ones(env.action_space.shape, np.float32))
@@ -113,14 +113,14 @@ def _zero_action_cost(env_id, seed, interface):
     return info["episode_metrics"]["control_cost"]
 
 
-@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v1", "lawn/Comm-v1"])
 def test_zero_action_of_the_anchored_scheme_is_a_sound_policy(env_id):
     from training.results.run import run_episode
 
     seeds = range(5)
     zero = np.mean([_zero_action_cost(env_id, s, "rl") for s in seeds])
     epa = np.mean([run_episode("epa", env_id, ScenarioConfig(), s)["control_cost"] for s in seeds])
-    plain_zero = _zero_action_cost("lawn/Comm-v0", 0, None)
+    plain_zero = _zero_action_cost("lawn/Comm-v1", 0, None)
     assert np.isfinite(zero) and zero < 3 * epa  # a small factor of EPA ...
     assert plain_zero > 100 * epa  # ... where the v0 zero action (hover at the start) is a catastrophe
     by_distance = np.mean([_zero_action_cost(env_id, s, {"base": "rl", "power_anchor": "distance"}) for s in seeds])
@@ -132,7 +132,7 @@ def test_stake_prior_is_the_linearized_slot_problems_power_split():
     (w d^2m)^(1/(m+1)) normalized; a worthless command keeps a floor, and with no stake at all the
     split goes by distance alone."""
     cfg = ScenarioConfig()
-    env = gym.make("lawn/Comm-v0").unwrapped
+    env = gym.make("lawn/Comm-v1").unwrapped
     env.reset(seed=3)
     env.action_space.seed(3)
     for _ in range(3):
@@ -198,7 +198,7 @@ def test_lqr_increment_anchor_is_the_lqr_baselines_first_increment_and_solves_no
     cfg = ScenarioConfig()
     layout = action_codec(cfg, "joint", {"base": "rl", "power_anchor": "distance", "increment_anchor": "lqr"})
     assert layout.mpc is None and layout.needs_reference  # the distance prior and the LQR: no MPC, the reference
-    env = gym.make("lawn/Joint-v0").unwrapped
+    env = gym.make("lawn/Joint-v1").unwrapped
     env.reset(seed=3)
     rng = np.random.default_rng(2)
     model = PredictionModel.from_config(cfg)
@@ -226,7 +226,7 @@ def test_encode_decode_round_trip(role, scheme):
     fields = {"action_scheme": "anchored", "increment_anchor": "lqr"} if scheme == "anchored-lqr" else \
         {"action_scheme": scheme}
     layout = action_codec(cfg, role, fields)
-    env = gym.make("lawn/Joint-v0").unwrapped
+    env = gym.make("lawn/Joint-v1").unwrapped
     env.reset(seed=2)
     rng = np.random.default_rng(1)
     for _ in range(20):
@@ -251,7 +251,7 @@ def test_encode_keeps_the_strongest_links_when_the_split_spans_more_than_the_ran
     top of the range) and saturates the weakest, instead of centring the span and clipping both."""
     cfg = ScenarioConfig(num_agvs=6)
     codec = action_codec(cfg, "comm", {"base": "rl", "power_anchor": "distance"})
-    env = gym.make("lawn/Comm-v0", config=cfg).unwrapped
+    env = gym.make("lawn/Comm-v1", config=cfg).unwrapped
     env.reset(seed=3)
     sim = env.sim
     args = (sim.x_obs, sim.reference_window(), sim.drone_position)
@@ -276,7 +276,7 @@ def test_planner_decisions_survive_both_schemes():
     drone_offset_m of the AGVs' centroid per axis; early slots, with the drone far from the AGVs
     and moving slowly, cannot be, and get the nearest action)."""
     cfg = ScenarioConfig()
-    env = gym.make("lawn/Joint-v0").unwrapped
+    env = gym.make("lawn/Joint-v1").unwrapped
     obs, _ = env.reset(seed=4)
     expert = make_policy("rg-mpc", cfg)
     expert.reset(4)
@@ -300,7 +300,7 @@ def test_planner_decisions_survive_both_schemes():
 
 def test_rl_interface_determinism_and_parallel_lockstep():
     par = lawn_env.parallel_env(interface="rl")
-    joint = gym.make("lawn/Joint-v0", interface="rl").unwrapped
+    joint = gym.make("lawn/Joint-v1", interface="rl").unwrapped
     obs, _ = par.reset(seed=9)
     jobs, _ = joint.reset(seed=9)
     rng = np.random.default_rng(3)
@@ -323,7 +323,7 @@ def test_the_stake_split_minimizes_the_expected_loss_it_claims_to():
     numerical optimum and the equal split's."""
     from scipy import optimize, special
 
-    env = gym.make("lawn/CommRL-v0").unwrapped
+    env = gym.make("lawn/CommRL-v1").unwrapped
     budget = env.config.power_budget_w
     for seed in range(3):
         env.reset(seed=seed)

@@ -166,8 +166,8 @@ def test_the_multi_agent_id_is_named_in_one_place():
 
     where = {name: _env_id_literals(ast.parse(path.read_text())) for name, path in _modules().items()}
     assert [name for name, ids in where.items() if lawn_env.PARALLEL_ENV_ID in ids] == ["lawn_env"]
-    assert lawn_env.central_env_id(lawn_env.PARALLEL_ENV_ID) == "lawn/Joint-v0"
-    assert lawn_env.central_env_id("lawn/Comm-v0") == "lawn/Comm-v0"
+    assert lawn_env.central_env_id(lawn_env.PARALLEL_ENV_ID) == "lawn/Joint-v1"
+    assert lawn_env.central_env_id("lawn/Comm-v1") == "lawn/Comm-v1"
     assert _env_id_literals(ast.parse('"""lawn/Parallel-v0 in a docstring"""\nx = "lawn/Parallel-v0"')) == [
         "lawn/Parallel-v0"]
 

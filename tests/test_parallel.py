@@ -25,9 +25,9 @@ def test_spaces_are_stable_objects():
 
 def test_lockstep_with_joint_env():
     """Two views of one core: the same seed and decisions give bit for bit the same observations,
-    drone reward and drone infos as ``lawn/Joint-v0``, and AGV rewards that sum to it."""
+    drone reward and drone infos as ``lawn/Joint-v1``, and AGV rewards that sum to it."""
     par = lawn_env.parallel_env()
-    joint = gym.make("lawn/Joint-v0").unwrapped
+    joint = gym.make("lawn/Joint-v1").unwrapped
     obs, infos = par.reset(seed=21)
     jobs, jinfo = joint.reset(seed=21)
     assert np.array_equal(obs["drone"], jobs)
@@ -105,7 +105,7 @@ def test_entity_agents_in_lockstep_with_the_central_entity_env():
     assembled, give bit for bit the central env's step."""
     k, iface = 5, {"base": "rl", "layout": "entities"}
     par = lawn_env.parallel_env(interface=iface, num_agvs=k, reference={"path_set": "random"})
-    joint = gym.make("lawn/Joint-v0", interface=iface, num_agvs=k, reference={"path_set": "random"}).unwrapped
+    joint = gym.make("lawn/Joint-v1", interface=iface, num_agvs=k, reference={"path_set": "random"}).unwrapped
     obs, _ = par.reset(seed=4)
     jobs, _ = joint.reset(seed=4)
     rng = np.random.default_rng(2)

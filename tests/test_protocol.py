@@ -20,7 +20,7 @@ from training.results.stats import normalized_score, scores_by_policy
 
 
 # ---------------------------------------------------------------------- normalized score
-def _rows(policy, costs, env="lawn/Joint-v0", task="default"):
+def _rows(policy, costs, env="lawn/Joint-v1", task="default"):
     return [{"policy": policy, "env": env, "task": task, "seed": s, "control_cost": c} for s, c in costs.items()]
 
 
@@ -60,11 +60,11 @@ def test_score_needs_references_that_separate_and_shared_seeds():
 def test_scores_by_policy_pairs_within_task_and_env():
     rows = (_rows("epa", {0: 10.0, 1: 12.0}) + _rows("dv-mpc", {0: 4.0, 1: 6.0}) + _rows("x", {0: 7.0, 1: 9.0})
             + _rows("epa", {0: 100.0, 1: 100.0}, task="k8") + _rows("dv-mpc", {0: 50.0, 1: 50.0}, task="k8")
-            + _rows("x", {0: 50.0, 1: 50.0}, task="k8") + _rows("y", {0: 1.0}, env="lawn/Comm-v0"))
+            + _rows("x", {0: 50.0, 1: 50.0}, task="k8") + _rows("y", {0: 1.0}, env="lawn/Comm-v1"))
     scores = scores_by_policy(rows)
-    assert scores[("default", "lawn/Joint-v0", "x")][0] == pytest.approx(50.0)
-    assert scores[("k8", "lawn/Joint-v0", "x")][0] == pytest.approx(100.0)
-    assert ("default", "lawn/Comm-v0", "y") not in scores  # no references on that env
+    assert scores[("default", "lawn/Joint-v1", "x")][0] == pytest.approx(50.0)
+    assert scores[("k8", "lawn/Joint-v1", "x")][0] == pytest.approx(100.0)
+    assert ("default", "lawn/Comm-v1", "y") not in scores  # no references on that env
     # references that do not separate give no score instead of an error mid-table
     rows = _rows("epa", {0: 1.0, 1: 1.0}, task="t") + _rows("dv-mpc", {0: 2.0, 1: 2.0}, task="t")
     assert scores_by_policy(rows) == {}
@@ -78,9 +78,9 @@ def test_score_v1_stays_computable_beside_v2():
     rows = (_rows("epa", {0: 10.0, 1: 12.0}) + _rows("rg-mpc", {0: 6.0, 1: 8.0}) + _rows("dv-mpc", {0: 4.0, 1: 6.0})
             + _rows("x", {0: 7.0, 1: 9.0}))
     v1, v2 = scores_by_policy(rows, version=1), scores_by_policy(rows, version=2)
-    assert v1[("default", "lawn/Joint-v0", "x")][0] == pytest.approx(75.0)
-    assert v2[("default", "lawn/Joint-v0", "x")][0] == pytest.approx(50.0)
-    assert v1[("default", "lawn/Joint-v0", "dv-mpc")][0] == pytest.approx(150.0)
+    assert v1[("default", "lawn/Joint-v1", "x")][0] == pytest.approx(75.0)
+    assert v2[("default", "lawn/Joint-v1", "x")][0] == pytest.approx(50.0)
+    assert v1[("default", "lawn/Joint-v1", "dv-mpc")][0] == pytest.approx(150.0)
     with pytest.raises(ValueError, match=r"score version=3; valid: 1, 2"):
         scores_by_policy(rows, version=3)
     with pytest.raises(ValueError, match=r"run epa and rg-mpc on the same seeds"):
@@ -101,7 +101,7 @@ def _zero_action_cost(env_id, interface, seed):
     return info["episode_metrics"]["control_cost"]
 
 
-@pytest.mark.parametrize("env_id", ["lawn/Comm-v0", "lawn/Joint-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/Comm-v1", "lawn/Joint-v1"])
 @pytest.mark.parametrize("name", list(ANCHORS))
 def test_anchor_rows_equal_a_direct_rollout_of_the_zero_action(env_id, name):
     seed = 4
@@ -117,7 +117,7 @@ def test_anchor_names_and_errors():
     assert anchor_name("rl") == "anchor:stake"
     assert anchor_name({"base": "rl", "power_anchor": "distance", "drone_offset_m": 10.0}) == "anchor:distance"
     assert anchor_name({"base": "rl", "power_anchor": "distance", "increment_anchor": "lqr"}) == "anchor:distance-lqr"
-    assert isinstance(make_policy("anchor:stake", env_id="lawn/Comm-v0"), AnchorPolicy)
+    assert isinstance(make_policy("anchor:stake", env_id="lawn/Comm-v1"), AnchorPolicy)
     with pytest.raises(ValueError, match="unknown anchor 'nope'; valid: hover, distance, stake"):
         make_policy("anchor:nope")
     with pytest.raises(ValueError, match="takes no settings"):
@@ -137,8 +137,8 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     anchors = sorted({own_anchor(a) for a in agents})
     assert all(a.startswith("anchor:") for a in anchors)
     entries = learned_entries(agents)  # a repeated agent is one row
-    assert entries == [("dv-mpc", "lawn/Comm-v0"), ("epa", "lawn/Comm-v0"), *[(a, "lawn/Comm-v0") for a in anchors],
-                       ("zoo:ppo-comm", "lawn/Comm-v0"), ("zoo:bc-comm", "lawn/Comm-v0")]
+    assert entries == [("dv-mpc", "lawn/Comm-v1"), ("epa", "lawn/Comm-v1"), *[(a, "lawn/Comm-v1") for a in anchors],
+                       ("zoo:ppo-comm", "lawn/Comm-v1"), ("zoo:bc-comm", "lawn/Comm-v1")]
     with pytest.raises(ValueError, match="unknown zoo agent 'nope'"):
         run_learned_protocol(["zoo:nope"], tmp_path, episodes=3, play=Play(1, False))
     table = run_learned_protocol(["zoo:ppo-comm"], tmp_path, episodes=3, play=Play(1, False))
@@ -148,14 +148,14 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     anchor = own_anchor("zoo:ppo-comm")
     assert f"| {anchor} |" in agent
     rows = read_csv(tmp_path / "episodes.csv")
-    diff = paired_difference(costs_of(rows, "zoo:ppo-comm", "lawn/Comm-v0"), costs_of(rows, anchor, "lawn/Comm-v0"))
+    diff = paired_difference(costs_of(rows, "zoo:ppo-comm", "lawn/Comm-v1"), costs_of(rows, anchor, "lawn/Comm-v1"))
     assert fmt_paired(*diff[:2]) in agent.split("|")[11]
-    geo = paired_geometric(costs_of(rows, "zoo:ppo-comm", "lawn/Comm-v0"), costs_of(rows, anchor, "lawn/Comm-v0"))
+    geo = paired_geometric(costs_of(rows, "zoo:ppo-comm", "lawn/Comm-v1"), costs_of(rows, anchor, "lawn/Comm-v1"))
     assert agent.split("|")[9].strip() == fmt_geometric(geo)
     split = [float(r["transient_cost"]) + float(r["sustained_cost"]) - float(r["control_cost"]) for r in rows]
     assert max(map(abs, split)) < 1e-6
-    assert any(line.startswith("| anchor:stake | lawn/Comm-v0 |") for line in lines)
-    assert any(line.startswith("| dv-mpc | lawn/Comm-v0 | – |") and "| 100.0 |" in line for line in lines)
+    assert any(line.startswith("| anchor:stake | lawn/Comm-v1 |") for line in lines)
+    assert any(line.startswith("| dv-mpc | lawn/Comm-v1 | – |") and "| 100.0 |" in line for line in lines)
     assert (tmp_path / "episodes.csv").exists() and "3 test seeds" in table
 
 
@@ -198,7 +198,7 @@ def test_suite_tasks_are_presets_with_their_own_scenarios():
     assert presets.get("imperfect-csi").channel.ce_error_var > 0
     assert presets.get("short-blocklength").channel.blocklength < ScenarioConfig().channel.blocklength
     assert presets.get("low-power").power_budget_dbw < ScenarioConfig().power_budget_dbw
-    env = gym.make("lawn/Comm-v0", config="k8")
+    env = gym.make("lawn/Comm-v1", config="k8")
     assert env.unwrapped.config.num_agvs == 8 and env.spec.kwargs == {"config": "k8"}
 
 
@@ -236,7 +236,7 @@ def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
 
     from training.bc import create_dataset
 
-    create_dataset("rg-mpc", "lawn/Comm-v0", episodes=2, seed=7, dataset_id="lawn/test/rg-mpc-v0", progress=False)
+    create_dataset("rg-mpc", "lawn/Comm-v1", episodes=2, seed=7, dataset_id="lawn/test/rg-mpc-v0", progress=False)
     dataset = minari.load_dataset("lawn/test/rg-mpc-v0")
     assert dataset.total_episodes == 2 and dataset.total_steps == 240
     episodes = list(dataset.iterate_episodes())
@@ -244,20 +244,20 @@ def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
         assert episode.observations.shape == (121, 335) and episode.actions.shape == (120, 6)
         assert episode.truncations[-1] and not episode.terminations.any()
         assert set(episode.infos) >= {"stage_cost", "delivered", "power_w", "drone_position"}
-        expected = run_episode("rg-mpc", "lawn/Comm-v0", ScenarioConfig(), 7 + i)["control_cost"]
+        expected = run_episode("rg-mpc", "lawn/Comm-v1", ScenarioConfig(), 7 + i)["control_cost"]
         assert float(np.sum(episode.infos["stage_cost"][1:])) == pytest.approx(expected, rel=1e-12)
         assert float(-np.sum(episode.rewards)) == pytest.approx(expected, rel=1e-12)
     # Minari's normalized score is the package's score / 100 (epa and dv-mpc on the same seeds)
     from training.results.stats import normalized_score
 
-    costs = {p: {7 + i: run_episode(p, "lawn/Comm-v0", ScenarioConfig(), 7 + i)["control_cost"] for i in range(2)}
+    costs = {p: {7 + i: run_episode(p, "lawn/Comm-v1", ScenarioConfig(), 7 + i)["control_cost"] for i in range(2)}
              for p in ("epa", "dv-mpc")}
     returns = np.array([float(np.sum(e.rewards)) for e in episodes])
     recorded = {7 + i: -r for i, r in enumerate(returns)}
     assert minari.get_normalized_score(dataset, returns.mean()) == pytest.approx(
         normalized_score(recorded, costs["epa"], costs["dv-mpc"])[0] / 100, rel=1e-9)
     env = dataset.recover_environment()
-    assert env.spec.id == "lawn/Comm-v0"
+    assert env.spec.id == "lawn/Comm-v1"
     obs, _ = env.reset(seed=7)
     np.testing.assert_array_equal(obs, episodes[0].observations[0])
     assert env.step(episodes[0].actions[0])[1] == pytest.approx(episodes[0].rewards[0])
@@ -266,36 +266,36 @@ def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
 def test_dataset_errors_name_the_problem(datasets_path):
     from training.bc import create_dataset, load_dataset
 
-    with pytest.raises(ValueError, match="datasets record lawn/Joint-v0 or lawn/Comm-v0"):
-        create_dataset("rg-mpc", "lawn/CommRL-v0", 1, 0, "lawn/test/x-v0")
+    with pytest.raises(ValueError, match="datasets record lawn/Joint-v1 or lawn/Comm-v1"):
+        create_dataset("rg-mpc", "lawn/CommRL-v1", 1, 0, "lawn/test/x-v0")
     with pytest.raises(ValueError, match="unknown policy 'nope'"):
-        create_dataset("nope", "lawn/Comm-v0", 1, 0, "lawn/test/x-v0")
+        create_dataset("nope", "lawn/Comm-v1", 1, 0, "lawn/test/x-v0")
     with pytest.raises(ValueError, match="unknown dataset 'lawn/test/none-v0'"):
         load_dataset("lawn/test/none-v0")
-    create_dataset("epa", "lawn/Joint-v0", 1, 0, "lawn/test/epa-v0", progress=False)
+    create_dataset("epa", "lawn/Joint-v1", 1, 0, "lawn/test/epa-v0", progress=False)
     with pytest.raises(ValueError, match="already exists"):
-        create_dataset("epa", "lawn/Joint-v0", 1, 0, "lawn/test/epa-v0", progress=False)
+        create_dataset("epa", "lawn/Joint-v1", 1, 0, "lawn/test/epa-v0", progress=False)
     for bad in ("epa", "lawn/epa", "lawn/epa-v"):
         with pytest.raises(ValueError, match=f"--dataset-id '{bad}': Minari ids have the form NAMESPACE/NAME-vN"):
-            create_dataset("epa", "lawn/Joint-v0", 1, 0, bad)
+            create_dataset("epa", "lawn/Joint-v1", 1, 0, bad)
 
 
 def test_bc_data_from_a_dataset_equals_live_labelling(datasets_path):
     from training.bc import collect, dataset_transitions
     from training.bc import create_dataset
 
-    create_dataset("rg-mpc", "lawn/Joint-v0", 2, 11, "lawn/test/live-v0", progress=False)
+    create_dataset("rg-mpc", "lawn/Joint-v1", 2, 11, "lawn/test/live-v0", progress=False)
     cfg = ScenarioConfig()
     for interface in ("rl", {"base": "rl", "power_anchor": "distance"}, None):
-        obs, labels, costs = collect("lawn/Joint-v0", cfg, "rg-mpc", 200, 11, interface)
-        d_obs, d_labels, d_costs, seeds, recorded = dataset_transitions("lawn/test/live-v0", "lawn/Joint-v0", cfg, 200,
+        obs, labels, costs = collect("lawn/Joint-v1", cfg, "rg-mpc", 200, 11, interface)
+        d_obs, d_labels, d_costs, seeds, recorded = dataset_transitions("lawn/test/live-v0", "lawn/Joint-v1", cfg, 200,
                                                                         interface)
         assert seeds == [11, 12] and obs.shape == (200, 335) and labels.shape == (200, 14) and recorded == "rg-mpc"
         np.testing.assert_array_equal(d_obs, obs)
         np.testing.assert_array_equal(d_labels, labels)
     assert d_costs[0] == pytest.approx(costs[0], rel=1e-12)
     with pytest.raises(ValueError, match="recorded with config 'default', not this run's scenario"):
-        dataset_transitions("lawn/test/live-v0", "lawn/Joint-v0", presets.get("k3"), 10, "rl")
+        dataset_transitions("lawn/test/live-v0", "lawn/Joint-v1", presets.get("k3"), 10, "rl")
 
 
 @pytest.mark.slow
@@ -308,16 +308,16 @@ def test_bc_from_a_dataset_is_the_clone_of_live_labelling(datasets_path, tmp_pat
     from training.protocol import TRAIN_SEED_BASE
     from training.train import TrainSpec, train
 
-    create_dataset("rg-mpc", "lawn/Comm-v0", 1, TRAIN_SEED_BASE, "lawn/test/bc-v0", progress=False)
-    common = dict(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=0,
+    create_dataset("rg-mpc", "lawn/Comm-v1", 1, TRAIN_SEED_BASE, "lawn/test/bc-v0", progress=False)
+    common = dict(algo="bc", env_id="lawn/Comm-v1", config=ScenarioConfig(), timesteps=120, seed=0,
                   hp_overrides={"epochs": 2}, progress=False)
     train(TrainSpec(out_dir=tmp_path / "live", **common))
     train(TrainSpec(out_dir=tmp_path / "data", dataset="lawn/test/bc-v0", **common))
     live = PPO.load(str(tmp_path / "live" / "model.zip")).policy.state_dict()
     data = PPO.load(str(tmp_path / "data" / "model.zip")).policy.state_dict()
     assert all(torch.equal(live[k], data[k]) for k in live)
-    with pytest.raises(ValueError, match="holds episodes of lawn/Comm-v0; this run trains on lawn/Joint-v0"):
-        train(TrainSpec(out_dir=tmp_path / "x", dataset="lawn/test/bc-v0", **{**common, "env_id": "lawn/Joint-v0"}))
+    with pytest.raises(ValueError, match="holds episodes of lawn/Comm-v1; this run trains on lawn/Joint-v1"):
+        train(TrainSpec(out_dir=tmp_path / "x", dataset="lawn/test/bc-v0", **{**common, "env_id": "lawn/Joint-v1"}))
     with pytest.raises(ValueError, match="only behaviour cloning"):
         TrainSpec(out_dir=tmp_path / "y", dataset="lawn/test/bc-v0", **{**common, "algo": "ppo"})
 
@@ -330,7 +330,7 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     runs = tmp_path / "runs"
     (tmp_path / "docs").mkdir()
     shutil.copy2(ROOT / "docs" / "LEARNED.md", tmp_path / "docs" / "LEARNED.md")  # the page's blocks
-    train(TrainSpec(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=0, out_dir=runs / "bc-comm" / "seed-0", hp_overrides={"epochs": 1, "dagger_iterations": 0}, progress=False))
+    train(TrainSpec(algo="bc", env_id="lawn/Comm-v1", config=ScenarioConfig(), timesteps=120, seed=0, out_dir=runs / "bc-comm" / "seed-0", hp_overrides={"epochs": 1, "dagger_iterations": 0}, progress=False))
     table = build_zoo(runs, tmp_path / "docs" / "LEARNED.md", workers=1, progress=False, episodes=3,
                       target=tmp_path / "zoo")
     from training.results.run import own_anchor
@@ -346,7 +346,7 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     assert f"| `bc-comm` (shipped) | 0 | {anchor} |" in doc and "3 test seeds (0-2)" in doc
     assert "| selected validation: vs rg-mpc (cost, episodes) |" in doc
     assert f"`dv-mpc` itself against each anchor (the \"vs own anchor\" of a perfect clone of the expert): `{anchor}` on " \
-           "lawn/Comm-v0 " in table
+           "lawn/Comm-v1 " in table
     episodes = (tmp_path / "docs" / "learned" / "episodes.csv").read_text()
     assert anchor in episodes and "stage_costs" not in episodes.splitlines()[0]
     assert (tmp_path / "docs" / "learned" / "curves.png").stat().st_size > 5000
@@ -366,11 +366,11 @@ def test_zoo_stages_on_a_recorded_run(tmp_path):
         finished_runs(runs)
     tiny = {"bc-comm": dataclasses.replace(RECIPES["bc-comm"], seeds=(0, 1), timesteps=120)}
     for s in (0, 1):
-        train(TrainSpec(algo="bc", env_id="lawn/Comm-v0", config=ScenarioConfig(), timesteps=120, seed=s, out_dir=runs / "bc-comm" / f"seed-{s}", hp_overrides={"epochs": 1, "dagger_iterations": 0}, progress=False))
+        train(TrainSpec(algo="bc", env_id="lawn/Comm-v1", config=ScenarioConfig(), timesteps=120, seed=s, out_dir=runs / "bc-comm" / f"seed-{s}", hp_overrides={"epochs": 1, "dagger_iterations": 0}, progress=False))
     found = finished_runs(runs, tiny)
     assert [(r.name, [d.name for d in dirs]) for r, dirs in found] == [("bc-comm", ["seed-0", "seed-1"])]
     ev = evaluate_zoo(found, episodes=2, workers=1, progress=False)
-    assert ev.envs == ["lawn/Comm-v0"] and {r["seed"] for r in ev.rows} == {0, 1}
+    assert ev.envs == ["lawn/Comm-v1"] and {r["seed"] for r in ev.rows} == {0, 1}
     tables = zoo_tables(ev)
     assert [row["label"] for row in tables.recipe_rows][:2] == ["dv-mpc", "epa"]
     assert len(tables.run_rows) == 2 and sum("(shipped)" in row["recipe"] for row in tables.run_rows) == 1
@@ -412,7 +412,7 @@ def test_benchmark_protocol_flags_are_checked(tmp_path, capsys):
     out = ["--out", str(tmp_path / "b"), "--quiet"]
     cases = [(["--suite", "--protocol", "learned"], "--suite and --protocol learned are two protocols"),
              (["--suite", "--seed", "5"], "--seed 5: --suite fixes the test seeds"),
-             (["--protocol", "learned", "--env", "lawn/Comm-v0"], "--env lawn/Comm-v0: --protocol learned runs each"),
+             (["--protocol", "learned", "--env", "lawn/Comm-v1"], "--env lawn/Comm-v1: --protocol learned runs each"),
              (["--suite", "--preset", "k3"], "choose tasks with --tasks"),
              (["--protocol", "learned", "--set", "num_slots=5"], "--protocol learned fixes the scenario"),
              (["--tasks", "k3"], "--tasks and --docs belong to --suite"),
@@ -447,21 +447,21 @@ def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
     for line in first_table(board)[2:]:
         policy, env, cell = (c.strip() for c in line.strip("|").split("|")[:3])
         assert cell == format_score(scores.get(("k3", env, policy))), policy
-    assert "| k3 | lawn/Joint-v0 | 3 |" in (out / "references.md").read_text()
+    assert "| k3 | lawn/Joint-v1 | 3 |" in (out / "references.md").read_text()
 
 
 def test_dataset_command_and_bc_from_it(datasets_path, tmp_path, capsys):
     pytest.importorskip("stable_baselines3")
     from training.cli import main
 
-    assert main(["dataset", "create", "--policy", "epa", "--env", "lawn/Comm-v0", "--episodes", "1", "--seed", "3",
+    assert main(["dataset", "create", "--policy", "epa", "--env", "lawn/Comm-v1", "--episodes", "1", "--seed", "3",
                  "--dataset-id", "lawn/test/epa-v0", "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "--preset default --dataset lawn/test/epa-v0 --timesteps 120 --out runs/bc-epa-v0 --hp expert=epa" in printed
-    assert main(["dataset", "create", "--policy", "epa", "--env", "lawn/Comm-v0", "--episodes", "1",
+    assert main(["dataset", "create", "--policy", "epa", "--env", "lawn/Comm-v1", "--episodes", "1",
                  "--dataset-id", "epa", "--quiet"]) == 2
     assert "--dataset-id 'epa': Minari ids have the form" in capsys.readouterr().err
-    common = ["train", "--algo", "bc", "--env", "lawn/Comm-v0", "--dataset", "lawn/test/epa-v0", "--timesteps", "60",
+    common = ["train", "--algo", "bc", "--env", "lawn/Comm-v1", "--dataset", "lawn/test/epa-v0", "--timesteps", "60",
               "--hp", "epochs=1", "--quiet"]
     assert main([*common, "--hp", "dagger_iterations=1", "--out", str(tmp_path / "mixed")]) == 2
     assert "holds episodes of epa, DAgger's expert is rg-mpc" in capsys.readouterr().err
@@ -478,14 +478,14 @@ def test_train_recipes_skips_finished_runs_restarts_unfinished_ones_and_trains_f
     import training.recipes as recipes_module
     from training.recipes import Recipe, finished, train_recipes
 
-    tiny = {"clone": Recipe("clone", "BC", "bc", "lawn/Comm-v0", 100, seeds=(0, 1)),
-            "tune": Recipe("tune", "PPO from the clone", "ppo", "lawn/Comm-v0", 50, seeds=(0, 1), init_from="clone")}
+    tiny = {"clone": Recipe("clone", "BC", "bc", "lawn/Comm-v1", 100, seeds=(0, 1)),
+            "tune": Recipe("tune", "PPO from the clone", "ppo", "lawn/Comm-v1", 50, seeds=(0, 1), init_from="clone")}
     monkeypatch.setattr(recipes_module, "RECIPES", tiny)
     runs = tmp_path / "runs"
     done0 = runs / "clone" / "seed-0"
     done0.mkdir(parents=True)
     (done0 / "run.json").write_text(json.dumps({"trainer": "bc", "num_timesteps": 100, "algo": "ppo",
-                                                 "env": "lawn/Comm-v0", "seed": 0}))
+                                                 "env": "lawn/Comm-v1", "seed": 0}))
     half = runs / "clone" / "seed-1"
     half.mkdir(parents=True)
     (half / "model.zip").write_text("an interrupted run's leftovers")

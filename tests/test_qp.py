@@ -103,11 +103,11 @@ def test_property_compiled_equals_daqp(seed, period, a_max, da_ratio, q1, q2, qv
 
 
 def test_captured_comm_rollout_stacks_match_daqp():
-    """QPs as the Comm-v0 vector env poses them under random actions (many AGVs saturating),
+    """QPs as the Comm-v1 vector env poses them under random actions (many AGVs saturating),
     captured from its MPC, warm starts as in use: every answer is DAQP's optimum."""
     import gymnasium as gym
 
-    envs = gym.make_vec("lawn/Comm-v0", num_envs=16, vectorization_mode="vector_entry_point")
+    envs = gym.make_vec("lawn/Comm-v1", num_envs=16, vectorization_mode="vector_entry_point")
     mpc = envs.unwrapped.mpc
     captured = []
     real = mpc.solve_prepared

@@ -101,7 +101,7 @@ def test_planners_plan_with_their_own_drone_reach():
     problems = []
     search = rg._search
     rg._search = lambda problem: problems.append(problem) or search(problem)
-    env = gym.make("lawn/Joint-v0", config=CFG).unwrapped
+    env = gym.make("lawn/Joint-v1", config=CFG).unwrapped
     env.reset(seed=0)
     longest = 0.0
     for _ in range(3):
@@ -169,7 +169,7 @@ def test_paper_ao_is_no_better_than_epa_per_slot_where_rg_mpc_is():
     of an EPA-driven episode the AO's returned J^ is above EPA's on some slots (its power block
     from equal power stalls and the stopping rule ends the descent), while the reduced-problem
     expert's is never above EPA's: EPA's point is feasible for it."""
-    env = gym.make("lawn/Joint-v0", config=CFG).unwrapped
+    env = gym.make("lawn/Joint-v1", config=CFG).unwrapped
     driver, ao, epa, rg = (make_policy(n, CFG) for n in ("epa", "ao-mpc", "epa", "rg-mpc"))
     obs, _ = env.reset(seed=0)
     for p in (driver, ao, epa, rg):

@@ -20,14 +20,14 @@ def test_render_writes_a_gif_of_the_episode(tmp_path, capsys):
     assert frames.shape[1] > 300 and frames.shape[2] > 300
     assert not np.array_equal(frames[0], frames[-1])  # the scene moves
     printed = capsys.readouterr().out
-    assert "epa on lawn/Joint-v0, seed 2: control cost" in printed and str(out) in printed
+    assert "epa on lawn/Joint-v1, seed 2: control cost" in printed and str(out) in printed
 
 
 def test_the_frames_are_the_envs_own_and_the_metrics_its_episode(tmp_path):
-    frames, metrics, env_id = record_frames("heuristic", "lawn/Joint-v0", seed=1, config={"num_slots": 4})
-    env = gym.make("lawn/Joint-v0", num_slots=4, render_mode="rgb_array")
+    frames, metrics, env_id = record_frames("heuristic", "lawn/Joint-v1", seed=1, config={"num_slots": 4})
+    env = gym.make("lawn/Joint-v1", num_slots=4, render_mode="rgb_array")
     env.reset(seed=1)
-    assert env_id == "lawn/Joint-v0" and len(frames) == 5
+    assert env_id == "lawn/Joint-v1" and len(frames) == 5
     np.testing.assert_array_equal(frames[0], env.render())  # the start, drawn by the env itself
     from agents import make_policy, rollout
 

@@ -17,7 +17,7 @@ from lawn_env import DisturbanceConfig, ScenarioConfig
 from training.experiments import EXPERIMENTS, make_figures
 from training.sweep import SweepTableError, load_spec, read_rows, read_table, run_sweep
 
-SPEC = {"name": "t", "env": "lawn/Joint-v0", "preset": "default", "set": {"num_slots": 8},
+SPEC = {"name": "t", "env": "lawn/Joint-v1", "preset": "default", "set": {"num_slots": 8},
         "grid": {"channel.blocklength": [256, 1024]}, "policies": ["epa", "pid"], "seeds": 3}
 
 
@@ -180,7 +180,7 @@ def test_disturbance_mode():
     with pytest.raises(ValueError, match="disturbance.actuator_lag_s"):
         ScenarioConfig(disturbance={"actuator_lag_s": -1})
     assert not ScenarioConfig().disturbance.active and DisturbanceConfig(control_period_slots=2).active
-    env = gym.make("lawn/Joint-v0", config="disturbed").unwrapped
+    env = gym.make("lawn/Joint-v1", config="disturbed").unwrapped
     obs, _ = env.reset(seed=0)
     assert not np.allclose(env.sim.x_obs, env.sim.x_aug)  # policies see noisy measurements
     q0 = env.sim.drone_position.copy()
@@ -191,8 +191,8 @@ def test_disturbance_mode():
     _, _, _, _, info1 = env.step(a)  # slot 1: no command (control period 2)
     assert np.allclose(info1["applied_increment"], 0.0)
     assert np.abs(info0["applied_increment"]).max() > 0
-    a_env = gym.make("lawn/Joint-v0", config="disturbed")
-    b_env = gym.make("lawn/Joint-v0", config="disturbed")
+    a_env = gym.make("lawn/Joint-v1", config="disturbed")
+    b_env = gym.make("lawn/Joint-v1", config="disturbed")
     oa, _ = a_env.reset(seed=3)
     ob, _ = b_env.reset(seed=3)
     for _ in range(10):

@@ -26,7 +26,7 @@ FAST = {"ppo": {"n_steps": 64, "batch_size": 64, "n_epochs": 2}, "a2c": {"n_step
         "td3": {"learning_starts": 64, "buffer_size": 2000, "batch_size": 32}}
 
 
-def _train(tmp_path, algo, env_id="lawn/Joint-v0", steps=256, name=None, **kwargs):  # noqa: D401
+def _train(tmp_path, algo, env_id="lawn/Joint-v1", steps=256, name=None, **kwargs):  # noqa: D401
     out = tmp_path / (name or f"{algo}-{env_id.split('/')[-1]}")
     hp = {**FAST.get(algo, {}), **kwargs.pop("hp_overrides", {})}
     n_envs = kwargs.pop("n_envs", 2 if algo in ("ppo", "a2c") else 1)
@@ -52,7 +52,7 @@ def _run_episode(policy, env_id):
 
 @pytest.mark.parametrize("algo", ["ppo", "sac", "td3", "a2c"])
 def test_train_save_load_evaluate(tmp_path, algo):
-    env_id = "lawn/Comm-v0" if algo == "sac" else "lawn/Joint-v0"
+    env_id = "lawn/Comm-v1" if algo == "sac" else "lawn/Joint-v1"
     out, summary = _train(tmp_path, algo, env_id)
     for name in ("model.zip", "vecnormalize.pkl", "best_model.zip", "best_vecnormalize.pkl", "run.json", "config.json",
                  "hyperparams.json", "learning_curve.csv", "learning_curve.png", "summary.md"):
@@ -72,7 +72,7 @@ def test_same_seed_same_agent(tmp_path):
     a, _ = _train(tmp_path, "ppo", name="a")
     b, _ = _train(tmp_path, "ppo", name="b")
     pa, pb = make_policy(f"sb3:{a}"), make_policy(f"sb3:{b}")
-    obs = gym.make("lawn/Joint-v0", config=SMALL).reset(seed=5)[0]
+    obs = gym.make("lawn/Joint-v1", config=SMALL).reset(seed=5)[0]
     assert np.array_equal(pa.act(obs), pb.act(obs))
 
 
@@ -100,7 +100,7 @@ def _history(out):
     return run["num_timesteps"], run["updates"], curve, episodes
 
 
-@pytest.mark.parametrize("algo, env_id, kill_at", [("ppo", "lawn/Joint-v0", 450), ("sac", "lawn/Comm-v0", 300)])
+@pytest.mark.parametrize("algo, env_id, kill_at", [("ppo", "lawn/Joint-v1", 450), ("sac", "lawn/Comm-v1", 300)])
 def test_a_killed_and_resumed_run_equals_an_uninterrupted_one(tmp_path, algo, env_id, kill_at):
     whole, _ = _train(tmp_path, algo, env_id, steps=640, name="whole")
     with pytest.raises(KeyboardInterrupt):
@@ -152,7 +152,7 @@ def test_resume_extends_finished_runs_only_when_asked_and_restarts_runs_without_
 
 
 def test_behaviour_cloning_reduces_loss_and_warm_starts_ppo(tmp_path):
-    out, summary = _train(tmp_path, "bc", "lawn/Comm-v0", steps=120, name="bc",
+    out, summary = _train(tmp_path, "bc", "lawn/Comm-v1", steps=120, name="bc",
                           hp_overrides={"epochs": 8, "dagger_iterations": 1, "dagger_timesteps": 36})
     history = json.loads((out / "bc_losses.json").read_text())
     assert history[0]["losses"][-1] < history[0]["losses"][0]
@@ -160,14 +160,14 @@ def test_behaviour_cloning_reduces_loss_and_warm_starts_ppo(tmp_path):
     assert summary["bc_loss_last"] < summary["bc_loss_first"]
     with pytest.raises(ValueError, match="bc runs are not resumable"):
         resume(out, timesteps=10_000)
-    metrics = _run_episode(make_policy(f"bc:{out}"), "lawn/Comm-v0")
+    metrics = _run_episode(make_policy(f"bc:{out}"), "lawn/Comm-v1")
     assert np.isfinite(metrics["control_cost"])
     # PPO started from the cloned policy: same weights before any update
     from stable_baselines3 import PPO
 
     from training.sb3 import init_from, make_train_env
 
-    env = make_train_env("lawn/Comm-v0", SMALL, 1, 0, {"norm_obs": True}, None)
+    env = make_train_env("lawn/Comm-v1", SMALL, 1, 0, {"norm_obs": True}, None)
     model = PPO("MlpPolicy", env, policy_kwargs={"net_arch": [128, 128], "log_std_init": -1.0}, seed=0)
     init_from(model, out, env)
     cloned = PPO.load(str(out / "model.zip"))
@@ -178,12 +178,12 @@ def test_behaviour_cloning_reduces_loss_and_warm_starts_ppo(tmp_path):
 def test_multi_agent_round_trip(tmp_path):
     out, _ = _train(tmp_path, "ppo", "lawn/Parallel-v0", steps=128, n_envs=1)
     policy = make_policy(f"marl:{out}")
-    assert policy.env_id == "lawn/Joint-v0"
-    obs = gym.make("lawn/Joint-v0", config=SMALL).reset(seed=1)[0]
+    assert policy.env_id == "lawn/Joint-v1"
+    obs = gym.make("lawn/Joint-v1", config=SMALL).reset(seed=1)[0]
     agent_obs = policy.agent_observations(obs)
     assert agent_obs.shape == (5, policy.network.observation_space.shape[0])
     assert np.array_equal(agent_obs[:, -5:], np.eye(5))  # SuperSuit's one-hot agent indicator
-    metrics = _run_episode(policy, "lawn/Joint-v0")
+    metrics = _run_episode(policy, "lawn/Joint-v1")
     assert np.isfinite(metrics["control_cost"])
     with pytest.raises(ValueError, match="marl:"):
         make_policy(f"sb3:{out}")
@@ -191,18 +191,18 @@ def test_multi_agent_round_trip(tmp_path):
 
 def test_errors_name_the_problem(tmp_path, capsys):
     with pytest.raises(ValueError, match="unknown algorithm 'ddpg'"):
-        load_hyperparams("ddpg", "lawn/Joint-v0")
+        load_hyperparams("ddpg", "lawn/Joint-v1")
     with pytest.raises(ValueError, match="unknown env id 'lawn/Nope-v0'"):
         load_hyperparams("ppo", "lawn/Nope-v0")
     with pytest.raises(ValueError, match="unknown PPO hyperparameters \\['lerning_rate'\\]"):
-        TrainSpec(algo="ppo", env_id="lawn/Joint-v0", timesteps=64, out_dir=tmp_path / "x",
+        TrainSpec(algo="ppo", env_id="lawn/Joint-v1", timesteps=64, out_dir=tmp_path / "x",
                   hp_overrides={"lerning_rate": 1e-3})
     with pytest.raises(ValueError, match="not a lawn train run directory"):
         make_policy(f"sb3:{tmp_path / 'missing'}")
     with pytest.raises(ValueError, match="unknown policy prefix 'zz'"):
         make_policy("zz:somewhere")
     with pytest.raises(SystemExit):
-        main(["train", "--algo", "ddpg", "--env", "lawn/Joint-v0", "--timesteps", "10", "--out", str(tmp_path / "y")])
+        main(["train", "--algo", "ddpg", "--env", "lawn/Joint-v1", "--timesteps", "10", "--out", str(tmp_path / "y")])
     assert "invalid choice: 'ddpg'" in capsys.readouterr().err
     assert main(["train", "--resume", str(tmp_path / "nowhere"), "--quiet"]) == 2
     assert "no run.json" in capsys.readouterr().err
@@ -220,7 +220,7 @@ def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_
     from training.protocol import read_learning_curve
     from training.results.stats import paired_difference
 
-    out, summary = _train(tmp_path, "ppo", "lawn/Comm-v0", steps=256, name="rl")
+    out, summary = _train(tmp_path, "ppo", "lawn/Comm-v1", steps=256, name="rl")
     curve = read_learning_curve(out)
     header = (out / "learning_curve.csv").read_text().splitlines()[0]
     assert header == "timesteps,control_cost,control_cost_ci95,vs_reference,vs_reference_ci95,vs_start,vs_start_ci95"
@@ -233,11 +233,11 @@ def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_
     assert summary["best_at_timesteps"] == 0 and summary["best_validation_vs_reference"] == best["vs_reference"]
     assert summary["best_validation_cost"] == best["control_cost"]
     policy = make_policy(f"sb3:{out}")
-    assert policy.interface.action_scheme == "anchored" and policy.env_id == "lawn/Comm-v0"
+    assert policy.interface.action_scheme == "anchored" and policy.env_id == "lawn/Comm-v1"
     seeds = [VALIDATION_SEED_BASE]  # _train validates on one episode
-    rows = {s: episode_row(policy, "lawn/Comm-v0", SMALL, seed=s) for s in seeds}
+    rows = {s: episode_row(policy, "lawn/Comm-v1", SMALL, seed=s) for s in seeds}
     assert all(r["slots"] == SMALL.num_slots for r in rows.values())  # no termination on the unmodified scenario
-    reference = {s: episode_row(make_policy("rg-mpc", SMALL, env_id="lawn/Comm-v0"), "lawn/Comm-v0", SMALL, s)
+    reference = {s: episode_row(make_policy("rg-mpc", SMALL, env_id="lawn/Comm-v1"), "lawn/Comm-v1", SMALL, s)
                  ["control_cost"] for s in seeds}
     selected = paired_difference({s: r["control_cost"] for s, r in rows.items()}, reference)[0]
     assert best["vs_reference"] == pytest.approx(selected, rel=1e-9)  # sb3:DIR plays the selected model
@@ -253,7 +253,7 @@ def test_plain_v0_interface_on_request(tmp_path):
 def test_several_training_seeds_in_one_command(tmp_path):
     from training.train import train_seeds
 
-    spec = TrainSpec(algo="ppo", env_id="lawn/Joint-v0", config=SMALL, timesteps=128, out_dir=tmp_path / "multi",
+    spec = TrainSpec(algo="ppo", env_id="lawn/Joint-v1", config=SMALL, timesteps=128, out_dir=tmp_path / "multi",
                      hp_overrides=FAST["ppo"], n_envs=2, eval_every=128, eval_episodes=1, checkpoint_every=128,
                      progress=False)
     result = train_seeds(spec, [3, 4], workers=1)
@@ -273,14 +273,14 @@ def test_several_training_seeds_in_one_command(tmp_path):
 def test_exported_agent_loads_as_zoo_name(tmp_path, monkeypatch):
     import agents.learned as learned
 
-    out, _ = _train(tmp_path, "ppo", "lawn/Comm-v0", steps=128, name="exp")
+    out, _ = _train(tmp_path, "ppo", "lawn/Comm-v1", steps=128, name="exp")
     monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
     learned.export_agent(out, tmp_path / "zoo" / "tiny", {"label": "tiny test agent"})
     files = sorted(p.name for p in (tmp_path / "zoo" / "tiny").iterdir())
     assert files == ["agent.json", "normalizer.npz", "policy.zip"]
     assert (tmp_path / "zoo" / "tiny" / "policy.zip").stat().st_size < 1_000_000
     shipped, original = make_policy("zoo:tiny"), make_policy(f"sb3:{out}")
-    obs = gym.make("lawn/Comm-v0", config=SMALL).reset(seed=2)[0]
+    obs = gym.make("lawn/Comm-v1", config=SMALL).reset(seed=2)[0]
     np.testing.assert_allclose(shipped.act(obs), original.act(obs), atol=1e-5)
     with pytest.raises(ValueError, match="unknown zoo agent 'nope'; shipped: tiny"):
         make_policy("zoo:nope")
@@ -312,8 +312,8 @@ def test_agents_are_shipped():
 
 def test_critic_warmup_keeps_the_cloned_actor(tmp_path):
     """With actor_warmup_steps beyond the run, PPO's updates move only the value function."""
-    out, _ = _train(tmp_path, "ppo", "lawn/Comm-v0", steps=128, name="base", n_envs=2)
-    tuned, _ = _train(tmp_path, "ppo", "lawn/Comm-v0", steps=256, name="warm", n_envs=2, init_from=out,
+    out, _ = _train(tmp_path, "ppo", "lawn/Comm-v1", steps=128, name="base", n_envs=2)
+    tuned, _ = _train(tmp_path, "ppo", "lawn/Comm-v1", steps=256, name="warm", n_envs=2, init_from=out,
                       hp_overrides={"actor_warmup_steps": 10_000, "init_log_std": -2.5})
     from stable_baselines3 import PPO
 
@@ -328,7 +328,7 @@ def test_critic_warmup_keeps_the_cloned_actor(tmp_path):
     assert float(a["log_std"].mean()) == pytest.approx(-2.5)
     # a start whose network differs from the run's is named before any torch error
     with pytest.raises(ValueError, match=r"--init-from .*net_arch=\[128, 128\], this run builds net_arch=\[32\]"):
-        _train(tmp_path, "ppo", "lawn/Comm-v0", steps=128, name="other", n_envs=2, init_from=out,
+        _train(tmp_path, "ppo", "lawn/Comm-v1", steps=128, name="other", n_envs=2, init_from=out,
                hp_overrides={"policy_kwargs": {"net_arch": [32]}})
 
 
@@ -353,7 +353,7 @@ def test_a_sigkilled_lawn_train_resumes_to_the_uninterrupted_counts(tmp_path):
     import time
 
     def cmd(out):
-        return [sys.executable, "-m", "training.cli", "train", "--algo", "ppo", "--env", "lawn/Joint-v0",
+        return [sys.executable, "-m", "training.cli", "train", "--algo", "ppo", "--env", "lawn/Joint-v1",
                 "--timesteps", "2048", "--seed", "3", "--out", str(out), "--n-envs", "2", "--eval-every", "256",
                 "--eval-episodes", "1", "--checkpoint-every", "256", "--quiet", "--set", "num_slots=12",
                 "--hp", "n_steps=64", "--hp", "batch_size=64", "--hp", "n_epochs=2"]
@@ -396,7 +396,7 @@ def test_start_at_anchor_makes_the_untrained_policy_play_the_zero_action(algo):
     from agents.runs import algorithm_class
     from training.sb3 import start_at_anchor
 
-    env = gym.make("lawn/CommRL-v0", num_slots=4)
+    env = gym.make("lawn/CommRL-v1", num_slots=4)
     model = algorithm_class(algo)("MlpPolicy", env, seed=0, **({"learning_starts": 10} if algo == "sac" else {}))
     obs, _ = env.reset(seed=0)
     before, _ = model.predict(obs, deterministic=True)
@@ -437,12 +437,12 @@ def test_the_valid_keys_are_the_public_ones():
     from training.train import split_params
 
     with pytest.raises(ValueError) as info:
-        split_params("ppo", "lawn/Joint-v0", {"learnin_rate": 1e-4})
+        split_params("ppo", "lawn/Joint-v1", {"learnin_rate": 1e-4})
     listed = str(info.value).split("valid: ")[1].split(", ")
     assert "learning_rate" in listed and "init_log_std" in listed and "actor_warmup_steps" in listed
     assert not any(k.startswith("_") for k in listed) and "seed" not in listed and "verbose" not in listed
     with pytest.raises(ValueError, match="--hp init_log_std: applies to ppo, a2c, not sac"):
-        split_params("sac", "lawn/Joint-v0", {"init_log_std": -1.0})
+        split_params("sac", "lawn/Joint-v1", {"init_log_std": -1.0})
 
 
 def _truncate(path):
@@ -495,10 +495,10 @@ def test_zoo_lists_each_agents_real_trainer(capsys):
     ({"timesteps": "many"}, "timesteps='many'"),
     ({"hp_overrides": {"lerning_rate": 1e-3}}, "unknown PPO hyperparameters \\['lerning_rate'\\]; valid: .*learning_rate"),
     ({"algo": "bc", "hp_overrides": {"epoch": 3}}, "unknown bc hyperparameters \\['epoch'\\]; valid: .*epochs"),
-    ({"algo": "sac", "env_id": "CartPole-v1"}, "env_id='CartPole-v1': sac trains on lawn/Joint-v0, lawn/Comm-v0"),
+    ({"algo": "sac", "env_id": "CartPole-v1"}, "env_id='CartPole-v1': sac trains on lawn/Joint-v1, lawn/Comm-v1"),
     ({"env_id": "lawn/Nope-v0"}, "env_id='lawn/Nope-v0': ppo trains on"),
     ({"vec": "fast"}, "vec='fast': should be 'dummy' or 'native'"),
-    ({"vec": "native", "env_id": "lawn/Parallel-v0"}, "--vec native runs lawn/Joint-v0"),
+    ({"vec": "native", "env_id": "lawn/Parallel-v0"}, "--vec native runs lawn/Joint-v1"),
     ({"dataset": "lawn/x-v0"}, "only behaviour cloning"),
     ({"eval_episodes": 0}, "eval_episodes=0"),
     ({"seed": -1}, "seed=-1"),
@@ -507,7 +507,7 @@ def test_zoo_lists_each_agents_real_trainer(capsys):
 def test_the_spec_names_the_bad_field_its_value_and_what_is_allowed(tmp_path, change, message):
     from lawn_env import ConfigError
 
-    base = dict(algo="ppo", env_id="lawn/Joint-v0", timesteps=64, out_dir=tmp_path / "r")
+    base = dict(algo="ppo", env_id="lawn/Joint-v1", timesteps=64, out_dir=tmp_path / "r")
     with pytest.raises(ConfigError, match=message):
         TrainSpec(**{**base, **change})
     assert not (tmp_path / "r").exists()  # a spec writes nothing
@@ -516,7 +516,7 @@ def test_the_spec_names_the_bad_field_its_value_and_what_is_allowed(tmp_path, ch
 def test_the_spec_is_frozen_and_a_replaced_copy_is_checked_again(tmp_path):
     import dataclasses
 
-    spec = TrainSpec(algo="ppo", env_id="lawn/Joint-v0", timesteps=64, out_dir=str(tmp_path))
+    spec = TrainSpec(algo="ppo", env_id="lawn/Joint-v1", timesteps=64, out_dir=str(tmp_path))
     assert spec.out_dir == tmp_path and spec.config == ScenarioConfig() and spec.vec == "dummy"
     with pytest.raises(dataclasses.FrozenInstanceError):
         spec.seed = 1
@@ -546,13 +546,13 @@ def test_the_registry_matches_the_hyperparameter_files_and_the_loaders():
         else:
             assert callable(algo.load())
     with pytest.raises(ValueError, match="unknown algorithm 'ddpg'; valid: ppo, a2c, sac, td3, fleet, bc"):
-        load_hyperparams("ddpg", "lawn/Joint-v0")
+        load_hyperparams("ddpg", "lawn/Joint-v1")
 
 
 def test_rl_zoo_reads_the_recipes_module():
     import training.recipes as recipes
 
-    assert set(recipes.hyperparams) == {"lawn/JointRL-v0", "lawn/CommRL-v0"}
+    assert set(recipes.hyperparams) == {"lawn/JointRL-v1", "lawn/CommRL-v1"}
     entry = next(iter(recipes.hyperparams.values()))
     assert "interface" not in entry and entry["policy"] == "MlpPolicy" and isinstance(entry["normalize"], str)
     with pytest.raises(AttributeError, match="no attribute 'nope'"):

@@ -12,7 +12,7 @@ from lawn_env.core import SlotDraws, draw_slot
 N = 4
 
 
-def _make(num_envs=N, env_id="lawn/Joint-v0", **kwargs):
+def _make(num_envs=N, env_id="lawn/Joint-v1", **kwargs):
     return gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
 
 
@@ -82,15 +82,15 @@ def _lockstep(env_id, config, actions, seed, **kwargs):
     return terminated_any
 
 
-@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v1", "lawn/Comm-v1"])
 @pytest.mark.parametrize("config", [ScenarioConfig(num_slots=30), ScenarioConfig(num_agvs=5, num_slots=30)],
                          ids=["paper-paths", "random-paths"])
 def test_lockstep_with_the_single_envs_on_their_draws(config, env_id):
     """Env i of the vector env reset with seed s equals the single env reset with s + i, bit for
-    bit, for a whole episode, when it gets the single env's slot draws (Comm-v0: the compiled QP
+    bit, for a whole episode, when it gets the single env's slot draws (Comm-v1: the compiled QP
     solver's answers depend only on each problem's own data and warm start)."""
     rng = np.random.default_rng(0)
-    size = (1 if env_id == "lawn/Comm-v0" else 3) * config.num_agvs + 2
+    size = (1 if env_id == "lawn/Comm-v1" else 3) * config.num_agvs + 2
     _lockstep(env_id, config, rng.uniform(-1, 1, (config.num_slots, N, size)).astype(np.float32), 10)
 
 
@@ -125,7 +125,7 @@ def test_one_env_of_the_vector_env_is_the_single_env(env_id, preset):
         restart = not restart and bool(v_term[0] or v_trunc[0])
 
 
-@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v1", "lawn/Comm-v1"])
 def test_next_step_autoreset_truncation_and_seeding(env_id):
     envs = _make(env_id=env_id, config=ScenarioConfig(num_slots=5))
     assert envs.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
@@ -158,14 +158,14 @@ def test_next_step_autoreset_truncation_and_seeding(env_id):
 
 
 def test_comm_vector_env_reports_its_qps_and_matches_the_one_by_one_solver():
-    """Comm-v0's vector env: per-env MPC info with a leading env axis, the same keys as the
+    """Comm-v1's vector env: per-env MPC info with a leading env axis, the same keys as the
     single env's, and the compiled solver's episode equal to DAQP's (one QP at a time) to 1e-6."""
     config = ScenarioConfig(num_slots=12)
-    single = gym.make("lawn/Comm-v0", config=config)
+    single = gym.make("lawn/Comm-v1", config=config)
     _, single_info = single.reset(seed=0)
     runs = {}
     for backend in ("compiled", "daqp"):
-        envs = _make(env_id="lawn/Comm-v0", config=config, qp_backend=backend)
+        envs = _make(env_id="lawn/Comm-v1", config=config, qp_backend=backend)
         assert envs.single_action_space == single.action_space
         assert envs.single_observation_space == single.observation_space
         _, info = envs.reset(seed=0)
@@ -180,10 +180,10 @@ def test_comm_vector_env_reports_its_qps_and_matches_the_one_by_one_solver():
         runs[backend] = np.array(rewards)
     np.testing.assert_allclose(runs["compiled"], runs["daqp"], rtol=1e-6)
     with pytest.raises(ValueError, match="unknown QP backend 'batched'; valid: compiled, daqp, osqp"):
-        _make(env_id="lawn/Comm-v0", qp_backend="batched")
+        _make(env_id="lawn/Comm-v1", qp_backend="batched")
 
 
-@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v1", "lawn/Comm-v1"])
 def test_bad_actions_name_the_env_index_and_the_expected_shape(env_id):
     envs = _make(env_id=env_id)
     envs.reset(seed=0)
@@ -221,7 +221,7 @@ def test_renders_the_chosen_env_with_its_trails():
         _make(render_mode="human")
 
 
-@pytest.mark.parametrize("env_id", ["lawn/JointRL-v0", "lawn/CommRL-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/JointRL-v1", "lawn/CommRL-v1"])
 def test_rl_ids_have_native_vector_envs_on_the_rl_interface(env_id):
     envs = gym.make_vec(env_id, num_envs=2)  # the vector entry point is the default mode
     single = gym.make(env_id)
@@ -268,13 +268,13 @@ def test_sb3_trains_on_the_native_vector_env(tmp_path):
         obs, reward, done, infos = venv.step(np.zeros((2, venv.action_space.shape[0]), dtype=np.float32))
     assert done.all() and infos[0]["TimeLimit.truncated"] and "episode" in infos[0]
     assert infos[0]["terminal_observation"].shape == obs[0].shape and obs[0][-1] == 0.0
-    summary = train(TrainSpec(algo="ppo", env_id="lawn/Joint-v0", config=ScenarioConfig(num_slots=12), timesteps=256,
+    summary = train(TrainSpec(algo="ppo", env_id="lawn/Joint-v1", config=ScenarioConfig(num_slots=12), timesteps=256,
                               seed=0, out_dir=tmp_path / "run", n_envs=4,
                               hp_overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, eval_every=128,
                               eval_episodes=1, checkpoint_every=128, progress=False, interface="v0", vec="native"))
     assert summary["timesteps"] == 256 and summary["best_validation_cost"] > 0
-    # the training protocol's default (the RL interface) on Comm-v0's native vector env
-    summary = train(TrainSpec(algo="ppo", env_id="lawn/Comm-v0", config=ScenarioConfig(num_slots=12), timesteps=128,
+    # the training protocol's default (the RL interface) on Comm-v1's native vector env
+    summary = train(TrainSpec(algo="ppo", env_id="lawn/Comm-v1", config=ScenarioConfig(num_slots=12), timesteps=128,
                               seed=0, out_dir=tmp_path / "comm", n_envs=4,
                               hp_overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, eval_every=128,
                               eval_episodes=1, checkpoint_every=128, progress=False, vec="native"))
@@ -284,32 +284,32 @@ def test_sb3_trains_on_the_native_vector_env(tmp_path):
                   out_dir=tmp_path / "rl", n_envs=2, progress=False, vec="native")
 
 
-@pytest.mark.parametrize("env_id, anchor", [("lawn/Joint-v0", {}), ("lawn/Comm-v0", {}),
-                                             ("lawn/Joint-v0", {"power_anchor": "distance", "increment_anchor": "lqr"})])
+@pytest.mark.parametrize("env_id, anchor", [("lawn/Joint-v1", {}), ("lawn/Comm-v1", {}),
+                                             ("lawn/Joint-v1", {"power_anchor": "distance", "increment_anchor": "lqr"})])
 def test_rl_interface_lockstep_with_the_single_env(env_id, anchor):
     """With the RL interface (anchored actions, scaled reward, termination, clipped features) env i
     of the vector env equals the single RL env on seed s + i, bit for bit, until its episode ends."""
     iface = {"base": "rl", "termination_distance_m": 4.0, **anchor}  # tight, so that some env is terminated
     rng = np.random.default_rng(3)
-    size = (1 if env_id == "lawn/Comm-v0" else 3) * 4 + 2
+    size = (1 if env_id == "lawn/Comm-v1" else 3) * 4 + 2
     actions = rng.uniform(-1, 1, (30, N, size)).astype(np.float32)
     actions[:, 1] *= 0.1  # env 1 stays on track, the others may be terminated
     assert _lockstep(env_id, ScenarioConfig(num_slots=30), actions, 20, interface=iface) > 0
 
 
-@pytest.mark.parametrize("env_id, interface", [("lawn/Joint-v0", "v0"), ("lawn/Comm-v0", "v0"), ("lawn/Joint-v0", "rl")])
+@pytest.mark.parametrize("env_id, interface", [("lawn/Joint-v1", "v0"), ("lawn/Comm-v1", "v0"), ("lawn/Joint-v1", "rl")])
 def test_disturbance_mode_lockstep_with_the_single_env(env_id, interface):
     """The disturbed preset (wind and gusts, control period 2 with period-aware planning, actuator
     lag, process and measurement noise): env i equals the single env on seed s + i bit for bit when
     both see the same draws (the single env's, :func:`lawn_env.core.draw_slot`'s order)."""
     config = lawn_env.presets.get("disturbed").override({"num_slots": 20})
-    size = (1 if env_id == "lawn/Comm-v0" else 3) * 4 + 2
+    size = (1 if env_id == "lawn/Comm-v1" else 3) * 4 + 2
     actions = np.random.default_rng(5).uniform(-1, 1, (20, N, size)).astype(np.float32)
     _lockstep(env_id, config, actions, 30, interface=interface)
 
 
 # ---------------------------------------------------------------------- gaps a test audit found
-@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v1", "lawn/Comm-v1"])
 def test_seeding_a_list_of_the_wrong_length_and_none(env_id):
     envs = _make(env_id=env_id, config=ScenarioConfig(num_slots=6))
     with pytest.raises(ValueError, match=f"a list of 3 seeds for {N} envs"):
@@ -327,7 +327,7 @@ def test_seeding_a_list_of_the_wrong_length_and_none(env_id):
     assert not np.array_equal(fresh[0], fresh[1])
 
 
-@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v1", "lawn/Comm-v1"])
 def test_step_and_render_before_reset_are_refused(env_id):
     envs = _make(env_id=env_id, render_mode="rgb_array")
     with pytest.raises(RuntimeError, match="reset"):
@@ -351,7 +351,7 @@ def _comm_reset_psi(envs, i):
 
 
 def test_comm_info_on_the_next_step_autoreset_describes_the_new_episode():
-    envs = _make(env_id="lawn/Comm-v0", config=ScenarioConfig(num_slots=3))
+    envs = _make(env_id="lawn/Comm-v1", config=ScenarioConfig(num_slots=3))
     envs.reset(seed=2)
     rng = np.random.default_rng(2)
     for _ in range(3):
@@ -364,14 +364,14 @@ def test_comm_info_on_the_next_step_autoreset_describes_the_new_episode():
         np.testing.assert_allclose(info["success_probability_planned"][i], _comm_reset_psi(envs, i), rtol=1e-12)
 
 
-@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v1", "lawn/Comm-v1"])
 def test_same_step_autoreset_on_termination_and_for_comm(env_id):
     """SameStep: the step that ends an episode, by truncation or by the RL interface's
     termination, returns the new episode's first observation, the final one in info, and infos
     (Comm's MPC keys included) describing the step that ended it."""
     from lawn_env.envs.vector import CommVectorEnv, JointVectorEnv
 
-    cls = CommVectorEnv if env_id == "lawn/Comm-v0" else JointVectorEnv
+    cls = CommVectorEnv if env_id == "lawn/Comm-v1" else JointVectorEnv
     iface = {"base": "rl", "termination_distance_m": 3.0}  # the 3 m offsets end some episodes at once
     envs = cls(8, config=ScenarioConfig(num_slots=4), interface=iface, autoreset_mode="SameStep")
     envs.reset(seed=0)
@@ -388,12 +388,12 @@ def test_same_step_autoreset_on_termination_and_for_comm(env_id):
             assert (obs[ended, -1] == 0.0).all() and (info["final_obs"][ended, -1] > 0.0).all()
             assert (info["slot"][ended] > 0).all()  # the info is the ending step's
             assert (reward[terminated] < envs.interface.reward_floor).all()  # the floor of the slots not played
-            if env_id == "lawn/Comm-v0":
+            if env_id == "lawn/Comm-v1":
                 assert (info["mpc_iterations"][ended] > 0).any()
     assert ended_by["terminated"] > 0 and ended_by["truncated"] > 0
 
 
-@pytest.mark.parametrize("env_id", ["lawn/Joint-v0", "lawn/Comm-v0"])
+@pytest.mark.parametrize("env_id", ["lawn/Joint-v1", "lawn/Comm-v1"])
 @pytest.mark.parametrize("config", [ScenarioConfig(num_slots=8), ScenarioConfig(num_agvs=5, num_slots=8),
                                     ScenarioConfig(num_slots=8).override(**{"disturbance.wind_gust_std_mps": 1.0,
                                                "disturbance.process_noise_position_m": 0.1,
@@ -403,7 +403,7 @@ def test_the_same_seed_gives_the_same_episodes_from_the_envs_own_generators(env_
     """Determinism with nothing replaced: the vector env's and the single env's own seeded
     generators, twice, give bitwise the same observations, rewards and infos (autoresets included)."""
     rng = np.random.default_rng(1)
-    actions = rng.uniform(-1, 1, (12, N, (1 if env_id == "lawn/Comm-v0" else 3) * config.num_agvs + 2))
+    actions = rng.uniform(-1, 1, (12, N, (1 if env_id == "lawn/Comm-v1" else 3) * config.num_agvs + 2))
     actions = actions.astype(np.float32)
 
     def vector_run():

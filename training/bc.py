@@ -45,7 +45,7 @@ __all__ = ["collect", "label_transitions", "fit", "BCSettings", "bc_settings", "
 BC_TARGETS = ("ppo", "sac")
 DATA_EXTRA = "datasets need the data extra (minari): pip install -e '.[data]' (bash scripts/setup.sh full installs it)"
 #: Datasets record the v0 envs (the RL ids reshape the reward and end episodes early).
-DATASET_ENV_IDS = ("lawn/Joint-v0", "lawn/Comm-v0")
+DATASET_ENV_IDS = ("lawn/Joint-v1", "lawn/Comm-v1")
 
 
 def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, interface: InterfaceLike,
@@ -85,7 +85,7 @@ def label_transitions(config: ScenarioConfig, env_id: str, interface: InterfaceL
     them): the observations as the learner sees them (the interface's clipping) and the actions in
     the interface's scheme (decoded as v0, encoded in the scheme)."""
     iface = resolve_interface(interface)
-    role = "joint" if env_id == "lawn/Joint-v0" else "comm"
+    role = "joint" if env_id == "lawn/Joint-v1" else "comm"
     v0, scheme = action_codec(config, role, None), action_codec(config, role, iface)
     layout = ObservationLayout(config)
     obs_out, act_out = [], []

@@ -52,7 +52,7 @@ __all__ = ["run_benchmark", "README_ROWS", "DIGESTS", "DIGEST_SEEDS", "episode_r
 SUITE_POLICIES = ("dv-mpc", "rg-mpc", "ao-mpc", "epa", "sf", "pid", "lqr", "heuristic", "anchor:stake", "anchor:distance")
 #: The rows of the README's table: lawn benchmark's default policies and the reference rows.
 README_ROWS = (*BENCHMARK_POLICIES, *REFERENCE_ROWS)
-#: Their recorded episodes (seeds DIGEST_SEEDS of the default task on lawn/Joint-v0).
+#: Their recorded episodes (seeds DIGEST_SEEDS of the default task on lawn/Joint-v1).
 DIGESTS = Path(__file__).resolve().parent.parent / "tests" / "data" / "episode_digests.json"
 DIGEST_SEEDS = (0, 1)
 #: Fleet size -> test seeds (0..n-1) of the fleet-size table.
@@ -141,7 +141,7 @@ def _applicable(policy: str, env: str, config: ScenarioConfig) -> str | None:
 def run_suite(policies: Sequence[str], tasks: Sequence[str], episodes: int, out_dir: Path, play: Play = Play()
               ) -> tuple[list[dict], dict[tuple[str, str], str], float]:
     """Every policy on every task (seeds 0..episodes-1), with the references of each env used and
-    the reference rows (:data:`.results.run.REFERENCE_ROWS`, on ``lawn/Joint-v0``); writes
+    the reference rows (:data:`.results.run.REFERENCE_ROWS`, on ``lawn/Joint-v1``); writes
     ``episodes.csv`` and ``per_slot.csv`` (the mean stage cost per slot of every task, env and
     policy). Returns the rows, the (task, policy) pairs that cannot run with the reason, and the
     wall time."""

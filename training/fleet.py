@@ -39,7 +39,7 @@ def fleet_pairs(env_id: str, config: ScenarioConfig, steps: int, seed: int, inte
     label (steps, A) bool: the AGVs present and the drone."""
     iface = resolve_interface(interface)
     obs, labels, _ = collect(env_id, config, expert, steps, seed, iface, actor=actor)
-    layout = EntityLayout(config, "joint" if env_id == "lawn/Joint-v0" else "comm", iface.obs_bound)
+    layout = EntityLayout(config, "joint" if env_id == "lawn/Joint-v1" else "comm", iface.obs_bound)
     present = np.zeros((len(labels), layout.action_space.shape[0]), dtype=bool)
     present[:, layout.gather] = True
     return layout.observe(obs), layout.to_entity_actions(labels), present
@@ -155,8 +155,8 @@ def train_fleet_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: i
                            versions, write_learning_curve)
 
     limit_torch_threads()
-    if env_id not in ("lawn/Joint-v0", "lawn/Comm-v0"):
-        raise ValueError(f"fleet networks train on lawn/Joint-v0 or lawn/Comm-v0, not {env_id!r}")
+    if env_id not in ("lawn/Joint-v1", "lawn/Comm-v1"):
+        raise ValueError(f"fleet networks train on lawn/Joint-v1 or lawn/Comm-v1, not {env_id!r}")
     st = fleet_settings(params)
     env = MixedFleetEnv(env_id, st["fleet_sizes"], st["interface"], config)  # checks the sizes
     start = time.perf_counter()

@@ -3,7 +3,7 @@
 ``lawn zoo train`` (:func:`train_recipes`), which trains the missing runs of each; and lawn's PPO
 hyperparameters in rl-baselines3-zoo's form (:func:`zoo_hyperparams`)::
 
-    python -m rl_zoo3.train --algo ppo --env lawn/CommRL-v0 --gym-packages lawn_env --conf-file training.recipes
+    python -m rl_zoo3.train --algo ppo --env lawn/CommRL-v1 --gym-packages lawn_env --conf-file training.recipes
 
 (``--conf-file`` takes a module with a ``hyperparams`` attribute: this one's, made when read.)
 """
@@ -107,29 +107,29 @@ _MARL_FLEET = {"interface": {"base": "rl", "layout": "entities"}, "policy": "Fle
 #: The learned comparators. Training runs them in this order, the longest first (a recipe that
 #: starts from another runs in a second phase); the tables list them per env in this order.
 RECIPES: dict[str, Recipe] = {r.name: r for r in (
-    Recipe("bc-comm", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Comm-v0", 100_000, hp=_BC_AT_SCALE),
-    Recipe("bc-joint", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Joint-v0", 100_000,
+    Recipe("bc-comm", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Comm-v1", 100_000, hp=_BC_AT_SCALE),
+    Recipe("bc-joint", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Joint-v1", 100_000,
            hp=_BC_AT_SCALE),
     Recipe("fleet-comm", "Fleet network (attention over the AGVs), DAgger of rg-mpc on K = 3-32", "fleet",
-           "lawn/Comm-v0", 50_000, seeds=_FLEET_SEEDS, section="fleet"),
+           "lawn/Comm-v1", 50_000, seeds=_FLEET_SEEDS, section="fleet"),
     Recipe("fleet-joint", "Fleet network (attention over the AGVs), DAgger of rg-mpc on K = 3-32", "fleet",
-           "lawn/Joint-v0", 50_000, seeds=_FLEET_SEEDS, section="fleet"),
+           "lawn/Joint-v1", 50_000, seeds=_FLEET_SEEDS, section="fleet"),
     Recipe("ppo-marl-fleet-k16", "PPO multi-agent, fleet network, trained at K = 16", "ppo", PARALLEL_ENV_ID,
            100_000, seeds=_FLEET_SEEDS, hp=_MARL_FLEET, eval_every=25_000, section="fleet", num_agvs=16),
     Recipe("ppo-marl-fleet-k64", "PPO multi-agent, fleet network, trained at K = 64", "ppo", PARALLEL_ENV_ID,
            30_000, seeds=_FLEET_SEEDS, hp=_MARL_FLEET, eval_every=10_000, section="fleet", num_agvs=64),
-    Recipe("ppo-comm-scratch", "PPO from the distance prior (no MPC in the action)", "ppo", "lawn/Comm-v0",
+    Recipe("ppo-comm-scratch", "PPO from the distance prior (no MPC in the action)", "ppo", "lawn/Comm-v1",
            1_000_000, hp=_SCRATCH, eval_every=100_000, vec="native"),
     Recipe("ppo-joint-scratch", "PPO from the distance prior and the LQR (no MPC in the action)", "ppo",
-           "lawn/Joint-v0", 1_000_000, hp=_SCRATCH_JOINT, eval_every=100_000, vec="native"),
-    Recipe("ppo-comm", "PPO (RL interface)", "ppo", "lawn/Comm-v0", 300_000, eval_every=50_000, vec="native"),
-    Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v0", 300_000, eval_every=50_000,
+           "lawn/Joint-v1", 1_000_000, hp=_SCRATCH_JOINT, eval_every=100_000, vec="native"),
+    Recipe("ppo-comm", "PPO (RL interface)", "ppo", "lawn/Comm-v1", 300_000, eval_every=50_000, vec="native"),
+    Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v1", 300_000, eval_every=50_000,
            vec="native"),
-    Recipe("sac-comm", "SAC (RL interface)", "sac", "lawn/Comm-v0", 20_000, eval_every=5_000),
+    Recipe("sac-comm", "SAC (RL interface)", "sac", "lawn/Comm-v1", 20_000, eval_every=5_000),
     Recipe("ppo-marl", "PPO multi-agent, shared weights", "ppo", PARALLEL_ENV_ID, 150_000, eval_every=25_000),
-    Recipe("ppo-comm-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Comm-v0", 60_000, init_from="bc-comm",
+    Recipe("ppo-comm-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Comm-v1", 60_000, init_from="bc-comm",
            hp=_FINE_TUNE, eval_every=10_000),
-    Recipe("ppo-joint-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Joint-v0", 60_000, init_from="bc-joint",
+    Recipe("ppo-joint-from-bc", "BC then PPO fine-tuning", "ppo", "lawn/Joint-v1", 60_000, init_from="bc-joint",
            hp=_FINE_TUNE, eval_every=10_000),
 )}
 

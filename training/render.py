@@ -104,7 +104,7 @@ def render_episode(policy: str, out: Path, env_id: str | None = None, seed: int 
 def run_demo(seed: int, out_dir: Path, config: ScenarioConfig | str | None = None,
              overrides: dict | None = None) -> dict:
     """Run one episode, write ``metrics.json`` and ``paths.png`` into ``out_dir``; return the metrics."""
-    env = gym.make("lawn/Joint-v0", config=config, **(overrides or {}))
+    env = gym.make("lawn/Joint-v1", config=config, **(overrides or {}))
     episode = rollout(env, HeuristicPolicy(env.unwrapped.config), seed)
     metrics = dict(episode.metrics)
     metrics["decision_time_median_s"] = episode.decision_time_median_s
@@ -113,6 +113,6 @@ def run_demo(seed: int, out_dir: Path, config: ScenarioConfig | str | None = Non
     from lawn_env.render import plot_episode
 
     plot_episode(env.unwrapped.sim, env.unwrapped.engine.kept_trail, out_dir / "paths.png",
-                 title=f"lawn/Joint-v0, scripted heuristic, seed {seed}: cost {metrics['control_cost']:.0f}")
+                 title=f"lawn/Joint-v1, scripted heuristic, seed {seed}: cost {metrics['control_cost']:.0f}")
     env.close()
     return metrics

@@ -40,7 +40,7 @@ class NativeVecEnv(VecEnv):
     """``n_envs`` scenarios of ``env_id`` (an id with a native vector env) in one batched
     simulation, on ``interface`` (an RL id's default: ``"rl"``)."""
 
-    def __init__(self, config: ScenarioConfig, n_envs: int, env_id: str = "lawn/Joint-v0",
+    def __init__(self, config: ScenarioConfig, n_envs: int, env_id: str = "lawn/Joint-v1",
                  interface: InterfaceLike = None):
         kwargs = {} if interface is None else {"interface": interface}  # None keeps the id's own (RL ids: "rl")
         self.venv = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", config=config,

@@ -3,7 +3,7 @@
 A spec (YAML or JSON, or a dict) names the grid::
 
     name: blocklength
-    env: lawn/Joint-v0
+    env: lawn/Joint-v1
     preset: default                     # base scenario
     set: {num_slots: 120}               # fixed overrides (dotted keys)
     grid: {channel.blocklength: [256, 1024], channel.infinite_blocklength: [false]}
@@ -109,7 +109,7 @@ def load_spec(spec: str | Path | Mapping[str, Any]) -> SweepSpec:
     policies = spec.get("policies", ["rg-mpc"])
     if not isinstance(policies, (list, tuple)) or not policies or not all(isinstance(p, str) for p in policies):
         raise ValueError(f"{source}: policies must be a non-empty list of policy names; got {policies!r}")
-    out = SweepSpec(name=spec.get("name", "sweep"), env=spec.get("env", "lawn/Joint-v0"),
+    out = SweepSpec(name=spec.get("name", "sweep"), env=spec.get("env", "lawn/Joint-v1"),
                     preset=spec.get("preset", "default"), set=dict(spec.get("set", {})),
                     grid={k: list(v) for k, v in dict(spec.get("grid", {})).items()},
                     policies=list(spec.get("policies", ["rg-mpc"])), policy_args=dict(spec.get("policy_args", {})))

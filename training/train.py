@@ -34,7 +34,7 @@ __all__ = ["ALGORITHMS", "ALGOS", "Algorithm", "TRAIN_ENV_IDS", "NATIVE_ENV_IDS"
            "TRAIN_SEED_BASE", "VALIDATION_SEED_BASE"]
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
-_LAWN, _CARTPOLE = ("lawn/Joint-v0", "lawn/Comm-v0"), "CartPole-v1"
+_LAWN, _CARTPOLE = ("lawn/Joint-v1", "lawn/Comm-v1"), "CartPole-v1"
 #: Environment ids ``lawn train`` accepts; ``lawn/Parallel-v0`` is the PettingZoo env (parameter sharing).
 TRAIN_ENV_IDS = (*ENV_IDS, PARALLEL_ENV_ID, _CARTPOLE)
 #: The ids registered with a native vector env (``--vec native``: :class:`training.sb3.NativeVecEnv`).

@@ -6,7 +6,7 @@ interface and the role (a strategy: :class:`JointRole`, the actions decide every
 stages in order for every environment: decode the actions and let the role decide the rest
 (:meth:`Engine.decide`), advance the core with the slot's draws (the scenarios of a mask), then the
 rewards, termination and truncation (:meth:`Engine.outcome`); the info (:meth:`Engine.info`) and
-the observations (:meth:`Engine.observe`) are read after it. ``lawn/Joint-v0`` and ``lawn/Comm-v0``
+the observations (:meth:`Engine.observe`) are read after it. ``lawn/Joint-v1`` and ``lawn/Comm-v1``
 (:class:`LawnEnv`) and the PettingZoo env are B = 1 engines behind their APIs, the native vector
 envs B = N ones.
 """
@@ -34,7 +34,7 @@ __all__ = ["Engine", "EngineAccess", "JointRole", "CommRole", "ROLE_TYPES", "Law
 
 
 #: The info keys every step and reset of the central environments (and the parallel env's "drone")
-#: carry, with fixed shapes and numpy dtypes; ``lawn/Comm-v0`` adds its MPC's keys
+#: carry, with fixed shapes and numpy dtypes; ``lawn/Comm-v1`` adds its MPC's keys
 #: (``COMM_INFO_KEYS``); the step that ends an episode adds ``episode_metrics`` (a dict of MODEL.md §6).
 INFO_KEYS = ("slot", "stage_cost", "reward_tracking", "reward_effort", "delivered",
              "outage_probability", "power_w", "drone_position", "applied_increment")
@@ -42,7 +42,7 @@ COMM_INFO_KEYS = ("mpc_iterations", "mpc_fallbacks", "success_probability_planne
 
 
 class JointRole:
-    """``lawn/Joint-v0``'s role: the actions decide the increments, the powers and the drone."""
+    """``lawn/Joint-v1``'s role: the actions decide the increments, the powers and the drone."""
 
     name = "joint"
 
@@ -58,7 +58,7 @@ class JointRole:
 
 
 class CommRole:
-    """``lawn/Comm-v0``'s role: the actions decide the powers and the drone; every AGV's increment
+    """``lawn/Comm-v1``'s role: the actions decide the powers and the drone; every AGV's increment
     is the first one of the outage-aware MPC (QP P3) at its link's planned success probability,
     solved for all B x K links at once (the compiled exact solver, warm-started per scenario).
 
@@ -71,7 +71,7 @@ class CommRole:
     def __init__(self, mpc: OutageAwareMPC, law: str = "paper", planning_state: str = "measured"):
         self.mpc = mpc
         self.law = law  # control.law: the QP at the planned psi ("paper") or at psi = 1 ("delivery")
-        self.planning_state = planning_state  # "true": lawn/Comm-v0's MPC, which planned from the true state
+        self.planning_state = planning_state  # "true": lawn/Comm-v0's MPC, which plans from the true state
         self.last_solve_time_s = float("nan")
 
     def reset(self, which: np.ndarray | None = None) -> None:
@@ -102,7 +102,7 @@ ROLE_TYPES = {"joint": JointRole, "comm": CommRole}
 
 
 #: The state the Comm role's MPC plans from: "measured" (what every planner has: the true state
-#: without measurement noise) or "true" (``lawn/Comm-v0``'s, kept for its episodes).
+#: without measurement noise) or "true" (``lawn/Comm-v1``'s, kept for its episodes).
 PLANNING_STATES = ("measured", "true")
 
 
@@ -317,13 +317,13 @@ def check_render_mode(render_mode: str | None, valid: Sequence[str] = RENDER_MOD
 
 class EngineAccess:
     """What every env over an :class:`Engine` (``self.engine``) exposes of it, single and vector
-    alike: the MPC of ``lawn/Comm-v0``'s role, its last solve time, the entity layout."""
+    alike: the MPC of ``lawn/Comm-v1``'s role, its last solve time, the entity layout."""
 
     engine: Engine
 
     @property
     def last_mpc_solve_time_s(self) -> float:
-        """Wall-clock time of the last step's MPC solves (``lawn/Comm-v0``; NaN otherwise)."""
+        """Wall-clock time of the last step's MPC solves (``lawn/Comm-v1``; NaN otherwise)."""
         return getattr(self.engine.role, "last_solve_time_s", float("nan"))
 
     @property
@@ -333,12 +333,12 @@ class EngineAccess:
 
     @property
     def mpc(self) -> OutageAwareMPC | None:
-        """The MPC that drives the AGVs of every scenario (``lawn/Comm-v0``; None otherwise)."""
+        """The MPC that drives the AGVs of every scenario (``lawn/Comm-v1``; None otherwise)."""
         return getattr(self.engine.role, "mpc", None)
 
 
 class LawnEnv(EngineAccess, gym.Env):
-    """``lawn/Joint-v0`` and ``lawn/Comm-v0`` (their classes set ``role``): an engine of one
+    """``lawn/Joint-v1`` and ``lawn/Comm-v1`` (their classes set ``role``): an engine of one
     scenario behind Gymnasium's API."""
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 4}

@@ -1,4 +1,4 @@
-"""``lawn/Joint-v0``: the agent makes every decision of a slot."""
+"""``lawn/Joint-v1``: the agent makes every decision of a slot."""
 
 from __future__ import annotations
 
@@ -70,36 +70,29 @@ class JointEnv(LawnEnv):
 
     ## Arguments
 
-    ``gym.make("lawn/Joint-v0", config=None, render_mode=None, interface=None, **overrides)``:
+    ``gym.make("lawn/Joint-v1", config=None, render_mode=None, interface=None, **overrides)``:
     ``config`` is a :class:`~lawn_env.ScenarioConfig`, a dict or a preset name; overrides are
     top-level config fields or a section mapped to a dict, e.g. ``num_agvs=3,
     channel={"blocklength": 256}``. ``interface`` is None (the paper's benchmark), ``"rl"``,
-    or an :class:`~lawn_env.RLInterface` / dict of its fields; ``lawn/JointRL-v0`` is this env
+    or an :class:`~lawn_env.RLInterface` / dict of its fields; ``lawn/JointRL-v1`` is this env
     with ``interface="rl"``. The interface's ``layout="entities"`` lays observations and actions
     out per AGV, padded to 64 rows with a mask (:mod:`lawn_env.entities`).
 
     ## Version History
 
-    * v0: initial version; the ``interface`` keyword (opt-in, the default is unchanged) and
-      ``info["stage_cost"]`` added later.
-    * v0 (later): reset and step infos share one flat schema (``lawn_env.envs.base.INFO_KEYS``;
-      ``reward_tracking``/``reward_effort`` replace the nested ``reward_terms``); a made env's spec
-      carries ``max_episode_steps`` (= ``num_slots``; the registry entry has no time limit, the
-      env truncates itself); v0 observations saturate at ±1e6 (``OBS_LIMIT``, the space's
-      bound); ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` gives the native
-      vector env (:mod:`lawn_env.envs.vector`); the dynamics and rewards are unchanged.
-    * v0 (later): every view (this env, ``lawn/Comm-v0``, the PettingZoo env, the native
-      vector envs) runs one compiled simulation core; this env's observations, rewards and infos
-      are bit for bit as before for the same seed and actions, ``episode_metrics`` now accumulate
-      slot by slot (equal to before within 1e-15 relative). The native vector env draws every
-      scenario's slot randomness from one generator (the env's, scenario 0's), so with N > 1 its
-      episodes differ from before for the same seed (N = 1 equals this env bit for bit), and its
-      infos gain ``episode_metrics`` on the step an episode ends.
-    * v0 (later): ``render()`` frames (every view) gain a colour bar of the links' outage
-      probability (now green to red) and the episode's control cost so far in the title, at
-      512 x 448 pixels (480 x 480 before); ``lawn render`` writes an episode of them as an
-      animation. Episodes are unchanged.
-    * v0 (later): the interface's ``layout`` field (opt-in; the flat layout stays the default):
-      ``"entities"`` gives a row per AGV padded to 64 rows, a mask and per-AGV action rows, the
-      flat layout's features and actions rearranged; episodes are unchanged.
+    * v1: the native vector env (``gym.make_vec(..., vectorization_mode="vector_entry_point")``,
+      :mod:`lawn_env.envs.vector`) draws every scenario's slot randomness from one generator (the
+      env's, scenario 0's) and steps a mask of rows, so with N > 1 its episodes differ from v0's
+      for the same seed (N = 1 equals this env bit for bit); observations saturate at ±1e6
+      (``OBS_LIMIT``, the space's bound). Also, with single-env episodes bit for bit as v0's: reset
+      and step infos share one flat schema (``lawn_env.envs.base.INFO_KEYS``;
+      ``reward_tracking``/``reward_effort`` replace the nested ``reward_terms``), ``episode_metrics``
+      summed slot by slot (within 1e-15 relative) and given on the step an episode ends; a made
+      env's spec carries ``max_episode_steps`` (= ``num_slots``; the env truncates itself); every
+      view runs one compiled simulation core; ``render()`` frames gain a colour bar of the links'
+      outage probability (green to red) and the running control cost, at 512 x 448 pixels (480 x
+      480 before); the interface's opt-in ``layout="entities"``.
+    * v0: initial version; the ``interface`` keyword (opt-in) and ``info["stage_cost"]`` added
+      later. Still registered: ``lawn/Joint-v0`` builds this class without a native vector env
+      (``gym.make_vec`` steps v0 scenarios side by side, each with its own generator).
     """

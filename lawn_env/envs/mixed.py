@@ -41,17 +41,17 @@ def _fleet_sizes(fleet_sizes: Any) -> list[int]:
 
 
 class MixedFleetEnv(gym.Env):
-    """Episodes of ``env_id`` (``lawn/Joint-v0`` or ``lawn/Comm-v0``) with K drawn uniformly from
+    """Episodes of ``env_id`` (``lawn/Joint-v1`` or ``lawn/Comm-v1``) with K drawn uniformly from
     ``fleet_sizes`` at every reset; ``interface`` is any interface (its layout is set to
     ``entities``), ``config`` and ``overrides`` as for ``gym.make`` (``num_agvs`` is the draw's).
     ``info["num_agvs"]`` carries the episode's K."""
 
     metadata = {"render_modes": []}
 
-    def __init__(self, env_id: str = "lawn/Joint-v0", fleet_sizes: Sequence[int] = tuple(range(3, 17)),
+    def __init__(self, env_id: str = "lawn/Joint-v1", fleet_sizes: Sequence[int] = tuple(range(3, 17)),
                  interface: InterfaceLike = "rl", config: ConfigLike = None, **overrides: Any):
-        if not isinstance(env_id, str) or env_id not in ("lawn/Joint-v0", "lawn/Comm-v0"):
-            raise ValueError(f"env_id={env_id!r}; valid: 'lawn/Joint-v0', 'lawn/Comm-v0'")
+        if not isinstance(env_id, str) or env_id not in ("lawn/Joint-v1", "lawn/Comm-v1"):
+            raise ValueError(f"env_id={env_id!r}; valid: 'lawn/Joint-v1', 'lawn/Comm-v1'")
         sizes = _fleet_sizes(fleet_sizes)
         if "num_agvs" in overrides:
             raise ValueError(f"num_agvs={overrides['num_agvs']!r}: MixedFleetEnv draws K from fleet_sizes at every "

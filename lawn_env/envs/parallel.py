@@ -26,7 +26,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
     """
     ## Description
 
-    The system of ``lawn/Joint-v0`` with one agent per decision maker: ``"drone"`` chooses the
+    The system of ``lawn/Joint-v1`` with one agent per decision maker: ``"drone"`` chooses the
     power split and its move, ``"agv_0"`` ... ``"agv_{K-1}"`` each choose their own acceleration
     increment. All act simultaneously each slot; the AGVs' commands then cross the links as in
     the central environments.
@@ -34,7 +34,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
     ## Action Spaces
 
     * ``"drone"``: ``Box(-1, 1, (K + 2,))``: K power weights, then the velocity (scalings of
-      ``lawn/Comm-v0``).
+      ``lawn/Comm-v1``).
     * ``"agv_k"``: ``Box(-1, 1, (2,))``: the increment, ``a * Delta-a_max`` m/s^2, saturated to
       the acceleration bound.
     * With ``interface={"layout": "entities", ...}``: ``"drone"`` ``Box(-1, 1, (2,))``, its move;
@@ -44,7 +44,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
 
     ## Observation Spaces
 
-    * ``"drone"``: the central observation of ``lawn/Joint-v0``.
+    * ``"drone"``: the central observation of ``lawn/Joint-v1``.
     * ``"agv_k"``: AGV k's block of that observation followed by the 3 global features (drone
       position, time): ``agv_features + 3`` floats.
     * With the entity layout, every agent: the central entity observation (``agvs``, ``globals``,
@@ -57,7 +57,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
     environments' reward). ``infos[agent]["reward_tracking"]`` and ``["reward_effort"]`` split each. With
     ``interface="rl"`` each reward is bounded and scaled (``-min(cost, 100) / 10``), the AGVs'
     actions are residuals on the outage-aware MPC and the drone's are anchored as in
-    ``lawn/Comm-v0`` (:mod:`lawn_env.interface`).
+    ``lawn/Comm-v1`` (:mod:`lawn_env.interface`).
 
     ## Episode End
 
@@ -76,15 +76,14 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
 
     ## Version History
 
-    * v0: initial version; the ``interface`` keyword (opt-in) added later.
-    * v0 (later): infos share one flat schema at reset and every step (``reward_tracking`` and
-      ``reward_effort`` replace the nested ``reward_terms``), as TorchRL's PettingZoo wrapper needs.
-    * v0 (later): the one simulation core of the central environments; under the same
-      decisions the drone's observations, rewards and infos equal ``lawn/Joint-v0``'s bit for bit.
-    * v0 (later): ``render()`` frames as ``lawn/Joint-v0``'s history says (a colour bar,
-      the running control cost, 512 x 448 pixels).
-    * v0 (later): the entity layout (opt-in, ``interface={"layout": "entities"}``): spaces that
-      do not depend on K, the power split decided by the AGVs' own power weights.
+    * v0: initial version; the ``interface`` keyword (opt-in) added later. Later changes that leave
+      its episodes as they were: infos share one flat schema at reset and every step
+      (``reward_tracking`` and ``reward_effort`` replace the nested ``reward_terms``), as TorchRL's
+      PettingZoo wrapper needs; the one simulation core of the central environments (under the same
+      decisions the drone's observations, rewards and infos equal ``lawn/Joint-v1``'s bit for bit);
+      ``render()`` frames as ``lawn/Joint-v1``'s history says; the opt-in entity layout
+      (``interface={"layout": "entities"}``: spaces that do not depend on K, the power split decided
+      by the AGVs' own power weights).
     """
 
     metadata = {"name": "lawn_v0", "render_modes": list(RENDER_MODES), "render_fps": 4, "is_parallelizable": True}

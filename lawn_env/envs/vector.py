@@ -1,5 +1,5 @@
-"""Native vector environments: ``gym.make_vec("lawn/Joint-v0", num_envs=N,
-vectorization_mode="vector_entry_point")`` and the same for ``lawn/Comm-v0``.
+"""Native vector environments: ``gym.make_vec("lawn/Joint-v1", num_envs=N,
+vectorization_mode="vector_entry_point")`` and the same for ``lawn/Comm-v1``.
 
 One :class:`~lawn_env.envs.base.Engine` of N scenarios, the step template of the single envs
 (their B = 1 views), advances all N per call instead of N Python-level env copies. Conventions are
@@ -21,13 +21,13 @@ Gymnasium's vector ones (as ``CartPoleVectorEnv``):
   array of N, the single env's dict where an episode ended, else None) with its mask
   ``_episode_metrics``, and ``episode_control_cost`` with its mask ``_episode_control_cost``.
 
-``lawn/Comm-v0``'s N x K outage-aware MPC QPs of a step are solved together
+``lawn/Comm-v1``'s N x K outage-aware MPC QPs of a step are solved together
 (:class:`CommVectorEnv`); its info adds ``mpc_iterations`` (N, K),
 ``mpc_fallbacks`` (N,) and ``success_probability_planned`` (N, K) as the single env's does.
 
 ``render_mode="rgb_array"`` draws env ``render_env`` (default 0) as the single env draws itself.
 ``interface=`` takes the single envs' RL interface (:mod:`lawn_env.interface`; ``"rl"`` is
-``lawn/JointRL-v0`` and ``lawn/CommRL-v0``): anchored actions decoded for the whole batch (the
+``lawn/JointRL-v1`` and ``lawn/CommRL-v1``): anchored actions decoded for the whole batch (the
 Joint anchor's MPC solved by the batched QP solver), the scaled reward, termination with its
 penalty, clipped observations. The disturbance mode runs as in the single env (wind on the drone,
 a reduced control rate, actuator lag, process and measurement noise); its per-slot draws come
@@ -52,7 +52,7 @@ __all__ = ["CommVectorEnv", "JointVectorEnv"]
 
 
 class JointVectorEnv(EngineAccess, VectorEnv):
-    """N copies of ``lawn/Joint-v0`` (any interface) in one engine."""
+    """N copies of ``lawn/Joint-v1`` (any interface) in one engine."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 4}
     role = "joint"
@@ -171,7 +171,7 @@ class JointVectorEnv(EngineAccess, VectorEnv):
 
 
 class CommVectorEnv(JointVectorEnv):
-    """N copies of ``lawn/Comm-v0`` (any interface) in one engine: the actions set powers and the
+    """N copies of ``lawn/Comm-v1`` (any interface) in one engine: the actions set powers and the
     drone, and the N x K outage-aware MPC QPs of a step are solved together (the compiled solver of
     :mod:`lawn_env.qp`, warm-started per scenario; problems it cannot settle go to DAQP one by one
     and are counted in ``info["mpc_fallbacks"]``). ``qp_backend`` names a reference backend

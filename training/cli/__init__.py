@@ -18,7 +18,7 @@ COMMAND_NAMES = ("demo", "render", "evaluate", "benchmark", "train", "zoo", "dat
 
 #: Each subcommand's line in ``lawn --help`` (its module's parser uses it too).
 COMMAND_HELP = {
-    "demo": "one seeded episode of lawn/Joint-v0 under a scripted policy",
+    "demo": "one seeded episode of lawn/Joint-v1 under a scripted policy",
     "render": "one seeded episode of a policy as an animation (drone, AGVs, reference paths, links coloured by "
               "outage probability)",
     "evaluate": "run a policy on seeded episodes and write one row per episode",

@@ -37,7 +37,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
                     help="--suite: only these tasks (presets)")
     bm.add_argument("--docs", default=None, metavar="DIR", help="--suite: also write DIR/LEADERBOARD.md")
     bm.add_argument("--env", default=None, type=comparison_env, metavar="ENV",
-                    help="the env of every policy (default: lawn/Joint-v0; --protocol learned and --suite run each "
+                    help="the env of every policy (default: lawn/Joint-v1; --protocol learned and --suite run each "
                          "policy on its own env)")
     bm.add_argument("--include", nargs="*", default=[], metavar="DIR",
                     help="trained run directories (lawn train) to add to the comparison")
@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     if args.suite or args.protocol == "learned":
         _check_fixed_protocol(args)
         return _suite(args) if args.suite else _learned(args)
-    args.env = args.env or "lawn/Joint-v0"
+    args.env = args.env or "lawn/Joint-v1"
     args.seed = 0 if args.seed is None else args.seed
     cfg = config_of(args)
     args.policies = list(args.policies or (*BENCHMARK_POLICIES, *REFERENCE_ROWS)) + included(args.include)
@@ -87,7 +87,7 @@ def _check_fixed_protocol(args: argparse.Namespace) -> None:
                          "training seeds are disjoint from them)")
     if args.env is not None:
         raise ValueError(f"--env {args.env}: {mode} runs each policy on its own env (a learned agent on the env it "
-                         "was trained on, experts, baselines and anchors on lawn/Joint-v0)")
+                         "was trained on, experts, baselines and anchors on lawn/Joint-v1)")
 
 
 def _play(args: argparse.Namespace):

@@ -15,7 +15,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
                         help=COMMAND_HELP["dataset"])
     ds.add_argument("action", choices=["create"])
     ds.add_argument("--policy", required=True, type=policy_name, help=policy_help("any policy: "))
-    ds.add_argument("--env", required=True, choices=["lawn/Joint-v0", "lawn/Comm-v0"], help="the env the episodes run on")
+    ds.add_argument("--env", required=True, choices=["lawn/Joint-v1", "lawn/Comm-v1"], help="the env the episodes run on")
     ds.add_argument("--episodes", type=count, required=True, help="episodes, seeds --seed..")
     ds.add_argument("--dataset-id", required=True, metavar="ID",
                     help="Minari id, e.g. lawn/comm/rg-mpc-v0; stored under MINARI_DATASETS_PATH")

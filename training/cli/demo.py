@@ -1,4 +1,4 @@
-"""``lawn demo``: one seeded episode of ``lawn/Joint-v0`` under a scripted policy."""
+"""``lawn demo``: one seeded episode of ``lawn/Joint-v1`` under a scripted policy."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = config_of(args)
     metrics = run_demo(args.seed, Path(args.out), config=cfg)
-    print(f"lawn demo: lawn/Joint-v0, scripted heuristic, seed {args.seed}, K={cfg.num_agvs}, "
+    print(f"lawn demo: lawn/Joint-v1, scripted heuristic, seed {args.seed}, K={cfg.num_agvs}, "
           f"R_th={cfg.channel.rate_threshold_bps_hz} bit/s/Hz, P_max={cfg.power_budget_dbw} dBW")
     for key in ("control_cost", "tracking_cost", "effort_cost", "rmse_m", "outage_rate", "outage_rate_predicted",
                 "drone_path_length_m", "decision_time_median_s"):

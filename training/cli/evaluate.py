@@ -18,7 +18,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     ev.add_argument("--policy", required=True, type=policy_name, help=policy_help())
     ev.add_argument("--env", default=None, type=comparison_env, metavar="ENV",
                     help=f"{', '.join(lawn_env.ENV_IDS)}: full episodes of the unmodified scenario (an agent trained on "
-                         "an RL id plays its v0 id through its own interface; default: lawn/Joint-v0, or a trained "
+                         "an RL id plays its v0 id through its own interface; default: lawn/Joint-v1, or a trained "
                          "agent's)")
     ev.add_argument("--episodes", type=count, default=10, help="episodes, seeds --seed.. (default: %(default)s)")
     ev.add_argument("--out", required=True, help="rows file, .csv or .json")

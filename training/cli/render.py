@@ -16,7 +16,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
                         help=COMMAND_HELP["render"])
     re.add_argument("--policy", default="rg-mpc", type=policy_name, help=policy_help("default: rg-mpc; "))
     re.add_argument("--env", default=None, choices=[*lawn_env.ENV_IDS, *lawn_env.RL_ENV_IDS],
-                    help="default: lawn/Joint-v0, or the env a trained agent was trained on")
+                    help="default: lawn/Joint-v1, or the env a trained agent was trained on")
     re.add_argument("--out", required=True, help="the animation: FILE.gif or FILE.mp4 (MP4 needs the video extra)")
     re.add_argument("--fps", type=float, default=8.0, help="frames per second (default: %(default)s; a slot is 0.5 s)")
     re.add_argument("--every", type=count, default=1, help="keep every n-th slot's frame (default: %(default)s)")

@@ -42,8 +42,8 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     tr.add_argument("--init-from", metavar="DIR", help="start from a behaviour-cloned run of the same algorithm")
     tr.add_argument("--resume", metavar="DIR", help="continue an interrupted run from its last checkpoint")
     tr.add_argument("--vec", choices=["dummy", "native"], default="dummy",
-                    help="SB3 DummyVecEnv of single envs (default) or lawn's batched vector env (Joint-v0, "
-                         "Comm-v0 and their RL ids, any --interface)")
+                    help="SB3 DummyVecEnv of single envs (default) or lawn's batched vector env (Joint-v1, "
+                         "Comm-v1 and their RL ids, any --interface)")
     tr.add_argument("--dataset", metavar="ID", help="bc: clone the episodes of this Minari dataset (lawn dataset create) "
                                                      "instead of live expert rollouts; --timesteps caps the transitions")
     tr.set_defaults(func=run)

@@ -93,10 +93,10 @@ class Experiment:
 def spec(
     name: str, grid: dict, policies: Sequence[str], seeds: int, preset: str = "default", set_: dict | None = None
 ) -> dict:
-    """A sweep spec (:func:`training.sweep.run_sweep`) on ``lawn/Joint-v0``."""
+    """A sweep spec (:func:`training.sweep.run_sweep`) on ``lawn/Joint-v1``."""
     return {
         "name": name,
-        "env": "lawn/Joint-v0",
+        "env": "lawn/Joint-v1",
         "preset": preset,
         "set": dict(set_ or {}),
         "grid": grid,

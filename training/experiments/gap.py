@@ -34,7 +34,7 @@ __all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "glo
 def gap_episode(policies: Sequence[str], driver: str, config: ScenarioConfig, seed: int, every: int,
                 global_settings: Mapping[str, Any] | None = None) -> list[dict]:
     """Rows (seed, slot, policy, objective, global objective, gap, decision time) for one episode."""
-    env = gym.make("lawn/Joint-v0", config=config).unwrapped
+    env = gym.make("lawn/Joint-v1", config=config).unwrapped
     drive = make_policy(driver, config)
     planners = {name: make_policy(name, config) for name in policies}
     reference = make_policy("global-mpc", config, **dict(global_settings or {}))
@@ -165,7 +165,7 @@ def convergence(config: ScenarioConfig, slots: Sequence[int], seed: int = 0, dri
                 iterations: int = 20, global_settings: Mapping[str, Any] | None = None) -> list[dict]:
     """The paper's AO run for ``iterations`` (no early stop) at each of ``slots`` of a driver
     episode; rows per (slot, iteration, block) with J^, plus the global and rg-mpc values."""
-    env = gym.make("lawn/Joint-v0", config=config).unwrapped
+    env = gym.make("lawn/Joint-v1", config=config).unwrapped
     drive = make_policy(driver, config)
     reference = make_policy("global-mpc", config, **dict(global_settings or {}))
     fast = make_policy("rg-mpc", config)

@@ -21,7 +21,7 @@ def trace_rows(cases: Sequence[tuple[str, str, str]], quick: bool) -> list[dict]
     rows = []
     for label, preset, policy in cases:
         cfg = presets.get(preset).override(QUICK_SET) if quick else presets.get(preset)
-        env = gym.make("lawn/Joint-v0", config=cfg).unwrapped
+        env = gym.make("lawn/Joint-v1", config=cfg).unwrapped
         cost = rollout(env, make_policy(policy, cfg), 0).metrics["control_cost"]
         traj = env.trajectories()
         for n in range(traj["drone_position"].shape[0]):

@@ -254,7 +254,7 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
 def structure_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
     """Per task, what decides it: the best expert's control cost, its transient and sustained parts (the
     sustained share), the noise floor and the two headroom rows against it (geometric,
-    :mod:`.run`), on ``lawn/Joint-v0``."""
+    :mod:`.run`), on ``lawn/Joint-v1``."""
     table = []
     for task in tasks:
         high = [r for r in rows if r["policy"] == SCORE_HIGH and r["env"] == JOINT and r.get("task") == task]
@@ -303,7 +303,7 @@ def task_tables(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
 def plot_profiles(per_slot: Sequence[Mapping], path: Path, tasks: Sequence[str],
                   transient_slots: int = TRANSIENT_SLOTS) -> Path:
     """The mean stage cost per slot of the experts, baselines, anchors, reference rows and agents on
-    ``lawn/Joint-v0`` (the agents on their own env), one panel per task, log scale; from the rows of
+    ``lawn/Joint-v1`` (the agents on their own env), one panel per task, log scale; from the rows of
     ``per_slot.csv`` (:func:`per_slot_profile`)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure

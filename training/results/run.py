@@ -197,7 +197,7 @@ def evaluate(tasks: Iterable[tuple], workers: int = 1, progress: bool = True, de
 
 def policy_env(policy: str) -> str:
     """The env a policy is benchmarked on: a learned agent's own (multi-agent agents drive
-    ``lawn/Joint-v0``), ``lawn/Joint-v0`` for everything else."""
+    ``lawn/Joint-v1``), ``lawn/Joint-v1`` for everything else."""
     prefix, _, rest = policy.partition(":")
     if prefix == "zoo":
         agents = zoo_agents()
