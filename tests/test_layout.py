@@ -4,6 +4,7 @@ kind (function-level and annotation-only imports included), no module importing 
 names, and every public function annotated."""
 
 import ast
+import importlib.util
 from pathlib import Path
 
 import pytest
@@ -177,6 +178,13 @@ def test_the_experts_share_their_problem_from_a_module_of_their_own():
     assert "agents.ao" not in EDGES["agents.reduced"]
 
 
+def _is_module(name: str) -> bool:
+    try:
+        return importlib.util.find_spec(name) is not None
+    except (ImportError, ValueError):
+        return False
+
+
 def _private_reads(tree: ast.Module) -> list[str]:
     """``obj._name`` reads where ``obj`` is not ``self``/``cls`` and no ``_name`` is defined in the
     module itself (as an attribute, function, class or global): a private attribute of another
@@ -193,6 +201,9 @@ def _private_reads(tree: ast.Module) -> list[str]:
             own.add(node.arg)
     modules = {alias.asname or alias.name for node in ast.walk(tree) if isinstance(node, ast.Import)
                for alias in node.names}  # a module's documented underscore names (os._exit) are not a class's
+    modules |= {alias.asname or alias.name for node in ast.walk(tree)
+                if isinstance(node, ast.ImportFrom) and node.module and node.level == 0
+                for alias in node.names if _is_module(f"{node.module}.{alias.name}")}  # from numba.core import caching
     return sorted({f"{node.value.id}.{node.attr}" for node in ast.walk(tree)
                    if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
                    and node.value.id not in ("self", "cls", *modules) and node.attr.startswith("_")
