@@ -22,7 +22,11 @@ import time
 import gymnasium as gym
 import numpy as np
 
-import lawn_env  # noqa: F401  (registers the ids)
+import lawn_env
+
+# the current ids of the tree this runs in (side_by_side.py runs it in an older checkout too, whose
+# ids may carry an earlier version)
+JOINT, COMM = (next(i for i in lawn_env.ENV_IDS if i.startswith(f"lawn/{name}-")) for name in ("Joint", "Comm"))
 
 
 def _time(fn, calls: int, repeats: int) -> float:
@@ -63,7 +67,7 @@ def _vector_steps(env_id: str, num_envs: int):
 def _decisions(policy_name: str):
     from agents import make_policy
 
-    env = gym.make("lawn/Joint-v1").unwrapped
+    env = gym.make(JOINT).unwrapped
     policy = make_policy(policy_name, config=env.config)
     obs, _ = env.reset(seed=0)
 
@@ -80,10 +84,10 @@ def main(argv=None) -> int:
     parser.add_argument("--json", help="also write the figures to this JSON file")
     args = parser.parse_args(argv)
     figures = {
-        "joint-step (us)": 1e6 * _time(_env_steps("lawn/Joint-v1"), 4000, args.repeats),
-        "comm-step (us)": 1e6 * _time(_env_steps("lawn/Comm-v1"), 1000, args.repeats),
-        "joint-vector N=256 (us)": 1e6 * _time(_vector_steps("lawn/Joint-v1", 256), 200, args.repeats),
-        "comm-vector N=256 (us)": 1e6 * _time(_vector_steps("lawn/Comm-v1", 256), 40, args.repeats),
+        "joint-step (us)": 1e6 * _time(_env_steps(JOINT), 4000, args.repeats),
+        "comm-step (us)": 1e6 * _time(_env_steps(COMM), 1000, args.repeats),
+        "joint-vector N=256 (us)": 1e6 * _time(_vector_steps(JOINT, 256), 200, args.repeats),
+        "comm-vector N=256 (us)": 1e6 * _time(_vector_steps(COMM, 256), 40, args.repeats),
         "rg-mpc decision (ms)": 1e3 * _time(_decisions("rg-mpc"), 40, args.repeats),
         "dv-mpc decision (ms)": 1e3 * _time(_decisions("dv-mpc"), 40, args.repeats),
     }
