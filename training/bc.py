@@ -15,7 +15,8 @@ import dataclasses
 import json
 import time
 import warnings
-from typing import TYPE_CHECKING, Any, Iterable, Mapping
+from collections.abc import Iterable, Mapping
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -31,8 +32,14 @@ from lawn_env.interface import InterfaceLike, RLInterface, action_codec, resolve
 from lawn_env.presets import resolve_config
 from lawn_env.spaces import check_action
 
-from .protocol import (TRAIN_SEED_BASE, VALIDATION_SEED_BASE, append_learning_curve, limit_torch_threads, versions,
-                       write_learning_curve)
+from .protocol import (
+    TRAIN_SEED_BASE,
+    VALIDATION_SEED_BASE,
+    append_learning_curve,
+    limit_torch_threads,
+    versions,
+    write_learning_curve,
+)
 from .provenance import provenance
 
 if TYPE_CHECKING:
@@ -203,27 +210,25 @@ class BCSettings:
     dagger_timesteps: int
     policy_kwargs: dict
 
-    def to_dict(self) -> dict:
-        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        return fields | {"interface": self.interface.to_dict()}
+
+def checked_settings(params: Mapping[str, Any], defaults: Mapping[str, Any], noun: str) -> dict[str, Any]:
+    """``params`` over ``defaults``, numbers as the default's type (``n_envs`` ignored: the expert's
+    rollouts run in one env); an unknown key raises an error naming it."""
+    p = {**defaults, **{k: v for k, v in params.items() if k != "n_envs"}}
+    unknown = sorted(set(p) - set(defaults))
+    if unknown:
+        raise ValueError(f"unknown {noun} hyperparameters {unknown}; valid: {', '.join(defaults)}")
+    return {k: type(defaults[k])(v) if type(defaults[k]) in (int, float) else v for k, v in p.items()}
 
 
 def bc_settings(params: Mapping[str, Any]) -> BCSettings:
-    """The hyperparameters of a BC run (expert rollouts run in one env: ``n_envs`` is ignored), with a
-    clear error for an unknown one or an unknown ``target``."""
-    p = {**_BC_KEYS, **{k: v for k, v in params.items() if k != "n_envs"}}
+    """The hyperparameters of a BC run, checked (an unknown key or ``target`` is named)."""
+    p = checked_settings(params, _BC_KEYS, "bc")
     if p["target"] not in BC_TARGETS:
         raise ValueError(f"bc target {p['target']!r}; valid: {', '.join(BC_TARGETS)}")
-    unknown = sorted(set(p) - set(_BC_KEYS))
-    if unknown:
-        raise ValueError(f"unknown bc hyperparameters {unknown}; valid: {', '.join(_BC_KEYS)}")
-    kwargs = p["policy_kwargs"]
     if p["target"] == "sac":
-        kwargs = {k: v for k, v in kwargs.items() if k != "log_std_init"}
-    return BCSettings(expert=p["expert"], target=p["target"], interface=resolve_interface(p["interface"]),
-                      epochs=int(p["epochs"]), batch_size=int(p["batch_size"]),
-                      learning_rate=float(p["learning_rate"]), dagger_iterations=int(p["dagger_iterations"]),
-                      dagger_timesteps=int(p["dagger_timesteps"]), policy_kwargs=kwargs)
+        p["policy_kwargs"] = {k: v for k, v in p["policy_kwargs"].items() if k != "log_std_init"}
+    return BCSettings(**p | {"interface": resolve_interface(p["interface"])})
 
 
 def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: BCSettings, expert: str, obs: np.ndarray,
@@ -271,40 +276,46 @@ def _expert_data(spec: Any, st: BCSettings, episode_seed: int) -> tuple:
 
 
 def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> dict:
-    """Clone, DAgger and save the run of ``spec`` (a :class:`training.train.TrainSpec`); one
-    validation of the clone on ``spec.eval_episodes`` validation seeds."""
-    from .callbacks import ControlCostValidation
-
+    """Clone, DAgger and save the run of ``spec`` (a :class:`training.train.TrainSpec`)."""
     limit_torch_threads()
     st = bc_settings(params)
-    out_dir = spec.out_dir
-    out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     episode_seed = TRAIN_SEED_BASE + 1000 * spec.seed  # expert episodes never use test or validation seeds
     obs, actions, expert_costs, dataset, expert = _expert_data(spec, st, episode_seed)
     venv, model, obs, history = _clone_with_dagger(spec.env_id, spec.config, st, expert, obs, actions, spec.seed,
                                                    episode_seed)
-    elapsed = time.perf_counter() - start
-    model.save(str(out_dir / "model.zip"))
-    venv.save(str(out_dir / "vecnormalize.pkl"))
     record = {"algo": st.target, "target": st.target, "trainer": "bc", "env": spec.env_id, "seed": spec.seed,
-              "timesteps": spec.timesteps, "interface": st.interface.to_dict(), "num_timesteps": int(len(obs)),
-              "hyperparams_version": version, "wall_time_s": elapsed, "eval_episodes": spec.eval_episodes,
+              "timesteps": spec.timesteps, "interface": st.interface.to_dict(), "num_timesteps": len(obs),
+              "hyperparams_version": version, "wall_time_s": time.perf_counter() - start,
+              "eval_episodes": spec.eval_episodes,
               "expert_mean_control_cost": float(np.mean(expert_costs)) if expert_costs else None,
               "dataset": dataset, "versions": versions()}
-    (out_dir / "config.json").write_text(json.dumps(spec.config.to_dict(), indent=2))
-    (out_dir / "hyperparams.json").write_text(json.dumps(dataclasses.replace(st, expert=expert).to_dict(), indent=2))
-    (out_dir / "run.json").write_text(json.dumps(record, indent=2))
-    (out_dir / "bc_losses.json").write_text(json.dumps(history, indent=2))
-    validation = ControlCostValidation(spec.env_id, spec.config, st.interface.to_dict(), episodes=spec.eval_episodes,
-                                       every=1, out_dir=out_dir, seed_base=VALIDATION_SEED_BASE)
-    validation.model = model
-    (out_dir / "learning_curve.csv").unlink(missing_ok=True)
-    append_learning_curve(out_dir, len(obs), validation.validate())
-    summary = write_learning_curve(out_dir, record)
-    summary.update(bc_loss_first=history[0]["losses"][0], bc_loss_last=history[-1]["losses"][-1])
+    hyperparams = vars(st) | {"expert": expert, "interface": st.interface.to_dict()}
+    summary = save_imitation(spec, model, record, hyperparams, history)
     venv.close()
     return summary
+
+
+def save_imitation(spec: Any, model: Any, record: dict, hyperparams: dict, history: list[dict]) -> dict:
+    """Validate an imitation-trained model once on ``spec.eval_episodes`` validation seeds and write
+    its run; ``run.json`` last (a run with it is a finished one), nothing at all on a failure before."""
+    from .callbacks import ControlCostValidation, save_model
+
+    validation = ControlCostValidation(spec.env_id, spec.config, record["interface"], spec.eval_episodes, 1,
+                                       spec.out_dir, VALIDATION_SEED_BASE)
+    validation.model = model
+    row = validation.validate()
+    out_dir = spec.out_dir
+    out_dir.mkdir(parents=True, exist_ok=True)
+    save_model(model, out_dir)
+    for name, data in (("config.json", spec.config.to_dict()), ("hyperparams.json", hyperparams),
+                       ("bc_losses.json", history)):
+        (out_dir / name).write_text(json.dumps(data, indent=2))
+    (out_dir / "learning_curve.csv").unlink(missing_ok=True)
+    append_learning_curve(out_dir, record["num_timesteps"], row)
+    summary = write_learning_curve(out_dir, record)
+    (out_dir / "run.json").write_text(json.dumps(record, indent=2))
+    return summary | {"bc_loss_first": history[0]["losses"][0], "bc_loss_last": history[-1]["losses"][-1]}
 
 
 def _minari():
@@ -330,7 +341,7 @@ def _step_data_callback():
 
 
 def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_id: str, task: str = "default",
-                   progress: bool = True) -> "minari.MinariDataset":
+                   progress: bool = True) -> minari.MinariDataset:
     """Record ``episodes`` seeded episodes of ``policy`` on ``env_id`` (the scenario of preset ``task``)
     as the Minari dataset ``dataset_id``; returns the ``MinariDataset``."""
     minari = _minari()
@@ -390,7 +401,7 @@ def _reference_returns(env_id: str, config: Any, seed: int, episodes: int) -> tu
     return low, high
 
 
-def load_dataset(dataset_id: str) -> "minari.MinariDataset":
+def load_dataset(dataset_id: str) -> minari.MinariDataset:
     """``minari.load_dataset``, naming the extra when minari is missing and the local ids otherwise."""
     minari = _minari()
     local = minari.list_local_datasets()

@@ -15,10 +15,9 @@ import shlex
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
-
-from agents.runs import read_run
 from typing import Any
 
+from agents.runs import read_run
 from lawn_env import PARALLEL_ENV_ID, RL_ENV_IDS, ScenarioConfig, central_env_id
 
 from .pool import pool_map

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
-from typing import Callable
+from collections.abc import Callable
 
 import lawn_env
 from agents.runs import read_run

@@ -35,8 +35,6 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
 def run(args: argparse.Namespace) -> int:
     from agents import make_policy
 
-    from ..results.run import Play
-
     from ..experiments.gap import (
         convergence,
         format_convergence,
@@ -46,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
         summarize_gaps,
         write_gap_outputs,
     )
+    from ..results.run import Play
 
     cfg = config_of(args)
     bad = [s for s in args.convergence_slots if not 0 <= s < cfg.num_slots]
