@@ -98,7 +98,7 @@ def label_transitions(config: ScenarioConfig, env_id: str, interface: InterfaceL
     obs_out, act_out = [], []
     for observations, actions in episodes:
         scheme.reset()  # the stake prior's MPC starts every episode afresh, as the envs' MPC does
-        for o, a in zip(observations, actions):
+        for o, a in zip(observations, actions, strict=True):
             state = layout.decode(o)
             args = (state["x_aug"], state["reference"], state["drone_position"], state["slot"])
             act_out.append(scheme.encode(v0.decode(check_action(a, v0.size), *args), *args))
@@ -179,7 +179,7 @@ def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, st
                          "scenario: pass the same --preset/--set")
     chosen, seeds, costs, left = [], [], [], steps
     metadata = dataset.storage.get_episode_metadata(dataset.episode_indices)
-    for episode, meta in zip(dataset.iterate_episodes(), metadata):
+    for episode, meta in zip(dataset.iterate_episodes(), metadata, strict=False):
         if left <= 0:
             break
         obs, actions = np.asarray(episode.observations, dtype=np.float32)[:-1], np.asarray(episode.actions, np.float32)
@@ -395,9 +395,10 @@ def _reference_returns(env_id: str, config: Any, seed: int, episodes: int) -> tu
     from .results.run import evaluate
     from .results.stats import SCORE_HIGH, SCORE_LOW
 
-    tasks = [(p, env_id, config, seed + i, {}) for p in (SCORE_LOW, SCORE_HIGH) for i in range(episodes)]
+    tasks_of = (SCORE_LOW, SCORE_HIGH)
+    tasks = [(p, env_id, config, seed + i, {}) for p in tasks_of for i in range(episodes)]
     rows = evaluate(tasks, progress=False)
-    low, high = (-float(np.mean([r["control_cost"] for r in rows if r["policy"] == p])) for p in (SCORE_LOW, SCORE_HIGH))
+    low, high = (-float(np.mean([r["control_cost"] for r in rows if r["policy"] == p])) for p in tasks_of)
     return low, high
 
 

@@ -1,7 +1,6 @@
 """The ``lawn`` command line: one module per subcommand (its parser builder ``add`` and its
-``run``), the shared flags as parent parsers and one policy-name type (:mod:`.common`).
-Each subcommand's one line is :data:`COMMAND_HELP` (``lawn --help`` lists them).
-"""
+``run``), the shared flags and one policy-name type (:mod:`.common`); each subcommand's line in
+``lawn --help`` is in :data:`COMMAND_HELP`."""
 
 from __future__ import annotations
 
@@ -64,12 +63,9 @@ def _top_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The whole ``lawn`` parser: every subcommand's flags (it imports lawn and its kernels)."""
-    from .common import Parents
-
     parser, sub = _top_parser()
-    parents = Parents()
     for command in __getattr__("COMMANDS"):
-        command.add(sub, parents)
+        command.add(sub).set_defaults(func=command.run)
     return parser
 
 
@@ -112,7 +108,8 @@ def _one_line(exc: BaseException) -> str:
         parts = []
         for err in exc.errors():
             field = ".".join(str(p) for p in err["loc"]) or exc.title
-            parts.append(f"{field}: {err['msg']} (got {err['input']!r})" if "input" in err else f"{field}: {err['msg']}")
+            got = f" (got {err['input']!r})" if "input" in err else ""
+            parts.append(f"{field}: {err['msg']}{got}")
         return f"invalid {exc.title}: " + "; ".join(parts)
     return " ".join(str(exc).split("\n")) if str(exc) else type(exc).__name__
 
@@ -188,12 +185,9 @@ def _run(argv: list[str] | None) -> int:
         if isinstance(exc, KeyboardInterrupt):
             print(f"lawn {args.command}: interrupted", file=sys.stderr)
             return 130
-        if isinstance(exc, MissingExtra):
+        if isinstance(exc, (MissingExtra, HelperDied)):  # a helper killed, out of memory...: said, not a traceback
             print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
-            return 3
-        if isinstance(exc, HelperDied):  # killed, out of memory, a crash in native code: said, not a traceback
-            print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
-            return 1
+            return 3 if isinstance(exc, MissingExtra) else 1
         if isinstance(exc, (ValueError, TypeError, OSError)):  # bad values, names, files: one clear line
             print(f"lawn {args.command}: error: {_one_line(exc)}", file=sys.stderr)
             return 2
