@@ -12,10 +12,7 @@ from pathlib import Path
 
 __all__ = ["main", "build_parser", "COMMANDS", "COMMAND_NAMES"]
 
-#: The subcommands in the order ``lawn --help`` lists them; ``COMMANDS`` are their modules.
-COMMAND_NAMES = ("demo", "render", "evaluate", "benchmark", "train", "zoo", "dataset", "sweep", "figures", "gap")
-
-#: Each subcommand's line in ``lawn --help`` (its module's parser uses it too).
+#: Each subcommand's line in ``lawn --help``, in the order it lists them.
 COMMAND_HELP = {
     "demo": "one seeded episode of lawn/Joint-v0 under a scripted policy",
     "render": "one seeded episode of a policy as an animation (drone, AGVs, reference paths, links coloured by "
@@ -30,6 +27,8 @@ COMMAND_HELP = {
     "figures": "the paper's experiments from tidy tables (running missing sweeps)",
     "gap": "per-slot optimality gap of planners against the global reference",
 }
+#: The subcommands; ``COMMANDS`` are their modules.
+COMMAND_NAMES = tuple(COMMAND_HELP)
 
 #: The commands that map episodes over ``--workers`` processes (training/pool.py, ``pool_map``): their
 #: helpers start before anything else (:func:`_start_helpers_early`). ``sweep``, ``figures`` and
@@ -134,9 +133,8 @@ def _early_workers(argv: list[str]) -> int:
 
 
 def _start_helpers_early(argv: list[str]) -> None:
-    """The helper processes of a parallel command (``--workers``, default 2 where there are two
-    cores) start importing lawn now, while this process imports it and builds the parser: the command
-    then finds them ready (training/pool.py). Nothing starts when the reading of ``argv`` is unclear
+    """The helper processes of a parallel command start importing lawn now, while this process imports
+    it and builds the parser (training/pool.py); nothing starts when the reading of ``argv`` is unclear
     or a helper cannot start (the command then reports it as it would without the early start)."""
     workers = _early_workers(argv)
     if workers <= 1:
