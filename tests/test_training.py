@@ -117,7 +117,7 @@ def test_a_killed_and_resumed_run_equals_an_uninterrupted_one(tmp_path, algo, en
     if algo == "sac":  # the replay buffer came back: as full as the uninterrupted run's
         import pickle
 
-        buffers = [pickle.load(open(latest_checkpoint(d).replay_buffer, "rb")) for d in (whole, out)]
+        buffers = [pickle.load(open(latest_checkpoint(d).file("replay_buffer.pkl"), "rb")) for d in (whole, out)]
         assert buffers[0].pos == buffers[1].pos == 640 and buffers[1].observations[:300].any()
 
 

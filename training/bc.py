@@ -1,12 +1,11 @@
 """Behaviour cloning of an expert with DAgger relabelling (``lawn train --algo bc``), and episodes
 of any policy as a Minari dataset (``lawn dataset create``, the ``data`` extra) to clone from.
 
-Cloning fits the policy network of an SB3 algorithm (``target``: PPO or SAC) by mean-squared error
-to the expert's actions (``rg-mpc`` by default, live or from a dataset) on normalized observations;
-each DAgger round lets the clone drive, labels the states it visits with the expert's actions and
-fits again. A dataset holds seeded, full episodes of the unmodified scenario (seed ``seed + i``);
-its reference scores are ``epa``'s and ``dv-mpc``'s mean returns on the same seeds, so
-``minari.get_normalized_score`` is :mod:`training.score`'s score / 100.
+Cloning fits the policy network of an SB3 algorithm (``target``) by mean-squared error to the
+expert's actions (live or from a dataset) on normalized observations; each DAgger round lets the
+clone drive, labels the states it visits with the expert's actions and fits again. A dataset's
+reference scores are ``epa``'s and ``dv-mpc``'s mean returns on its seeds, so
+``minari.get_normalized_score`` is the normalized score / 100.
 """
 
 from __future__ import annotations
@@ -15,7 +14,8 @@ import dataclasses
 import json
 import time
 import warnings
-from typing import TYPE_CHECKING, Any, Iterable, Mapping
+from collections.abc import Iterable, Mapping
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -31,8 +31,14 @@ from lawn_env.interface import InterfaceLike, RLInterface, action_codec, resolve
 from lawn_env.presets import resolve_config
 from lawn_env.spaces import check_action
 
-from .protocol import (TRAIN_SEED_BASE, VALIDATION_SEED_BASE, append_learning_curve, limit_torch_threads, versions,
-                       write_learning_curve)
+from .protocol import (
+    TRAIN_SEED_BASE,
+    VALIDATION_SEED_BASE,
+    append_learning_curve,
+    limit_torch_threads,
+    versions,
+    write_learning_curve,
+)
 from .provenance import provenance
 
 if TYPE_CHECKING:
@@ -50,9 +56,8 @@ DATASET_ENV_IDS = ("lawn/Joint-v1", "lawn/Comm-v1")
 
 def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, interface: InterfaceLike,
             actor: Actor | None = None) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """``steps`` transitions of seeded episodes (seed, seed + 1, ...) of the v0 env, the states ``actor``
-    (default: the expert) visits labelled with the expert's action (:func:`label_transitions`), and
-    the costs of the episodes that ended."""
+    """``steps`` transitions of seeded episodes (seed, seed + 1, ...) of the v0 env: the states ``actor``
+    (default: the expert) visits labelled with the expert's action, and the costs of the episodes that ended."""
     env = gym.make(env_id, config=config)
     expert = make_policy(expert_name, config, env_id=env_id)
     driver = _Labelling(expert, actor)
@@ -81,9 +86,8 @@ def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, s
 
 def label_transitions(config: ScenarioConfig, env_id: str, interface: InterfaceLike,
                       episodes: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Behaviour-cloning pairs from v0 episodes ((T, n) observations, (T, m) actions, whoever chose
-    them): the observations as the learner sees them (the interface's clipping) and the actions in
-    the interface's scheme (decoded as v0, encoded in the scheme)."""
+    """Behaviour-cloning pairs from v0 episodes ((T, n) observations, (T, m) actions): the observations
+    as the learner sees them and the actions in the interface's scheme (decoded as v0, encoded in it)."""
     iface = resolve_interface(interface)
     role = "joint" if env_id == "lawn/Joint-v1" else "comm"
     v0, scheme = action_codec(config, role, None), action_codec(config, role, iface)
@@ -91,7 +95,7 @@ def label_transitions(config: ScenarioConfig, env_id: str, interface: InterfaceL
     obs_out, act_out = [], []
     for observations, actions in episodes:
         scheme.reset()  # the stake prior's MPC starts every episode afresh, as the envs' MPC does
-        for o, a in zip(observations, actions):
+        for o, a in zip(observations, actions, strict=True):
             state = layout.decode(o)
             args = (state["x_aug"], state["reference"], state["drone_position"], state["slot"])
             act_out.append(scheme.encode(v0.decode(check_action(a, v0.size), *args), *args))
@@ -101,10 +105,9 @@ def label_transitions(config: ScenarioConfig, env_id: str, interface: InterfaceL
 
 
 class _Labelling:
-    """Drives the env with ``actor`` (default: the expert) while the expert decides every slot, so
-    that each visited state gets the expert's action (``expert_action``)."""
+    """Drives the env with ``actor`` (default: the expert) while the expert decides every slot."""
 
-    def __init__(self, expert, actor=None):
+    def __init__(self, expert: Any, actor: Actor | None = None):
         self.expert, self.actor = expert, actor
         self.expert_action = None
 
@@ -114,11 +117,11 @@ class _Labelling:
             self.actor.reset(seed)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        self.expert_action = self.expert.act(obs)  # the expert decides every slot, also when it does not act
-        return self.expert_action if self.actor is None else self.actor.act(obs)
+        self.expert_action = action = self.expert.act(obs)  # the expert decides every slot, also when it does not act
+        return action if self.actor is None else self.actor.act(obs)
 
 
-def _deterministic_action(model, obs_tensor):
+def _deterministic_action(model: Any, obs_tensor: Any) -> Any:
     from stable_baselines3 import SAC
 
     if isinstance(model, SAC):
@@ -128,8 +131,8 @@ def _deterministic_action(model, obs_tensor):
 
 def fit(model: Any, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_size: int, learning_rate: float,
         seed: int) -> list[float]:
-    """Mean-squared-error regression of the model's deterministic action on the expert's; returns
-    the loss of every epoch (over the whole data set, before the epoch's updates for epoch 0)."""
+    """Mean-squared-error regression of the model's deterministic action on the expert's; the loss over
+    the whole data set before the first epoch and after each."""
     import torch
 
     torch.manual_seed(seed)
@@ -160,8 +163,7 @@ def fit(model: Any, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_siz
 def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, steps: int, interface: InterfaceLike
                         ) -> tuple[np.ndarray, np.ndarray, list[float], list, str | None]:
     """The first ``steps`` transitions of a Minari dataset of ``env_id`` with ``config`` as pairs
-    (:func:`label_transitions`), the control costs and seeds of their episodes and the policy that
-    recorded them (the dataset's ``algorithm_name``)."""
+    (:func:`label_transitions`), their episodes' control costs and seeds and the policy that recorded them."""
     dataset = load_dataset(dataset_id)
     spec = dataset.spec.env_spec
     recorded_env, recorded_config = spec.id, (spec.kwargs or {}).get("config", "default")
@@ -172,7 +174,7 @@ def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, st
                          "scenario: pass the same --preset/--set")
     chosen, seeds, costs, left = [], [], [], steps
     metadata = dataset.storage.get_episode_metadata(dataset.episode_indices)
-    for episode, meta in zip(dataset.iterate_episodes(), metadata):
+    for episode, meta in zip(dataset.iterate_episodes(), metadata, strict=False):
         if left <= 0:
             break
         obs, actions = np.asarray(episode.observations, dtype=np.float32)[:-1], np.asarray(episode.actions, np.float32)
@@ -203,45 +205,43 @@ class BCSettings:
     dagger_timesteps: int
     policy_kwargs: dict
 
-    def to_dict(self) -> dict:
-        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        return fields | {"interface": self.interface.to_dict()}
+
+def checked_settings(params: Mapping[str, Any], defaults: Mapping[str, Any], noun: str) -> dict[str, Any]:
+    """``params`` over ``defaults``, numbers as the default's type (``n_envs`` ignored: the expert's
+    rollouts run in one env); an unknown key raises an error naming it."""
+    p = {**defaults, **{k: v for k, v in params.items() if k != "n_envs"}}
+    unknown = sorted(set(p) - set(defaults))
+    if unknown:
+        raise ValueError(f"unknown {noun} hyperparameters {unknown}; valid: {', '.join(defaults)}")
+    return {k: type(defaults[k])(v) if type(defaults[k]) in (int, float) else v for k, v in p.items()}
 
 
 def bc_settings(params: Mapping[str, Any]) -> BCSettings:
-    """The hyperparameters of a BC run (expert rollouts run in one env: ``n_envs`` is ignored), with a
-    clear error for an unknown one or an unknown ``target``."""
-    p = {**_BC_KEYS, **{k: v for k, v in params.items() if k != "n_envs"}}
+    """The hyperparameters of a BC run, checked (an unknown key or ``target`` is named)."""
+    p = checked_settings(params, _BC_KEYS, "bc")
     if p["target"] not in BC_TARGETS:
         raise ValueError(f"bc target {p['target']!r}; valid: {', '.join(BC_TARGETS)}")
-    unknown = sorted(set(p) - set(_BC_KEYS))
-    if unknown:
-        raise ValueError(f"unknown bc hyperparameters {unknown}; valid: {', '.join(_BC_KEYS)}")
-    kwargs = p["policy_kwargs"]
     if p["target"] == "sac":
-        kwargs = {k: v for k, v in kwargs.items() if k != "log_std_init"}
-    return BCSettings(expert=p["expert"], target=p["target"], interface=resolve_interface(p["interface"]),
-                      epochs=int(p["epochs"]), batch_size=int(p["batch_size"]),
-                      learning_rate=float(p["learning_rate"]), dagger_iterations=int(p["dagger_iterations"]),
-                      dagger_timesteps=int(p["dagger_timesteps"]), policy_kwargs=kwargs)
+        p["policy_kwargs"] = {k: v for k, v in p["policy_kwargs"].items() if k != "log_std_init"}
+    return BCSettings(**p | {"interface": resolve_interface(p["interface"])})
 
 
 def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: BCSettings, expert: str, obs: np.ndarray,
                        actions: np.ndarray, seed: int, episode_seed: int):
-    """Fit the clone, then the DAgger rounds (the clone drives, the expert labels); the normalizing
-    env (statistics of the expert's observations), the model, every observation, every round's losses."""
+    """Fit the clone, then the DAgger rounds; the normalizing env (the expert's observation statistics),
+    the model, every observation and every round's losses."""
     from stable_baselines3.common.running_mean_std import RunningMeanStd
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    venv = VecNormalize(DummyVecEnv([lambda: gym.make(env_id, config=config, interface=st.interface)]),
-                        norm_reward=False)
+    venv: Any = VecNormalize(DummyVecEnv([lambda: gym.make(env_id, config=config, interface=st.interface)]),
+                             norm_reward=False)
     venv.obs_rms = RunningMeanStd(shape=obs.shape[1:])
     venv.obs_rms.update(obs.astype(np.float64))
     venv.training = False
-    model = algorithm_class(st.target)("MlpPolicy", venv, seed=seed, policy_kwargs=st.policy_kwargs, verbose=0,
-                                       device="cpu")
+    cls: Any = algorithm_class(st.target)  # a concrete SB3 class: mypy sees the base's signature
+    model = cls("MlpPolicy", venv, seed=seed, policy_kwargs=st.policy_kwargs, verbose=0, device="cpu")
 
-    def normalized(o):
+    def normalized(o: np.ndarray) -> np.ndarray:
         return venv.normalize_obs(o).astype(np.float32)
 
     history = [{"round": 0, "samples": len(obs), "losses": fit(model, normalized(obs), actions, st.epochs,
@@ -257,8 +257,8 @@ def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: BCSettings, expe
 
 
 def _expert_data(spec: Any, st: BCSettings, episode_seed: int) -> tuple:
-    """The expert's transitions: live rollouts, or the dataset's episodes (DAgger rounds then ask the
-    policy that recorded them live); with the expert's costs, the dataset record and the expert."""
+    """The expert's transitions (live, or a dataset's: DAgger then asks the policy that recorded them),
+    costs, the dataset record and the expert."""
     if spec.dataset is None:
         obs, actions, costs = collect(spec.env_id, spec.config, st.expert, spec.timesteps, episode_seed, st.interface)
         return obs, actions, costs, None, st.expert
@@ -271,40 +271,46 @@ def _expert_data(spec: Any, st: BCSettings, episode_seed: int) -> tuple:
 
 
 def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> dict:
-    """Clone, DAgger and save the run of ``spec`` (a :class:`training.train.TrainSpec`); one
-    validation of the clone on ``spec.eval_episodes`` validation seeds."""
-    from .callbacks import ControlCostValidation
-
+    """Clone, DAgger and save the run of ``spec`` (a :class:`training.train.TrainSpec`)."""
     limit_torch_threads()
     st = bc_settings(params)
-    out_dir = spec.out_dir
-    out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     episode_seed = TRAIN_SEED_BASE + 1000 * spec.seed  # expert episodes never use test or validation seeds
     obs, actions, expert_costs, dataset, expert = _expert_data(spec, st, episode_seed)
     venv, model, obs, history = _clone_with_dagger(spec.env_id, spec.config, st, expert, obs, actions, spec.seed,
                                                    episode_seed)
-    elapsed = time.perf_counter() - start
-    model.save(str(out_dir / "model.zip"))
-    venv.save(str(out_dir / "vecnormalize.pkl"))
     record = {"algo": st.target, "target": st.target, "trainer": "bc", "env": spec.env_id, "seed": spec.seed,
-              "timesteps": spec.timesteps, "interface": st.interface.to_dict(), "num_timesteps": int(len(obs)),
-              "hyperparams_version": version, "wall_time_s": elapsed, "eval_episodes": spec.eval_episodes,
+              "timesteps": spec.timesteps, "interface": st.interface.to_dict(), "num_timesteps": len(obs),
+              "hyperparams_version": version, "wall_time_s": time.perf_counter() - start,
+              "eval_episodes": spec.eval_episodes,
               "expert_mean_control_cost": float(np.mean(expert_costs)) if expert_costs else None,
               "dataset": dataset, "versions": versions()}
-    (out_dir / "config.json").write_text(json.dumps(spec.config.to_dict(), indent=2))
-    (out_dir / "hyperparams.json").write_text(json.dumps(dataclasses.replace(st, expert=expert).to_dict(), indent=2))
-    (out_dir / "run.json").write_text(json.dumps(record, indent=2))
-    (out_dir / "bc_losses.json").write_text(json.dumps(history, indent=2))
-    validation = ControlCostValidation(spec.env_id, spec.config, st.interface.to_dict(), episodes=spec.eval_episodes,
-                                       every=1, out_dir=out_dir, seed_base=VALIDATION_SEED_BASE)
-    validation.model = model
-    (out_dir / "learning_curve.csv").unlink(missing_ok=True)
-    append_learning_curve(out_dir, len(obs), validation.validate())
-    summary = write_learning_curve(out_dir, record)
-    summary.update(bc_loss_first=history[0]["losses"][0], bc_loss_last=history[-1]["losses"][-1])
+    hyperparams = vars(st) | {"expert": expert, "interface": st.interface.to_dict()}
+    summary = save_imitation(spec, model, record, hyperparams, history)
     venv.close()
     return summary
+
+
+def save_imitation(spec: Any, model: Any, record: dict, hyperparams: dict, history: list[dict]) -> dict:
+    """Validate an imitation-trained model once on ``spec.eval_episodes`` validation seeds and write
+    its run; ``run.json`` last (a run with it is a finished one), nothing at all on a failure before."""
+    from .callbacks import ControlCostValidation, save_model
+
+    validation = ControlCostValidation(spec.env_id, spec.config, record["interface"], spec.eval_episodes, 1,
+                                       spec.out_dir, VALIDATION_SEED_BASE)
+    validation.model = model
+    row = validation.validate()
+    out_dir = spec.out_dir
+    out_dir.mkdir(parents=True, exist_ok=True)
+    save_model(model, out_dir)
+    for name, data in (("config.json", spec.config.to_dict()), ("hyperparams.json", hyperparams),
+                       ("bc_losses.json", history)):
+        (out_dir / name).write_text(json.dumps(data, indent=2))
+    (out_dir / "learning_curve.csv").unlink(missing_ok=True)
+    append_learning_curve(out_dir, record["num_timesteps"], row)
+    summary = write_learning_curve(out_dir, record)
+    (out_dir / "run.json").write_text(json.dumps(record, indent=2))
+    return summary | {"bc_loss_first": history[0]["losses"][0], "bc_loss_last": history[-1]["losses"][-1]}
 
 
 def _minari():
@@ -315,27 +321,24 @@ def _minari():
     return minari
 
 
-def _step_data_callback():
-    from minari import StepDataCallback
+def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_id: str, task: str = "default",
+                   progress: bool = True) -> minari.MinariDataset:
+    """Record ``episodes`` seeded episodes of ``policy`` on ``env_id`` (the scenario of preset ``task``)
+    as the Minari dataset ``dataset_id``; returns the ``MinariDataset``."""
+    minari = _minari()
+    from minari import DataCollector, StepDataCallback
+    from tqdm.auto import tqdm
+
+    from .results.run import evaluate
+    from .results.stats import SCORE_HIGH, SCORE_LOW
 
     class LawnStepData(StepDataCallback):
         """The env's per-step info without ``episode_metrics`` (present on the last step only)."""
 
-        def __call__(self, env, **kwargs):
+        def __call__(self, env: Any, **kwargs: Any) -> Any:
             data = super().__call__(env, **kwargs)
             data["info"] = {k: np.asarray(v) for k, v in data["info"].items() if k != "episode_metrics"}
             return data
-
-    return LawnStepData
-
-
-def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_id: str, task: str = "default",
-                   progress: bool = True) -> "minari.MinariDataset":
-    """Record ``episodes`` seeded episodes of ``policy`` on ``env_id`` (the scenario of preset ``task``)
-    as the Minari dataset ``dataset_id``; returns the ``MinariDataset``."""
-    minari = _minari()
-    from minari import DataCollector
-    from tqdm.auto import tqdm
 
     if env_id not in DATASET_ENV_IDS:
         raise ValueError(f"--env {env_id!r}: datasets record {' or '.join(DATASET_ENV_IDS)} (the unmodified "
@@ -348,8 +351,10 @@ def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_i
     if dataset_id in minari.list_local_datasets():
         raise ValueError(f"--dataset-id {dataset_id!r} already exists under MINARI_DATASETS_PATH; choose another id "
                          f"or delete it (minari delete {dataset_id})")
-    low, high = _reference_returns(env_id, config, seed, episodes)
-    env = DataCollector(gym.make(env_id, config=task), step_data_callback=_step_data_callback(), record_infos=True)
+    references = (SCORE_LOW, SCORE_HIGH)  # Minari's reference scores: their mean returns on the same seeds
+    rows = evaluate([(p, env_id, config, seed + i, {}) for p in references for i in range(episodes)], progress=False)
+    low, high = (-float(np.mean([r["control_cost"] for r in rows if r["policy"] == p])) for p in references)
+    env = DataCollector(gym.make(env_id, config=task), step_data_callback=LawnStepData, record_infos=True)
     for i in tqdm(range(episodes), desc=f"dataset {dataset_id}", unit="ep", disable=None if progress else True):
         rollout(env, agent, seed + i)
     with warnings.catch_warnings():
@@ -379,18 +384,7 @@ def _check_dataset_id(dataset_id: str) -> None:
                          "optional), e.g. lawn/comm/rg-mpc-v0")
 
 
-def _reference_returns(env_id: str, config: Any, seed: int, episodes: int) -> tuple[float, float]:
-    """Minari's ``ref_min_score`` and ``ref_max_score``: the mean returns of ``epa`` and ``dv-mpc``."""
-    from .results.run import evaluate
-    from .results.stats import SCORE_HIGH, SCORE_LOW
-
-    tasks = [(p, env_id, config, seed + i, {}) for p in (SCORE_LOW, SCORE_HIGH) for i in range(episodes)]
-    rows = evaluate(tasks, progress=False)
-    low, high = (-float(np.mean([r["control_cost"] for r in rows if r["policy"] == p])) for p in (SCORE_LOW, SCORE_HIGH))
-    return low, high
-
-
-def load_dataset(dataset_id: str) -> "minari.MinariDataset":
+def load_dataset(dataset_id: str) -> minari.MinariDataset:
     """``minari.load_dataset``, naming the extra when minari is missing and the local ids otherwise."""
     minari = _minari()
     local = minari.list_local_datasets()

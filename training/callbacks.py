@@ -4,9 +4,9 @@ rollout boundaries, actor warm-up) and the checkpoints a run resumes from.
 A checkpoint is taken after the algorithm has trained on every step it collected (SB3 calls
 ``on_rollout_start`` after ``train()``), so a resumed run repeats no update and loses none. It is
 ``checkpoints/<steps>/``: the model, its normalization statistics, an off-policy replay buffer,
-the validation-selected model, and ``state.json`` (steps, updates, wall time, the byte length of
-every history file), written to a temporary directory and renamed into place; only the newest is
-kept. Resuming truncates the history files to those lengths and appends from there.
+the validation-selected model and ``state.json`` (steps, updates, wall time, the byte length of
+every history file), renamed into place; only the newest is kept. Resuming truncates the history
+files to those lengths and appends from there.
 """
 
 from __future__ import annotations
@@ -25,12 +25,17 @@ from agents.learned import ObsNormalizer, SB3Policy, marl_policy
 from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
 from lawn_env.interface import InterfaceLike
 
+from .protocol import (
+    append_learning_curve,
+    read_learning_curve,
+    selected_validation,
+    validation_reference,
+    validation_row,
+)
 from .results.run import episode_row
-from .protocol import (append_learning_curve, read_learning_curve, selected_validation, validation_reference,
-                       validation_row)
 
 __all__ = ["ControlCostValidation", "RunCheckpoint", "ActorWarmup", "Checkpoint", "latest_checkpoint",
-           "write_checkpoint", "restore_history", "clear_history"]
+           "write_checkpoint", "restore_history", "clear_history", "save_model"]
 
 #: Files of a run directory that only ever grow (appended rows), relative to the run directory.
 HISTORY_FILES = ("learning_curve.csv", "monitor/*.csv")
@@ -46,32 +51,31 @@ class Checkpoint:
     steps: int
     state: dict
 
-    @property
-    def model(self) -> Path:
-        return self.path / "model.zip"
-
-    @property
-    def vecnormalize(self) -> Path | None:
-        path = self.path / "vecnormalize.pkl"
+    def file(self, name: str) -> Path | None:
+        """``name`` in the checkpoint; None where it was not saved (normalization statistics, a replay buffer)."""
+        path = self.path / name
         return path if path.exists() else None
 
-    @property
-    def replay_buffer(self) -> Path | None:
-        path = self.path / "replay_buffer.pkl"
-        return path if path.exists() else None
+
+def save_model(model: Any, folder: Path, prefix: str = "") -> None:
+    """``<prefix>model.zip`` and the normalization statistics ``<prefix>vecnormalize.pkl`` of a
+    normalized env (a stale file removed otherwise)."""
+    model.save(str(folder / f"{prefix}model.zip"))
+    venv = model.get_vec_normalize_env()
+    if venv is not None:
+        venv.save(str(folder / f"{prefix}vecnormalize.pkl"))
+    else:
+        (folder / f"{prefix}vecnormalize.pkl").unlink(missing_ok=True)
 
 
 def _history(out_dir: Path) -> dict[str, int]:
-    sizes = {}
-    for pattern in HISTORY_FILES:
-        for path in sorted(out_dir.glob(pattern)):
-            sizes[path.relative_to(out_dir).as_posix()] = path.stat().st_size
-    return sizes
+    return {path.relative_to(out_dir).as_posix(): path.stat().st_size
+            for pattern in HISTORY_FILES for path in sorted(out_dir.glob(pattern))}
 
 
 def write_checkpoint(out_dir: Path, model: Any, state: dict) -> Checkpoint:
-    """Save ``model`` (and its normalization statistics and replay buffer) with the run's history
-    lengths as ``checkpoints/<steps>/``, atomically; older checkpoints are removed."""
+    """Save ``model`` (with its statistics and replay buffer) and the run's history lengths as
+    ``checkpoints/<steps>/``, atomically; older checkpoints are removed."""
     out_dir = Path(out_dir)
     root = out_dir / "checkpoints"
     root.mkdir(parents=True, exist_ok=True)
@@ -79,10 +83,7 @@ def write_checkpoint(out_dir: Path, model: Any, state: dict) -> Checkpoint:
     tmp = root / f".tmp-{steps}"
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir()
-    model.save(str(tmp / "model.zip"))
-    venv = model.get_vec_normalize_env()
-    if venv is not None:
-        venv.save(str(tmp / "vecnormalize.pkl"))
+    save_model(model, tmp)
     if getattr(model, "replay_buffer", None) is not None:
         model.save_replay_buffer(str(tmp / "replay_buffer.pkl"))
     for name in BEST_FILES:
@@ -91,12 +92,9 @@ def write_checkpoint(out_dir: Path, model: Any, state: dict) -> Checkpoint:
     state = dict(state, steps=steps, updates=int(getattr(model, "_n_updates", 0)), history=_history(out_dir))
     (tmp / "state.json").write_text(json.dumps(state, indent=2))
     final = root / str(steps)
-    if final.exists():
-        shutil.rmtree(final)
+    shutil.rmtree(final, ignore_errors=True)
     os.replace(tmp, final)
-    for other in root.iterdir():
-        if other == final:
-            continue
+    for other in (path for path in root.iterdir() if path != final):
         if other.is_dir():
             shutil.rmtree(other, ignore_errors=True)
         else:
@@ -132,11 +130,11 @@ def restore_history(out_dir: Path, checkpoint: Checkpoint) -> None:
                 with open(path, "r+b") as fh:
                     fh.truncate(size)
     for name in BEST_FILES:
-        saved = checkpoint.path / name
-        if saved.exists():
+        saved = checkpoint.file(name)
+        if saved is not None:
             shutil.copy2(saved, out_dir / name)
-        elif (out_dir / name).exists():
-            (out_dir / name).unlink()
+        else:
+            (out_dir / name).unlink(missing_ok=True)
 
 
 def clear_history(out_dir: Path) -> None:
@@ -156,22 +154,18 @@ def _next_mark(steps: int, every: int) -> int:
 
 
 class ControlCostValidation(BaseCallback):
-    """Every ``every`` environment steps, run the current policy (deterministic, through the same wrapper as
-    ``sb3:DIR``) on ``episodes`` full episodes of the unmodified scenario with the validation
-    seeds ``seed_base + i``; append the mean realized control cost and the paired relative
-    differences against ``rg-mpc`` and against the starting policy on the same seeds to
-    ``learning_curve.csv``, and keep the model :func:`~training.protocol.selected_validation`
-    chooses as ``best_model.zip`` (+ ``best_vecnormalize.pkl``). A fresh run is validated before
-    its first step (its per-seed costs kept in ``validation_start.json``), so selection keeps the
-    starting policy (the anchor, or the clone a fine-tuning run starts from) unless training
-    beats it significantly."""
+    """Every ``every`` environment steps, run the current policy (deterministic, as ``sb3:DIR`` runs it)
+    on ``episodes`` full episodes of the unmodified scenario with the validation seeds ``seed_base + i``;
+    append its learning-curve row (:func:`~training.protocol.validation_row`) and keep the model
+    :func:`~training.protocol.selected_validation` chooses as ``best_model.zip``. A fresh run is
+    validated before its first step (its costs kept in ``validation_start.json``), so selection keeps
+    the starting policy (the anchor, or the clone it fine-tunes) unless training beats it significantly."""
 
     def __init__(self, env_id: str, config: ScenarioConfig, interface: InterfaceLike, episodes: int, every: int,
                  out_dir: Path, seed_base: int):
         super().__init__(verbose=0)
         self.env_id, self.config, self.interface = env_id, config, interface
         self.episodes, self.every, self.out_dir, self.seed_base = episodes, every, Path(out_dir), seed_base
-        self._last = -1
         self._next = every
         self._reference: dict[int, float] | None = None
         rows = read_learning_curve(self.out_dir)  # a resumed run: keep its history and its start
@@ -184,23 +178,23 @@ class ControlCostValidation(BaseCallback):
             self._record()
         self._next = _next_mark(self.num_timesteps, self.every)
 
-    def _policy(self):
+    def _policy(self) -> Any:
         normalizer = ObsNormalizer.from_vecnormalize(self.model.get_vec_normalize_env())
         if self.env_id == PARALLEL_ENV_ID:
             return marl_policy(self.model, self.config, self.interface, normalizer, None, "marl")
         return SB3Policy(self.model, self.config, self.env_id, self.interface, normalizer)
 
-    def validation_costs(self) -> dict[int, float]:
-        """The current policy's control cost on each validation seed."""
+    def validate(self, start: bool = False) -> dict[str, float]:
+        """The learning-curve columns of the current policy; ``start``: it is the run's starting policy,
+        which every later validation is paired against."""
         policy = self._policy()
         env_id = central_env_id(self.env_id)
         if self._reference is None:  # rg-mpc on the validation seeds, once per process (deterministic)
             self._reference = validation_reference(env_id, self.config, self.episodes, self.seed_base)
-        return {s: float(episode_row(policy, env_id, self.config, s)["control_cost"]) for s in self._reference}
-
-    def validate(self) -> dict[str, float]:
-        """The learning-curve columns of the current policy (:func:`~training.protocol.validation_row`)."""
-        costs = self.validation_costs()
+        costs = {s: float(episode_row(policy, env_id, self.config, s)["control_cost"]) for s in self._reference}
+        if start:
+            self._start = costs
+            (self.out_dir / "validation_start.json").write_text(json.dumps({str(k): v for k, v in costs.items()}))
         return validation_row(costs, self._reference, self._start)
 
     def _on_step(self) -> bool:
@@ -214,29 +208,20 @@ class ControlCostValidation(BaseCallback):
             self._record()
 
     def _record(self) -> None:
-        fresh = self._last < 0
+        row = self.validate(start=self._last < 0)
         self._last = self.num_timesteps
-        costs = self.validation_costs()
-        if fresh:  # the starting policy: what every later validation is paired against
-            self._start = costs
-            (self.out_dir / "validation_start.json").write_text(json.dumps({str(k): v for k, v in costs.items()}))
-        row = validation_row(costs, self._reference, self._start)
         append_learning_curve(self.out_dir, self.num_timesteps, row)
         self.logger.record("validation/control_cost", row["control_cost"])
         self.logger.record("validation/vs_reference", row["vs_reference"])
-        if selected_validation(read_learning_curve(self.out_dir))["timesteps"] == self.num_timesteps:
-            self.model.save(str(self.out_dir / "best_model.zip"))
-            venv = self.model.get_vec_normalize_env()
-            if venv is not None:
-                venv.save(str(self.out_dir / "best_vecnormalize.pkl"))
-            elif (self.out_dir / "best_vecnormalize.pkl").exists():
-                (self.out_dir / "best_vecnormalize.pkl").unlink()
+        best = selected_validation(read_learning_curve(self.out_dir))
+        if best is not None and best["timesteps"] == self.num_timesteps:
+            save_model(self.model, self.out_dir, "best_")
 
 
 class RunCheckpoint(BaseCallback):
     """A checkpoint (:func:`write_checkpoint`) at the first rollout boundary at least ``every``
-    steps after the previous one, and one at the end of training. ``state`` goes into each
-    checkpoint's ``state.json``; its ``wall_time_s`` is the run's wall time so far."""
+    steps after the previous one, and one at the end of training; its ``state.json`` holds the
+    run's wall time so far (``wall_time_before`` this process)."""
 
     def __init__(self, out_dir: Path, every: int, wall_time_before: float = 0.0):
         super().__init__(verbose=0)
@@ -265,27 +250,22 @@ class RunCheckpoint(BaseCallback):
 
 
 class ActorWarmup(BaseCallback):
-    """Critic warm-up for fine-tuning a cloned policy: the actor's parameters (policy network,
-    action head, log-std) are frozen for the first ``steps`` environment steps, so PPO's first
-    updates fit the value function to the cloned policy instead of moving the policy with an
-    untrained critic's advantages."""
+    """Critic warm-up for fine-tuning a cloned policy: the actor (policy network, action head,
+    log-std) is frozen for the first ``steps`` environment steps, so PPO's first updates fit the
+    value function to the clone instead of moving it with an untrained critic's advantages."""
 
     def __init__(self, steps: int):
         super().__init__(verbose=0)
         self.steps = steps
         self.frozen: list = []
 
-    def _actor_parameters(self):
-        policy = self.model.policy
-        params = list(policy.action_net.parameters()) + list(policy.mlp_extractor.policy_net.parameters())
-        if getattr(policy, "log_std", None) is not None:
-            params.append(policy.log_std)
-        return params
-
     def _on_training_start(self) -> None:
         if self.num_timesteps >= self.steps:  # a resumed run past its warm-up
             return
-        self.frozen = self._actor_parameters()
+        policy: Any = self.model.policy
+        self.frozen = [*policy.action_net.parameters(), *policy.mlp_extractor.policy_net.parameters()]
+        if getattr(policy, "log_std", None) is not None:
+            self.frozen.append(policy.log_std)
         for p in self.frozen:
             p.requires_grad_(False)
 

@@ -1,23 +1,15 @@
-"""DAgger of a fleet network (``agents.fleet.FleetPolicy``) from an expert, on mixed fleet sizes.
-
-1. For every fleet size K of ``fleet_sizes``, roll out the expert (``rg-mpc`` by default) on the
-   v0 env of that K and label each visited state with its action, re-expressed in the interface's
-   scheme and laid out per entity (:func:`fleet_pairs`: :func:`training.bc.collect`'s labels).
-2. Fit the network's deterministic action to the labels by mean-squared error over the entries
-   of the AGVs present and the drone (:func:`fit_fleet`; padded rows carry no label).
-3. DAgger: roll out the network itself (through :class:`agents.learned.SB3Policy`, on the v0
-   envs), label the states it visits with the expert's actions, add them and fit again.
-
-The observations and labels of every K share one shape (the entity layout), so one data set and
-one network serve them all.
+"""DAgger of a fleet network (``agents.fleet.FleetPolicy``) from an expert, on mixed fleet sizes: the
+expert's (then the network's own) rollouts on the v0 env of every fleet size K, labelled with the
+expert's actions in the interface's scheme and laid out per entity (:func:`fleet_pairs`), fitted by
+mean-squared error over the AGVs present and the drone (:func:`fit_fleet`). Every K shares the entity
+layout's shapes, so one data set and one network serve them all.
 """
 
 from __future__ import annotations
 
-import json
 import time
-from pathlib import Path
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -26,17 +18,17 @@ from lawn_env import ScenarioConfig
 from lawn_env.entities import EntityLayout
 from lawn_env.interface import InterfaceLike, resolve_interface
 
-from .bc import collect
+from .bc import checked_settings, collect, save_imitation
+from .protocol import TRAIN_SEED_BASE, limit_torch_threads, versions
 
-__all__ = ["fleet_pairs", "fit_fleet", "dagger_round", "fleet_settings", "train_fleet_run"]
+__all__ = ["fleet_pairs", "fit_fleet", "dagger_round", "fleet_settings", "train_fleet"]
 
 
 def fleet_pairs(env_id: str, config: ScenarioConfig, steps: int, seed: int, interface: InterfaceLike,
                 expert: str = "rg-mpc", actor: Any = None) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
-    """``steps`` labelled transitions of the v0 env of ``config`` (:func:`training.bc.collect`, the
-    states visited by ``actor``, default the expert) in the entity layout: the observations (a
-    dict of (steps, ...) arrays), the expert's entity actions (steps, A) and which entries carry a
-    label (steps, A) bool: the AGVs present and the drone."""
+    """``steps`` labelled transitions of the v0 env of ``config`` (:func:`training.bc.collect`) in the
+    entity layout: the observations (a dict of arrays), the expert's entity actions (steps, A) and
+    which entries carry a label (steps, A): the AGVs present and the drone."""
     iface = resolve_interface(interface)
     obs, labels, _ = collect(env_id, config, expert, steps, seed, iface, actor=actor)
     layout = EntityLayout(config, "joint" if env_id == "lawn/Joint-v1" else "comm", iface.obs_bound)
@@ -47,11 +39,9 @@ def fleet_pairs(env_id: str, config: ScenarioConfig, steps: int, seed: int, inte
 
 def fit_fleet(model: Any, obs: dict[str, np.ndarray], actions: np.ndarray, present: np.ndarray, epochs: int,
               batch_size: int, learning_rate: float, seed: int) -> list[float]:
-    """Mean-squared-error regression of the model's deterministic action on the labelled entries;
-    returns the loss over the whole data set before the first epoch and after each. The step size
-    falls by 0.9 ``learning_rate`` / ``epochs`` after each epoch (a tenth of it would come after the
-    last). Every batch holds one fleet size (the network then attends over that many rows, not the data's largest
-    fleet); the batches of an epoch come in random order."""
+    """Mean-squared-error regression of the model's deterministic action on the labelled entries; the
+    loss over the data before the first epoch and after each. The step size falls linearly to a tenth;
+    every batch holds one fleet size (the network attends over that many rows), in random order."""
     import torch
 
     torch.manual_seed(seed)
@@ -101,26 +91,18 @@ def dagger_round(model: Any, env_id: str, configs: Sequence[ScenarioConfig], ste
     return obs, np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts])
 
 
-_SETTINGS = ("interface", "expert", "fleet_sizes", "epochs", "batch_size", "learning_rate", "dagger_iterations",
-             "dagger_timesteps", "width", "heads", "layers")
+#: A fleet run's hyperparameters and their defaults (``fleet.yml`` and ``--hp``).
+_FLEET_KEYS = {"interface": "rl", "expert": "rg-mpc", "fleet_sizes": (3, 4, 8), "epochs": 20, "batch_size": 256,
+               "learning_rate": 1e-3, "dagger_iterations": 2, "dagger_timesteps": 2400, "width": 64, "heads": 4,
+               "layers": 2}
 
 
 def fleet_settings(params: Mapping[str, Any]) -> dict[str, Any]:
-    """A fleet run's hyperparameters (``fleet.yml`` and ``--hp``), resolved: the interface in the
-    entity layout, the sizes sorted; an unknown one raises an error naming it."""
-    p = {k: v for k, v in dict(params).items() if k != "n_envs"}  # the expert's rollouts run in one env
-    unknown = sorted(set(p) - set(_SETTINGS))
-    if unknown:
-        raise ValueError(f"unknown fleet hyperparameters {unknown}; valid: {', '.join(_SETTINGS)}")
-    iface = resolve_interface(p.get("interface", "rl")).to_dict() | {"layout": "entities"}
-    sizes = sorted({int(k) for k in p.get("fleet_sizes", (3, 4, 8))})
-    return {"interface": iface, "expert": p.get("expert", "rg-mpc"), "fleet_sizes": sizes,
-            "epochs": int(p.get("epochs", 20)), "batch_size": int(p.get("batch_size", 256)),
-            "learning_rate": float(p.get("learning_rate", 1e-3)),
-            "dagger_iterations": int(p.get("dagger_iterations", 2)),
-            "dagger_timesteps": int(p.get("dagger_timesteps", 2400)),
-            "network": {"width": int(p.get("width", 64)), "heads": int(p.get("heads", 4)),
-                        "layers": int(p.get("layers", 2))}}
+    """A fleet run's hyperparameters, checked: the interface in the entity layout, the sizes sorted."""
+    p = checked_settings(params, _FLEET_KEYS, "fleet")
+    network = {key: p.pop(key) for key in ("width", "heads", "layers")}
+    return p | {"interface": resolve_interface(p["interface"]).to_dict() | {"layout": "entities"},
+                "fleet_sizes": sorted({int(k) for k in p["fleet_sizes"]}), "network": network}
 
 
 def _dagger(model: Any, env_id: str, configs: list, st: dict, timesteps: int, episode_seed: int) -> list[dict]:
@@ -140,48 +122,28 @@ def _dagger(model: Any, env_id: str, configs: list, st: dict, timesteps: int, ep
     return history
 
 
-def train_fleet_run(env_id: str, config: ScenarioConfig, timesteps: int, seed: int, out_dir: Path,
-                    params: Mapping[str, Any], version: int, eval_episodes: int = 5) -> dict:
-    """``lawn train --algo fleet``: DAgger of a :class:`agents.fleet.FleetPolicy` from the expert on
-    every size of ``fleet_sizes`` (``config`` with that K), saved as a PPO model in the run's usual
-    layout (``sb3:DIR`` loads it), validated on ``config``'s own K."""
+def train_fleet(spec: Any, params: Mapping[str, Any], version: int) -> dict:
+    """``lawn train --algo fleet``: DAgger of a :class:`agents.fleet.FleetPolicy` on every size of
+    ``fleet_sizes``, saved as a PPO model (``sb3:DIR`` loads it), validated on the spec's own K."""
     from stable_baselines3 import PPO
 
     from agents.fleet import FleetPolicy
     from lawn_env import MixedFleetEnv
 
-    from .callbacks import ControlCostValidation
-    from .protocol import (TRAIN_SEED_BASE, VALIDATION_SEED_BASE, append_learning_curve, limit_torch_threads,
-                           versions, write_learning_curve)
-
     limit_torch_threads()
-    if env_id not in ("lawn/Joint-v1", "lawn/Comm-v1"):
-        raise ValueError(f"fleet networks train on lawn/Joint-v1 or lawn/Comm-v1, not {env_id!r}")
+    if spec.env_id not in ("lawn/Joint-v1", "lawn/Comm-v1"):
+        raise ValueError(f"fleet networks train on lawn/Joint-v1 or lawn/Comm-v1, not {spec.env_id!r}")
     st = fleet_settings(params)
-    env = MixedFleetEnv(env_id, st["fleet_sizes"], st["interface"], config)  # checks the sizes
+    env = MixedFleetEnv(spec.env_id, st["fleet_sizes"], st["interface"], spec.config)  # checks the sizes
     start = time.perf_counter()
-    model = PPO(FleetPolicy, env, seed=seed, device="cpu", verbose=0,
+    model = PPO(FleetPolicy, env, seed=spec.seed, device="cpu", verbose=0,
                 policy_kwargs={**st["network"], "log_std_init": -1.0})
-    configs = [config.override(num_agvs=k) for k in st["fleet_sizes"]]
-    history = _dagger(model, env_id, configs, st, timesteps, TRAIN_SEED_BASE + 1000 * seed)
-    wall = time.perf_counter() - start
-    out_dir = Path(out_dir)  # written once the network is trained and validated: a failed run leaves nothing
-    validation = ControlCostValidation(env_id, config, st["interface"], episodes=eval_episodes, every=1,
-                                       out_dir=out_dir, seed_base=VALIDATION_SEED_BASE)
-    validation.model = model
-    row = validation.validate()
+    configs = [spec.config.override(num_agvs=k) for k in st["fleet_sizes"]]
+    history = _dagger(model, spec.env_id, configs, st, spec.timesteps, TRAIN_SEED_BASE + 1000 * spec.seed)
+    record = {"algo": "fleet", "target": "fleet", "trainer": "fleet", "env": spec.env_id, "seed": spec.seed,
+              "timesteps": spec.timesteps, "interface": st["interface"], "fleet_sizes": st["fleet_sizes"],
+              "num_timesteps": int(history[-1]["samples"]), "hyperparams_version": version,
+              "wall_time_s": time.perf_counter() - start, "eval_episodes": spec.eval_episodes, "versions": versions()}
+    summary = save_imitation(spec, model, record, st, history)
     env.close()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    model.save(str(out_dir / "model.zip"))
-    spec = {"algo": "fleet", "target": "fleet", "trainer": "fleet", "env": env_id, "seed": seed, "timesteps": timesteps,
-            "interface": st["interface"], "fleet_sizes": st["fleet_sizes"],
-            "num_timesteps": int(history[-1]["samples"]), "hyperparams_version": version,
-            "wall_time_s": wall, "eval_episodes": eval_episodes, "versions": versions()}
-    for name, data in (("config.json", config.to_dict()), ("hyperparams.json", st), ("bc_losses.json", history)):
-        (out_dir / name).write_text(json.dumps(data, indent=2))
-    (out_dir / "learning_curve.csv").unlink(missing_ok=True)
-    append_learning_curve(out_dir, history[-1]["samples"], row)
-    summary = write_learning_curve(out_dir, spec)
-    (out_dir / "run.json").write_text(json.dumps(spec, indent=2))  # last: a run with run.json is a finished one
-    summary.update(bc_loss_first=history[0]["losses"][0], bc_loss_last=history[-1]["losses"][-1])
     return summary

@@ -1,27 +1,22 @@
-"""The protocol every training run follows (``lawn train``'s algorithms and behaviour cloning alike):
-disjoint seed ranges, one torch thread per run, the versions stamped into ``run.json``, and the
-learning curve and summary written from the periodic validation.
-
-Seeds. Training seed s draws its environments from ``TRAIN_SEED_BASE + 1000 s`` on; model
-selection uses the validation seeds ``VALIDATION_SEED_BASE + i``; learned agents are tested on the
-seeds 0..TEST_EPISODES-1 (``lawn benchmark --protocol learned``, ``lawn zoo build``; ``lawn
-benchmark`` alone tests on 0-19 by default). The three ranges never meet.
-"""
+"""The protocol every training run follows: disjoint seed ranges (training, validation and test
+never meet), one torch thread per run, the versions in ``run.json``, and the learning curve and
+summary written from the periodic validation."""
 
 from __future__ import annotations
 
 import csv
 import platform
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 import lawn_env
 from agents import make_policy
 
-from .results.run import episode_row, read_csv
 from .provenance import provenance
+from .results.run import episode_row, read_csv
 from .results.stats import mean_ci, paired_difference
 
 __all__ = ["TRAIN_SEED_BASE", "VALIDATION_SEED_BASE", "TEST_EPISODES", "VALIDATION_REFERENCE", "CURVE_FIELDS",
@@ -38,8 +33,8 @@ TEST_EPISODES = 100
 
 
 def limit_torch_threads() -> None:
-    """One torch thread: these networks are small, and several threads per run oversubscribe the
-    cores when runs go side by side (measured: SAC's update 100x slower with two concurrent runs)."""
+    """One torch thread: the networks are small, and more oversubscribe the cores of runs side by side
+    (SAC's update was 100x slower with two concurrent runs)."""
     import torch
 
     torch.set_num_threads(1)
@@ -56,10 +51,9 @@ def versions() -> dict:
             "source": provenance()}
 
 
-#: The columns of ``learning_curve.csv``: the mean realized control cost on the validation seeds,
-#: the mean per-seed relative difference against ``rg-mpc`` on the same seeds (paired) and the one
-#: against the run's own starting policy (its first validation: the anchor, or the clone it
-#: fine-tunes), each with its 95 % half-width.
+#: The columns of ``learning_curve.csv``: the mean control cost on the validation seeds and the paired
+#: relative differences against ``rg-mpc`` and against the run's starting policy (its first validation),
+#: each with its 95 % half-width.
 CURVE_FIELDS = ("timesteps", "control_cost", "control_cost_ci95", "vs_reference", "vs_reference_ci95",
                 "vs_start", "vs_start_ci95")
 #: The policy whose costs on the validation seeds pair every validation.
@@ -67,29 +61,24 @@ VALIDATION_REFERENCE = "rg-mpc"
 
 
 def read_learning_curve(run_dir: Path) -> list[dict[str, float]]:
-    """The periodic validation of a run (``learning_curve.csv``): rows of :data:`CURVE_FIELDS` as
-    floats, in order (empty before the first validation); a column a row leaves empty (behaviour
-    cloning has no start to pair with) or a run made before it existed is absent from the row."""
+    """The rows of ``learning_curve.csv`` as floats, in order; an empty column (behaviour cloning has
+    no start to pair with; older runs) is absent from its row."""
     return [{k: float(v) for k, v in r.items() if v not in ("", None)}
             for r in read_csv(Path(run_dir) / "learning_curve.csv")]
 
 
 def selection_key(row: Mapping[str, float]) -> float:
-    """What model selection minimizes over validations: the paired relative difference against
-    ``rg-mpc`` on the validation seeds. Pairing on the same seeds (the same fading draws) keeps a
-    seed that every policy finds hard from deciding the choice, which the mean cost lets one
-    heavy-tailed episode do. Runs recorded without it fall back to the mean cost."""
+    """What model selection minimizes: the paired relative difference against ``rg-mpc`` (pairing on
+    the same seeds keeps one heavy-tailed episode from deciding, as it can the mean cost, which runs
+    recorded without the column fall back to)."""
     return float(row["vs_reference"]) if "vs_reference" in row else float(row["control_cost"])
 
 
-def selected_validation(rows: list[Mapping[str, float]]) -> Mapping[str, float] | None:
-    """The validation model selection keeps: the lowest :func:`selection_key` among the run's
-    starting policy (the first row) and the validations significantly better than it (the upper
-    end of the paired 95 % interval against the start below zero). With a handful of validations
-    on 20 seeds, the plain minimum picks a policy that only looks better by chance about as often
-    as not (the winner's curse), and ships a learner worse than the start it never improved on; the
-    gate keeps that start instead. Rows without the ``vs_start`` column (behaviour cloning, which
-    has no start to beat, and older runs) are all eligible. ``None`` for no rows."""
+def selected_validation(rows: Sequence[Mapping[str, float]]) -> Mapping[str, float] | None:
+    """The lowest :func:`selection_key` among the starting policy (the first row) and the validations
+    significantly better than it (paired 95 % interval against the start below zero): the plain
+    minimum of a few validations on 20 seeds often picks a policy better only by chance (the winner's
+    curse). Rows without ``vs_start`` (behaviour cloning, older runs) are all eligible; None for none."""
     eligible = [r for i, r in enumerate(rows)
                 if i == 0 or "vs_start" not in r or float(r["vs_start"]) + float(r["vs_start_ci95"]) < 0]
     return min(eligible, key=selection_key, default=None)
@@ -105,9 +94,8 @@ def validation_reference(env_id: str, config: Any, episodes: int, seed_base: int
 
 def validation_row(costs: Mapping[int, float], reference: Mapping[int, float],
                    start: Mapping[int, float] | None = None) -> dict[str, float]:
-    """The learning-curve columns of one validation: mean cost and paired difference against the
-    reference, and against the run's starting policy when ``start`` (its costs on the same seeds)
-    is given, each with its 95 % half-width."""
+    """The learning-curve columns of one validation (:data:`CURVE_FIELDS`; ``vs_start`` given the
+    starting policy's costs on the same seeds)."""
     mean, half = mean_ci(list(costs.values()))
     diff, diff_half, _ = paired_difference(costs, reference)
     row = {"control_cost": mean, "control_cost_ci95": half, "vs_reference": diff, "vs_reference_ci95": diff_half}
@@ -117,8 +105,7 @@ def validation_row(costs: Mapping[int, float], reference: Mapping[int, float],
 
 
 def append_learning_curve(run_dir: Path, timesteps: int, row: Mapping[str, float]) -> None:
-    """One validation (:func:`validation_row`) appended to ``learning_curve.csv`` (its header
-    first on a new file; a file of an older run keeps its own columns)."""
+    """One validation appended to ``learning_curve.csv`` (an older run's file keeps its columns)."""
     path = Path(run_dir) / "learning_curve.csv"
     fields = list(CURVE_FIELDS) if not path.exists() else next(csv.reader(path.open()))
     new = not path.exists()
@@ -150,7 +137,7 @@ def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict:
     return summary
 
 
-def _plot_curve(rows, path: Path, title: str) -> None:
+def _plot_curve(rows: list[dict[str, float]], path: Path, title: str) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

@@ -1,11 +1,8 @@
-"""The recipes of the shipped learned agents (:data:`RECIPES`, keyed by name): how each is trained
-(``lawn train`` arguments, training seeds, hyperparameters, the recipe it starts from);
-``lawn zoo train`` (:func:`train_recipes`), which trains the missing runs of each; and lawn's PPO
-hyperparameters in rl-baselines3-zoo's form (:func:`zoo_hyperparams`)::
+"""The recipes of the shipped learned agents (:data:`RECIPES`), ``lawn zoo train``
+(:func:`train_recipes`) and lawn's PPO hyperparameters in rl-baselines3-zoo's form
+(:func:`zoo_hyperparams`; this module's ``hyperparams``, made when read)::
 
     python -m rl_zoo3.train --algo ppo --env lawn/CommRL-v1 --gym-packages lawn_env --conf-file training.recipes
-
-(``--conf-file`` takes a module with a ``hyperparams`` attribute: this one's, made when read.)
 """
 
 from __future__ import annotations
@@ -15,10 +12,9 @@ import shlex
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Literal
 
 from agents.runs import read_run
-from typing import Any
-
 from lawn_env import PARALLEL_ENV_ID, RL_ENV_IDS, ScenarioConfig, central_env_id
 
 from .pool import pool_map
@@ -41,7 +37,7 @@ class Recipe:
     hp: dict = field(default_factory=dict)
     init_from: str | None = None  # another recipe's name: seed s starts from that recipe's seed s
     eval_every: int = 25_000
-    vec: str = "dummy"  # lawn train --vec: "native" trains on lawn's batched vector env
+    vec: Literal["dummy", "native"] = "dummy"  # lawn train --vec: "native" trains on lawn's batched vector env
     section: str = "main"  # where docs/LEARNED.md shows it: the page's tables, or the "fleet" block (SECTIONS)
     num_agvs: int = 4  # the fleet it trains on (lawn train --set num_agvs=K); every recipe is evaluated at K = 4
 
@@ -87,23 +83,19 @@ _FINE_TUNE = {"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2
 #: From scratch: the distance prior and the centroid drone (no MPC in the action; the Comm env's
 #: own MPC still drives the AGVs), and the exploration and step size a learner far from the
 #: optimum needs (log-std -1, 3e-4 decayed).
-_SCRATCH = {"interface": {"base": "rl", "power_anchor": "distance"}, "learning_rate": "lin_3e-4",
-            "policy_kwargs": {"net_arch": [128, 128], "log_std_init": -1.0}}
-
+_SCRATCH: dict[str, Any] = {"interface": {"base": "rl", "power_anchor": "distance"}, "learning_rate": "lin_3e-4",
+                            "policy_kwargs": {"net_arch": [128, 128], "log_std_init": -1.0}}
 #: From scratch on Joint: the same, with the LQR baseline's increments under the residual.
 _SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_anchor": "lqr"}}
 
-#: One network for every fleet size (agents/fleet.py): DAgger of rg-mpc on fleets of 3 to 32 AGVs
-#: (training/hyperparams/fleet.yml), 50,000 labelled states, then 4 rounds of 12,500 on the
-#: network's own; one training seed (a run is about 25 minutes, two side by side on 2 cores).
+#: One network for every fleet size (agents/fleet.py, training/hyperparams/fleet.yml): one training
+#: seed (a run is about 25 minutes, two side by side on 2 cores).
 _FLEET_SEEDS = (0,)
-
 #: Multi-agent PPO with the fleet network (training/sb3.py): every agent sees the fleet and which
 #: entity it is, and acts with its own row; started at the anchor (the heads zeroed), small steps.
 _MARL_FLEET = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,
                "start_at_anchor": True, "n_steps": 64, "batch_size": 256, "learning_rate": "lin_1e-4",
                "policy_kwargs": {"width": 32, "heads": 4, "layers": 2, "log_std_init": -3.0}}
-
 #: The learned comparators. Training runs them in this order, the longest first (a recipe that
 #: starts from another runs in a second phase); the tables list them per env in this order.
 RECIPES: dict[str, Recipe] = {r.name: r for r in (
@@ -155,8 +147,8 @@ def finished(run_dir: Path, timesteps: int) -> bool:
 
 
 def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, progress: bool = True) -> list[Path]:
-    """Train the missing runs of the chosen recipes (all by default); returns the run directories.
-    Runs that start from another recipe wait for it (two phases)."""
+    """Train the missing runs of the chosen recipes (all by default; a recipe that starts from another
+    in a second phase); returns the run directories."""
     runs = Path(runs)
     chosen = [recipe(n) for n in names] if names else list(RECIPES.values())
     done: list[Path] = []
@@ -178,10 +170,9 @@ def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, 
 
 
 def zoo_hyperparams(algo: str = "ppo") -> dict[str, dict[str, Any]]:
-    """rl-zoo3's hyperparameters of ``algo`` for every RL id whose base env's entry in lawn's file
-    trains on the RL interface: the keys only ``lawn train`` knows dropped, the dicts written as
-    rl-zoo3 expects them (strings it evaluates) and the budget (``n_timesteps``) of the shipped
-    agent's plain recipe on that env."""
+    """rl-zoo3's hyperparameters of ``algo`` for every RL id whose base env's entry trains on the RL
+    interface: without the keys only ``lawn train`` knows, dicts as the strings rl-zoo3 evaluates, and
+    the budget (``n_timesteps``) of the plain recipe on that env."""
     plain = [r for r in RECIPES.values() if r.algo == algo and not r.hp and r.init_from is None]
     budgets = {r.env_id: r.timesteps for r in plain}
     if len(budgets) != len(plain):

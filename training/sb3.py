@@ -1,13 +1,6 @@
-"""Stable-Baselines3 runs of ``lawn train``: the training envs, the model and the learning loop.
-
-:func:`make_train_env` makes a seeded SB3 VecEnv of single envs, of lawn's batched vector env
-(:class:`NativeVecEnv`: same-step autoreset, SB3's convention) or of the PettingZoo env
-(:func:`make_marl_vec_env`: parameter sharing; SuperSuit pads the agents' observations and actions
-and appends a one-hot agent indicator, or in the entity layout, where every agent sees the fleet
-and which entity it is, pads the drone's action only), with optional ``VecNormalize``.
-:func:`train_sb3`, :func:`setup` and :func:`learn` make a run (new, or resumed from a checkpoint)
-and train it.
-"""
+"""Stable-Baselines3 runs of ``lawn train``: the seeded training envs (:func:`make_train_env`: single
+envs, lawn's batched vector env or the PettingZoo env with parameter sharing), the model and the
+learning loop of a new or resumed run (:func:`train_sb3`, :func:`setup`, :func:`learn`)."""
 
 from __future__ import annotations
 
@@ -15,12 +8,14 @@ import json
 import pickle
 import shutil
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
@@ -29,7 +24,7 @@ from agents.runs import algorithm_class, read_run
 from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, parallel_env
 from lawn_env.interface import InterfaceLike
 
-from .callbacks import ActorWarmup, Checkpoint, ControlCostValidation, RunCheckpoint
+from .callbacks import ActorWarmup, Checkpoint, ControlCostValidation, RunCheckpoint, save_model
 from .protocol import TRAIN_SEED_BASE, VALIDATION_SEED_BASE, limit_torch_threads, versions, write_learning_curve
 
 __all__ = ["NativeVecEnv", "make_marl_vec_env", "make_train_env", "train_sb3", "setup", "learn", "init_from",
@@ -37,12 +32,12 @@ __all__ = ["NativeVecEnv", "make_marl_vec_env", "make_train_env", "train_sb3", "
 
 
 class NativeVecEnv(VecEnv):
-    """``n_envs`` scenarios of ``env_id`` (an id with a native vector env) in one batched
-    simulation, on ``interface`` (an RL id's default: ``"rl"``)."""
+    """``n_envs`` scenarios of ``env_id`` in one batched simulation (same-step autoreset, SB3's
+    convention), on ``interface`` (None: the id's own)."""
 
     def __init__(self, config: ScenarioConfig, n_envs: int, env_id: str = "lawn/Joint-v1",
                  interface: InterfaceLike = None):
-        kwargs = {} if interface is None else {"interface": interface}  # None keeps the id's own (RL ids: "rl")
+        kwargs: dict[str, Any] = {} if interface is None else {"interface": interface}
         self.venv = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", config=config,
                                  autoreset_mode="SameStep", **kwargs)
         super().__init__(n_envs, self.venv.single_observation_space, self.venv.single_action_space)
@@ -74,9 +69,8 @@ class NativeVecEnv(VecEnv):
     def close(self) -> None:
         self.venv.close()
 
-    # attribute access as SB3's VecEnvs offer it (one batched env: the same answer for every index)
-    def get_attr(self, attr_name: str, indices: Any = None) -> list:
-        return [getattr(self.venv, attr_name)] * len(self._get_indices(indices))
+    def get_attr(self, attr_name: str, indices: Any = None) -> list:  # one batched env: one answer for every index
+        return [getattr(self.venv, attr_name)] * len(list(self._get_indices(indices)))
 
     def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
         setattr(self.venv, attr_name, value)
@@ -85,11 +79,13 @@ class NativeVecEnv(VecEnv):
         raise NotImplementedError(f"env_method({method_name!r}): the native vector env has no per-env objects")
 
     def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
-        return [False] * len(self._get_indices(indices))
+        return [False] * len(list(self._get_indices(indices)))
 
 
 def make_marl_vec_env(config: ScenarioConfig, n_envs: int, seed: int, interface: InterfaceLike = None) -> Any:
-    """An SB3 VecEnv with one sub-environment per agent per copy of the PettingZoo env, seeded."""
+    """An SB3 VecEnv with one sub-environment per agent per copy of the PettingZoo env, seeded: SuperSuit
+    pads the agents' observations and actions and appends a one-hot agent indicator, or in the entity
+    layout (every agent sees the fleet and which entity it is) pads the drone's action only."""
     import supersuit as ss
     from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
 
@@ -121,10 +117,9 @@ def make_marl_vec_env(config: ScenarioConfig, n_envs: int, seed: int, interface:
 
 def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, normalize: bool | Mapping[str, Any],
                    monitor_dir: Path | None, vecnormalize_path: Path | None = None, **kwargs: Any) -> Any:
-    """A seeded SB3 VecEnv (Monitor-wrapped) with optional VecNormalize (``normalize``: true or its
-    options; ``vecnormalize_path``: saved statistics). Keywords: ``interface``, ``append_monitor``
-    (continue the monitor logs of a resumed run) and ``vec`` (``"native"``: :class:`NativeVecEnv`,
-    episode statistics through ``VecMonitor``, no monitor files)."""
+    """A seeded, monitored SB3 VecEnv with optional VecNormalize (``normalize``: true or its options;
+    ``vecnormalize_path``: saved statistics). Keywords: ``interface``, ``append_monitor`` (a resumed
+    run's monitor logs) and ``vec`` (``"native"``: :class:`NativeVecEnv`, no monitor files)."""
     from stable_baselines3.common.env_util import make_vec_env
 
     unknown = set(kwargs) - {"interface", "append_monitor", "vec"}
@@ -132,7 +127,7 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
         raise TypeError(f"make_train_env: unexpected keywords {sorted(unknown)}")
     interface = kwargs.get("interface")
     if kwargs.get("vec", "dummy") == "native":
-        venv = VecMonitor(NativeVecEnv(config, n_envs, env_id, interface=interface))
+        venv: VecEnv = VecMonitor(NativeVecEnv(config, n_envs, env_id, interface=interface))
         venv.seed(seed)
     elif env_id == PARALLEL_ENV_ID:
         venv = make_marl_vec_env(config, n_envs, seed, interface=interface)
@@ -149,9 +144,8 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
 
 
 def train_sb3(spec: Any, params: dict, options: Any, version: int, callbacks: list | None = None) -> dict:
-    """Train the SB3 run of ``spec`` (a :class:`training.train.TrainSpec`) with its resolved
-    hyperparameters and their checked :class:`~training.train.RunOptions`; a model SB3 refuses to
-    build leaves nothing of the run behind."""
+    """Train the SB3 run of ``spec`` (a :class:`training.train.TrainSpec`) with its hyperparameters and
+    their :class:`~training.train.RunOptions`; a model SB3 refuses to build leaves nothing behind."""
     if spec.init_from is not None:
         _check_init_from(spec.init_from, spec.algo, params)
     record = {"algo": spec.algo, "env": spec.env_id, "seed": spec.seed, "timesteps": spec.timesteps,
@@ -161,24 +155,23 @@ def train_sb3(spec: Any, params: dict, options: Any, version: int, callbacks: li
     out_dir = spec.out_dir
     existed = out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
-    written = [out_dir / name for name in ("config.json", "hyperparams.json", "run.json", "spec.json", "monitor", "tb")]
-    (out_dir / "config.json").write_text(json.dumps(spec.config.to_dict(), indent=2))
-    (out_dir / "hyperparams.json").write_text(json.dumps(params, indent=2))
-    (out_dir / "run.json").write_text(json.dumps(record, indent=2))
+    for name, data in (("config.json", spec.config.to_dict()), ("hyperparams.json", params), ("run.json", record)):
+        (out_dir / name).write_text(json.dumps(data, indent=2))  # before SB3 adds its defaults to policy_kwargs
     spec.write()
     try:
         run = setup(record, options, spec.config, out_dir, None, callbacks)
     except BaseException:
-        if not existed:
-            shutil.rmtree(out_dir, ignore_errors=True)
-        for path in written:
-            shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
+        written = ("config.json", "hyperparams.json", "run.json", "spec.json", "monitor", "tb")
+        for path in [out_dir] if not existed else [out_dir / name for name in written]:
+            if path.is_dir():
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                path.unlink(missing_ok=True)
         raise
     return learn(run, progress=spec.progress)
 
 
-def _net_arch(params: Mapping[str, Any]) -> Any:
-    """The ``net_arch`` of a run's hyperparameters (None: SB3's default)."""
+def _net_arch(params: Mapping[str, Any]) -> Any:  # None: SB3's default
     return (params.get("policy_kwargs") or {}).get("net_arch")
 
 
@@ -202,7 +195,7 @@ def _check_init_from(init_from: Path, algo: str, params: Mapping[str, Any]) -> N
 
 @dataclass
 class Run:
-    """A run ready to learn: its record (``run.json``), model, env, callbacks and where it writes."""
+    """A run ready to learn: its record (``run.json``), model, env and callbacks."""
 
     record: dict
     model: Any
@@ -215,8 +208,7 @@ class Run:
 
 def setup(record: dict, options: Any, config: ScenarioConfig, out_dir: Path, start: Checkpoint | None,
           callbacks: list | None = None) -> Run:
-    """The env, the model and the callbacks of a run (new, or resumed from ``start``); ``options``
-    are its checked :class:`training.train.RunOptions`."""
+    """The env, the model and the callbacks of a run (new, or resumed from ``start``)."""
     from stable_baselines3.common.utils import set_random_seed
 
     limit_torch_threads()
@@ -224,15 +216,15 @@ def setup(record: dict, options: Any, config: ScenarioConfig, out_dir: Path, sta
     env_seed = TRAIN_SEED_BASE + 1000 * int(record["seed"]) + done_steps  # a resumed run: fresh, seeded episodes
     set_random_seed(env_seed)
     env = make_train_env(record["env"], config, options.n_envs, env_seed, options.normalize, out_dir / "monitor",
-                         vecnormalize_path=start.vecnormalize if start else None, interface=options.interface,
-                         append_monitor=start is not None, vec=record.get("vec", "dummy"))
+                         vecnormalize_path=start.file("vecnormalize.pkl") if start else None,
+                         interface=options.interface, append_monitor=start is not None, vec=record.get("vec", "dummy"))
     try:
         model = _model(record, env, start, out_dir, options)
     except BaseException:
         env.close()
         raise
     wall_before = float(record.get("wall_time_s", 0.0))
-    hooks = []
+    hooks: list[BaseCallback] = []
     if record["env"] != "CartPole-v1":
         hooks.append(ControlCostValidation(record["env"], config, options.interface, int(record["eval_episodes"]),
                                            max(int(record["eval_every"]), 1), out_dir, VALIDATION_SEED_BASE))
@@ -251,9 +243,7 @@ def learn(run: Run, progress: bool) -> dict:
         model.learn(total_timesteps=remaining, callback=run.hooks, reset_num_timesteps=not run.resumed,
                     progress_bar=progress, tb_log_name="run")
     elapsed = time.perf_counter() - began
-    model.save(str(out_dir / "model.zip"))
-    if isinstance(env, VecNormalize):
-        env.save(str(out_dir / "vecnormalize.pkl"))
+    save_model(model, out_dir)
     record = dict(run.record, num_timesteps=int(model.num_timesteps), updates=int(getattr(model, "_n_updates", 0)),
                   wall_time_s=float(elapsed + run.wall_before))
     (out_dir / "run.json").write_text(json.dumps(record, indent=2))
@@ -267,10 +257,11 @@ def _model(record: dict, env: Any, start: Checkpoint | None, out_dir: Path, opti
     anchor, with the fine-tuning's exploration noise as the options ask)."""
     cls = algorithm_class(record["algo"])
     if start:
-        model = load_saved(lambda p: cls.load(p, env=env, tensorboard_log=str(out_dir / "tb")), start.model,
-                           "checkpoint model")
-        if start.replay_buffer is not None:
-            model.load_replay_buffer(str(start.replay_buffer))
+        model = load_saved(lambda p: cls.load(p, env=env, tensorboard_log=str(out_dir / "tb")),
+                           start.path / "model.zip", "checkpoint model")
+        buffer = start.file("replay_buffer.pkl")
+        if buffer is not None:
+            model.load_replay_buffer(str(buffer))
         return model
     model = cls(options.policy, env, seed=int(record["seed"]) if record["env"] != PARALLEL_ENV_ID else None, verbose=0,
                 tensorboard_log=str(out_dir / "tb"), **options.algo_kwargs)
@@ -281,8 +272,8 @@ def _model(record: dict, env: Any, start: Checkpoint | None, out_dir: Path, opti
     if options.init_log_std is not None:  # exploration noise of a fine-tuned policy (after the cloned weights)
         import torch
 
-        with torch.no_grad():
-            model.policy.log_std.fill_(float(options.init_log_std))
+        log_std: Any = model.policy.log_std
+        torch.nn.init.constant_(log_std, float(options.init_log_std))
     return model
 
 
@@ -297,11 +288,9 @@ def init_from(model: Any, source: Path, env: Any) -> None:
 
 
 def start_at_anchor(model: Any, algo: str) -> None:
-    """``start_at_anchor``: the policy's output layer starts at zero weights and bias, so that its
-    deterministic action is the zero action: the run starts at its interface's anchor, and model
-    selection, which validates the start, compares what training finds against the anchor itself
-    (SAC's untrained mean acts far from zero; PPO's orthogonal init with gain 0.01 near zero but
-    not at it). A run started ``--init-from`` keeps the weights it loads."""
+    """``start_at_anchor``: the output layer starts at zero, so the deterministic action is the zero
+    action, the interface's anchor, and model selection compares training against the anchor itself
+    (SAC's untrained mean acts far from zero; PPO's init near zero but not at it)."""
     import torch
 
     def heads() -> list:  # a fleet network's means are its two heads' outputs (its action_net is the identity)

@@ -1,12 +1,10 @@
 """``lawn train``: a typed run spec (:class:`TrainSpec`), the algorithm registry (:data:`ALGORITHMS`)
 and the runs they make (the ``rl`` extra trains; this module imports without it).
 
-A run directory holds ``spec.json`` (the spec that made it), ``run.json`` (algorithm, env, seed,
-timesteps, interface, versions), ``config.json``, ``hyperparams.json`` (the entry of
-``hyperparams/<algo>.yml`` with the ``--hp`` overrides), the model (``model.zip``,
-``vecnormalize.pkl``), the model selected on the validation seeds (``best_model.zip``), the
-validation history (``learning_curve.csv``, :mod:`training.protocol`), the newest checkpoint
-(``checkpoints/<N>/``, :mod:`training.callbacks`; ``--resume``) and TensorBoard logs (``tb/``).
+A run directory holds ``spec.json``, ``run.json``, ``config.json``, ``hyperparams.json`` (the file's
+entry with the ``--hp`` overrides), the model (``model.zip``, ``vecnormalize.pkl``), the model selected
+on the validation seeds (``best_model.zip``; ``learning_curve.csv``, :mod:`training.protocol`), the
+newest checkpoint (:mod:`training.callbacks`) and TensorBoard logs (``tb/``).
 """
 
 from __future__ import annotations
@@ -15,8 +13,9 @@ import dataclasses
 import importlib
 import inspect
 import json
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any, Callable, Literal, Mapping
+from typing import Annotated, Any, Literal
 
 import gymnasium as gym
 from pydantic import ConfigDict, Field, StrictBool, TypeAdapter
@@ -88,7 +87,7 @@ def _check_normalize(normalize: bool | dict) -> None:
             raise ValueError(f"--hp normalize: unknown VecNormalize options {unknown}; valid: {', '.join(allowed)}")
 
 
-def _policy(algo: str, env_id: str, options: RunOptions, cls: type) -> Any:
+def _policy(algo: str, env_id: str, options: RunOptions, cls: Any) -> Any:
     """The policy class or alias of ``options`` (``FleetPolicy``: lawn's attention policy, agents/fleet.py)."""
     policy = options.policy
     fleet = policy == "FleetPolicy"
@@ -109,9 +108,8 @@ def _policy(algo: str, env_id: str, options: RunOptions, cls: type) -> Any:
 
 
 def split_params(algo: str, env_id: str, params: Mapping[str, Any]) -> RunOptions:
-    """``lawn train``'s options and the SB3 keyword arguments of ``params``, every one checked: an
-    unknown key, a value of the wrong type, an option the algorithm does not take; the error names
-    the key, the value and what is allowed."""
+    """``lawn train``'s options and the SB3 keyword arguments of ``params``, every one checked (an
+    error names the key, the value and what is allowed)."""
     cls = ALGORITHMS[algo].load()
     params = dict(params)
     for key, algos in LAWN_KEYS.items():
@@ -160,8 +158,7 @@ Count = Annotated[int, Field(ge=1)]
 @dataclass(frozen=True, config=_SPEC)
 class TrainSpec:
     """One ``lawn train`` run, checked on construction: the algorithm and env (:data:`ALGORITHMS`),
-    the counts, and every hyperparameter of the file with ``hp_overrides`` (an unknown key, a bad
-    value, an option the algorithm does not take raise a :class:`~lawn_env.ConfigError` naming it)."""
+    the counts and every hyperparameter with ``hp_overrides`` (a :class:`~lawn_env.ConfigError` names a bad one)."""
 
     algo: str
     env_id: str
@@ -193,8 +190,7 @@ class TrainSpec:
         ALGORITHMS[self.algo].check(self, self.hyperparams()[0])
 
     def hyperparams(self) -> tuple[dict, int]:
-        """The run's hyperparameters (the file's entry, ``hp_overrides``, ``n_envs`` and
-        ``interface``; the interface resolved to a dict) and the file's version."""
+        """The run's hyperparameters (the interface resolved to a dict) and the file's version."""
         params, version = load_hyperparams(self.algo, self.env_id, self.hp_overrides)
         if self.n_envs is not None:
             params["n_envs"] = self.n_envs
@@ -211,69 +207,47 @@ class TrainSpec:
 
 
 # ---------------------------------------------------------------- the registry
-def _check_sb3(spec: TrainSpec, params: dict) -> None:
-    split_params(spec.algo, spec.env_id, params)
-
-
-def _check_bc(spec: TrainSpec, params: dict) -> None:
-    from .bc import bc_settings
-
-    bc_settings(params)
-
-
-def _check_fleet(spec: TrainSpec, params: dict) -> None:
-    from .fleet import fleet_settings
-
-    fleet_settings(params)
-
-
-def _run_sb3(spec: TrainSpec, params: dict, version: int, callbacks: list | None) -> dict:
-    from .sb3 import train_sb3
-
-    return train_sb3(spec, params, split_params(spec.algo, spec.env_id, params), version, callbacks)
-
-
-def _run_bc(spec: TrainSpec, params: dict, version: int, callbacks: list | None) -> dict:
-    from .bc import train_bc
-
-    return train_bc(spec, params, version)
-
-
-def _run_fleet(spec: TrainSpec, params: dict, version: int, callbacks: list | None) -> dict:
-    from .fleet import train_fleet_run
-
-    return train_fleet_run(spec.env_id, spec.config, spec.timesteps, spec.seed, spec.out_dir, params, version,
-                           eval_episodes=spec.eval_episodes)
-
-
 @dataclasses.dataclass(frozen=True)
 class Algorithm:
-    """One algorithm of ``lawn train``: what learns (``module:name`` of the SB3 class or of the
-    trainer), the env ids it trains on (SAC and TD3 act in continuous spaces: not CartPole's),
-    its hyperparameter file, how a spec's hyperparameters are checked and how the run is made."""
+    """One algorithm of ``lawn train``: what learns (``module:name`` of the SB3 class, or of the trainer
+    that takes the spec, its hyperparameters and their version), the env ids it trains on (SAC and TD3
+    act in continuous spaces: not CartPole's), its hyperparameter file and, for a trainer, the
+    ``module:name`` of the function that resolves its hyperparameters (an error names a bad one)."""
 
     learner: str
     envs: tuple[str, ...]
     hyperparams: str
-    check: Callable[[TrainSpec, dict], None]
-    run: Callable[[TrainSpec, dict, int, list | None], dict]
+    settings: str | None = None  # None: an SB3 algorithm (split_params)
 
-    def load(self) -> Any:
-        """The SB3 class or the trainer (importing it: SB3 and torch for most)."""
-        module, name = self.learner.split(":")
+    def load(self, which: str | None = None) -> Any:
+        """The SB3 class or the trainer (``which``: another ``module:name``), imported."""
+        module, name = (which or self.learner).split(":")
         return getattr(importlib.import_module(module), name)
+
+    def check(self, spec: TrainSpec, params: dict) -> None:
+        if self.settings is None:
+            split_params(spec.algo, spec.env_id, params)
+        else:
+            self.load(self.settings)(params)
+
+    def run(self, spec: TrainSpec, params: dict, version: int, callbacks: list | None) -> dict:
+        if self.settings is not None:
+            return self.load()(spec, params, version)
+        from .sb3 import train_sb3
+
+        return train_sb3(spec, params, split_params(spec.algo, spec.env_id, params), version, callbacks)
 
 
 #: The algorithms ``lawn train`` runs, by ``--algo`` name: SB3's, ``fleet`` (DAgger of one network for
 #: any fleet size, saved as a PPO model: :mod:`training.fleet`) and ``bc`` (behaviour cloning:
 #: :mod:`training.bc`).
 ALGORITHMS: dict[str, Algorithm] = {
-    "ppo": Algorithm("stable_baselines3:PPO", (*_LAWN, PARALLEL_ENV_ID, _CARTPOLE), "ppo.yml", _check_sb3, _run_sb3),
-    "a2c": Algorithm("stable_baselines3:A2C", (*_LAWN, PARALLEL_ENV_ID), "a2c.yml", _check_sb3, _run_sb3),
-    "sac": Algorithm("stable_baselines3:SAC", _LAWN, "sac.yml", _check_sb3, _run_sb3),
-    "td3": Algorithm("stable_baselines3:TD3", _LAWN, "td3.yml", _check_sb3, _run_sb3),
-    "fleet": Algorithm("training.fleet:train_fleet_run", _LAWN, "fleet.yml", _check_fleet, _run_fleet),
-    "bc": Algorithm("training.bc:train_bc", _LAWN, "bc.yml", _check_bc, _run_bc),
+    "ppo": Algorithm("stable_baselines3:PPO", (*_LAWN, PARALLEL_ENV_ID, _CARTPOLE), "ppo.yml"),
+    "a2c": Algorithm("stable_baselines3:A2C", (*_LAWN, PARALLEL_ENV_ID), "a2c.yml"),
+    "sac": Algorithm("stable_baselines3:SAC", _LAWN, "sac.yml"),
+    "td3": Algorithm("stable_baselines3:TD3", _LAWN, "td3.yml"),
+    "fleet": Algorithm("training.fleet:train_fleet", _LAWN, "fleet.yml", "training.fleet:fleet_settings"),
+    "bc": Algorithm("training.bc:train_bc", _LAWN, "bc.yml", "training.bc:bc_settings"),
 }
 #: The ``--algo`` names.
 ALGOS = tuple(ALGORITHMS)
@@ -292,11 +266,10 @@ def train(spec: TrainSpec, callbacks: list | None = None) -> dict:
 
 
 def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: str = "process") -> dict:
-    """Train ``spec`` once per seed into ``spec.out_dir/seed-<s>`` (a process pool when ``workers > 1``,
-    or Ray with ``backend="ray"``, as ``lawn sweep``) and summarize the selected models' validation
-    costs across seeds (mean and 95 % interval)."""
-    from .sweep import execute
+    """Train ``spec`` once per seed into ``spec.out_dir/seed-<s>`` (``workers`` processes, or Ray, as
+    ``lawn sweep``) and summarize the selected models' validation costs across seeds."""
     from .results.stats import mean_ci
+    from .sweep import execute
 
     if len(set(seeds)) != len(seeds) or not seeds:
         raise ValueError(f"--seeds {seeds}: give one or more distinct seeds")
@@ -312,24 +285,10 @@ def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: st
     return result
 
 
-def _resume_check(out_dir: Path, record: dict, target: int, checkpoint: Any) -> None:
-    """A run that is not finished (or that ``--timesteps`` extends), past its last checkpoint."""
-    done = int(record.get("num_timesteps") or 0)
-    if done >= target and (out_dir / "model.zip").exists():
-        raise ValueError(f"--resume {out_dir}: the run is finished ({done} steps, target {target}); "
-                         f"pass --timesteps above {done} to train it further")
-    if checkpoint is not None and checkpoint.steps >= target:
-        raise ValueError(f"--resume {out_dir}: --timesteps {target} is not above the last checkpoint's "
-                         f"{checkpoint.steps} steps")
-
-
 def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -> dict:
-    """Continue an interrupted run from its last checkpoint up to its (or a new) timestep target.
-
-    The resumed run reaches the target with the update count of an uninterrupted run, its history
-    (learning curve, monitor logs) appended to what the checkpoint had, and the replay buffer of
-    an off-policy algorithm restored. A run killed before its first checkpoint restarts from
-    scratch; a finished run is left alone unless ``timesteps`` extends it."""
+    """Continue an interrupted run from its last checkpoint up to its (or a new) timestep target, with
+    the update count of an uninterrupted run, its history appended to the checkpoint's and an
+    off-policy replay buffer restored; a run killed before its first checkpoint restarts from scratch."""
     from .callbacks import clear_history, latest_checkpoint, restore_history
     from .sb3 import learn, setup
 
@@ -337,7 +296,7 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
     run = read_run(out_dir, "--resume")
     record = dict(run.record)
     trainer = record.get("trainer", record["algo"])
-    if trainer not in ALGORITHMS or ALGORITHMS[trainer].run is not _run_sb3:
+    if trainer not in ALGORITHMS or ALGORITHMS[trainer].settings is not None:
         raise ValueError(f"--resume {out_dir}: {trainer} runs are not resumable (no checkpoints); rerun lawn train")
     for key in ("algo", "env", "seed", "timesteps", "checkpoint_every", "eval_every", "eval_episodes"):
         if key not in record:
@@ -346,7 +305,13 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
     config = run.load_config("--resume", "the run directory is incomplete")
     target = int(record["timesteps"]) if timesteps is None else int(timesteps)
     checkpoint = latest_checkpoint(out_dir)
-    _resume_check(out_dir, record, target, checkpoint)
+    done = int(record.get("num_timesteps") or 0)
+    if done >= target and (out_dir / "model.zip").exists():
+        raise ValueError(f"--resume {out_dir}: the run is finished ({done} steps, target {target}); "
+                         f"pass --timesteps above {done} to train it further")
+    if checkpoint is not None and checkpoint.steps >= target:
+        raise ValueError(f"--resume {out_dir}: --timesteps {target} is not above the last checkpoint's "
+                         f"{checkpoint.steps} steps")
     options = split_params(record["algo"], record["env"], params)  # before any file is touched
     record["timesteps"] = target
     record.pop("num_timesteps", None)

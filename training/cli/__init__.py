@@ -1,7 +1,6 @@
 """The ``lawn`` command line: one module per subcommand (its parser builder ``add`` and its
-``run``), the shared flags as parent parsers and one policy-name type (:mod:`.common`).
-Each subcommand's one line is :data:`COMMAND_HELP` (``lawn --help`` lists them).
-"""
+``run``), the shared flags and one policy-name type (:mod:`.common`); each subcommand's line in
+``lawn --help`` is in :data:`COMMAND_HELP`."""
 
 from __future__ import annotations
 
@@ -13,10 +12,7 @@ from pathlib import Path
 
 __all__ = ["main", "build_parser", "COMMANDS", "COMMAND_NAMES"]
 
-#: The subcommands in the order ``lawn --help`` lists them; ``COMMANDS`` are their modules.
-COMMAND_NAMES = ("demo", "render", "evaluate", "benchmark", "train", "zoo", "dataset", "sweep", "figures", "gap")
-
-#: Each subcommand's line in ``lawn --help`` (its module's parser uses it too).
+#: Each subcommand's line in ``lawn --help``, in the order it lists them.
 COMMAND_HELP = {
     "demo": "one seeded episode of lawn/Joint-v1 under a scripted policy",
     "render": "one seeded episode of a policy as an animation (drone, AGVs, reference paths, links coloured by "
@@ -31,6 +27,8 @@ COMMAND_HELP = {
     "figures": "the paper's experiments from tidy tables (running missing sweeps)",
     "gap": "per-slot optimality gap of planners against the global reference",
 }
+#: The subcommands; ``COMMANDS`` are their modules.
+COMMAND_NAMES = tuple(COMMAND_HELP)
 
 #: The commands that map episodes over ``--workers`` processes (training/pool.py, ``pool_map``): their
 #: helpers start before anything else (:func:`_start_helpers_early`). ``sweep``, ``figures`` and
@@ -64,12 +62,9 @@ def _top_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The whole ``lawn`` parser: every subcommand's flags (it imports lawn and its kernels)."""
-    from .common import Parents
-
     parser, sub = _top_parser()
-    parents = Parents()
     for command in __getattr__("COMMANDS"):
-        command.add(sub, parents)
+        command.add(sub).set_defaults(func=command.run)
     return parser
 
 
@@ -112,7 +107,8 @@ def _one_line(exc: BaseException) -> str:
         parts = []
         for err in exc.errors():
             field = ".".join(str(p) for p in err["loc"]) or exc.title
-            parts.append(f"{field}: {err['msg']} (got {err['input']!r})" if "input" in err else f"{field}: {err['msg']}")
+            got = f" (got {err['input']!r})" if "input" in err else ""
+            parts.append(f"{field}: {err['msg']}{got}")
         return f"invalid {exc.title}: " + "; ".join(parts)
     return " ".join(str(exc).split("\n")) if str(exc) else type(exc).__name__
 
@@ -137,9 +133,8 @@ def _early_workers(argv: list[str]) -> int:
 
 
 def _start_helpers_early(argv: list[str]) -> None:
-    """The helper processes of a parallel command (``--workers``, default 2 where there are two
-    cores) start importing lawn now, while this process imports it and builds the parser: the command
-    then finds them ready (training/pool.py). Nothing starts when the reading of ``argv`` is unclear
+    """The helper processes of a parallel command start importing lawn now, while this process imports
+    it and builds the parser (training/pool.py); nothing starts when the reading of ``argv`` is unclear
     or a helper cannot start (the command then reports it as it would without the early start)."""
     workers = _early_workers(argv)
     if workers <= 1:
@@ -188,12 +183,9 @@ def _run(argv: list[str] | None) -> int:
         if isinstance(exc, KeyboardInterrupt):
             print(f"lawn {args.command}: interrupted", file=sys.stderr)
             return 130
-        if isinstance(exc, MissingExtra):
+        if isinstance(exc, (MissingExtra, HelperDied)):  # a helper killed, out of memory...: said, not a traceback
             print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
-            return 3
-        if isinstance(exc, HelperDied):  # killed, out of memory, a crash in native code: said, not a traceback
-            print(f"lawn {args.command}: error: {exc}", file=sys.stderr)
-            return 1
+            return 3 if isinstance(exc, MissingExtra) else 1
         if isinstance(exc, (ValueError, TypeError, OSError)):  # bad values, names, files: one clear line
             print(f"lawn {args.command}: error: {_one_line(exc)}", file=sys.stderr)
             return 2

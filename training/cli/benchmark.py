@@ -10,27 +10,25 @@ from pathlib import Path
 
 from lawn_env import presets
 
-from . import COMMAND_HELP
-from .common import Parents, comparison_env, config_of, count, included, policy_help, policy_name
+from .common import command, comparison_env, config_of, count, included, policy_help, policy_name
 
 
-def add(sub: argparse._SubParsersAction, p: Parents) -> None:
+def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     from agents import BENCHMARK_POLICIES
 
     from ..results.run import REFERENCE_ROWS
 
-    bm = sub.add_parser("benchmark", parents=p("workers", "quiet", "seed", "config", "split"),
-                        help=COMMAND_HELP["benchmark"],
-                        epilog="--protocol learned and --suite fix the test seeds (0..N-1) and the scenario; "
-                               "--seed, --preset, --set and --env belong to the paper protocol.")
+    bm = command(sub, "benchmark", "workers", "quiet", "seed", "config", "split",
+                 epilog="--protocol learned and --suite fix the test seeds (0..N-1) and the scenario; "
+                        "--seed, --preset, --set and --env belong to the paper protocol.")
     bm.add_argument("--policies", nargs="+", default=None, type=policy_name,
                     help=policy_help() + f" (default: {' '.join(BENCHMARK_POLICIES)} and the reference rows "
                          f"{' '.join(REFERENCE_ROWS)}; with --protocol learned every "
                          "shipped agent with its anchor and the references; with --suite every expert, baseline, "
                          "shipped agent and the stake and distance anchors, beside the reference rows)")
     bm.add_argument("--protocol", choices=["paper", "learned"], default="paper",
-                    help="paper (default): the policies on --episodes seeds of one scenario; learned: agents "
-                         "beside the best expert, epa and their own anchors on the 100 test seeds, with the normalized score")
+                    help="paper (default): the policies on --episodes seeds of one scenario; learned: agents beside "
+                         "the best expert, epa and their own anchors on the 100 test seeds, with the normalized score")
     bm.add_argument("--suite", action="store_true",
                     help="the task suite (lawn_env.presets.SUITE): normalized score of every policy on every task")
     bm.add_argument("--tasks", nargs="+", default=None, choices=presets.names(), metavar="TASK",
@@ -44,7 +42,8 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     bm.add_argument("--episodes", type=count, default=None,
                     help="seeds from --seed (default: 20; 100 test seeds for --protocol learned and --suite)")
     bm.add_argument("--out", default="runs/benchmark", help="output directory (default: %(default)s)")
-    bm.set_defaults(func=run, seed=None)  # None: the paper protocol's 0, refused by the other protocols
+    bm.set_defaults(seed=None)  # None: the paper protocol's 0, refused by the other protocols
+    return bm
 
 
 def run(args: argparse.Namespace) -> int:

@@ -1,19 +1,21 @@
-"""What every ``lawn`` subcommand shares: the parent parsers of the shared flags (``--workers``,
-``--quiet``, ``--seed``, ``--preset``/``--set``, ``--debug``), the argument types (counts, seeds,
-policy names: one type for every subcommand), ``KEY=VALUE`` overrides and the config they make."""
+"""What every ``lawn`` subcommand shares: the shared flags (:func:`command`), the argument types
+(counts, seeds, policy names: one type for every subcommand), ``KEY=VALUE`` overrides and the config
+they make."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import os
-from typing import Callable
+from collections.abc import Callable
+from typing import Any
 
 import lawn_env
 from agents.runs import read_run
 from lawn_env import presets
 
-__all__ = ["Parents", "count", "seed", "comparison_env", "policy_name", "policy_help", "parse_overrides", "config_of", "included"]
+__all__ = ["command", "count", "seed", "comparison_env", "policy_name", "policy_help", "parse_overrides", "config_of",
+           "included"]
 
 
 def _int_at_least(low: int) -> Callable[[str], int]:
@@ -79,62 +81,49 @@ def policy_help(prefix: str = "") -> str:
             f"the benchmark's reference rows {', '.join(REFERENCE_ROWS)} (docs/benchmark.md)")
 
 
-class Parents:
-    """The parent parsers of the shared flags (argparse ``parents=``). Each call builds new ones:
-    argparse shares a parent's actions with every subcommand built from it, so one subcommand's
-    ``set_defaults`` would otherwise change the others' defaults."""
+def _shared_flags() -> dict[str, list[tuple[str, dict[str, Any]]]]:
+    """The shared flags by name: each one's ``add_argument`` flag and options."""
+    from ..results.run import TRANSIENT_SLOTS
 
-    @staticmethod
-    def _debug(p: argparse.ArgumentParser) -> None:  # --debug also after the subcommand
-        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="on an error, show the traceback")
+    return {
+        "debug": [("--debug", {"action": "store_true", "default": argparse.SUPPRESS,  # also after the subcommand
+                               "help": "on an error, show the traceback"})],
+        "workers": [("--workers", {"type": count, "default": min(2, os.cpu_count() or 1),
+                                   "help": "processes (default: %(default)s)"})],
+        "quiet": [("--quiet", {"action": "store_true", "help": "no progress bar"})],
+        "seed": [("--seed", {"type": seed, "default": 0, "help": "first seed; episode i uses seed + i (default: 0)"})],
+        "one_seed": [("--seed", {"type": seed, "default": 0, "help": "the episode's seed (default: 0)"})],
+        "config": [("--preset", {"default": "default", "choices": presets.names(),
+                                 "help": "scenario preset (default: %(default)s)"}),
+                   ("--set", {"action": "append", "default": [], "metavar": "KEY=VALUE",
+                              "help": "config override with a dotted key, e.g. --set channel.blocklength=256 "
+                                      "(repeatable)"})],
+        "split": [("--transient-slots", {
+            "type": _int_at_least(1), "default": TRANSIENT_SLOTS, "metavar": "N",
+            "help": "the transient/sustained split of each episode's control cost: slots 0..N-1 and N on "
+                    "(default: %(default)s)"})],
+        "policy_arg": [("--policy-arg", {
+            "action": "append", "default": [], "metavar": "KEY=VALUE",
+            "help": "policy setting, e.g. --policy-arg power_levels=60 for rg-mpc or tolerance=1e-3 for ao-mpc "
+                    "(repeatable; the fields of agents.DeliverySettings for dv-mpc, agents.ReducedSettings for "
+                    "rg-mpc, agents.AOSettings for the AO planners)"})],
+        "backend": [("--backend", {"choices": ["process", "ray"], "default": "process",
+                                   "help": "a process pool (default) or Ray (local, or the cluster at $RAY_ADDRESS)"})],
+    }
 
-    @staticmethod
-    def _workers(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--workers", type=count, default=min(2, os.cpu_count() or 1),
-                       help="processes (default: %(default)s)")
 
-    @staticmethod
-    def _quiet(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--quiet", action="store_true", help="no progress bar")
+def command(sub: argparse._SubParsersAction, name: str, *shared: str, **kwargs: Any) -> argparse.ArgumentParser:
+    """The parser of subcommand ``name`` with ``--debug`` and the named shared flags (``"workers"``,
+    ``"quiet"``, ``"seed"`` (a first seed), ``"one_seed"`` (one episode's), ``"config"``, ``"split"``,
+    ``"policy_arg"``, ``"backend"``), each with one meaning everywhere."""
+    from . import COMMAND_HELP
 
-    @staticmethod
-    def _seed(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--seed", type=seed, default=0, help="first seed; episode i uses seed + i (default: 0)")
-
-    @staticmethod
-    def _one_seed(p: argparse.ArgumentParser) -> None:  # the commands that play one episode
-        p.add_argument("--seed", type=seed, default=0, help="the episode's seed (default: 0)")
-
-    @staticmethod
-    def _config(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--preset", default="default", choices=presets.names(), help="scenario preset (default: %(default)s)")
-        p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                       help="config override with a dotted key, e.g. --set channel.blocklength=256 (repeatable)")
-
-    @staticmethod
-    def _split(p: argparse.ArgumentParser) -> None:
-        from ..results.run import TRANSIENT_SLOTS
-
-        p.add_argument("--transient-slots", type=_int_at_least(1), default=TRANSIENT_SLOTS, metavar="N",
-                       help="the transient/sustained split of each episode's control cost: slots 0..N-1 and N on "
-                            "(default: %(default)s)")
-
-    @staticmethod
-    def _policy_arg(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--policy-arg", action="append", default=[], metavar="KEY=VALUE",
-                       help="policy setting, e.g. --policy-arg power_levels=60 for rg-mpc or tolerance=1e-3 for ao-mpc "
-                            "(repeatable; the fields of agents.DeliverySettings for dv-mpc, agents.ReducedSettings for "
-                            "rg-mpc, agents.AOSettings for the AO planners)")
-
-    def __call__(self, *names: str) -> list[argparse.ArgumentParser]:
-        """New parent parsers of ``--debug`` and the named shared flags (``"workers"``, ``"quiet"``,
-        ``"seed"`` (a first seed), ``"one_seed"`` (one episode's), ``"config"``, ``"split"``, ``"policy_arg"``)."""
-        out = []
-        for name in ("debug",) + names:
-            parent = argparse.ArgumentParser(add_help=False)
-            getattr(self, f"_{name}")(parent)
-            out.append(parent)
-        return out
+    parser = sub.add_parser(name, help=COMMAND_HELP[name], **kwargs)
+    flags = _shared_flags()
+    for key in ("debug", *shared):
+        for flag, options in flags[key]:
+            parser.add_argument(flag, **options)
+    return parser
 
 
 def parse_overrides(items: list[str], flag: str = "--set") -> dict:

@@ -6,21 +6,20 @@ import argparse
 
 from lawn_env import presets
 
-from . import COMMAND_HELP
-from .common import Parents, count, policy_help, policy_name
+from .common import command, count, policy_help, policy_name
 
 
-def add(sub: argparse._SubParsersAction, p: Parents) -> None:
-    ds = sub.add_parser("dataset", parents=p("quiet", "seed"),
-                        help=COMMAND_HELP["dataset"])
+def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    ds = command(sub, "dataset", "quiet", "seed")
     ds.add_argument("action", choices=["create"])
     ds.add_argument("--policy", required=True, type=policy_name, help=policy_help("any policy: "))
-    ds.add_argument("--env", required=True, choices=["lawn/Joint-v1", "lawn/Comm-v1"], help="the env the episodes run on")
+    ds.add_argument("--env", required=True, choices=["lawn/Joint-v1", "lawn/Comm-v1"],
+                    help="the env the episodes run on")
     ds.add_argument("--episodes", type=count, required=True, help="episodes, seeds --seed..")
     ds.add_argument("--dataset-id", required=True, metavar="ID",
                     help="Minari id, e.g. lawn/comm/rg-mpc-v0; stored under MINARI_DATASETS_PATH")
     ds.add_argument("--task", default="default", choices=presets.names(), help="scenario preset (default: %(default)s)")
-    ds.set_defaults(func=run)
+    return ds
 
 
 def run(args: argparse.Namespace) -> int:

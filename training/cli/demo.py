@@ -5,15 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from . import COMMAND_HELP
-from .common import Parents, config_of
+from .common import command, config_of
 
 
-def add(sub: argparse._SubParsersAction, p: Parents) -> None:
-    demo = sub.add_parser("demo", parents=p("one_seed", "config"),
-                          help=COMMAND_HELP["demo"])
+def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    demo = command(sub, "demo", "one_seed", "config")
     demo.add_argument("--out", default="runs/demo", help="output directory (default: %(default)s)")
-    demo.set_defaults(func=run)
+    return demo
 
 
 def run(args: argparse.Namespace) -> int:

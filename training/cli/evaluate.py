@@ -8,23 +8,21 @@ from pathlib import Path
 
 import lawn_env
 
-from . import COMMAND_HELP
-from .common import Parents, comparison_env, config_of, count, parse_overrides, policy_help, policy_name
+from .common import command, comparison_env, config_of, count, parse_overrides, policy_help, policy_name
 
 
-def add(sub: argparse._SubParsersAction, p: Parents) -> None:
-    ev = sub.add_parser("evaluate", parents=p("workers", "quiet", "seed", "config", "split", "policy_arg"),
-                        help=COMMAND_HELP["evaluate"])
+def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    ev = command(sub, "evaluate", "workers", "quiet", "seed", "config", "split", "policy_arg")
     ev.add_argument("--policy", required=True, type=policy_name, help=policy_help())
     ev.add_argument("--env", default=None, type=comparison_env, metavar="ENV",
-                    help=f"{', '.join(lawn_env.ENV_IDS)}: full episodes of the unmodified scenario (an agent trained on "
-                         "an RL id plays its v0 id through its own interface; default: lawn/Joint-v1, or a trained "
+                    help=f"{', '.join(lawn_env.ENV_IDS)}: full episodes of the unmodified scenario (an agent trained "
+                         "on an RL id plays its benchmark id through its own interface; default: lawn/Joint-v1, or a trained "
                          "agent's)")
     ev.add_argument("--episodes", type=count, default=10, help="episodes, seeds --seed.. (default: %(default)s)")
     ev.add_argument("--out", required=True, help="rows file, .csv or .json")
     ev.add_argument("--no-score", action="store_true",
                     help="skip the normalized score (which runs its references, epa and dv-mpc, on the same seeds)")
-    ev.set_defaults(func=run)
+    return ev
 
 
 def run(args: argparse.Namespace) -> int:

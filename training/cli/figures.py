@@ -7,22 +7,20 @@ import argparse
 import time
 from pathlib import Path
 
-from . import COMMAND_HELP
-from .common import Parents
+from .common import command
 
 
-def add(sub: argparse._SubParsersAction, p: Parents) -> None:
+def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     from ..experiments import EXPERIMENTS
 
-    fg = sub.add_parser("figures", parents=p("workers", "quiet"),
-                        help=COMMAND_HELP["figures"])
-    fg.add_argument("names", nargs="*", choices=[[]] + list(EXPERIMENTS), metavar="NAME",
+    fg = command(sub, "figures", "workers", "quiet")
+    fg.add_argument("names", nargs="*", choices=[[], *EXPERIMENTS], metavar="NAME",
                     help=f"figures to make (default: all): {', '.join(EXPERIMENTS)}")
     fg.add_argument("--out", default="runs/figures", help="output directory (default: %(default)s)")
     fg.add_argument("--quick", action="store_true", help="reduced seeds, grids and episode length (tests)")
     fg.add_argument("--docs", default=None, metavar="DIR",
                     help="also write DIR/REPRODUCTION.md and copy the figures to DIR/figures/reproduction/")
-    fg.set_defaults(func=run)
+    return fg
 
 
 def run(args: argparse.Namespace) -> int:

@@ -6,22 +6,21 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from . import COMMAND_HELP
-from .common import Parents, config_of, count, parse_overrides, policy_help, policy_name
+from .common import command, config_of, count, parse_overrides, policy_help, policy_name
 
 
-def add(sub: argparse._SubParsersAction, p: Parents) -> None:
+def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     from ..experiments.gap import CONVERGENCE_SLOTS
 
-    gp = sub.add_parser("gap", parents=p("workers", "quiet", "seed", "config"),
-                        help=COMMAND_HELP["gap"])
+    gp = command(sub, "gap", "workers", "quiet", "seed", "config")
     from agents import policy_names
 
     gp.add_argument("--policies", nargs="+", default=["ao-mpc", "rg-mpc"], type=policy_name, metavar="POLICY",
                     help=f"planners to compare: {', '.join(policy_names())} (default: ao-mpc rg-mpc)")
     gp.add_argument("--driver", default="ao-mpc", type=policy_name, metavar="POLICY",
                     help=policy_help("policy that runs the episodes (default: ao-mpc): ") + " too")
-    gp.add_argument("--episodes", type=count, default=5, help="episodes of the driver, seeds --seed.. (default: %(default)s)")
+    gp.add_argument("--episodes", type=count, default=5,
+                    help="episodes of the driver, seeds --seed.. (default: %(default)s)")
     gp.add_argument("--every", type=count, default=3, help="compare at every n-th slot (default: %(default)s)")
     gp.add_argument("--convergence-slots", type=int, nargs="*", default=list(CONVERGENCE_SLOTS),
                     help="slots of the first episode for the AO convergence figure "
@@ -29,13 +28,11 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     gp.add_argument("--global-arg", action="append", default=[], metavar="KEY=VALUE",
                     help="resolution of the global reference, e.g. --global-arg drone_spacing_m=0.25")
     gp.add_argument("--out", default="runs/gap", help="output directory (default: %(default)s)")
-    gp.set_defaults(func=run)
+    return gp
 
 
 def run(args: argparse.Namespace) -> int:
     from agents import make_policy
-
-    from ..results.run import Play
 
     from ..experiments.gap import (
         convergence,
@@ -46,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
         summarize_gaps,
         write_gap_outputs,
     )
+    from ..results.run import Play
 
     cfg = config_of(args)
     bad = [s for s in args.convergence_slots if not 0 <= s < cfg.num_slots]
@@ -59,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
                              "plan (the experts, the baselines and global-mpc do; a learned agent can drive: --driver)")
     make_policy("global-mpc", cfg, **global_settings)
     seeds = range(args.seed, args.seed + args.episodes)
-    rows = run_gap(args.policies, args.driver, cfg, seeds, args.every, Play(args.workers, not args.quiet), global_settings)
+    play = Play(args.workers, not args.quiet)
+    rows = run_gap(args.policies, args.driver, cfg, seeds, args.every, play, global_settings)
     summary = summarize_gaps(rows)
     conv = convergence(cfg, args.convergence_slots, seed=args.seed, driver=args.driver,
                        global_settings=global_settings) if args.convergence_slots else []

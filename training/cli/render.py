@@ -7,20 +7,18 @@ from pathlib import Path
 
 import lawn_env
 
-from . import COMMAND_HELP
-from .common import Parents, config_of, count, parse_overrides, policy_help, policy_name
+from .common import command, config_of, count, parse_overrides, policy_help, policy_name
 
 
-def add(sub: argparse._SubParsersAction, p: Parents) -> None:
-    re = sub.add_parser("render", parents=p("quiet", "one_seed", "config", "policy_arg"),
-                        help=COMMAND_HELP["render"])
+def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    re = command(sub, "render", "quiet", "one_seed", "config", "policy_arg")
     re.add_argument("--policy", default="rg-mpc", type=policy_name, help=policy_help("default: rg-mpc; "))
     re.add_argument("--env", default=None, choices=[*lawn_env.ENV_IDS, *lawn_env.RL_ENV_IDS],
                     help="default: lawn/Joint-v1, or the env a trained agent was trained on")
     re.add_argument("--out", required=True, help="the animation: FILE.gif or FILE.mp4 (MP4 needs the video extra)")
     re.add_argument("--fps", type=float, default=8.0, help="frames per second (default: %(default)s; a slot is 0.5 s)")
     re.add_argument("--every", type=count, default=1, help="keep every n-th slot's frame (default: %(default)s)")
-    re.set_defaults(func=run)
+    return re
 
 
 def run(args: argparse.Namespace) -> int:

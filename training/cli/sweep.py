@@ -5,20 +5,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from . import COMMAND_HELP
-from .common import Parents
+from .common import command
 
 
-def add(sub: argparse._SubParsersAction, p: Parents) -> None:
-    sw = sub.add_parser("sweep", parents=p("workers", "quiet"),
-                        help=COMMAND_HELP["sweep"])
+def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    sw = command(sub, "sweep", "workers", "quiet", "backend")
     sw.add_argument("spec", help="sweep spec (YAML or JSON)")
     sw.add_argument("--out", required=True, help="table (CSV); finished rows are skipped on rerun")
-    sw.add_argument("--backend", choices=["process", "ray"], default="process",
-                    help="process pool (default) or Ray (local, or the cluster at $RAY_ADDRESS)")
     sw.add_argument("--extend", action="store_true",
                     help="keep rows of the table that this spec would not produce (another spec or version)")
-    sw.set_defaults(func=run)
+    return sw
 
 
 def run(args: argparse.Namespace) -> int:

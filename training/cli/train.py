@@ -7,29 +7,27 @@ from pathlib import Path
 
 from agents.errors import MissingExtra
 
-from . import COMMAND_HELP
-from .common import Parents, config_of, count, parse_overrides, seed
+from .common import command, config_of, count, parse_overrides, seed
 
 
-def add(sub: argparse._SubParsersAction, p: Parents) -> None:
+def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     from ..train import ALGOS, TRAIN_ENV_IDS
 
-    tr = sub.add_parser("train", parents=p("workers", "quiet", "seed", "config"),
-                        help=COMMAND_HELP["train"])
+    tr = command(sub, "train", "workers", "quiet", "seed", "config", "backend")
     tr.add_argument("--algo", choices=ALGOS,
                     help="algorithm: SB3's, bc (behaviour cloning of an expert) or fleet (DAgger, one network "
                          "for any K)")
-    tr.add_argument("--env", choices=TRAIN_ENV_IDS, help="lawn/Parallel-v0 is the multi-agent PettingZoo env; CartPole-v1 checks the "
-                         "training pipeline in seconds (it has no control cost: no validation on it)")
+    tr.add_argument("--env", choices=TRAIN_ENV_IDS,
+                    help="lawn/Parallel-v0 is the multi-agent PettingZoo env; CartPole-v1 checks the training "
+                         "pipeline in seconds (it has no control cost: no validation on it)")
     tr.add_argument("--timesteps", type=count, help="environment steps (for bc: expert transitions)")
     tr.add_argument("--seeds", type=seed, nargs="+", metavar="SEED",
-                    help="train one run per seed into OUT/seed-<s> (process pool, --workers) and summarize across seeds")
-    tr.add_argument("--backend", choices=["process", "ray"], default="process",
-                    help="where --seeds runs go: a process pool (default) or Ray, as lawn sweep")
+                    help="train one run per seed into OUT/seed-<s> (--workers, --backend) and summarize across seeds")
     tr.add_argument("--interface", default=None, choices=["rl", "v0"],
                     help="the RL interface (default: the hyperparameter file's, rl) or the plain v0 interface")
     tr.add_argument("--out", help="run directory")
-    tr.add_argument("--n-envs", type=count, default=None, help="parallel environments (default: the hyperparameter file)")
+    tr.add_argument("--n-envs", type=count, default=None,
+                    help="parallel environments (default: the hyperparameter file)")
     tr.add_argument("--hp", action="append", default=[], metavar="KEY=VALUE",
                     help="hyperparameter override, e.g. --hp learning_rate=1e-4 (repeatable)")
     tr.add_argument("--eval-every", type=count, default=10000,
@@ -44,9 +42,10 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
     tr.add_argument("--vec", choices=["dummy", "native"], default="dummy",
                     help="SB3 DummyVecEnv of single envs (default) or lawn's batched vector env (Joint-v1, "
                          "Comm-v1 and their RL ids, any --interface)")
-    tr.add_argument("--dataset", metavar="ID", help="bc: clone the episodes of this Minari dataset (lawn dataset create) "
-                                                     "instead of live expert rollouts; --timesteps caps the transitions")
-    tr.set_defaults(func=run)
+    tr.add_argument("--dataset", metavar="ID",
+                    help="bc: clone the episodes of this Minari dataset (lawn dataset create) instead of live expert "
+                         "rollouts; --timesteps caps the transitions")
+    return tr
 
 
 def run(args: argparse.Namespace) -> int:

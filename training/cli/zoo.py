@@ -7,16 +7,14 @@ from pathlib import Path
 
 from agents.errors import MissingExtra
 
-from . import COMMAND_HELP
-from .common import Parents
+from .common import command
 
 #: Where ``lawn zoo build`` exports the agents.
 ZOO_HINT = "agents/zoo/<name>/ (policy.zip, normalizer.npz, agent.json)"
 
 
-def add(sub: argparse._SubParsersAction, p: Parents) -> None:
-    zo = sub.add_parser("zoo", parents=p("workers", "quiet"),
-                        help=COMMAND_HELP["zoo"])
+def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    zo = command(sub, "zoo", "workers", "quiet")
     zo.add_argument("action", nargs="?", default="list", choices=["list", "train", "build"],
                     help="list the shipped agents (default), train their recipes, or build the zoo from the runs")
     zo.add_argument("--runs", default="runs/agents", help="training runs, one folder per recipe (default: %(default)s)")
@@ -24,7 +22,7 @@ def add(sub: argparse._SubParsersAction, p: Parents) -> None:
                     help="train only these recipes; build: rebuild only the sections of docs/LEARNED.md they are in "
                          "(the fleet networks' block, or the main tables), keeping the rest of the page")
     zo.add_argument("--doc", default="docs/LEARNED.md", help="build: the table's document (default: %(default)s)")
-    zo.set_defaults(func=run)
+    return zo
 
 
 def run(args: argparse.Namespace) -> int:
