@@ -16,8 +16,8 @@ def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     ev.add_argument("--policy", required=True, type=policy_name, help=policy_help())
     ev.add_argument("--env", default=None, type=comparison_env, metavar="ENV",
                     help=f"{', '.join(lawn_env.ENV_IDS)}: full episodes of the unmodified scenario (an agent trained "
-                         "on an RL id plays its benchmark id through its own interface; default: lawn/Joint-v1, or a trained "
-                         "agent's)")
+                         "on an RL id plays its benchmark id through its own interface; default: lawn/Joint-v1, or "
+                         "a trained agent's)")
     ev.add_argument("--episodes", type=count, default=10, help="episodes, seeds --seed.. (default: %(default)s)")
     ev.add_argument("--out", required=True, help="rows file, .csv or .json")
     ev.add_argument("--no-score", action="store_true",
