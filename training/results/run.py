@@ -43,7 +43,7 @@ from lawn_env.config import DroneConfig
 from ..pool import pool_map
 from .stats import SCORE_HIGH, SCORE_LOW
 
-__all__ = ["TRANSIENT_SLOTS", "Play", "episode_row", "build_policy", "run_episode", "split_cost", "evaluate",
+__all__ = ["TRANSIENT_SLOTS", "Play", "DEFAULT_PLAY", "episode_row", "build_policy", "run_episode", "split_cost", "evaluate",
            "run_entries", "per_slot_profile", "policy_env", "own_anchor", "learned_entries", "write_rows",
            "write_csv", "read_csv", "parse_bool", "LIMITS", "LIMIT_SETTINGS", "NOISE", "REFERENCE_ROWS",
            "is_reference_row", "limit_config", "resolve"]
@@ -65,6 +65,10 @@ class Play:
     workers: int = 1
     progress: bool = True
     transient_slots: int = TRANSIENT_SLOTS
+
+
+#: The default way to play: one process, a progress bar, the default split.
+DEFAULT_PLAY = Play()
 
 
 def _max_speed() -> float:
