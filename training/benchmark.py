@@ -2,23 +2,17 @@
 (:mod:`.results.run`), compute (:mod:`.results.stats`), write the tables (:mod:`.results.report`).
 
 * **Paper protocol** (:func:`run_benchmark`): the policies on the same seeds of one scenario,
-  compared with the first per seed (paired mean and geometric ratio) and scored. Every row of the
-  README's table (its default policies and the reference rows) replays two recorded episodes
-  (:func:`digest_records`, ``tests/data/episode_digests.json``: every slot's stage cost, the outage
-  rate and the RMSE to 10 significant digits, hashed), so a change of any policy's episodes is
-  deliberate or a test failure; ``python -m training.benchmark --write-digests`` records them
-  beside the table.
-* **Learned protocol** (:func:`run_learned_protocol`, the tables of ``lawn zoo build``): every agent
-  on the test seeds 0..TEST_EPISODES-1 of the unmodified default scenario beside the best expert,
-  ``epa`` and the zero action of every interface the agents act through (``anchor:NAME``): what
-  learning adds is the comparison with its own anchor.
-* **Task suite** (:func:`run_suite`, docs/LEADERBOARD.md): every expert, baseline, shipped agent and
-  the reference rows on every preset of :data:`lawn_env.presets.SUITE`, scored against the
-  references of the same task and env; agents trained on the default task that cannot act on a
-  task (a network built for K = 4) are reported as such.
+  compared with the first per seed and scored. Every row of the README's table replays two recorded
+  episodes (:func:`digest_records`, ``tests/data/episode_digests.json``), so a change of any
+  policy's episodes is deliberate or a test failure; ``python -m training.benchmark
+  --write-digests`` records them.
+* **Learned protocol** (:func:`run_learned_protocol`, ``lawn zoo build``): every agent on the test
+  seeds beside the best expert, ``epa`` and the zero action of the interface it acts through.
+* **Task suite** (:func:`run_suite`, docs/LEADERBOARD.md): experts, baselines, shipped agents and
+  the reference rows on every preset of :data:`lawn_env.presets.SUITE`; an agent that cannot act on
+  a task (a network built for K = 4) is reported as such.
 * **Fleet sizes** (:func:`run_generalization`, docs/LEARNED.md): the networks that read the entity
-  layout on K = 3..64 AGVs without retraining, beside the best expert and its noise floor, every
-  entry of one size in one pool so that decision times are measured side by side.
+  layout on K = 3..64 AGVs beside the best expert and its noise floor.
 """
 
 from __future__ import annotations

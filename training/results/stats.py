@@ -281,14 +281,12 @@ def scores_by_policy(rows: Iterable[Mapping], metric: str = "control_cost", vers
 
 def aggregate_score(per_task: Mapping[str, Costs],
                     resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float, float, int]:
-    """The headline over tasks: rliable's interquartile mean (Agarwal et al., 2021;
-    ``scipy.stats.trim_mean(scores, 0.25)``) of the per-task scores, ``int(T / 4)`` tasks dropped at
-    each end (the mean of the middle four of six; nothing dropped below four tasks; rliable pools the
-    runs of every task, here each task is one score), with a 95 % stratified bootstrap interval
-    (each task's seeds resampled on their own, its score recomputed from the resampled (E, R, x),
-    the IQM taken; percentile method, a fixed seed). ``per_task``: task -> the aligned per-seed
-    costs (E, R, x) of :func:`score_inputs`. Returns (IQM, low, high, number of tasks); tasks
-    whose references do not separate are left out."""
+    """The headline over tasks: rliable's interquartile mean (Agarwal et al., 2021) of the per-task
+    scores (``scipy.stats.trim_mean(scores, 0.25)``: the middle four of six), with a 95 % stratified
+    bootstrap interval (each task's seeds resampled on their own, its score recomputed, the IQM
+    taken; percentile method, a fixed seed). ``per_task``: task -> the costs (E, R, x) of
+    :func:`score_inputs`. Returns (IQM, low, high, number of tasks); tasks whose references do not
+    separate are left out."""
     scores, draws = [], []
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     for task in sorted(per_task):
