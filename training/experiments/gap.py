@@ -27,6 +27,7 @@ from agents.ao import AOSettings, AOSolver
 from agents.policies import PlannerPolicy
 from lawn_env import ScenarioConfig, Snapshot
 
+from ..results.report import markdown_table
 from ..results.run import DEFAULT_PLAY, Play, write_rows
 
 __all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "global_power_shares", "format_gap_table",
@@ -125,17 +126,14 @@ def global_power_shares(rows: list[dict]) -> int:
 
 
 def format_gap_table(summary: list[dict]) -> str:
+    """:func:`summarize_gaps`' rows as a Markdown table."""
     keys = list(dict.fromkeys(k for e in summary for k in e if k.startswith("worse_than_")))
     header = ["planner", "slots", "gap median", "gap p90", "gap max", "decision time (ms)", "a link < 5 % power"]
-    header += [f"worse than {k[len('worse_than_'):]}" for k in keys]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for e in summary:
-        cells = [e["policy"], str(e["slots"]), f"{e['gap_median'] * 100:.3f} %", f"{e['gap_p90'] * 100:.3f} %",
-                 f"{e['gap_max'] * 100:.2f} %", f"{e['decision_time_median_s'] * 1e3:.2f}",
-                 f"{e['slots_with_a_link_below_5pct_power']}"]
-        cells += [str(e[k]) if k in e else "–" for k in keys]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    table = [[e["policy"], str(e["slots"]), f"{e['gap_median'] * 100:.3f} %", f"{e['gap_p90'] * 100:.3f} %",
+              f"{e['gap_max'] * 100:.2f} %", f"{e['decision_time_median_s'] * 1e3:.2f}",
+              f"{e['slots_with_a_link_below_5pct_power']}", *(str(e[k]) if k in e else "–" for k in keys)]
+             for e in summary]
+    return markdown_table([*header, *(f"worse than {k[len('worse_than_'):]}" for k in keys)], table)
 
 
 def plot_gaps(rows: list[dict], path: Path) -> None:

@@ -10,6 +10,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from ..results.report import markdown_table
 from .base import Experiment
 from .claims import Claim
 from .registry import EXPERIMENTS
@@ -111,10 +112,7 @@ def tally(claims: Sequence[Claim]) -> str:
 
 def format_claims(claims: Sequence[Claim]) -> str:
     """The claims as a Markdown table."""
-    lines = ["| figure | claim | checked on | project's number (paired mean ± 95 % interval) | seeds | verdict |",
-             "|---|---|---|---|---|---|"]
     marks = {"differs": "**differs**", "not significant": "*not significant*"}
-    for c in claims:
-        v = marks.get(c.verdict, c.verdict)
-        lines.append(f"| {c.figure} | {c.claim} | {c.metric} | {c.value} | {c.seeds or '–'} | {v} |")
-    return "\n".join(lines)
+    return markdown_table(["figure", "claim", "checked on", "project's number (paired mean ± 95 % interval)", "seeds",
+                           "verdict"], ([c.figure, c.claim, c.metric, c.value, str(c.seeds or "–"),
+                                         marks.get(c.verdict, c.verdict)] for c in claims))
