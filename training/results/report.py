@@ -97,11 +97,9 @@ def format_score(score: tuple[float, float, float, int] | None) -> str:
 def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy",
                  paired: dict[str, tuple[float, float]] | None = None, reference: str | None = None,
                  scores: Mapping[str, tuple] | None = None, geometric: Mapping[str, Geometric] | None = None) -> str:
-    """A Markdown table: mean ± 95 % interval per metric (decision time in ms), optionally the
-    normalized score (``scores``: policy -> :func:`.stats.normalized_score`), the paired
-    relative cost difference against ``reference`` (``paired``: mean of per-seed relative
-    differences, t-interval) and the geometric one (``geometric``: the deciding statistic,
-    docs/benchmark.md)."""
+    """A Markdown table: mean ± 95 % interval per metric (decision time in ms), optionally the score
+    (``scores``: policy -> :func:`.stats.normalized_score`) and the cost against ``reference``
+    (``paired``: the mean relative difference; ``geometric``: the deciding statistic)."""
     header = [by, "episodes"] + [label.replace("(s)", "(ms)") for _, label in metrics]
     if scores:
         header.insert(3, f"score v{SCORE_VERSION} [95 %]")
@@ -265,9 +263,8 @@ def _references_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
 
 
 def structure_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
-    """Per task, what decides it: the best expert's control cost, its transient and sustained parts (the
-    sustained share), the noise floor and the two headroom rows against it (geometric,
-    :mod:`.run`), on ``lawn/Joint-v0``."""
+    """Per task, what decides it on ``lawn/Joint-v0``: the best expert's control cost, its transient and
+    sustained parts (the sustained share), the noise floor and the headroom rows against it."""
     table = []
     for task in tasks:
         high = [r for r in rows if r["policy"] == SCORE_HIGH and r["env"] == JOINT and r.get("task") == task]
@@ -289,8 +286,7 @@ def structure_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
 def task_tables(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequence[str],
                 skipped: Mapping[tuple[str, str], str]) -> str:
     """One Markdown table per task: every row's control cost, its transient and sustained parts, the
-    score, and the comparison with the best expert on the same env (geometric, the deciding statistic,
-    and the paired mean of relative differences)."""
+    score, and the comparison with the best expert on the same env (geometric and paired mean)."""
     scores = scores_by_policy(rows)
     out = []
     for task in tasks:
@@ -315,9 +311,8 @@ def task_tables(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
 
 def plot_profiles(per_slot: Sequence[Mapping], path: Path, tasks: Sequence[str],
                   transient_slots: int = TRANSIENT_SLOTS) -> Path:
-    """The mean stage cost per slot of the experts, baselines, anchors, reference rows and agents on
-    ``lawn/Joint-v0`` (the agents on their own env), one panel per task, log scale; from the rows of
-    ``per_slot.csv`` (:func:`per_slot_profile`)."""
+    """The mean stage cost per slot of every row on ``lawn/Joint-v0`` (the agents on their own env),
+    one panel per task, log scale; from the rows of ``per_slot.csv`` (:func:`.run.per_slot_profile`)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
