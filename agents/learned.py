@@ -1,10 +1,10 @@
-"""Learned policies behind the common policy protocol, always acting on the v0 environments.
+"""Learned policies behind the common policy protocol, always acting on the benchmark environments.
 
 ``make_policy("sb3:DIR", config)`` loads a ``lawn train`` run directory (``bc:DIR`` the same for
 behaviour-cloned runs, ``marl:DIR`` a parameter-shared multi-agent run) and ``zoo:NAME`` a
 shipped agent (``agents/zoo/NAME``: policy weights, observation statistics and ``agent.json``).
 Whatever interface an agent was trained with (:mod:`lawn_env.interface`: anchored actions,
-clipped features), the wrapper reproduces it around the network and hands the v0 environment
+clipped features), the wrapper reproduces it around the network and hands the benchmark environment
 the equivalent v0 action, so every comparison runs the unmodified scenario. torch and SB3 are
 imported only here, when such a policy is built.
 """

@@ -11,10 +11,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from training.pages import ROOT, block_body
-
 from lawn_env import DisturbanceConfig, ScenarioConfig
 from training.experiments import EXPERIMENTS, make_figures
+from training.pages import ROOT, block_body
 from training.sweep import SweepTableError, load_spec, read_rows, read_table, run_sweep
 
 SPEC = {"name": "t", "env": "lawn/Joint-v1", "preset": "default", "set": {"num_slots": 8},
@@ -156,7 +155,7 @@ def test_quick_figures_are_built_from_their_tables(tmp_path):
 
 
 def test_paired_claims_use_the_same_seeds_and_their_intervals():
-    from training.experiments.base import multi_claim, paired_claim
+    from training.experiments.claims import multi_claim, paired_claim
     from training.results.stats import paired_difference, verdict
 
     a = {0: 90.0, 1: 180.0, 2: 95.0, 3: 9.0}
@@ -322,8 +321,8 @@ def test_sweep_reruns_when_policy_arguments_or_the_version_change(tmp_path, monk
 
 
 def test_summarize_sweep_gives_the_mean_and_interval_per_point_and_policy():
-    from training.sweep import summarize_sweep
     from training.results.stats import mean_ci
+    from training.sweep import summarize_sweep
 
     rows = [{"g": g, "policy": p, "control_cost": c, "rmse_m": 1.0, "outage_rate": 0.0}
             for g, p, c in [(1, "a", 10.0), (1, "a", 14.0), (1, "b", 3.0), (2, "a", 5.0), (2, "a", 7.0)]]

@@ -50,13 +50,13 @@ __all__ = ["collect", "label_transitions", "fit", "BCSettings", "bc_settings", "
 #: The algorithms whose policy network behaviour cloning fits (the ``target`` hyperparameter).
 BC_TARGETS = ("ppo", "sac")
 DATA_EXTRA = "datasets need the data extra (minari): pip install -e '.[data]' (bash scripts/setup.sh full installs it)"
-#: Datasets record the v0 envs (the RL ids reshape the reward and end episodes early).
+#: Datasets record the benchmark envs (the RL ids reshape the reward and end episodes early).
 DATASET_ENV_IDS = ("lawn/Joint-v1", "lawn/Comm-v1")
 
 
 def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, interface: InterfaceLike,
             actor: Actor | None = None) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """``steps`` transitions of seeded episodes (seed, seed + 1, ...) of the v0 env: the states ``actor``
+    """``steps`` transitions of seeded episodes (seed, seed + 1, ...) of the benchmark env: the states ``actor``
     (default: the expert) visits labelled with the expert's action, and the costs of the episodes that ended."""
     env = gym.make(env_id, config=config)
     expert = make_policy(expert_name, config, env_id=env_id)

@@ -2,23 +2,17 @@
 (:mod:`.results.run`), compute (:mod:`.results.stats`), write the tables (:mod:`.results.report`).
 
 * **Paper protocol** (:func:`run_benchmark`): the policies on the same seeds of one scenario,
-  compared with the first per seed (paired mean and geometric ratio) and scored. Every row of the
-  README's table (its default policies and the reference rows) replays two recorded episodes
-  (:func:`digest_records`, ``tests/data/episode_digests.json``: every slot's stage cost, the outage
-  rate and the RMSE to 10 significant digits, hashed), so a change of any policy's episodes is
-  deliberate or a test failure; ``python -m training.benchmark --write-digests`` records them
-  beside the table.
-* **Learned protocol** (:func:`run_learned_protocol`, the tables of ``lawn zoo build``): every agent
-  on the test seeds 0..TEST_EPISODES-1 of the unmodified default scenario beside the best expert,
-  ``epa`` and the zero action of every interface the agents act through (``anchor:NAME``): what
-  learning adds is the comparison with its own anchor.
-* **Task suite** (:func:`run_suite`, docs/LEADERBOARD.md): every expert, baseline, shipped agent and
-  the reference rows on every preset of :data:`lawn_env.presets.SUITE`, scored against the
-  references of the same task and env; agents trained on the default task that cannot act on a
-  task (a network built for K = 4) are reported as such.
+  compared with the first per seed and scored. Every row of the README's table replays two recorded
+  episodes (:func:`digest_records`, ``tests/data/episode_digests.json``), so a change of any
+  policy's episodes is deliberate or a test failure; ``python -m training.benchmark
+  --write-digests`` records them.
+* **Learned protocol** (:func:`run_learned_protocol`, ``lawn zoo build``): every agent on the test
+  seeds beside the best expert, ``epa`` and the zero action of the interface it acts through.
+* **Task suite** (:func:`run_suite`, docs/LEADERBOARD.md): experts, baselines, shipped agents and
+  the reference rows on every preset of :data:`lawn_env.presets.SUITE`; an agent that cannot act on
+  a task (a network built for K = 4) is reported as such.
 * **Fleet sizes** (:func:`run_generalization`, docs/LEARNED.md): the networks that read the entity
-  layout on K = 3..64 AGVs without retraining, beside the best expert and its noise floor, every
-  entry of one size in one pool so that decision times are measured side by side.
+  layout on K = 3..64 AGVs beside the best expert and its noise floor.
 """
 
 from __future__ import annotations
@@ -28,8 +22,8 @@ import hashlib
 import json
 import sys
 import time
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Mapping, Sequence
 
 from agents import BENCHMARK_POLICIES, make_policy
 from agents.base import JOINT
@@ -39,17 +33,35 @@ from lawn_env import ScenarioConfig, presets
 
 from .protocol import TEST_EPISODES
 from .results.report import learned_table, plot_summary, summary_markdown
-from .results.run import (NOISE, REFERENCE_ROWS, Play, build_policy, evaluate, learned_entries, policy_env,
-                          run_entries, run_episode, write_rows)
-from .results.stats import (SCORE_HIGH, SCORE_LOW, paired_cost_difference, paired_cost_geometric,
-                            scores_by_policy, summarize)
+from .results.run import (
+    DEFAULT_PLAY,
+    NOISE,
+    REFERENCE_ROWS,
+    Play,
+    build_policy,
+    evaluate,
+    learned_entries,
+    policy_env,
+    run_entries,
+    run_episode,
+    write_rows,
+)
+from .results.stats import (
+    SCORE_HIGH,
+    SCORE_LOW,
+    paired_cost_difference,
+    paired_cost_geometric,
+    scores_by_policy,
+    summarize,
+)
 
 __all__ = ["run_benchmark", "README_ROWS", "DIGESTS", "DIGEST_SEEDS", "episode_record", "digest_records",
            "run_learned_protocol", "SUITE_POLICIES", "suite_policies", "run_suite", "FLEET_SIZES",
            "fleet_agents", "run_generalization"]
 
 #: Experts and baselines of the suite (global-mpc, seconds per slot, is the gap study's reference).
-SUITE_POLICIES = ("dv-mpc", "rg-mpc", "ao-mpc", "epa", "sf", "pid", "lqr", "heuristic", "anchor:stake", "anchor:distance")
+SUITE_POLICIES = ("dv-mpc", "rg-mpc", "ao-mpc", "epa", "sf", "pid", "lqr", "heuristic", "anchor:stake",
+                  "anchor:distance")
 #: The rows of the README's table: lawn benchmark's default policies and the reference rows.
 README_ROWS = (*BENCHMARK_POLICIES, *REFERENCE_ROWS)
 #: Their recorded episodes (seeds DIGEST_SEEDS of the default task on lawn/Joint-v1).
@@ -57,18 +69,19 @@ DIGESTS = Path(__file__).resolve().parent.parent / "tests" / "data" / "episode_d
 DIGEST_SEEDS = (0, 1)
 #: Fleet size -> test seeds (0..n-1) of the fleet-size table.
 FLEET_SIZES: dict[int, int] = {3: 100, 4: 100, 8: 100, 16: 40, 32: 40, 64: 20}
+#: How the fleet-size table is played by default: two processes.
+FLEET_PLAY = Play(workers=2)
 
 
 def run_benchmark(policies: Sequence[str], env_id: str, config: ScenarioConfig, episodes: int, seed: int,
-                  out_dir: Path, play: Play = Play()) -> tuple[list[dict], list[dict]]:
+                  out_dir: Path, play: Play = DEFAULT_PLAY) -> tuple[list[dict], list[dict]]:
     """Run every policy on seeds ``seed .. seed+episodes-1``; write ``episodes.csv``,
     ``summary.csv``, ``summary.md`` and ``benchmark.png`` into ``out_dir``. With ``epa`` and
     ``dv-mpc`` among the policies, the summary has the normalized score; every policy is compared
     with the first, per seed, as a mean of relative differences and as a geometric mean of cost
     ratios (the deciding statistic, docs/benchmark.md)."""
-    tasks = [(name, env_id, config, seed + i, {}) for name in policies for i in range(episodes)]
-    rows = evaluate(tasks, workers=play.workers, progress=play.progress, desc="benchmark",
-                    transient_slots=play.transient_slots)
+    tasks: list[tuple] = [(name, env_id, config, seed + i, {}) for name in policies for i in range(episodes)]
+    rows = evaluate(tasks, play.workers, play.progress, "benchmark", play.transient_slots)
     out_dir = Path(out_dir)
     write_rows(rows, out_dir / "episodes.csv")  # the episodes first: a failed summary loses none of them
     summary = summarize(rows)
@@ -104,7 +117,7 @@ def digest_records(rows: Sequence[str] = README_ROWS) -> dict[str, list[dict]]:
     return {name: [episode_record(name, s) for s in DIGEST_SEEDS] for name in rows}
 
 
-def run_learned_protocol(agents: Sequence[str], out_dir: Path, episodes: int = TEST_EPISODES, play: Play = Play(),
+def run_learned_protocol(agents: Sequence[str], out_dir: Path, episodes: int = TEST_EPISODES, play: Play = DEFAULT_PLAY,
                          config: ScenarioConfig | None = None) -> str:
     """The learned protocol over ``agents`` (default: every shipped agent); writes
     ``episodes.csv`` and ``summary.md`` into ``out_dir`` and returns the table with its runtime."""
@@ -138,7 +151,7 @@ def _applicable(policy: str, env: str, config: ScenarioConfig) -> str | None:
     return None
 
 
-def run_suite(policies: Sequence[str], tasks: Sequence[str], episodes: int, out_dir: Path, play: Play = Play()
+def run_suite(policies: Sequence[str], tasks: Sequence[str], episodes: int, out_dir: Path, play: Play = DEFAULT_PLAY
               ) -> tuple[list[dict], dict[tuple[str, str], str], float]:
     """Every policy on every task (seeds 0..episodes-1), with the references of each env used and
     the reference rows (:data:`.results.run.REFERENCE_ROWS`, on ``lawn/Joint-v1``); writes
@@ -176,7 +189,7 @@ def fleet_agents() -> list[str]:
             if (rec.get("interface") or {}).get("layout") == "entities"]
 
 
-def run_generalization(agents: Sequence[str], sizes: Mapping[int, int] = FLEET_SIZES, play: Play = Play(workers=2),
+def run_generalization(agents: Sequence[str], sizes: Mapping[int, int] = FLEET_SIZES, play: Play = FLEET_PLAY,
                        base: ScenarioConfig | None = None) -> list[dict]:
     """Full episodes of every agent, the best expert and its noise floor on the default task (or
     ``base``) with each fleet size (``task`` = ``k<K>``)."""
@@ -193,7 +206,7 @@ def run_generalization(agents: Sequence[str], sizes: Mapping[int, int] = FLEET_S
 def main(argv: list[str] | None = None) -> int:
     """``python -m training.benchmark [--write-digests]``: compare the README rows' episodes with the
     recorded ones (exit 1 naming the rows that changed), or record them."""
-    parser = argparse.ArgumentParser(prog="python -m training.benchmark", description=main.__doc__.split(":")[0])
+    parser = argparse.ArgumentParser(prog="python -m training.benchmark", description=str(main.__doc__).split(":")[0])
     parser.add_argument("--write-digests", action="store_true", help=f"rewrite {DIGESTS.name}")
     args = parser.parse_args(argv)
     now = digest_records()

@@ -1,5 +1,5 @@
 """DAgger of a fleet network (``agents.fleet.FleetPolicy``) from an expert, on mixed fleet sizes: the
-expert's (then the network's own) rollouts on the v0 env of every fleet size K, labelled with the
+expert's (then the network's own) rollouts on the benchmark env of every fleet size K, labelled with the
 expert's actions in the interface's scheme and laid out per entity (:func:`fleet_pairs`), fitted by
 mean-squared error over the AGVs present and the drone (:func:`fit_fleet`). Every K shares the entity
 layout's shapes, so one data set and one network serve them all.
@@ -26,7 +26,7 @@ __all__ = ["fleet_pairs", "fit_fleet", "dagger_round", "fleet_settings", "train_
 
 def fleet_pairs(env_id: str, config: ScenarioConfig, steps: int, seed: int, interface: InterfaceLike,
                 expert: str = "rg-mpc", actor: Any = None) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
-    """``steps`` labelled transitions of the v0 env of ``config`` (:func:`training.bc.collect`) in the
+    """``steps`` labelled transitions of the benchmark env of ``config`` (:func:`training.bc.collect`) in the
     entity layout: the observations (a dict of arrays), the expert's entity actions (steps, A) and
     which entries carry a label (steps, A): the AGVs present and the drone."""
     iface = resolve_interface(interface)
@@ -81,7 +81,7 @@ def fit_fleet(model: Any, obs: dict[str, np.ndarray], actions: np.ndarray, prese
 def dagger_round(model: Any, env_id: str, configs: Sequence[ScenarioConfig], steps: int, seed: int,
                  interface: InterfaceLike, expert: str = "rg-mpc"
                  ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
-    """The states ``model`` visits on the v0 env of every config (``steps`` each, seeds from
+    """The states ``model`` visits on the benchmark env of every config (``steps`` each, seeds from
     ``seed``), labelled by the expert (``model`` None: the expert's own states), concatenated."""
     parts = []
     for i, config in enumerate(configs):

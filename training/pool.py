@@ -1,35 +1,17 @@
 """The process pool of every parallel command: the calling process works, helpers that start once
-and stay.
+and stay (docs/performance.md, "Many cores", says why and measures it).
 
-``lawn evaluate``, ``benchmark`` (the suite too), ``gap`` and ``zoo`` map independent tasks over
-``workers`` processes: this one and ``workers - 1`` helpers (:func:`pool_map`). (``lawn sweep``,
-``figures`` and ``train --seeds`` stream rows from ``workers`` processes of a :func:`worker_pool` while
-this one writes them.) The helpers are ``spawn`` workers by default (fresh
-interpreters, safe with torch and OpenMP thread pools; ``LAWN_START_METHOD`` or ``start_method=``
-picks ``fork`` or ``forkserver`` where the platform has them). Starting one costs an interpreter,
-the imports and the loading of numba's kernel cache (about two seconds; from an empty cache, the
-compilation): this process starts on the tasks at once and a helper gets tasks only once it has
-started, so a short command pays nothing for a helper that is still starting; each chunk a helper
-returns hands it the next at once, whatever this process is playing. The pool stays for the next
-batch (:func:`shared_pool`; the suite maps six) and is shut down when the process exits. A command
-starts its helpers before its own imports and set-up (:func:`start_helpers`), and ends them at once
-when it fails before its map (:func:`stop_helpers`). A helper that dies while it holds tasks (killed,
-out of memory, a crash in native code) fails the map with :class:`HelperDied`.
-
-Every process of a map runs each numerical library on one thread (:func:`single_threaded`): the
-episodes are the parallelism. An OpenBLAS or OpenMP pool per process would start as many threads as
-the machine has cores, and N processes would share the cores with N times that many threads; and a
-task gives the same numbers in whichever process plays it.
-
-numba's own thread pool is never launched: lawn's kernels are serial, and numba refuses to change
-``NUMBA_NUM_THREADS`` once its threads run, which it checks at every compilation (a cold kernel
-cache compiles in the workers). :func:`single_threaded` sets the variable and reloads numba's
-configuration before any thread exists.
-
-Tasks go to the helpers in chunks (:func:`chunk_size`): one message per chunk instead of per episode,
-so the parent's share of the work does not grow with the number of workers, and the chunks shrink to
-one task as the work runs out; this process takes one task at a time between them
-(``benchmarks/parallel_scaling.py`` measures the whole).
+``lawn evaluate``, ``benchmark``, ``gap`` and ``zoo`` map independent tasks over ``workers``
+processes: this one and ``workers - 1`` helpers of a persistent pool (:func:`pool_map`,
+:func:`shared_pool`); ``lawn sweep``, ``figures`` and ``train --seeds`` stream rows from a
+:func:`worker_pool`. Helpers are ``spawn`` workers by default (``LAWN_START_METHOD`` or
+``start_method=`` picks another). A command starts its helpers before its own set-up
+(:func:`start_helpers`) and ends them at once when it fails before its map (:func:`stop_helpers`);
+a helper gets tasks only once it has started, in chunks (:func:`chunk_size`) that shrink as the work
+runs out, while this process plays one task at a time. A helper that dies while it holds tasks fails
+the map with :class:`HelperDied`. Every process runs BLAS, OpenMP and numba on one thread
+(:func:`single_threaded`): the episodes are the parallelism, and a task gives the same numbers in
+whichever process plays it.
 """
 
 from __future__ import annotations
@@ -39,12 +21,13 @@ import multiprocessing
 import os
 import threading
 from collections import deque
+from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from typing import Any, Callable
+from typing import Any
 
-__all__ = ["worker_pool", "shared_pool", "start_helpers", "stop_helpers", "shutdown_shared_pool", "HelperDied", "pool_map", "single_threaded",
-           "chunk_size", "resolve_start_method"]
+__all__ = ["worker_pool", "shared_pool", "start_helpers", "stop_helpers", "shutdown_shared_pool", "HelperDied",
+           "pool_map", "single_threaded", "chunk_size", "resolve_start_method"]
 
 _SHARED: dict[str, Any] = {"pool": None, "helpers": 0, "pid": 0, "method": None, "starts": []}
 
@@ -127,7 +110,7 @@ def shared_pool(helpers: int, start_method: str | None = None) -> ProcessPoolExe
     method = resolve_start_method(start_method)
     pool = _SHARED["pool"]
     if pool is not None and _SHARED["pid"] != os.getpid():  # a forked child: the parent's pool is not its own
-        _SHARED.update(pool=None, helpers=0, pid=0, method=None, starts=[])
+        _forget()
         pool = None
     if pool is not None and (_SHARED["helpers"] != helpers or _SHARED["method"] != method
                              or getattr(pool, "_broken", False)):
@@ -153,11 +136,17 @@ def start_helpers(workers: int, start_method: str | None = None) -> list[Future]
     return list(_SHARED["starts"])
 
 
+def _forget() -> tuple[ProcessPoolExecutor | None, int]:
+    """Drop the persistent pool from this process's record; returns it and the process that made it."""
+    pool, owner = _SHARED["pool"], _SHARED["pid"]
+    _SHARED.update(pool=None, helpers=0, pid=0, method=None, starts=[])
+    return pool, owner
+
+
 def stop_helpers() -> None:
     """End this process's helpers at once, whatever they are doing (a command that fails before its
     map does not wait for helpers still starting)."""
-    pool, owner = _SHARED["pool"], _SHARED["pid"]
-    _SHARED.update(pool=None, helpers=0, pid=0, method=None, starts=[])
+    pool, owner = _forget()
     if pool is None or owner != os.getpid():
         return
     for helper in list((getattr(pool, "_processes", None) or {}).values()):  # this pool's, no other child
@@ -170,8 +159,7 @@ def stop_helpers() -> None:
 
 def shutdown_shared_pool() -> None:
     """Stop the persistent pool's workers (at exit, or to start afresh)."""
-    pool, owner = _SHARED["pool"], _SHARED["pid"]
-    _SHARED.update(pool=None, helpers=0, pid=0, method=None, starts=[])
+    pool, owner = _forget()
     if pool is not None and owner == os.getpid():
         pool.shutdown(wait=True, cancel_futures=True)
 
@@ -208,17 +196,13 @@ def pool_map(fn: Callable[[Any], Any], tasks: list, workers: int, progress: bool
                 out.append(fn(task))
                 bar.update()
             return out
-        return _map_with_helpers(fn, tasks, workers, bar, start_method)
+        return _HelperMap(fn, tasks, workers, bar, start_method).run()
     finally:
         bar.close()
 
 
 class HelperDied(RuntimeError):
     """A helper process ended while it held tasks (killed, out of memory, a crash in native code)."""
-
-
-def _map_with_helpers(fn: Callable[[Any], Any], tasks: list, workers: int, bar, start_method: str | None) -> list:
-    return _HelperMap(fn, tasks, workers, bar, start_method).run()
 
 
 class _HelperMap:
@@ -265,7 +249,7 @@ class _HelperMap:
             if chunk is not None and not future.cancelled():
                 error = future.exception()
                 if error is None:
-                    for i, row in zip(chunk, future.result()):
+                    for i, row in zip(chunk, future.result(), strict=True):
                         self.results[i] = row
                     self.bar.update(len(chunk))
                     self.hand_out()

@@ -28,7 +28,8 @@ _GENERATED = (":(exclude)README.md", ":(exclude)docs", ":(exclude)agents/zoo")
 
 
 def _git(root: Path, *args: str) -> str:
-    return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, check=True, timeout=10).stdout.strip()
+    done = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, check=True, timeout=10)
+    return done.stdout.strip()
 
 
 def source_stamp(root: Path = _ROOT) -> dict | None:
@@ -63,4 +64,5 @@ def provenance() -> str:
     stamp = source_stamp() or _build_stamp()
     if stamp is None:
         return f"lawn {lawn_env.__version__}, commit unknown"
-    return f"lawn {lawn_env.__version__}, commit {stamp['commit']}" + (" + uncommitted changes" if stamp["dirty"] else "")
+    dirty = " + uncommitted changes" if stamp["dirty"] else ""
+    return f"lawn {lawn_env.__version__}, commit {stamp['commit']}{dirty}"

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -14,6 +14,7 @@ import numpy as np
 import lawn_env
 from agents import HeuristicPolicy, make_policy, rollout
 from lawn_env import ScenarioConfig
+from lawn_env.envs.base import LawnEnv
 
 __all__ = ["FORMATS", "check_output", "record_frames", "write_animation", "render_episode", "run_demo"]
 
@@ -21,7 +22,7 @@ __all__ = ["FORMATS", "check_output", "record_frames", "write_animation", "rende
 FORMATS = (".gif", ".mp4")
 
 
-def record_frames(policy: str, env_id: str | None, seed: int, config: ScenarioConfig | str | None = None,
+def record_frames(policy: str, env_id: str | None = None, seed: int = 0, config: ScenarioConfig | str | None = None,
                   every: int = 1, progress: bool = False, **policy_args: Any) -> tuple[list[np.ndarray], dict, str]:
     """Play one seeded episode of ``env_id`` (default: the policy's own env) under ``policy`` and
     keep the env's ``rgb_array`` frame of the start and of every ``every``-th slot (and the last),
@@ -35,23 +36,27 @@ def record_frames(policy: str, env_id: str | None, seed: int, config: ScenarioCo
     env_id = env_id or actor.env_id
     env = gym.make(env_id, config=actor.config if config is None else config, render_mode="rgb_array")
     frames: list[np.ndarray] = []
-    bar = tqdm(total=env.unwrapped.config.num_slots, desc=policy, unit="slot", disable=None if progress else True,
-               leave=False)
+
+    def frame() -> np.ndarray:
+        return cast(np.ndarray, env.render())
+
+    bar = tqdm(total=cast(LawnEnv, env.unwrapped).config.num_slots, desc=policy, unit="slot",
+               disable=None if progress else True, leave=False)
 
     def keep(step) -> None:
         bar.update()
         if (step.slot + 1) % every == 0:  # the frame shows slot n + 1
-            frames.append(env.render())
+            frames.append(frame())
 
     # the start's frame: the reset rollout() does gives the same state for the same seed
     env.reset(seed=seed)
-    frames.append(env.render())
+    frames.append(frame())
     try:
         episode = rollout(env, actor, seed, on_step=keep)
     finally:
         bar.close()
     if episode.length % every:  # the episode's last slot (at num_slots, or earlier if it terminated)
-        frames.append(env.render())
+        frames.append(frame())
     env.close()
     return frames, dict(episode.metrics), env_id
 
@@ -88,15 +93,14 @@ def write_animation(frames: list[np.ndarray], out: Path, fps: float = 8.0) -> Pa
     return out
 
 
-def render_episode(policy: str, out: Path, env_id: str | None = None, seed: int = 0,
-                   config: ScenarioConfig | str | None = None, fps: float = 8.0, every: int = 1,
-                   progress: bool = False, **policy_args: Any) -> dict:
+def render_episode(policy: str, out: Path, env_id: str | None = None, fps: float = 8.0, **options: Any) -> dict:
     """One seeded episode of ``env_id`` under ``policy`` as an animation at ``out`` (GIF or MP4);
-    returns the episode's metrics with the env id, frame count and file."""
+    returns the episode's metrics with the env id, frame count and file. ``options``: the ``seed``,
+    ``config``, ``every``, ``progress`` and policy settings of :func:`record_frames`."""
     if env_id is not None and env_id not in lawn_env.ENV_IDS and env_id not in lawn_env.RL_ENV_IDS:
         raise ValueError(f"env {env_id!r}: unknown; valid: {', '.join([*lawn_env.ENV_IDS, *lawn_env.RL_ENV_IDS])}")
     check_output(Path(out), fps)
-    frames, metrics, env_id = record_frames(policy, env_id, seed, config, every, progress, **policy_args)
+    frames, metrics, env_id = record_frames(policy, env_id, **options)
     path = write_animation(frames, out, fps)
     return {**metrics, "env_id": env_id, "frames": len(frames), "out": str(path)}
 
@@ -105,14 +109,15 @@ def run_demo(seed: int, out_dir: Path, config: ScenarioConfig | str | None = Non
              overrides: dict | None = None) -> dict:
     """Run one episode, write ``metrics.json`` and ``paths.png`` into ``out_dir``; return the metrics."""
     env = gym.make("lawn/Joint-v1", config=config, **(overrides or {}))
-    episode = rollout(env, HeuristicPolicy(env.unwrapped.config), seed)
+    lawn = cast(LawnEnv, env.unwrapped)
+    episode = rollout(env, HeuristicPolicy(lawn.config), seed)
     metrics = dict(episode.metrics)
     metrics["decision_time_median_s"] = episode.decision_time_median_s
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))
     from lawn_env.render import plot_episode
 
-    plot_episode(env.unwrapped.sim, env.unwrapped.engine.kept_trail, out_dir / "paths.png",
+    plot_episode(lawn.sim, lawn.engine.kept_trail, out_dir / "paths.png",
                  title=f"lawn/Joint-v1, scripted heuristic, seed {seed}: cost {metrics['control_cost']:.0f}")
     env.close()
     return metrics

@@ -4,24 +4,19 @@ A spec (YAML or JSON, or a dict) names the grid::
 
     name: blocklength
     env: lawn/Joint-v1
-    preset: default                     # base scenario
+    preset: default                     # base scenario (a grid key "preset" switches it)
     set: {num_slots: 120}               # fixed overrides (dotted keys)
     grid: {channel.blocklength: [256, 1024], channel.infinite_blocklength: [false]}
-                                        # a grid key "preset" switches the base preset
     policies: [rg-mpc, ao-mpc, epa]
     seeds: 10                           # or an explicit list
 
-Every combination is one episode; its row holds the grid values, the policy, the seed, the
-episode metrics, the full resolved config, its stable hash and the software version. Rows are keyed
-by (config hash, policy, policy arguments, seed, env, version): rerunning a sweep skips exactly the
-rows it would produce again, so a killed sweep resumes without losing or duplicating rows, while a
-changed ``preset``/``set``/grid or a new lawn version reruns. Rows are validated on read: a row
-with a missing or unparseable field (a truncated write) or a duplicate is dropped and rerun. A
-table that holds rows this spec would not produce (another sweep's, another version's, an older
-lawn's without hashes) is refused with a clear message unless ``extend=True`` (``--extend``) keeps
-them beside the new ones. The table (CSV) is rewritten atomically (temporary file + rename) after
-every finished run. Runs go to a local process pool, or to Ray with ``backend="ray"`` (optional
-extra).
+A row holds the grid values, the policy, the seed, the episode metrics, the resolved config, its
+stable hash and the software version, and is keyed by (config hash, policy, policy arguments, seed,
+env, version): a rerun skips the rows it would produce again, so a killed sweep resumes, while a
+changed spec or lawn version reruns. An incomplete (truncated) or duplicate row is dropped and rerun;
+a table holding rows this spec would not produce is refused unless ``extend=True`` (``--extend``).
+The table (CSV) is rewritten atomically after every run. Runs go to a local process pool, or to Ray
+with ``backend="ray"`` (optional extra).
 """
 
 from __future__ import annotations
@@ -30,12 +25,14 @@ import hashlib
 import itertools
 import json
 import os
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from typing import Any
 
 import lawn_env
 from lawn_env import presets
 
+from .results.report import markdown_table
 from .results.run import read_csv, write_csv
 from .results.stats import mean_ci
 
@@ -79,7 +76,7 @@ def _read_spec(spec: str | Path | Mapping[str, Any]) -> tuple[Any, str]:
 
 def _seed_list(seeds: Any, source: str) -> list[int]:
     """A spec's ``seeds``: a count (seeds 0..n-1) or a list of seeds >= 0."""
-    if isinstance(seeds, bool) or not (isinstance(seeds, int) or isinstance(seeds, (list, tuple))):
+    if isinstance(seeds, bool) or not isinstance(seeds, (int, list, tuple)):
         raise ValueError(f"{source}: seeds must be a count >= 1 or a non-empty list of seeds >= 0; got {seeds!r}")
     if isinstance(seeds, int):
         if seeds < 1:
@@ -133,8 +130,9 @@ def point_config(spec: Mapping[str, Any], point: Mapping[str, Any]) -> lawn_env.
 
 
 def expand(spec: Mapping[str, Any]) -> list[dict]:
-    keys = list(spec["grid"])
-    return [dict(zip(keys, values)) for values in itertools.product(*(spec["grid"][k] for k in keys))] or [{}]
+    """Every grid point of ``spec`` (one point, ``{}``, without a grid)."""
+    grid = spec["grid"]
+    return [dict(zip(grid, values, strict=True)) for values in itertools.product(*grid.values())] or [{}]
 
 
 class SweepTableError(ValueError):
@@ -204,7 +202,7 @@ def _run(task) -> dict:
     point, policy, seed, env_id, cfg_dict, policy_kwargs, sweep_name = task
     cfg = lawn_env.ScenarioConfig.from_dict(cfg_dict)
     row = run_episode(policy, env_id, cfg, seed, policy_kwargs)
-    out = {"sweep": sweep_name, **{k: v for k, v in point.items()}}
+    out = {"sweep": sweep_name, **point}
     out.update(row)
     out["lawn_version"] = lawn_env.__version__
     out["config_hash"] = config_hash(cfg_dict)
@@ -312,9 +310,9 @@ def execute(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int, backen
     from .pool import worker_pool
 
     with worker_pool(workers) as pool:
-        pending = {pool.submit(fn, t) for t in tasks}
-        while pending:
-            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+        futures = {pool.submit(fn, t) for t in tasks}
+        while futures:
+            finished, futures = wait(futures, return_when=FIRST_COMPLETED)
             for fut in finished:
                 yield fut.result()
 
@@ -324,13 +322,9 @@ def summarize_sweep(rows: list[dict], grid_keys: Sequence[str],
     """Markdown table: mean ± 95 % interval of ``metrics`` per grid point and policy."""
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
-        groups.setdefault(tuple(str(r[k]) for k in grid_keys) + (r["policy"],), []).append(r)
-    header = list(grid_keys) + ["policy", "runs"] + list(metrics)
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        groups.setdefault((*(str(r[k]) for k in grid_keys), r["policy"]), []).append(r)
+    table = []
     for key, members in groups.items():
-        cells = list(key) + [str(len(members))]
-        for m in metrics:
-            mean, half = mean_ci(float(r[m]) for r in members)
-            cells.append(f"{mean:.4g} ± {half:.2g}")
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        stats = [mean_ci(float(r[m]) for r in members) for m in metrics]
+        table.append([*key, str(len(members)), *(f"{mean:.4g} ± {half:.2g}" for mean, half in stats)])
+    return markdown_table([*grid_keys, "policy", "runs", *metrics], table)

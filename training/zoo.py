@@ -1,23 +1,20 @@
 """The shipped learned agents: how they compare and what is exported, in four stages a test can
-call one by one: :func:`evaluate_zoo` (every finished run of every recipe of
-:mod:`training.recipes` by the learned protocol, :mod:`training.benchmark`: full 120-slot
-episodes of the unmodified scenario on 100 test seeds, realized control cost, paired with
-``rg-mpc`` and with the agent's own anchor on the same seeds, normalized score), :func:`zoo_tables`
-(the table cells and the run each recipe ships, selected on the validation seeds),
-:func:`render_zoo` (Markdown; :func:`plot_curves` the learning curves) and :func:`export_zoo`
-(``agents/zoo/<name>``: policy weights and observation statistics only). ``lawn zoo build``
-(:func:`build_zoo`) runs them and writes ``docs/LEARNED.md``; ``lawn zoo
-train`` trains the recipes (:func:`training.recipes.train_recipes`); ``lawn zoo list`` shows the
-shipped agents; ``scripts/train_agents.sh`` runs train and build."""
+call one by one: :func:`evaluate_zoo` (every finished run of every recipe of :mod:`training.recipes`
+by the learned protocol of :mod:`training.benchmark`), :func:`zoo_tables` (the table cells and the
+run each recipe ships, selected on the validation seeds), :func:`render_zoo` (Markdown;
+:func:`plot_curves` the learning curves) and :func:`export_zoo` (``agents/zoo/<name>``: policy
+weights and observation statistics only). ``lawn zoo build`` (:func:`build_zoo`) runs them and
+writes ``docs/LEARNED.md``; ``lawn zoo list`` shows the shipped agents (:func:`format_zoo_list`)."""
 
 from __future__ import annotations
 
 import math
 import os
 import shutil
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -28,7 +25,7 @@ from lawn_env import ScenarioConfig
 from .pages import block_names, replace_body
 from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
 from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe, train_recipes
-from .results.report import fmt_num, fmt_paired, fmt_pct, protocol_cells
+from .results.report import fmt_num, fmt_paired, fmt_pct, markdown_table, protocol_cells
 from .results.run import Play, evaluate, learned_entries, own_anchor, read_csv, run_entries, write_csv
 from .results.stats import SCORE_HIGH, SCORE_VERSION, mean_ci, paired, scores_by_policy
 
@@ -92,7 +89,8 @@ def finished_runs(runs: Path, recipes: Mapping[str, Recipe] | None = None) -> li
 
 def evaluate_zoo(found: list[tuple[Recipe, list[Path]]], episodes: int = TEST_EPISODES, workers: int = 2,
                  progress: bool = True) -> ZooEvaluation:
-    """Stage 1: every run by the learned protocol on test seeds 0..episodes-1 (:func:`training.results.run.run_entries`)."""
+    """Stage 1: every run by the learned protocol on test seeds 0..episodes-1
+    (:func:`training.results.run.run_entries`)."""
     run = {d: read_run(d) for _, dirs in found for d in dirs}
     entries = learned_entries([run[d].policy_name for _, dirs in found for d in dirs])
     rows = run_entries(entries, ScenarioConfig(), range(episodes), Play(workers, progress), desc="zoo benchmark")
@@ -112,9 +110,9 @@ def zoo_tables(ev: ZooEvaluation) -> ZooTables:
                 continue
             validation = [_best_validation(d) for d in dirs]
             chosen = dirs[int(np.argmin([selection_key(v) for v in validation]))]
-            gains = [paired(ev.rows, ev.runs[d].policy_name, own_anchor(ev.runs[d].policy_name), env) for d in dirs]
+            gains = [paired(ev.rows, ev.runs[d].policy_name, _anchor(ev.runs[d].policy_name), env) for d in dirs]
             across = mean_ci(g[0] for g in gains)
-            run_rows += [_run_cells(ev, r, d, best, d == chosen, env) for d, best in zip(dirs, validation)]
+            run_rows += [_run_cells(ev, r, d, best, d == chosen, env) for d, best in zip(dirs, validation, strict=True)]
             specs = [ev.runs[d].record for d in dirs]
             algo = {"bc": "BC", "fleet": "DAgger"}.get(r.algo, r.algo.upper())
             budget = (f"{algo}, {int(specs[0].get('num_timesteps', r.timesteps)):,} steps"
@@ -139,7 +137,7 @@ def _cells(ev: ZooEvaluation, policy: str, env: str, label: str, how: str, acros
     return {"label": label, "env": env, "how": how, **protocol_cells(ev.rows, ev.scores, policy, env), "across": across}
 
 
-def _run_cells(ev: ZooEvaluation, r: Recipe, run_dir: Path, best: dict, chosen: bool, env: str) -> dict[str, str]:
+def _run_cells(ev: ZooEvaluation, r: Recipe, run_dir: Path, best: Mapping, chosen: bool, env: str) -> dict[str, str]:
     """One row of the per-run table."""
     spec = ev.runs[run_dir].record
     c = protocol_cells(ev.rows, ev.scores, ev.runs[run_dir].policy_name, env)
@@ -152,18 +150,18 @@ def _run_cells(ev: ZooEvaluation, r: Recipe, run_dir: Path, best: dict, chosen: 
 def render_zoo(tables: ZooTables) -> tuple[str, str]:
     """Stage 3: the recipe table (with its note on seeds, sources and the expert against each
     anchor) and the per-run table, as Markdown."""
-    head = [f"| agent | env | algorithm, budget per run | acts around | control cost | score v{SCORE_VERSION} [95 %] "
-            f"| vs {SCORE_HIGH} (paired) | vs own anchor (paired) | vs own anchor, mean over training seeds |", "|" + "---|" * 9]
-    runs_head = [f"| recipe | training seed | acts around | selected validation: vs rg-mpc (cost, episodes) "
-                 f"| score v{SCORE_VERSION} | vs {SCORE_HIGH} (paired) | vs own anchor (paired) | worst test seed vs own "
-                 "anchor | wall time |", "|" + "---|" * 9]
-    lines = head + ["| " + " | ".join(row[k] for k in _RECIPE_COLUMNS) + " |" for row in tables.recipe_rows]
+    head = ["agent", "env", "algorithm, budget per run", "acts around", "control cost",
+            f"score v{SCORE_VERSION} [95 %]", f"vs {SCORE_HIGH} (paired)", "vs own anchor (paired)",
+            "vs own anchor, mean over training seeds"]
+    runs_head = ["recipe", "training seed", "acts around", "selected validation: vs rg-mpc (cost, episodes)",
+                 f"score v{SCORE_VERSION}", f"vs {SCORE_HIGH} (paired)", "vs own anchor (paired)",
+                 "worst test seed vs own anchor", "wall time"]
     n = tables.episodes
-    table = "\n".join(lines) + (f"\n\n{n} test seeds (0-{n - 1}); training runs made at: " + "; ".join(tables.sources)
-                                + f". `{SCORE_HIGH}` itself against each anchor (the \"vs own anchor\" of a perfect clone of "
-                                "the expert): " + "; ".join(tables.floor) + ".")
-    per_run = runs_head + ["| " + " | ".join(row[k] for k in _RUN_COLUMNS) + " |" for row in tables.run_rows]
-    return table, "\n".join(per_run)
+    note = (f"{n} test seeds (0-{n - 1}); training runs made at: {'; '.join(tables.sources)}. `{SCORE_HIGH}` itself "
+            f"against each anchor (the \"vs own anchor\" of a perfect clone of the expert): {'; '.join(tables.floor)}.")
+    table = markdown_table(head, ([row[k] for k in _RECIPE_COLUMNS] for row in tables.recipe_rows))
+    per_run = markdown_table(runs_head, ([row[k] for k in _RUN_COLUMNS] for row in tables.run_rows))
+    return f"{table}\n\n{note}", per_run
 
 
 def export_zoo(tables: ZooTables, ev: ZooEvaluation, target: Path = ZOO_DIR) -> list[Path]:
@@ -174,16 +172,12 @@ def export_zoo(tables: ZooTables, ev: ZooEvaluation, target: Path = ZOO_DIR) -> 
 def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True,
               episodes: int = TEST_EPISODES, export: bool = True, target: Path = ZOO_DIR,
               only: Sequence[str] | None = None) -> str:
-    """Evaluate the finished recipe runs by the learned protocol, write the tables (``out_doc``,
-    and its learning-curve plot), export each recipe's validation-selected run into ``target``;
-    returns the recipe tables (Markdown). The four stages: :func:`evaluate_zoo`,
-    :func:`zoo_tables`, :func:`render_zoo` (and :func:`plot_curves`), :func:`export_zoo`.
-
-    The page has sections (:data:`training.recipes.SECTIONS`): the ``main`` tables and the fleet
-    networks' block. ``only`` (recipe names) rebuilds the sections those recipes are in and keeps
-    the rest of the page, and of ``docs/learned/episodes.csv``, as it is; without it every section
-    with finished runs is rebuilt. Everything is evaluated and rendered before the first file is
-    written (the page and the episodes are replaced whole, through a temporary file)."""
+    """The four stages over the finished recipe runs: write the tables into ``out_doc`` (and its
+    learning-curve plot), export each recipe's validation-selected run into ``target``; returns the
+    recipe tables (Markdown). The page has sections (:data:`training.recipes.SECTIONS`): ``only``
+    (recipe names) rebuilds the sections those recipes are in and keeps the rest of the page, and of
+    ``docs/learned/episodes.csv``, as it is. Everything is evaluated and rendered before the first
+    file is written (the page and the episodes are replaced whole, through a temporary file)."""
     names = list(only or [])
     for name in names:
         recipe(name)  # an unknown name is an error that names the recipes
@@ -205,7 +199,7 @@ def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True
     page = read_text(out_doc)
     source = "lawn zoo build" + (f" --only {' '.join(names)}" if names else "")
     if "main" in built:
-        for name, text in zip(("zoo-main", "zoo-runs"), rendered["main"]):
+        for name, text in zip(("zoo-main", "zoo-runs"), rendered["main"], strict=True):
             page = replace_body(page, name, text, source=source, where=str(out_doc))
     if "fleet" in built:
         page = replace_body(page, "zoo-fleet", "\n\n".join(rendered["fleet"]), source=source, where=str(out_doc))
@@ -257,12 +251,17 @@ def plot_curves(found: list[tuple[Recipe, list[Path]]], reference: dict[str, flo
     fig.savefig(path)
 
 
-def _best_validation(run_dir: Path) -> dict[str, float]:
+def _anchor(policy: str) -> str:
+    """The anchor a learned agent acts around; "" (no seeds, a NaN comparison) for a run that records none."""
+    return own_anchor(policy) or ""
+
+
+def _best_validation(run_dir: Path) -> Mapping[str, float]:
     """The run's selected validation (:func:`~training.protocol.selected_validation`)."""
-    return selected_validation(read_learning_curve(run_dir)) or {"control_cost": math.inf}
+    return selected_validation(list(read_learning_curve(run_dir))) or {"control_cost": math.inf}
 
 
-def _validation_cell(best: dict[str, float], episodes: int) -> str:
+def _validation_cell(best: Mapping[str, float], episodes: int) -> str:
     vs = fmt_pct(best["vs_reference"]) if "vs_reference" in best else "–"
     return f"{vs} ({fmt_num(best['control_cost'])}, {episodes})"
 
@@ -281,7 +280,7 @@ def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
         "benchmark": {"test_seeds": f"0-{episodes - 1}", "reference": SCORE_HIGH, "anchor": anchor,
                       "score_version": SCORE_VERSION, "score": list(ev.scores[("default", s.env, policy)][:3]),
                       "shipped_vs_reference": list(paired(ev.rows, policy, SCORE_HIGH, s.env)),
-                      "shipped_vs_anchor": list(paired(ev.rows, policy, anchor, s.env)),
+                      "shipped_vs_anchor": list(paired(ev.rows, policy, _anchor(policy), s.env)),
                       "across_training_seeds_vs_anchor": list(s.across)},
     }
     target = target_dir / r.name

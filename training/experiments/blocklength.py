@@ -8,27 +8,17 @@ import numpy as np
 
 from ..results.report import fmt_paired
 from ..results.stats import paired_difference
-from .base import (SEEDS, EXPERTS, QUICK_SET, REPORT_SLOT, STYLE, Claim, Experiment, by_seed, cell, curve, label_axes,
-                   multi_claim, new_figure, paired_claim, pick, save, seeds, slot_cost, spec, values)
+from .base import EXPERTS, REPORT_SLOT, SEEDS, Experiment, by_seed, slot_cost, spec, values
+from .claims import Claim, multi_claim, paired_claim
+from .plots import STYLE, curve, label_axes, new_figure, save
 
-BLOCK_POLICIES = EXPERTS + ("epa", "sf")
+BLOCK_POLICIES = (*EXPERTS, "epa", "sf")
 
 
 def _blocklength_sweeps(quick):
-    q = QUICK_SET if quick else {}
-    n_seeds = seeds(quick)
-    return {
-        "blocklength": spec(
-            "blocklength",
-            {"channel.blocklength": pick(quick, [128, 256, 1024, 4096], [256, 2048])},
-            BLOCK_POLICIES,
-            n_seeds,
-            set_=q,
-        ),
-        "blocklength-ibl": spec(
-            "blocklength-ibl", {"channel.infinite_blocklength": [True]}, BLOCK_POLICIES, n_seeds, set_=q
-        ),
-    }
+    lengths = [256, 2048] if quick else [128, 256, 1024, 4096]
+    return {"blocklength": spec("blocklength", {"channel.blocklength": lengths}, BLOCK_POLICIES, quick),
+            "blocklength-ibl": spec("blocklength-ibl", {"channel.infinite_blocklength": [True]}, BLOCK_POLICIES, quick)}
 
 
 def _blocklength_plot(tables, path: Path) -> None:
@@ -37,17 +27,13 @@ def _blocklength_plot(tables, path: Path) -> None:
     ax = fig.add_subplot(111)
     for policy in dict.fromkeys(r["policy"] for r in rows):
         curve(ax, rows, "channel.blocklength", "control_cost", policy)
-        limit = [cell(r, "control_cost") for r in ibl if r["policy"] == policy]
+        limit = [float(r["control_cost"]) for r in ibl if r["policy"] == policy]
         if limit:
             ax.axhline(np.mean(limit), color=STYLE.get(policy, ("k",))[0], ls=":", lw=1)
     ax.set_xscale("log", base=2)
     ax.set_yscale("log")
-    label_axes(
-        ax,
-        "control cost vs blocklength (R_th = 10, P_max = 0 dBW)",
-        "blocklength l (channel uses); dotted: IBL limit of each policy",
-        "realized control cost",
-    )
+    label_axes(ax, "control cost vs blocklength (R_th = 10, P_max = 0 dBW)",
+               "blocklength l (channel uses); dotted: IBL limit of each policy", "realized control cost")
     save(fig, path)
 
 
@@ -84,10 +70,6 @@ def _blocklength_claims(tables) -> list[Claim]:
     return out
 
 
-EXPERIMENT = Experiment(
-    "blocklength",
-    f"default, l ∈ {{128, 256, 1024, 4096}} and IBL, rg-mpc, ao-mpc, epa, sf, {SEEDS} seeds",
-    sweeps=_blocklength_sweeps,
-    plot=_blocklength_plot,
-    claims=_blocklength_claims,
-)
+EXPERIMENT = Experiment("blocklength",
+                        f"default, l ∈ {{128, 256, 1024, 4096}} and IBL, rg-mpc, ao-mpc, epa, sf, {SEEDS} seeds",
+                        sweeps=_blocklength_sweeps, plot=_blocklength_plot, claims=_blocklength_claims)

@@ -2,27 +2,21 @@
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
 
 from ..results.report import fmt_paired
 from ..results.stats import paired_difference, verdict
-from .base import (SEEDS, EXPERTS, QUICK_SET, Claim, Experiment, by_seed, cell, label_axes, new_figure, paired_claim, pick,
-                   save, seeds, spec, values)
+from .base import EXPERTS, SEEDS, Experiment, by_seed, spec, values
+from .claims import Claim, paired_claim
+from .plots import label_axes, new_figure, save
 
 
 def _cdf_sweeps(quick):
-    return {
-        "cdf": spec(
-            "cdf",
-            {"power_budget_dbw": pick(quick, [-30.0, -25.0, -20.0, -15.0], [-30.0, -15.0])},
-            EXPERTS,
-            seeds(quick),
-            preset="paper-nominal",
-            set_=QUICK_SET if quick else {},
-        )
-    }
+    budgets = [-30.0, -15.0] if quick else [-30.0, -25.0, -20.0, -15.0]
+    return {"cdf": spec("cdf", {"power_budget_dbw": budgets}, EXPERTS, quick, preset="paper-nominal")}
 
 
 def _cdf_plot(tables, path: Path) -> None:
@@ -31,18 +25,11 @@ def _cdf_plot(tables, path: Path) -> None:
     ax = fig.add_subplot(111)
     for i, p in enumerate(values(rows, "power_budget_dbw")):
         for policy in EXPERTS:
-            vals = np.sort(
-                [cell(r, "rmse_m") for r in rows if r["policy"] == policy and float(r["power_budget_dbw"]) == p]
-            )
+            vals = np.sort([float(r["rmse_m"]) for r in rows
+                            if r["policy"] == policy and float(r["power_budget_dbw"]) == p])
             if vals.size:
-                ax.step(
-                    vals,
-                    np.arange(1, vals.size + 1) / vals.size,
-                    where="post",
-                    color=f"C{i}",
-                    ls="-" if policy == "rg-mpc" else "--",
-                    label=f"{policy}, {p:g} dBW",
-                )
+                ax.step(vals, np.arange(1, vals.size + 1) / vals.size, where="post", color=f"C{i}",
+                        ls="-" if policy == "rg-mpc" else "--", label=f"{policy}, {p:g} dBW")
     label_axes(ax, "CDF of RMSE under power budgets (R_th = 1)", "tracking RMSE (m)", "CDF over seeds")
     save(fig, path)
 
@@ -52,36 +39,17 @@ def _cdf_claims(tables) -> list[Claim]:
     budgets = values(rows, "power_budget_dbw")
     out = []
     for e in EXPERTS:
-        parts = [
-            (
-                f"{b:g} vs {a:g} dBW",
-                by_seed(rows, "rmse_m", policy=e, power_budget_dbw=b),
-                by_seed(rows, "rmse_m", policy=e, power_budget_dbw=a),
-            )
-            for a, b in zip(budgets, budgets[1:])
-        ]
+        parts = [(f"{b:g} vs {a:g} dBW", by_seed(rows, "rmse_m", policy=e, power_budget_dbw=b),
+                  by_seed(rows, "rmse_m", policy=e, power_budget_dbw=a)) for a, b in itertools.pairwise(budgets)]
         overall = paired_claim("cdf", "", "", "", parts[-1][1], parts[0][2], "negative")
         steps = [verdict(*paired_difference(a, b)[:2], "negative") for _, a, b in parts]
         cells = "; ".join(f"{label}: {fmt_paired(*paired_difference(a, b)[:2])}" for label, a, b in parts)
         v = overall.verdict if overall.verdict != "holds" else ("holds" if "differs" not in steps else "differs")
-        out.append(
-            Claim(
-                "cdf",
-                f"cdf.power.{e}",
-                f"{e}: a higher power budget gives a lower RMSE",
-                "RMSE, paired per seed",
-                f"{budgets[-1]:g} vs {budgets[0]:g} dBW: {overall.value} ({cells})",
-                v,
-                overall.seeds,
-            )
-        )
+        out.append(Claim("cdf", f"cdf.power.{e}", f"{e}: a higher power budget gives a lower RMSE",
+                         "RMSE, paired per seed", f"{budgets[-1]:g} vs {budgets[0]:g} dBW: {overall.value} ({cells})",
+                         v, overall.seeds))
     return out
 
 
-EXPERIMENT = Experiment(
-    "cdf",
-    f"`paper-nominal`, P_max ∈ {{−30, −25, −20, −15}} dBW, rg-mpc and ao-mpc, {SEEDS} seeds",
-    sweeps=_cdf_sweeps,
-    plot=_cdf_plot,
-    claims=_cdf_claims,
-)
+EXPERIMENT = Experiment("cdf", f"`paper-nominal`, P_max ∈ {{−30, −25, −20, −15}} dBW, rg-mpc and ao-mpc, {SEEDS} seeds",
+                        sweeps=_cdf_sweeps, plot=_cdf_plot, claims=_cdf_claims)

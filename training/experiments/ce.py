@@ -1,31 +1,22 @@
-"""Robustness to channel-estimation error (the paper's CE figure): tracking RMSE against the CE error variance, at -30 dBW and at the 0 dBW floor."""
+"""Robustness to channel-estimation error (the paper's CE figure): tracking RMSE against the CE error
+variance, at -30 dBW and at the 0 dBW floor."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from .base import (SEEDS, BASELINES, EXPERTS, QUICK_SET, REPORT_SLOT, Claim, Experiment, by_seed, curve, label_axes,
-                   multi_claim, new_figure, pick, save, seeds, slot_cost, spec, values)
+from .base import BASELINES, EXPERTS, REPORT_SLOT, SEEDS, Experiment, by_seed, slot_cost, spec, values
+from .claims import Claim, multi_claim
+from .plots import curve, label_axes, new_figure, save
 
 CE_BUDGET_DBW = -30.0
 
 
 def _ce_sweeps(quick):
-    q = QUICK_SET if quick else {}
-    policies = EXPERTS + BASELINES
-    return {
-        "ce": spec(
-            "ce",
-            {"channel.ce_error_var": pick(quick, [0.0, 0.01, 0.05, 0.1], [0.0, 0.1])},
-            policies,
-            seeds(quick),
-            preset="paper-nominal",
-            set_={**q, "power_budget_dbw": CE_BUDGET_DBW},
-        ),
-        "ce-floor": spec(
-            "ce-floor", {"channel.ce_error_var": [0.0, 0.1]}, policies, seeds(quick), preset="paper-nominal", set_=q
-        ),
-    }
+    policies, rhos = EXPERTS + BASELINES, [0.0, 0.1] if quick else [0.0, 0.01, 0.05, 0.1]
+    return {"ce": spec("ce", {"channel.ce_error_var": rhos}, policies, quick, preset="paper-nominal",
+                       set_={"power_budget_dbw": CE_BUDGET_DBW}),
+            "ce-floor": spec("ce-floor", {"channel.ce_error_var": [0.0, 0.1]}, policies, quick, preset="paper-nominal")}
 
 
 def _ce_plot(tables, path: Path) -> None:
@@ -35,12 +26,8 @@ def _ce_plot(tables, path: Path) -> None:
         rows = tables[name]
         for policy in dict.fromkeys(r["policy"] for r in rows):
             curve(ax, rows, "channel.ce_error_var", "rmse_m", policy)
-        label_axes(
-            ax,
-            f"R_th = 1, P_max = {budget:g} dBW" + (" (the floor: power cannot matter)" if j else ""),
-            "normalized CE error variance ρ",
-            "tracking RMSE (m)",
-        )
+        label_axes(ax, f"R_th = 1, P_max = {budget:g} dBW" + (" (the floor: power cannot matter)" if j else ""),
+                   "normalized CE error variance ρ", "tracking RMSE (m)")
     save(fig, path)
 
 
@@ -68,17 +55,14 @@ def _ce_claims(tables) -> list[Claim]:
                                [(b, rmse(e, hi, slot_cost), rmse(b, hi, slot_cost)) for b in BASELINES], "negative"))
     floor = {"channel.ce_error_var": 0.1}
     out.append(multi_claim("ce", "ce.floor", "at 0 dBW (project's check): power and position cannot lower the outage "
-                           "floor, so the experts tie with EPA (within ±1 %)", "RMSE vs EPA at ρ = 0.1, paired per seed",
+                           "floor, so the experts tie with EPA (within ±1 %)",
+                           "RMSE vs EPA at ρ = 0.1, paired per seed",
                            [(e, by_seed(tables["ce-floor"], "rmse_m", policy=e, **floor),
                              by_seed(tables["ce-floor"], "rmse_m", policy="epa", **floor)) for e in EXPERTS], "tie"))
     return out
 
 
-EXPERIMENT = Experiment(
-    "ce",
-    f"`paper-nominal` (R_th = 1) at P_max = {CE_BUDGET_DBW:g} dBW, ρ ∈ {{0, 0.01, 0.05, 0.1}}, "
-    f"rg-mpc, ao-mpc, epa, pid, lqr, {SEEDS} seeds; the 0 dBW floor panel at ρ ∈ {{0, 0.1}}, {SEEDS} seeds",
-    sweeps=_ce_sweeps,
-    plot=_ce_plot,
-    claims=_ce_claims,
-)
+EXPERIMENT = Experiment("ce", f"`paper-nominal` (R_th = 1) at P_max = {CE_BUDGET_DBW:g} dBW, "
+                        f"ρ ∈ {{0, 0.01, 0.05, 0.1}}, rg-mpc, ao-mpc, epa, pid, lqr, {SEEDS} seeds; "
+                        f"the 0 dBW floor panel at ρ ∈ {{0, 0.1}}, {SEEDS} seeds",
+                        sweeps=_ce_sweeps, plot=_ce_plot, claims=_ce_claims)

@@ -15,17 +15,20 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
 
 from agents import Step, make_policy, rollout
 from agents.ao import AOSettings, AOSolver
-from lawn_env import ScenarioConfig
+from agents.policies import PlannerPolicy
+from lawn_env import ScenarioConfig, Snapshot
 
-from ..results.run import Play, write_rows
+from ..results.report import markdown_table
+from ..results.run import DEFAULT_PLAY, Play, write_rows
 
 __all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "global_power_shares", "format_gap_table",
            "convergence", "format_convergence", "plot_gaps", "plot_convergence", "write_gap_outputs"]
@@ -36,14 +39,14 @@ def gap_episode(policies: Sequence[str], driver: str, config: ScenarioConfig, se
     """Rows (seed, slot, policy, objective, global objective, gap, decision time) for one episode."""
     env = gym.make("lawn/Joint-v1", config=config).unwrapped
     drive = make_policy(driver, config)
-    planners = {name: make_policy(name, config) for name in policies}
-    reference = make_policy("global-mpc", config, **dict(global_settings or {}))
+    planners = {name: _planner(name, config) for name in policies}
+    reference = _planner("global-mpc", config, **dict(global_settings or {}))
     for policy in (reference, *planners.values()):
         policy.reset(seed)
     rows = []
 
     def on_step(step: Step) -> None:  # the planners and the reference plan the state the driver acted in
-        snap, slot = step.snapshot, step.slot
+        snap, slot = _snapshot(step), step.slot
         results = {}
         for name, policy in planners.items():
             start = time.perf_counter()
@@ -66,12 +69,22 @@ def gap_episode(policies: Sequence[str], driver: str, config: ScenarioConfig, se
     return rows
 
 
+def _planner(name: str, config: ScenarioConfig, **settings: Any) -> PlannerPolicy:
+    """A policy that plans from the full state (the experts, ``global-mpc``)."""
+    return cast(PlannerPolicy, make_policy(name, config, **settings))
+
+
+def _snapshot(step: Step) -> Snapshot:
+    """The state a step's action was chosen in (``rollout(..., snapshots=True)`` records it)."""
+    return cast(Snapshot, step.snapshot)
+
+
 def _gap_task(task):
     return gap_episode(*task)
 
 
 def run_gap(policies: Sequence[str], driver: str, config: ScenarioConfig, seeds: Sequence[int], every: int,
-            play: Play = Play(), global_settings: Mapping[str, Any] | None = None) -> list[dict]:
+            play: Play = DEFAULT_PLAY, global_settings: Mapping[str, Any] | None = None) -> list[dict]:
     """:func:`gap_episode` of every seed (``play``'s workers and progress bar), its rows in seed order."""
     from ..pool import pool_map
 
@@ -108,25 +121,19 @@ def summarize_gaps(rows: list[dict], tolerance: float = 1e-6) -> list[dict]:
 
 def global_power_shares(rows: list[dict]) -> int:
     """On how many compared slots the global reference gives some link less than 5 % of P_max."""
-    seen = {}
-    for r in rows:
-        seen[(r["seed"], r["slot"])] = r["global_min_power_share"]
+    seen = {(r["seed"], r["slot"]): r["global_min_power_share"] for r in rows}
     return int(sum(1 for v in seen.values() if v < 0.05))
 
 
 def format_gap_table(summary: list[dict]) -> str:
-    header = ["planner", "slots", "gap median", "gap p90", "gap max", "decision time (ms)", "a link < 5 % power"]
-    header += [f"worse than {k[len('worse_than_'):]}" for k in dict.fromkeys(
-        k for e in summary for k in e if k.startswith("worse_than_"))]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    """:func:`summarize_gaps`' rows as a Markdown table."""
     keys = list(dict.fromkeys(k for e in summary for k in e if k.startswith("worse_than_")))
-    for e in summary:
-        cells = [e["policy"], str(e["slots"]), f"{e['gap_median'] * 100:.3f} %", f"{e['gap_p90'] * 100:.3f} %",
-                 f"{e['gap_max'] * 100:.2f} %", f"{e['decision_time_median_s'] * 1e3:.2f}",
-                 f"{e['slots_with_a_link_below_5pct_power']}"]
-        cells += [str(e[k]) if k in e else "–" for k in keys]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    header = ["planner", "slots", "gap median", "gap p90", "gap max", "decision time (ms)", "a link < 5 % power"]
+    table = [[e["policy"], str(e["slots"]), f"{e['gap_median'] * 100:.3f} %", f"{e['gap_p90'] * 100:.3f} %",
+              f"{e['gap_max'] * 100:.2f} %", f"{e['decision_time_median_s'] * 1e3:.2f}",
+              f"{e['slots_with_a_link_below_5pct_power']}", *(str(e[k]) if k in e else "–" for k in keys)]
+             for e in summary]
+    return markdown_table([*header, *(f"worse than {k[len('worse_than_'):]}" for k in keys)], table)
 
 
 def plot_gaps(rows: list[dict], path: Path) -> None:
@@ -167,8 +174,8 @@ def convergence(config: ScenarioConfig, slots: Sequence[int], seed: int = 0, dri
     episode; rows per (slot, iteration, block) with J^, plus the global and rg-mpc values."""
     env = gym.make("lawn/Joint-v1", config=config).unwrapped
     drive = make_policy(driver, config)
-    reference = make_policy("global-mpc", config, **dict(global_settings or {}))
-    fast = make_policy("rg-mpc", config)
+    reference = _planner("global-mpc", config, **dict(global_settings or {}))
+    fast = _planner("rg-mpc", config)
     ao = AOSolver(config, AOSettings(max_iterations=iterations, tolerance=0.0))
     for p in (reference, fast):
         p.reset(seed)
@@ -176,7 +183,7 @@ def convergence(config: ScenarioConfig, slots: Sequence[int], seed: int = 0, dri
     rows = []
 
     def on_step(step: Step) -> bool:
-        snap, slot = step.snapshot, step.slot
+        snap, slot = _snapshot(step), step.slot
         fast_value = fast.plan(snap).objective  # rg-mpc plans every slot, as deployed
         if slot in wanted:
             glob = reference.plan(snap).objective

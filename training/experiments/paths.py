@@ -1,27 +1,21 @@
-"""The drone's and AGVs' paths (the paper's trajectory figure) and the path-length and RMSE claims about them."""
+"""The drone's and AGVs' paths (the paper's trajectory figure) and the path-length and RMSE claims
+about them."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from .base import SEEDS, EXPERTS, QUICK_SET, Claim, Experiment, by_seed, paired_claim, seeds, spec
+from .base import EXPERTS, SEEDS, Experiment, by_seed, spec
+from .claims import Claim, paired_claim
 from .traces import plot_traces, trace_rows
 
-PATH_CASES = [
-    ("K=3", "k3", "rg-mpc"),
-    ("K=3", "k3", "ao-mpc"),
-    ("K=4", "default", "rg-mpc"),
-    ("K=4", "default", "ao-mpc"),
-    ("K=4", "default", "epa"),
-]
+PATH_CASES = [("K=3", "k3", "rg-mpc"), ("K=3", "k3", "ao-mpc"), ("K=4", "default", "rg-mpc"),
+              ("K=4", "default", "ao-mpc"), ("K=4", "default", "epa")]
 
 
 def _paths_sweeps(quick):
-    n_seeds, q = seeds(quick), QUICK_SET if quick else {}
-    return {
-        "paths-k3": spec("paths-k3", {}, EXPERTS, n_seeds, preset="k3", set_=q),
-        "paths-k4": spec("paths-k4", {}, EXPERTS + ("epa",), n_seeds, set_=q),
-    }
+    return {"paths-k3": spec("paths-k3", {}, EXPERTS, quick, preset="k3"),
+            "paths-k4": spec("paths-k4", {}, (*EXPERTS, "epa"), quick)}
 
 
 def _paths_plot(tables, path: Path) -> None:
@@ -45,11 +39,7 @@ def _paths_claims(tables) -> list[Claim]:
     return out
 
 
-EXPERIMENT = Experiment(
-    "paths",
-    f"`k3` (rg-mpc, ao-mpc) and default (rg-mpc, ao-mpc, epa): paths of seed 0, path lengths and RMSE over {SEEDS} seeds",
-    sweeps=_paths_sweeps,
-    builders={"paths": lambda out, quick: trace_rows(PATH_CASES, quick)},
-    plot=_paths_plot,
-    claims=_paths_claims,
-)
+EXPERIMENT = Experiment("paths", "`k3` (rg-mpc, ao-mpc) and default (rg-mpc, ao-mpc, epa): paths of seed 0, path "
+                        f"lengths and RMSE over {SEEDS} seeds", sweeps=_paths_sweeps,
+                        builders={"paths": lambda out, quick: trace_rows(PATH_CASES, quick)}, plot=_paths_plot,
+                        claims=_paths_claims)

@@ -3,47 +3,32 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
-from .base import (SEEDS, EXPERTS, QUICK_SET, REPORT_SLOT, Claim, Experiment, by_seed, curve, label_axes, multi_claim,
-                   new_figure, pick, save, seeds, slot_cost, spec, values)
+from .base import EXPERTS, REPORT_SLOT, SEEDS, Experiment, by_seed, slot_cost, spec, values
+from .claims import Claim, multi_claim
+from .plots import curve, label_axes, new_figure, save
 
 
 def _rate_sweeps(quick):
-    return {
-        "rate": spec(
-            "rate",
-            {
-                "channel.rate_threshold_bps_hz": pick(quick, [6.0, 8.0, 10.0], [6.0, 10.0]),
-                "power_budget_dbw": pick(quick, [-3.0, 0.0, 3.0], [0.0, 3.0]),
-            },
-            EXPERTS,
-            seeds(quick),
-            set_=QUICK_SET if quick else {},
-        )
-    }
+    grid = {"channel.rate_threshold_bps_hz": [6.0, 10.0] if quick else [6.0, 8.0, 10.0],
+            "power_budget_dbw": [0.0, 3.0] if quick else [-3.0, 0.0, 3.0]}
+    return {"rate": spec("rate", grid, EXPERTS, quick)}
 
 
 def _rate_plot(tables, path: Path) -> None:
     rows = tables["rate"]
     fig = new_figure(ncols=2, width=4.6)
-    for j, (metric, label) in enumerate(
-        (("control_cost", "episode control cost"), (slot_cost, f"stage cost at slot {REPORT_SLOT}"))
-    ):
+    panels: tuple[tuple[str | Callable, str], ...] = (("control_cost", "episode control cost"),
+                                                      (slot_cost, f"stage cost at slot {REPORT_SLOT}"))
+    for j, (metric, label) in enumerate(panels):
         ax = fig.add_subplot(1, 2, j + 1)
         for i, p in enumerate(values(rows, "power_budget_dbw")):
             sub = [r for r in rows if float(r["power_budget_dbw"]) == p]
             for policy in EXPERTS:
-                curve(
-                    ax,
-                    sub,
-                    "channel.rate_threshold_bps_hz",
-                    metric,
-                    policy,
-                    label=f"{policy}, {p:g} dBW",
-                    color=f"C{i}",
-                    ls="-" if policy == "rg-mpc" else "--",
-                )
+                curve(ax, sub, "channel.rate_threshold_bps_hz", metric, policy, label=f"{policy}, {p:g} dBW",
+                      color=f"C{i}", ls="-" if policy == "rg-mpc" else "--")
         ax.set_yscale("log")
         label_axes(ax, f"{label} vs rate threshold", "rate threshold R_th (bit/s/Hz)", label)
     save(fig, path)
@@ -55,48 +40,23 @@ def _rate_claims(tables) -> list[Claim]:
     r0, r1 = rates[0], rates[-1]
     out = []
     for e in EXPERTS:
-        for metric, mlabel, tag in (
-            ("control_cost", "episode control cost", ""),
-            (slot_cost, f"stage cost at slot {REPORT_SLOT}", "-slot"),
-        ):
-
-            def at(rate, budget, metric=metric):
-                return by_seed(
-                    rows, metric, policy=e, **{"channel.rate_threshold_bps_hz": rate, "power_budget_dbw": budget}
-                )
-
-            out.append(
-                multi_claim(
-                    "rate",
-                    f"rate.rises{tag}.{e}",
-                    f"{e}: cost rises with R_th ({r0:g} → {r1:g}), at every P_max",
-                    f"{mlabel}, paired per seed",
-                    [(f"{b:g} dBW", at(r1, b), at(r0, b)) for b in budgets],
-                    "positive",
-                )
-            )
-            log_rise = {
-                b: {s: math.log(max(v, 1e-12) / max(at(r0, b)[s], 1e-12)) for s, v in at(r1, b).items()}
-                for b in budgets
-            }
-            out.append(
-                multi_claim(
-                    "rate",
-                    f"rate.steeper{tag}.{e}",
-                    f"{e}: the rise is steeper at lower P_max",
-                    f"log(cost at R_th {r1:g} / at {r0:g}), {mlabel}, paired per seed",
-                    [(f"{budgets[0]:g} vs {budgets[-1]:g} dBW", log_rise[budgets[0]], log_rise[budgets[-1]])],
-                    "positive",
-                    relative=False,
-                )
-            )
+        for metric, mlabel, tag in (("control_cost", "episode control cost", ""),
+                                    (slot_cost, f"stage cost at slot {REPORT_SLOT}", "-slot")):
+            at = {(rate, b): by_seed(rows, metric, policy=e,
+                                     **{"channel.rate_threshold_bps_hz": rate, "power_budget_dbw": b})
+                  for rate in (r0, r1) for b in budgets}
+            out.append(multi_claim("rate", f"rate.rises{tag}.{e}", f"{e}: cost rises with R_th ({r0:g} → {r1:g}), at "
+                                   "every P_max", f"{mlabel}, paired per seed",
+                                   [(f"{b:g} dBW", at[r1, b], at[r0, b]) for b in budgets], "positive"))
+            log_rise = {b: {s: math.log(max(v, 1e-12) / max(at[r0, b][s], 1e-12)) for s, v in at[r1, b].items()}
+                        for b in budgets}
+            out.append(multi_claim("rate", f"rate.steeper{tag}.{e}", f"{e}: the rise is steeper at lower P_max",
+                                   f"log(cost at R_th {r1:g} / at {r0:g}), {mlabel}, paired per seed",
+                                   [(f"{budgets[0]:g} vs {budgets[-1]:g} dBW", log_rise[budgets[0]],
+                                     log_rise[budgets[-1]])], "positive", relative=False))
     return out
 
 
-EXPERIMENT = Experiment(
-    "rate",
-    f"default, R_th ∈ {{6, 8, 10}}, P_max ∈ {{−3, 0, 3}} dBW, rg-mpc and ao-mpc, {SEEDS} seeds",
-    sweeps=_rate_sweeps,
-    plot=_rate_plot,
-    claims=_rate_claims,
-)
+EXPERIMENT = Experiment("rate",
+                        f"default, R_th ∈ {{6, 8, 10}}, P_max ∈ {{−3, 0, 3}} dBW, rg-mpc and ao-mpc, {SEEDS} seeds",
+                        sweeps=_rate_sweeps, plot=_rate_plot, claims=_rate_claims)

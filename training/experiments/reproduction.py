@@ -11,11 +11,12 @@ from __future__ import annotations
 import json
 import re
 import shutil
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .base import Claim
+    from .claims import Claim
 
 __all__ = ["EXPLANATIONS", "write_reproduction"]
 
@@ -62,7 +63,8 @@ def _explained(claims: Sequence[Claim], explanations: Mapping[str, str], page: s
     its key's longest prefix; those without one, or whose section the page lacks, listed as not yet
     explained."""
     headings = set(re.findall(r"^#{2,3} (.+)$", page, flags=re.MULTILINE))
-    missing, groups = [], {}  # heading -> the claims it explains, in table order
+    missing: list[str] = []
+    groups: dict[str, list[Claim]] = {}  # heading -> the claims it explains, in table order
     for c in claims:
         if c.verdict == "holds":
             continue

@@ -7,18 +7,19 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
-from .base import Claim, Experiment
+from ..results.report import markdown_table
+from .base import Experiment
+from .claims import Claim
 from .registry import EXPERIMENTS
 
 __all__ = ["tables_of", "make_figures", "check_claims", "write_claims", "read_claims", "format_claims", "tally"]
 
 
-def tables_of(
-    exp: Experiment, out: Path, quick: bool = False, workers: int = 1, progress: bool = False, run: bool = True
-) -> dict[str, list[dict]]:
+def tables_of(exp: Experiment, out: Path, quick: bool = False, workers: int = 1, progress: bool = False,
+              run: bool = True) -> dict[str, list[dict]]:
     """The experiment's tables in ``out/data`` (with ``run``: their missing rows run first)."""
     from ..results.run import write_rows
     from ..sweep import SweepTableError, read_rows, read_table, run_sweep
@@ -30,10 +31,8 @@ def tables_of(
             try:
                 run_sweep(spec, path, workers=workers, progress=progress)
             except SweepTableError as exc:
-                raise SweepTableError(
-                    f"{exc}. For `lawn figures`: delete {path} or choose another --out "
-                    "(the figure's table was written by another spec or version)"
-                ) from None
+                raise SweepTableError(f"{exc}. For `lawn figures`: delete {path} or choose another --out (the "
+                                      "figure's table was written by another spec or version)") from None
         tables[name] = read_rows(path)[0]
     for name, build in exp.builders.items():
         path = out / "data" / f"{name}.csv"
@@ -43,9 +42,8 @@ def tables_of(
     return tables
 
 
-def make_figures(
-    names: Sequence[str], out: Path, quick: bool = False, workers: int = 1, progress: bool = True
-) -> dict[str, float]:
+def make_figures(names: Sequence[str], out: Path, quick: bool = False, workers: int = 1,
+                 progress: bool = True) -> dict[str, float]:
     """Build the named figures (all when ``names`` is empty): run the missing table rows, plot;
     returns seconds per figure and records, in ``out/timings.json``, the time of every figure whose
     rows were run (what building it from scratch takes)."""
@@ -108,21 +106,13 @@ def tally(claims: Sequence[Claim]) -> str:
     def count(cs):
         return ", ".join(f"{sum(c.verdict == v for c in cs)} {v}" for v in ("holds", "not significant", "differs"))
 
-    return (
-        f"Of the paper's {len(paper)} claims checked here: {count(paper)}. Of the project's own {len(own)} "
-        f"checks: {count(own)}."
-    )
+    return (f"Of the paper's {len(paper)} claims checked here: {count(paper)}. "
+            f"Of the project's own {len(own)} checks: {count(own)}.")
 
 
 def format_claims(claims: Sequence[Claim]) -> str:
     """The claims as a Markdown table."""
-    lines = [
-        "| figure | claim | checked on | project's number (paired mean ± 95 % interval) | seeds | verdict |",
-        "|---|---|---|---|---|---|",
-    ]
-    for c in claims:
-        v = {"holds": "holds", "differs": "**differs**", "not significant": "*not significant*"}.get(
-            c.verdict, c.verdict
-        )
-        lines.append(f"| {c.figure} | {c.claim} | {c.metric} | {c.value} | {c.seeds or '–'} | {v} |")
-    return "\n".join(lines)
+    marks = {"differs": "**differs**", "not significant": "*not significant*"}
+    return markdown_table(["figure", "claim", "checked on", "project's number (paired mean ± 95 % interval)", "seeds",
+                           "verdict"], ([c.figure, c.claim, c.metric, c.value, str(c.seeds or "–"),
+                                         marks.get(c.verdict, c.verdict)] for c in claims))

@@ -3,10 +3,12 @@ one episode per case, as table rows (:func:`trace_rows`), and their plot (:func:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
+from typing import cast
 
-from .base import QUICK_SET, new_figure, save
+from .base import QUICK_SET
+from .plots import new_figure, save
 
 __all__ = ["trace_rows", "plot_traces"]
 
@@ -17,11 +19,12 @@ def trace_rows(cases: Sequence[tuple[str, str, str]], quick: bool) -> list[dict]
 
     from agents import make_policy, rollout
     from lawn_env import presets
+    from lawn_env.envs import JointEnv
 
     rows = []
     for label, preset, policy in cases:
         cfg = presets.get(preset).override(QUICK_SET) if quick else presets.get(preset)
-        env = gym.make("lawn/Joint-v1", config=cfg).unwrapped
+        env = cast(JointEnv, gym.make("lawn/Joint-v1", config=cfg).unwrapped)
         cost = rollout(env, make_policy(policy, cfg), 0).metrics["control_cost"]
         traj = env.trajectories()
         for n in range(traj["drone_position"].shape[0]):
@@ -44,9 +47,9 @@ def plot_traces(rows: Sequence[dict], path: Path, cases: Sequence[tuple[str, str
         for i in range(k):
             for who, ls in (("reference", "--"), ("agv", "-")):
                 pts = [(float(r["x"]), float(r["y"])) for r in sel if r["who"] == f"{who}_{i}"]
-                ax.plot(*zip(*pts), ls, color=f"C{i}", lw=0.9 if who == "reference" else 1.3)
+                ax.plot(*zip(*pts, strict=True), ls, color=f"C{i}", lw=0.9 if who == "reference" else 1.3)
         drone = [(float(r["x"]), float(r["y"])) for r in sel if r["who"] == "drone"]
-        ax.plot(*zip(*drone), "-", color="k", lw=1.2)
+        ax.plot(*zip(*drone, strict=True), "-", color="k", lw=1.2)
         ax.plot(*drone[-1], "k^", ms=6)
         x0, x1, y0, y1 = presets.get(preset).area_m
         ax.set_xlim(x0, x1)

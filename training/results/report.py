@@ -6,8 +6,8 @@ here plays an episode; the pages' prose around the tables lives in ``docs/``."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -15,13 +15,25 @@ from agents.base import JOINT
 from agents.learned import zoo_agents
 
 from .run import NOISE, REFERENCE_ROWS, TRANSIENT_SLOTS, is_reference_row, own_anchor, policy_env
-from .stats import (SCORE_HIGH, SCORE_LOW, SCORE_VERSION, SUMMARY_METRICS, Geometric, aggregate_score, costs_of,
-                    geometric, mean_ci, paired, score_inputs, scores_by_policy)
+from .stats import (
+    SCORE_HIGH,
+    SCORE_LOW,
+    SCORE_VERSION,
+    SUMMARY_METRICS,
+    Geometric,
+    aggregate_score,
+    costs_of,
+    geometric,
+    mean_ci,
+    paired,
+    score_inputs,
+    scores_by_policy,
+)
 
-__all__ = ["fmt_pct", "fmt_num", "fmt_stat", "fmt_geometric", "fmt_paired", "format_score", "RESULT_METRICS", "TIMING_METRICS",
-           "format_table", "summary_markdown", "plot_summary", "mean_cell", "protocol_cells", "learned_table",
-           "suite_table", "structure_table", "task_tables", "plot_profiles", "skipped_summary", "TARGETS",
-           "generalization_table"]
+__all__ = ["fmt_pct", "fmt_num", "fmt_stat", "fmt_geometric", "fmt_paired", "format_score", "RESULT_METRICS",
+           "TIMING_METRICS", "format_table", "summary_markdown", "plot_summary", "mean_cell", "protocol_cells",
+           "learned_table", "suite_table", "structure_table", "task_tables", "plot_profiles", "skipped_summary",
+           "TARGETS", "generalization_table"]
 
 #: The summary's deterministic metrics (the same seeds give the same digits on any machine) and its
 #: measured ones (this machine's clock), in two tables.
@@ -85,11 +97,9 @@ def format_score(score: tuple[float, float, float, int] | None) -> str:
 def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy",
                  paired: dict[str, tuple[float, float]] | None = None, reference: str | None = None,
                  scores: Mapping[str, tuple] | None = None, geometric: Mapping[str, Geometric] | None = None) -> str:
-    """A Markdown table: mean ± 95 % interval per metric (decision time in ms), optionally the
-    normalized score (``scores``: policy -> :func:`.stats.normalized_score`), the paired
-    relative cost difference against ``reference`` (``paired``: mean of per-seed relative
-    differences, t-interval) and the geometric one (``geometric``: the deciding statistic,
-    docs/benchmark.md)."""
+    """A Markdown table: mean ± 95 % interval per metric (decision time in ms), optionally the score
+    (``scores``: policy -> :func:`.stats.normalized_score`) and the cost against ``reference``
+    (``paired``: the mean relative difference; ``geometric``: the deciding statistic)."""
     header = [by, "episodes"] + [label.replace("(s)", "(ms)") for _, label in metrics]
     if scores:
         header.insert(3, f"score v{SCORE_VERSION} [95 %]")
@@ -131,8 +141,8 @@ def summary_markdown(summary: list[dict], paired: dict, reference: str, scores: 
     results = format_table(summary, metrics=RESULT_METRICS, paired=paired, reference=reference, scores=scores,
                            geometric=geometric)
     timing = format_table(summary, metrics=TIMING_METRICS)
-    return f"{results}\n\nDecision time (median per episode; mean ± 95 % interval over the episodes), measured on the " \
-           f"machine that ran it:\n\n{timing}\n"
+    return (f"{results}\n\nDecision time (median per episode; mean ± 95 % interval over the episodes), measured on the "
+            f"machine that ran it:\n\n{timing}\n")
 
 
 def plot_summary(summary: list[dict], path: Path, title: str = "") -> None:
@@ -174,11 +184,11 @@ def protocol_cells(rows: Sequence[Mapping], scores: Mapping, policy: str, env: s
     cost = costs_of(rows, policy, env)
     anchor = own_anchor(policy)
     cells = {"anchor": anchor or "–", "cost": mean_cell(rows, policy, env, None, "control_cost"),
+             "transient": mean_cell(rows, policy, env, None, "transient_cost"),
+             "sustained": mean_cell(rows, policy, env, None, "sustained_cost"),
              "score": format_score(scores.get(("default", env, policy))),
              "vs_ref": "–" if policy == SCORE_HIGH else fmt_paired(*paired(rows, policy, SCORE_HIGH, env)),
              "vs_anchor": "–", "worst": "–", "geo_ref": "–", "geo_anchor": "–"}
-    cells["transient"] = mean_cell(rows, policy, env, None, "transient_cost")
-    cells["sustained"] = mean_cell(rows, policy, env, None, "sustained_cost")
     if policy != SCORE_HIGH:
         cells["geo_ref"] = fmt_geometric(geometric(rows, policy, SCORE_HIGH, env))
     if anchor is not None:
@@ -198,20 +208,21 @@ def learned_table(rows: Sequence[Mapping], entries: Sequence[tuple[str, str]],
     """The learned protocol's Markdown table of ``entries`` from their rows."""
     scores = scores_by_policy(rows)
     seeds = len({int(r["seed"]) for r in rows})
-    header = ["policy", "env", "acts around", "control cost", "transient", "sustained", f"score v{SCORE_VERSION} [95 %]",
-              f"vs {SCORE_HIGH} (geometric, seeds won)", "vs own anchor (geometric, seeds won)",
+    header = ["policy", "env", "acts around", "control cost", "transient", "sustained",
+              f"score v{SCORE_VERSION} [95 %]", f"vs {SCORE_HIGH} (geometric, seeds won)",
+              "vs own anchor (geometric, seeds won)",
               f"vs {SCORE_HIGH} (paired mean)", "vs own anchor (paired mean)", "worst seed vs own anchor"]
     table = []
     for policy, env in entries:
         c = protocol_cells(rows, scores, policy, env)
         table.append([(labels or {}).get(policy, policy), env, *(c[k] for k in _LEARNED_CELLS)])
     split = rows[0]["transient_slots"]
-    lines = [markdown_table(header, table), "", f"{seeds} test seeds; control cost split into the transient (slots 0-{split - 1}) and the sustained "
-              f"part (slots {split} on); score v{SCORE_VERSION}: 0 = {SCORE_LOW}, 100 = {SCORE_HIGH} "
-              "(training/results/stats.py); geometric columns (the deciding statistic, docs/benchmark.md): the geometric "
-              "mean of the per-seed cost ratios - 1 with its 95 % bootstrap interval and the share of seeds won; "
-              "paired-mean columns: the mean per-seed relative difference and its 95 % t-interval."]
-    return "\n".join(lines)
+    note = (f"{seeds} test seeds; control cost split into the transient (slots 0-{split - 1}) and the sustained part "
+            f"(slots {split} on); score v{SCORE_VERSION}: 0 = {SCORE_LOW}, 100 = {SCORE_HIGH} "
+            "(training/results/stats.py); geometric columns (the deciding statistic, docs/benchmark.md): the geometric "
+            "mean of the per-seed cost ratios - 1 with its 95 % bootstrap interval and the share of seeds won; "
+            "paired-mean columns: the mean per-seed relative difference and its 95 % t-interval.")
+    return f"{markdown_table(header, table)}\n\n{note}"
 
 
 def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequence[str],
@@ -226,35 +237,34 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
         env = JOINT if is_reference_row(p) else policy_env(p)
         if is_reference_row(p) and not any(r["policy"] == p for r in rows):
             continue
-        cells = []
-        for task in tasks:
-            score = scores.get((task, env, p))
-            cells.append("n/a" if (task, p) in skipped else format_score(score))
+        cells = ["n/a" if (task, p) in skipped else format_score(scores.get((task, env, p))) for task in tasks]
         iqm, lo, hi, n = aggregate_score({t: inputs[(t, env, p)] for t in tasks if (t, env, p) in inputs})
-        overall = "–" if n == 0 else format_score((iqm, lo, hi, n)) + ("" if n == len(tasks) else f" ({n} task{'s' * (n != 1)})")
-        board.append([p, env, *cells, overall])
+        overall = "–" if n == 0 else format_score((iqm, lo, hi, n))
+        board.append([p, env, *cells, overall + ("" if n in (0, len(tasks)) else f" ({n} task{'s' * (n != 1)})")])
+    return markdown_table(["policy", "env", *tasks, "IQM over tasks [95 %]"], board), _references_table(rows, tasks)
+
+
+def _references_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
+    """The references' costs per task and env, their gap and how it varies over the seeds."""
     refs = []
     for task in tasks:
         for env in dict.fromkeys(r["env"] for r in rows if r.get("task") == task):
             low, high = costs_of(rows, SCORE_LOW, env, task), costs_of(rows, SCORE_HIGH, env, task)
             if not low or not high:
                 continue
-            lo, hi = mean_ci(low.values()), mean_ci(high.values())
-            gap = lo[0] - hi[0]
+            gap = mean_ci(low.values())[0] - mean_ci(high.values())[0]
             per_seed = [(low[s] - high[s]) / high[s] for s in low if s in high]
-            refs.append([task, env, str(len(low)), f"{fmt_num(lo[0])} ± {fmt_num(lo[1])}",
-                         f"{fmt_num(hi[0])} ± {fmt_num(hi[1])}", fmt_num(gap),
+            refs.append([task, env, str(len(low)), mean_cell(rows, SCORE_LOW, env, task, "control_cost"),
+                         mean_cell(rows, SCORE_HIGH, env, task, "control_cost"), fmt_num(gap),
                          f"{fmt_pct(min(per_seed))} to {fmt_pct(max(per_seed))}", str(sum(g <= 0 for g in per_seed))])
-    return (markdown_table(["policy", "env", *tasks, "IQM over tasks [95 %]"], board),
-            markdown_table(["task", "env", "episodes", f"{SCORE_LOW} cost", f"{SCORE_HIGH} cost", "gap (mean)",
-                            f"per-seed gap / {SCORE_HIGH} cost, min to max", f"seeds where {SCORE_LOW} costs no more"],
-                           refs))
+    return markdown_table(["task", "env", "episodes", f"{SCORE_LOW} cost", f"{SCORE_HIGH} cost", "gap (mean)",
+                           f"per-seed gap / {SCORE_HIGH} cost, min to max", f"seeds where {SCORE_LOW} costs no more"],
+                          refs)
 
 
 def structure_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
-    """Per task, what decides it: the best expert's control cost, its transient and sustained parts (the
-    sustained share), the noise floor and the two headroom rows against it (geometric,
-    :mod:`.run`), on ``lawn/Joint-v1``."""
+    """Per task, what decides it on ``lawn/Joint-v1``: the best expert's control cost, its transient and
+    sustained parts (the sustained share), the noise floor and the headroom rows against it."""
     table = []
     for task in tasks:
         high = [r for r in rows if r["policy"] == SCORE_HIGH and r["env"] == JOINT and r.get("task") == task]
@@ -276,8 +286,7 @@ def structure_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
 def task_tables(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequence[str],
                 skipped: Mapping[tuple[str, str], str]) -> str:
     """One Markdown table per task: every row's control cost, its transient and sustained parts, the
-    score, and the comparison with the best expert on the same env (geometric, the deciding statistic,
-    and the paired mean of relative differences)."""
+    score, and the comparison with the best expert on the same env (geometric and paired mean)."""
     scores = scores_by_policy(rows)
     out = []
     for task in tasks:
@@ -302,9 +311,8 @@ def task_tables(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
 
 def plot_profiles(per_slot: Sequence[Mapping], path: Path, tasks: Sequence[str],
                   transient_slots: int = TRANSIENT_SLOTS) -> Path:
-    """The mean stage cost per slot of the experts, baselines, anchors, reference rows and agents on
-    ``lawn/Joint-v1`` (the agents on their own env), one panel per task, log scale; from the rows of
-    ``per_slot.csv`` (:func:`per_slot_profile`)."""
+    """The mean stage cost per slot of every row on ``lawn/Joint-v1`` (the agents on their own env),
+    one panel per task, log scale; from the rows of ``per_slot.csv`` (:func:`.run.per_slot_profile`)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

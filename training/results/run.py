@@ -22,9 +22,10 @@ import functools
 import json
 import math
 import os
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -43,8 +44,8 @@ from lawn_env.config import DroneConfig
 from ..pool import pool_map
 from .stats import SCORE_HIGH, SCORE_LOW
 
-__all__ = ["TRANSIENT_SLOTS", "Play", "episode_row", "build_policy", "run_episode", "split_cost", "evaluate",
-           "run_entries", "per_slot_profile", "policy_env", "own_anchor", "learned_entries", "write_rows",
+__all__ = ["TRANSIENT_SLOTS", "Play", "DEFAULT_PLAY", "episode_row", "build_policy", "run_episode", "split_cost",
+           "evaluate", "run_entries", "per_slot_profile", "policy_env", "own_anchor", "learned_entries", "write_rows",
            "write_csv", "read_csv", "parse_bool", "LIMITS", "LIMIT_SETTINGS", "NOISE", "REFERENCE_ROWS",
            "is_reference_row", "limit_config", "resolve"]
 
@@ -67,10 +68,14 @@ class Play:
     transient_slots: int = TRANSIENT_SLOTS
 
 
+#: The default way to play: one process, a progress bar, the default split.
+DEFAULT_PLAY = Play()
+
+
 def _max_speed() -> float:
     """The validated upper bound of ``drone.max_speed_mps`` (the config's maximum)."""
-    field = DroneConfig.__pydantic_fields__["max_speed_mps"]
-    return float(next(m.le for m in field.metadata if isinstance(m, Le)))
+    field = cast(Any, DroneConfig).__pydantic_fields__["max_speed_mps"]  # a pydantic dataclass
+    return float(cast(float, next(m.le for m in field.metadata if isinstance(m, Le))))
 
 
 #: name -> the lifted field (a dotted config key) and its value.
@@ -172,8 +177,9 @@ def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
     return row
 
 
-def _run_task(task, transient_slots: int = TRANSIENT_SLOTS) -> dict:
-    return run_episode(*task, transient_slots=transient_slots)
+def _run_task(task: tuple, transient_slots: int = TRANSIENT_SLOTS) -> dict:
+    policy, env_id, config, seed, policy_kwargs = task
+    return run_episode(policy, env_id, config, seed, policy_kwargs, transient_slots)
 
 
 def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SLOTS) -> tuple[float, float]:
@@ -190,9 +196,8 @@ def evaluate(tasks: Iterable[tuple], workers: int = 1, progress: bool = True, de
              transient_slots: int = TRANSIENT_SLOTS) -> list[dict]:
     """Run ``(policy, env_id, config, seed, policy_kwargs)`` tasks; rows in task order, each with its
     ``transient_cost`` and ``sustained_cost`` split at ``transient_slots`` (:func:`split_cost`)."""
-    tasks = list(tasks)
     split_cost((), transient_slots)  # a bad split fails before any episode
-    return pool_map(functools.partial(_run_task, transient_slots=transient_slots), tasks, workers, progress, desc)
+    return pool_map(functools.partial(_run_task, transient_slots=transient_slots), list(tasks), workers, progress, desc)
 
 
 def policy_env(policy: str) -> str:
@@ -234,13 +239,14 @@ def learned_entries(agents: Sequence[str], envs: Sequence[str] | None = None) ->
     return out
 
 
-def run_entries(entries: Sequence[tuple[str, str]], config: ScenarioConfig, seeds: Sequence[int], play: Play = Play(),
-                task: str = "default", desc: str = "benchmark", profiles: list[dict] | None = None) -> list[dict]:
+def run_entries(entries: Sequence[tuple[str, str]], config: ScenarioConfig, seeds: Sequence[int],
+                play: Play = DEFAULT_PLAY, task: str = "default", desc: str = "benchmark",
+                profiles: list[dict] | None = None) -> list[dict]:
     """Full episodes of every (policy, env) entry on every seed; rows with a ``task`` column and
     without the per-slot trace (its mean per slot appended to ``profiles`` when given,
     :func:`per_slot_profile`)."""
-    tasks = [(policy, env, config, int(s), {}) for policy, env in entries for s in seeds]
-    rows = evaluate(tasks, workers=play.workers, progress=play.progress, desc=desc, transient_slots=play.transient_slots)
+    tasks: list[tuple] = [(policy, env, config, int(s), {}) for policy, env in entries for s in seeds]
+    rows = evaluate(tasks, play.workers, play.progress, desc, play.transient_slots)
     for row in rows:
         row["task"] = task
     if profiles is not None:

@@ -13,13 +13,13 @@ run beside the policy on the same seeds, never stored. v1 (100 at ``rg-mpc``) st
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["SUMMARY_METRICS", "mean_ci", "paired_difference", "Geometric", "paired_geometric", "verdict", "costs_of", "paired",
-           "geometric", "summarize", "paired_cost_difference", "paired_cost_geometric", "SCORE_VERSION",
+__all__ = ["SUMMARY_METRICS", "mean_ci", "paired_difference", "Geometric", "paired_geometric", "verdict", "costs_of",
+           "paired", "geometric", "summarize", "paired_cost_difference", "paired_cost_geometric", "SCORE_VERSION",
            "SCORE_REFERENCES", "SCORE_LOW", "SCORE_HIGH", "score_references", "normalized_score", "score_inputs",
            "scores_by_policy", "aggregate_score"]
 
@@ -32,6 +32,8 @@ SCORE_VERSION = 2
 SCORE_REFERENCES: dict[int, tuple[str, str]] = {1: ("epa", "rg-mpc"), 2: ("epa", "dv-mpc")}
 #: The current version's: 0 and 100.
 SCORE_LOW, SCORE_HIGH = SCORE_REFERENCES[SCORE_VERSION]
+#: The aligned per-seed costs (E, R, x) of the two references and a policy (:func:`score_inputs`).
+Costs = tuple[np.ndarray, np.ndarray, np.ndarray]
 #: Metrics summarized with a mean and a 95 % interval (name, label).
 SUMMARY_METRICS = (
     ("control_cost", "control cost"),
@@ -98,7 +100,7 @@ def paired_geometric(a: Mapping, b: Mapping, resamples: int = BOOTSTRAP_RESAMPLE
         raise ValueError("paired_geometric: the two cost maps share no seed")
     x = np.array([float(a[k]) for k in keys])
     y = np.array([float(b[k]) for k in keys])
-    bad = [k for k, u, v in zip(keys, x, y) if not (u > 0 and v > 0 and np.isfinite(u) and np.isfinite(v))]
+    bad = [k for k, u, v in zip(keys, x, y, strict=True) if not (u > 0 and v > 0 and np.isfinite(u) and np.isfinite(v))]
     if bad:
         raise ValueError(f"paired_geometric: every cost must be > 0 and finite; seed {bad[0]!r} has {a[bad[0]]!r} "
                          f"against {b[bad[0]]!r}")
@@ -141,7 +143,8 @@ def verdict(mean: float, half: float, expect: str, tie_tolerance: float = 0.01) 
     return "not significant"
 
 
-def summarize(rows: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy") -> list[dict]:
+def summarize(rows: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy"
+              ) -> list[dict]:
     """Mean and 95 % t-interval half-width of each metric per group, in first-seen group order."""
     groups: dict[str, list[dict]] = {}
     for row in rows:
@@ -155,7 +158,8 @@ def summarize(rows: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_MET
     return out
 
 
-def paired_cost_difference(rows: list[dict], reference: str, metric: str = "control_cost") -> dict[str, tuple[float, float]]:
+def paired_cost_difference(rows: list[dict], reference: str, metric: str = "control_cost"
+                           ) -> dict[str, tuple[float, float]]:
     """Per policy: mean and 95 % t-interval half-width of the per-seed relative difference
     ``(x - x_ref) / x_ref`` against ``reference`` on the seeds both ran (:func:`paired_difference`)."""
     ref = costs_of(rows, reference, metric=metric)
@@ -168,15 +172,11 @@ def paired_cost_difference(rows: list[dict], reference: str, metric: str = "cont
 
 
 def paired_cost_geometric(rows: list[dict], reference: str, metric: str = "control_cost") -> dict[str, Geometric]:
-    """Per policy: the geometric mean of its per-seed cost ratios against ``reference`` with a 95 %
-    bootstrap interval and the share of seeds won (:func:`paired_geometric`)."""
+    """Per policy but ``reference``: :func:`paired_geometric` of its per-seed costs against the reference's."""
     ref = costs_of(rows, reference, metric=metric)
-    out = {}
-    for name in dict.fromkeys(r["policy"] for r in rows):
-        mine = costs_of(rows, name, metric=metric)
-        if name != reference and any(s in ref for s in mine):
-            out[name] = paired_geometric(mine, ref)
-    return out
+    mine = {name: costs_of(rows, name, metric=metric) for name in dict.fromkeys(r["policy"] for r in rows)}
+    return {name: paired_geometric(cost, ref) for name, cost in mine.items()
+            if name != reference and any(s in ref for s in cost)}
 
 
 def costs_of(rows: Sequence[Mapping], policy: str, env: str | None = None, task: str | None = None,
@@ -188,8 +188,8 @@ def costs_of(rows: Sequence[Mapping], policy: str, env: str | None = None, task:
 
 
 def geometric(rows: Sequence[Mapping], policy: str, reference: str, env: str, task: str | None = None) -> Geometric:
-    """The geometric mean of ``policy``'s per-seed cost ratios against ``reference``, its bootstrap
-    interval and the share of seeds won (:func:`paired_geometric`)."""
+    """:func:`paired_geometric` of ``policy``'s per-seed costs against ``reference``'s (on ``env``, and
+    ``task`` when given)."""
     return paired_geometric(costs_of(rows, policy, env, task), costs_of(rows, reference, env, task))
 
 
@@ -219,11 +219,10 @@ def _score(e: np.ndarray, r: np.ndarray, x: np.ndarray, axis: int = -1) -> np.nd
 
 def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: Mapping[int, float],
                      references: tuple[str, str] = (SCORE_LOW, SCORE_HIGH)) -> tuple[float, float, float, int]:
-    """Score, 95 % interval (low end, high end) and seed count of a policy's per-seed costs
-    ``cost`` against the references' per-seed costs ``low`` (EPA) and ``high`` (the best expert;
-    ``references`` names both in messages), over the seeds all three hold. NaN interval for fewer
-    than 3 seeds; ValueError when the references do not separate (mean low cost not above mean
-    high cost), where no score is defined."""
+    """Score, 95 % interval (low end, high end) and seed count of a policy's per-seed costs ``cost``
+    against the references' ``low`` (EPA) and ``high`` (the best expert; ``references`` names both in
+    messages), over the seeds all three hold. NaN interval for fewer than 3 seeds; ValueError when
+    the references do not separate (mean low cost not above mean high cost): no score is defined."""
     low_name, high_name = references
     seeds = [s for s in cost if s in low and s in high]
     if not seeds:
@@ -247,7 +246,7 @@ def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: 
 
 
 def score_inputs(rows: Iterable[Mapping], metric: str = "control_cost", version: int = SCORE_VERSION
-                 ) -> dict[tuple[str, str, str], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+                 ) -> dict[tuple[str, str, str], Costs]:
     """Per (task, env, policy) of evaluation rows (``policy``, ``env``, ``seed``, ``metric`` and
     optionally ``task``, default ``"default"``): the per-seed costs (E, R, x) of the two references
     of score ``version`` and the policy on the seeds all three hold, aligned. Groups without both
@@ -264,7 +263,8 @@ def score_inputs(rows: Iterable[Mapping], metric: str = "control_cost", version:
             continue
         seeds = [s for s in cost if s in low and s in high]
         if seeds:
-            out[(task, env, policy)] = tuple(np.array([float(c[s]) for s in seeds]) for c in (low, high, cost))
+            e, r, x = (np.array([float(c[s]) for s in seeds]) for c in (low, high, cost))
+            out[(task, env, policy)] = (e, r, x)
     return out
 
 
@@ -274,27 +274,19 @@ def scores_by_policy(rows: Iterable[Mapping], metric: str = "control_cost", vers
     (:func:`score_inputs`), against the reference rows of the same task and env. Groups without both
     references, sharing no seed with them, or whose references do not separate (EPA not costlier
     than the best expert on average) are left out: no score is defined there."""
-    out = {}
     references = score_references(version)
-    for key, (e, r, x) in score_inputs(rows, metric, version).items():
-        seeds = range(len(x))
-        try:
-            out[key] = normalized_score(dict(zip(seeds, x)), dict(zip(seeds, e)), dict(zip(seeds, r)), references)
-        except ValueError:  # the references do not separate
-            continue
-    return out
+    return {key: normalized_score(dict(enumerate(x)), dict(enumerate(e)), dict(enumerate(r)), references)
+            for key, (e, r, x) in score_inputs(rows, metric, version).items() if float(np.mean(e - r)) > 0}
 
 
-def aggregate_score(per_task: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
+def aggregate_score(per_task: Mapping[str, Costs],
                     resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float, float, int]:
-    """The headline over tasks: rliable's interquartile mean (Agarwal et al., 2021;
-    ``scipy.stats.trim_mean(scores, 0.25)``) of the per-task scores, ``int(T / 4)`` tasks dropped at
-    each end (the mean of the middle four of six; nothing dropped below four tasks; rliable pools the
-    runs of every task, here each task is one score), with a 95 % stratified bootstrap interval
-    (each task's seeds resampled on their own, its score recomputed from the resampled (E, R, x),
-    the IQM taken; percentile method, a fixed seed). ``per_task``: task -> the aligned per-seed
-    costs (E, R, x) of :func:`score_inputs`. Returns (IQM, low, high, number of tasks); tasks
-    whose references do not separate are left out."""
+    """The headline over tasks: rliable's interquartile mean (Agarwal et al., 2021) of the per-task
+    scores (``scipy.stats.trim_mean(scores, 0.25)``: the middle four of six), with a 95 % stratified
+    bootstrap interval (each task's seeds resampled on their own, its score recomputed, the IQM
+    taken; percentile method, a fixed seed). ``per_task``: task -> the costs (E, R, x) of
+    :func:`score_inputs`. Returns (IQM, low, high, number of tasks); tasks whose references do not
+    separate are left out."""
     scores, draws = [], []
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     for task in sorted(per_task):
