@@ -1,11 +1,14 @@
 """Time the hot paths of the tree it runs in: env steps, vector steps and the experts' decisions.
 
 Made to be run side by side with another commit (two checkouts, interleaved runs, the ratios
-quoted): each figure is the median over ``--repeats`` timed runs of a fixed, seeded workload, and
-``--json`` writes them for the comparison. The workloads:
+quoted): each figure is the median over ``--repeats`` timed runs of a fixed, seeded workload, in
+CPU seconds of this (single-threaded) process, which a busy host's other work does not inflate as
+it does wall time; ``--json`` writes them for the comparison. The workloads:
 
 * ``joint-step``, ``comm-step``: ``lawn/Joint-v1`` (zero action) and ``lawn/Comm-v1`` (its MPC's QPs
   every step) at K = 4, one env, microseconds per step;
+* ``core-step``: the slot of ``joint-step`` alone (``lawn_env.core.step`` on a fixed state, decisions
+  and draws), microseconds: the compiled kernel's call, without the env around it;
 * ``joint-vector``, ``comm-vector``: the native vector envs at N = 256, microseconds per vector step;
 * ``rg-mpc``, ``dv-mpc``: one decision of each expert on the default task, milliseconds.
 
@@ -30,13 +33,13 @@ JOINT, COMM = (next(i for i in lawn_env.ENV_IDS if i.startswith(f"lawn/{name}-")
 
 
 def _time(fn, calls: int, repeats: int) -> float:
-    """Median seconds per call of ``fn`` over ``repeats`` runs of ``calls`` calls (one warm-up run)."""
+    """Median CPU seconds per call of ``fn`` over ``repeats`` runs of ``calls`` calls (one warm-up run)."""
     fn(calls)
     runs = []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start = time.process_time()
         fn(calls)
-        runs.append((time.perf_counter() - start) / calls)
+        runs.append((time.process_time() - start) / calls)
     return statistics.median(runs)
 
 
@@ -50,6 +53,23 @@ def _env_steps(env_id: str):
             _, _, terminated, truncated, _ = env.step(action)
             if terminated or truncated:
                 env.reset()
+    return run
+
+
+def _core_steps():
+    from lawn_env import core
+
+    env = gym.make(JOINT).unwrapped
+    env.reset(seed=0)
+    engine = env.engine
+    action = engine.check(np.zeros(env.action_space.shape, dtype=env.action_space.dtype), batch=False)[None]
+    decisions, _ = engine.decide(action)
+    sim = engine.sim
+    draws = sim.draw(np.random.default_rng(0))
+
+    def run(calls: int) -> None:
+        for _ in range(calls):
+            core.step(sim.params, sim.state, decisions, draws)
     return run
 
 
@@ -85,6 +105,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     figures = {
         "joint-step (us)": 1e6 * _time(_env_steps(JOINT), 4000, args.repeats),
+        "core-step (us)": 1e6 * _time(_core_steps(), 8000, args.repeats),
         "comm-step (us)": 1e6 * _time(_env_steps(COMM), 1000, args.repeats),
         "joint-vector N=256 (us)": 1e6 * _time(_vector_steps(JOINT, 256), 200, args.repeats),
         "comm-vector N=256 (us)": 1e6 * _time(_vector_steps(COMM, 256), 40, args.repeats),
