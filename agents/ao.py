@@ -35,7 +35,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -116,7 +116,8 @@ class PowerObjective:
     def gradient(self, state: tuple[np.ndarray, ...]) -> np.ndarray:
         psi, pf, x = state
         dpsi = self._link.success_power_slope(x, pf)  # reusing the value's x
-        return (self._two_l * psi + self._two_s) * dpsi
+        grad: np.ndarray = (self._two_l * psi + self._two_s) * dpsi
+        return grad
 
 
 class DroneObjective:
@@ -134,7 +135,8 @@ class DroneObjective:
 
     def gradient(self, q: np.ndarray) -> np.ndarray:
         psi, _, dpsi_dq = channel.success_and_gradients(self._power, q, self._agv, self._link)
-        return (2.0 * self._l * psi + 2.0 * self._s) @ dpsi_dq
+        grad: np.ndarray = (2.0 * self._l * psi + 2.0 * self._s) @ dpsi_dq
+        return grad
 
 
 @dataclass
@@ -164,7 +166,7 @@ class AOSolver:
         self.mpc = OutageAwareMPC.from_config(config, backend=self.settings.qp_backend)
         self.link = channel.LinkParams.from_config(config, planning=True)
         self.power_budget_w = config.power_budget_w
-        self._memory: dict = {}
+        self._memory: dict[str, Any] = {}
 
     def reset(self) -> None:
         """Drop warm starts (per episode)."""

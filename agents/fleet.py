@@ -190,7 +190,7 @@ def _linear(layer: nn.Linear) -> tuple[np.ndarray, np.ndarray]:
     return _numpy(layer.weight, transpose=True), _numpy(layer.bias)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True)  # type: ignore[untyped-decorator]  # numba is not followed (pyproject.toml: numba's follow_imports)
 def _layer_norm(x: np.ndarray, gain: np.ndarray, bias: np.ndarray, eps: float) -> np.ndarray:
     n, width = x.shape
     out = np.empty_like(x)
@@ -208,7 +208,7 @@ def _layer_norm(x: np.ndarray, gain: np.ndarray, bias: np.ndarray, eps: float) -
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True)  # type: ignore[untyped-decorator]  # numba is not followed (pyproject.toml: numba's follow_imports)
 def _mix(qkv: np.ndarray, heads: int) -> np.ndarray:
     """Scaled dot-product attention of every head over all the tokens: ``qkv`` (n, 3 width) holds
     the queries, keys and values; returns the heads' outputs side by side (n, width)."""
@@ -232,14 +232,15 @@ def _mix(qkv: np.ndarray, heads: int) -> np.ndarray:
     return mixed
 
 
-@numba.njit(cache=True)
-def _attend(x: np.ndarray, weights: tuple, heads: int, eps: float) -> np.ndarray:
+@numba.njit(cache=True)  # type: ignore[untyped-decorator]  # numba is not followed (pyproject.toml: numba's follow_imports)
+def _attend(x: np.ndarray, weights: tuple[Any, ...], heads: int, eps: float) -> np.ndarray:
     """One post-norm encoder layer (``nn.TransformerEncoderLayer``: ReLU, no dropout, no mask) on
     the tokens ``x`` (n, width); ``weights`` as :class:`_Attention` packs them."""
     in_w, in_b, out_w, out_b, w1, b1, w2, b2, g1, c1, g2, c2 = weights
     x = _layer_norm(x + (_mix(x @ in_w + in_b, heads) @ out_w + out_b), g1, c1, eps)
     hidden = np.maximum(x @ w1 + b1, np.float32(0.0))
-    return _layer_norm(x + (hidden @ w2 + b2), g2, c2, eps)
+    out: np.ndarray = _layer_norm(x + (hidden @ w2 + b2), g2, c2, eps)
+    return out
 
 
 class _Attention:
@@ -262,7 +263,8 @@ class _Attention:
                         _numpy(layer.norm2.bias))
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
-        return _attend(x, self.weights, self.heads, self.eps)
+        out: np.ndarray = _attend(x, self.weights, self.heads, self.eps)
+        return out
 
 
 class FleetInference:

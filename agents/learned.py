@@ -16,6 +16,7 @@ import pickle
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -34,7 +35,7 @@ __all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "marl_policy", "LOADERS",
 
 #: Shipped agents: one folder per agent (``lawn zoo`` lists them).
 ZOO_DIR = Path(__file__).parent / "zoo"
-def _sb3():
+def _sb3() -> ModuleType:
     try:
         import stable_baselines3
         import torch
@@ -85,7 +86,7 @@ def load_saved(load: Callable[[str], Any], path: Path, what: str) -> Any:
                          f"({type(exc).__name__}: {detail}); restore it (git checkout, a copy) or retrain it") from exc
 
 
-def _load_model(run: RunDir):
+def _load_model(run: RunDir) -> Any:
     _sb3()
     cls = algorithm_class(run.algo, f"{run.path}: run.json: ")
     return load_saved(lambda p: cls.load(p, device="cpu"), _selected(run.path)[0], f"{run.algo} model")
@@ -323,14 +324,15 @@ def export_agent(run_dir: Path, out_dir: Path, record: dict[str, Any]) -> Path:
     return out_dir
 
 
-def zoo_agents() -> dict[str, dict]:
+def zoo_agents() -> dict[str, dict[str, Any]]:
     """Shipped agents by name: their ``agent.json`` records."""
     if not ZOO_DIR.is_dir():
         return {}
     return {p.parent.name: read_json(p) for p in sorted(ZOO_DIR.glob("*/agent.json"))}
 
 
-def _load_zoo(name: str, config=None, env_id=None, seed=None) -> Policy:
+def _load_zoo(name: str, config: ScenarioConfig | None = None, env_id: str | None = None, seed: int | None = None
+              ) -> Policy:
     agents = zoo_agents()
     if name not in agents:
         raise ValueError(f"unknown zoo agent {name!r}; shipped: {', '.join(agents) or 'none'} (lawn zoo lists them)")
@@ -352,8 +354,9 @@ def _load_zoo(name: str, config=None, env_id=None, seed=None) -> Policy:
                      config_given=config is not None)
 
 
-def _no_settings(loader):
-    def load(path, config=None, env_id=None, seed=None, **kwargs):
+def _no_settings(loader: Callable[..., Policy]) -> Callable[..., Policy]:
+    def load(path: str, config: ScenarioConfig | None = None, env_id: str | None = None, seed: int | None = None,
+             **kwargs: Any) -> Policy:
         if kwargs:
             raise ValueError(f"learned policies take no settings; got {sorted(kwargs)}")
         return loader(path, config, env_id, seed)

@@ -22,11 +22,11 @@ def project_budget(v: np.ndarray, total: float) -> np.ndarray:
     projection lies on the simplex sum p = total and is ``max(v - theta, 0)`` with the threshold
     theta found by sorting (Held, Wolfe and Crowder 1974; Duchi et al. 2008).
     """
-    clipped = np.maximum(v, 0.0)
+    clipped: np.ndarray = np.maximum(v, 0.0)
     if clipped.sum() <= total:
         return clipped
     theta = (v.sum() - total) / v.size  # common case: every entry stays positive on the face
-    shifted = v - theta
+    shifted: np.ndarray = v - theta
     if shifted.min() >= 0.0:
         return shifted
     u = np.sort(v)[::-1]
@@ -34,7 +34,8 @@ def project_budget(v: np.ndarray, total: float) -> np.ndarray:
     idx = _ranks(u.size)
     rho = int(np.count_nonzero(u * idx > css))  # the condition holds exactly for the first rho entries
     theta = css[rho - 1] / rho
-    return np.maximum(v - theta, 0.0)
+    projected: np.ndarray = np.maximum(v - theta, 0.0)
+    return projected
 
 
 _RANKS: dict[int, np.ndarray] = {}
@@ -173,11 +174,12 @@ def min_plus_allocation(costs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     costs = np.ascontiguousarray(costs, dtype=float)
     if costs.ndim != 3 or costs.shape[1] < 1 or costs.shape[2] < 1:
         raise ValueError(f"costs has shape {costs.shape}; expected (B, K, J+1) with K >= 1 and J >= 0")
-    return _min_plus(costs)
+    values_alloc: tuple[np.ndarray, np.ndarray] = _min_plus(costs)
+    return values_alloc
 
 
-@numba.njit(cache=True)
-def _min_plus(costs):  # pragma: no cover - compiled
+@numba.njit(cache=True)  # type: ignore[untyped-decorator]  # numba is not followed (pyproject.toml: numba's follow_imports)
+def _min_plus(costs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     b_total, k, levels = costs.shape
     values = np.empty(b_total)
     alloc = np.empty((b_total, k), dtype=np.int64)

@@ -163,7 +163,7 @@ class PIDPolicy(PlannerPolicy):
     name = "pid"
 
     def __init__(self, config: ConfigLike = None, env_id: str = JOINT, seed: int | None = None,
-                 gains: PIDGains | Mapping | None = None, **settings: Any):
+                 gains: PIDGains | Mapping[str, Any] | None = None, **settings: Any):
         super().__init__(config, env_id, seed, **settings)
         self.gains = gains if isinstance(gains, PIDGains) else PIDGains(**dict(gains or {}))
         self.integral = np.zeros((self.config.num_agvs, 2))

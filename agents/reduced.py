@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
-from typing import Annotated, Protocol
+from typing import Annotated, Any, Protocol
 
 import numba
 import numpy as np
@@ -202,13 +202,14 @@ class ValueTable:
         if psi.shape[-2] != k:
             raise ValueError(f"psi has shape {psi.shape}; expected (..., {k}, L) (AGVs on axis -2)")
         flat = np.ascontiguousarray(psi.reshape(-1, k, psi.shape[-1]))
-        out = _hermite(self.grid, np.ascontiguousarray(self.values, dtype=float),
+        out: np.ndarray = _hermite(self.grid, np.ascontiguousarray(self.values, dtype=float),
                        np.ascontiguousarray(self.slopes, dtype=float), flat)
         return out.reshape(psi.shape)
 
 
-@numba.njit(cache=True)
-def _hermite(grid, values, slopes, psi):  # pragma: no cover - compiled
+@numba.njit(cache=True)  # type: ignore[untyped-decorator]  # numba is not followed (pyproject.toml: numba's follow_imports)
+def _hermite(grid: np.ndarray, values: np.ndarray, slopes: np.ndarray, psi: np.ndarray
+             ) -> np.ndarray:  # pragma: no cover - compiled
     """Cubic Hermite interpolation of each AGV's column at psi (B, K, L). The order of the
     expression's terms is part of the result (floating point): reordering them changes the
     tabulated V in the last bits, and with it the grid searches' choices."""
@@ -265,9 +266,12 @@ class DeliveryValue:
 
     def __call__(self, psi: np.ndarray) -> np.ndarray:
         psi = np.asarray(psi, dtype=float)
+        value: np.ndarray
         if psi.ndim == 1:
-            return self.lost - psi * self.worth
-        return self.lost[:, None] - psi * self.worth[:, None]
+            value = self.lost - psi * self.worth
+            return value
+        value = self.lost[:, None] - psi * self.worth[:, None]
+        return value
 
 
 # ---------------------------------------------------------------------- planners
@@ -377,7 +381,7 @@ class _ReducedPlannerBase:
     def reset(self) -> None:
         self.mpc.reset()
 
-    def _plan(self, problem: ReducedProblem, best: Evaluation, start: float, info: dict) -> Plan:
+    def _plan(self, problem: ReducedProblem, best: Evaluation, start: float, info: dict[str, Any]) -> Plan:
         info.update(qp_evaluations=problem.evaluations, success_probability=best.psi,
                     qp_fallbacks=best.fallbacks)
         trace = np.array([[best.phi, math.nan, math.nan]])

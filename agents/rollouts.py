@@ -73,7 +73,8 @@ class Episode:
         if "episode_metrics" not in self.info:
             raise ValueError(f"the episode of seed {self.seed} stopped after {self.length} steps before the env "
                              "ended it: it has no episode metrics")
-        return self.info["episode_metrics"]
+        metrics: dict[str, Any] = self.info["episode_metrics"]
+        return metrics
 
     @property
     def decision_time_median_s(self) -> float:

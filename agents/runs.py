@@ -51,13 +51,15 @@ def algorithm_class(algo: str, where: str = "") -> type[BaseAlgorithm]:
     """The SB3 algorithm class of ``algo`` (``ppo``, ``a2c``, ``sac``, ``td3``); ``where`` prefixes the
     error (the file or option the name came from)."""
     _check_algorithm(algo, where)
-    return _import(ALGORITHMS[algo][0])
+    cls: type[BaseAlgorithm] = _import(ALGORITHMS[algo][0])
+    return cls
 
 
 def policy_network_class(algo: str, where: str = "") -> type[BasePolicy]:
     """The class of the network a shipped agent of ``algo`` keeps (:data:`ALGORITHMS`)."""
     _check_algorithm(algo, where)
-    return _import(ALGORITHMS[algo][1])
+    cls: type[BasePolicy] = _import(ALGORITHMS[algo][1])
+    return cls
 
 
 def read_json(path: Path, context: str = "", missing: str = "") -> Any:
@@ -87,7 +89,8 @@ class RunDir:
 
     @property
     def env(self) -> str:
-        return self.record["env"]
+        env: str = self.record["env"]
+        return env
 
     @property
     def algo(self) -> str:
@@ -95,7 +98,8 @@ class RunDir:
         run: ``fleet``, a PPO model whose policy is :class:`agents.fleet.FleetPolicy`)."""
         if self.record.get("trainer") == "fleet":
             return "fleet"
-        return self.record.get("target", self.record["algo"])
+        algo: str = self.record.get("target", self.record["algo"])
+        return algo
 
     @property
     def kind(self) -> str:

@@ -37,7 +37,8 @@ class PIDGains:
 def saturate(u_desired: np.ndarray, u_prev: np.ndarray, accel_max: float, accel_increment_max: float) -> np.ndarray:
     """The increment that moves u[n-1] toward ``u_desired`` inside the control set."""
     u = np.clip(u_desired, -accel_max, accel_max)
-    return np.clip(u - u_prev, -accel_increment_max, accel_increment_max)
+    increment: np.ndarray = np.clip(u - u_prev, -accel_increment_max, accel_increment_max)
+    return increment
 
 
 def pid_rollout(x_aug: np.ndarray, reference: np.ndarray, integral: np.ndarray, model: PredictionModel,

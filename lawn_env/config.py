@@ -89,12 +89,14 @@ class ChannelConfig:
     @property
     def alpha0(self) -> float:
         """Reference channel gain, linear."""
-        return 10.0 ** (self.alpha0_db / 10.0)
+        gain: float = 10.0 ** (self.alpha0_db / 10.0)
+        return gain
 
     @property
     def noise_power_w(self) -> float:
         """Noise power, W."""
-        return 10.0 ** ((self.noise_power_dbm - 30.0) / 10.0)
+        power: float = 10.0 ** ((self.noise_power_dbm - 30.0) / 10.0)
+        return power
 
 
 @raises_config_errors("drone.")
@@ -305,7 +307,8 @@ class ScenarioConfig:
     @property
     def power_budget_w(self) -> float:
         """P_max, W."""
-        return 10.0 ** (self.power_budget_dbw / 10.0)
+        power: float = 10.0 ** (self.power_budget_dbw / 10.0)
+        return power
 
     @property
     def drone_reach_m(self) -> float:
@@ -324,7 +327,8 @@ class ScenarioConfig:
     # ----------------------------------------------------------------- (de)serialization
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (JSON-serializable) that :meth:`from_dict` accepts back."""
-        return _to_plain(dataclasses.asdict(self))
+        plain: dict[str, Any] = _to_plain(dataclasses.asdict(self))
+        return plain
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> ScenarioConfig:
@@ -375,7 +379,7 @@ def _to_plain(value: Any) -> Any:
     return value
 
 
-def _check_keys(cls, data: Mapping[str, Any], prefix: str) -> None:
+def _check_keys(cls: type[Any], data: Mapping[str, Any], prefix: str) -> None:
     """Unknown keys of a (nested) config dict, named with their dotted path."""
     fields = {f.name for f in dataclasses.fields(cls)}
     hints = typing.get_type_hints(cls)
@@ -391,7 +395,7 @@ def _check_keys(cls, data: Mapping[str, Any], prefix: str) -> None:
 def _valid_keys(cfg: ScenarioConfig) -> str:
     keys: list[str] = []
 
-    def walk(tree: dict, prefix: str) -> None:
+    def walk(tree: dict[str, Any], prefix: str) -> None:
         for k, v in tree.items():
             if isinstance(v, dict):
                 walk(v, f"{prefix}{k}.")

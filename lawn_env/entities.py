@@ -52,7 +52,10 @@ class EntityLayout:
         self.num_agvs, self.role = k, role
         self.flat = ObservationLayout(config)
         self.agv_features = self.flat.agv_features
-        box = lambda shape, lo=-bound, hi=bound: gym.spaces.Box(lo, hi, shape=shape, dtype=np.float32)  # noqa: E731
+
+        def box(shape: tuple[int, ...], lo: float = -bound, hi: float = bound) -> gym.spaces.Box:
+            return gym.spaces.Box(lo, hi, shape=shape, dtype=np.float32)
+
         self.observation_space = gym.spaces.Dict({
             "agvs": box((MAX_AGVS, self.agv_features)), "globals": box((len(GLOBALS),)),
             "mask": box((MAX_AGVS,), 0.0, 1.0)})

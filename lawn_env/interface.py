@@ -139,7 +139,8 @@ class RLInterface:
         if self.termination_distance_m is None:
             return np.zeros(position_error_m.shape[0], dtype=bool)
         d2 = (position_error_m * position_error_m).sum(axis=-1)
-        return d2.max(axis=-1) > self.termination_distance_m**2
+        terminal: np.ndarray = d2.max(axis=-1) > self.termination_distance_m**2
+        return terminal
 
     def terminal_penalties(self, remaining_slots: np.ndarray) -> np.ndarray:
         """Added to the reward of a terminating step: the floor for every slot not played (any shape)."""
@@ -180,7 +181,7 @@ RL_INTERFACE = RLInterface(action_scheme="anchored", reward="scaled", terminatio
                            power_anchor="stake")
 _NAMED = {"v0": V0_INTERFACE, "rl": RL_INTERFACE}
 #: What every ``interface=`` argument takes: an RLInterface, a dict of its fields, "v0"/"rl" or None (v0).
-InterfaceLike = RLInterface | Mapping | str | None
+InterfaceLike = RLInterface | Mapping[str, Any] | str | None
 
 
 def resolve_interface(interface: InterfaceLike) -> RLInterface:
@@ -246,7 +247,8 @@ class AnchoredActions(ActionCodec):
         if self.mpc is not None:
             self.mpc.reset(which)
 
-    def _decode_rows(self, actions, x_aug, reference, drone_position, slot) -> Decisions:
+    def _decode_rows(self, actions: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
+                     drone_position: np.ndarray, slot: int | np.ndarray | None) -> Decisions:
         k, comm = self.num_agvs, actions[:, self.increment_size :]
         target = x_aug[..., POSITION].mean(axis=-2) + comm[:, k:] * self.interface.drone_offset_m
         drone_next = toward(drone_position, target, self._vmax, self._dt, self.area)
@@ -316,11 +318,13 @@ class AnchoredActions(ActionCodec):
                                  "reference: pass the reference window")
             feedforward = reference[..., 1, ACCELERATION] - reference[..., 0, ACCELERATION]
             free = feedforward - (x_aug - reference[..., 0, :]) @ self._lqr_model.lqr_gain.T
-            return saturate_increment(x_aug[..., ACCELERATION], free, self._accel_max)
+            increment: np.ndarray = saturate_increment(x_aug[..., ACCELERATION], free, self._accel_max)
+            return increment
         start = "stakes" if self._stake else None
         psi = np.ones(d2.shape) if self._delivery else self._link.success_sq(power_w, d2)
         assert self.mpc is not None and data is not None  # the MPC anchor: built, and _prepare gave its data
-        return self.mpc.solve_prepared(data, psi, start_from=start).increments[..., 0, :].copy()
+        first: np.ndarray = self.mpc.solve_prepared(data, psi, start_from=start).increments[..., 0, :].copy()
+        return first
 
     # ------------------------------------------------------------------ encode
     def encode(self, decision: Decisions, x_aug: np.ndarray, reference: np.ndarray | None,

@@ -191,7 +191,7 @@ class _CompiledBackend:
 
     def __init__(self, pencils: AxisPencils):
         self.pencils = pencils
-        self.working_sets: dict[tuple, np.ndarray] = {}  # (stack shape, key) -> (M, 2, 2 N_p) int8
+        self.working_sets: dict[tuple[Any, ...], np.ndarray] = {}  # (stack shape, key) -> (M, 2, 2 N_p) int8
 
     def forget(self, rows: np.ndarray, lead: int) -> None:
         """Drop the warm starts of the scenarios ``rows`` of the stacks whose first axis has ``lead``
@@ -200,8 +200,8 @@ class _CompiledBackend:
             if shape and shape[0] == lead:
                 sets.reshape(shape + sets.shape[1:])[rows] = 0
 
-    def solve_all(self, key: tuple, s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                  phase: np.ndarray, start: tuple | None = None):
+    def solve_all(self, key: tuple[Any, ...], s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                  phase: np.ndarray, start: tuple[Any, ...] | None = None):
         """Solve the stack from the working sets kept under ``key`` (or copied from ``start``'s)."""
         source = self.working_sets.get(start) if start is not None else None
         if source is not None:
@@ -268,7 +268,7 @@ class OutageAwareMPC:
         reference backends, which take the full matrix."""
         return s * self._ftq4f_2 + self._q5_2
 
-    def __getstate__(self) -> dict:
+    def __getstate__(self) -> dict[str, Any]:
         """Copies and pickles carry the problem and the compiled backend's working sets (plain
         arrays: the copy continues bitwise); the reference backends' workspaces (C objects) are
         not carried, so such a copy starts its next solve cold."""
@@ -278,7 +278,7 @@ class OutageAwareMPC:
         state["_last_bounds"] = None
         return state
 
-    def __setstate__(self, state: dict) -> None:
+    def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         if self.backend is None:
             self.backend = self._make_backend(self.backend_name)
@@ -491,7 +491,7 @@ def _writable(arr: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=32)
-def _pencils(model_key: tuple, period: int) -> AxisPencils:
+def _pencils(model_key: tuple[Any, ...], period: int) -> AxisPencils:
     """The per-axis pencils of the prediction model built from ``model_key``
     (:attr:`~lawn_env.dynamics.PredictionModel.key`) and a control period, built once per pair of
     values and shared."""

@@ -28,7 +28,7 @@ import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, cast
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -69,7 +69,7 @@ class TimeWarp:
         """The warp run ``factor`` times as fast: theta(factor t)."""
         return TimeWarp(w=self.w * factor, theta0=self.theta0, a=self.a, nu=self.nu * factor, phi=self.phi)
 
-    def __call__(self, t: np.ndarray):
+    def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         arg = self.nu * t + self.phi
         theta = self.theta0 + self.w * t + self.a * np.sin(arg)
         dtheta = self.w + self.a * self.nu * np.cos(arg)
@@ -117,7 +117,8 @@ class _Curve:
 
     def evaluate(self, t: np.ndarray) -> np.ndarray:
         """Reference augmented states [x, y, v_x, v_y, a_x, a_y] at times ``t`` (s): (T, 6)."""
-        return evaluate_paths([self], t)[0]
+        table: np.ndarray = evaluate_paths([self], t)[0]
+        return table
 
 
 def evaluate_paths(paths: Sequence[_Curve], t: np.ndarray) -> np.ndarray:
@@ -126,7 +127,7 @@ def evaluate_paths(paths: Sequence[_Curve], t: np.ndarray) -> np.ndarray:
     over a leading path axis (vel = c'(theta) theta', acc = c''(theta) theta'^2 + c'(theta) theta'')."""
     t = np.asarray(t, dtype=float)
     out = np.empty((len(paths), t.size, 6))
-    groups: dict = {}
+    groups: dict[type[_Curve], list[int]] = {}
     for i, p in enumerate(paths):
         groups.setdefault(type(p), []).append(i)
     for cls, idx in groups.items():
@@ -178,7 +179,7 @@ class RoundedRectangle(_Curve):
     radius: float
     warp: TimeWarp
 
-    def _segments(self):
+    def _segments(self) -> list[tuple[str, float, tuple[float, float], tuple[float, float] | float]]:
         cx, cy = self.center
         hx, hy, r = self.half_width, self.half_height, self.radius
         lx, ly, arc = 2 * (hx - r), 2 * (hy - r), 0.5 * math.pi * r
@@ -325,13 +326,13 @@ def envelope_violation(table: np.ndarray, accel_max: float, increment_max: float
 def _violations(tables: np.ndarray, accel_max: float, increment_max: float) -> np.ndarray:
     """:func:`envelope_violation` of each table of a stack (P, T, 6): (P,)."""
     acc = tables[..., 4:6]
-    ratio = np.abs(acc).max(axis=(1, 2)) / accel_max
+    ratio: np.ndarray = np.abs(acc).max(axis=(1, 2)) / accel_max
     if acc.shape[-2] > 1:
         ratio = np.maximum(ratio, np.abs(np.diff(acc, axis=-2)).max(axis=(1, 2)) / increment_max)
     return ratio
 
 
-def fit_envelopes(paths: list, envelope: Envelope, max_rounds: int = 60) -> list:
+def fit_envelopes(paths: Sequence[_Curve], envelope: Envelope, max_rounds: int = 60) -> list[_Curve]:
     """:func:`fit_envelope` of many paths at once (each round evaluates every path still outside
     the envelope in one :func:`evaluate_paths` call)."""
     t = np.arange(envelope.num_steps) * envelope.slot_s
@@ -397,7 +398,7 @@ def slowed_until(path: _Curve, accept: Callable[[_Curve], bool], first: float = 
     return candidate
 
 
-def _scaled(area_m, x: float, y: float) -> tuple[float, float]:
+def _scaled(area_m: Sequence[float], x: float, y: float) -> tuple[float, float]:
     """Map a point of the nominal 200 m x 200 m area onto ``area_m``."""
     x0, x1, y0, y1 = area_m
     return (x0 + (x1 - x0) * x / 200.0, y0 + (y1 - y0) * y / 200.0)
@@ -429,7 +430,7 @@ def paper_paths(num_agvs: int, area_m: Sequence[float] = (0.0, 200.0, 0.0, 200.0
     return paths if envelope is None else [fit_envelope(p, envelope) for p in paths]
 
 
-def _random_path(rng: np.random.Generator, family: str, area_m, margin: float = 2.0) -> _Curve:
+def _random_path(rng: np.random.Generator, family: str, area_m: Sequence[float], margin: float = 2.0) -> _Curve:
     x0, x1, y0, y1 = area_m
     width, height = x1 - x0, y1 - y0
     s = min(width, height) / 200.0
@@ -475,7 +476,7 @@ def _random_path(rng: np.random.Generator, family: str, area_m, margin: float = 
     raise ValueError(f"unknown reference family {family!r}; valid: {', '.join(FAMILIES)}")
 
 
-def _inside(table: np.ndarray, area_m, margin: float) -> bool:
+def _inside(table: np.ndarray, area_m: Sequence[float], margin: float) -> bool:
     x0, x1, y0, y1 = area_m
     return bool(
         (table[:, 0] >= x0 + margin).all() and (table[:, 0] <= x1 - margin).all()
@@ -483,12 +484,13 @@ def _inside(table: np.ndarray, area_m, margin: float) -> bool:
     )
 
 
-def _inside_many(tables: np.ndarray, area_m, margin: float) -> np.ndarray:
+def _inside_many(tables: np.ndarray, area_m: Sequence[float], margin: float) -> np.ndarray:
     """:func:`_inside` of each table of a stack (P, T, 6): (P,) bool."""
     x0, x1, y0, y1 = area_m
     x, y = tables[..., 0], tables[..., 1]
-    return ((x >= x0 + margin).all(axis=1) & (x <= x1 - margin).all(axis=1)
-            & (y >= y0 + margin).all(axis=1) & (y <= y1 - margin).all(axis=1))
+    # all(axis=1) of a (P, T) stack is a (P,) array (numpy's stubs also allow a scalar)
+    return cast(np.ndarray, (x >= x0 + margin).all(axis=1) & (x <= x1 - margin).all(axis=1)
+                & (y >= y0 + margin).all(axis=1) & (y <= y1 - margin).all(axis=1))
 
 
 def sample_paths(rngs: Sequence[np.random.Generator], num_agvs: int, families: Sequence[str], area_m: Sequence[float],

@@ -61,7 +61,7 @@ def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, s
     env = gym.make(env_id, config=config)
     expert = make_policy(expert_name, config, env_id=env_id)
     driver = _Labelling(expert, actor)
-    episodes: list[tuple[list, list]] = []
+    episodes: list[tuple[list[Any], list[Any]]] = []
     costs = []
     count = 0
 
@@ -161,7 +161,7 @@ def fit(model: Any, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_siz
 
 
 def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, steps: int, interface: InterfaceLike
-                        ) -> tuple[np.ndarray, np.ndarray, list[float], list, str | None]:
+                        ) -> tuple[np.ndarray, np.ndarray, list[float], list[Any], str | None]:
     """The first ``steps`` transitions of a Minari dataset of ``env_id`` with ``config`` as pairs
     (:func:`label_transitions`), their episodes' control costs and seeds and the policy that recorded them."""
     dataset = load_dataset(dataset_id)
@@ -203,7 +203,7 @@ class BCSettings:
     learning_rate: float
     dagger_iterations: int
     dagger_timesteps: int
-    policy_kwargs: dict
+    policy_kwargs: dict[str, Any]
 
 
 def checked_settings(params: Mapping[str, Any], defaults: Mapping[str, Any], noun: str) -> dict[str, Any]:
@@ -227,7 +227,8 @@ def bc_settings(params: Mapping[str, Any]) -> BCSettings:
 
 
 def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: BCSettings, expert: str, obs: np.ndarray,
-                       actions: np.ndarray, seed: int, episode_seed: int):
+                       actions: np.ndarray, seed: int, episode_seed: int
+                       ) -> tuple[Any, Any, np.ndarray, list[dict[str, Any]]]:
     """Fit the clone, then the DAgger rounds; the normalizing env (the expert's observation statistics),
     the model, every observation and every round's losses."""
     from stable_baselines3.common.running_mean_std import RunningMeanStd
@@ -242,7 +243,8 @@ def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: BCSettings, expe
     model = cls("MlpPolicy", venv, seed=seed, policy_kwargs=st.policy_kwargs, verbose=0, device="cpu")
 
     def normalized(o: np.ndarray) -> np.ndarray:
-        return venv.normalize_obs(o).astype(np.float32)
+        normalized_obs: np.ndarray = venv.normalize_obs(o).astype(np.float32)
+        return normalized_obs
 
     history = [{"round": 0, "samples": len(obs), "losses": fit(model, normalized(obs), actions, st.epochs,
                                                                 st.batch_size, st.learning_rate, seed)}]
@@ -256,7 +258,7 @@ def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: BCSettings, expe
     return venv, model, obs, history
 
 
-def _expert_data(spec: Any, st: BCSettings, episode_seed: int) -> tuple:
+def _expert_data(spec: Any, st: BCSettings, episode_seed: int) -> tuple[Any, ...]:
     """The expert's transitions (live, or a dataset's: DAgger then asks the policy that recorded them),
     costs, the dataset record and the expert."""
     if spec.dataset is None:
@@ -270,7 +272,7 @@ def _expert_data(spec: Any, st: BCSettings, episode_seed: int) -> tuple:
     return obs, actions, costs, {"id": spec.dataset, "episode_seeds": seeds}, recorded or "unrecorded"
 
 
-def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> dict:
+def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> dict[str, Any]:
     """Clone, DAgger and save the run of ``spec`` (a :class:`training.train.TrainSpec`)."""
     limit_torch_threads()
     st = bc_settings(params)
@@ -291,7 +293,8 @@ def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> dict:
     return summary
 
 
-def save_imitation(spec: Any, model: Any, record: dict, hyperparams: dict, history: list[dict]) -> dict:
+def save_imitation(spec: Any, model: Any, record: dict[str, Any], hyperparams: dict[str, Any],
+                   history: list[dict[str, Any]]) -> dict[str, Any]:
     """Validate an imitation-trained model once on ``spec.eval_episodes`` validation seeds and write
     its run; ``run.json`` last (a run with it is a finished one), nothing at all on a failure before."""
     from .callbacks import ControlCostValidation, save_model
@@ -313,7 +316,7 @@ def save_imitation(spec: Any, model: Any, record: dict, hyperparams: dict, histo
     return summary | {"bc_loss_first": history[0]["losses"][0], "bc_loss_last": history[-1]["losses"][-1]}
 
 
-def _minari():
+def _minari() -> Any:  # the minari module (an optional extra: not followed)
     try:
         import minari
     except ImportError:
@@ -332,7 +335,7 @@ def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_i
     from .results.run import evaluate
     from .results.stats import SCORE_HIGH, SCORE_LOW
 
-    class LawnStepData(StepDataCallback):
+    class LawnStepData(StepDataCallback):  # type: ignore[misc]  # minari is an optional extra, not followed
         """The env's per-step info without ``episode_metrics`` (present on the last step only)."""
 
         def __call__(self, env: Any, **kwargs: Any) -> Any:

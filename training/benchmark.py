@@ -24,6 +24,7 @@ import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from agents import BENCHMARK_POLICIES, make_policy
 from agents.base import JOINT
@@ -74,13 +75,13 @@ FLEET_PLAY = Play(workers=2)
 
 
 def run_benchmark(policies: Sequence[str], env_id: str, config: ScenarioConfig, episodes: int, seed: int,
-                  out_dir: Path, play: Play = DEFAULT_PLAY) -> tuple[list[dict], list[dict]]:
+                  out_dir: Path, play: Play = DEFAULT_PLAY) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """Run every policy on seeds ``seed .. seed+episodes-1``; write ``episodes.csv``,
     ``summary.csv``, ``summary.md`` and ``benchmark.png`` into ``out_dir``. With ``epa`` and
     ``dv-mpc`` among the policies, the summary has the normalized score; every policy is compared
     with the first, per seed, as a mean of relative differences and as a geometric mean of cost
     ratios (the deciding statistic, docs/benchmark.md)."""
-    tasks: list[tuple] = [(name, env_id, config, seed + i, {}) for name in policies for i in range(episodes)]
+    tasks: list[tuple[Any, ...]] = [(name, env_id, config, seed + i, {}) for name in policies for i in range(episodes)]
     rows = evaluate(tasks, play.workers, play.progress, "benchmark", play.transient_slots)
     out_dir = Path(out_dir)
     write_rows(rows, out_dir / "episodes.csv")  # the episodes first: a failed summary loses none of them
@@ -104,7 +105,7 @@ def run_benchmark(policies: Sequence[str], env_id: str, config: ScenarioConfig, 
     return rows, summary
 
 
-def episode_record(policy: str, seed: int) -> dict:
+def episode_record(policy: str, seed: int) -> dict[str, Any]:
     """One seeded episode of a README row on the default task: its digest and its control cost."""
     row = run_episode(policy, JOINT, ScenarioConfig(), seed)
     values = [f"{float(x):.10g}" for x in (*json.loads(row["stage_costs"]), row["outage_rate"], row["rmse_m"])]
@@ -112,7 +113,7 @@ def episode_record(policy: str, seed: int) -> dict:
             "digest": hashlib.sha256(" ".join(values).encode()).hexdigest()[:16]}
 
 
-def digest_records(rows: Sequence[str] = README_ROWS) -> dict[str, list[dict]]:
+def digest_records(rows: Sequence[str] = README_ROWS) -> dict[str, list[dict[str, Any]]]:
     """Every row's episodes (:func:`episode_record`), by row name."""
     return {name: [episode_record(name, s) for s in DIGEST_SEEDS] for name in rows}
 
@@ -152,7 +153,7 @@ def _applicable(policy: str, env: str, config: ScenarioConfig) -> str | None:
 
 
 def run_suite(policies: Sequence[str], tasks: Sequence[str], episodes: int, out_dir: Path, play: Play = DEFAULT_PLAY
-              ) -> tuple[list[dict], dict[tuple[str, str], str], float]:
+              ) -> tuple[list[dict[str, Any]], dict[tuple[str, str], str], float]:
     """Every policy on every task (seeds 0..episodes-1), with the references of each env used and
     the reference rows (:data:`.results.run.REFERENCE_ROWS`, on ``lawn/Joint-v1``); writes
     ``episodes.csv`` and ``per_slot.csv`` (the mean stage cost per slot of every task, env and
@@ -163,8 +164,8 @@ def run_suite(policies: Sequence[str], tasks: Sequence[str], episodes: int, out_
     envs = {p: policy_env(p) for p in policies}
     for p in policies:  # unknown names and agents that cannot act on the default task are errors
         build_policy(p, ScenarioConfig(), envs[p])
-    rows: list[dict] = []
-    profiles: list[dict] = []
+    rows: list[dict[str, Any]] = []
+    profiles: list[dict[str, Any]] = []
     skipped: dict[tuple[str, str], str] = {}
     for task in tasks:
         config = presets.get(task)
@@ -190,12 +191,12 @@ def fleet_agents() -> list[str]:
 
 
 def run_generalization(agents: Sequence[str], sizes: Mapping[int, int] = FLEET_SIZES, play: Play = FLEET_PLAY,
-                       base: ScenarioConfig | None = None) -> list[dict]:
+                       base: ScenarioConfig | None = None) -> list[dict[str, Any]]:
     """Full episodes of every agent, the best expert and its noise floor on the default task (or
     ``base``) with each fleet size (``task`` = ``k<K>``)."""
     envs = list(dict.fromkeys(policy_env(a) for a in agents))
     noise = next(iter(NOISE))
-    rows: list[dict] = []
+    rows: list[dict[str, Any]] = []
     for k, seeds in sizes.items():
         config = (base or presets.get("default")).override(num_agvs=int(k))
         entries = [(p, env) for env in envs for p in (SCORE_HIGH, noise)] + [(a, policy_env(a)) for a in agents]

@@ -49,7 +49,7 @@ class Checkpoint:
 
     path: Path
     steps: int
-    state: dict
+    state: dict[str, Any]
 
     def file(self, name: str) -> Path | None:
         """``name`` in the checkpoint; None where it was not saved (normalization statistics, a replay buffer)."""
@@ -73,7 +73,7 @@ def _history(out_dir: Path) -> dict[str, int]:
             for pattern in HISTORY_FILES for path in sorted(out_dir.glob(pattern))}
 
 
-def write_checkpoint(out_dir: Path, model: Any, state: dict) -> Checkpoint:
+def write_checkpoint(out_dir: Path, model: Any, state: dict[str, Any]) -> Checkpoint:
     """Save ``model`` (with its statistics and replay buffer) and the run's history lengths as
     ``checkpoints/<steps>/``, atomically; older checkpoints are removed."""
     out_dir = Path(out_dir)
@@ -257,7 +257,7 @@ class ActorWarmup(BaseCallback):
     def __init__(self, steps: int):
         super().__init__(verbose=0)
         self.steps = steps
-        self.frozen: list = []
+        self.frozen: list[Any] = []
 
     def _on_training_start(self) -> None:
         if self.num_timesteps >= self.steps:  # a resumed run past its warm-up

@@ -105,7 +105,8 @@ def fleet_settings(params: Mapping[str, Any]) -> dict[str, Any]:
                 "fleet_sizes": sorted({int(k) for k in p["fleet_sizes"]}), "network": network}
 
 
-def _dagger(model: Any, env_id: str, configs: list, st: dict, timesteps: int, episode_seed: int) -> list[dict]:
+def _dagger(model: Any, env_id: str, configs: list[Any], st: dict[str, Any], timesteps: int,
+            episode_seed: int) -> list[dict[str, Any]]:
     """The expert's round and the DAgger rounds, each followed by a fit; the loss history."""
     per_size = max(1, timesteps // len(configs))
     obs, actions, present = dagger_round(None, env_id, configs, per_size, episode_seed, st["interface"], st["expert"])
@@ -122,7 +123,7 @@ def _dagger(model: Any, env_id: str, configs: list, st: dict, timesteps: int, ep
     return history
 
 
-def train_fleet(spec: Any, params: Mapping[str, Any], version: int) -> dict:
+def train_fleet(spec: Any, params: Mapping[str, Any], version: int) -> dict[str, Any]:
     """``lawn train --algo fleet``: DAgger of a :class:`agents.fleet.FleetPolicy` on every size of
     ``fleet_sizes``, saved as a PPO model (``sb3:DIR`` loads it), validated on the spec's own K."""
     from stable_baselines3 import PPO

@@ -57,7 +57,7 @@ class Block:
     group: str = ""
 
 
-def _markers(name: str) -> tuple[re.Pattern, re.Pattern]:
+def _markers(name: str) -> tuple[re.Pattern[str], re.Pattern[str]]:
     return (re.compile(rf'^<!-- {re.escape(name)}:begin(?: [a-z]+="[^"]*")* -->$', flags=re.MULTILINE),
             re.compile(rf"^<!-- {re.escape(name)}:end -->$", flags=re.MULTILINE))
 

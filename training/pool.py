@@ -108,7 +108,7 @@ def shared_pool(helpers: int, start_method: str | None = None) -> ProcessPoolExe
     every later call with the same count and start method, replaced when either changes or the pool
     broke."""
     method = resolve_start_method(start_method)
-    pool = _SHARED["pool"]
+    pool: ProcessPoolExecutor | None = _SHARED["pool"]
     if pool is not None and _SHARED["pid"] != os.getpid():  # a forked child: the parent's pool is not its own
         _forget()
         pool = None
@@ -122,7 +122,7 @@ def shared_pool(helpers: int, start_method: str | None = None) -> ProcessPoolExe
     return pool
 
 
-def start_helpers(workers: int, start_method: str | None = None) -> list[Future]:
+def start_helpers(workers: int, start_method: str | None = None) -> list[Future[int]]:
     """Start the ``workers - 1`` helpers of a later :func:`pool_map` now, in the background (each
     imports lawn and loads its kernels while this process goes on): a command calls it before its own
     set-up. Returns a future per helper start (its result: a process id, once a helper has started);
@@ -174,12 +174,12 @@ def chunk_size(tasks: int, workers: int) -> int:
     return max(1, min(4, tasks // (8 * workers)))
 
 
-def _run_chunk(fn: Callable[[Any], Any], chunk: list) -> list:
+def _run_chunk(fn: Callable[[Any], Any], chunk: list[Any]) -> list[Any]:
     return [fn(task) for task in chunk]
 
 
-def pool_map(fn: Callable[[Any], Any], tasks: list, workers: int, progress: bool, desc: str,
-             start_method: str | None = None) -> list:
+def pool_map(fn: Callable[[Any], Any], tasks: list[Any], workers: int, progress: bool, desc: str,
+             start_method: str | None = None) -> list[Any]:
     """``[fn(t) for t in tasks]`` over ``workers`` processes: this one and ``workers - 1`` helpers of
     this process's persistent pool (:func:`shared_pool`), with a progress bar; results in task order
     whatever the scheduling. This process plays one task at a time while each helper holds at most
@@ -213,7 +213,7 @@ class _HelperMap:
     only for the chunks the helpers hold: a short map, or one whose helpers are still starting, is
     played here alone."""
 
-    def __init__(self, fn: Callable[[Any], Any], tasks: list, workers: int, bar, start_method: str | None):
+    def __init__(self, fn: Callable[[Any], Any], tasks: list[Any], workers: int, bar: Any, start_method: str | None):
         self.fn, self.tasks, self.workers, self.bar = fn, tasks, workers, bar
         self.starts = start_helpers(workers, start_method)
         self.pool = _SHARED["pool"]
@@ -221,7 +221,7 @@ class _HelperMap:
         self.returned = threading.Condition(self.lock)
         self.pending = deque(range(len(tasks)))  # task indices not yet handed out, in order
         self.results: list[Any] = [None] * len(tasks)
-        self.in_flight: dict[Future, list[int]] = {}
+        self.in_flight: dict[Future[list[Any]], list[int]] = {}
         self.failure: list[BaseException] = []
 
     @staticmethod
@@ -243,7 +243,8 @@ class _HelperMap:
                 self.in_flight[future] = chunk
                 future.add_done_callback(self.finished)
 
-    def finished(self, future: Future) -> None:  # in the pool's result thread (or this one, for a done future)
+    # in the pool's result thread (or this one, for a done future)
+    def finished(self, future: Future[list[Any]]) -> None:
         with self.lock:
             chunk = self.in_flight.pop(future, None)
             if chunk is not None and not future.cancelled():
@@ -257,7 +258,7 @@ class _HelperMap:
                     self.failure.append(self.died(error, chunk) if isinstance(error, BrokenProcessPool) else error)
             self.returned.notify_all()
 
-    def run(self) -> list:
+    def run(self) -> list[Any]:
         from threadpoolctl import threadpool_limits
 
         for start in self.starts:  # a helper that becomes ready takes its first chunks at once

@@ -40,7 +40,7 @@ def limit_torch_threads() -> None:
     torch.set_num_threads(1)
 
 
-def versions() -> dict:
+def versions() -> dict[str, Any]:
     """The versions of lawn, SB3, torch, Gymnasium and Python, and the source commit."""
     import gymnasium
     import stable_baselines3
@@ -116,7 +116,7 @@ def append_learning_curve(run_dir: Path, timesteps: int, row: Mapping[str, float
         writer.writerow({"timesteps": timesteps, **row})
 
 
-def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict:
+def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict[str, Any]:
     """learning_curve.png and summary.md from the periodic validation (``learning_curve.csv``)."""
     out_dir = Path(out_dir)
     rows = read_learning_curve(out_dir)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import subprocess
 from pathlib import Path
+from typing import Any
 
 __all__ = ["provenance", "source_stamp", "BUILD_INFO"]
 
@@ -32,7 +33,7 @@ def _git(root: Path, *args: str) -> str:
     return done.stdout.strip()
 
 
-def source_stamp(root: Path = _ROOT) -> dict | None:
+def source_stamp(root: Path = _ROOT) -> dict[str, Any] | None:
     """``{"commit", "dirty"}`` of the lawn checkout at ``root`` (``dirty``: a tracked file other than
     the generated outputs differs from the commit); None when ``root`` is not the top of a git work
     tree that tracks ``training/provenance.py`` (an install inside someone else's repository)."""
@@ -48,7 +49,7 @@ def source_stamp(root: Path = _ROOT) -> dict | None:
     return {"commit": commit, "dirty": bool(dirty)}
 
 
-def _build_stamp() -> dict | None:
+def _build_stamp() -> dict[str, Any] | None:
     try:
         stamp = json.loads(BUILD_INFO.read_text())
     except (OSError, ValueError):

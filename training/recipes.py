@@ -34,7 +34,7 @@ class Recipe:
     env_id: str
     timesteps: int
     seeds: tuple[int, ...] = (0, 1, 2)
-    hp: dict = field(default_factory=dict)
+    hp: dict[str, Any] = field(default_factory=dict)
     init_from: str | None = None  # another recipe's name: seed s starts from that recipe's seed s
     eval_every: int = 25_000
     vec: Literal["dummy", "native"] = "dummy"  # lawn train --vec: "native" trains on lawn's batched vector env

@@ -12,7 +12,7 @@ import gymnasium as gym
 import numpy as np
 
 import lawn_env
-from agents import HeuristicPolicy, make_policy, rollout
+from agents import HeuristicPolicy, Step, make_policy, rollout
 from lawn_env import ScenarioConfig
 from lawn_env.envs.base import LawnEnv
 
@@ -23,7 +23,8 @@ FORMATS = (".gif", ".mp4")
 
 
 def record_frames(policy: str, env_id: str | None = None, seed: int = 0, config: ScenarioConfig | str | None = None,
-                  every: int = 1, progress: bool = False, **policy_args: Any) -> tuple[list[np.ndarray], dict, str]:
+                  every: int = 1, progress: bool = False,
+                  **policy_args: Any) -> tuple[list[np.ndarray], dict[str, Any], str]:
     """Play one seeded episode of ``env_id`` (default: the policy's own env) under ``policy`` and
     keep the env's ``rgb_array`` frame of the start and of every ``every``-th slot (and the last),
     with a progress bar over the slots when ``progress``. Returns the frames, the episode's metrics
@@ -43,7 +44,7 @@ def record_frames(policy: str, env_id: str | None = None, seed: int = 0, config:
     bar = tqdm(total=cast(LawnEnv, env.unwrapped).config.num_slots, desc=policy, unit="slot",
                disable=None if progress else True, leave=False)
 
-    def keep(step) -> None:
+    def keep(step: Step) -> None:
         bar.update()
         if (step.slot + 1) % every == 0:  # the frame shows slot n + 1
             frames.append(frame())
@@ -93,7 +94,8 @@ def write_animation(frames: list[np.ndarray], out: Path, fps: float = 8.0) -> Pa
     return out
 
 
-def render_episode(policy: str, out: Path, env_id: str | None = None, fps: float = 8.0, **options: Any) -> dict:
+def render_episode(policy: str, out: Path, env_id: str | None = None, fps: float = 8.0,
+                   **options: Any) -> dict[str, Any]:
     """One seeded episode of ``env_id`` under ``policy`` as an animation at ``out`` (GIF or MP4);
     returns the episode's metrics with the env id, frame count and file. ``options``: the ``seed``,
     ``config``, ``every``, ``progress`` and policy settings of :func:`record_frames`."""
@@ -106,7 +108,7 @@ def render_episode(policy: str, out: Path, env_id: str | None = None, fps: float
 
 
 def run_demo(seed: int, out_dir: Path, config: ScenarioConfig | str | None = None,
-             overrides: dict | None = None) -> dict:
+             overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """Run one episode, write ``metrics.json`` and ``paths.png`` into ``out_dir``; return the metrics."""
     env = gym.make("lawn/Joint-v1", config=config, **(overrides or {}))
     lawn = cast(LawnEnv, env.unwrapped)

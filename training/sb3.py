@@ -46,6 +46,7 @@ class NativeVecEnv(VecEnv):
         self.render_mode = None
 
     def reset(self) -> np.ndarray:
+        obs: np.ndarray
         obs, _ = self.venv.reset(seed=self._seed)
         self._seed = None
         return obs
@@ -53,7 +54,7 @@ class NativeVecEnv(VecEnv):
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = actions  # SB3 clips Box actions before stepping; the env rejects what it cannot take
 
-    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
+    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
         obs, reward, terminated, truncated, info = self.venv.step(self._actions)
         done = terminated | truncated
         infos: list[dict[str, Any]] = [{"stage_cost": float(c)} for c in info["stage_cost"]]
@@ -69,13 +70,13 @@ class NativeVecEnv(VecEnv):
     def close(self) -> None:
         self.venv.close()
 
-    def get_attr(self, attr_name: str, indices: Any = None) -> list:  # one batched env: one answer for every index
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:  # one batched env: one answer for every index
         return [getattr(self.venv, attr_name)] * len(list(self._get_indices(indices)))
 
     def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
         setattr(self.venv, attr_name, value)
 
-    def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list:
+    def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list[Any]:
         raise NotImplementedError(f"env_method({method_name!r}): the native vector env has no per-env objects")
 
     def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
@@ -89,12 +90,12 @@ def make_marl_vec_env(config: ScenarioConfig, n_envs: int, seed: int, interface:
     import supersuit as ss
     from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
 
-    class _Seeded(SB3VecEnvWrapper):
+    class _Seeded(SB3VecEnvWrapper):  # type: ignore[misc]  # supersuit ships no type information
         """SuperSuit's SB3 adapter with SB3's ``seed`` (the next reset uses it)."""
 
         _next_seed = None
 
-        def seed(self, seed: int | None = None) -> list:
+        def seed(self, seed: int | None = None) -> list[Any]:
             self._next_seed = seed
             return [seed]
 
@@ -143,7 +144,8 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
     return venv
 
 
-def train_sb3(spec: Any, params: dict, options: Any, version: int, callbacks: list | None = None) -> dict:
+def train_sb3(spec: Any, params: dict[str, Any], options: Any, version: int,
+              callbacks: list[Any] | None = None) -> dict[str, Any]:
     """Train the SB3 run of ``spec`` (a :class:`training.train.TrainSpec`) with its hyperparameters and
     their :class:`~training.train.RunOptions`; a model SB3 refuses to build leaves nothing behind."""
     if spec.init_from is not None:
@@ -197,17 +199,17 @@ def _check_init_from(init_from: Path, algo: str, params: Mapping[str, Any]) -> N
 class Run:
     """A run ready to learn: its record (``run.json``), model, env and callbacks."""
 
-    record: dict
+    record: dict[str, Any]
     model: Any
     env: Any
-    hooks: list
+    hooks: list[Any]
     out_dir: Path
     wall_before: float
     resumed: bool
 
 
-def setup(record: dict, options: Any, config: ScenarioConfig, out_dir: Path, start: Checkpoint | None,
-          callbacks: list | None = None) -> Run:
+def setup(record: dict[str, Any], options: Any, config: ScenarioConfig, out_dir: Path, start: Checkpoint | None,
+          callbacks: list[Any] | None = None) -> Run:
     """The env, the model and the callbacks of a run (new, or resumed from ``start``)."""
     from stable_baselines3.common.utils import set_random_seed
 
@@ -234,7 +236,7 @@ def setup(record: dict, options: Any, config: ScenarioConfig, out_dir: Path, sta
     return Run(record, model, env, hooks + list(callbacks or []), out_dir, wall_before, start is not None)
 
 
-def learn(run: Run, progress: bool) -> dict:
+def learn(run: Run, progress: bool) -> dict[str, Any]:
     """Train a set-up run to its timestep target; save the model, its statistics and the curve."""
     model, env, out_dir = run.model, run.env, run.out_dir
     remaining = int(run.record["timesteps"]) - model.num_timesteps
@@ -252,7 +254,7 @@ def learn(run: Run, progress: bool) -> dict:
     return summary
 
 
-def _model(record: dict, env: Any, start: Checkpoint | None, out_dir: Path, options: Any) -> Any:
+def _model(record: dict[str, Any], env: Any, start: Checkpoint | None, out_dir: Path, options: Any) -> Any:
     """The model a run trains: its checkpoint's, or a new one (from a cloned run's weights, at the
     anchor, with the fine-tuning's exploration noise as the options ask)."""
     cls = algorithm_class(record["algo"])
@@ -293,7 +295,7 @@ def start_at_anchor(model: Any, algo: str) -> None:
     (SAC's untrained mean acts far from zero; PPO's init near zero but not at it)."""
     import torch
 
-    def heads() -> list:  # a fleet network's means are its two heads' outputs (its action_net is the identity)
+    def heads() -> list[Any]:  # a fleet network's means are its two heads' outputs (its action_net is the identity)
         net = model.policy.mlp_extractor
         return [net.agv_head, net.drone_head] if hasattr(net, "agv_head") else [model.policy.action_net]
 

@@ -40,7 +40,7 @@ __all__ = ["SweepSpec", "SweepTableError", "load_spec", "expand", "run_sweep", "
            "config_hash", "summarize_sweep"]
 
 
-class SweepSpec(dict):
+class SweepSpec(dict[str, Any]):
     """A validated sweep specification."""
 
 
@@ -129,7 +129,7 @@ def point_config(spec: Mapping[str, Any], point: Mapping[str, Any]) -> lawn_env.
     return presets.get(point.get("preset", spec["preset"])).override(spec["set"]).override(rest)
 
 
-def expand(spec: Mapping[str, Any]) -> list[dict]:
+def expand(spec: Mapping[str, Any]) -> list[dict[str, Any]]:
     """Every grid point of ``spec`` (one point, ``{}``, without a grid)."""
     grid = spec["grid"]
     return [dict(zip(grid, values, strict=True)) for values in itertools.product(*grid.values())] or [{}]
@@ -151,7 +151,7 @@ def config_hash(config_dict: Mapping[str, Any], policy_args: Mapping[str, Any] |
     return hashlib.sha256(payload.encode()).hexdigest()[:16]
 
 
-def _key(row: Mapping[str, Any]) -> tuple:
+def _key(row: Mapping[str, Any]) -> tuple[Any, ...]:
     return (str(row["config_hash"]), str(row["policy"]), str(row["policy_args"]), int(row["seed"]), str(row["env"]),
             str(row["lawn_version"]))
 
@@ -176,7 +176,7 @@ def _problem(row: Mapping[str, Any]) -> str | None:
     return None
 
 
-def read_rows(path: Path) -> tuple[list[dict], list[str]]:
+def read_rows(path: Path) -> tuple[list[dict[str, Any]], list[str]]:
     """The usable rows of a sweep table and a message per dropped row (incomplete or duplicate)."""
     rows, dropped, seen = [], [], set()
     for i, row in enumerate(read_table(path), start=2):  # line 1 is the header
@@ -191,12 +191,12 @@ def read_rows(path: Path) -> tuple[list[dict], list[str]]:
     return rows, dropped
 
 
-def read_table(path: Path) -> list[dict]:
+def read_table(path: Path) -> list[dict[str, Any]]:
     """Every row of a sweep table as written (an empty list before the first row)."""
     return read_csv(path)
 
 
-def _run(task) -> dict:
+def _run(task: tuple[Any, ...]) -> dict[str, Any]:
     from .results.run import run_episode
 
     point, policy, seed, env_id, cfg_dict, policy_kwargs, sweep_name = task
@@ -212,7 +212,7 @@ def _run(task) -> dict:
 
 
 def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: int = 1, backend: str = "process",
-              progress: bool = True, max_runs: int | None = None, extend: bool = False) -> list[dict]:
+              progress: bool = True, max_runs: int | None = None, extend: bool = False) -> list[dict[str, Any]]:
     """Run the missing rows of ``spec`` into ``table`` (CSV); returns all rows of the table.
 
     Rows are keyed by config hash, policy, policy arguments, seed, env and version (module
@@ -225,7 +225,7 @@ def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: 
     spec = load_spec(spec)
     table = Path(table)
     table.parent.mkdir(parents=True, exist_ok=True)
-    wanted: dict[tuple, tuple] = {}
+    wanted: dict[tuple[Any, ...], tuple[Any, ...]] = {}
     for point in expand(spec):
         cfg_dict = point_config(spec, point).to_dict()
         chash = config_hash(cfg_dict)
@@ -272,7 +272,7 @@ def run_sweep(spec: str | Path | Mapping[str, Any], table: str | Path, workers: 
     return rows
 
 
-def _canonical(rows: list[dict], wanted: Mapping[tuple, Any]) -> list[dict]:
+def _canonical(rows: list[dict[str, Any]], wanted: Mapping[tuple[Any, ...], Any]) -> list[dict[str, Any]]:
     """Rows in the spec's order (grid point, policy, seed), rows of other specs (``extend``) first
     as they were: a finished table is the same file whatever order its runs finished in."""
     rank = {key: i for i, key in enumerate(wanted)}
@@ -317,10 +317,10 @@ def execute(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int, backen
                 yield fut.result()
 
 
-def summarize_sweep(rows: list[dict], grid_keys: Sequence[str],
+def summarize_sweep(rows: list[dict[str, Any]], grid_keys: Sequence[str],
                     metrics: Sequence[str] = ("control_cost", "rmse_m", "outage_rate")) -> str:
     """Markdown table: mean ± 95 % interval of ``metrics`` per grid point and policy."""
-    groups: dict[tuple, list[dict]] = {}
+    groups: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault((*(str(r[k]) for k in grid_keys), r["policy"]), []).append(r)
     table = []

@@ -77,7 +77,7 @@ def lr_schedule(value: Any, key: str = "learning_rate") -> Any:
     return value
 
 
-def _check_normalize(normalize: bool | dict) -> None:
+def _check_normalize(normalize: bool | dict[str, Any]) -> None:
     if isinstance(normalize, dict):
         from stable_baselines3.common.vec_env import VecNormalize
 
@@ -131,7 +131,7 @@ def split_params(algo: str, env_id: str, params: Mapping[str, Any]) -> RunOption
     return options
 
 
-def load_hyperparams(algo: str, env_id: str, overrides: Mapping[str, Any] | None = None) -> tuple[dict, int]:
+def load_hyperparams(algo: str, env_id: str, overrides: Mapping[str, Any] | None = None) -> tuple[dict[str, Any], int]:
     """Hyperparameters of ``algo`` for ``env_id`` from its versioned file, with overrides; and the version."""
     if algo not in ALGORITHMS:
         raise ValueError(f"unknown algorithm {algo!r}; valid: {', '.join(ALGORITHMS)}")
@@ -189,7 +189,7 @@ class TrainSpec:
             raise ValueError(f"--vec native runs {', '.join(NATIVE_ENV_IDS)} (got {self.env_id}); pass --vec dummy")
         ALGORITHMS[self.algo].check(self, self.hyperparams()[0])
 
-    def hyperparams(self) -> tuple[dict, int]:
+    def hyperparams(self) -> tuple[dict[str, Any], int]:
         """The run's hyperparameters (the interface resolved to a dict) and the file's version."""
         params, version = load_hyperparams(self.algo, self.env_id, self.hp_overrides)
         if self.n_envs is not None:
@@ -224,15 +224,16 @@ class Algorithm:
         module, name = (which or self.learner).split(":")
         return getattr(importlib.import_module(module), name)
 
-    def check(self, spec: TrainSpec, params: dict) -> None:
+    def check(self, spec: TrainSpec, params: dict[str, Any]) -> None:
         if self.settings is None:
             split_params(spec.algo, spec.env_id, params)
         else:
             self.load(self.settings)(params)
 
-    def run(self, spec: TrainSpec, params: dict, version: int, callbacks: list | None) -> dict:
+    def run(self, spec: TrainSpec, params: dict[str, Any], version: int, callbacks: list[Any] | None) -> dict[str, Any]:
         if self.settings is not None:
-            return self.load()(spec, params, version)
+            record: dict[str, Any] = self.load()(spec, params, version)
+            return record
         from .sb3 import train_sb3
 
         return train_sb3(spec, params, split_params(spec.algo, spec.env_id, params), version, callbacks)
@@ -254,7 +255,7 @@ ALGOS = tuple(ALGORITHMS)
 
 
 # ---------------------------------------------------------------- runs
-def train(spec: TrainSpec, callbacks: list | None = None) -> dict:
+def train(spec: TrainSpec, callbacks: list[Any] | None = None) -> dict[str, Any]:
     """Train the run of ``spec`` from scratch; returns its summary (also written to ``spec.out_dir``).
     ``callbacks`` are extra SB3 callbacks, run after the run's own (validation, checkpoints)."""
     if (spec.out_dir / "run.json").exists():
@@ -265,7 +266,7 @@ def train(spec: TrainSpec, callbacks: list | None = None) -> dict:
     return summary
 
 
-def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: str = "process") -> dict:
+def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: str = "process") -> dict[str, Any]:
     """Train ``spec`` once per seed into ``spec.out_dir/seed-<s>`` (``workers`` processes, or Ray, as
     ``lawn sweep``) and summarize the selected models' validation costs across seeds."""
     from .results.stats import mean_ci
@@ -285,7 +286,7 @@ def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: st
     return result
 
 
-def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -> dict:
+def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -> dict[str, Any]:
     """Continue an interrupted run from its last checkpoint up to its (or a new) timestep target, with
     the update count of an uninterrupted run, its history appended to the checkpoint's and an
     off-policy replay buffer restored; a run killed before its first checkpoint restarts from scratch."""

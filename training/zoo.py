@@ -42,8 +42,8 @@ class ZooEvaluation:
     found: list[tuple[Recipe, list[Path]]]
     runs: dict[Path, RunDir]
     entries: list[tuple[str, str]]
-    rows: list[dict]
-    scores: dict
+    rows: list[dict[str, Any]]
+    scores: dict[tuple[str, str, str], tuple[Any, ...]]
     episodes: int
 
     @property
@@ -57,7 +57,7 @@ class Shipped:
 
     recipe: Recipe
     run_dir: Path
-    specs: list[dict]
+    specs: list[dict[str, Any]]
     env: str
     across: tuple[float, float]  # mean and 95 % half-width of vs-own-anchor across training seeds
 
@@ -137,7 +137,8 @@ def _cells(ev: ZooEvaluation, policy: str, env: str, label: str, how: str, acros
     return {"label": label, "env": env, "how": how, **protocol_cells(ev.rows, ev.scores, policy, env), "across": across}
 
 
-def _run_cells(ev: ZooEvaluation, r: Recipe, run_dir: Path, best: Mapping, chosen: bool, env: str) -> dict[str, str]:
+def _run_cells(ev: ZooEvaluation, r: Recipe, run_dir: Path, best: Mapping[str, Any], chosen: bool,
+               env: str) -> dict[str, str]:
     """One row of the per-run table."""
     spec = ev.runs[run_dir].record
     c = protocol_cells(ev.rows, ev.scores, ev.runs[run_dir].policy_name, env)
@@ -332,11 +333,11 @@ def _run_of(policy: str) -> str | None:
         else None
 
 
-def merged_rows(old: list[dict], built: Mapping[str, tuple[Any, Any]]) -> list[dict]:
+def merged_rows(old: list[dict[str, Any]], built: Mapping[str, tuple[Any, Any]]) -> list[dict[str, Any]]:
     """The episodes of the rebuilt sections (each (policy, env, seed) once: the sections share
     their references), with, when a section was not rebuilt, the recorded episodes the new ones do
     not replace, less the rebuilt sections' runs."""
-    new: dict[tuple, dict] = {}
+    new: dict[tuple[Any, ...], dict[str, Any]] = {}
     for ev, _ in built.values():
         for row in ev.rows:
             new.setdefault((row["policy"], row["env"], str(row["seed"])), row)

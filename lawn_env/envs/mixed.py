@@ -66,7 +66,8 @@ class MixedFleetEnv(gym.Env):
         self.observation_space, self.action_space = first.observation_space, first.action_space
         self.env = first
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Observation, dict[str, Any]]:
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[Observation, dict[str, Any]]:
         super().reset(seed=seed)
         k = int(self.np_random.choice(self.fleet_sizes))
         self.env = self.envs[k]

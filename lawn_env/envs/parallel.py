@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypeVar
 
 import gymnasium as gym
 import numpy as np
@@ -21,8 +21,10 @@ from .base import RENDER_MODES, Engine, EngineAccess, check_render_mode
 
 __all__ = ["LawnParallelEnv", "parallel_env", "raw_env", "env"]
 
+_T = TypeVar("_T")
 
-class LawnParallelEnv(EngineAccess, ParallelEnv):
+
+class LawnParallelEnv(EngineAccess, ParallelEnv):  # type: ignore[misc]  # pettingzoo ships no type information
     """
     ## Description
 
@@ -117,7 +119,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
 
     def _flat_spaces(self, k: int) -> None:
         agv_size = self.layout.agv_features + self.layout.global_features
-        self._observation_spaces: dict[str, gym.spaces.Space] = {
+        self._observation_spaces: dict[str, gym.spaces.Space[Any]] = {
             "drone": self.interface.observation_space(self.layout.size),
             **{a: self.interface.observation_space(agv_size) for a in self._agv_index},
         }
@@ -142,13 +144,13 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
             **{a: gym.spaces.Box(-1.0, 1.0, shape=(entities.per_agv,), dtype=np.float32) for a in self._agv_index},
         }
 
-    def observation_space(self, agent: str) -> gym.spaces.Space:
+    def observation_space(self, agent: str) -> gym.spaces.Space[Any]:
         return self._lookup(self._observation_spaces, agent)
 
     def action_space(self, agent: str) -> gym.spaces.Box:
         return self._lookup(self._action_spaces, agent)
 
-    def _lookup(self, table: dict, agent: str):
+    def _lookup(self, table: dict[str, _T], agent: str) -> _T:
         try:
             return table[agent]
         except KeyError:
@@ -156,7 +158,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
 
     # ------------------------------------------------------------------ API
     def reset(self, seed: int | None = None,
-              options: dict | None = None) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+              options: dict[str, Any] | None = None) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
         if seed is not None:
             self._np_random, _ = seeding.np_random(seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
@@ -173,7 +175,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
         """The env's generator (seeded by ``reset(seed=...)``): every draw of an episode."""
         return self._np_random
 
-    def _infos(self, info: dict) -> dict:
+    def _infos(self, info: dict[str, Any]) -> dict[str, Any]:
         """Per-agent infos with the same keys, shapes and dtypes at reset and at every step: the
         drone's are the central environments' (``INFO_KEYS``); each AGV's the same keys for its own
         link, as scalars (``applied_increment`` (2,)) and its own stage cost."""
@@ -194,7 +196,8 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
             }
         return infos
 
-    def step(self, actions: dict[str, np.ndarray]) -> tuple[dict, dict, dict, dict, dict]:
+    def step(self, actions: dict[str, np.ndarray]
+             ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], dict[str, Any], dict[str, Any]]:
         if not self.agents:
             raise RuntimeError("the episode has ended (or reset() was never called); call reset() before step()")
         if not isinstance(actions, Mapping):
@@ -238,7 +241,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
             joint[2 * i : 2 * i + 2] = check_action(actions[agent], 2, name=f"actions[{agent!r}]")
         return joint
 
-    def _observations(self) -> dict:
+    def _observations(self) -> dict[str, Any]:
         if self.entities is not None:  # fresh arrays every step, shared read-only by the agents (not K + 1 copies)
             entity_obs = self.engine.observe()
             assert isinstance(entity_obs, dict)  # the entity layout's observation
@@ -259,9 +262,10 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
         """Global state: the central observation (an element of ``state_space``)."""
         if not self.engine.sim.started:
             raise RuntimeError("call reset() before state()")
-        return self.engine.observe_flat()[0]
+        state: np.ndarray = self.engine.observe_flat()[0]
+        return state
 
-    def episode_metrics(self) -> dict:
+    def episode_metrics(self) -> dict[str, Any]:
         """MODEL.md §6's metrics of the episode so far (the central envs put them in the last info)."""
         return self.sim.episode_metrics()
 
@@ -269,7 +273,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):
         """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
         return self.engine.snapshot()
 
-    def trajectories(self) -> dict:
+    def trajectories(self) -> dict[str, Any]:
         """The current episode's drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions."""
         return self.engine.kept_trail.trajectories()
 

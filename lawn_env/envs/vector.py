@@ -96,7 +96,7 @@ class JointVectorEnv(EngineAccess, VectorEnv):
 
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | list[int] | None = None,
-              options: dict | None = None) -> tuple[Observation, dict[str, Any]]:
+              options: dict[str, Any] | None = None) -> tuple[Observation, dict[str, Any]]:
         if isinstance(seed, (list, tuple)):
             if len(seed) != self.num_envs:
                 raise ValueError(f"seed: a list of {len(seed)} seeds for {self.num_envs} envs")

@@ -9,6 +9,7 @@ import importlib
 import os
 import sys
 from pathlib import Path
+from types import ModuleType
 
 __all__ = ["main", "build_parser", "COMMANDS", "COMMAND_NAMES"]
 
@@ -36,7 +37,7 @@ COMMAND_NAMES = tuple(COMMAND_HELP)
 _PARALLEL = ("evaluate", "benchmark", "gap")
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> tuple[ModuleType, ...]:
     if name == "COMMANDS":  # imported on first use: the module itself stays light (see main)
         return tuple(importlib.import_module(f"{__name__}.{command}") for command in COMMAND_NAMES)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -53,7 +54,7 @@ def _version() -> str:
         return lawn_env.__version__
 
 
-def _top_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
+def _top_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction[argparse.ArgumentParser]]:
     parser = argparse.ArgumentParser(prog="lawn", description="Wireless predictive control over low-altitude networks.")
     parser.add_argument("--version", action="version", version=f"lawn {_version()}")
     parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
@@ -176,7 +177,8 @@ def _run(argv: list[str] | None) -> int:
 
     try:
         _check_out(args.command, getattr(args, "out", None))
-        return args.func(args)
+        code: int = args.func(args)
+        return code
     except BaseException as exc:
         if args.debug or isinstance(exc, SystemExit):
             raise

@@ -7,13 +7,17 @@ from __future__ import annotations
 import argparse
 import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from lawn_env import presets
 
 from .common import command, comparison_env, config_of, count, included, policy_help, policy_name
 
+if TYPE_CHECKING:
+    from ..results.run import Play
 
-def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+
+def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     from agents import BENCHMARK_POLICIES
 
     from ..results.run import REFERENCE_ROWS
@@ -89,7 +93,7 @@ def _check_fixed_protocol(args: argparse.Namespace) -> None:
                          "was trained on, experts, baselines and anchors on lawn/Joint-v1)")
 
 
-def _play(args: argparse.Namespace):
+def _play(args: argparse.Namespace) -> Play:
     from ..results.run import Play
 
     return Play(args.workers, not args.quiet, args.transient_slots)

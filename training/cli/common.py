@@ -112,7 +112,8 @@ def _shared_flags() -> dict[str, list[tuple[str, dict[str, Any]]]]:
     }
 
 
-def command(sub: argparse._SubParsersAction, name: str, *shared: str, **kwargs: Any) -> argparse.ArgumentParser:
+def command(sub: argparse._SubParsersAction[argparse.ArgumentParser], name: str, *shared: str,
+            **kwargs: Any) -> argparse.ArgumentParser:
     """The parser of subcommand ``name`` with ``--debug`` and the named shared flags (``"workers"``,
     ``"quiet"``, ``"seed"`` (a first seed), ``"one_seed"`` (one episode's), ``"config"``, ``"split"``,
     ``"policy_arg"``, ``"backend"``), each with one meaning everywhere."""
@@ -126,7 +127,7 @@ def command(sub: argparse._SubParsersAction, name: str, *shared: str, **kwargs: 
     return parser
 
 
-def parse_overrides(items: list[str], flag: str = "--set") -> dict:
+def parse_overrides(items: list[str], flag: str = "--set") -> dict[str, Any]:
     """``key=value`` pairs with dotted keys; values parsed as JSON when possible."""
     out = {}
     for item in items:

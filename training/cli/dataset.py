@@ -9,7 +9,7 @@ from lawn_env import presets
 from .common import command, count, policy_help, policy_name
 
 
-def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     ds = command(sub, "dataset", "quiet", "seed")
     ds.add_argument("action", choices=["create"])
     ds.add_argument("--policy", required=True, type=policy_name, help=policy_help("any policy: "))

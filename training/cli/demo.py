@@ -8,7 +8,7 @@ from pathlib import Path
 from .common import command, config_of
 
 
-def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     demo = command(sub, "demo", "one_seed", "config")
     demo.add_argument("--out", default="runs/demo", help="output directory (default: %(default)s)")
     return demo

@@ -11,7 +11,7 @@ import lawn_env
 from .common import command, comparison_env, config_of, count, parse_overrides, policy_help, policy_name
 
 
-def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     ev = command(sub, "evaluate", "workers", "quiet", "seed", "config", "split", "policy_arg")
     ev.add_argument("--policy", required=True, type=policy_name, help=policy_help())
     ev.add_argument("--env", default=None, type=comparison_env, metavar="ENV",

@@ -10,7 +10,7 @@ from pathlib import Path
 from .common import command
 
 
-def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     from ..experiments import EXPERIMENTS
 
     fg = command(sub, "figures", "workers", "quiet")

@@ -9,7 +9,7 @@ from pathlib import Path
 from .common import command, config_of, count, parse_overrides, policy_help, policy_name
 
 
-def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     from ..experiments.gap import CONVERGENCE_SLOTS
 
     gp = command(sub, "gap", "workers", "quiet", "seed", "config")

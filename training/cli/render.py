@@ -10,7 +10,7 @@ import lawn_env
 from .common import command, config_of, count, parse_overrides, policy_help, policy_name
 
 
-def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     re = command(sub, "render", "quiet", "one_seed", "config", "policy_arg")
     re.add_argument("--policy", default="rg-mpc", type=policy_name, help=policy_help("default: rg-mpc; "))
     re.add_argument("--env", default=None, choices=[*lawn_env.ENV_IDS, *lawn_env.RL_ENV_IDS],

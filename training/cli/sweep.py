@@ -8,7 +8,7 @@ from pathlib import Path
 from .common import command
 
 
-def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     sw = command(sub, "sweep", "workers", "quiet", "backend")
     sw.add_argument("spec", help="sweep spec (YAML or JSON)")
     sw.add_argument("--out", required=True, help="table (CSV); finished rows are skipped on rerun")

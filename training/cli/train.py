@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from agents.errors import MissingExtra
 
 from .common import command, config_of, count, parse_overrides, seed
 
 
-def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     from ..train import ALGOS, TRAIN_ENV_IDS
 
     tr = command(sub, "train", "workers", "quiet", "seed", "config", "backend")
@@ -95,7 +96,7 @@ def _resume(args: argparse.Namespace) -> int:
     return 0
 
 
-def _report(summary: dict, out: str) -> None:
+def _report(summary: dict[str, Any], out: str) -> None:
     print(f"lawn train: {summary['algo']} on {summary['env']}, seed {summary['seed']}, "
           f"{summary['timesteps']} steps in {summary['wall_time_s']:.1f} s")
     for key in ("final_validation_cost", "best_validation_cost", "best_at_timesteps", "bc_loss_first", "bc_loss_last"):

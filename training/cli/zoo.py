@@ -13,7 +13,7 @@ from .common import command
 ZOO_HINT = "agents/zoo/<name>/ (policy.zip, normalizer.npz, agent.json)"
 
 
-def add(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     zo = command(sub, "zoo", "workers", "quiet")
     zo.add_argument("action", nargs="?", default="list", choices=["list", "train", "build"],
                     help="list the shipped agents (default), train their recipes, or build the zoo from the runs")

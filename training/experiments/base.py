@@ -23,6 +23,8 @@ SEEDS = 40
 QUICK_SEEDS = 2
 #: What ``--quick`` sets in every scenario.
 QUICK_SET: dict[str, Any] = {"num_slots": 30}
+#: An experiment's tables: table name -> its rows.
+Tables = dict[str, list[dict[str, Any]]]
 
 
 @dataclass(frozen=True)
@@ -33,17 +35,17 @@ class Experiment:
 
     name: str
     setting: str  # one line for the settings table of REPRODUCTION.md
-    sweeps: Callable[[bool], dict[str, dict]] = lambda quick: {}  # table name -> sweep spec
-    builders: dict[str, Callable[[Path, bool], list[dict]]] = field(default_factory=dict)  # non-sweep tables
-    plot: Callable[[dict[str, list[dict]], Path], None] = lambda tables, path: None
-    claims: Callable[[dict[str, list[dict]]], list[Claim]] = lambda tables: []
+    sweeps: Callable[[bool], dict[str, dict[str, Any]]] = lambda quick: {}  # table name -> sweep spec
+    builders: dict[str, Callable[[Path, bool], list[dict[str, Any]]]] = field(default_factory=dict)  # non-sweep tables
+    plot: Callable[[dict[str, list[dict[str, Any]]], Path], None] = lambda tables, path: None
+    claims: Callable[[dict[str, list[dict[str, Any]]]], list[Claim]] = lambda tables: []
 
     def table_names(self, quick: bool = False) -> list[str]:
         return list(self.sweeps(quick)) + list(self.builders)
 
 
-def spec(name: str, grid: dict, policies: Sequence[str], quick: bool, preset: str = "default",
-         set_: dict | None = None) -> dict:
+def spec(name: str, grid: dict[str, Any], policies: Sequence[str], quick: bool, preset: str = "default",
+         set_: dict[str, Any] | None = None) -> dict[str, Any]:
     """A sweep spec (:func:`training.sweep.run_sweep`) on ``lawn/Joint-v1``: :data:`SEEDS` seeds, or in
     ``--quick`` mode :data:`QUICK_SEEDS` with :data:`QUICK_SET` under ``set_``."""
     return {"name": name, "env": "lawn/Joint-v1", "preset": preset,
@@ -57,12 +59,12 @@ def slot_cost(row: Mapping[str, Any], slot: int = REPORT_SLOT) -> float:
     return float(costs[min(slot, len(costs) - 1)])
 
 
-def by_seed(rows: Sequence[Mapping], metric: str | Callable, **where: Any) -> dict[int, float]:
+def by_seed(rows: Sequence[Mapping[str, Any]], metric: str | Callable[..., Any], **where: Any) -> dict[int, float]:
     """{seed: value} of the rows matching ``where`` (values compared as strings)."""
     get = metric if callable(metric) else (lambda r: float(r[metric]))
     return {int(r["seed"]): get(r) for r in rows if all(str(r[k]) == str(v) for k, v in where.items())}
 
 
-def values(rows: Sequence[Mapping], key: str) -> list[float]:
+def values(rows: Sequence[Mapping[str, Any]], key: str) -> list[float]:
     """The sorted distinct values of a numeric column."""
     return sorted({float(r[key]) for r in rows})

@@ -2,26 +2,28 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..results.report import fmt_paired
 from ..results.stats import paired_difference
-from .base import EXPERTS, REPORT_SLOT, SEEDS, Experiment, by_seed, slot_cost, spec, values
+from .base import EXPERTS, REPORT_SLOT, SEEDS, Experiment, Tables, by_seed, slot_cost, spec, values
 from .claims import Claim, multi_claim, paired_claim
 from .plots import STYLE, curve, label_axes, new_figure, save
 
 BLOCK_POLICIES = (*EXPERTS, "epa", "sf")
 
 
-def _blocklength_sweeps(quick):
+def _blocklength_sweeps(quick: bool) -> dict[str, dict[str, Any]]:
     lengths = [256, 2048] if quick else [128, 256, 1024, 4096]
     return {"blocklength": spec("blocklength", {"channel.blocklength": lengths}, BLOCK_POLICIES, quick),
             "blocklength-ibl": spec("blocklength-ibl", {"channel.infinite_blocklength": [True]}, BLOCK_POLICIES, quick)}
 
 
-def _blocklength_plot(tables, path: Path) -> None:
+def _blocklength_plot(tables: Tables, path: Path) -> None:
     rows, ibl = tables["blocklength"], tables["blocklength-ibl"]
     fig = new_figure()
     ax = fig.add_subplot(111)
@@ -37,12 +39,12 @@ def _blocklength_plot(tables, path: Path) -> None:
     save(fig, path)
 
 
-def _blocklength_claims(tables) -> list[Claim]:
+def _blocklength_claims(tables: Tables) -> list[Claim]:
     rows, ibl = tables["blocklength"], tables["blocklength-ibl"]
     lengths = [int(x) for x in values(rows, "channel.blocklength")]
     l0, l1 = lengths[0], lengths[-1]
 
-    def at(policy, length, metric="control_cost"):
+    def at(policy: str, length: int, metric: str | Callable[..., Any] = "control_cost") -> dict[int, float]:
         return by_seed(rows, metric, policy=policy, **{"channel.blocklength": length})
 
     out = []

@@ -4,22 +4,23 @@ from __future__ import annotations
 
 import itertools
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..results.report import fmt_paired
 from ..results.stats import paired_difference, verdict
-from .base import EXPERTS, SEEDS, Experiment, by_seed, spec, values
+from .base import EXPERTS, SEEDS, Experiment, Tables, by_seed, spec, values
 from .claims import Claim, paired_claim
 from .plots import label_axes, new_figure, save
 
 
-def _cdf_sweeps(quick):
+def _cdf_sweeps(quick: bool) -> dict[str, dict[str, Any]]:
     budgets = [-30.0, -15.0] if quick else [-30.0, -25.0, -20.0, -15.0]
     return {"cdf": spec("cdf", {"power_budget_dbw": budgets}, EXPERTS, quick, preset="paper-nominal")}
 
 
-def _cdf_plot(tables, path: Path) -> None:
+def _cdf_plot(tables: Tables, path: Path) -> None:
     rows = tables["cdf"]
     fig = new_figure()
     ax = fig.add_subplot(111)
@@ -34,7 +35,7 @@ def _cdf_plot(tables, path: Path) -> None:
     save(fig, path)
 
 
-def _cdf_claims(tables) -> list[Claim]:
+def _cdf_claims(tables: Tables) -> list[Claim]:
     rows = tables["cdf"]
     budgets = values(rows, "power_budget_dbw")
     out = []

@@ -3,23 +3,25 @@ variance, at -30 dBW and at the 0 dBW floor."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
-from .base import BASELINES, EXPERTS, REPORT_SLOT, SEEDS, Experiment, by_seed, slot_cost, spec, values
+from .base import BASELINES, EXPERTS, REPORT_SLOT, SEEDS, Experiment, Tables, by_seed, slot_cost, spec, values
 from .claims import Claim, multi_claim
 from .plots import curve, label_axes, new_figure, save
 
 CE_BUDGET_DBW = -30.0
 
 
-def _ce_sweeps(quick):
+def _ce_sweeps(quick: bool) -> dict[str, dict[str, Any]]:
     policies, rhos = EXPERTS + BASELINES, [0.0, 0.1] if quick else [0.0, 0.01, 0.05, 0.1]
     return {"ce": spec("ce", {"channel.ce_error_var": rhos}, policies, quick, preset="paper-nominal",
                        set_={"power_budget_dbw": CE_BUDGET_DBW}),
             "ce-floor": spec("ce-floor", {"channel.ce_error_var": [0.0, 0.1]}, policies, quick, preset="paper-nominal")}
 
 
-def _ce_plot(tables, path: Path) -> None:
+def _ce_plot(tables: Tables, path: Path) -> None:
     fig = new_figure(ncols=2, width=4.6)
     for j, (name, budget) in enumerate((("ce", CE_BUDGET_DBW), ("ce-floor", 0.0))):
         ax = fig.add_subplot(1, 2, j + 1)
@@ -31,13 +33,13 @@ def _ce_plot(tables, path: Path) -> None:
     save(fig, path)
 
 
-def _ce_claims(tables) -> list[Claim]:
+def _ce_claims(tables: Tables) -> list[Claim]:
     rows = tables["ce"]
     rhos = values(rows, "channel.ce_error_var")
     lo, hi = rhos[0], rhos[-1]
     policies = list(dict.fromkeys(r["policy"] for r in rows))
 
-    def rmse(policy, rho, metric="rmse_m"):
+    def rmse(policy: str, rho: float, metric: str | Callable[..., Any] = "rmse_m") -> dict[int, float]:
         return by_seed(rows, metric, policy=policy, **{"channel.ce_error_var": rho})
 
     growth = {p: {s: v - rmse(p, lo)[s] for s, v in rmse(p, hi).items()} for p in policies}

@@ -27,7 +27,8 @@ class Claim:
     seeds: int = 0
 
 
-def paired_claim(figure: str, key: str, claim: str, metric: str, a: Mapping, b: Mapping, expect: str) -> Claim:
+def paired_claim(figure: str, key: str, claim: str, metric: str, a: Mapping[int, float], b: Mapping[int, float],
+                 expect: str) -> Claim:
     """A claim on one paired per-seed comparison of ``a`` against ``b`` (relative differences)."""
     mean, half, n = paired_difference(a, b)
     return Claim(figure, key, claim, metric, fmt_paired(mean, half), verdict(mean, half, expect), n)
@@ -42,7 +43,8 @@ def combine(verdicts: Sequence[str]) -> str:
     return "not significant"
 
 
-def multi_claim(figure: str, key: str, claim: str, metric: str, parts: list[tuple[str, dict, dict]], expect: str,
+def multi_claim(figure: str, key: str, claim: str, metric: str,
+                parts: list[tuple[str, dict[int, float], dict[int, float]]], expect: str,
                 relative: bool = True) -> Claim:
     """One claim over several paired comparisons (label, a, b): every interval must hold; its seed
     count is the smallest of the comparisons'."""

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import itertools
 from pathlib import Path
+from typing import Any
 
-from .base import QUICK_SET, Claim, Experiment
+from .base import QUICK_SET, Experiment, Tables
+from .claims import Claim
 
 
-def _convergence_table(out: Path, quick: bool) -> list[dict]:
+def _convergence_table(out: Path, quick: bool) -> list[dict[str, Any]]:
     from lawn_env import ScenarioConfig
 
     from .gap import CONVERGENCE_SLOTS, convergence
@@ -20,7 +22,7 @@ def _convergence_table(out: Path, quick: bool) -> list[dict]:
     return convergence(cfg, slots, seed=0, driver="ao-mpc", iterations=20, global_settings=glob)
 
 
-def _convergence_plot(tables, path: Path) -> None:
+def _convergence_plot(tables: Tables, path: Path) -> None:
     from .gap import plot_convergence
 
     rows = [{**r, "slot": int(r["slot"]), "iteration": int(r["iteration"]),
@@ -30,7 +32,7 @@ def _convergence_plot(tables, path: Path) -> None:
     plot_convergence(rows, path.with_suffix(".pdf"))
 
 
-def _convergence_claims(tables) -> list[Claim]:
+def _convergence_claims(tables: Tables) -> list[Claim]:
     from agents import AOSettings
 
     tol = AOSettings().tolerance

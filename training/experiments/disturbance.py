@@ -4,13 +4,15 @@ control-period ablation."""
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..results.run import parse_bool
 from ..results.stats import mean_ci
-from .base import EXPERTS, SEEDS, Experiment, by_seed, spec, values
+from .base import EXPERTS, SEEDS, Experiment, Tables, by_seed, spec, values
 from .claims import Claim, multi_claim, paired_claim
 from .plots import STYLE, curve, label_axes, new_figure, save
 from .traces import plot_traces, trace_rows
@@ -19,7 +21,7 @@ DIST_CASES = [("nominal", "default", "rg-mpc"), ("nominal", "default", "epa"), (
               ("disturbed", "disturbed", "epa")]
 
 
-def _disturbance_sweeps(quick):
+def _disturbance_sweeps(quick: bool) -> dict[str, dict[str, Any]]:
     period = {"disturbance.control_period_slots": [2] if quick else [1, 2, 3],
               "disturbance.period_aware_planning": [True, False]}
     return {"disturbance-costs": spec("disturbance-costs", {"preset": ["default", "disturbed"]}, (*EXPERTS, "epa"),
@@ -27,7 +29,7 @@ def _disturbance_sweeps(quick):
             "disturbance-period": spec("disturbance-period", period, ("rg-mpc", "epa"), quick, preset="disturbed")}
 
 
-def _disturbance_plot(tables, path: Path) -> None:
+def _disturbance_plot(tables: Tables, path: Path) -> None:
     fig = new_figure(ncols=3, width=4.0)
     rows = tables["disturbance-costs"]
     variants = list(dict.fromkeys(r["preset"] for r in rows))
@@ -58,14 +60,14 @@ def _disturbance_plot(tables, path: Path) -> None:
     plot_traces(tables["disturbance"], path.with_name(path.name + "-paths"), DIST_CASES)
 
 
-def _period_costs(rows, policy: str, period: int, aware: bool) -> dict[int, float]:
+def _period_costs(rows: Sequence[Mapping[str, Any]], policy: str, period: int, aware: bool) -> dict[int, float]:
     """{seed: control cost} of ``policy`` at control period ``period``, planning with it or not."""
     return {int(r["seed"]): float(r["control_cost"]) for r in rows
             if r["policy"] == policy and int(float(r["disturbance.control_period_slots"])) == period
             and parse_bool(r["disturbance.period_aware_planning"]) == aware}
 
 
-def _disturbance_claims(tables) -> list[Claim]:
+def _disturbance_claims(tables: Tables) -> list[Claim]:
     rows = tables["disturbance-costs"]
     out = []
     for variant in ("default", "disturbed"):

@@ -35,7 +35,7 @@ __all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "glo
 
 
 def gap_episode(policies: Sequence[str], driver: str, config: ScenarioConfig, seed: int, every: int,
-                global_settings: Mapping[str, Any] | None = None) -> list[dict]:
+                global_settings: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
     """Rows (seed, slot, policy, objective, global objective, gap, decision time) for one episode."""
     env = gym.make("lawn/Joint-v1", config=config).unwrapped
     drive = make_policy(driver, config)
@@ -79,12 +79,12 @@ def _snapshot(step: Step) -> Snapshot:
     return cast(Snapshot, step.snapshot)
 
 
-def _gap_task(task):
+def _gap_task(task: tuple[Any, ...]) -> list[dict[str, Any]]:
     return gap_episode(*task)
 
 
 def run_gap(policies: Sequence[str], driver: str, config: ScenarioConfig, seeds: Sequence[int], every: int,
-            play: Play = DEFAULT_PLAY, global_settings: Mapping[str, Any] | None = None) -> list[dict]:
+            play: Play = DEFAULT_PLAY, global_settings: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
     """:func:`gap_episode` of every seed (``play``'s workers and progress bar), its rows in seed order."""
     from ..pool import pool_map
 
@@ -95,11 +95,11 @@ def run_gap(policies: Sequence[str], driver: str, config: ScenarioConfig, seeds:
     return rows
 
 
-def summarize_gaps(rows: list[dict], tolerance: float = 1e-6) -> list[dict]:
+def summarize_gaps(rows: list[dict[str, Any]], tolerance: float = 1e-6) -> list[dict[str, Any]]:
     """Per planner: gap median / p90 / max, median decision time, and on how many slots it is
     worse than each other planner by more than ``tolerance`` (relative)."""
     names = list(dict.fromkeys(r["policy"] for r in rows))
-    by_slot: dict[tuple, dict[str, float]] = {}
+    by_slot: dict[tuple[Any, ...], dict[str, float]] = {}
     for r in rows:
         by_slot.setdefault((r["seed"], r["slot"]), {})[r["policy"]] = r["objective"]
     out = []
@@ -119,13 +119,13 @@ def summarize_gaps(rows: list[dict], tolerance: float = 1e-6) -> list[dict]:
     return out
 
 
-def global_power_shares(rows: list[dict]) -> int:
+def global_power_shares(rows: list[dict[str, Any]]) -> int:
     """On how many compared slots the global reference gives some link less than 5 % of P_max."""
     seen = {(r["seed"], r["slot"]): r["global_min_power_share"] for r in rows}
     return int(sum(1 for v in seen.values() if v < 0.05))
 
 
-def format_gap_table(summary: list[dict]) -> str:
+def format_gap_table(summary: list[dict[str, Any]]) -> str:
     """:func:`summarize_gaps`' rows as a Markdown table."""
     keys = list(dict.fromkeys(k for e in summary for k in e if k.startswith("worse_than_")))
     header = ["planner", "slots", "gap median", "gap p90", "gap max", "decision time (ms)", "a link < 5 % power"]
@@ -136,7 +136,7 @@ def format_gap_table(summary: list[dict]) -> str:
     return markdown_table([*header, *(f"worse than {k[len('worse_than_'):]}" for k in keys)], table)
 
 
-def plot_gaps(rows: list[dict], path: Path) -> None:
+def plot_gaps(rows: list[dict[str, Any]], path: Path) -> None:
     """CDF of the gap per planner and the gap along the slots of the first episode."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -169,7 +169,7 @@ CONVERGENCE_SLOTS = (11, 19, 28, 41)
 
 
 def convergence(config: ScenarioConfig, slots: Sequence[int], seed: int = 0, driver: str = "ao-mpc",
-                iterations: int = 20, global_settings: Mapping[str, Any] | None = None) -> list[dict]:
+                iterations: int = 20, global_settings: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
     """The paper's AO run for ``iterations`` (no early stop) at each of ``slots`` of a driver
     episode; rows per (slot, iteration, block) with J^, plus the global and rg-mpc values."""
     env = gym.make("lawn/Joint-v1", config=config).unwrapped
@@ -198,7 +198,7 @@ def convergence(config: ScenarioConfig, slots: Sequence[int], seed: int = 0, dri
     return rows
 
 
-def plot_convergence(rows: list[dict], path: Path) -> None:
+def plot_convergence(rows: list[dict[str, Any]], path: Path) -> None:
     """Top: J^ after every block of every AO iteration with the global reference's and rg-mpc's
     values as lines. Bottom: the same as excess over the global reference, log scale."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -235,7 +235,7 @@ def plot_convergence(rows: list[dict], path: Path) -> None:
     fig.savefig(path)
 
 
-def format_convergence(conv_rows: list[dict], slots: Sequence[int]) -> str:
+def format_convergence(conv_rows: list[dict[str, Any]], slots: Sequence[int]) -> str:
     """The AO's distance above the global reference after its first and its last iteration, and
     rg-mpc's, at each slot of :func:`convergence`'s rows (one line per slot)."""
     lines = ["convergence (paper's AO, 20 iterations, no early stop): J^ above the global reference"]
@@ -249,7 +249,8 @@ def format_convergence(conv_rows: list[dict], slots: Sequence[int]) -> str:
     return "\n".join(lines)
 
 
-def write_gap_outputs(rows: list[dict], summary: list[dict], conv_rows: list[dict], out_dir: Path) -> None:
+def write_gap_outputs(rows: list[dict[str, Any]], summary: list[dict[str, Any]], conv_rows: list[dict[str, Any]],
+                      out_dir: Path) -> None:
     out_dir = Path(out_dir)
     write_rows(rows, out_dir / "gap_rows.csv")
     write_rows(summary, out_dir / "gap_summary.csv")

@@ -4,8 +4,9 @@ about them."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
-from .base import EXPERTS, SEEDS, Experiment, by_seed, spec
+from .base import EXPERTS, SEEDS, Experiment, Tables, by_seed, spec
 from .claims import Claim, paired_claim
 from .traces import plot_traces, trace_rows
 
@@ -13,16 +14,16 @@ PATH_CASES = [("K=3", "k3", "rg-mpc"), ("K=3", "k3", "ao-mpc"), ("K=4", "default
               ("K=4", "default", "ao-mpc"), ("K=4", "default", "epa")]
 
 
-def _paths_sweeps(quick):
+def _paths_sweeps(quick: bool) -> dict[str, dict[str, Any]]:
     return {"paths-k3": spec("paths-k3", {}, EXPERTS, quick, preset="k3"),
             "paths-k4": spec("paths-k4", {}, (*EXPERTS, "epa"), quick)}
 
 
-def _paths_plot(tables, path: Path) -> None:
+def _paths_plot(tables: Tables, path: Path) -> None:
     plot_traces(tables["paths"], path, PATH_CASES)
 
 
-def _paths_claims(tables) -> list[Claim]:
+def _paths_claims(tables: Tables) -> list[Claim]:
     k3, k4 = tables["paths-k3"], tables["paths-k4"]
     length, rmse = "drone_path_length_m", "rmse_m"
     out = []

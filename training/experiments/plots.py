@@ -35,7 +35,8 @@ def save(fig: Any, path: Path) -> None:
     fig.savefig(path.with_suffix(".pdf"))
 
 
-def curve(ax: Any, rows: Sequence[Mapping], x_key: str, y_key: str | Callable, policy: str, label: str | None = None,
+def curve(ax: Any, rows: Sequence[Mapping[str, Any]], x_key: str, y_key: str | Callable[..., Any], policy: str,
+          label: str | None = None,
           **kw: Any) -> None:
     """Mean and 95 % interval of ``y_key`` over the seeds at each ``x_key`` of one policy."""
     sel = [r for r in rows if r["policy"] == policy]

@@ -5,22 +5,23 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
-from .base import EXPERTS, REPORT_SLOT, SEEDS, Experiment, by_seed, slot_cost, spec, values
+from .base import EXPERTS, REPORT_SLOT, SEEDS, Experiment, Tables, by_seed, slot_cost, spec, values
 from .claims import Claim, multi_claim
 from .plots import curve, label_axes, new_figure, save
 
 
-def _rate_sweeps(quick):
+def _rate_sweeps(quick: bool) -> dict[str, dict[str, Any]]:
     grid = {"channel.rate_threshold_bps_hz": [6.0, 10.0] if quick else [6.0, 8.0, 10.0],
             "power_budget_dbw": [0.0, 3.0] if quick else [-3.0, 0.0, 3.0]}
     return {"rate": spec("rate", grid, EXPERTS, quick)}
 
 
-def _rate_plot(tables, path: Path) -> None:
+def _rate_plot(tables: Tables, path: Path) -> None:
     rows = tables["rate"]
     fig = new_figure(ncols=2, width=4.6)
-    panels: tuple[tuple[str | Callable, str], ...] = (("control_cost", "episode control cost"),
+    panels: tuple[tuple[str | Callable[..., Any], str], ...] = (("control_cost", "episode control cost"),
                                                       (slot_cost, f"stage cost at slot {REPORT_SLOT}"))
     for j, (metric, label) in enumerate(panels):
         ax = fig.add_subplot(1, 2, j + 1)
@@ -34,7 +35,7 @@ def _rate_plot(tables, path: Path) -> None:
     save(fig, path)
 
 
-def _rate_claims(tables) -> list[Claim]:
+def _rate_claims(tables: Tables) -> list[Claim]:
     rows = tables["rate"]
     rates, budgets = values(rows, "channel.rate_threshold_bps_hz"), values(rows, "power_budget_dbw")
     r0, r1 = rates[0], rates[-1]

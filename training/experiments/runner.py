@@ -9,6 +9,7 @@ import json
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from ..results.report import markdown_table
 from .base import Experiment
@@ -19,7 +20,7 @@ __all__ = ["tables_of", "make_figures", "check_claims", "write_claims", "read_cl
 
 
 def tables_of(exp: Experiment, out: Path, quick: bool = False, workers: int = 1, progress: bool = False,
-              run: bool = True) -> dict[str, list[dict]]:
+              run: bool = True) -> dict[str, list[dict[str, Any]]]:
     """The experiment's tables in ``out/data`` (with ``run``: their missing rows run first)."""
     from ..results.run import write_rows
     from ..sweep import SweepTableError, read_rows, read_table, run_sweep
@@ -103,7 +104,7 @@ def tally(claims: Sequence[Claim]) -> str:
     paper = [c for c in claims if "project's check" not in c.claim]
     own = [c for c in claims if "project's check" in c.claim]
 
-    def count(cs):
+    def count(cs: Sequence[Claim]) -> str:
         return ", ".join(f"{sum(c.verdict == v for c in cs)} {v}" for v in ("holds", "not significant", "differs"))
 
     return (f"Of the paper's {len(paper)} claims checked here: {count(paper)}. "

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import cast
+from typing import Any, cast
 
 from .base import QUICK_SET
 from .plots import new_figure, save
@@ -13,7 +13,7 @@ from .plots import new_figure, save
 __all__ = ["trace_rows", "plot_traces"]
 
 
-def trace_rows(cases: Sequence[tuple[str, str, str]], quick: bool) -> list[dict]:
+def trace_rows(cases: Sequence[tuple[str, str, str]], quick: bool) -> list[dict[str, Any]]:
     """Drone, AGV and reference positions of one episode (seed 0) per (label, preset, policy)."""
     import gymnasium as gym
 
@@ -36,7 +36,7 @@ def trace_rows(cases: Sequence[tuple[str, str, str]], quick: bool) -> list[dict]
     return rows
 
 
-def plot_traces(rows: Sequence[dict], path: Path, cases: Sequence[tuple[str, str, str]]) -> None:
+def plot_traces(rows: Sequence[dict[str, Any]], path: Path, cases: Sequence[tuple[str, str, str]]) -> None:
     from lawn_env import presets
 
     fig = new_figure(ncols=len(cases), width=3.3, height=3.6)

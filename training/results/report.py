@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -45,6 +46,7 @@ TARGETS: dict[int, float | None] = {3: 0.05, 4: 0.05, 8: 0.05, 16: 0.10, 32: 0.1
 _NOISE = next(iter(NOISE))
 #: The cost columns of the per-task and learned tables.
 _COSTS = ("control_cost", "transient_cost", "sustained_cost")
+Rows = Sequence[Mapping[str, Any]]  # evaluation rows (:mod:`.run`)
 
 
 def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
@@ -94,9 +96,10 @@ def format_score(score: tuple[float, float, float, int] | None) -> str:
     return f"{mean:.1f} [{lo:.1f}, {hi:.1f}]"
 
 
-def format_table(summary: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy",
-                 paired: dict[str, tuple[float, float]] | None = None, reference: str | None = None,
-                 scores: Mapping[str, tuple] | None = None, geometric: Mapping[str, Geometric] | None = None) -> str:
+def format_table(summary: list[dict[str, Any]], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS,
+                 by: str = "policy", paired: dict[str, tuple[float, float]] | None = None, reference: str | None = None,
+                 scores: Mapping[str, tuple[Any, ...]] | None = None, geometric: Mapping[str, Geometric] | None = None
+                 ) -> str:
     """A Markdown table: mean ± 95 % interval per metric (decision time in ms), optionally the score
     (``scores``: policy -> :func:`.stats.normalized_score`) and the cost against ``reference``
     (``paired``: the mean relative difference; ``geometric``: the deciding statistic)."""
@@ -135,7 +138,8 @@ def fmt_stat(x: float) -> str:
     return f"{x:.3g}"
 
 
-def summary_markdown(summary: list[dict], paired: dict, reference: str, scores: dict, geometric: dict) -> str:
+def summary_markdown(summary: list[dict[str, Any]], paired: dict[str, tuple[float, float]], reference: str,
+                     scores: Mapping[str, tuple[Any, ...]], geometric: Mapping[str, Geometric]) -> str:
     """The benchmark's summary as Markdown: the results table, which the same seeds reproduce digit
     for digit on any machine, then each policy's decision time, which is this machine's."""
     results = format_table(summary, metrics=RESULT_METRICS, paired=paired, reference=reference, scores=scores,
@@ -145,7 +149,7 @@ def summary_markdown(summary: list[dict], paired: dict, reference: str, scores: 
             f"machine that ran it:\n\n{timing}\n")
 
 
-def plot_summary(summary: list[dict], path: Path, title: str = "") -> None:
+def plot_summary(summary: list[dict[str, Any]], path: Path, title: str = "") -> None:
     """Bar chart of each summary metric with its 95 % interval."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -171,13 +175,13 @@ def plot_summary(summary: list[dict], path: Path, title: str = "") -> None:
     fig.savefig(path)
 
 
-def mean_cell(rows: Sequence[Mapping], policy: str, env: str, task: str | None, metric: str) -> str:
+def mean_cell(rows: Rows, policy: str, env: str, task: str | None, metric: str) -> str:
     """``mean ± 95 % half-width`` of ``metric`` over the seeds of ``policy`` on ``env`` (and ``task``)."""
     mean, half = mean_ci(costs_of(rows, policy, env, task, metric).values())
     return f"{fmt_num(mean)} ± {fmt_num(half)}"
 
 
-def protocol_cells(rows: Sequence[Mapping], scores: Mapping, policy: str, env: str) -> dict[str, str]:
+def protocol_cells(rows: Rows, scores: Mapping[tuple[str, str, str], Any], policy: str, env: str) -> dict[str, str]:
     """The cells every learned-protocol table shows for ``policy`` on ``env``: its anchor, control
     cost, score, paired difference against the best expert and against its own anchor, and its worst seed
     against the anchor."""
@@ -203,8 +207,7 @@ _LEARNED_CELLS = ("anchor", "cost", "transient", "sustained", "score", "geo_ref"
                   "worst")
 
 
-def learned_table(rows: Sequence[Mapping], entries: Sequence[tuple[str, str]],
-                  labels: Mapping[str, str] | None = None) -> str:
+def learned_table(rows: Rows, entries: Sequence[tuple[str, str]], labels: Mapping[str, str] | None = None) -> str:
     """The learned protocol's Markdown table of ``entries`` from their rows."""
     scores = scores_by_policy(rows)
     seeds = len({int(r["seed"]) for r in rows})
@@ -225,7 +228,7 @@ def learned_table(rows: Sequence[Mapping], entries: Sequence[tuple[str, str]],
     return f"{markdown_table(header, table)}\n\n{note}"
 
 
-def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequence[str],
+def suite_table(rows: Rows, policies: Sequence[str], tasks: Sequence[str],
                 skipped: Mapping[tuple[str, str], str]) -> tuple[str, str]:
     """The leaderboard (score per task, the IQM over tasks with its stratified bootstrap interval)
     and the references' costs per task."""
@@ -244,7 +247,7 @@ def suite_table(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
     return markdown_table(["policy", "env", *tasks, "IQM over tasks [95 %]"], board), _references_table(rows, tasks)
 
 
-def _references_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
+def _references_table(rows: Rows, tasks: Sequence[str]) -> str:
     """The references' costs per task and env, their gap and how it varies over the seeds."""
     refs = []
     for task in tasks:
@@ -262,7 +265,7 @@ def _references_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
                           refs)
 
 
-def structure_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
+def structure_table(rows: Rows, tasks: Sequence[str]) -> str:
     """Per task, what decides it on ``lawn/Joint-v1``: the best expert's control cost, its transient and
     sustained parts (the sustained share), the noise floor and the headroom rows against it."""
     table = []
@@ -283,7 +286,7 @@ def structure_table(rows: Sequence[Mapping], tasks: Sequence[str]) -> str:
     return markdown_table(header, table)
 
 
-def task_tables(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequence[str],
+def task_tables(rows: Rows, policies: Sequence[str], tasks: Sequence[str],
                 skipped: Mapping[tuple[str, str], str]) -> str:
     """One Markdown table per task: every row's control cost, its transient and sustained parts, the
     score, and the comparison with the best expert on the same env (geometric and paired mean)."""
@@ -309,8 +312,7 @@ def task_tables(rows: Sequence[Mapping], policies: Sequence[str], tasks: Sequenc
     return "\n\n".join(out)
 
 
-def plot_profiles(per_slot: Sequence[Mapping], path: Path, tasks: Sequence[str],
-                  transient_slots: int = TRANSIENT_SLOTS) -> Path:
+def plot_profiles(per_slot: Rows, path: Path, tasks: Sequence[str], transient_slots: int = TRANSIENT_SLOTS) -> Path:
     """The mean stage cost per slot of every row on ``lawn/Joint-v1`` (the agents on their own env),
     one panel per task, log scale; from the rows of ``per_slot.csv`` (:func:`.run.per_slot_profile`)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -355,7 +357,7 @@ def skipped_summary(skipped: Mapping[tuple[str, str], str]) -> list[str]:
     return [f"on `{task}`: {', '.join(ps)} ({skipped[(task, ps[0])]})" for task, ps in by_task.items()]
 
 
-def _decision_ms(rows: Sequence[Mapping], policy: str, env: str, task: str) -> float:
+def _decision_ms(rows: Rows, policy: str, env: str, task: str) -> float:
     return 1e3 * float(np.median(list(costs_of(rows, policy, env, task, "decision_time_median_s").values())))
 
 
@@ -373,8 +375,7 @@ def _target_cell(k: int, change: float) -> str:
     return f"≤ {target * 100:+.0f} %: {'met' if change <= target else 'missed'}"
 
 
-def generalization_table(rows: Sequence[Mapping], agents: Sequence[str], sizes: Mapping[int, int]
-                         ) -> str:
+def generalization_table(rows: Rows, agents: Sequence[str], sizes: Mapping[int, int]) -> str:
     """The Markdown table: per env, per K, the noise-floor row and every agent."""
     table = []
     envs = list(dict.fromkeys(policy_env(a) for a in agents))

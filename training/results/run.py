@@ -124,7 +124,7 @@ def resolve(name: str, config: ScenarioConfig, policy_kwargs: Mapping[str, Any] 
 
 
 def episode_row(policy: Policy, env_id: str, config: ScenarioConfig, seed: int,
-                transient_slots: int = TRANSIENT_SLOTS) -> dict:
+                transient_slots: int = TRANSIENT_SLOTS) -> dict[str, Any]:
     """One seeded, full episode of the unmodified scenario (``env_id`` of ``lawn_env.ENV_IDS``)
     under a built policy (:func:`agents.rollout`); returns a flat row of MODEL.md §6 metrics plus
     decision statistics and the control cost's transient and sustained parts (:func:`split_cost`)."""
@@ -168,7 +168,8 @@ def build_policy(policy: str, config: ScenarioConfig, env_id: str | None = None,
 
 
 def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
-                policy_kwargs: Mapping[str, Any] | None = None, transient_slots: int = TRANSIENT_SLOTS) -> dict:
+                policy_kwargs: Mapping[str, Any] | None = None,
+                transient_slots: int = TRANSIENT_SLOTS) -> dict[str, Any]:
     """One seeded episode of the named policy or reference row (:func:`build_policy`,
     :func:`episode_row`)."""
     agent, played = build_policy(policy, config, env_id, policy_kwargs)
@@ -177,7 +178,7 @@ def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
     return row
 
 
-def _run_task(task: tuple, transient_slots: int = TRANSIENT_SLOTS) -> dict:
+def _run_task(task: tuple[Any, ...], transient_slots: int = TRANSIENT_SLOTS) -> dict[str, Any]:
     policy, env_id, config, seed, policy_kwargs = task
     return run_episode(policy, env_id, config, seed, policy_kwargs, transient_slots)
 
@@ -192,8 +193,8 @@ def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SL
     return float(costs[:transient_slots].sum()), float(costs[transient_slots:].sum())
 
 
-def evaluate(tasks: Iterable[tuple], workers: int = 1, progress: bool = True, desc: str = "episodes",
-             transient_slots: int = TRANSIENT_SLOTS) -> list[dict]:
+def evaluate(tasks: Iterable[tuple[Any, ...]], workers: int = 1, progress: bool = True, desc: str = "episodes",
+             transient_slots: int = TRANSIENT_SLOTS) -> list[dict[str, Any]]:
     """Run ``(policy, env_id, config, seed, policy_kwargs)`` tasks; rows in task order, each with its
     ``transient_cost`` and ``sustained_cost`` split at ``transient_slots`` (:func:`split_cost`)."""
     split_cost((), transient_slots)  # a bad split fails before any episode
@@ -208,7 +209,8 @@ def policy_env(policy: str) -> str:
         agents = zoo_agents()
         if rest not in agents:
             raise ValueError(f"unknown zoo agent {rest!r}; shipped: {', '.join(agents)}")
-        return agents[rest]["evaluated_on"]
+        env: str = agents[rest]["evaluated_on"]
+        return env
     if prefix in ("sb3", "bc", "marl"):
         env = read_run(rest).env
         return central_env_id(env)
@@ -241,11 +243,11 @@ def learned_entries(agents: Sequence[str], envs: Sequence[str] | None = None) ->
 
 def run_entries(entries: Sequence[tuple[str, str]], config: ScenarioConfig, seeds: Sequence[int],
                 play: Play = DEFAULT_PLAY, task: str = "default", desc: str = "benchmark",
-                profiles: list[dict] | None = None) -> list[dict]:
+                profiles: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
     """Full episodes of every (policy, env) entry on every seed; rows with a ``task`` column and
     without the per-slot trace (its mean per slot appended to ``profiles`` when given,
     :func:`per_slot_profile`)."""
-    tasks: list[tuple] = [(policy, env, config, int(s), {}) for policy, env in entries for s in seeds]
+    tasks: list[tuple[Any, ...]] = [(policy, env, config, int(s), {}) for policy, env in entries for s in seeds]
     rows = evaluate(tasks, play.workers, play.progress, desc, play.transient_slots)
     for row in rows:
         row["task"] = task
@@ -257,7 +259,7 @@ def run_entries(entries: Sequence[tuple[str, str]], config: ScenarioConfig, seed
     return rows
 
 
-def per_slot_profile(rows: Sequence[Mapping]) -> list[dict]:
+def per_slot_profile(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """The mean stage cost per slot over the episodes of every (task, env, policy) of rows that
     hold their per-slot trace (``stage_costs``): one row per slot."""
     groups: dict[tuple[str, str, str], list[list[float]]] = {}
@@ -272,7 +274,7 @@ def per_slot_profile(rows: Sequence[Mapping]) -> list[dict]:
     return out
 
 
-def write_rows(rows: list[dict], path: str | Path) -> Path:
+def write_rows(rows: list[dict[str, Any]], path: str | Path) -> Path:
     """Write rows as CSV or JSON, chosen by the file extension (``.csv`` or ``.json``)."""
     path = Path(path)
     suffix = path.suffix.lower()
@@ -286,7 +288,7 @@ def write_rows(rows: list[dict], path: str | Path) -> Path:
     return path
 
 
-def write_csv(rows: list[dict], path: Path | str, atomic: bool = False) -> Path:
+def write_csv(rows: list[dict[str, Any]], path: Path | str, atomic: bool = False) -> Path:
     """Rows as CSV with the union of their keys as columns (first-seen order). ``atomic`` writes a
     temporary file, syncs it and renames it over ``path``, so a reader never sees half a table."""
     path = Path(path)

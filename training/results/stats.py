@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -57,7 +58,8 @@ def mean_ci(values: Iterable[float]) -> tuple[float, float]:
     return float(x.mean()), float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
 
 
-def paired_difference(a: Mapping, b: Mapping, relative: bool = True) -> tuple[float, float, int]:
+def paired_difference(a: Mapping[int, float], b: Mapping[int, float], relative: bool = True
+                      ) -> tuple[float, float, int]:
     """Mean, 95 % t-interval half-width and count of the per-key difference ``a[k] - b[k]`` over the
     keys (seeds) both hold; ``relative`` divides each difference by ``b[k]`` (a paired comparison)."""
     keys = [k for k in a if k in b]
@@ -89,7 +91,7 @@ class Geometric:
         return bool(self.high < 1.0 or self.low > 1.0)
 
 
-def paired_geometric(a: Mapping, b: Mapping, resamples: int = BOOTSTRAP_RESAMPLES) -> Geometric:
+def paired_geometric(a: Mapping[int, float], b: Mapping[int, float], resamples: int = BOOTSTRAP_RESAMPLES) -> Geometric:
     """The geometric mean of the per-key (seed) cost ratios ``a[k] / b[k]`` over the keys both hold,
     its 95 % percentile bootstrap interval (``scipy.stats.bootstrap`` on the log-ratios, a fixed
     seed; NaN for fewer than 3 seeds) and the share of seeds ``a`` won. On heavy-tailed costs the
@@ -143,10 +145,10 @@ def verdict(mean: float, half: float, expect: str, tie_tolerance: float = 0.01) 
     return "not significant"
 
 
-def summarize(rows: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy"
-              ) -> list[dict]:
+def summarize(rows: list[dict[str, Any]], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS, by: str = "policy"
+              ) -> list[dict[str, Any]]:
     """Mean and 95 % t-interval half-width of each metric per group, in first-seen group order."""
-    groups: dict[str, list[dict]] = {}
+    groups: dict[str, list[dict[str, Any]]] = {}
     for row in rows:
         groups.setdefault(row[by], []).append(row)
     out = []
@@ -158,7 +160,7 @@ def summarize(rows: list[dict], metrics: Sequence[tuple[str, str]] = SUMMARY_MET
     return out
 
 
-def paired_cost_difference(rows: list[dict], reference: str, metric: str = "control_cost"
+def paired_cost_difference(rows: list[dict[str, Any]], reference: str, metric: str = "control_cost"
                            ) -> dict[str, tuple[float, float]]:
     """Per policy: mean and 95 % t-interval half-width of the per-seed relative difference
     ``(x - x_ref) / x_ref`` against ``reference`` on the seeds both ran (:func:`paired_difference`)."""
@@ -171,7 +173,8 @@ def paired_cost_difference(rows: list[dict], reference: str, metric: str = "cont
     return out
 
 
-def paired_cost_geometric(rows: list[dict], reference: str, metric: str = "control_cost") -> dict[str, Geometric]:
+def paired_cost_geometric(rows: list[dict[str, Any]], reference: str,
+                          metric: str = "control_cost") -> dict[str, Geometric]:
     """Per policy but ``reference``: :func:`paired_geometric` of its per-seed costs against the reference's."""
     ref = costs_of(rows, reference, metric=metric)
     mine = {name: costs_of(rows, name, metric=metric) for name in dict.fromkeys(r["policy"] for r in rows)}
@@ -179,7 +182,7 @@ def paired_cost_geometric(rows: list[dict], reference: str, metric: str = "contr
             if name != reference and any(s in ref for s in cost)}
 
 
-def costs_of(rows: Sequence[Mapping], policy: str, env: str | None = None, task: str | None = None,
+def costs_of(rows: Sequence[Mapping[str, Any]], policy: str, env: str | None = None, task: str | None = None,
              metric: str = "control_cost") -> dict[int, float]:
     """``metric`` (default: the control cost) per seed of ``policy`` (on ``env`` and ``task``, when
     given) in evaluation rows."""
@@ -187,13 +190,14 @@ def costs_of(rows: Sequence[Mapping], policy: str, env: str | None = None, task:
             and (env is None or r["env"] == env) and (task is None or r.get("task", "default") == task)}
 
 
-def geometric(rows: Sequence[Mapping], policy: str, reference: str, env: str, task: str | None = None) -> Geometric:
+def geometric(rows: Sequence[Mapping[str, Any]], policy: str, reference: str, env: str,
+              task: str | None = None) -> Geometric:
     """:func:`paired_geometric` of ``policy``'s per-seed costs against ``reference``'s (on ``env``, and
     ``task`` when given)."""
     return paired_geometric(costs_of(rows, policy, env, task), costs_of(rows, reference, env, task))
 
 
-def paired(rows: Sequence[Mapping], policy: str, reference: str, env: str, task: str | None = None
+def paired(rows: Sequence[Mapping[str, Any]], policy: str, reference: str, env: str, task: str | None = None
            ) -> tuple[float, float]:
     """Mean per-seed relative difference of ``policy``'s cost against ``reference``'s (on ``env``, and
     ``task`` when given) and its 95 % half-width."""
@@ -214,7 +218,8 @@ def _score(e: np.ndarray, r: np.ndarray, x: np.ndarray, axis: int = -1) -> np.nd
     refuse a sample whose references do not separate; a bootstrap resample that does not is kept as
     it comes out (both intervals, the task's and the aggregate's, treat it alike)."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        return 100.0 * np.mean(e - x, axis=axis) / np.mean(e - r, axis=axis)
+        score: np.ndarray = 100.0 * np.mean(e - x, axis=axis) / np.mean(e - r, axis=axis)
+        return score
 
 
 def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: Mapping[int, float],
@@ -245,7 +250,7 @@ def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: 
     return score, float(res.confidence_interval.low), float(res.confidence_interval.high), len(seeds)
 
 
-def score_inputs(rows: Iterable[Mapping], metric: str = "control_cost", version: int = SCORE_VERSION
+def score_inputs(rows: Iterable[Mapping[str, Any]], metric: str = "control_cost", version: int = SCORE_VERSION
                  ) -> dict[tuple[str, str, str], Costs]:
     """Per (task, env, policy) of evaluation rows (``policy``, ``env``, ``seed``, ``metric`` and
     optionally ``task``, default ``"default"``): the per-seed costs (E, R, x) of the two references
@@ -268,8 +273,8 @@ def score_inputs(rows: Iterable[Mapping], metric: str = "control_cost", version:
     return out
 
 
-def scores_by_policy(rows: Iterable[Mapping], metric: str = "control_cost", version: int = SCORE_VERSION
-                     ) -> dict[tuple[str, str, str], tuple]:
+def scores_by_policy(rows: Iterable[Mapping[str, Any]], metric: str = "control_cost", version: int = SCORE_VERSION
+                     ) -> dict[tuple[str, str, str], tuple[Any, ...]]:
     """Scores (version ``version``) of every (task, env, policy) of evaluation rows
     (:func:`score_inputs`), against the reference rows of the same task and env. Groups without both
     references, sharing no seed with them, or whose references do not separate (EPA not costlier
