@@ -275,8 +275,8 @@ def test_the_core_and_the_agents_keep_short_and_narrow_functions():
     assert {name: fs for name, fs in long.items() if fs} == {}
     wide = {name: _wide_functions(ast.parse(path.read_text()), 8) for name, path in _modules().items()}
     assert {name: fs for name, fs in wide.items() if fs} == {}
-    kernel = ("import numba\n_kernel = numba.njit(cache=True)\n@numba.njit(cache=True)\ndef k(a, b, c, d, e, f, g, h, i):\n"
-              "    pass\n@_kernel\ndef j(a, b, c, d, e, f, g, h, i, j, k, l, m):\n    pass\n")
+    kernel = ("import numba\n_kernel = numba.njit(cache=True)\n@numba.njit(cache=True)\n"
+              "def k(a, b, c, d, e, f, g, h, i):\n    pass\n@_kernel\ndef j(a, b, c, d, e, f, g, h, i, j, k, l, m):\n    pass\n")
     assert _wide_functions(ast.parse(kernel + "def w(a, b, c, d, e, f, g, h, *i):\n    pass\n"), 8) == [
         "j (13 parameters)", "w (9 parameters)"]
 
