@@ -557,3 +557,28 @@ def test_rl_zoo_reads_the_recipes_module():
     assert "interface" not in entry and entry["policy"] == "MlpPolicy" and isinstance(entry["normalize"], str)
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
         recipes.nope
+
+
+def test_paired_reward_run_trains_on_the_paired_reward_and_logs_the_envs_own(tmp_path):
+    # PPO on the RL interface with the reward paired against epa: the monitor logs keep the env's rewards
+    out, _ = _train(tmp_path, "ppo", steps=128, interface="rl", hp_overrides={"paired_anchor": "epa", "gamma": 0.9})
+    assert json.loads((out / "hyperparams.json").read_text())["paired_anchor"] == "epa"
+    from stable_baselines3.common.monitor import Monitor
+
+    from agents.paired import PairedReward
+    from training.sb3 import make_train_env
+
+    venv = make_train_env("lawn/Joint-v1", SMALL, 1, 0, False, tmp_path / "m", interface="rl",
+                          paired={"anchor": "epa", "gamma": 0.9})
+    wrapper = venv.envs[0]
+    assert isinstance(wrapper, PairedReward) and isinstance(wrapper.env, Monitor)  # the monitor logs the env's reward
+    assert wrapper.gamma == 0.9 and wrapper.anchor.name == "epa"
+    returns = [float(row["r"]) for f in sorted((out / "monitor").glob("*.monitor.csv"))
+               for row in csv.DictReader(f.read_text().splitlines()[1:])]
+    assert returns and all(r <= 0 for r in returns)  # the RL interface's rewards are at most zero; pairs are not
+    with pytest.raises(ValueError, match="paired_anchor='nope': unknown policy"):
+        TrainSpec(algo="ppo", env_id="lawn/Joint-v1", timesteps=64, out_dir=tmp_path / "x",
+                  hp_overrides={"paired_anchor": "nope"})
+    with pytest.raises(ValueError, match="paired reward wraps"):
+        TrainSpec(algo="ppo", env_id="CartPole-v1", timesteps=64, out_dir=tmp_path / "y",
+                  hp_overrides={"paired_anchor": "epa"})

@@ -21,7 +21,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from agents.learned import load_saved
 from agents.runs import algorithm_class, read_run
-from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, parallel_env
+from lawn_env import ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig, parallel_env
 from lawn_env.interface import InterfaceLike
 
 from .callbacks import ActorWarmup, Checkpoint, ControlCostValidation, RunCheckpoint, save_model
@@ -120,13 +120,18 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
                    monitor_dir: Path | None, vecnormalize_path: Path | None = None, **kwargs: Any) -> Any:
     """A seeded, monitored SB3 VecEnv with optional VecNormalize (``normalize``: true or its options;
     ``vecnormalize_path``: saved statistics). Keywords: ``interface``, ``append_monitor`` (a resumed
-    run's monitor logs) and ``vec`` (``"native"``: :class:`NativeVecEnv`, no monitor files)."""
+    run's monitor logs), ``vec`` (``"native"``: :class:`NativeVecEnv`, no monitor files) and ``paired``
+    (:class:`agents.paired.PairedReward`'s keywords: every env's reward paired with an anchor's; the
+    monitor logs keep the env's own rewards)."""
     from stable_baselines3.common.env_util import make_vec_env
 
-    unknown = set(kwargs) - {"interface", "append_monitor", "vec"}
+    unknown = set(kwargs) - {"interface", "append_monitor", "vec", "paired"}
     if unknown:
         raise TypeError(f"make_train_env: unexpected keywords {sorted(unknown)}")
-    interface = kwargs.get("interface")
+    interface, paired = kwargs.get("interface"), kwargs.get("paired")
+    if paired is not None and (kwargs.get("vec", "dummy") == "native" or env_id not in ENV_IDS):
+        raise ValueError(f"the paired reward wraps single envs of {', '.join(ENV_IDS)}: train with --vec dummy "
+                         f"(got env {env_id}, vec {kwargs.get('vec', 'dummy')})")
     if kwargs.get("vec", "dummy") == "native":
         venv: VecEnv = VecMonitor(NativeVecEnv(config, n_envs, env_id, interface=interface))
         venv.seed(seed)
@@ -134,9 +139,12 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
         venv = make_marl_vec_env(config, n_envs, seed, interface=interface)
     else:
         env_kwargs = {} if env_id == "CartPole-v1" else {"config": config, "interface": interface}
+        from agents.paired import PairedReward
+
         venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs,
                             monitor_dir=str(monitor_dir) if monitor_dir else None,
-                            monitor_kwargs={"override_existing": not kwargs.get("append_monitor", False)})
+                            monitor_kwargs={"override_existing": not kwargs.get("append_monitor", False)},
+                            wrapper_class=PairedReward if paired else None, wrapper_kwargs=paired)
     if vecnormalize_path is not None:
         return VecNormalize.load(str(vecnormalize_path), venv)
     if normalize:
@@ -219,7 +227,9 @@ def setup(record: dict[str, Any], options: Any, config: ScenarioConfig, out_dir:
     set_random_seed(env_seed)
     env = make_train_env(record["env"], config, options.n_envs, env_seed, options.normalize, out_dir / "monitor",
                          vecnormalize_path=start.file("vecnormalize.pkl") if start else None,
-                         interface=options.interface, append_monitor=start is not None, vec=record.get("vec", "dummy"))
+                         interface=options.interface, append_monitor=start is not None, vec=record.get("vec", "dummy"),
+                         paired=None if options.paired_anchor is None else
+                         {"anchor": options.paired_anchor, "gamma": float(options.algo_kwargs.get("gamma", 0.99))})
     try:
         model = _model(record, env, start, out_dir, options)
     except BaseException:

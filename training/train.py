@@ -44,6 +44,7 @@ NATIVE_ENV_IDS = tuple(i for i in (*ENV_IDS, *RL_ENV_IDS) if gym.spec(i).vector_
 LAWN_KEYS: dict[str, tuple[str, ...] | None] = {
     "n_envs": None, "normalize": None, "policy": None, "interface": None,
     "actor_warmup_steps": ("ppo", "a2c"), "init_log_std": ("ppo", "a2c"), "start_at_anchor": ("ppo", "sac"),
+    "paired_anchor": ("ppo", "sac", "a2c", "td3"),
 }
 #: Constructor arguments ``lawn train`` sets itself: not hyperparameters.
 _SET_BY_LAWN = {"self", "env", "policy", "seed", "verbose", "tensorboard_log"}
@@ -63,6 +64,8 @@ class RunOptions:
     actor_warmup_steps: Annotated[int, Field(ge=0, strict=True)] = 0
     init_log_std: Annotated[float, Field(ge=-20, strict=True)] | None = None
     start_at_anchor: bool = False
+    paired_anchor: str | None = None
+    """Train on the paired reward against this policy (:class:`agents.paired.PairedReward`)."""
     algo_kwargs: dict[str, Any] = Field(default_factory=dict)
 
 
@@ -75,6 +78,18 @@ def lr_schedule(value: Any, key: str = "learning_rate") -> Any:
             raise ValueError(f"--hp {key}={value!r}: lin_<number> expected, e.g. lin_3e-4") from None
         return lambda progress_remaining: progress_remaining * start
     return value
+
+
+def _check_paired(anchor: str | None, env_id: str) -> None:
+    """A paired-reward anchor: a registered policy of a central lawn env (the wrapper's errors, early)."""
+    if anchor is None:
+        return
+    if env_id not in _LAWN:
+        raise ValueError(f"--hp paired_anchor={anchor!r}: the paired reward wraps {', '.join(_LAWN)}, not {env_id}")
+    from agents.policies import POLICIES
+
+    if anchor not in POLICIES:
+        raise ValueError(f"--hp paired_anchor={anchor!r}: unknown policy; valid: {', '.join(POLICIES)}")
 
 
 def _check_normalize(normalize: bool | dict[str, Any]) -> None:
@@ -117,6 +132,7 @@ def split_params(algo: str, env_id: str, params: Mapping[str, Any]) -> RunOption
             raise ValueError(f"--hp {key}: applies to {', '.join(algos)}, not {algo}")
     options = RunOptions(**{k: params.pop(k) for k in list(params) if k in LAWN_KEYS})
     _check_normalize(options.normalize)
+    _check_paired(options.paired_anchor, env_id)
     options.policy = _policy(algo, env_id, options, cls)
     for key in ("learning_rate", "clip_range"):
         if key in params:
