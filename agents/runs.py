@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from lawn_env import PARALLEL_ENV_ID, ScenarioConfig
+from lawn_env import LEGACY_ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig
 
 from .errors import MissingExtra
 
@@ -89,8 +89,10 @@ class RunDir:
 
     @property
     def env(self) -> str:
+        """The env the run trained on, by its current id: a run recorded under a v0 id
+        (``lawn_env.LEGACY_ENV_IDS``) plays that id's current version, the same scenario."""
         env: str = self.record["env"]
-        return env
+        return LEGACY_ENV_IDS[env][0] if env in LEGACY_ENV_IDS else env
 
     @property
     def algo(self) -> str:
