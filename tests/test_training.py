@@ -579,6 +579,11 @@ def test_paired_reward_run_trains_on_the_paired_reward_and_logs_the_envs_own(tmp
     with pytest.raises(ValueError, match="paired_anchor='nope': unknown policy"):
         TrainSpec(algo="ppo", env_id="lawn/Joint-v1", timesteps=64, out_dir=tmp_path / "x",
                   hp_overrides={"paired_anchor": "nope"})
+    with pytest.raises(ValueError, match="paired_anchor='bogus:x': unknown policy"):
+        TrainSpec(algo="ppo", env_id="lawn/Joint-v1", timesteps=64, out_dir=tmp_path / "x",
+                  hp_overrides={"paired_anchor": "bogus:x"})
+    assert TrainSpec(algo="ppo", env_id="lawn/Joint-v1", timesteps=64, out_dir=tmp_path / "z",
+                     hp_overrides={"paired_anchor": "anchor:stake"}).hyperparams()[0]["paired_anchor"] == "anchor:stake"
     with pytest.raises(ValueError, match="paired reward wraps"):
         TrainSpec(algo="ppo", env_id="CartPole-v1", timesteps=64, out_dir=tmp_path / "y",
                   hp_overrides={"paired_anchor": "epa"})

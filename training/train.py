@@ -86,10 +86,12 @@ def _check_paired(anchor: str | None, env_id: str) -> None:
         return
     if env_id not in _LAWN:
         raise ValueError(f"--hp paired_anchor={anchor!r}: the paired reward wraps {', '.join(_LAWN)}, not {env_id}")
-    from agents.policies import POLICIES
+    from agents.policies import LOADERS, POLICIES
 
-    if anchor not in POLICIES:
-        raise ValueError(f"--hp paired_anchor={anchor!r}: unknown policy; valid: {', '.join(POLICIES)}")
+    prefix = anchor.split(":", 1)[0] if ":" in anchor else None
+    if (anchor not in POLICIES) if prefix is None else (prefix not in LOADERS):
+        raise ValueError(f"--hp paired_anchor={anchor!r}: unknown policy; valid: {', '.join(POLICIES)}, or "
+                         f"{', '.join(f'{p}:NAME' for p in LOADERS)}")
 
 
 def _check_normalize(normalize: bool | dict[str, Any]) -> None:
