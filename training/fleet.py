@@ -14,14 +14,15 @@ from typing import Any
 import numpy as np
 
 from agents.learned import SB3Policy
-from lawn_env import ScenarioConfig
+from lawn_env import ScenarioConfig, presets
 from lawn_env.entities import EntityLayout
 from lawn_env.interface import InterfaceLike, resolve_interface
 
 from .bc import checked_settings, collect, save_imitation
 from .protocol import TRAIN_SEED_BASE, limit_torch_threads, versions
 
-__all__ = ["fleet_pairs", "fit_fleet", "dagger_round", "fleet_settings", "train_fleet"]
+__all__ = ["fleet_pairs", "fit_fleet", "dagger_round", "fleet_settings", "task_config", "training_configs",
+           "train_fleet"]
 
 
 def fleet_pairs(env_id: str, config: ScenarioConfig, steps: int, seed: int, interface: InterfaceLike,
@@ -92,17 +93,41 @@ def dagger_round(model: Any, env_id: str, configs: Sequence[ScenarioConfig], ste
 
 
 #: A fleet run's hyperparameters and their defaults (``fleet.yml`` and ``--hp``).
-_FLEET_KEYS = {"interface": "rl", "expert": "rg-mpc", "fleet_sizes": (3, 4, 8), "epochs": 20, "batch_size": 256,
-               "learning_rate": 1e-3, "dagger_iterations": 2, "dagger_timesteps": 2400, "width": 64, "heads": 4,
-               "layers": 2}
+#: ``tasks`` (preset names, :mod:`lawn_env.presets`), when given, replaces ``fleet_sizes``: the network
+#: trains on those scenarios, each at its own K, with ``task_settings`` (dotted config keys, as
+#: ``--set``) applied to every one.
+_FLEET_KEYS = {"interface": "rl", "expert": "rg-mpc", "fleet_sizes": (3, 4, 8), "tasks": (), "task_settings": {},
+               "epochs": 20, "batch_size": 256, "learning_rate": 1e-3, "dagger_iterations": 2, "dagger_timesteps": 2400,
+               "width": 64, "heads": 4, "layers": 2}
 
 
 def fleet_settings(params: Mapping[str, Any]) -> dict[str, Any]:
     """A fleet run's hyperparameters, checked: the interface in the entity layout, the sizes sorted."""
     p = checked_settings(params, _FLEET_KEYS, "fleet")
     network = {key: p.pop(key) for key in ("width", "heads", "layers")}
-    return p | {"interface": resolve_interface(p["interface"]).to_dict() | {"layout": "entities"},
-                "fleet_sizes": sorted({int(k) for k in p["fleet_sizes"]}), "network": network}
+    tasks = [p["tasks"]] if isinstance(p["tasks"], str) else list(p["tasks"])
+    for task in tasks:
+        if task not in presets.names():
+            raise ValueError(f"fleet hyperparameter tasks: unknown preset {task!r}; valid: {', '.join(presets.names())}")
+    if not isinstance(p["task_settings"], Mapping):
+        raise ValueError(f"fleet hyperparameter task_settings={p['task_settings']!r}: a mapping of config keys")
+    sizes = sorted({task_config(t, p["task_settings"]).num_agvs for t in tasks} if tasks
+                   else {int(k) for k in p["fleet_sizes"]})
+    return p | {"interface": resolve_interface(p["interface"]).to_dict() | {"layout": "entities"}, "tasks": tasks,
+                "task_settings": dict(p["task_settings"]), "fleet_sizes": sizes, "network": network}
+
+
+def task_config(task: str, settings: Mapping[str, Any]) -> ScenarioConfig:
+    """The scenario of preset ``task`` with ``settings`` (dotted config keys) applied."""
+    return presets.get(task).override(dict(settings))
+
+
+def training_configs(config: ScenarioConfig, st: Mapping[str, Any]) -> list[ScenarioConfig]:
+    """The scenarios a fleet run trains on: its ``tasks`` with ``task_settings``, else ``config`` at
+    every size of ``fleet_sizes`` (with ``task_settings``)."""
+    if st["tasks"]:
+        return [task_config(t, st["task_settings"]) for t in st["tasks"]]
+    return [config.override(dict(st["task_settings"]), num_agvs=k) for k in st["fleet_sizes"]]
 
 
 def _dagger(model: Any, env_id: str, configs: list[Any], st: dict[str, Any], timesteps: int,
@@ -139,10 +164,11 @@ def train_fleet(spec: Any, params: Mapping[str, Any], version: int) -> dict[str,
     start = time.perf_counter()
     model = PPO(FleetPolicy, env, seed=spec.seed, device="cpu", verbose=0,
                 policy_kwargs={**st["network"], "log_std_init": -1.0})
-    configs = [spec.config.override(num_agvs=k) for k in st["fleet_sizes"]]
+    configs = training_configs(spec.config, st)
     history = _dagger(model, spec.env_id, configs, st, spec.timesteps, TRAIN_SEED_BASE + 1000 * spec.seed)
     record = {"algo": "fleet", "target": "fleet", "trainer": "fleet", "env": spec.env_id, "seed": spec.seed,
               "timesteps": spec.timesteps, "interface": st["interface"], "fleet_sizes": st["fleet_sizes"],
+              "tasks": st["tasks"], "task_settings": st["task_settings"],
               "num_timesteps": int(history[-1]["samples"]), "hyperparams_version": version,
               "wall_time_s": time.perf_counter() - start, "eval_episodes": spec.eval_episodes, "versions": versions()}
     summary = save_imitation(spec, model, record, st, history)

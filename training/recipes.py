@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from agents.runs import read_run
-from lawn_env import PARALLEL_ENV_ID, RL_ENV_IDS, ScenarioConfig, central_env_id
+from lawn_env import PARALLEL_ENV_ID, RL_ENV_IDS, ScenarioConfig, central_env_id, presets
 
 from .pool import pool_map
 from .train import LAWN_KEYS, TrainSpec, load_hyperparams, train
@@ -40,11 +40,14 @@ class Recipe:
     vec: Literal["dummy", "native"] = "dummy"  # lawn train --vec: "native" trains on lawn's batched vector env
     section: str = "main"  # where docs/LEARNED.md shows it: the page's tables, or the "fleet" block (SECTIONS)
     num_agvs: int = 4  # the fleet it trains on (lawn train --set num_agvs=K); every recipe is evaluated at K = 4
+    preset: str = "default"  # the scenario it trains and validates on (lawn train --preset)
+    settings: dict[str, Any] = field(default_factory=dict)  # config keys over the preset (lawn train --set)
 
     @property
     def config(self) -> ScenarioConfig:
-        """The scenario it trains on: the default one, with its fleet size."""
-        return ScenarioConfig(num_agvs=self.num_agvs)
+        """The scenario it trains on: its preset with its settings and fleet size."""
+        base = presets.get(self.preset)
+        return base.override(dict(self.settings), **({} if self.num_agvs == base.num_agvs else {"num_agvs": self.num_agvs}))
 
     @property
     def evaluated_on(self) -> str:
@@ -64,8 +67,11 @@ class Recipe:
         parts += [f"--hp {shlex.quote(f'{k}={json.dumps(v)}')}" for k, v in self.hp.items()]
         if self.vec != "dummy":
             parts.append(f"--vec {self.vec}")
-        if self.num_agvs != 4:
-            parts.append(f"--set num_agvs={self.num_agvs}")
+        if self.preset != "default":
+            parts.append(f"--preset {self.preset}")
+        sets = {**self.settings, **({} if self.num_agvs == presets.get(self.preset).num_agvs else
+                                    {"num_agvs": self.num_agvs})}
+        parts += [f"--set {k}={v}" for k, v in sets.items()]
         if self.init_from:
             parts.append(f"--init-from RUNS/{self.init_from}/seed-<s>")
         return " ".join(parts)
@@ -91,6 +97,15 @@ _SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_
 #: One network for every fleet size (agents/fleet.py, training/hyperparams/fleet.yml): one training
 #: seed (a run is about 25 minutes, two side by side on 2 cores).
 _FLEET_SEEDS = (0,)
+#: The fleet networks' teacher: the delivery-value expert (on Comm-v1 under the paper's law it plans as
+#: rg-mpc), DAgger on the network's own states.
+_FLEET_DV = {"expert": "dv-mpc"}
+#: Distillation of dv-mpc into one fleet network for the steady suite tasks (each at its own K: the
+#: entity layout serves K = 4 and 8 alike): 10,000 labels a task, then 4 DAgger rounds of 2,500 a task.
+_DISTIL_TASKS = ("steady", "steady-low-power", "steady-gusty", "wide-k8")
+_DISTIL = {"expert": "dv-mpc", "tasks": list(_DISTIL_TASKS), "dagger_timesteps": 10_000}
+#: dv-mpc's AGVs on Comm: the env's MPC applies the delivery law (each command planned as if it arrives).
+_DELIVERY = {"control.law": "delivery"}
 #: Multi-agent PPO with the fleet network (training/sb3.py): every agent sees the fleet and which
 #: entity it is, and acts with its own row; started at the anchor (the heads zeroed), small steps.
 _MARL_FLEET = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,
@@ -102,10 +117,15 @@ RECIPES: dict[str, Recipe] = {r.name: r for r in (
     Recipe("bc-comm", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Comm-v1", 100_000, hp=_BC_AT_SCALE),
     Recipe("bc-joint", "BC of rg-mpc, 100k labels + 4 DAgger rounds", "bc", "lawn/Joint-v1", 100_000,
            hp=_BC_AT_SCALE),
-    Recipe("fleet-comm", "Fleet network (attention over the AGVs), DAgger of rg-mpc on K = 3-32", "fleet",
-           "lawn/Comm-v1", 50_000, seeds=_FLEET_SEEDS, section="fleet"),
-    Recipe("fleet-joint", "Fleet network (attention over the AGVs), DAgger of rg-mpc on K = 3-32", "fleet",
-           "lawn/Joint-v1", 50_000, seeds=_FLEET_SEEDS, section="fleet"),
+    Recipe("dv-joint", "Fleet network, DAgger of dv-mpc on the steady suite tasks", "fleet", "lawn/Joint-v1", 40_000,
+           seeds=_FLEET_SEEDS, hp=_DISTIL, section="distil", preset="steady"),
+    Recipe("dv-comm", "Fleet network, DAgger of dv-mpc on the steady suite tasks (delivery law)", "fleet",
+           "lawn/Comm-v1", 40_000, seeds=_FLEET_SEEDS, hp={**_DISTIL, "task_settings": _DELIVERY}, section="distil",
+           preset="steady", settings=_DELIVERY),
+    Recipe("fleet-comm", "Fleet network (attention over the AGVs), DAgger of dv-mpc on K = 3-32", "fleet",
+           "lawn/Comm-v1", 50_000, seeds=_FLEET_SEEDS, hp=_FLEET_DV, section="fleet"),
+    Recipe("fleet-joint", "Fleet network (attention over the AGVs), DAgger of dv-mpc on K = 3-32", "fleet",
+           "lawn/Joint-v1", 50_000, seeds=_FLEET_SEEDS, hp=_FLEET_DV, section="fleet"),
     Recipe("ppo-marl-fleet-k16", "PPO multi-agent, fleet network, trained at K = 16", "ppo", PARALLEL_ENV_ID,
            100_000, seeds=_FLEET_SEEDS, hp=_MARL_FLEET, eval_every=25_000, section="fleet", num_agvs=16),
     Recipe("ppo-marl-fleet-k64", "PPO multi-agent, fleet network, trained at K = 64", "ppo", PARALLEL_ENV_ID,
@@ -128,7 +148,7 @@ RECIPES: dict[str, Recipe] = {r.name: r for r in (
 
 #: The sections of docs/LEARNED.md (``lawn zoo build`` rebuilds whole sections): ``main``, the
 #: page's tables; ``fleet``, the fleet networks' tables (generated block ``zoo-fleet``).
-SECTIONS: tuple[str, ...] = ("main", "fleet")
+SECTIONS: tuple[str, ...] = ("main", "fleet", "distil")
 
 
 def recipe(name: str) -> Recipe:
