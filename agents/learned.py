@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 import pickle
 import zipfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -152,6 +152,7 @@ class SB3Policy(InterfacePolicy):
         self.name = label
         self.config_given = config_given
         self.entities = None
+        self.residual: Any = None  # agents.residual.ResidualActions: with_residual
         self._predict = _predictor(network)
         if self.interface.layout == "entities":
             self.entities = EntityLayout(self.config, "joint" if env_id == JOINT else "comm", self.interface.obs_bound)
@@ -174,7 +175,27 @@ class SB3Policy(InterfacePolicy):
         if env_id not in (None, trained_env):
             raise ValueError(f"{path} was trained on {trained_env}, not {env_id}")
         return cls(_load_model(run), config if config is not None else run.load_config(), trained_env, run.interface,
-                   ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}", config_given=config is not None)
+                   ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}",
+                   config_given=config is not None).with_residual(run.record.get("residual"))
+
+    def with_residual(self, residual: Mapping[str, Any] | None) -> SB3Policy:
+        """Act by the residual scheme its run recorded (:mod:`agents.residual`: the network's action
+        moves the anchor policy's; ``None``: no residual); returns the policy."""
+        if residual is not None:
+            from .residual import ResidualActions, check_residual
+
+            settings = check_residual(residual)
+            if self.entities is not None:
+                raise ValueError(f"{self.name}: the residual scheme moves flat actions, not the entity layout's")
+            self.residual = ResidualActions(settings["anchor"], self.config, self.env_id, self.interface,
+                                            settings["scale"])
+            self.stateful = True  # the anchor keeps per-episode state
+        return self
+
+    def _on_reset(self, rng: np.random.Generator) -> None:
+        super()._on_reset(rng)
+        if self.residual is not None:
+            self.residual.reset(int(rng.integers(2**31)))
 
     def observation_hint(self, shape: tuple[int, ...]) -> str:
         return _built_for(self, shape, self.entities is not None)
@@ -190,6 +211,8 @@ class SB3Policy(InterfacePolicy):
         action = np.clip(np.asarray(self._predict(inputs), dtype=np.float64), -1.0, 1.0)
         if self.entities is not None:
             action = self.entities.to_flat_actions(action)
+        if self.residual is not None:
+            action = self.residual.action(action, raw)
         return self.to_v0(action, raw)
 
 
@@ -319,6 +342,7 @@ def export_agent(run_dir: Path, out_dir: Path, record: dict[str, Any]) -> Path:
     if normalizer is not None:
         normalizer.save(out_dir / "normalizer.npz")
     agent = {"algo": algo, "trainer": run.record.get("trainer", run.algo), "env": run.env, "interface": run.interface,
+             **({"residual": run.record["residual"]} if run.record.get("residual") else {}),
              "config": read_json(run_dir / "config.json"), **record}
     (out_dir / "agent.json").write_text(json.dumps(agent, indent=2) + "\n")
     return out_dir
@@ -351,7 +375,7 @@ def _load_zoo(name: str, config: ScenarioConfig | None = None, env_id: str | Non
     if env_id not in (None, record["env"]):
         raise ValueError(f"zoo:{name} was trained on {record['env']}, not {env_id}")
     return SB3Policy(network, cfg, record["env"], record["interface"], normalizer, seed, label=f"zoo:{name}",
-                     config_given=config is not None)
+                     config_given=config is not None).with_residual(record.get("residual"))
 
 
 def _no_settings(loader: Callable[..., Policy]) -> Callable[..., Policy]:

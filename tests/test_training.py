@@ -13,11 +13,13 @@ pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
 from agents import make_policy  # noqa: E402
+from agents.rollouts import rollout  # noqa: E402
 from lawn_env import ScenarioConfig  # noqa: E402
 from training.cli import main  # noqa: E402
 from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 
 from training.callbacks import latest_checkpoint  # noqa: E402
+from training.protocol import VALIDATION_SEED_BASE  # noqa: E402
 from training.train import TrainSpec, load_hyperparams, resume, train  # noqa: E402
 
 SMALL = ScenarioConfig(num_slots=12)
@@ -587,3 +589,32 @@ def test_paired_reward_run_trains_on_the_paired_reward_and_logs_the_envs_own(tmp
     with pytest.raises(ValueError, match="paired reward wraps"):
         TrainSpec(algo="ppo", env_id="CartPole-v1", timesteps=64, out_dir=tmp_path / "y",
                   hp_overrides={"paired_anchor": "epa"})
+
+
+def test_residual_run_records_its_scheme_and_acts_by_it(tmp_path):
+    # PPO around epa, started at the anchor: validation plays the residual, and so does the loaded agent
+    residual = {"anchor": "epa", "scale": 0.3}
+    out, _ = _train(tmp_path, "ppo", steps=128, interface="rl", n_envs=1,
+                    hp_overrides={"residual": residual, "start_at_anchor": True})
+    assert json.loads((out / "run.json").read_text())["residual"] == residual
+    policy = make_policy(f"sb3:{out}", SMALL)
+    assert policy.residual is not None and policy.residual.anchor.name == "epa" and policy.residual.scale == 0.3
+    start = [r for r in csv.DictReader((out / "learning_curve.csv").read_text().splitlines())][0]
+    from agents.residual import AnchorResidual
+
+    zero = AnchorResidual(gym.make("lawn/Joint-v1", config=SMALL, interface="rl"), **residual)
+    zero.reset(seed=VALIDATION_SEED_BASE)
+    while not zero.unwrapped.sim.done:
+        zero.step(np.zeros(zero.action_space.shape, np.float32))
+    # the run starts at the anchor: its first validation is the zero residual's episode
+    assert float(start["control_cost"]) == pytest.approx(zero.unwrapped.episode_metrics()["control_cost"], rel=1e-6)
+    with pytest.raises(ValueError, match="action_scheme='direct'"):
+        TrainSpec(algo="ppo", env_id="lawn/Joint-v1", timesteps=64, out_dir=tmp_path / "x",
+                  hp_overrides={"residual": residual, "interface": "v0"})
+    with pytest.raises(ValueError, match="scale=5"):
+        TrainSpec(algo="ppo", env_id="lawn/Joint-v1", timesteps=64, out_dir=tmp_path / "x",
+                  hp_overrides={"residual": {"anchor": "epa", "scale": 5}, "interface": "rl"})
+    from training.sb3 import make_train_env
+
+    with pytest.raises(ValueError, match="residual scheme wraps single envs"):
+        make_train_env("lawn/Joint-v1", SMALL, 1, 0, False, None, interface="rl", vec="native", residual=residual)

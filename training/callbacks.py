@@ -15,6 +15,7 @@ import json
 import os
 import shutil
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -162,9 +163,9 @@ class ControlCostValidation(BaseCallback):
     the starting policy (the anchor, or the clone it fine-tunes) unless training beats it significantly."""
 
     def __init__(self, env_id: str, config: ScenarioConfig, interface: InterfaceLike, episodes: int, every: int,
-                 out_dir: Path, seed_base: int):
+                 out_dir: Path, seed_base: int, residual: Mapping[str, Any] | None = None):
         super().__init__(verbose=0)
-        self.env_id, self.config, self.interface = env_id, config, interface
+        self.env_id, self.config, self.interface, self.residual = env_id, config, interface, residual
         self.episodes, self.every, self.out_dir, self.seed_base = episodes, every, Path(out_dir), seed_base
         self._next = every
         self._reference: dict[int, float] | None = None
@@ -182,7 +183,7 @@ class ControlCostValidation(BaseCallback):
         normalizer = ObsNormalizer.from_vecnormalize(self.model.get_vec_normalize_env())
         if self.env_id == PARALLEL_ENV_ID:
             return marl_policy(self.model, self.config, self.interface, normalizer, None, "marl")
-        return SB3Policy(self.model, self.config, self.env_id, self.interface, normalizer)
+        return SB3Policy(self.model, self.config, self.env_id, self.interface, normalizer).with_residual(self.residual)
 
     def validate(self, start: bool = False) -> dict[str, float]:
         """The learning-curve columns of the current policy; ``start``: it is the run's starting policy,

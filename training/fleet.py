@@ -108,7 +108,8 @@ def fleet_settings(params: Mapping[str, Any]) -> dict[str, Any]:
     tasks = [p["tasks"]] if isinstance(p["tasks"], str) else list(p["tasks"])
     for task in tasks:
         if task not in presets.names():
-            raise ValueError(f"fleet hyperparameter tasks: unknown preset {task!r}; valid: {', '.join(presets.names())}")
+            raise ValueError(f"fleet hyperparameter tasks: unknown preset {task!r}; valid: "
+                             f"{', '.join(presets.names())}")
     if not isinstance(p["task_settings"], Mapping):
         raise ValueError(f"fleet hyperparameter task_settings={p['task_settings']!r}: a mapping of config keys")
     sizes = sorted({task_config(t, p["task_settings"]).num_agvs for t in tasks} if tasks

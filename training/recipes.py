@@ -47,7 +47,8 @@ class Recipe:
     def config(self) -> ScenarioConfig:
         """The scenario it trains on: its preset with its settings and fleet size."""
         base = presets.get(self.preset)
-        return base.override(dict(self.settings), **({} if self.num_agvs == base.num_agvs else {"num_agvs": self.num_agvs}))
+        size = {} if self.num_agvs == base.num_agvs else {"num_agvs": self.num_agvs}
+        return base.override(dict(self.settings), **size)
 
     @property
     def evaluated_on(self) -> str:

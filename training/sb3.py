@@ -125,13 +125,14 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
     monitor logs keep the env's own rewards)."""
     from stable_baselines3.common.env_util import make_vec_env
 
-    unknown = set(kwargs) - {"interface", "append_monitor", "vec", "paired"}
+    unknown = set(kwargs) - {"interface", "append_monitor", "vec", "paired", "residual"}
     if unknown:
         raise TypeError(f"make_train_env: unexpected keywords {sorted(unknown)}")
-    interface, paired = kwargs.get("interface"), kwargs.get("paired")
-    if paired is not None and (kwargs.get("vec", "dummy") == "native" or env_id not in ENV_IDS):
-        raise ValueError(f"the paired reward wraps single envs of {', '.join(ENV_IDS)}: train with --vec dummy "
-                         f"(got env {env_id}, vec {kwargs.get('vec', 'dummy')})")
+    interface, paired, residual = kwargs.get("interface"), kwargs.get("paired"), kwargs.get("residual")
+    for name, value in (("paired reward", paired), ("residual scheme", residual)):
+        if value is not None and (kwargs.get("vec", "dummy") == "native" or env_id not in ENV_IDS):
+            raise ValueError(f"the {name} wraps single envs of {', '.join(ENV_IDS)}: train with --vec dummy "
+                             f"(got env {env_id}, vec {kwargs.get('vec', 'dummy')})")
     if kwargs.get("vec", "dummy") == "native":
         venv: VecEnv = VecMonitor(NativeVecEnv(config, n_envs, env_id, interface=interface))
         venv.seed(seed)
@@ -139,17 +140,27 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
         venv = make_marl_vec_env(config, n_envs, seed, interface=interface)
     else:
         env_kwargs = {} if env_id == "CartPole-v1" else {"config": config, "interface": interface}
-        from agents.paired import PairedReward
-
         venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs,
                             monitor_dir=str(monitor_dir) if monitor_dir else None,
                             monitor_kwargs={"override_existing": not kwargs.get("append_monitor", False)},
-                            wrapper_class=PairedReward if paired else None, wrapper_kwargs=paired)
+                            wrapper_class=_lawn_wrappers if paired or residual else None,  # type: ignore[arg-type]
+                            wrapper_kwargs={"paired": paired, "residual": residual})
     if vecnormalize_path is not None:
         return VecNormalize.load(str(vecnormalize_path), venv)
     if normalize:
         return VecNormalize(venv, **(dict(normalize) if isinstance(normalize, Mapping) else {}))
     return venv
+
+
+def _lawn_wrappers(env: Any, paired: Mapping[str, Any] | None, residual: Mapping[str, Any] | None) -> Any:
+    """A monitored env with the residual scheme (:class:`agents.residual.AnchorResidual`) and then
+    the paired reward (:class:`agents.paired.PairedReward`), each when given its keywords."""
+    from agents.paired import PairedReward
+    from agents.residual import AnchorResidual
+
+    if residual is not None:
+        env = AnchorResidual(env, **residual)
+    return PairedReward(env, **paired) if paired is not None else env
 
 
 def train_sb3(spec: Any, params: dict[str, Any], options: Any, version: int,
@@ -161,7 +172,8 @@ def train_sb3(spec: Any, params: dict[str, Any], options: Any, version: int,
     record = {"algo": spec.algo, "env": spec.env_id, "seed": spec.seed, "timesteps": spec.timesteps,
               "hyperparams_version": version, "interface": params.get("interface"), "eval_every": spec.eval_every,
               "eval_episodes": spec.eval_episodes, "checkpoint_every": spec.checkpoint_every,
-              "init_from": str(spec.init_from) if spec.init_from else None, "vec": spec.vec, "versions": versions()}
+              "init_from": str(spec.init_from) if spec.init_from else None, "vec": spec.vec,
+              **({"residual": options.residual} if options.residual else {}), "versions": versions()}
     out_dir = spec.out_dir
     existed = out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -229,7 +241,8 @@ def setup(record: dict[str, Any], options: Any, config: ScenarioConfig, out_dir:
                          vecnormalize_path=start.file("vecnormalize.pkl") if start else None,
                          interface=options.interface, append_monitor=start is not None, vec=record.get("vec", "dummy"),
                          paired=None if options.paired_anchor is None else
-                         {"anchor": options.paired_anchor, "gamma": float(options.algo_kwargs.get("gamma", 0.99))})
+                         {"anchor": options.paired_anchor, "gamma": float(options.algo_kwargs.get("gamma", 0.99))},
+                         residual=options.residual)
     try:
         model = _model(record, env, start, out_dir, options)
     except BaseException:
@@ -239,7 +252,8 @@ def setup(record: dict[str, Any], options: Any, config: ScenarioConfig, out_dir:
     hooks: list[BaseCallback] = []
     if record["env"] != "CartPole-v1":
         hooks.append(ControlCostValidation(record["env"], config, options.interface, int(record["eval_episodes"]),
-                                           max(int(record["eval_every"]), 1), out_dir, VALIDATION_SEED_BASE))
+                                           max(int(record["eval_every"]), 1), out_dir, VALIDATION_SEED_BASE,
+                                           options.residual))
     hooks.append(RunCheckpoint(out_dir, max(int(record["checkpoint_every"]), 1), wall_time_before=wall_before))
     if options.actor_warmup_steps > 0:
         hooks.append(ActorWarmup(options.actor_warmup_steps))

@@ -44,7 +44,7 @@ NATIVE_ENV_IDS = tuple(i for i in (*ENV_IDS, *RL_ENV_IDS) if gym.spec(i).vector_
 LAWN_KEYS: dict[str, tuple[str, ...] | None] = {
     "n_envs": None, "normalize": None, "policy": None, "interface": None,
     "actor_warmup_steps": ("ppo", "a2c"), "init_log_std": ("ppo", "a2c"), "start_at_anchor": ("ppo", "sac"),
-    "paired_anchor": ("ppo", "sac", "a2c", "td3"),
+    "paired_anchor": ("ppo", "sac", "a2c", "td3"), "residual": ("ppo", "sac", "a2c", "td3"),
 }
 #: Constructor arguments ``lawn train`` sets itself: not hyperparameters.
 _SET_BY_LAWN = {"self", "env", "policy", "seed", "verbose", "tensorboard_log"}
@@ -66,6 +66,8 @@ class RunOptions:
     start_at_anchor: bool = False
     paired_anchor: str | None = None
     """Train on the paired reward against this policy (:class:`agents.paired.PairedReward`)."""
+    residual: dict[str, Any] | None = None
+    """Act by the residual scheme around a policy, ``{"anchor": NAME, "scale": s}`` (:mod:`agents.residual`)."""
     algo_kwargs: dict[str, Any] = Field(default_factory=dict)
 
 
@@ -80,18 +82,37 @@ def lr_schedule(value: Any, key: str = "learning_rate") -> Any:
     return value
 
 
-def _check_paired(anchor: str | None, env_id: str) -> None:
-    """A paired-reward anchor: a registered policy of a central lawn env (the wrapper's errors, early)."""
+def _check_anchor(key: str, anchor: str | None, env_id: str) -> None:
+    """A paired-reward or residual anchor: a registered policy of a central lawn env (the wrappers'
+    errors, early)."""
     if anchor is None:
         return
     if env_id not in _LAWN:
-        raise ValueError(f"--hp paired_anchor={anchor!r}: the paired reward wraps {', '.join(_LAWN)}, not {env_id}")
+        what = "paired reward" if key == "paired_anchor" else "residual scheme"
+        raise ValueError(f"--hp {key}={anchor!r}: the {what} wraps {', '.join(_LAWN)}, not {env_id}")
     from agents.policies import LOADERS, POLICIES
 
     prefix = anchor.split(":", 1)[0] if ":" in anchor else None
     if (anchor not in POLICIES) if prefix is None else (prefix not in LOADERS):
-        raise ValueError(f"--hp paired_anchor={anchor!r}: unknown policy; valid: {', '.join(POLICIES)}, or "
+        raise ValueError(f"--hp {key}={anchor!r}: unknown policy; valid: {', '.join(POLICIES)}, or "
                          f"{', '.join(f'{p}:NAME' for p in LOADERS)}")
+
+
+def _check_residual(options: RunOptions, env_id: str) -> None:
+    """The residual scheme: its settings, its anchor, an anchored flat interface and single envs."""
+    if options.residual is None:
+        return
+    from agents.residual import check_residual
+
+    try:
+        options.residual = check_residual(options.residual)
+    except ValueError as exc:
+        raise ValueError(f"--hp {exc}") from None
+    _check_anchor("residual anchor", options.residual["anchor"], env_id)
+    iface = resolve_interface(options.interface)
+    if iface.action_scheme != "anchored" or iface.layout != "flat":
+        raise ValueError(f"--hp residual: moves an anchored interface's flat actions; --hp interface gives "
+                         f"action_scheme={iface.action_scheme!r}, layout={iface.layout!r} (e.g. --hp interface=rl)")
 
 
 def _check_normalize(normalize: bool | dict[str, Any]) -> None:
@@ -134,7 +155,8 @@ def split_params(algo: str, env_id: str, params: Mapping[str, Any]) -> RunOption
             raise ValueError(f"--hp {key}: applies to {', '.join(algos)}, not {algo}")
     options = RunOptions(**{k: params.pop(k) for k in list(params) if k in LAWN_KEYS})
     _check_normalize(options.normalize)
-    _check_paired(options.paired_anchor, env_id)
+    _check_anchor("paired_anchor", options.paired_anchor, env_id)
+    _check_residual(options, env_id)
     options.policy = _policy(algo, env_id, options, cls)
     for key in ("learning_rate", "clip_range"):
         if key in params:

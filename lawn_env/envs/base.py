@@ -337,6 +337,10 @@ class EngineAccess:
         return getattr(self.engine.role, "mpc", None)
 
 
+#: The benchmark interface's observation bound (every v0 feature fits inside it).
+_BENCHMARK_BOUND = resolve_interface(None).obs_bound
+
+
 class LawnEnv(EngineAccess, gym.Env):
     """``lawn/Joint-v1`` and ``lawn/Comm-v1`` (their classes set ``role``): an engine of one
     scenario behind Gymnasium's API."""
@@ -397,6 +401,13 @@ class LawnEnv(EngineAccess, gym.Env):
         """This scenario's observation in the interface's layout."""
         obs = self.engine.observe()
         return {key: value[0] for key, value in obs.items()} if isinstance(obs, dict) else obs[0]
+
+    def benchmark_observation(self) -> np.ndarray:
+        """This scenario's observation as the benchmark interface gives it (the flat v0 layout,
+        unclipped), whatever this env's interface: what the experts of ``agents`` act on."""
+        if not self.engine.sim.started:
+            raise RuntimeError("call reset() before benchmark_observation()")
+        return self.layout.encode(self.engine.sim, _BENCHMARK_BOUND, self.engine.slot_table)[0]
 
     def snapshot(self) -> Snapshot:
         """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
