@@ -174,7 +174,9 @@ class SB3Policy(InterfacePolicy):
             raise ValueError(f"{path} was trained on {trained_env}; use marl:{path} for multi-agent runs")
         if env_id not in (None, trained_env):
             raise ValueError(f"{path} was trained on {trained_env}, not {env_id}")
-        return cls(_load_model(run), config if config is not None else run.load_config(), trained_env, run.interface,
+        trained = run.load_config()
+        check_law(f"sb3:{path}", trained_env, trained, config if config is not None else trained)
+        return cls(_load_model(run), config if config is not None else trained, trained_env, run.interface,
                    ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}",
                    config_given=config is not None).with_residual(run.record.get("residual"))
 
@@ -214,6 +216,14 @@ class SB3Policy(InterfacePolicy):
         if self.residual is not None:
             action = self.residual.action(action, raw)
         return self.to_v0(action, raw)
+
+
+def check_law(label: str, env_id: str, trained: ScenarioConfig, config: ScenarioConfig) -> None:
+    """A Comm agent acts where the env's AGVs apply the control law it was trained with (its power
+    and drone decisions assume their increments): another law is an error naming both."""
+    if env_id == COMM and config.control.law != trained.control.law:
+        raise ValueError(f"{label} was trained on {COMM} with control.law={trained.control.law!r}; this scenario "
+                         f"has control.law={config.control.law!r} (pass --set control.law={trained.control.law})")
 
 
 def _predictor(network: Any) -> Any:
@@ -365,7 +375,9 @@ def _load_zoo(name: str, config: ScenarioConfig | None = None, env_id: str | Non
     network_class = policy_network_class(record["algo"], f"zoo:{name}: agent.json: ")
     network = load_saved(lambda p: network_class.load(p, device="cpu"), ZOO_DIR / name / "policy.zip",
                          f"zoo agent's {record['algo']} network")
-    cfg = config if config is not None else ScenarioConfig.from_dict(record["config"])
+    trained = ScenarioConfig.from_dict(record["config"])
+    cfg = config if config is not None else trained
+    check_law(f"zoo:{name}", record["env"], trained, cfg)
     normalizer = ObsNormalizer.load(ZOO_DIR / name / "normalizer.npz")
     if record["env"] == PARALLEL_ENV_ID:
         if env_id not in (None, JOINT):

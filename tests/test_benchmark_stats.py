@@ -178,3 +178,25 @@ def test_steady_tasks_start_without_the_transient():
         assert config.drone.start_m == ((x0 + x1) / 2, (y0 + y1) / 2)
     assert presets.SUITE_VERSION == 2 and presets.SUITE[0] == "default" and "disturbed" in presets.SUITE
     assert set(presets.SUITE_V1) <= set(presets.names())
+
+
+def test_two_ranges_are_compared_apart_with_the_tail_and_the_worst_seed():
+    from training.results.ranges import TAIL_RATIO, TEST_RANGES, compare_ranges, range_of, test_seeds
+
+    seeds = test_seeds(5)
+    assert seeds[:5] == list(range(5)) and seeds[5:] == [TEST_RANGES[1] + i for i in range(5)]
+    assert [range_of(s) for s in (0, 4, TEST_RANGES[1], TEST_RANGES[1] + 4)] == [0, 0, 1, 1]
+    reference = {s: 10.0 + (s % 3) for s in seeds}
+    # the first range 2 % above the reference on every seed, the second 10 % below but for one seed at 4x
+    costs = {s: reference[s] * (1.02 if range_of(s) == 0 else 0.9) for s in seeds}
+    costs[TEST_RANGES[1] + 2] = 4.0 * reference[TEST_RANGES[1] + 2]
+    c = compare_ranges(costs, reference)
+    assert len(c.ranges) == 2 and c.ranges[0].ratio == pytest.approx(1.02) and c.ranges[0].seeds == 5
+    assert c.ranges[1].ratio == pytest.approx((0.9 ** 4 * 4.0) ** 0.2)
+    assert c.tail == pytest.approx(0.1) and TAIL_RATIO < 4.0
+    assert c.worst == pytest.approx(4.0) and c.worst_seed == TEST_RANGES[1] + 2
+    assert c.below(1.03) is False  # the second range's interval reaches past +3 %
+    assert compare_ranges({s: costs[s] for s in seeds[:5]}, reference).below(1.021)  # one range: its bound
+    assert c.cell().count(" / ") == 1 and "4.00× (seed" in c.worst_cell()
+    with pytest.raises(ValueError, match="share no seed"):
+        compare_ranges({1: 1.0}, {2: 1.0})

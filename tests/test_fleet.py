@@ -271,7 +271,7 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     from agents import make_policy
     from lawn_env import ScenarioConfig, presets
     from training.benchmark import fleet_agents, run_generalization
-    from training.results.report import generalization_table
+    from training.results.ranges import fleet_table
     from training.results.run import Play, read_csv
     from training.train import TrainSpec, train
 
@@ -307,9 +307,11 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
                               base=presets.get("default").override(num_slots=6))
     assert {(r["policy"], r["task"]) for r in rows} == {(p, f"k{k}") for p in ("dv-mpc", "noise:dv-mpc", "zoo:fleet-comm")
                                                         for k in sizes}
-    text = generalization_table(rows, fleet_agents(), sizes)
+    text = fleet_table(rows, fleet_agents(), sizes, {"zoo:fleet-comm"})
     lines = [line for line in text.splitlines() if line.startswith("| zoo:fleet-comm")]
     assert [line.split(" | ")[2] for line in lines] == ["3", "5"] and all("×" in line for line in lines)
+    assert [line.split(" | ")[3] for line in lines] == ["4", "4"]  # two seeds of each of the two test ranges
+    assert "reported" in lines[1] and (": met" in lines[0] or ": missed" in lines[0])  # K = 5 has no target
     assert sum(line.startswith("| noise:dv-mpc") for line in text.splitlines()) == 2
 
 
@@ -349,16 +351,63 @@ def test_the_suite_writes_the_table_over_fleet_sizes_for_the_shipped_fleet_netwo
     from training.cli import main
     from training.cli.benchmark import _fleet_sizes
     from training.benchmark import FLEET_SIZES
+    from training.results.ranges import TEST_RANGES
     from training.results.run import TRANSIENT_SLOTS, read_csv
 
     args = argparse.Namespace(episodes=1, workers=1, quiet=True, transient_slots=TRANSIENT_SLOTS)
     block = _fleet_sizes(args, ["rg-mpc", "zoo:fleet-comm"], tmp_path)
     rows = read_csv(tmp_path / "fleet_sizes.csv")
     assert {r["task"] for r in rows if r["policy"] == "zoo:fleet-comm"} == {f"k{k}" for k in FLEET_SIZES}
-    assert all(r["seed"] == "0" for r in rows)
+    assert {r["seed"] for r in rows} == {str(base) for base in TEST_RANGES}  # the first seed of each test range
     assert block.count("| zoo:fleet-comm |") == len(FLEET_SIZES) and (tmp_path / "fleet_sizes.md").exists()
     assert _fleet_sizes(args, ["rg-mpc"], tmp_path) == ""
     (tmp_path / "docs").mkdir()
     assert main(["benchmark", "--suite", "--docs", str(tmp_path / "docs"), "--policies", "zoo:fleet-comm",
                  "--episodes", "1", "--out", str(tmp_path / "suite"), "--quiet"]) == 2
     assert not any((tmp_path / "suite").iterdir())  # the checked, empty --out folder: nothing was run
+
+
+def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypatch):
+    """``lawn zoo build --only dv-joint``: a network cloned from dv-mpc on two tasks is compared on
+    each against dv-mpc and rg-mpc on seeds of both test ranges, exported with those figures, and
+    acts at each task's K; a Comm agent refuses a scenario with another control law."""
+    import dataclasses
+
+    import agents.learned as learned
+    import training.recipes as recipes_module
+    import training.zoo as zoo
+    from agents import make_policy
+    from lawn_env import presets
+    from training.results.ranges import TEST_RANGES
+    from training.results.run import read_csv
+    from training.train import TrainSpec, train
+
+    hp = {"expert": "dv-mpc", "tasks": ["steady", "wide-k8"], "epochs": 1, "dagger_iterations": 0, "width": 16,
+          "heads": 2}
+    tiny = dataclasses.replace(recipes_module.RECIPES["dv-joint"], timesteps=16, hp=hp)
+    monkeypatch.setitem(recipes_module.RECIPES, "dv-joint", tiny)
+    runs, docs = tmp_path / "runs", tmp_path / "docs"
+    train(TrainSpec(algo="fleet", env_id="lawn/Joint-v1", config=tiny.config, timesteps=16, seed=0,
+                    out_dir=runs / "dv-joint" / "seed-0", hp_overrides=hp, eval_episodes=1, progress=False))
+    docs.mkdir()
+    (docs / "LEARNED.md").write_text("# Learned\n\n<!-- zoo-distil:begin -->\nold\n<!-- zoo-distil:end -->\n")
+    table = zoo.build_zoo(runs, docs / "LEARNED.md", workers=1, progress=False, episodes=1, target=tmp_path / "zoo",
+                          only=["dv-joint"])
+    lines = [line for line in table.splitlines() if line.startswith("| `zoo:dv-joint`")]
+    assert [line.split(" | ")[2] for line in lines] == ["steady", "wide-k8"]
+    assert all(line.split(" | ")[3] == "2" and line.endswith(("| met |", "| missed |")) for line in lines)
+    assert "old" not in (docs / "LEARNED.md").read_text()
+    rows = read_csv(docs / "learned" / "distil.csv")
+    assert {int(r["seed"]) for r in rows} == set(TEST_RANGES)
+    assert {r["policy"] for r in rows} == {"dv-mpc", "rg-mpc", f"sb3:{runs / 'dv-joint' / 'seed-0'}"}
+    record = json.loads((tmp_path / "zoo" / "dv-joint" / "agent.json").read_text())
+    assert set(record["benchmark"]["tasks"]) == {"steady", "wide-k8"}
+    assert all(len(v) == 2 for per in record["benchmark"]["tasks"].values() for v in per.values())  # per range
+    monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
+    assert make_policy("zoo:dv-joint", presets.get("wide-k8")).entities.num_agvs == 8
+    from training.benchmark import fleet_agents
+
+    assert "zoo:dv-joint" not in fleet_agents()  # the fleet-size table is for the default-scenario networks
+    with pytest.raises(ValueError, match="control.law='delivery'.*control.law='paper'"):
+        learned.check_law("zoo:x", "lawn/Comm-v1", presets.get("steady").override({"control.law": "delivery"}),
+                          presets.get("steady"))

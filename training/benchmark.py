@@ -33,6 +33,7 @@ from agents.learned import zoo_agents
 from lawn_env import ScenarioConfig, presets
 
 from .protocol import TEST_EPISODES
+from .results.ranges import test_seeds
 from .results.report import learned_table, plot_summary, summary_markdown
 from .results.run import (
     DEFAULT_PLAY,
@@ -185,22 +186,30 @@ def run_suite(policies: Sequence[str], tasks: Sequence[str], episodes: int, out_
 
 
 def fleet_agents() -> list[str]:
-    """The shipped agents whose network reads the entity layout (``zoo:NAME``)."""
+    """The shipped agents whose network reads the entity layout (``zoo:NAME``) and was trained on the
+    default scenario (not the distilled agents of the steady tasks: :func:`distil_agents`)."""
     return [f"zoo:{name}" for name, rec in zoo_agents().items()
-            if (rec.get("interface") or {}).get("layout") == "entities"]
+            if (rec.get("interface") or {}).get("layout") == "entities" and name not in _distilled()]
+
+
+def _distilled() -> list[str]:
+    from .recipes import RECIPES
+
+    return [name for name, r in RECIPES.items() if r.section == "distil"]
 
 
 def run_generalization(agents: Sequence[str], sizes: Mapping[int, int] = FLEET_SIZES, play: Play = FLEET_PLAY,
                        base: ScenarioConfig | None = None) -> list[dict[str, Any]]:
     """Full episodes of every agent, the best expert and its noise floor on the default task (or
-    ``base``) with each fleet size (``task`` = ``k<K>``)."""
+    ``base``) with each fleet size (``task`` = ``k<K>``), on the first n seeds of both test ranges
+    (:func:`training.results.ranges.test_seeds`, n per size)."""
     envs = list(dict.fromkeys(policy_env(a) for a in agents))
     noise = next(iter(NOISE))
     rows: list[dict[str, Any]] = []
     for k, seeds in sizes.items():
         config = (base or presets.get("default")).override(num_agvs=int(k))
         entries = [(p, env) for env in envs for p in (SCORE_HIGH, noise)] + [(a, policy_env(a)) for a in agents]
-        rows += run_entries(entries, config, range(int(seeds)), play, task=f"k{k}", desc=f"fleet sizes: K = {k}")
+        rows += run_entries(entries, config, test_seeds(int(seeds)), play, task=f"k{k}", desc=f"fleet sizes: K = {k}")
     return rows
 
 

@@ -20,8 +20,8 @@ from lawn_env import PARALLEL_ENV_ID, RL_ENV_IDS, ScenarioConfig, central_env_id
 from .pool import pool_map
 from .train import LAWN_KEYS, TrainSpec, load_hyperparams, train
 
-__all__ = ["Recipe", "RECIPES", "SECTIONS", "recipe", "finished", "train_recipes", "ZOO_VALIDATION_EPISODES",
-           "zoo_hyperparams"]
+__all__ = ["Recipe", "RECIPES", "SECTIONS", "DISTIL_TASKS", "recipe", "finished", "train_recipes",
+           "ZOO_VALIDATION_EPISODES", "zoo_hyperparams"]
 
 
 @dataclass(frozen=True)
@@ -103,10 +103,19 @@ _FLEET_SEEDS = (0,)
 _FLEET_DV = {"expert": "dv-mpc"}
 #: Distillation of dv-mpc into one fleet network for the steady suite tasks (each at its own K: the
 #: entity layout serves K = 4 and 8 alike): 10,000 labels a task, then 4 DAgger rounds of 2,500 a task.
-_DISTIL_TASKS = ("steady", "steady-low-power", "steady-gusty", "wide-k8")
-_DISTIL = {"expert": "dv-mpc", "tasks": list(_DISTIL_TASKS), "dagger_timesteps": 10_000}
+DISTIL_TASKS = ("steady", "steady-low-power", "steady-gusty", "wide-k8")
+_DISTIL = {"expert": "dv-mpc", "tasks": list(DISTIL_TASKS), "dagger_timesteps": 10_000}
 #: dv-mpc's AGVs on Comm: the env's MPC applies the delivery law (each command planned as if it arrives).
 _DELIVERY = {"control.law": "delivery"}
+#: RL past the anchor: PPO whose action moves dv-mpc's decision (agents/residual.py: a quarter of the
+#: action range), on the paired reward against dv-mpc on the same seed (agents/paired.py), started at
+#: dv-mpc (the output layer zeroed) with small exploration; the interface decodes without an MPC.
+_RESIDUAL_DV: dict[str, Any] = {
+    "interface": {"base": "rl", "power_anchor": "distance", "increment_anchor": "lqr", "residual_scale": 2.0,
+                  "power_log_range": 4.0},
+    "residual": {"anchor": "dv-mpc", "scale": 0.25}, "paired_anchor": "dv-mpc", "start_at_anchor": True,
+    "n_envs": 4, "n_steps": 256, "batch_size": 256, "learning_rate": "lin_1e-4",
+    "policy_kwargs": {"net_arch": [128, 128], "log_std_init": -2.0}}
 #: Multi-agent PPO with the fleet network (training/sb3.py): every agent sees the fleet and which
 #: entity it is, and acts with its own row; started at the anchor (the heads zeroed), small steps.
 _MARL_FLEET = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,
@@ -123,6 +132,8 @@ RECIPES: dict[str, Recipe] = {r.name: r for r in (
     Recipe("dv-comm", "Fleet network, DAgger of dv-mpc on the steady suite tasks (delivery law)", "fleet",
            "lawn/Comm-v1", 40_000, seeds=_FLEET_SEEDS, hp={**_DISTIL, "task_settings": _DELIVERY}, section="distil",
            preset="steady", settings=_DELIVERY),
+    Recipe("ppo-dv-residual", "PPO, residual on dv-mpc, paired reward", "ppo", "lawn/Joint-v1", 100_000, seeds=(0, 1),
+           hp=_RESIDUAL_DV, eval_every=20_000, section="distil", preset="steady"),
     Recipe("fleet-comm", "Fleet network (attention over the AGVs), DAgger of dv-mpc on K = 3-32", "fleet",
            "lawn/Comm-v1", 50_000, seeds=_FLEET_SEEDS, hp=_FLEET_DV, section="fleet"),
     Recipe("fleet-joint", "Fleet network (attention over the AGVs), DAgger of dv-mpc on K = 3-32", "fleet",

@@ -22,6 +22,7 @@ from agents.learned import ZOO_DIR, export_agent, zoo_agents
 from agents.runs import RunDir, read_run
 from lawn_env import ScenarioConfig
 
+from .distil import evaluate_distil, export_distil
 from .pages import block_names, replace_body
 from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
 from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe, train_recipes
@@ -180,21 +181,14 @@ def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True
     ``docs/learned/episodes.csv``, as it is. Everything is evaluated and rendered before the first
     file is written (the page and the episodes are replaced whole, through a temporary file)."""
     names = list(only or [])
-    for name in names:
-        recipe(name)  # an unknown name is an error that names the recipes
-    sections = [x for x in SECTIONS if not names or any(RECIPES[n].section == x for n in names)]
-    out_doc = Path(out_doc)
-    if names and "main" not in sections and "zoo-fleet" not in block_names(read_text(out_doc)):
-        raise ValueError(f"{out_doc}: no generated block 'zoo-fleet' to rebuild; build the whole page (lawn zoo "
-                         "build without --only)")
+    sections, out_doc = _sections(names, Path(out_doc)), Path(out_doc)
     built: dict[str, tuple[ZooEvaluation, ZooTables]] = {}
-    for section in sections:
-        recipes = {n: r for n, r in RECIPES.items() if r.section == section}
-        if names or any(finished(Path(runs) / r.name / f"seed-{s}", r.timesteps) for r in recipes.values()
-                        for s in r.seeds):
-            ev = evaluate_zoo(finished_runs(Path(runs), recipes), episodes, workers, progress)
-            built[section] = (ev, zoo_tables(ev))
-    if not built:
+    distilled = (evaluate_distil(Path(runs), workers, progress, episodes) if _wanted("distil", sections, names, runs)
+                 else None)
+    for section in (x for x in sections if x != "distil" and _wanted(x, sections, names, runs)):
+        ev = evaluate_zoo(finished_runs(Path(runs), _of_section(section)), episodes, workers, progress)
+        built[section] = (ev, zoo_tables(ev))
+    if not built and distilled is None:
         raise ValueError(f"{runs}: no finished recipe runs (lawn zoo train --runs {runs} trains them)")
     rendered = {section: render_zoo(tables) for section, (_, tables) in built.items()}
     page = read_text(out_doc)
@@ -204,15 +198,44 @@ def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True
             page = replace_body(page, name, text, source=source, where=str(out_doc))
     if "fleet" in built:
         page = replace_body(page, "zoo-fleet", "\n\n".join(rendered["fleet"]), source=source, where=str(out_doc))
+    if distilled is not None:
+        page = replace_body(page, "zoo-distil", distilled.block, source=source, where=str(out_doc))
+        (out_doc.parent / "learned").mkdir(parents=True, exist_ok=True)
+        write_csv(distilled.rows, out_doc.parent / "learned" / "distil.csv", atomic=True)
     if "main" in built:
         _plot_main_curves(built["main"][0], out_doc, workers)
-    rows = merged_rows(read_csv(out_doc.parent / "learned" / "episodes.csv"), built)
-    write_csv(rows, out_doc.parent / "learned" / "episodes.csv", atomic=True)
+    if built:
+        rows = merged_rows(read_csv(out_doc.parent / "learned" / "episodes.csv"), built)
+        write_csv(rows, out_doc.parent / "learned" / "episodes.csv", atomic=True)
     write_atomic(out_doc, page)
     if export:
         for ev, tables in built.values():
             export_zoo(tables, ev, target)
-    return "\n\n".join(table for table, _ in rendered.values())
+        if distilled is not None:
+            export_distil(distilled, target)
+    return "\n\n".join([table for table, _ in rendered.values()] + ([distilled.block] if distilled else []))
+
+
+def _sections(names: list[str], out_doc: Path) -> list[str]:
+    """The sections ``names`` (recipes; none: all) are in, after checking the page has their blocks."""
+    for name in names:
+        recipe(name)  # an unknown name is an error that names the recipes
+    sections = [x for x in SECTIONS if not names or any(RECIPES[n].section == x for n in names)]
+    for section, block in (("fleet", "zoo-fleet"), ("distil", "zoo-distil")):
+        if names and "main" not in sections and section in sections and block not in block_names(read_text(out_doc)):
+            raise ValueError(f"{out_doc}: no generated block {block!r} to rebuild; build the whole page (lawn zoo "
+                             "build without --only)")
+    return sections
+
+
+def _of_section(section: str) -> dict[str, Recipe]:
+    return {n: r for n, r in RECIPES.items() if r.section == section}
+
+
+def _wanted(section: str, sections: list[str], names: list[str], runs: Path) -> bool:
+    """Rebuild ``section``: it was named, or (building everything) it has a finished run."""
+    return section in sections and (bool(names) or any(finished(Path(runs) / r.name / f"seed-{s}", r.timesteps)
+                                                       for r in _of_section(section).values() for s in r.seeds))
 
 
 def _plot_main_curves(ev: ZooEvaluation, out_doc: Path, workers: int) -> None:
@@ -341,7 +364,7 @@ def merged_rows(old: list[dict[str, Any]], built: Mapping[str, tuple[Any, Any]])
     for ev, _ in built.values():
         for row in ev.rows:
             new.setdefault((row["policy"], row["env"], str(row["seed"])), row)
-    if all(section in built for section in SECTIONS):
+    if all(section in built for section in SECTIONS if section != "distil"):  # the distil episodes: distil.csv
         return list(new.values())
     rebuilt = {name for name, r in RECIPES.items() if r.section in built}
     columns = list(next(iter(new.values())))

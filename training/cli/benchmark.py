@@ -162,8 +162,10 @@ def _fleet_sizes(args: argparse.Namespace, policies: list[str], out: Path) -> st
     ``fleet_sizes.csv`` and ``.md``, returns the block (empty without fleet networks)."""
     import time
 
+    from agents.learned import zoo_agents
+
     from ..benchmark import FLEET_SIZES, fleet_agents, run_generalization
-    from ..results.report import generalization_table
+    from ..results.ranges import TEST_RANGES, fleet_table
     from ..results.run import write_rows
 
     agents = [p for p in fleet_agents() if p in policies]
@@ -173,8 +175,11 @@ def _fleet_sizes(args: argparse.Namespace, policies: list[str], out: Path) -> st
     sizes = {k: min(n, args.episodes) if args.episodes else n for k, n in FLEET_SIZES.items()}
     rows = run_generalization(agents, sizes, _play(args))
     seeds = ", ".join(f"K = {k}: {n}" for k, n in sizes.items())
-    block = (f"Test seeds 0..n-1 per fleet size ({seeds}); {args.workers} worker processes, "
-             f"{(time.perf_counter() - start) / 60:.1f} min.\n\n" + generalization_table(rows, agents, sizes))
+    # the targets are for the networks trained on mixed fleets, not the multi-agent ones trained at one K
+    targeted = {a for a in agents if zoo_agents()[a.partition(":")[2]].get("trainer") == "fleet"}
+    block = (f"Test seeds S..S+n-1 of each range S = {', '.join(map(str, TEST_RANGES))}, n per fleet size ({seeds}); "
+             f"{args.workers} worker processes, {(time.perf_counter() - start) / 60:.1f} min.\n\n"
+             + fleet_table(rows, agents, sizes, targeted))
     write_rows(rows, out / "fleet_sizes.csv")
     (out / "fleet_sizes.md").write_text(block + "\n")
     print(block)

@@ -10,12 +10,9 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from agents.base import JOINT
-from agents.learned import zoo_agents
 
-from .run import NOISE, REFERENCE_ROWS, TRANSIENT_SLOTS, is_reference_row, own_anchor, policy_env
+from .run import REFERENCE_ROWS, TRANSIENT_SLOTS, is_reference_row, own_anchor, policy_env
 from .stats import (
     SCORE_HIGH,
     SCORE_LOW,
@@ -33,17 +30,12 @@ from .stats import (
 
 __all__ = ["fmt_pct", "fmt_num", "fmt_stat", "fmt_geometric", "fmt_paired", "format_score", "RESULT_METRICS",
            "TIMING_METRICS", "format_table", "summary_markdown", "plot_summary", "mean_cell", "protocol_cells",
-           "learned_table", "suite_table", "structure_table", "task_tables", "plot_profiles", "skipped_summary",
-           "TARGETS", "generalization_table"]
+           "learned_table", "suite_table", "structure_table", "task_tables", "plot_profiles", "skipped_summary"]
 
 #: The summary's deterministic metrics (the same seeds give the same digits on any machine) and its
 #: measured ones (this machine's clock), in two tables.
 RESULT_METRICS = tuple(m for m in SUMMARY_METRICS if not m[0].startswith("decision_time"))
 TIMING_METRICS = tuple(m for m in SUMMARY_METRICS if m[0].startswith("decision_time"))
-#: Fleet size -> the largest geometric cost change against the best expert the fleet networks aim for
-#: (None: reported only).
-TARGETS: dict[int, float | None] = {3: 0.05, 4: 0.05, 8: 0.05, 16: 0.10, 32: 0.10, 64: None}
-_NOISE = next(iter(NOISE))
 #: The cost columns of the per-task and learned tables.
 _COSTS = ("control_cost", "transient_cost", "sustained_cost")
 Rows = Sequence[Mapping[str, Any]]  # evaluation rows (:mod:`.run`)
@@ -355,46 +347,3 @@ def skipped_summary(skipped: Mapping[tuple[str, str], str]) -> list[str]:
     for task, policy in skipped:
         by_task.setdefault(task, []).append(policy)
     return [f"on `{task}`: {', '.join(ps)} ({skipped[(task, ps[0])]})" for task, ps in by_task.items()]
-
-
-def _decision_ms(rows: Rows, policy: str, env: str, task: str) -> float:
-    return 1e3 * float(np.median(list(costs_of(rows, policy, env, task, "decision_time_median_s").values())))
-
-
-def _trained_for_every_size(agents: Sequence[str]) -> set[str]:
-    """The agents the targets are for: the fleet networks trained on mixed fleets (``lawn train
-    --algo fleet``), not the multi-agent ones trained at one size."""
-    records = zoo_agents()
-    return {a for a in agents if records.get(a.partition(":")[2], {}).get("trainer") == "fleet"}
-
-
-def _target_cell(k: int, change: float) -> str:
-    target = TARGETS.get(k)
-    if target is None:
-        return "reported"
-    return f"≤ {target * 100:+.0f} %: {'met' if change <= target else 'missed'}"
-
-
-def generalization_table(rows: Rows, agents: Sequence[str], sizes: Mapping[int, int]) -> str:
-    """The Markdown table: per env, per K, the noise-floor row and every agent."""
-    table = []
-    envs = list(dict.fromkeys(policy_env(a) for a in agents))
-    targeted = _trained_for_every_size(agents)
-    for env in envs:
-        for policy in [_NOISE, *(a for a in agents if policy_env(a) == env)]:
-            for k in sizes:
-                task = f"k{k}"
-                mine = costs_of(rows, policy, env, task)
-                if not mine or not costs_of(rows, SCORE_HIGH, env, task):
-                    continue
-                g = geometric(rows, policy, SCORE_HIGH, env, task)
-                ms, ref_ms = _decision_ms(rows, policy, env, task), _decision_ms(rows, SCORE_HIGH, env, task)
-                table.append([policy, env, str(k), str(len(mine)), mean_cell(rows, policy, env, task, "control_cost"),
-                              mean_cell(rows, SCORE_HIGH, env, task, "control_cost"), fmt_geometric(g),
-                              fmt_paired(*paired(rows, policy, SCORE_HIGH, env, task)),
-                              _target_cell(k, g.change) if policy in targeted else "–", f"{ms:.3g}", f"{ref_ms:.3g}",
-                              f"{ref_ms / ms:.1f}×"])
-    header = ["policy", "env", "K", "seeds", "control cost", f"{SCORE_HIGH} cost",
-              f"vs {SCORE_HIGH} (geometric [95 %], seeds won)", f"vs {SCORE_HIGH} (paired mean)", "target",
-              "decision time (ms)", f"{SCORE_HIGH} decision time (ms)", f"{SCORE_HIGH} / policy time"]
-    return markdown_table(header, table)

@@ -1,0 +1,147 @@
+"""The distilled agents (the ``distil`` recipes of :mod:`training.recipes`: one fleet network
+cloned from ``dv-mpc`` on the steady suite tasks) compared on those tasks, on two disjoint ranges of
+test seeds (:mod:`training.results.ranges`), and shipped: ``lawn zoo build`` runs
+:func:`evaluate_distil` for the page's ``zoo-distil`` block and :func:`export_distil`.
+
+Each agent plays its own env with its own control law (``zoo:dv-comm``'s AGVs apply the delivery
+law); the references ``dv-mpc`` and ``rg-mpc`` play ``lawn/Joint-v1`` of the same task on the same
+seeds: the same scenario and draws, so the per-seed ratios compare realized control costs.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.base import JOINT
+from agents.learned import ZOO_DIR, export_agent, zoo_agents
+from agents.runs import read_run
+from lawn_env import ScenarioConfig, presets
+
+from .protocol import read_learning_curve, selected_validation, selection_key
+from .recipes import RECIPES, Recipe, finished
+from .results.ranges import TEST_RANGES, compare_ranges, distil_table, test_seeds
+from .results.report import fmt_num, fmt_paired, markdown_table
+from .results.run import DEFAULT_PLAY, Play, policy_env, run_entries
+from .results.stats import SCORE_HIGH, costs_of
+
+__all__ = ["DISTIL_EPISODES", "own_law", "run_distil", "Distilled", "evaluate_distil", "export_distil"]
+
+#: Test seeds per range and task.
+DISTIL_EPISODES = 100
+
+
+def own_law(policy: str) -> dict[str, Any]:
+    """The control law ``policy`` (``zoo:NAME`` or ``sb3:DIR``) was trained with, as config settings."""
+    prefix, _, rest = policy.partition(":")
+    if prefix == "zoo":
+        config = ScenarioConfig.from_dict(zoo_agents()[rest]["config"])
+    elif prefix in ("sb3", "bc"):
+        config = read_run(rest).load_config()
+    else:
+        raise ValueError(f"own_law: {policy!r} is not a learned agent (zoo:NAME or sb3:DIR)")
+    return {"control.law": config.control.law}
+
+
+def recipe_tasks(r: Recipe) -> list[str]:
+    """The tasks a recipe of the section is compared on: those it trained on (``--hp tasks``), else its preset."""
+    return list(r.hp.get("tasks") or [r.preset])
+
+
+def run_distil(agents: Mapping[str, Sequence[str]], episodes: int = DISTIL_EPISODES, play: Play = DEFAULT_PLAY
+               ) -> list[dict[str, Any]]:
+    """Full episodes of ``dv-mpc`` and ``rg-mpc`` (on ``lawn/Joint-v1``) and of every agent (``{policy:
+    tasks}``, on its env, with its law) on each of its tasks, on the first ``episodes`` seeds of both
+    test ranges."""
+    seeds = test_seeds(episodes)
+    rows: list[dict[str, Any]] = []
+    for task in dict.fromkeys(t for tasks in agents.values() for t in tasks):
+        config = presets.get(task)
+        rows += run_entries([(SCORE_HIGH, JOINT), ("rg-mpc", JOINT)], config, seeds, play, task=task,
+                            desc=f"distil: {task}, experts")
+        for agent in (a for a, tasks in agents.items() if task in tasks):
+            rows += run_entries([(agent, policy_env(agent))], config.override(own_law(agent)), seeds, play, task=task,
+                                desc=f"distil: {task}, {agent}")
+    return rows
+
+
+@dataclass
+class Distilled:
+    """The section's shipped runs (``{recipe: run dir}``, the validation-selected seed), their policy
+    names, the episodes of :func:`run_distil` and the page block (tables and note)."""
+
+    found: dict[str, Path]
+    names: dict[str, str]
+    rows: list[dict[str, Any]]
+    block: str
+
+
+def _chosen(r: Recipe, runs: Path) -> Path | None:
+    """The recipe's finished run with the lowest selected validation (None: no finished run)."""
+    dirs = [runs / r.name / f"seed-{s}" for s in r.seeds if finished(runs / r.name / f"seed-{s}", r.timesteps)]
+    if not dirs:
+        return None
+    keys = [selection_key(selected_validation(read_learning_curve(d)) or {"control_cost": math.inf}) for d in dirs]
+    return dirs[int(np.argmin(keys))]
+
+
+def evaluate_distil(runs: Path, workers: int = 2, progress: bool = True, episodes: int = DISTIL_EPISODES
+                    ) -> Distilled:
+    """The section's recipes: each one's validation-selected run compared on its tasks
+    (:func:`run_distil`) and rendered (:func:`~training.results.ranges.distil_table`; the RL runs'
+    learning curves on the validation seeds beside it)."""
+    section = {name: r for name, r in RECIPES.items() if r.section == "distil"}
+    found = {name: d for name, r in section.items() if (d := _chosen(r, Path(runs))) is not None}
+    if not found:
+        raise ValueError(f"{runs}: no finished distil recipe runs ({', '.join(section)}; lawn zoo train --only ...)")
+    names = {name: read_run(d).policy_name for name, d in found.items()}
+    rows = run_distil({names[n]: recipe_tasks(section[n]) for n in found}, episodes, Play(workers, progress))
+    labels = {names[n]: (f"`zoo:{n}`", section[n].evaluated_on) for n in found}
+    targeted = {names[n] for n in found if section[n].algo == "fleet"}
+    tasks = list(dict.fromkeys(t for n in found for t in recipe_tasks(section[n])))
+    note = (f"{episodes} test seeds from each of {', '.join(map(str, TEST_RANGES))} per task. Trained by: "
+            + "; ".join(f"`{section[n].command()}`" for n in found) + ".")
+    curves = [_curve_table(n, found[n]) for n in found if section[n].algo != "fleet"]
+    return Distilled(found, names, rows, "\n\n".join([distil_table(rows, labels, tasks, JOINT, targeted), note,
+                                                        *curves]))
+
+
+def _curve_table(name: str, run_dir: Path) -> str:
+    """An RL run's learning curve: the validation cost and the paired change against its start."""
+    rows = read_learning_curve(run_dir)
+    body = [[f"{int(r['timesteps']):,}", fmt_num(r["control_cost"]), fmt_paired(r.get("vs_start", math.nan),
+                                                                               r.get("vs_start_ci95", math.nan)),
+             fmt_paired(r["vs_reference"], r["vs_reference_ci95"])] for r in rows]
+    head = ["steps", "validation cost", "vs start (paired)", "vs rg-mpc (paired)"]
+    return f"`{name}` ({run_dir.name}), learning curve on the validation seeds:\n\n" + markdown_table(head, body)
+
+
+def export_distil(d: Distilled, target: Path = ZOO_DIR) -> list[Path]:
+    """Each run of ``d`` as ``target/<recipe>``."""
+    return [_export(name, run_dir, d.names[name], d.rows, Path(target)) for name, run_dir in d.found.items()]
+
+
+def _export(name: str, run_dir: Path, policy: str, rows: list[dict[str, Any]], target: Path) -> Path:
+    """``target/<name>``: the run's network with a record of how it compares on every task."""
+    r, run = RECIPES[name], read_run(run_dir)
+    env = r.evaluated_on
+    per_task = {}
+    for task in recipe_tasks(r):
+        mine = costs_of(rows, policy, env, task)
+        per_task[task] = {ref: [g.change for g in compare_ranges(mine, costs_of(rows, ref, JOINT, task)).ranges]
+                          for ref in (SCORE_HIGH, "rg-mpc")}
+    record = {"name": name, "label": r.label, "trained_on": r.env_id, "evaluated_on": env, "command": r.command(),
+              "budget_steps": int(run.record.get("num_timesteps", r.timesteps)), "training_seeds": list(r.seeds),
+              "shipped_seed": run.record["seed"], "wall_time_s": [round(float(run.record["wall_time_s"]), 1)],
+              "benchmark": {"test_seeds": " and ".join(f"{b}-{b + DISTIL_EPISODES - 1}" for b in TEST_RANGES),
+                            "reference": SCORE_HIGH, "tasks": per_task}}
+    out = Path(target) / name
+    if out.exists():
+        shutil.rmtree(out)
+    return export_agent(run_dir, out, record)
