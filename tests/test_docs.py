@@ -20,7 +20,7 @@ BLOCKS = {"benchmark": "README.md", "benchmark-nominal": "docs/policies.md", "ga
           "vector-step": "docs/performance.md", "numba-jit": "docs/performance.md",
           "qp-speed": "docs/performance.md",
           "fast-drone-grid": "docs/benchmark.md", "parallel-scaling": "docs/performance.md",
-          "parallel-scaling-16": "docs/performance.md", "zoo-fleet": "docs/LEARNED.md",
+          "parallel-scaling-16": "docs/performance.md", "zoo-fleet": "docs/LEARNED.md", "zoo-distil": "docs/LEARNED.md",
           "fleet-generalization": "docs/LEARNED.md", "fleet-decision": "docs/performance.md",
           "dv-mpc": "docs/experts.md", "dv-mpc-refinements": "docs/experts.md",
           "beyond-the-paper": "docs/REPRODUCTION.md", "reproduction": "docs/REPRODUCTION.md",
