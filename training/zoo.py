@@ -329,9 +329,15 @@ def format_zoo_list() -> str:
         lines.append(f"  drives {rec.get('evaluated_on')} (trained on {rec.get('trained_on')}, {algo}), "
                      f"{rec.get('budget_steps', 0):,} steps, training seeds {rec.get('training_seeds')}, shipped seed "
                      f"{rec.get('shipped_seed')}")
-        lines.append(f"  test seeds {bench.get('test_seeds')}: cost vs rg-mpc {fmt_paired(*ship)}, vs its anchor "
-                     f"{bench.get('anchor', '?')} {fmt_paired(*gain)}, score v{bench.get('score_version', '?')} "
-                     f"{bench.get('score', [math.nan])[0]:.1f}")
+        if "tasks" in bench:  # a steady-task agent: geometric change per task and test range
+            for task, refs in bench["tasks"].items():
+                cells = ", ".join(f"vs {ref} {' / '.join(fmt_pct(x) for x in changes)}"
+                                  for ref, changes in refs.items())
+                lines.append(f"  {task}, test seeds {bench.get('test_seeds')} (geometric, per range): {cells}")
+        else:
+            lines.append(f"  test seeds {bench.get('test_seeds')}: cost vs rg-mpc {fmt_paired(*ship)}, vs its anchor "
+                         f"{bench.get('anchor', '?')} {fmt_paired(*gain)}, score v{bench.get('score_version', '?')} "
+                         f"{bench.get('score', [math.nan])[0]:.1f}")
         lines.append(f"  trained with: {rec.get('command')}")
     return "\n".join(lines)
 
