@@ -391,15 +391,26 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
                     out_dir=runs / "dv-joint" / "seed-0", hp_overrides=hp, eval_episodes=1, progress=False))
     docs.mkdir()
     (docs / "LEARNED.md").write_text("# Learned\n\n<!-- zoo-distil:begin -->\nold\n<!-- zoo-distil:end -->\n")
+    residual = recipes_module.RECIPES["ppo-dv-residual"]  # an RL run of the section: its curve beside the table
+    rl_hp = {**residual.hp, "n_envs": 1, "n_steps": 64, "batch_size": 64, "n_epochs": 1}
+    small_rl = dataclasses.replace(residual, timesteps=64, seeds=(0,), hp=rl_hp)
+    monkeypatch.setitem(recipes_module.RECIPES, "ppo-dv-residual", small_rl)
+    train(TrainSpec(algo="ppo", env_id="lawn/Joint-v1", config=small_rl.config, timesteps=64, seed=0, eval_every=64,
+                    out_dir=runs / "ppo-dv-residual" / "seed-0", hp_overrides=rl_hp, eval_episodes=1, progress=False))
     table = zoo.build_zoo(runs, docs / "LEARNED.md", workers=1, progress=False, episodes=1, target=tmp_path / "zoo",
-                          only=["dv-joint"])
+                          only=["dv-joint", "ppo-dv-residual"])
+    rl = [line for line in table.splitlines() if line.startswith("| `zoo:ppo-dv-residual`")]
+    assert len(rl) == 1 and rl[0].split(" | ")[2] == "steady" and rl[0].endswith("| – |")  # no clone target
+    assert "`ppo-dv-residual` (seed-0, shipped;" in table and "| 64 |" in table  # the learning curve
+    assert json.loads((tmp_path / "zoo" / "ppo-dv-residual" / "agent.json").read_text())["residual"]["anchor"] == "dv-mpc"
     lines = [line for line in table.splitlines() if line.startswith("| `zoo:dv-joint`")]
     assert [line.split(" | ")[2] for line in lines] == ["steady", "wide-k8"]
     assert all(line.split(" | ")[3] == "2" and line.endswith(("| met |", "| missed |")) for line in lines)
     assert "old" not in (docs / "LEARNED.md").read_text()
     rows = read_csv(docs / "learned" / "distil.csv")
     assert {int(r["seed"]) for r in rows} == set(TEST_RANGES)
-    assert {r["policy"] for r in rows} == {"dv-mpc", "rg-mpc", f"sb3:{runs / 'dv-joint' / 'seed-0'}"}
+    assert {r["policy"] for r in rows} == {"dv-mpc", "rg-mpc", f"sb3:{runs / 'dv-joint' / 'seed-0'}",
+                                           f"sb3:{runs / 'ppo-dv-residual' / 'seed-0'}"}
     record = json.loads((tmp_path / "zoo" / "dv-joint" / "agent.json").read_text())
     assert set(record["benchmark"]["tasks"]) == {"steady", "wide-k8"}
     assert all(len(v) == 2 for per in record["benchmark"]["tasks"].values() for v in per.values())  # per range

@@ -80,11 +80,16 @@ class Distilled:
     names: dict[str, str]
     rows: list[dict[str, Any]]
     block: str
+    episodes: int
+
+
+def _finished(r: Recipe, runs: Path) -> list[Path]:
+    return [runs / r.name / f"seed-{s}" for s in r.seeds if finished(runs / r.name / f"seed-{s}", r.timesteps)]
 
 
 def _chosen(r: Recipe, runs: Path) -> Path | None:
     """The recipe's finished run with the lowest selected validation (None: no finished run)."""
-    dirs = [runs / r.name / f"seed-{s}" for s in r.seeds if finished(runs / r.name / f"seed-{s}", r.timesteps)]
+    dirs = _finished(r, runs)
     if not dirs:
         return None
     keys = [selection_key(selected_validation(read_learning_curve(d)) or {"control_cost": math.inf}) for d in dirs]
@@ -107,39 +112,43 @@ def evaluate_distil(runs: Path, workers: int = 2, progress: bool = True, episode
     tasks = list(dict.fromkeys(t for n in found for t in recipe_tasks(section[n])))
     note = (f"{episodes} test seeds from each of {', '.join(map(str, TEST_RANGES))} per task. Trained by: "
             + "; ".join(f"`{section[n].command()}`" for n in found) + ".")
-    curves = [_curve_table(n, found[n]) for n in found if section[n].algo != "fleet"]
-    return Distilled(found, names, rows, "\n\n".join([distil_table(rows, labels, tasks, JOINT, targeted), note,
-                                                        *curves]))
+    curves = [_curve_table(n, d, d == found[n]) for n in found if section[n].algo != "fleet"
+              for d in _finished(section[n], Path(runs))]
+    block = "\n\n".join([distil_table(rows, labels, tasks, JOINT, targeted), note, *curves])
+    return Distilled(found, names, rows, block, episodes)
 
 
-def _curve_table(name: str, run_dir: Path) -> str:
+def _curve_table(name: str, run_dir: Path, shipped: bool) -> str:
     """An RL run's learning curve: the validation cost and the paired change against its start."""
     rows = read_learning_curve(run_dir)
     body = [[f"{int(r['timesteps']):,}", fmt_num(r["control_cost"]), fmt_paired(r.get("vs_start", math.nan),
                                                                                r.get("vs_start_ci95", math.nan)),
              fmt_paired(r["vs_reference"], r["vs_reference_ci95"])] for r in rows]
     head = ["steps", "validation cost", "vs start (paired)", "vs rg-mpc (paired)"]
-    return f"`{name}` ({run_dir.name}), learning curve on the validation seeds:\n\n" + markdown_table(head, body)
+    wall = read_run(run_dir).record.get("wall_time_s", math.nan)
+    return (f"`{name}` ({run_dir.name}{', shipped' if shipped else ''}; {wall / 60:.0f} min), learning curve on the "
+            "validation seeds:\n\n" + markdown_table(head, body))
 
 
 def export_distil(d: Distilled, target: Path = ZOO_DIR) -> list[Path]:
     """Each run of ``d`` as ``target/<recipe>``."""
-    return [_export(name, run_dir, d.names[name], d.rows, Path(target)) for name, run_dir in d.found.items()]
+    return [_export(name, run_dir, d.names[name], d, Path(target)) for name, run_dir in d.found.items()]
 
 
-def _export(name: str, run_dir: Path, policy: str, rows: list[dict[str, Any]], target: Path) -> Path:
+def _export(name: str, run_dir: Path, policy: str, d: Distilled, target: Path) -> Path:
     """``target/<name>``: the run's network with a record of how it compares on every task."""
     r, run = RECIPES[name], read_run(run_dir)
     env = r.evaluated_on
     per_task = {}
     for task in recipe_tasks(r):
-        mine = costs_of(rows, policy, env, task)
-        per_task[task] = {ref: [g.change for g in compare_ranges(mine, costs_of(rows, ref, JOINT, task)).ranges]
+        mine = costs_of(d.rows, policy, env, task)
+        per_task[task] = {ref: [g.change for g in compare_ranges(mine, costs_of(d.rows, ref, JOINT, task)).ranges]
                           for ref in (SCORE_HIGH, "rg-mpc")}
     record = {"name": name, "label": r.label, "trained_on": r.env_id, "evaluated_on": env, "command": r.command(),
               "budget_steps": int(run.record.get("num_timesteps", r.timesteps)), "training_seeds": list(r.seeds),
               "shipped_seed": run.record["seed"], "wall_time_s": [round(float(run.record["wall_time_s"]), 1)],
-              "benchmark": {"test_seeds": " and ".join(f"{b}-{b + DISTIL_EPISODES - 1}" for b in TEST_RANGES),
+              "selected_on": "lowest selected validation against rg-mpc on the validation seeds (500000 + i)",
+              "benchmark": {"test_seeds": " and ".join(f"{b}-{b + d.episodes - 1}" for b in TEST_RANGES),
                             "reference": SCORE_HIGH, "tasks": per_task}}
     out = Path(target) / name
     if out.exists():
