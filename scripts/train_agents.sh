@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # Train every learned comparator of training/recipes.py (RECIPES: fixed budgets, training seeds 0-2;
-# the fleet networks one seed), benchmark each run on the test seeds beside rg-mpc, export the
-# validation-selected run of each recipe to agents/zoo/ and regenerate docs/LEARNED.md (about 100
-# minutes of 2 cores: 69 at the last retrain of the flat networks, 24 for the two fleet networks
-# side by side and 5 for the multi-agent fleet runs, `lawn zoo train --only ...`).
+# the fleet networks one seed), benchmark each run on the test seeds beside the experts, export the
+# validation-selected run of each recipe to agents/zoo/ and regenerate docs/LEARNED.md. Not timed end
+# to end; its parts, two runs side by side on 2 cores: 69 minutes for the flat networks, 24 for the two
+# fleet networks, 5 for the multi-agent fleet runs, 10 for dv-joint and dv-comm (600 s a run) and 8
+# for ppo-dv-residual (about 495 s a run): about 116 minutes of training (`lawn zoo train --only ...`),
+# then the build's test episodes (about 10 minutes for the steady-task agents).
 #   bash scripts/train_agents.sh [RUNS_DIR]   (default: runs/agents; finished runs are kept)
 set -euo pipefail
 cd "$(dirname "$0")/.."
