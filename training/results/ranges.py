@@ -66,7 +66,7 @@ class RangeComparison:
         return all(math.isfinite(g.high) and g.high <= bound for g in self.ranges)
 
     def cell(self) -> str:
-        """One geometric cell per range, `` / ``-separated."""
+        """One geometric cell per range, separated by slashes."""
         return " / ".join(fmt_geometric(g, wins=False) for g in self.ranges)
 
     def tail_cell(self) -> str:
