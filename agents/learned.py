@@ -153,6 +153,8 @@ class SB3Policy(InterfacePolicy):
         self.config_given = config_given
         self.entities = None
         self.residual: Any = None  # agents.residual.ResidualActions: with_residual
+        #: the residual scheme the agent's run records ({"anchor": NAME, "scale": s}; None: none)
+        self.residual_settings: Mapping[str, Any] | None = None
         self._predict = _predictor(network)
         if self.interface.layout == "entities":
             self.entities = EntityLayout(self.config, "joint" if env_id == JOINT else "comm", self.interface.obs_bound)
@@ -178,20 +180,21 @@ class SB3Policy(InterfacePolicy):
         check_law(f"sb3:{path}", trained_env, trained, config if config is not None else trained)
         return cls(_load_model(run), config if config is not None else trained, trained_env, run.interface,
                    ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}",
-                   config_given=config is not None).with_residual(run.record.get("residual"))
+                   config_given=config is not None)._recorded(run.record.get("residual"))
 
-    def with_residual(self, residual: Mapping[str, Any] | None) -> SB3Policy:
-        """Act by the residual scheme its run recorded (:mod:`agents.residual`: the network's action
-        moves the anchor policy's; ``None``: no residual); returns the policy."""
-        if residual is not None:
-            from .residual import ResidualActions, check_residual
+    def with_residual(self, actions: Any) -> SB3Policy:
+        """Act by the residual scheme (an :class:`agents.residual.ResidualActions` around its anchor:
+        the network's action moves the anchor's; :func:`agents.policies.attach_residual` builds it from
+        the run's record, ``residual_settings``); returns the policy."""
+        if self.entities is not None:
+            raise ValueError(f"{self.name}: the residual scheme moves flat actions, not the entity layout's")
+        self.residual = actions
+        self.stateful = True  # the anchor keeps per-episode state
+        return self
 
-            settings = check_residual(residual)
-            if self.entities is not None:
-                raise ValueError(f"{self.name}: the residual scheme moves flat actions, not the entity layout's")
-            self.residual = ResidualActions(settings["anchor"], self.config, self.env_id, self.interface,
-                                            settings["scale"])
-            self.stateful = True  # the anchor keeps per-episode state
+    def _recorded(self, residual: Mapping[str, Any] | None) -> SB3Policy:
+        """Keep the residual scheme a run records, for :func:`agents.make_policy` to attach."""
+        self.residual_settings = residual
         return self
 
     def _on_reset(self, rng: np.random.Generator) -> None:
@@ -387,7 +390,7 @@ def _load_zoo(name: str, config: ScenarioConfig | None = None, env_id: str | Non
     if env_id not in (None, record["env"]):
         raise ValueError(f"zoo:{name} was trained on {record['env']}, not {env_id}")
     return SB3Policy(network, cfg, record["env"], record["interface"], normalizer, seed, label=f"zoo:{name}",
-                     config_given=config is not None).with_residual(record.get("residual"))
+                     config_given=config is not None)._recorded(record.get("residual"))
 
 
 def _no_settings(loader: Callable[..., Policy]) -> Callable[..., Policy]:

@@ -47,6 +47,7 @@ from .reduced import (
     ReducedGradientPlanner,
     ReducedSettings,
 )
+from .residual import ResidualActions, check_residual
 from .scripted import HeuristicPolicy
 from .tracking import PIDGains, lqr_gain, lqr_rollout, pid_rollout
 
@@ -64,6 +65,7 @@ __all__ = [
     "BENCHMARK_POLICIES",
     "POLICIES",
     "make_policy",
+    "attach_residual",
     "policy_names",
     "is_policy_name",
     "snapshot_from_observation",
@@ -265,6 +267,21 @@ PAPER_POLICIES = ("ao-mpc", "epa", "sf", "pid", "lqr")
 BENCHMARK_POLICIES = ("dv-mpc", "rg-mpc", *PAPER_POLICIES)
 
 
+def attach_residual(policy: Policy, settings: Mapping[str, Any] | None) -> Policy:
+    """``policy`` (a trained :class:`~agents.learned.SB3Policy`) acting by the residual scheme its run
+    recorded, ``{"anchor": NAME, "scale": s}`` (:mod:`agents.residual`), the anchor built for the
+    policy's scenario; ``None``: the policy as it is."""
+    if settings is None:
+        return policy
+    checked = check_residual(settings)
+    anchor = make_policy(checked["anchor"], policy.config, env_id=policy.env_id)
+    interface = getattr(policy, "interface", None)
+    with_residual = getattr(policy, "with_residual", None)
+    if with_residual is None:
+        raise ValueError(f"{policy.name} records a residual scheme but cannot act by one")
+    return with_residual(ResidualActions(anchor, policy.config, policy.env_id, interface, checked["scale"]))
+
+
 def policy_names() -> list[str]:
     return list(POLICIES)
 
@@ -291,8 +308,9 @@ def make_policy(name: str, config: ConfigLike = None, env_id: str | None = None,
         if prefix not in LOADERS:
             raise ValueError(f"unknown policy prefix {prefix!r} in {name!r}; valid: {learned_name_forms()}")
         # no config: the agent's own training config (DIR/config.json)
-        return LOADERS[prefix](path, resolve_config(config) if config is not None else None,
-                               env_id=env_id, seed=seed, **kwargs)
+        policy = LOADERS[prefix](path, resolve_config(config) if config is not None else None,
+                                 env_id=env_id, seed=seed, **kwargs)
+        return attach_residual(policy, getattr(policy, "residual_settings", None))
     env_id = env_id or JOINT
     try:
         factory = POLICIES[name]

@@ -12,8 +12,9 @@ scheme (the same encode that labels behaviour cloning), and the learner's action
 so the zero action is the anchor (up to the float32 of the env's action and the interface's
 range), and ``scale`` bounds how far a learner can move it in one slot. One class holds the
 equation: :class:`ResidualActions`; :class:`AnchorResidual` puts it in front of a Gymnasium env
-for training, and :class:`agents.learned.SB3Policy` applies it when a trained agent acts, from the
-``residual`` its run records (``{"anchor": NAME, "scale": s}``).
+for training, and a trained agent (:class:`agents.learned.SB3Policy`) applies it when it acts, from
+the ``residual`` its run records (``{"anchor": NAME, "scale": s}``: :func:`agents.make_policy` and
+:func:`agents.policies.attach_residual` build the anchor).
 
 The anchor's cost is paid every slot: a ``dv-mpc`` decision is about 1.7 ms at K = 4.
 """
@@ -51,21 +52,21 @@ def check_residual(residual: Any) -> dict[str, Any]:
 
 class ResidualActions:
     """The residual scheme of ``interface`` (an anchored interface of the flat layout) around the
-    policy ``anchor`` on ``env_id`` with ``config``: :meth:`action` maps a learner's action and the
+    policy ``anchor`` (built for ``env_id`` and ``config``, :func:`agents.make_policy`): :meth:`action` maps a learner's action and the
     benchmark observation of the slot to the interface's action."""
 
-    def __init__(self, anchor: str | Policy, config: ScenarioConfig, env_id: str, interface: InterfaceLike,
+    def __init__(self, anchor: Policy, config: ScenarioConfig, env_id: str, interface: InterfaceLike,
                  scale: float = 0.25):
-        from .policies import make_policy  # agents.learned builds this class; the policies import it
-
-        settings = check_residual({"anchor": anchor if isinstance(anchor, str) else "policy", "scale": scale})
+        if not isinstance(anchor, Policy):
+            raise TypeError(f"anchor={anchor!r}: a built policy (agents.make_policy(name, config, env_id=...))")
+        settings = check_residual({"anchor": anchor.name, "scale": scale})
         self.interface = resolve_interface(interface)
         if self.interface.action_scheme != "anchored" or self.interface.layout != "flat":
             raise ValueError(f"the residual scheme moves an anchored interface's flat actions; got action_scheme="
                              f"{self.interface.action_scheme!r}, layout={self.interface.layout!r}")
         if env_id not in (JOINT, COMM):
             raise ValueError(f"env_id={env_id!r}; the residual scheme drives {JOINT} or {COMM}")
-        self.anchor = make_policy(anchor, config, env_id=env_id) if isinstance(anchor, str) else anchor
+        self.anchor = anchor
         if self.anchor.env_id != env_id:
             raise ValueError(f"anchor {self.anchor.name!r} drives {self.anchor.env_id}, not {env_id}")
         role = "joint" if env_id == JOINT else "comm"
@@ -92,10 +93,11 @@ class ResidualActions:
 
 class AnchorResidual(gym.ActionWrapper[Any, np.ndarray, np.ndarray]):
     """``env`` (``lawn/Joint-v1`` or ``lawn/Comm-v1`` with an anchored flat interface, possibly
-    wrapped) acting by the residual scheme around ``anchor`` (a policy name or a built policy of the
-    env's scenario): the action space is the env's, and the zero action plays the anchor."""
+    wrapped) acting by the residual scheme around ``anchor`` (a policy built for the env's scenario,
+    ``make_policy("dv-mpc", env.unwrapped.config, env_id=...)``): the action space is the env's, and
+    the zero action plays the anchor."""
 
-    def __init__(self, env: gym.Env[Any, Any], anchor: str | Policy = "dv-mpc", scale: float = 0.25):
+    def __init__(self, env: gym.Env[Any, Any], anchor: Policy, scale: float = 0.25):
         super().__init__(env)
         base = env.unwrapped
         if not isinstance(base, LawnEnv):

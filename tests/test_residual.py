@@ -30,16 +30,18 @@ def _episode(env, actor, seed):
 def test_the_zero_action_plays_the_anchor(env_id):
     config = lawn_env.presets.get("steady").override(SHORT)
     expert = rollout(gym.make(env_id, config=config), make_policy("dv-mpc", config, env_id=env_id), 0)
-    env = AnchorResidual(gym.make(env_id, config=config, interface=NO_MPC), "dv-mpc", scale=0.3)
+    env = AnchorResidual(gym.make(env_id, config=config, interface=NO_MPC), make_policy("dv-mpc", config, env_id=env_id),
+                         scale=0.3)
     cost, _ = _episode(env, lambda obs: np.zeros(env.action_space.shape, np.float32), seed=0)
     assert cost == pytest.approx(expert.metrics["control_cost"], rel=1e-6)
 
 
 def test_the_action_moves_the_anchors_by_the_scale():
     config = lawn_env.ScenarioConfig(**SHORT)
-    env = AnchorResidual(gym.make("lawn/Joint-v1", config=config, interface=NO_MPC), "epa", scale=0.5)
+    env = AnchorResidual(gym.make("lawn/Joint-v1", config=config, interface=NO_MPC), make_policy("epa", config),
+                         scale=0.5)
     env.reset(seed=1)
-    probe = ResidualActions("epa", config, "lawn/Joint-v1", NO_MPC, 0.5)
+    probe = ResidualActions(make_policy("epa", config), config, "lawn/Joint-v1", NO_MPC, 0.5)
     probe.reset(1)
     anchor = probe.anchor_action(env.unwrapped.benchmark_observation())
     a = np.linspace(-1, 1, env.action_space.shape[0]).astype(np.float32)
@@ -50,18 +52,21 @@ def test_the_action_moves_the_anchors_by_the_scale():
 
 def test_bad_settings_and_actions_are_named():
     env = gym.make("lawn/Joint-v1", interface=NO_MPC, **SHORT)
+    epa = make_policy("epa", env.unwrapped.config)
     for bad, match in ((0.0, "scale=0.0"), (3, "scale=3"), (True, "scale=True")):
         with pytest.raises(ValueError, match=match):
-            AnchorResidual(env, "epa", scale=bad)
-    with pytest.raises(ValueError, match="unknown policy 'nope'"):
-        AnchorResidual(env, "nope")
+            AnchorResidual(env, epa, scale=bad)
+    with pytest.raises(TypeError, match="a built policy"):
+        AnchorResidual(env, "epa")
+    with pytest.raises(ValueError, match="drives lawn/Comm-v1, not lawn/Joint-v1"):
+        AnchorResidual(env, make_policy("epa", env.unwrapped.config, env_id="lawn/Comm-v1"))
     with pytest.raises(ValueError, match="'anchor'"):
         check_residual({"scale": 0.2})
     with pytest.raises(ValueError, match="action_scheme='direct'"):
-        AnchorResidual(gym.make("lawn/Joint-v1", **SHORT), "epa")  # the v0 interface has no anchored actions
+        AnchorResidual(gym.make("lawn/Joint-v1", **SHORT), epa)  # the v0 interface has no anchored actions
     with pytest.raises(TypeError, match="wraps a lawn env"):
-        AnchorResidual(gym.make("CartPole-v1"), "epa")
-    wrapped = AnchorResidual(env, "epa")
+        AnchorResidual(gym.make("CartPole-v1"), epa)
+    wrapped = AnchorResidual(env, epa)
     wrapped.reset(seed=0)
     with pytest.raises(ValueError, match="shape"):
         wrapped.step(np.zeros(3, np.float32))
@@ -78,7 +83,7 @@ def test_a_residual_agent_acts_at_evaluation_as_in_training(tmp_path):
 
     config = lawn_env.ScenarioConfig(**SHORT)
     residual = {"anchor": "epa", "scale": 0.4}
-    env = AnchorResidual(gym.make("lawn/Joint-v1", config=config, interface=NO_MPC), **residual)
+    env = AnchorResidual(gym.make("lawn/Joint-v1", config=config, interface=NO_MPC), make_policy("epa", config), 0.4)
     model = PPO("MlpPolicy", env, seed=0, device="cpu", n_steps=32, batch_size=32)
     import torch
 
@@ -86,7 +91,9 @@ def test_a_residual_agent_acts_at_evaluation_as_in_training(tmp_path):
         model.policy.action_net.weight.mul_(50.0)
     trained, actions = _episode(env, lambda obs: model.predict(obs, deterministic=True)[0], seed=4)
     assert np.abs(actions).max() > 0.2
-    policy = SB3Policy(model, config, "lawn/Joint-v1", NO_MPC).with_residual(residual)
+    from agents.policies import attach_residual
+
+    policy = attach_residual(SB3Policy(model, config, "lawn/Joint-v1", NO_MPC), residual)
     evaluated = rollout(gym.make("lawn/Joint-v1", config=config), policy, 4).metrics["control_cost"]
     assert evaluated == pytest.approx(trained, rel=1e-5)
     plain = rollout(gym.make("lawn/Joint-v1", config=config), SB3Policy(model, config, "lawn/Joint-v1", NO_MPC), 4)

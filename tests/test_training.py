@@ -602,7 +602,7 @@ def test_residual_run_records_its_scheme_and_acts_by_it(tmp_path):
     start = [r for r in csv.DictReader((out / "learning_curve.csv").read_text().splitlines())][0]
     from agents.residual import AnchorResidual
 
-    zero = AnchorResidual(gym.make("lawn/Joint-v1", config=SMALL, interface="rl"), **residual)
+    zero = AnchorResidual(gym.make("lawn/Joint-v1", config=SMALL, interface="rl"), make_policy("epa", SMALL), 0.3)
     zero.reset(seed=VALIDATION_SEED_BASE)
     while not zero.unwrapped.sim.done:
         zero.step(np.zeros(zero.action_space.shape, np.float32))

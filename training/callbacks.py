@@ -23,6 +23,7 @@ from typing import Any
 from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.learned import ObsNormalizer, SB3Policy, marl_policy
+from agents.policies import attach_residual
 from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
 from lawn_env.interface import InterfaceLike
 
@@ -183,7 +184,8 @@ class ControlCostValidation(BaseCallback):
         normalizer = ObsNormalizer.from_vecnormalize(self.model.get_vec_normalize_env())
         if self.env_id == PARALLEL_ENV_ID:
             return marl_policy(self.model, self.config, self.interface, normalizer, None, "marl")
-        return SB3Policy(self.model, self.config, self.env_id, self.interface, normalizer).with_residual(self.residual)
+        return attach_residual(SB3Policy(self.model, self.config, self.env_id, self.interface, normalizer),
+                               self.residual)
 
     def validate(self, start: bool = False) -> dict[str, float]:
         """The learning-curve columns of the current policy; ``start``: it is the run's starting policy,

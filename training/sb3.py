@@ -155,11 +155,15 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
 def _lawn_wrappers(env: Any, paired: Mapping[str, Any] | None, residual: Mapping[str, Any] | None) -> Any:
     """A monitored env with the residual scheme (:class:`agents.residual.AnchorResidual`) and then
     the paired reward (:class:`agents.paired.PairedReward`), each when given its keywords."""
+    from agents import make_policy
+    from agents.base import COMM, JOINT
     from agents.paired import PairedReward
     from agents.residual import AnchorResidual
 
     if residual is not None:
-        env = AnchorResidual(env, **residual)
+        base = env.unwrapped
+        anchor = make_policy(residual["anchor"], base.config, env_id=COMM if base.role == "comm" else JOINT)
+        env = AnchorResidual(env, anchor, residual["scale"])
     return PairedReward(env, **paired) if paired is not None else env
 
 
