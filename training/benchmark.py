@@ -139,8 +139,16 @@ def run_learned_protocol(agents: Sequence[str], out_dir: Path, episodes: int = T
 
 def suite_policies() -> list[str]:
     """The experts, baselines and anchors of :data:`SUITE_POLICIES` (``anchor:hover`` left out: its
-    cost is thousands of times the experts') and every shipped agent."""
-    return list(SUITE_POLICIES) + [f"zoo:{n}" for n in zoo_agents()]
+    cost is thousands of times the experts') and every shipped agent that acts under the paper's
+    control law."""
+    return list(SUITE_POLICIES) + [f"zoo:{n}" for n, rec in zoo_agents().items() if _paper_law(rec)]
+
+
+def _paper_law(record: Mapping[str, Any]) -> bool:
+    """A shipped agent acts on the suite's tasks (the paper's control law): not a Comm agent trained
+    with the delivery law (``zoo:dv-comm``, compared on its own tasks in docs/LEARNED.md)."""
+    law = record.get("config", {}).get("control", {}).get("law", "paper")
+    return record.get("env") != "lawn/Comm-v1" or law == "paper"
 
 
 def _applicable(policy: str, env: str, config: ScenarioConfig) -> str | None:
