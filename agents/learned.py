@@ -177,7 +177,7 @@ class SB3Policy(InterfacePolicy):
         if env_id not in (None, trained_env):
             raise ValueError(f"{path} was trained on {trained_env}, not {env_id}")
         trained = run.load_config()
-        check_law(f"sb3:{path}", trained_env, trained, config if config is not None else trained)
+        check_law(f"sb3:{path}", trained_env, trained, config if config is not None else trained, run.interface)
         return cls(_load_model(run), config if config is not None else trained, trained_env, run.interface,
                    ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}",
                    config_given=config is not None)._recorded(run.record.get("residual"))
@@ -221,11 +221,15 @@ class SB3Policy(InterfacePolicy):
         return self.to_v0(action, raw)
 
 
-def check_law(label: str, env_id: str, trained: ScenarioConfig, config: ScenarioConfig) -> None:
-    """A Comm agent acts where the env's AGVs apply the control law it was trained with (its power
-    and drone decisions assume their increments): another law is an error naming both."""
-    if env_id == COMM and config.control.law != trained.control.law:
-        raise ValueError(f"{label} was trained on {COMM} with control.law={trained.control.law!r}; this scenario "
+def check_law(label: str, env_id: str, trained: ScenarioConfig, config: ScenarioConfig,
+              interface: InterfaceLike = None) -> None:
+    """An agent acts under the control law it was trained with: on Comm the env's AGVs apply it (its
+    power and drone decisions assume their increments), on Joint an anchored interface's MPC increment
+    anchor plans by it. Another law is an error naming both."""
+    iface = resolve_interface(interface)
+    uses_law = env_id == COMM or (iface.action_scheme == "anchored" and iface.increment_anchor == "mpc")
+    if uses_law and config.control.law != trained.control.law:
+        raise ValueError(f"{label} was trained on {env_id} with control.law={trained.control.law!r}; this scenario "
                          f"has control.law={config.control.law!r} (pass --set control.law={trained.control.law})")
 
 
@@ -380,7 +384,7 @@ def _load_zoo(name: str, config: ScenarioConfig | None = None, env_id: str | Non
                          f"zoo agent's {record['algo']} network")
     trained = ScenarioConfig.from_dict(record["config"])
     cfg = config if config is not None else trained
-    check_law(f"zoo:{name}", record["env"], trained, cfg)
+    check_law(f"zoo:{name}", record["env"], trained, cfg, record["interface"])
     normalizer = ObsNormalizer.load(ZOO_DIR / name / "normalizer.npz")
     if record["env"] == PARALLEL_ENV_ID:
         if env_id not in (None, JOINT):

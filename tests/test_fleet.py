@@ -383,7 +383,8 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
     from training.train import TrainSpec, train
 
     hp = {"expert": "dv-mpc", "tasks": ["steady", "wide-k8"], "epochs": 1, "dagger_iterations": 0, "width": 16,
-          "heads": 2}
+          "heads": 2, "interface": recipes_module.RECIPES["dv-joint"].hp["interface"],
+          "task_settings": {"control.law": "delivery"}}
     tiny = dataclasses.replace(recipes_module.RECIPES["dv-joint"], timesteps=16, hp=hp)
     monkeypatch.setitem(recipes_module.RECIPES, "dv-joint", tiny)
     runs, docs = tmp_path / "runs", tmp_path / "docs"
@@ -415,7 +416,10 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
     assert set(record["benchmark"]["tasks"]) == {"steady", "wide-k8"}
     assert all(len(v) == 2 for per in record["benchmark"]["tasks"].values() for v in per.values())  # per range
     monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
-    assert make_policy("zoo:dv-joint", presets.get("wide-k8")).entities.num_agvs == 8
+    delivery = {"control.law": "delivery"}
+    assert make_policy("zoo:dv-joint", presets.get("wide-k8").override(delivery)).entities.num_agvs == 8
+    with pytest.raises(ValueError, match="zoo:dv-joint was trained on lawn/Joint-v1 with control.law='delivery'"):
+        make_policy("zoo:dv-joint", presets.get("wide-k8"))  # its MPC increment anchor plans by the law
     from training.benchmark import fleet_agents
 
     assert "zoo:dv-joint" not in fleet_agents()  # the fleet-size table is for the default-scenario networks

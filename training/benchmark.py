@@ -145,10 +145,9 @@ def suite_policies() -> list[str]:
 
 
 def _paper_law(record: Mapping[str, Any]) -> bool:
-    """A shipped agent acts on the suite's tasks (the paper's control law): not a Comm agent trained
-    with the delivery law (``zoo:dv-comm``, compared on its own tasks in docs/LEARNED.md)."""
-    law = record.get("config", {}).get("control", {}).get("law", "paper")
-    return record.get("env") != "lawn/Comm-v1" or law == "paper"
+    """A shipped agent acts on the suite's tasks (the paper's control law): not one trained with the
+    delivery law (``zoo:dv-joint``, ``zoo:dv-comm``: compared on their own tasks in docs/LEARNED.md)."""
+    return bool(record.get("config", {}).get("control", {}).get("law", "paper") == "paper")
 
 
 def _applicable(policy: str, env: str, config: ScenarioConfig) -> str | None:
