@@ -3,7 +3,7 @@
 # the fleet networks one seed), benchmark each run on the test seeds beside the experts, export the
 # validation-selected run of each recipe to agents/zoo/ and regenerate docs/LEARNED.md. Not timed end
 # to end; its parts, two runs side by side on 2 cores: 69 minutes for the flat networks, 24 for the two
-# fleet networks, 5 for the multi-agent fleet runs, 10 for dv-joint and dv-comm (600 s a run) and 8
+# fleet networks, 5 for the multi-agent fleet runs, 10 for dv-joint and dv-comm (about 610 s a run) and 8
 # for ppo-dv-residual (about 495 s a run): about 116 minutes of training (`lawn zoo train --only ...`),
 # then the build's test episodes (about 10 minutes for the steady-task agents).
 #   bash scripts/train_agents.sh [RUNS_DIR]   (default: runs/agents; finished runs are kept)
