@@ -52,8 +52,9 @@ def check_residual(residual: Any) -> dict[str, Any]:
 
 class ResidualActions:
     """The residual scheme of ``interface`` (an anchored interface of the flat layout) around the
-    policy ``anchor`` (built for ``env_id`` and ``config``, :func:`agents.make_policy`): :meth:`action` maps a learner's action and the
-    benchmark observation of the slot to the interface's action."""
+    policy ``anchor`` (built for ``env_id`` and ``config``, :func:`agents.make_policy`):
+    :meth:`action` maps a learner's action and the benchmark observation of the slot to the
+    interface's action."""
 
     def __init__(self, anchor: Policy, config: ScenarioConfig, env_id: str, interface: InterfaceLike,
                  scale: float = 0.25):
