@@ -5,6 +5,7 @@ the coefficients of J^ per AGV, and the plan a planner returns (:class:`Plan`)."
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -71,11 +72,17 @@ class SlotProblem:
                 f"({k}, 6) and ({k}, {window}, 6) for this config"
             )
         self.agv_xy = self.x_aug[:, POSITION]
-        self.data: SlotData = mpc.prepare(self.x_aug if state is None else np.asarray(state, dtype=float),
-                                          self.reference, snapshot.slot)
+        self._state = self.x_aug if state is None else np.asarray(state, dtype=float)
+        self._slot = snapshot.slot
         self.budget = config.power_budget_w
         self.reach = float(config.drone_reach_m)
         self.area = config.area_m
+
+    @functools.cached_property
+    def data(self) -> SlotData:
+        """The slot's QP data (:meth:`lawn_env.mpc.OutageAwareMPC.prepare`), prepared on first use (a
+        problem whose values come from elsewhere never needs it)."""
+        return self.mpc.prepare(self._state, self.reference, self._slot)
 
     # ------------------------------------------------------------------ pieces of J^
     def coefficients(self, dmu: np.ndarray) -> Coefficients:

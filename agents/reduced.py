@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
-from typing import Annotated, Any, Protocol
+from typing import Annotated, Any, Literal, Protocol
 
 import numba
 import numpy as np
@@ -48,6 +48,7 @@ from lawn_env.core import Snapshot
 from lawn_env.dynamics import cost_coefficients
 from lawn_env.errors import raises_config_errors
 from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
+from lawn_env.tail import LossAwareTail, expected_delivery, first_delivery
 
 from .estimation import AGVTracker
 from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
@@ -241,9 +242,10 @@ class DeliveryProblem(ReducedProblem):
     is the channel alone."""
 
     def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig,
-                 state: np.ndarray | None = None):
+                 state: np.ndarray | None = None, values: tuple[MPCSolution, np.ndarray] | None = None):
         super().__init__(mpc, link, snapshot, config, state)
-        self.delivered, self.lost = mpc.delivery_values(self.data)
+        # (V^del's solution, V^lost): the certainty-equivalent MPC's unless given (the loss-aware tail's)
+        self.delivered, self.lost = mpc.delivery_values(self.data) if values is None else values
         self.worth = self.lost - self.delivered.value  # w_k >= 0
 
     def values_at_psi(self, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray, MPCSolution]:
@@ -335,11 +337,34 @@ class DeliverySettings:
     """Plan from a Kalman filter's positions and velocities where the config declares measurement
     noise (``disturbance.measurement_noise_*``; :class:`agents.estimation.AGVTracker`), not from each
     noisy measurement. Without measurement noise, no change."""
+    tail: Literal["loss-aware", "certainty-equivalent"] = "loss-aware"
+    """How the future after the command is priced (MODEL.md §4): ``"loss-aware"``, every later command
+    delivered with the expected delivery psi-bar and replanned (:class:`lawn_env.tail.LossAwareTail`:
+    the modified Riccati recursion, the command planned as delivered for one step);
+    ``"certainty-equivalent"``, every later command delivered (the psi = 1 MPC over the horizon and
+    the DARE behind it: the expert before the loss-aware tail, which diverges where links lose most
+    commands)."""
+    bounds_probability: Annotated[float, Field(gt=0, le=1)] = 0.3
+    """The loss-aware tail keeps the bounds of the j-th later command of its plan while
+    ``psi-bar**j`` is at least this (:class:`lawn_env.tail.LossAwareTail`: where the all-delivered path
+    is unlikely its bounds would bind where no AGV will be); the next command's bounds always hold."""
+    delivery_memory: Annotated[float, Field(ge=0, lt=1)] = 0.5
+    """The loss-aware tail's psi-bar: ``memory * psi-bar + (1 - memory) * sum_k psi_k w_k / sum_k w_k``
+    after each slot (:func:`lawn_env.tail.expected_delivery`), from 1 at the episode's start."""
+    delivery_start_iterations: Annotated[int, Field(ge=0, le=20)] = 3
+    """psi-bar at the episode's first slot: this many fixed-point steps from 1 (each the search at
+    psi-bar, then its worth-weighted success); 0 starts from 1."""
     terminal_success: Annotated[float, Field(gt=0, le=1)] = 1.0
-    """The MPC's terminal weight: 1, the loss-free DARE's (the paper's Q3); below 1, the modified
-    Riccati equation's at that success probability (MODEL.md §4: a refinement measured in
-    docs/experts.md, not adopted)."""
+    """The certainty-equivalent tail's terminal weight: 1, the loss-free DARE's (the paper's Q3); below 1,
+    the modified Riccati equation's at that success probability behind stages priced as delivered
+    (docs/experts.md: measured, not adopted; ``tail="certainty-equivalent"`` only)."""
     qp_backend: str = DEFAULT_BACKEND
+
+    def __post_init__(self) -> None:
+        if self.tail == "loss-aware" and self.terminal_success != 1.0:
+            raise ValueError(f"terminal_success={self.terminal_success!r}: a terminal weight of the certainty-"
+                             "equivalent tail; with tail='loss-aware' every stage is priced at the expected "
+                             "delivery (set tail='certainty-equivalent' to use it)")
 
 
 class _PlannerSettings(Protocol):
@@ -451,12 +476,20 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
         if s.terminal_success != 1.0 or lag:
             self.mpc = OutageAwareMPC.from_config(config, backend=s.qp_backend, terminal_success=s.terminal_success,
                                                   lag=lag)
+        self.tail = (LossAwareTail.from_config(config, lag, s.bounds_probability, s.qp_backend)
+                     if s.tail == "loss-aware" else None)
         self.period = self.mpc.control_period
         self.tracker = AGVTracker(config, lag=lag, filter=s.filter_measurements)
+        # the loss-aware tail's expected delivery (lawn_env.tail.expected_delivery); None: the episode's start
+        self.psi_bar: float | None = None
+        self._worth = np.zeros(config.num_agvs)  # the last problem's w_k
 
     def reset(self) -> None:
         super().reset()
         self.tracker.reset()
+        if self.tail is not None:
+            self.tail.reset()
+        self.psi_bar = None
 
     def _state(self, snapshot: Snapshot) -> np.ndarray | None:
         """The MPC's state from the tracker (:class:`agents.estimation.AGVTracker`: filtered under
@@ -471,12 +504,41 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
         return 1 + (-int(slot)) % self.period
 
     def _problem(self, snapshot: Snapshot) -> DeliveryProblem:
-        problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, self._state(snapshot))
+        state = self._state(snapshot)
+        values = None
+        if self.tail is not None:
+            z = np.asarray(snapshot.x_aug if state is None else state, dtype=float)
+            reference = np.asarray(snapshot.reference, dtype=float)
+            if self.psi_bar is None:
+                self.psi_bar = self._first_delivery(snapshot, state, z, reference)
+            values = self.tail.delivery_values(z, reference, self.psi_bar, snapshot.slot)
+        problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values)
         problem.reach *= self._moves(snapshot.slot)
+        self._worth = problem.worth
         return problem
+
+    def _first_delivery(self, snapshot: Snapshot, state: np.ndarray | None, z: np.ndarray,
+                        reference: np.ndarray) -> float:
+        """psi-bar at an episode's first slot (:func:`lawn_env.tail.first_delivery`): the search's (p, q)
+        at each step's psi-bar."""
+        tail = self.tail
+        assert tail is not None
+
+        def worth_at(psi_bar: float) -> tuple[np.ndarray, np.ndarray]:
+            values = tail.delivery_values(z, reference, psi_bar, snapshot.slot)
+            problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values)
+            problem.reach *= self._moves(snapshot.slot)
+            return self._search(problem).psi, problem.worth
+
+        return first_delivery(worth_at, self.settings.delivery_start_iterations)
 
     def plan(self, snapshot: Snapshot) -> Plan:
         plan = super().plan(snapshot)
+        if self.tail is not None:
+            assert self.psi_bar is not None
+            plan.info["expected_delivery"] = self.psi_bar
+            self.psi_bar = float(expected_delivery(self.psi_bar, plan.info["success_probability"], self._worth,
+                                                   self.settings.delivery_memory))
         if self._moves(snapshot.slot) == 1:
             return plan
         target = plan.drone_position  # where the next command goes out from: one move toward it now

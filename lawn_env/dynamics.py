@@ -30,6 +30,9 @@ __all__ = [
     "agv_matrices",
     "augmented_matrices",
     "terminal_weight",
+    "modified_riccati",
+    "loss_aware_gain",
+    "mean_square_radius",
     "prediction_matrices",
     "horizon_weights",
     "increment_sum_matrix",
@@ -154,36 +157,74 @@ def lag_matrices(slot_s: float, lag_alpha: float) -> tuple[np.ndarray, np.ndarra
     return a8, b8
 
 
+def modified_riccati(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, success: float = 1.0,
+                     start: np.ndarray | None = None) -> np.ndarray:
+    """The cost-to-go S of the linear-quadratic regulator whose every command arrives with probability
+    ``success`` = psi, a lost one being seen and replanned (Bernoulli actuation loss with
+    acknowledgements; Schenato, Sinopoli, Franceschetti, Poolla, Sastry, Proc. IEEE 2007):
+
+        S = A'SA + Q - psi A'SB (R + B'SB)^-1 B'SA.
+
+    At psi = 1 it is the discrete algebraic Riccati equation (scipy's solver); below, value iteration
+    from ``start`` (default: the DARE's solution, a lower bound: the iterates rise monotonically to the
+    solution) until the largest change is 1e-12 of the largest entry. Raises ``ValueError`` where no
+    finite solution exists (psi at or below the critical arrival probability of ``a``)."""
+    if not 0.0 < success <= 1.0:
+        raise ValueError(f"success={success!r}: the arrival probability must lie in (0, 1]")
+    s = linalg.solve_discrete_are(a, b, q, r) if start is None else np.array(start, dtype=float)
+    if not np.all(np.isfinite(s)):
+        raise ValueError("the discrete Riccati equation has no finite solution for these weights")
+    if success < 1.0 or start is not None:
+        with np.errstate(over="ignore", invalid="ignore"):  # a diverging iteration stops at the check below
+            s = _value_iteration(a, b, q, r, success, s)
+        if s is None:
+            raise ValueError(f"success={success!r}: the modified Riccati equation does not converge (at or below "
+                             "the critical arrival probability of these dynamics)")
+    return 0.5 * (s + s.T)
+
+
+def _value_iteration(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, success: float,
+                     s: np.ndarray) -> np.ndarray | None:
+    """:func:`modified_riccati`'s iteration from ``s``; None when it diverges."""
+    for _ in range(1_000_000):
+        gain = np.linalg.solve(r + b.T @ s @ b, b.T @ s @ a)
+        nxt = q + a.T @ s @ a - success * (a.T @ s @ b) @ gain
+        nxt = 0.5 * (nxt + nxt.T)
+        scale = np.abs(nxt).max()
+        if not np.isfinite(scale):
+            return None
+        done = np.abs(nxt - s).max() <= 1e-12 * scale
+        s = nxt
+        if done:
+            return s
+    return None
+
+
+def loss_aware_gain(a: np.ndarray, b: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """The state feedback ``L = (R + B'SB)^-1 B'SA`` of the cost-to-go ``s`` (the command is -L x):
+    the LQR gain at the DARE's S, the loss-aware gain at the modified Riccati equation's."""
+    return np.linalg.solve(r + b.T @ s @ b, b.T @ s @ a)
+
+
+def mean_square_radius(a: np.ndarray, b: np.ndarray, gain: np.ndarray, success: float) -> float:
+    """The spectral radius of the second-moment map of ``x+ = (A - delta B L) x``, delta ~ Bernoulli(psi):
+    ``psi (A-BL)⊗(A-BL) + (1-psi) A⊗A`` (the Kronecker test). Below 1: mean-square stable."""
+    closed = a - b @ gain
+    moment = success * np.kron(closed, closed) + (1.0 - success) * np.kron(a, a)
+    return float(np.max(np.abs(np.linalg.eigvals(moment))))
+
+
 def terminal_weight(a_aug: np.ndarray, b_aug: np.ndarray, q1: np.ndarray, q2: np.ndarray,
                     success: float = 1.0) -> np.ndarray:
     """Q3: the stabilizing solution of the discrete algebraic Riccati equation (paper eq. for Q3)
 
-    Q3 = Q1 + A~' Q3 A~ - A~' Q3 B~ (Q2 + B~' Q3 B~)^-1 B~' Q3 A~.
+    Q3 = Q1 + A~' Q3 A~ - A~' Q3 B~ (Q2 + B~' Q3 B~)^-1 B~' Q3 A~;
 
-    With ``success`` = psi < 1, the modified Riccati equation of control over a lossy link (every
-    command delivered with probability psi, a lost one seen and replanned: Schenato et al., Proc.
-    IEEE 2007), ``Q3 = Q1 + A~'Q3A~ - psi A~'Q3B~ (Q2 + B~'Q3B~)^-1 B~'Q3A~``: the cost-to-go of the
-    certainty-equivalent LQR when each command arrives with probability psi (MODEL.md §4, "Planning
-    under delivery"), solved by fixed-point iteration from the DARE's solution.
-    """
+    with ``success`` = psi < 1 the modified Riccati equation's (:func:`modified_riccati`): the
+    certainty-equivalent MPC's ``terminal_success`` refinement (docs/experts.md)."""
     if not 0.0 < success <= 1.0:
         raise ValueError(f"success={success!r}: the terminal weight's success probability must lie in (0, 1]")
-    q3 = linalg.solve_discrete_are(a_aug, b_aug, q1, q2)
-    if not np.all(np.isfinite(q3)):
-        raise ValueError("the discrete Riccati equation has no finite solution for these weights")
-    if success < 1.0:
-        for _ in range(100_000):
-            gain = np.linalg.solve(q2 + b_aug.T @ q3 @ b_aug, b_aug.T @ q3 @ a_aug)
-            nxt = q1 + a_aug.T @ q3 @ a_aug - success * (a_aug.T @ q3 @ b_aug) @ gain
-            nxt = 0.5 * (nxt + nxt.T)
-            done = np.abs(nxt - q3).max() <= 1e-12 * np.abs(nxt).max()
-            q3 = nxt
-            if done:
-                break
-        else:
-            raise ValueError(f"success={success!r}: the modified Riccati equation does not converge (below the "
-                             "critical arrival probability of these dynamics)")
-    return 0.5 * (q3 + q3.T)
+    return modified_riccati(a_aug, b_aug, q1, q2, success)
 
 
 def prediction_matrices(a_aug: np.ndarray, b_aug: np.ndarray, horizon: int) -> tuple[np.ndarray, np.ndarray]:
@@ -254,7 +295,7 @@ class PredictionModel:
     ftq4f: np.ndarray  # F' Q4 F, (2N_p, 2N_p)
     ftq4: np.ndarray  # F' Q4, (2N_p, 6(N_p+1))
     increment_sum: np.ndarray  # T, (2N_p, 2N_p)
-    q1_tiled: np.ndarray  # diag(Q1) repeated N_p times: Q4's diagonal blocks, (6 N_p,)
+    q1_tiled: np.ndarray | None  # diag(Q1) repeated N_p times: Q4's diagonal blocks, (6 N_p,); None: others
     # (slot_s, horizon, q1_diag, q2_diag[, terminal_success, lag_alpha]): what it is built from, its cache key
     key: tuple
 
@@ -301,7 +342,10 @@ class PredictionModel:
 
     def cost_to_go(self, r: np.ndarray) -> np.ndarray:
         """r' Q4 r for residuals r (..., 6(N_p+1)): Q4 = diag(Q1 x N_p, Q3) with Q1 diagonal, so the
-        first N_p blocks are a weighted sum of squares and only the terminal block is a 6 x 6 form."""
+        first N_p blocks are a weighted sum of squares and only the terminal block is a 6 x 6 form
+        (a model whose stage weights are not Q1's, ``q1_tiled`` None: the full form)."""
+        if self.q1_tiled is None:
+            return ((r @ self.q4) * r).sum(axis=-1)
         head, tail = r[..., :-6], r[..., -6:]
         return (head * head) @ self.q1_tiled + ((tail @ self.q3) * tail).sum(axis=-1)
 

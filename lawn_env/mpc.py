@@ -237,10 +237,13 @@ class OutageAwareMPC:
     """
 
     def __init__(self, model: PredictionModel, num_agvs: int, accel_max: float, accel_increment_max: float,
-                 backend: str = DEFAULT_BACKEND, control_period: int = 1):
+                 backend: str = DEFAULT_BACKEND, control_period: int = 1, pencils: AxisPencils | None = None):
         if int(control_period) < 1:
             raise ValueError(f"control_period={control_period!r}: must be an integer >= 1")
         self.model = model
+        # the compiled backend's pencils when the caller keeps them (a model not rebuilt from its key:
+        # lawn_env.tail's); else the shared ones of the model's key
+        self._given_pencils = pencils
         self.control_period = int(control_period)
         self.num_agvs = int(num_agvs)
         self.accel_max = float(accel_max)
@@ -260,7 +263,8 @@ class OutageAwareMPC:
 
     def _make_backend(self, name: str):
         if name == "compiled":
-            return _CompiledBackend(_pencils(self.model.key, self.control_period))
+            given = self._given_pencils
+            return _CompiledBackend(given if given is not None else _pencils(self.model.key, self.control_period))
         return _reference_backend(name, self._constraint)
 
     def hessian(self, s: float) -> np.ndarray:
@@ -320,18 +324,36 @@ class OutageAwareMPC:
             raise ValueError(f"x_aug has shape {x_aug.shape} and chi_ref {chi_ref.shape}; this MPC (num_agvs={k}, "
                              f"horizon={self.model.horizon}) needs ({k}, {nx}) and ({k}, {window}, 6), with any "
                              f"leading batch axes (..., K, {nx}) and (..., K, N_p+1, 6)")
-        if self.control_period == 1:
-            phase: Any = 0
-        elif slot is None:
-            raise ValueError(f"this MPC plans with control_period={self.control_period}: pass slot= (the current slot)")
-        else:
-            phase = np.asarray(slot, dtype=np.int64) % self.control_period
-            if phase.shape not in ((), lead):
-                raise ValueError(f"slot has shape {phase.shape}; expected a scalar or one per scenario {lead}")
-            phase = int(phase) if phase.ndim == 0 else phase
+        phase = self._phase(slot, lead)
         n = self._n
         flat_x = np.reshape(x_aug, (-1, nx))
         r = self.model.residual(flat_x, chi_ref.reshape(-1, window, 6))  # 2-D products over every problem
+        lower, upper = self._bounds(flat_x, phase)
+        shape = (*lead, k)
+        return SlotData(
+            residual=r.reshape((*shape, -1)),
+            linear=(r @ self.model.ftq4.T).reshape((*shape, n)),  # F' Q4 r, so H = 2 psi (F' Q4 r)'
+            constant=self.model.cost_to_go(r).reshape(shape),
+            lower=lower.reshape((*shape, 2 * n)),
+            upper=upper.reshape((*shape, 2 * n)),
+            phase=phase,
+        )
+
+    def _phase(self, slot: npt.ArrayLike | None, lead: tuple[int, ...]) -> Any:
+        """The slot phase (slot % control period) of each scenario: an int, or one per scenario ``lead``."""
+        if self.control_period == 1:
+            return 0
+        if slot is None:
+            raise ValueError(f"this MPC plans with control_period={self.control_period}: pass slot= (the current slot)")
+        phase = np.asarray(slot, dtype=np.int64) % self.control_period
+        if phase.shape not in ((), lead):
+            raise ValueError(f"slot has shape {phase.shape}; expected a scalar or one per scenario {lead}")
+        return int(phase) if phase.ndim == 0 else phase
+
+    def _bounds(self, flat_x: np.ndarray, phase: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The QPs' lower and upper bounds (M, 4 N_p) of states ``flat_x`` (M, nx): the increment bounds
+        (zero where move blocking holds the acceleration), then |u[n-1] + running sum| <= a_max."""
+        n, k = self._n, self.num_agvs
         lower = np.empty((flat_x.shape[0], 2 * n))
         upper = np.empty((flat_x.shape[0], 2 * n))
         pos = self._box_upper[phase]  # (2 N_p,) or (..., 2 N_p), one row per scenario
@@ -342,15 +364,21 @@ class OutageAwareMPC:
         u_prev = np.tile(flat_x[:, ACCELERATION], self.model.horizon)  # u[n-1] repeated over the horizon
         np.subtract(self.accel_max, u_prev, out=upper[:, n:])
         np.subtract(-self.accel_max, u_prev, out=lower[:, n:])
-        shape = (*lead, k)
-        return SlotData(
-            residual=r.reshape((*shape, -1)),
-            linear=(r @ self.model.ftq4.T).reshape((*shape, n)),  # F' Q4 r, so H = 2 psi (F' Q4 r)'
-            constant=self.model.cost_to_go(r).reshape(shape),
-            lower=lower.reshape((*shape, 2 * n)),
-            upper=upper.reshape((*shape, 2 * n)),
-            phase=phase,
-        )
+        return lower, upper
+
+    def objective_data(self, state: np.ndarray, linear: np.ndarray, constant: np.ndarray,
+                       slot: npt.ArrayLike | None = None) -> SlotData:
+        """The slot's QPs with a linear term ``linear`` (..., K, 2 N_p) and constant (..., K) of the
+        caller's (the objective ``z' G z + 2 linear' z + constant``; G the model's), the bounds of
+        ``state`` (..., K, nx) as :meth:`prepare`'s: for an objective that is not the tracking error's
+        (:class:`lawn_env.tail.LossAwareTail`'s). The data carries no residual."""
+        lead = state.shape[:-2]
+        phase = self._phase(slot, lead)
+        lower, upper = self._bounds(np.reshape(state, (-1, state.shape[-1])), phase)
+        shape = (*lead, self.num_agvs)
+        return SlotData(residual=np.empty((*shape, 0)), linear=linear, constant=constant,
+                        lower=lower.reshape((*shape, 2 * self._n)), upper=upper.reshape((*shape, 2 * self._n)),
+                        phase=phase)
 
     # ------------------------------------------------------------------ solve
     def solve(self, x_aug: np.ndarray, chi_ref: np.ndarray, psi: npt.ArrayLike,

@@ -11,6 +11,7 @@ from lawn_env import ScenarioConfig, channel, presets
 from lawn_env.dynamics import command_mask
 from lawn_env.errors import ConfigError
 from lawn_env.mpc import OutageAwareMPC
+from lawn_env.tail import LossAwareTail
 from test_agents import _snapshots
 
 CFG = ScenarioConfig()
@@ -66,13 +67,21 @@ def test_the_objective_is_the_expected_cost_of_delivery(rng):
             assert np.array_equal(ev.increments, problem.delivered.increments)
 
 
-def test_dv_mpc_sends_the_psi_one_increments_whatever_the_links():
-    policy = make_policy("dv-mpc", CFG)
+@pytest.mark.parametrize("tail", ["certainty-equivalent", "loss-aware"])
+def test_dv_mpc_sends_the_delivered_plan_whatever_the_links(tail):
+    """The certainty-equivalent tail sends the psi = 1 MPC's increments; the loss-aware tail its QP's at
+    the planner's psi-bar (lawn_env.tail); whatever the links, the plan's power and drone are feasible."""
+    policy = make_policy("dv-mpc", CFG, tail=tail)
     policy.reset(seed=0)
     mpc = OutageAwareMPC.from_config(CFG, backend="daqp")
+    lossy = LossAwareTail.from_config(CFG, backend="daqp")
     for snap in _snapshots(4, seed=24):
         plan = policy.plan(snap)
-        expected = mpc.solve(snap.x_aug, snap.reference, np.ones(4), snap.slot).increments
+        if tail == "certainty-equivalent":
+            expected = mpc.solve(snap.x_aug, snap.reference, np.ones(4), snap.slot).increments
+        else:
+            expected = lossy.delivery_values(snap.x_aug, snap.reference, plan.info["expected_delivery"],
+                                             snap.slot)[0].increments
         assert np.allclose(plan.increments, expected, atol=1e-7)
         assert plan.power_w.sum() <= CFG.power_budget_w * (1 + 1e-9) and np.all(plan.power_w >= 0)
         assert np.linalg.norm(plan.drone_position - snap.drone_position) <= CFG.drone_reach_m + 1e-9
@@ -103,7 +112,7 @@ def test_with_perfect_links_dv_mpc_decides_as_rg_mpc():
 
 def test_under_a_control_period_the_command_is_the_next_command_slots_increment():
     config = DISTURBED  # from the snapshots as observed: the tracker (tested below) off
-    policy = make_policy("dv-mpc", config, model_lag=False, filter_measurements=False)
+    policy = make_policy("dv-mpc", config, model_lag=False, filter_measurements=False, tail="certainty-equivalent")
     policy.reset(seed=0)
     reach = config.drone_reach_m
     mpc = OutageAwareMPC.from_config(config, backend="daqp")
