@@ -218,20 +218,46 @@ class RGMPCPolicy(PlannerPolicy):
 class DVMPCPolicy(PlannerPolicy):
     """The delivery-value expert (agents.reduced.DeliveryValuePlanner): each command planned as if it
     arrives (the psi = 1 MPC), power and the drone chosen to maximise the expected worth of the
-    commands delivered, ``sum_k psi_k (V_k^lost - V_k^del)``. It plans (p, q) for the increments the
-    AGVs apply: on ``lawn/Comm-v1`` under the paper's law (``control.law="paper"``, the env's AGVs
-    apply the psi-scaled QP) that is the paper's problem: it plans as ``rg-mpc`` (its settings are
-    then :class:`~agents.ReducedSettings`)."""
+    commands delivered, ``sum_k psi_k (V_k^lost - V_k^del)``, the future after each command priced
+    under loss (its ``tail``). It plans (p, q) for the increments the AGVs apply: on ``lawn/Comm-v1``
+    under the paper's law (``control.law="paper"``, the env's AGVs apply the psi-scaled QP) that is the
+    paper's problem: it plans as ``rg-mpc`` (its settings are then :class:`~agents.ReducedSettings`);
+    under ``"delivery"`` with the loss-aware tail, under ``"delivery-certainty-equivalent"`` with the
+    certainty-equivalent one."""
 
     name = "dv-mpc"
 
     def _make_solver(self, **settings: Any):
-        if self.env_id == COMM and self.config.control.law == "paper":
+        law = self.config.control.law
+        if self.env_id == COMM and law == "paper":
             return ReducedGradientPlanner(self.config, ReducedSettings(**settings))
+        if self.env_id == COMM:  # the AGVs apply the law's increments: plan with its tail
+            tail = "loss-aware" if law == "delivery" else "certainty-equivalent"
+            if settings.get("tail", tail) != tail:
+                raise ValueError(f"tail={settings['tail']!r}: on {COMM} the AGVs apply control.law={law!r}, whose "
+                                 f"command is the {tail} tail's (plan with tail={tail!r}, or set control.law)")
+            settings = {**settings, "tail": tail}
         return DeliveryValuePlanner(self.config, DeliverySettings(**settings))
 
     def plan(self, snapshot: Snapshot) -> Plan:
         return self.solver.plan(snapshot)
+
+
+class DVMPCCertaintyEquivalentPolicy(DVMPCPolicy):
+    """``dv-mpc`` with the certainty-equivalent tail (``tail="certainty-equivalent"``): every later command
+    priced as delivered, the expert before the loss-aware tail (MODEL.md §4), kept by name for
+    comparisons and for the agents built on it."""
+
+    name = "dv-mpc-ce"
+
+    def _make_solver(self, **settings: Any):
+        if settings.get("tail", _CERTAINTY_EQUIVALENT) != _CERTAINTY_EQUIVALENT:
+            raise ValueError(f"tail={settings['tail']!r}: {self.name} is dv-mpc with tail='certainty-equivalent' "
+                             "(use dv-mpc for another tail)")
+        return super()._make_solver(**{**settings, "tail": _CERTAINTY_EQUIVALENT})
+
+
+_CERTAINTY_EQUIVALENT = "certainty-equivalent"
 
 
 class GlobalMPCPolicy(PlannerPolicy):
@@ -250,6 +276,7 @@ class GlobalMPCPolicy(PlannerPolicy):
 #: The one registry of policy names; the command line reads its choices from here.
 POLICIES: dict[str, Any] = {
     "dv-mpc": DVMPCPolicy,
+    "dv-mpc-ce": DVMPCCertaintyEquivalentPolicy,
     "rg-mpc": RGMPCPolicy,
     "ao-mpc": AOMPCPolicy,
     "epa": EPAPolicy,

@@ -48,7 +48,14 @@ from lawn_env.core import Snapshot
 from lawn_env.dynamics import cost_coefficients
 from lawn_env.errors import raises_config_errors
 from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
-from lawn_env.tail import LossAwareTail, expected_delivery, first_delivery
+from lawn_env.tail import (
+    BOUNDS_PROBABILITY,
+    DELIVERY_MEMORY,
+    DELIVERY_START_ITERATIONS,
+    LossAwareTail,
+    expected_delivery,
+    first_delivery,
+)
 
 from .estimation import AGVTracker
 from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
@@ -344,14 +351,14 @@ class DeliverySettings:
     ``"certainty-equivalent"``, every later command delivered (the psi = 1 MPC over the horizon and
     the DARE behind it: the expert before the loss-aware tail, which diverges where links lose most
     commands)."""
-    bounds_probability: Annotated[float, Field(gt=0, le=1)] = 0.3
+    bounds_probability: Annotated[float, Field(gt=0, le=1)] = BOUNDS_PROBABILITY
     """The loss-aware tail keeps the bounds of the j-th later command of its plan while
     ``psi-bar**j`` is at least this (:class:`lawn_env.tail.LossAwareTail`: where the all-delivered path
     is unlikely its bounds would bind where no AGV will be); the next command's bounds always hold."""
-    delivery_memory: Annotated[float, Field(ge=0, lt=1)] = 0.5
+    delivery_memory: Annotated[float, Field(ge=0, lt=1)] = DELIVERY_MEMORY
     """The loss-aware tail's psi-bar: ``memory * psi-bar + (1 - memory) * sum_k psi_k w_k / sum_k w_k``
     after each slot (:func:`lawn_env.tail.expected_delivery`), from 1 at the episode's start."""
-    delivery_start_iterations: Annotated[int, Field(ge=0, le=20)] = 3
+    delivery_start_iterations: Annotated[int, Field(ge=0, le=20)] = DELIVERY_START_ITERATIONS
     """psi-bar at the episode's first slot: this many fixed-point steps from 1 (each the search at
     psi-bar, then its worth-weighted success); 0 starts from 1."""
     terminal_success: Annotated[float, Field(gt=0, le=1)] = 1.0

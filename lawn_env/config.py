@@ -132,12 +132,16 @@ class ControlConfig:
     accel_increment_max_mps2: Annotated[float, Field(ge=0.001)] = 1.0
     """Increment bound per axis per slot, m/s^2, at least 0.001 and at most 2 a_max (actions are
     scaled by it) *(decided)*."""
-    law: Literal["paper", "delivery"] = "paper"
+    law: Literal["paper", "delivery", "delivery-certainty-equivalent"] = "paper"
     """The increments the AGVs of ``lawn/Comm-v1`` apply (the MPC the environment solves for them;
-    ``lawn/Joint-v1``'s actions carry the increments): ``"paper"``, the paper's QP P3 at the link's
-    planned success probability psi (its expected-trajectory cost scales the command with psi);
-    ``"delivery"``, the same QP at psi = 1, the command planned as if it arrives (MODEL.md §4,
-    "Planning under delivery": a lost command is seen at the next slot and replanned) *(decided)*."""
+    ``lawn/Joint-v1``'s actions carry the increments; the RL interface's MPC anchor plans by it too):
+    ``"paper"``, the paper's QP P3 at the link's planned success probability psi (its
+    expected-trajectory cost scales the command with psi); ``"delivery"``, the command planned as if it
+    arrives with the later ones priced under loss, ``dv-mpc``'s loss-aware tail at the fleet's expected
+    delivery (MODEL.md §4, "Planning under loss"; :class:`lawn_env.tail.DeliveryLaw`);
+    ``"delivery-certainty-equivalent"``, the QP at psi = 1, every later command priced as delivered
+    (MODEL.md §4, "Planning under delivery": the delivery law before the loss-aware tail, which
+    diverges where links lose most commands) *(decided)*."""
 
     @model_validator(mode="after")
     def _check_weights(self) -> ControlConfig:

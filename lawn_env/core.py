@@ -39,7 +39,7 @@ _POS0, _VEL0, _ACCEL0 = dynamics.POSITION.start, dynamics.VELOCITY.start, dynami
 __all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Snapshot", "Simulation", "ScenarioView",
            "Trail", "draw_slot", "reset", "step", "step_rows", "episode_metrics", "control_costs", "link_outage",
            "link_success",
-           "SLOT_CONSTANTS", "TOTALS"]
+           "SLOT_CONSTANTS", "TOTALS", "DIVERGENCE_DISTANCE_M"]
 
 
 # ---------------------------------------------------------------------- the slot kernel
@@ -96,7 +96,7 @@ class SlotInputs(NamedTuple):
     process_position: np.ndarray  # (B, K, 2), or (0, 0, 2) without process noise
     process_velocity: np.ndarray
     drone_prev: np.ndarray  # (B, 2)
-    totals: np.ndarray  # (B, 4 + 3K)
+    totals: np.ndarray  # (B, 5 + 3K)
 
 
 class SlotOutputs(NamedTuple):
@@ -109,7 +109,7 @@ class SlotOutputs(NamedTuple):
     outage: np.ndarray  # (B, K)
     applied_next: np.ndarray  # (B, K, 2), under lag
     costs: np.ndarray  # (B, 3)
-    totals_next: np.ndarray  # (B, 4 + 3K)
+    totals_next: np.ndarray  # (B, 5 + 3K)
 
 
 _F, _B, _I = numba.types.float64, numba.types.boolean, numba.types.int64
@@ -223,9 +223,11 @@ def _accumulate(inp, out, err):  # pragma: no cover - compiled
         sx, sy = drone_next[b, 0] - drone_prev[b, 0], drone_next[b, 1] - drone_prev[b, 1]
         totals[b, 3] += np.sqrt(sx * sx + sy * sy)
         for i in range(k):
-            totals[b, 4 + i] += err[b, i, 0] ** 2 + err[b, i, 1] ** 2
+            sq = err[b, i, 0] ** 2 + err[b, i, 1] ** 2
+            totals[b, 4 + i] += sq
             totals[b, 4 + k + i] += 0.0 if delivered[b, i] else sent
             totals[b, 4 + 2 * k + i] += sent * power[b, i]
+            totals[b, 4 + 3 * k] = max(totals[b, 4 + 3 * k], np.sqrt(sq))
 
 
 @numba.njit([_SLOT_SIGNATURE], cache=True)
@@ -254,11 +256,15 @@ def _slot(inputs, packed, constants, outputs):  # pragma: no cover - compiled
     _accumulate(inp, out, err)
 
 
-#: The columns of ``SimState.totals`` (B, 4 + 3K): the episode's running sums of the tracking
+#: The columns of ``SimState.totals`` (B, 5 + 3K): the episode's running sums of the tracking
 #: and effort costs, the predicted outage probabilities, the drone's path length, then per AGV the
-#: squared position errors, the lost commands and the powers. The outage and power sums count the
-#: slots that send a command only: on the others nothing is transmitted (MODEL.md §7).
-TOTALS = ("tracking", "effort", "outage_p", "path", "sq_error", "outages", "power")
+#: squared position errors, the lost commands and the powers, and last the largest position error of
+#: any AGV so far (a running maximum). The outage and power sums count the slots that send a command
+#: only: on the others nothing is transmitted (MODEL.md §7).
+TOTALS = ("tracking", "effort", "outage_p", "path", "sq_error", "outages", "power", "max_error")
+#: An episode has diverged when some AGV's position error passed this many metres (the RL interface's
+#: termination distance; MODEL.md §6): ``episode_metrics``'s ``diverged``.
+DIVERGENCE_DISTANCE_M = 25.0
 
 
 # ---------------------------------------------------------------------- parameters, state, draws
@@ -413,7 +419,7 @@ class SimState:
     last_outage_probability: np.ndarray  # (B, K)
     reference: np.ndarray  # (B, K, T, 6)
     paths: list  # per scenario, its K paths
-    totals: np.ndarray  # (B, 4 + 3K), columns TOTALS
+    totals: np.ndarray  # (B, 5 + 3K), columns TOTALS
 
     @property
     def num_envs(self) -> int:
@@ -432,7 +438,7 @@ def empty_state(params: SimParams, num: int) -> SimState:
         last_power_w=np.zeros((num, k)), last_delivered=np.ones((num, k), dtype=bool),
         last_outage_probability=np.zeros((num, k)), reference=reference,
         paths=[params.fixed_paths] * num,
-        totals=np.zeros((num, 4 + 3 * k)),
+        totals=np.zeros((num, 5 + 3 * k)),
     )
 
 
@@ -603,7 +609,9 @@ def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np
     effort), ``tracking_cost``, ``effort_cost``, ``rmse_m``, ``rmse_per_agv_m``, ``outage_rate``,
     ``outage_rate_predicted``, ``outage_rate_per_agv`` (over the commands sent: with commands every
     P slots, the slots n with n % P == 0), ``mean_power_w`` (the power radiated per link, averaged
-    over every slot: 0 W on a slot without a command), ``drone_path_length_m``."""
+    over every slot: 0 W on a slot without a command), ``drone_path_length_m``,
+    ``max_tracking_error_m`` (the largest position error of any AGV at any slot) and ``diverged`` (1
+    when it passed :data:`DIVERGENCE_DISTANCE_M`, else 0)."""
     rows = np.asarray(rows, dtype=np.int64).reshape(-1)
     n, k = state.slot[rows], params.num_agvs
     if np.any(n == 0):
@@ -612,16 +620,19 @@ def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np
     period = params.command_period
     sent = (n + period - 1) // period  # the command slots 0, P, 2P, ... among slots 0..n-1 (step's rule)
     nk, per = sent * k, sent[:, None]
-    sq_error, outages, power = t[:, 4 : 4 + k], t[:, 4 + k : 4 + 2 * k], t[:, 4 + 2 * k :]
+    sq_error, outages, power = t[:, 4 : 4 + k], t[:, 4 + k : 4 + 2 * k], t[:, 4 + 2 * k : 4 + 3 * k]
+    largest = t[:, 4 + 3 * k]
     columns = zip(n.tolist(), control_costs(state, rows).tolist(), t[:, 0].tolist(), t[:, 1].tolist(),
                   np.sqrt(sq_error.sum(axis=1) / (n * k)).tolist(), np.sqrt(sq_error / n[:, None]).tolist(),
                   (outages.sum(axis=1) / nk).tolist(), (t[:, 2] / nk).tolist(), (outages / per).tolist(),
-                  (power / n[:, None]).tolist(), t[:, 3].tolist(), strict=True)
+                  (power / n[:, None]).tolist(), t[:, 3].tolist(), largest.tolist(),
+                  (largest > DIVERGENCE_DISTANCE_M).astype(int).tolist(), strict=True)
     return [dict(zip(_METRICS, values, strict=True)) for values in columns]
 
 
 _METRICS = ("slots", "control_cost", "tracking_cost", "effort_cost", "rmse_m", "rmse_per_agv_m", "outage_rate",
-            "outage_rate_predicted", "outage_rate_per_agv", "mean_power_w", "drone_path_length_m")
+            "outage_rate_predicted", "outage_rate_per_agv", "mean_power_w", "drone_path_length_m",
+            "max_tracking_error_m", "diverged")
 
 
 # ---------------------------------------------------------------------- the environments' object

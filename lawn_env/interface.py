@@ -71,6 +71,7 @@ from .dynamics import ACCELERATION, POSITION, PredictionModel, saturate_incremen
 from .errors import raises_config_errors
 from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
 from .spaces import ActionCodec, DirectActions
+from .tail import DeliveryLaw
 
 __all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FLOOR", "resolve_interface",
            "action_codec", "AnchoredActions", "InterfaceLike"]
@@ -231,11 +232,16 @@ class AnchoredActions(ActionCodec):
         self._reach = config.drone_reach_m
         self._link = LinkParams.from_config(config, planning=True)
         self._stake = interface.power_anchor == "stake"
-        self._delivery = config.control.law == "delivery"  # the anchor MPC plans as the Comm AGVs do
+        # the anchor MPC plans as the Comm AGVs do (control.law): the loss-aware tail's command under
+        # "delivery", the QP at psi = 1 under "delivery-certainty-equivalent", at the planned psi under "paper"
+        self._law = config.control.law
+        self._delivery: DeliveryLaw | None = None
         self._lqr_model: PredictionModel | None = None
         lqr = role == "joint" and interface.increment_anchor == "lqr"
         if (role == "joint" and not lqr) or self._stake:  # the residual's controller, and the stakes
             self.mpc = OutageAwareMPC.from_config(config, backend=mpc_backend)
+        if role == "joint" and not lqr and self._law == "delivery":
+            self._delivery = DeliveryLaw(config, backend=mpc_backend)
         if lqr:
             self._lqr_model = PredictionModel.from_config(config)
             self._accel_max = config.control.accel_max_mps2
@@ -246,6 +252,8 @@ class AnchoredActions(ActionCodec):
         ``which`` (a mask over a batch's scenarios) restarts only those scenarios."""
         if self.mpc is not None:
             self.mpc.reset(which)
+        if self._delivery is not None:
+            self._delivery.reset(which)
 
     def _decode_rows(self, actions: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
                      drone_position: np.ndarray, slot: int | np.ndarray | None) -> Decisions:
@@ -275,7 +283,7 @@ class AnchoredActions(ActionCodec):
         power = w * (self._pmax / w.sum(axis=-1, keepdims=True))
         if not self.increment_size:
             return Decisions(None, power, drone_next)
-        increment = self._anchor_increment(data, power, d2, x_aug, reference)
+        increment = self._anchor_increment(data, power, d2, x_aug, reference, slot)
         increment += a_increment.reshape(increment.shape) * (self.interface.residual_scale * self._inc_max)
         np.clip(increment, -self._inc_max, self._inc_max, out=increment)
         return Decisions(increment, power, drone_next)
@@ -304,12 +312,14 @@ class AnchoredActions(ActionCodec):
         return self._link.stake_power_weights(stake, d2)
 
     def _anchor_increment(self, data: SlotData | None, power_w: np.ndarray, d2: np.ndarray, x_aug: np.ndarray,
-                          reference: np.ndarray | None) -> np.ndarray:
+                          reference: np.ndarray | None, slot: int | np.ndarray | None = None) -> np.ndarray:
         """The tracking controller under the residual, (..., K, 2) m/s^2 (a new array; before the
         residual). ``increment_anchor="mpc"``: the outage-aware MPC's first increment at each link's
         planned success probability (with the stake prior it starts from this slot's stake solve's
         working sets: the same QPs at psi = 1, closer to these than the previous slot's).
-        Under ``control.law="delivery"`` the MPC plans at psi = 1, as the Comm environment's AGVs do.
+        Under ``control.law="delivery"`` it is the loss-aware tail's command
+        (:class:`lawn_env.tail.DeliveryLaw`), under ``"delivery-certainty-equivalent"`` the MPC's at psi = 1,
+        as the Comm environment's AGVs apply them.
         ``"lqr"``: ``Delta-u_ref - K (x~ - x~_ref)`` saturated so that ``|u| <= a_max``, the first
         increment of the LQR baseline's rollout."""
         if self._lqr_model is not None:
@@ -321,7 +331,14 @@ class AnchoredActions(ActionCodec):
             increment: np.ndarray = saturate_increment(x_aug[..., ACCELERATION], free, self._accel_max)
             return increment
         start = "stakes" if self._stake else None
-        psi = np.ones(d2.shape) if self._delivery else self._link.success_sq(power_w, d2)
+        psi = self._link.success_sq(power_w, d2)
+        if self._delivery is not None:
+            assert reference is not None  # the MPC anchor: _prepare checked it
+            solution = self._delivery.solve(x_aug, reference, psi, 0 if slot is None else slot)
+            law_first: np.ndarray = solution.increments[..., 0, :].copy()
+            return law_first
+        if self._law == "delivery-certainty-equivalent":
+            psi = np.ones(d2.shape)
         assert self.mpc is not None and data is not None  # the MPC anchor: built, and _prepare gave its data
         first: np.ndarray = self.mpc.solve_prepared(data, psi, start_from=start).increments[..., 0, :].copy()
         return first

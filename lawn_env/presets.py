@@ -11,7 +11,7 @@ from typing import Any
 
 from .config import ChannelConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 
-__all__ = ["PRESETS", "SUITE", "SUITE_V1", "SUITE_VERSION", "get", "names", "register", "resolve_config", "ConfigLike"]
+__all__ = ["PRESETS", "SUITE", "SUITE_V1", "SUITE_V2", "SUITE_VERSION", "get", "names", "register", "resolve_config", "ConfigLike"]
 
 PRESETS: dict[str, ScenarioConfig] = {}
 #: What every ``config=`` argument takes: a ScenarioConfig, a dict of its fields, a preset name or None.
@@ -47,7 +47,11 @@ register("k3", ScenarioConfig(num_agvs=3))
 #: The stress variant of the reference paths (MODEL.md §1): the raw paper-like set, not slowed into
 #: the AGVs' envelope, whose corners demand up to ~4 a_max; tracking error there is unavoidable.
 register("stress-paths", ScenarioConfig(reference=ReferenceConfig(envelope_fraction=None)))
-#: Thirty-two AGVs on random paths, for scaling studies and benchmarks.
+#: Sixteen AGVs on random paths at the default budget: the links lose about two commands in three
+#: (suite v3's first task where links are poor).
+register("k16", ScenarioConfig(num_agvs=16))
+#: Thirty-two AGVs on random paths at the default budget: about four commands in five are lost (suite
+#: v3's second task where links are poor; scaling studies and benchmarks).
 register("k32", ScenarioConfig(num_agvs=32))
 #: The default scenario with the disturbance mode on (MODEL.md §7: wind 2 m/s x, 2.5 m/s y with
 #: gusts, actuator lag, process and measurement noise, commands every second slot).
@@ -90,10 +94,13 @@ register("wide-k8", ScenarioConfig(num_agvs=8, area_m=(0.0, 300.0, 0.0, 300.0), 
 
 #: The task suite of ``lawn benchmark --suite`` and the leaderboard (docs/LEADERBOARD.md): preset
 #: names, default first. A change of its members or of their configs is a new SUITE_VERSION.
-#: Version 2 keeps the paper's scenario (``default``) and the strong disturbance (``disturbed``)
-#: and adds four tasks whose cost falls mostly after the transient (docs/benchmark.md).
-SUITE: tuple[str, ...] = ("default", "steady", "steady-low-power", "steady-gusty", "wide-k8", "disturbed")
-SUITE_VERSION = 2
+#: Version 3 adds to version 2's six tasks two where links are poor, 16 and 32 AGVs on the default
+#: budget (65-82 % of the commands lost: where pricing the future under loss decides; docs/benchmark.md).
+SUITE: tuple[str, ...] = ("default", "steady", "steady-low-power", "steady-gusty", "wide-k8", "disturbed", "k16", "k32")
+SUITE_VERSION = 3
+#: Suite version 2 (its tasks stay presets): the paper's scenario, the strong disturbance and four
+#: tasks whose cost falls mostly after the transient.
+SUITE_V2: tuple[str, ...] = ("default", "steady", "steady-low-power", "steady-gusty", "wide-k8", "disturbed")
 #: Suite version 1 (its tasks stay presets): the paper's scenario and six variants of it, each
 #: decided mostly by the transient of its first ten slots.
 SUITE_V1: tuple[str, ...] = ("default", "k3", "k8", "low-power", "short-blocklength", "imperfect-csi", "disturbed")

@@ -80,12 +80,19 @@ from .qp import AxisPencils
 if TYPE_CHECKING:
     from .config import ScenarioConfig
 
-__all__ = ["LossAwareTail", "TailModel", "tail_model", "expected_delivery", "first_delivery", "PSI_GRID",
-           "PSI_FLOOR", "TAILS"]
+__all__ = ["LossAwareTail", "DeliveryLaw", "TailModel", "tail_model", "expected_delivery", "first_delivery",
+           "PSI_GRID", "PSI_FLOOR", "TAILS", "BOUNDS_PROBABILITY", "DELIVERY_MEMORY", "DELIVERY_START_ITERATIONS"]
 
 #: The tails a delivery-value planner can price the future with: ``"loss-aware"`` (this module) and
 #: ``"certainty-equivalent"`` (every later command delivered: the psi = 1 MPC and its DARE).
 TAILS = ("loss-aware", "certainty-equivalent")
+
+#: The loss-aware tail's defaults, shared by ``dv-mpc`` (:class:`agents.DeliverySettings`) and the AGVs'
+#: ``control.law="delivery"`` (:class:`DeliveryLaw`): the later bounds' probability, psi-bar's memory and
+#: the fixed-point steps of its first value.
+BOUNDS_PROBABILITY = 0.3
+DELIVERY_MEMORY = 0.5
+DELIVERY_START_ITERATIONS = 3
 
 #: The lowest psi-bar the tail plans for: below it the cost-to-go grows past 1e9 times the loss-free one.
 PSI_FLOOR = 0.02
@@ -181,11 +188,16 @@ class TailModel:
     def terminal(self, index: int) -> np.ndarray:
         """The stationary cost-to-go at psi-bar = PSI_GRID[index], per slot phase (P, n, n): the modified
         Riccati equation's solution, with a period the periodic one (commands at phase 0), by value
-        iteration from the one above it on the grid (the solutions rise as psi-bar falls)."""
-        if index in self._terminal:
-            return self._terminal[index]
+        iteration from the one above it on the grid (the solutions rise as psi-bar falls), from the DARE at
+        psi-bar = 1 down: one chain, so a value never depends on which ones were asked for before."""
+        for i in range(PSI_GRID.size - 1, index - 1, -1):
+            if i not in self._terminal:
+                self._terminal[i] = self._stationary(i)
+        return self._terminal[index]
+
+    def _stationary(self, index: int) -> np.ndarray:
         psi = float(PSI_GRID[index])
-        above = self._terminal.get(index + 1) if index + 1 < PSI_GRID.size else None
+        above = self._terminal.get(index + 1)
         if self.period == 1:
             values = modified_riccati(self.a, self.b, self.q, self.r, psi, start=None if above is None else above[0])
             values = values[None]
@@ -193,7 +205,6 @@ class TailModel:
             start = modified_riccati(self.a, self.b, self.q, self.r, psi) if above is None else above[0]
             values = self._periodic(psi, start)
         values.setflags(write=False)
-        self._terminal[index] = values
         return values
 
     def _periodic(self, psi: float, start: np.ndarray) -> np.ndarray:
@@ -310,7 +321,7 @@ class LossAwareTail:
     :meth:`lawn_env.mpc.OutageAwareMPC.delivery_values` returns."""
 
     def __init__(self, model: TailModel, num_agvs: int, accel_max: float, accel_increment_max: float,
-                 bounds_probability: float = 0.3, backend: str = DEFAULT_BACKEND):
+                 bounds_probability: float = BOUNDS_PROBABILITY, backend: str = DEFAULT_BACKEND, warm: bool = True):
         if not 0.0 < bounds_probability <= 1.0:
             raise ValueError(f"bounds_probability={bounds_probability!r}: must lie in (0, 1]")
         self.model = model
@@ -318,12 +329,13 @@ class LossAwareTail:
         self.accel_max, self.accel_increment_max = float(accel_max), float(accel_increment_max)
         self.bounds_probability = float(bounds_probability)
         self.backend = backend
+        self.warm = warm  # False: every solve starts cold (its result a function of its problem alone)
         self._mpcs: dict[tuple[int, int], OutageAwareMPC] = {}
         self._released_cache: dict[tuple[int, int], np.ndarray | None] = {}
 
     @classmethod
-    def from_config(cls, config: ScenarioConfig, lag: bool = False, bounds_probability: float = 0.3,
-                    backend: str = DEFAULT_BACKEND) -> LossAwareTail:
+    def from_config(cls, config: ScenarioConfig, lag: bool = False, bounds_probability: float = BOUNDS_PROBABILITY,
+                    backend: str = DEFAULT_BACKEND, warm: bool = True) -> LossAwareTail:
         """The tail of ``config``'s AGVs (its horizon, weights, bounds and the control period the planners
         know); ``lag`` predicts with its actuator lag, where it has one."""
         ctl, d = config.control, config.disturbance
@@ -332,7 +344,7 @@ class LossAwareTail:
         horizon = max(int(ctl.horizon), period + 1)  # the next command and one after it inside the horizon
         model = tail_model(float(config.slot_s), horizon, tuple(ctl.q1_diag), tuple(ctl.q2_diag), period, alpha)
         return cls(model, config.num_agvs, ctl.accel_max_mps2, ctl.accel_increment_max_mps2, bounds_probability,
-                   backend)
+                   backend, warm)
 
     @property
     def state_dim(self) -> int:
@@ -420,6 +432,8 @@ class LossAwareTail:
         constant = (((zr @ maps.zz) * zr).sum(-1) - 2.0 * ((zr @ maps.zr) * rr).sum(-1)
                     + ((rr @ maps.rr) * rr).sum(-1))
         data = mpc.objective_data(z, linear, constant.reshape(z.shape[:2]), slots if slots.size > 1 else slots[0])
+        if not self.warm:
+            mpc.reset()
         released = self._released(index, phase, stages)
         if released is not None:
             data.lower[..., released] = -np.inf
@@ -443,3 +457,48 @@ class LossAwareTail:
                 released = np.concatenate([np.repeat(free & stages.command, 2), np.repeat(free, 2)])
         self._released_cache[key] = released
         return released
+
+
+class DeliveryLaw:
+    """The AGVs' law ``control.law="delivery"`` (the Comm envs' controller, the RL interface's MPC anchor):
+    each AGV applies the loss-aware tail's command (:class:`LossAwareTail`, planned from the state the
+    drone observes) at the fleet's psi-bar, which the drone sends with the commands. psi-bar follows the
+    rule of ``dv-mpc`` (:func:`expected_delivery`, :data:`DELIVERY_MEMORY`) from the success
+    probabilities the drone's decisions give; at an episode's first slot, the fixed point
+    (:func:`first_delivery`, :data:`DELIVERY_START_ITERATIONS` steps) at that slot's decision. One psi-bar
+    per scenario of a batch; every solve starts cold, so a scenario's commands do not depend on the
+    others'."""
+
+    def __init__(self, config: ScenarioConfig, backend: str = DEFAULT_BACKEND):
+        self.tail = LossAwareTail.from_config(config, backend=backend, warm=False)
+        self.psi_bar: np.ndarray | None = None  # per scenario; NaN: a new episode's first slot
+
+    def reset(self, which: np.ndarray | None = None) -> None:
+        """New episodes for the scenarios ``which`` (a mask over the batch; all when None)."""
+        if self.psi_bar is None or which is None:
+            self.psi_bar = None
+        else:
+            self.psi_bar[np.asarray(which, dtype=bool).reshape(self.psi_bar.shape)] = np.nan
+
+    def solve(self, state: np.ndarray, chi_ref: np.ndarray, psi: np.ndarray, slot: npt.ArrayLike
+              ) -> MPCSolution:
+        """The AGVs' planned increments (..., K, N, 2) at the success probabilities ``psi`` (..., K) of the
+        drone's decisions; advances psi-bar by this slot."""
+        lead = state.shape[:-2]
+        if self.psi_bar is None or self.psi_bar.shape != lead:
+            self.psi_bar = np.full(lead, np.nan)
+        unset = np.isnan(self.psi_bar)
+        if unset.any():
+            rows = np.flatnonzero(unset.reshape(-1))
+            flat = self.psi_bar.reshape(-1)
+            slots = np.broadcast_to(np.asarray(slot, dtype=np.int64), lead).reshape(-1)[rows]
+            z = state.reshape(-1, *state.shape[-2:])[rows]
+            ref = chi_ref.reshape(-1, *chi_ref.shape[-3:])[rows]
+            start = np.ones(rows.size)
+            for _ in range(DELIVERY_START_ITERATIONS):
+                solution, lost = self.tail.delivery_values(z, ref, start, slots)
+                start = expected_delivery(start, psi.reshape(-1, psi.shape[-1])[rows], lost - solution.value, 0.0)
+            flat[rows] = start
+        solution, lost = self.tail.delivery_values(state, chi_ref, self.psi_bar, slot)
+        self.psi_bar = expected_delivery(self.psi_bar, psi, lost - solution.value, DELIVERY_MEMORY)
+        return solution

@@ -101,16 +101,18 @@ def test_aggregate_is_rliables_interquartile_mean_of_the_task_scores():
         r = 100.0 + rng.normal(0, 5, 30)
         x = e - (target / 100.0) * (e - r).mean() + rng.normal(0, 1, 30)
         per_task[f"t{i}"] = (e, r, x)
-    scores = [normalized_score(dict(enumerate(x)), dict(enumerate(e)), dict(enumerate(r)))[0]
+    scores = [normalized_score(dict(enumerate(x)), dict(enumerate(e)), dict(enumerate(r)), version=2)[0]
               for e, r, x in per_task.values()]
-    iqm, lo, hi, n = aggregate_score(per_task)
+    iqm, lo, hi, n = aggregate_score(per_task, version=2)  # on cost: the outlying task's costs go below zero
     middle = sorted(scores)[1:-1]  # trim_mean(0.25) of five drops int(1.25) = 1 at each end
     assert n == 5 and iqm == pytest.approx(np.mean(middle), rel=1e-12)
     assert iqm == pytest.approx(stats.trim_mean(scores, 0.25), rel=1e-12)  # rliable's metrics.aggregate_iqm
     assert lo < iqm < hi and hi - lo < 20  # the outlier moves neither the point nor the interval much
     # a task whose costs do not vary contributes its one score to every resample
     fixed = {t: (np.full(10, 200.0), np.full(10, 100.0), np.full(10, 150.0)) for t in ("a", "b", "c", "d")}
-    assert aggregate_score(fixed) == (50.0, 50.0, 50.0, 4)
+    assert aggregate_score(fixed, version=2) == (50.0, 50.0, 50.0, 4)
+    geometric = {t: (np.full(10, 200.0), np.full(10, 50.0), np.full(10, 100.0)) for t in ("a", "b", "c", "d")}
+    assert aggregate_score(geometric)[:3] == pytest.approx((50.0, 50.0, 50.0))  # v3: on log cost
     assert aggregate_score({})[3] == 0
 
 
@@ -154,7 +156,7 @@ def test_reference_rows_run_under_their_names_and_beat_or_tie_the_expert():
     assert cost["noise:rg-mpc"] == pytest.approx(cost["rg-mpc"], rel=0.05)
 
 
-# ---------------------------------------------------------------------- suite v2
+# ---------------------------------------------------------------------- the suite
 @pytest.mark.parametrize("task", presets.SUITE)
 def test_suite_tasks_resolve_validate_and_run_an_episode(task):
     config = presets.get(task)
@@ -176,8 +178,17 @@ def test_steady_tasks_start_without_the_transient():
         x0, x1, y0, y1 = config.area_m
         assert config.reference.initial_offset_std_m == 0.0
         assert config.drone.start_m == ((x0 + x1) / 2, (y0 + y1) / 2)
-    assert presets.SUITE_VERSION == 2 and presets.SUITE[0] == "default" and "disturbed" in presets.SUITE
-    assert set(presets.SUITE_V1) <= set(presets.names())
+    assert presets.SUITE_VERSION == 3 and presets.SUITE[0] == "default" and "disturbed" in presets.SUITE
+    assert set(presets.SUITE_V1) <= set(presets.names()) and set(presets.SUITE_V2) < set(presets.SUITE)
+
+
+def test_suite_v3_adds_tasks_where_links_are_poor():
+    """k16 and k32: the default scenario with 16 and 32 AGVs on one budget, where most commands are lost."""
+    extra = [t for t in presets.SUITE if t not in presets.SUITE_V2]
+    assert extra == ["k16", "k32"]
+    for task, k in zip(extra, (16, 32), strict=True):
+        config = presets.get(task)
+        assert config == ScenarioConfig(num_agvs=k)
 
 
 def test_two_ranges_are_compared_apart_with_the_tail_and_the_worst_seed():

@@ -220,16 +220,20 @@ def test_observation_is_order_one_under_a_reasonable_policy():
     assert worst < 4  # measured: 2.84 (a feature far above one would dominate a network's input)
 
 
-@pytest.mark.parametrize("law", ["paper", "delivery"])
+@pytest.mark.parametrize("law", ["paper", "delivery-certainty-equivalent", "delivery"])
 def test_comm_env_applies_the_mpc_first_increment(law):
-    """control.law="paper": the QP at each link's planned psi; "delivery": the same QP at psi = 1 (the
-    command as if it arrives), the links and the planned psi in info as they are."""
+    """control.law="paper": the QP at each link's planned psi; "delivery-certainty-equivalent": the same QP
+    at psi = 1 (the command as if it arrives); "delivery": the loss-aware tail's command at the fleet's
+    psi-bar (lawn_env.tail.DeliveryLaw, with the reference backend); the links and the planned psi in
+    info as they are."""
     env = gym.make("lawn/Comm-v1", control={"law": law}).unwrapped
     env.reset(seed=6)
     env.action_space.seed(6)
     from lawn_env.mpc import OutageAwareMPC
+    from lawn_env.tail import DeliveryLaw
 
     independent = OutageAwareMPC.from_config(env.config, backend="osqp")
+    lossy = DeliveryLaw(env.config, backend="daqp")
     for _ in range(15):
         a = env.action_space.sample()
         x = env.sim.x_aug.copy()
@@ -237,7 +241,10 @@ def test_comm_env_applies_the_mpc_first_increment(law):
         power = lawn_env.spaces.DirectActions(env.config, "comm").decode(a, x, ref, env.sim.drone_position).power_w
         q_next = env.sim.drone_target(a[4:].astype(float) * env.config.drone.max_speed_mps)
         psi = env.sim.planning_success(power, q_next)
-        expected = independent.solve(x, ref, psi if law == "paper" else np.ones_like(psi)).increments[:, 0]
+        if law == "delivery":
+            expected = lossy.solve(x, ref, psi, int(np.asarray(env.sim.slot).reshape(-1)[0])).increments[:, 0]
+        else:
+            expected = independent.solve(x, ref, psi if law == "paper" else np.ones_like(psi)).increments[:, 0]
         _, _, _, _, info = env.step(a)
         assert np.allclose(info["success_probability_planned"], psi) and np.all(psi < 1.0)
         applied = np.where(info["delivered"][:, None], expected, 0.0)

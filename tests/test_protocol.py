@@ -27,16 +27,32 @@ def _rows(policy, costs, env="lawn/Joint-v1", task="default"):
 def test_score_is_zero_at_epa_and_one_hundred_at_rg_mpc():
     epa = {0: 900.0, 1: 1500.0, 2: 700.0, 3: 1200.0}
     rg = {0: 400.0, 1: 500.0, 2: 450.0, 3: 600.0}
-    assert normalized_score(epa, epa, rg)[0] == 0.0
-    assert normalized_score(rg, epa, rg)[0] == pytest.approx(100.0, abs=1e-12)
-    # halfway on every seed is 50; the mean gap (not a per-seed ratio) is the denominator
+    for version in (2, 3):
+        assert normalized_score(epa, epa, rg, version=version)[0] == 0.0
+        assert normalized_score(rg, epa, rg, version=version)[0] == pytest.approx(100.0, abs=1e-12)
+    # v2, on cost: halfway on every seed is 50; the mean gap (not a per-seed ratio) is the denominator
     half = {s: (epa[s] + rg[s]) / 2 for s in epa}
-    assert normalized_score(half, epa, rg)[0] == pytest.approx(50.0, abs=1e-12)
+    assert normalized_score(half, epa, rg, version=2)[0] == pytest.approx(50.0, abs=1e-12)
     better = {s: rg[s] - 0.1 * (epa[s] - rg[s]) for s in epa}
-    assert normalized_score(better, epa, rg)[0] == pytest.approx(110.0, abs=1e-9)
+    assert normalized_score(better, epa, rg, version=2)[0] == pytest.approx(110.0, abs=1e-9)
     gap = np.mean([epa[s] - rg[s] for s in epa])
     odd = {0: 650.0, 1: 1500.0, 2: 700.0, 3: 1200.0}  # only seed 0 moves
-    assert normalized_score(odd, epa, rg)[0] == pytest.approx(100 * 250.0 / 4 / gap)
+    assert normalized_score(odd, epa, rg, version=2)[0] == pytest.approx(100 * 250.0 / 4 / gap)
+    # v3, on log cost: the geometric midpoint on every seed is 50
+    geometric = {s: math.sqrt(epa[s] * rg[s]) for s in epa}
+    assert normalized_score(geometric, epa, rg)[0] == pytest.approx(50.0, abs=1e-9)
+
+
+def test_the_log_score_is_not_squashed_by_a_diverged_reference():
+    """One EPA episode at 1e7 (a diverged AGV) leaves v2 with every other policy near 100 whatever it
+    costs; v3 on log cost keeps a policy at twice the expert's cost well apart from the expert."""
+    epa = {0: 900.0, 1: 1500.0, 2: 1e7, 3: 1200.0}
+    expert = {0: 400.0, 1: 500.0, 2: 450.0, 3: 600.0}
+    twice = {s: 2 * c for s, c in expert.items()}
+    assert normalized_score(twice, epa, expert, version=2)[0] > 99.9
+    assert normalized_score(twice, epa, expert)[0] < 80.0
+    with pytest.raises(ValueError, match=r"log costs: every cost must be > 0"):
+        normalized_score({0: 0.0}, {0: 2.0}, {0: 1.0})
 
 
 def test_score_interval_brackets_the_mean_and_is_seeded():
@@ -58,7 +74,7 @@ def test_score_needs_references_that_separate_and_shared_seeds():
 
 
 def test_scores_by_policy_pairs_within_task_and_env():
-    rows = (_rows("epa", {0: 10.0, 1: 12.0}) + _rows("dv-mpc", {0: 4.0, 1: 6.0}) + _rows("x", {0: 7.0, 1: 9.0})
+    rows = (_rows("epa", {0: 100.0, 1: 400.0}) + _rows("dv-mpc", {0: 1.0, 1: 4.0}) + _rows("x", {0: 10.0, 1: 40.0})
             + _rows("epa", {0: 100.0, 1: 100.0}, task="k8") + _rows("dv-mpc", {0: 50.0, 1: 50.0}, task="k8")
             + _rows("x", {0: 50.0, 1: 50.0}, task="k8") + _rows("y", {0: 1.0}, env="lawn/Comm-v1"))
     scores = scores_by_policy(rows)
@@ -70,19 +86,26 @@ def test_scores_by_policy_pairs_within_task_and_env():
     assert scores_by_policy(rows) == {}
 
 
-def test_score_v1_stays_computable_beside_v2():
-    """v2 puts 100 at dv-mpc; v1, at rg-mpc, is computed from the same rows when they hold it."""
-    from training.results.stats import SCORE_REFERENCES, SCORE_VERSION
+def test_earlier_scores_stay_computable_beside_v3():
+    """v3 puts 100 at dv-mpc on log cost; v2 (100 at dv-mpc-ce, dv-mpc before its loss-aware tail) and
+    v1 (at rg-mpc), both on cost, are computed from the same rows when they hold their references."""
+    from training.results.stats import SCORE_REFERENCES, SCORE_SCALES, SCORE_VERSION
 
-    assert SCORE_VERSION == 2 and SCORE_REFERENCES == {1: ("epa", "rg-mpc"), 2: ("epa", "dv-mpc")}
-    rows = (_rows("epa", {0: 10.0, 1: 12.0}) + _rows("rg-mpc", {0: 6.0, 1: 8.0}) + _rows("dv-mpc", {0: 4.0, 1: 6.0})
-            + _rows("x", {0: 7.0, 1: 9.0}))
-    v1, v2 = scores_by_policy(rows, version=1), scores_by_policy(rows, version=2)
+    assert SCORE_VERSION == 3 and SCORE_REFERENCES == {1: ("epa", "rg-mpc"), 2: ("epa", "dv-mpc-ce"),
+                                                        3: ("epa", "dv-mpc")}
+    assert SCORE_SCALES == {1: "cost", 2: "cost", 3: "log cost"}
+    rows = (_rows("epa", {0: 10.0, 1: 12.0}) + _rows("rg-mpc", {0: 6.0, 1: 8.0}) + _rows("dv-mpc-ce", {0: 4.0, 1: 6.0})
+            + _rows("dv-mpc", {0: 4.0, 1: 6.0}) + _rows("x", {0: 7.0, 1: 9.0}))
+    v1, v2, v3 = (scores_by_policy(rows, version=v) for v in (1, 2, 3))
     assert v1[("default", "lawn/Joint-v1", "x")][0] == pytest.approx(75.0)
     assert v2[("default", "lawn/Joint-v1", "x")][0] == pytest.approx(50.0)
+    logs = {p: np.log([c for c in costs]) for p, costs in
+            {"epa": (10.0, 12.0), "dv-mpc": (4.0, 6.0), "x": (7.0, 9.0)}.items()}
+    expected = 100 * (logs["epa"] - logs["x"]).mean() / (logs["epa"] - logs["dv-mpc"]).mean()
+    assert v3[("default", "lawn/Joint-v1", "x")][0] == pytest.approx(expected)
     assert v1[("default", "lawn/Joint-v1", "dv-mpc")][0] == pytest.approx(150.0)
-    with pytest.raises(ValueError, match=r"score version=3; valid: 1, 2"):
-        scores_by_policy(rows, version=3)
+    with pytest.raises(ValueError, match=r"score version=4; valid: 1, 2, 3"):
+        scores_by_policy(rows, version=4)
     with pytest.raises(ValueError, match=r"run epa and rg-mpc on the same seeds"):
         normalized_score({5: 1.0}, {0: 1.0}, {0: 0.5}, references=SCORE_REFERENCES[1])
 
@@ -143,7 +166,7 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
         run_learned_protocol(["zoo:nope"], tmp_path, episodes=3, play=Play(1, False))
     table = run_learned_protocol(["zoo:ppo-comm"], tmp_path, episodes=3, play=Play(1, False))
     lines = table.splitlines()
-    assert "vs own anchor (paired mean)" in lines[0] and "vs own anchor (geometric" in lines[0] and "score v2" in lines[0]
+    assert "vs own anchor (paired mean)" in lines[0] and "vs own anchor (geometric" in lines[0] and "score v3" in lines[0]
     agent = next(line for line in lines if line.startswith("| zoo:ppo-comm "))
     anchor = own_anchor("zoo:ppo-comm")
     assert f"| {anchor} |" in agent
@@ -191,7 +214,7 @@ def test_selection_keeps_the_start_unless_a_validation_beats_it_significantly():
 
 # ---------------------------------------------------------------------- the task suite
 def test_suite_tasks_are_presets_with_their_own_scenarios():
-    for suite in (presets.SUITE, presets.SUITE_V1):
+    for suite in (presets.SUITE, presets.SUITE_V2, presets.SUITE_V1):
         configs = [presets.get(task) for task in suite]
         assert suite[0] == "default" and len(set(map(repr, configs))) == len(configs)
     assert presets.get("k8").num_agvs == 8 and presets.get("k3").num_agvs == 3
@@ -337,7 +360,7 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
 
     anchor = own_anchor(f"bc:{runs / 'bc-comm' / 'seed-0'}")  # the hyperparameter file's interface: anchor:stake
     rows = table.splitlines()
-    assert "vs own anchor (paired)" in rows[0] and "score v2" in rows[0]
+    assert "vs own anchor (paired)" in rows[0] and "score v3" in rows[0]
     label = RECIPES["bc-comm"].label
     assert [r.split(" | ")[0] for r in rows[2:6]] == ["| dv-mpc", "| epa", f"| {anchor}",
                                                       f"| {label} (`zoo:bc-comm`, seed 0)"]

@@ -220,3 +220,62 @@ def test_bad_tail_settings_name_them():
     tail = LossAwareTail.from_config(CFG)
     with pytest.raises(ValueError, match=r"state has shape \(3, 6\)"):
         tail.delivery_values(np.zeros((3, 6)), np.zeros((3, 11, 6)), 0.5)
+
+
+# ---------------------------------------------------------------------- the AGVs' delivery law
+def test_the_comm_agvs_delivery_law_holds_where_links_fail():
+    """``control.law="delivery"`` is the loss-aware tail's command at the fleet's psi-bar: at K = 32 the
+    AGVs of lawn/Comm-v1 stay near their paths under dv-mpc; under the certainty-equivalent law they
+    run away (the same drone decisions' planner, its tail matching each law)."""
+    config = CFG.override({"num_agvs": 32, "num_slots": 60})
+    rmse = {}
+    for law in ("delivery", "delivery-certainty-equivalent"):
+        law_config = config.override({"control.law": law})
+        env = gym.make("lawn/Comm-v1", config=law_config)
+        rmse[law] = rollout(env, make_policy("dv-mpc", law_config, env_id="lawn/Comm-v1"), 700).metrics["rmse_m"]
+    assert rmse["delivery"] < 5.0 < 4 * rmse["delivery"] < rmse["delivery-certainty-equivalent"]
+
+
+def test_dv_mpc_on_comm_plans_with_the_tail_of_the_agvs_law():
+    delivery = CFG.override({"control.law": "delivery"})
+    assert make_policy("dv-mpc", delivery, env_id="lawn/Comm-v1").solver.tail is not None
+    ce = make_policy("dv-mpc", CFG.override({"control.law": "delivery-certainty-equivalent"}), env_id="lawn/Comm-v1")
+    assert ce.solver.tail is None
+    with pytest.raises(ValueError, match=r"tail='certainty-equivalent'.*control.law='delivery'"):
+        make_policy("dv-mpc", delivery, env_id="lawn/Comm-v1", tail="certainty-equivalent")
+    with pytest.raises(ValueError, match="dv-mpc-ce is dv-mpc with tail='certainty-equivalent'"):
+        make_policy("dv-mpc-ce", CFG, tail="loss-aware")
+    assert make_policy("dv-mpc-ce", CFG).solver.tail is None
+
+
+def test_the_delivery_law_of_a_vector_env_is_each_scenarios_own():
+    """Env i of the Comm vector env under the delivery law equals the single env reset with s + i, bit
+    for bit: psi-bar is per scenario and every solve starts cold."""
+    from test_vector import _lockstep
+
+    config = ScenarioConfig(num_slots=25).override({"control.law": "delivery"})
+    rng = np.random.default_rng(1)
+    _lockstep("lawn/Comm-v1", config, rng.uniform(-1, 1, (25, 4, config.num_agvs + 2)).astype(np.float32), 10)
+
+
+def test_the_anchored_joint_increments_follow_the_delivery_law():
+    """Under control.law="delivery" the RL interface's MPC anchor plans as the Comm AGVs do: the zero
+    action of lawn/JointRL-v1 with increment_anchor="mpc" decodes to the delivery law's command at the
+    anchored powers."""
+    from lawn_env.channel import LinkParams
+    from lawn_env.interface import action_codec
+    from lawn_env.tail import DeliveryLaw
+
+    config = CFG.override({"control.law": "delivery"})
+    env = gym.make("lawn/JointRL-v1", config=config, interface={"base": "rl", "increment_anchor": "mpc"}).unwrapped
+    env.reset(seed=3)
+    law, link = DeliveryLaw(config), LinkParams.from_config(config, planning=True)
+    codec = action_codec(config, "joint", env.interface)  # the env's own, a copy: decoding advances psi-bar
+    zero = np.zeros(env.action_space.shape, dtype=np.float32)
+    for _ in range(3):
+        snap = env.snapshot()
+        decision = codec.decode(zero, snap.x_aug, snap.reference, snap.drone_position, snap.slot)
+        psi = link.success_sq(decision.power_w, link.distance_sq(decision.drone_next, snap.x_aug[:, :2]))
+        expected = law.solve(snap.x_aug, snap.reference, psi, snap.slot).increments[:, 0]
+        assert np.allclose(decision.increment, expected, atol=1e-12)
+        env.step(zero)

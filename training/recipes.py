@@ -102,8 +102,9 @@ _FLEET_SEEDS = (0,)
 #: entity layout serves K = 4 and 8 alike): 10,000 labels a task, then 4 DAgger rounds of 2,500 a task.
 DISTIL_TASKS = ("steady", "steady-low-power", "steady-gusty", "wide-k8")
 _DISTIL = {"expert": "dv-mpc", "tasks": list(DISTIL_TASKS), "dagger_timesteps": 10_000}
-#: dv-mpc's AGVs on Comm: the env's MPC applies the delivery law (each command planned as if it arrives).
-_DELIVERY = {"control.law": "delivery"}
+#: dv-mpc's AGVs on Comm: the env's MPC applies the delivery law the shipped clones were trained with (each
+#: command planned as if it arrives, every later one priced as delivered: the certainty-equivalent tail).
+_DELIVERY = {"control.law": "delivery-certainty-equivalent"}
 #: On Joint the network's increments are a residual on the delivery-law MPC's (the anchored interface's
 #: increment anchor plans as the scenario's law says), so what it learns is dv-mpc's power and drone, as
 #: on Comm. Around the LQR's increments instead (the fleet networks' interface, no MPC in the decision)

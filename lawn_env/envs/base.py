@@ -28,6 +28,7 @@ from ..interface import InterfaceLike, RLInterface, action_codec, resolve_interf
 from ..mpc import DEFAULT_BACKEND, OutageAwareMPC
 from ..presets import ConfigLike, resolve_config
 from ..spaces import ObservationLayout, check_action
+from ..tail import DeliveryLaw
 
 __all__ = ["Engine", "EngineAccess", "JointRole", "CommRole", "ROLE_TYPES", "LawnEnv", "SlotResult", "INFO_KEYS",
            "COMM_INFO_KEYS"]
@@ -68,21 +69,31 @@ class CommRole:
 
     name = "comm"
 
-    def __init__(self, mpc: OutageAwareMPC, law: str = "paper", planning_state: str = "measured"):
+    def __init__(self, mpc: OutageAwareMPC, law: str = "paper", planning_state: str = "measured",
+                 delivery: DeliveryLaw | None = None):
         self.mpc = mpc
-        self.law = law  # control.law: the QP at the planned psi ("paper") or at psi = 1 ("delivery")
+        # control.law: the QP at the planned psi ("paper"), at psi = 1 ("delivery-certainty-equivalent"), or
+        # the loss-aware tail's command (``delivery``, the law of "delivery")
+        self.law = law
+        if law == "delivery" and delivery is None:
+            raise ValueError("control.law='delivery': pass delivery=, the AGVs' DeliveryLaw")
+        self.delivery = delivery
         self.planning_state = planning_state  # "true": lawn/Comm-v0's MPC, which plans from the true state
         self.last_solve_time_s = float("nan")
 
     def reset(self, which: np.ndarray | None = None) -> None:
         self.mpc.reset(which)  # a new episode starts without the old one's warm starts
+        if self.delivery is not None:
+            self.delivery.reset(which)
 
     def decide(self, sim: Simulation, decision: Decisions, windows: np.ndarray | None) -> tuple[Decisions, dict]:
         assert windows is not None  # the engine passes them to a role that plans
         x = sim.x_obs if self.planning_state == "measured" else sim.x_aug
         psi = link_success(x, decision.drone_next, decision.power_w, sim.params.planning_link)
-        planned = psi if self.law == "paper" else np.ones_like(psi)  # control.law: as if delivered
-        solution = self.mpc.solve(x, windows, planned, sim.slot)
+        if self.delivery is not None:  # control.law="delivery": the loss-aware tail's command
+            solution = self.delivery.solve(x, windows, psi, sim.slot)
+        else:  # the QP at the planned psi, or as if delivered
+            solution = self.mpc.solve(x, windows, psi if self.law == "paper" else np.ones_like(psi), sim.slot)
         self.last_solve_time_s = solution.solve_time_s  # not in info: infos must be deterministic
         extra = {"mpc_iterations": solution.iterations.astype(np.int64),
                  "mpc_fallbacks": np.count_nonzero(solution.status, axis=-1).astype(np.int64),
@@ -137,7 +148,9 @@ class Engine:
         self.role: JointRole | CommRole = JointRole()
         if role == "comm":  # one MPC per env: the anchor's when it has one
             mpc = self.actions.mpc or OutageAwareMPC.from_config(config, backend=qp_backend)
-            self.role = CommRole(mpc, config.control.law, planning_state)
+            law = config.control.law
+            self.role = CommRole(mpc, law, planning_state,
+                                 DeliveryLaw(config, backend=qp_backend) if law == "delivery" else None)
         self.needs_windows = role == "comm" or self.actions.needs_reference
         self.slot_table = self.layout.slot_table(self.sim.params.fixed_reference)
         self._no_termination = np.zeros(self.num_envs, dtype=bool)

@@ -108,7 +108,10 @@ def format_table(summary: list[dict[str, Any]], metrics: Sequence[tuple[str, str
         for key, _ in metrics:
             scale = 1e3 if key.startswith("decision_time") else 1.0
             mean, half = entry[key] * scale, entry[f"{key}_ci95"] * scale
-            cells.append(f"{fmt_stat(mean)} ± {fmt_stat(half)}")
+            if key == "diverged":  # a flag per episode (lawn_env.core.DIVERGENCE_DISTANCE_M): how many of them
+                cells.append("n/a" if not math.isfinite(mean) else f"{round(mean * entry['episodes'])}")
+            else:
+                cells.append(f"{fmt_stat(mean)} ± {fmt_stat(half)}")
         if scores:
             cells.insert(3, format_score(scores.get(entry[by])))
         if paired:

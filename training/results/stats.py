@@ -2,12 +2,15 @@
 differences and the geometric mean of cost ratios with a bootstrap interval), the verdict of a
 claim, and the normalized score with its interquartile mean over tasks.
 
-**The normalized score** (v2, :data:`SCORE_VERSION`; docs/benchmark.md defines it and says why):
-on one task and env, with ``E_i``, ``R_i`` and ``x_i`` the costs of ``epa``, ``dv-mpc`` and the
+**The normalized score** (v3, :data:`SCORE_VERSION`; docs/benchmark.md defines it and says why):
+on one task and env, with ``E_i``, ``R_i`` and ``x_i`` the log costs of ``epa``, ``dv-mpc`` and the
 policy on seed ``i``, ``score = 100 * (mean E - mean x) / (mean E - mean R)`` (0 is EPA, 100 the
-best expert); the 95 % interval is a paired bootstrap of the triples over seeds. The references are
-run beside the policy on the same seeds, never stored. v1 (100 at ``rg-mpc``) stays computable:
-:data:`SCORE_REFERENCES` and the ``version`` arguments.
+best expert): on log cost, the score of the geometric mean, so one diverged episode of a reference
+(costs 1e5 times the others') does not squash the scale; the 95 % interval is a paired bootstrap of
+the triples over seeds. The references are run beside the policy on the same seeds, never stored.
+Earlier versions stay computable (:data:`SCORE_REFERENCES`, :data:`SCORE_SCALES` and the
+``version`` arguments): v2 on cost with 100 at ``dv-mpc-ce`` (``dv-mpc`` before its loss-aware tail),
+v1 on cost with 100 at ``rg-mpc``.
 """
 
 from __future__ import annotations
@@ -21,16 +24,19 @@ import numpy as np
 
 __all__ = ["SUMMARY_METRICS", "mean_ci", "paired_difference", "Geometric", "paired_geometric", "verdict", "costs_of",
            "paired", "geometric", "summarize", "paired_cost_difference", "paired_cost_geometric", "SCORE_VERSION",
-           "SCORE_REFERENCES", "SCORE_LOW", "SCORE_HIGH", "score_references", "normalized_score", "score_inputs",
+           "SCORE_REFERENCES", "SCORE_SCALES", "SCORE_LOW", "SCORE_HIGH", "score_references", "score_version",
+           "normalized_score", "score_inputs",
            "scores_by_policy", "aggregate_score"]
 
 #: Resamples of every bootstrap interval of the tables (the score's and the geometric comparison's).
 BOOTSTRAP_RESAMPLES = 2000
 #: The bootstraps' fixed seed: the same rows give the same interval.
 BOOTSTRAP_SEED = 20261124
-SCORE_VERSION = 2
+SCORE_VERSION = 3
 #: The policies that define 0 and 100, per score version.
-SCORE_REFERENCES: dict[int, tuple[str, str]] = {1: ("epa", "rg-mpc"), 2: ("epa", "dv-mpc")}
+SCORE_REFERENCES: dict[int, tuple[str, str]] = {1: ("epa", "rg-mpc"), 2: ("epa", "dv-mpc-ce"), 3: ("epa", "dv-mpc")}
+#: What each version averages: the costs ("cost") or their logarithms ("log cost").
+SCORE_SCALES: dict[int, str] = {1: "cost", 2: "cost", 3: "log cost"}
 #: The current version's: 0 and 100.
 SCORE_LOW, SCORE_HIGH = SCORE_REFERENCES[SCORE_VERSION]
 #: The aligned per-seed costs (E, R, x) of the two references and a policy (:func:`score_inputs`).
@@ -42,6 +48,7 @@ SUMMARY_METRICS = (
     ("sustained_cost", "sustained cost"),
     ("rmse_m", "RMSE (m)"),
     ("outage_rate", "outage rate"),
+    ("diverged", "diverged"),
     ("decision_time_median_s", "decision time (s)"),
 )
 
@@ -154,8 +161,8 @@ def summarize(rows: list[dict[str, Any]], metrics: Sequence[tuple[str, str]] = S
     out = []
     for name, members in groups.items():
         entry = {by: name, "episodes": len(members)}
-        for key, _ in metrics:
-            entry[key], entry[f"{key}_ci95"] = mean_ci(float(r[key]) for r in members)
+        for key, _ in metrics:  # a metric the rows do not hold (an older CSV's): NaN
+            entry[key], entry[f"{key}_ci95"] = mean_ci(float(r[key]) for r in members if key in r)
         out.append(entry)
     return out
 
@@ -222,24 +229,43 @@ def _score(e: np.ndarray, r: np.ndarray, x: np.ndarray, axis: int = -1) -> np.nd
         return score
 
 
+def _scaled(costs: np.ndarray, version: int) -> np.ndarray:
+    """The values score ``version`` averages: the costs, or their logarithms (positive costs only)."""
+    if SCORE_SCALES[score_version(version)] == "cost":
+        return costs
+    if not np.all(costs > 0):
+        raise ValueError(f"score v{version} averages log costs: every cost must be > 0 (got {costs.min():.6g})")
+    scaled: np.ndarray = np.log(costs)
+    return scaled
+
+
+def score_version(version: int) -> int:
+    """``version`` if it is one; ValueError naming the versions otherwise."""
+    score_references(version)
+    return version
+
+
 def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: Mapping[int, float],
-                     references: tuple[str, str] = (SCORE_LOW, SCORE_HIGH)) -> tuple[float, float, float, int]:
-    """Score, 95 % interval (low end, high end) and seed count of a policy's per-seed costs ``cost``
-    against the references' ``low`` (EPA) and ``high`` (the best expert; ``references`` names both in
-    messages), over the seeds all three hold. NaN interval for fewer than 3 seeds; ValueError when
-    the references do not separate (mean low cost not above mean high cost): no score is defined."""
-    low_name, high_name = references
+                     references: tuple[str, str] | None = None, version: int = SCORE_VERSION
+                     ) -> tuple[float, float, float, int]:
+    """Score ``version``, its 95 % interval (low end, high end) and seed count of a policy's per-seed
+    costs ``cost`` against the references' ``low`` (EPA) and ``high`` (the best expert; ``references``
+    names both in messages, default the version's), over the seeds all three hold. NaN interval for
+    fewer than 3 seeds; ValueError when the references do not separate (mean low cost, or log cost,
+    not above the high one's): no score is defined."""
+    low_name, high_name = score_references(version) if references is None else references
     seeds = [s for s in cost if s in low and s in high]
     if not seeds:
         raise ValueError(f"no seed holds the policy's and both references' costs: run {low_name} and {high_name} on "
                          "the same seeds, task and environment")
-    x = np.array([float(cost[s]) for s in seeds])
-    e = np.array([float(low[s]) for s in seeds])
-    r = np.array([float(high[s]) for s in seeds])
+    x = _scaled(np.array([float(cost[s]) for s in seeds]), version)
+    e = _scaled(np.array([float(low[s]) for s in seeds]), version)
+    r = _scaled(np.array([float(high[s]) for s in seeds]), version)
     gap = float(np.mean(e - r))
     if not gap > 0:
-        raise ValueError(f"the references do not separate on these {len(seeds)} seeds: mean {low_name} cost "
-                         f"{e.mean():.6g} is not above mean {high_name} cost {r.mean():.6g}")
+        scale = SCORE_SCALES[version]
+        raise ValueError(f"the references do not separate on these {len(seeds)} seeds: mean {low_name} {scale} "
+                         f"{e.mean():.6g} is not above mean {high_name} {scale} {r.mean():.6g}")
     score = float(_score(e, r, x))
     if len(seeds) < 3:
         return score, math.nan, math.nan, len(seeds)
@@ -280,12 +306,13 @@ def scores_by_policy(rows: Iterable[Mapping[str, Any]], metric: str = "control_c
     references, sharing no seed with them, or whose references do not separate (EPA not costlier
     than the best expert on average) are left out: no score is defined there."""
     references = score_references(version)
-    return {key: normalized_score(dict(enumerate(x)), dict(enumerate(e)), dict(enumerate(r)), references)
-            for key, (e, r, x) in score_inputs(rows, metric, version).items() if float(np.mean(e - r)) > 0}
+    return {key: normalized_score(dict(enumerate(x)), dict(enumerate(e)), dict(enumerate(r)), references, version)
+            for key, (e, r, x) in score_inputs(rows, metric, version).items()
+            if float(np.mean(_scaled(e, version) - _scaled(r, version))) > 0}
 
 
-def aggregate_score(per_task: Mapping[str, Costs],
-                    resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float, float, int]:
+def aggregate_score(per_task: Mapping[str, Costs], resamples: int = BOOTSTRAP_RESAMPLES,
+                    version: int = SCORE_VERSION) -> tuple[float, float, float, int]:
     """The headline over tasks: rliable's interquartile mean (Agarwal et al., 2021) of the per-task
     scores (``scipy.stats.trim_mean(scores, 0.25)``: the middle four of six), with a 95 % stratified
     bootstrap interval (each task's seeds resampled on their own, its score recomputed, the IQM
@@ -295,7 +322,7 @@ def aggregate_score(per_task: Mapping[str, Costs],
     scores, draws = [], []
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     for task in sorted(per_task):
-        e, r, x = (np.asarray(a, dtype=float) for a in per_task[task])
+        e, r, x = (_scaled(np.asarray(a, dtype=float), version) for a in per_task[task])
         if not float(np.mean(e - r)) > 0:
             continue
         scores.append(float(_score(e, r, x)))
