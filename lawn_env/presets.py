@@ -11,7 +11,8 @@ from typing import Any
 
 from .config import ChannelConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 
-__all__ = ["PRESETS", "SUITE", "SUITE_V1", "SUITE_V2", "SUITE_VERSION", "get", "names", "register", "resolve_config", "ConfigLike"]
+__all__ = ["PRESETS", "SUITE", "SUITE_V1", "SUITE_V2", "SUITE_VERSION", "get", "names", "register", "resolve_config",
+           "ConfigLike"]
 
 PRESETS: dict[str, ScenarioConfig] = {}
 #: What every ``config=`` argument takes: a ScenarioConfig, a dict of its fields, a preset name or None.
