@@ -358,6 +358,10 @@ class DeliverySettings:
     delivery_memory: Annotated[float, Field(ge=0, lt=1)] = DELIVERY_MEMORY
     """The loss-aware tail's psi-bar: ``memory * psi-bar + (1 - memory) * sum_k psi_k w_k / sum_k w_k``
     after each slot (:func:`lawn_env.tail.expected_delivery`), from 1 at the episode's start."""
+    delivery_weights: Literal["worth", "uniform"] = "worth"
+    """What psi-bar averages the AGVs' success probabilities by: ``"worth"``, what delivering each
+    command is worth (the commands that matter; the default), or ``"uniform"``, the fleet's plain
+    average (docs/experts.md measures both)."""
     delivery_start_iterations: Annotated[int, Field(ge=0, le=20)] = DELIVERY_START_ITERATIONS
     """psi-bar at the episode's first slot: this many fixed-point steps from 1 (each the search at
     psi-bar, then its worth-weighted success); 0 starts from 1."""
@@ -535,16 +539,21 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
             values = tail.delivery_values(z, reference, psi_bar, snapshot.slot)
             problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values)
             problem.reach *= self._moves(snapshot.slot)
-            return self._search(problem).psi, problem.worth
+            return self._search(problem).psi, self._weights(problem.worth)
 
         return first_delivery(worth_at, self.settings.delivery_start_iterations)
+
+    def _weights(self, worth: np.ndarray) -> np.ndarray:
+        """psi-bar's weights of the AGVs (``delivery_weights``): their worth, or all alike."""
+        return worth if self.settings.delivery_weights == "worth" else np.ones_like(worth)
 
     def plan(self, snapshot: Snapshot) -> Plan:
         plan = super().plan(snapshot)
         if self.tail is not None:
             assert self.psi_bar is not None
             plan.info["expected_delivery"] = self.psi_bar
-            self.psi_bar = float(expected_delivery(self.psi_bar, plan.info["success_probability"], self._worth,
+            self.psi_bar = float(expected_delivery(self.psi_bar, plan.info["success_probability"],
+                                                   self._weights(self._worth),
                                                    self.settings.delivery_memory))
         if self._moves(snapshot.slot) == 1:
             return plan

@@ -24,7 +24,7 @@ against ``rg-mpc`` with the interval below zero and no seed over 1.5x ``rg-mpc``
 references'.
 
     python benchmarks/dv_mpc.py [--episodes 100] [--large-episodes 50] [--ranges 0 100000] [--workers 2]
-                                [--configs 50] [--markdown FILE]
+                                [--configs 50] [--variant KEY=VALUE ...] [--markdown FILE]
 """
 
 from __future__ import annotations
@@ -62,21 +62,44 @@ def _costs(rows: list[dict], policy: str, metric: str = "control_cost") -> dict[
 
 
 def _play(entries: list[tuple], workers: int, desc: str) -> list[dict]:
-    """``entries``: (policy, config, seed, label...) -> rows labelled with the entry's extra fields."""
-    rows = evaluate([(e[0], JOINT, e[1], e[2], {}) for e in entries], workers=workers, progress=True, desc=desc)
+    """``entries``: (policy, config, seed, label...) -> rows labelled with the entry's extra fields; a
+    policy ``(name, settings)`` plays ``name`` with those settings under the row name ``variant_name``."""
+    tasks = [(e[0][0], JOINT, e[1], e[2], e[0][1]) if isinstance(e[0], tuple) else (e[0], JOINT, e[1], e[2], {})
+             for e in entries]
+    rows = evaluate(tasks, workers=workers, progress=True, desc=desc)
     for entry, row in zip(entries, rows, strict=True):
         row["label"] = entry[3:]
+        if isinstance(entry[0], tuple):
+            row["policy"] = variant_name(entry[0][1])
     return rows
 
 
-def cost_table(tasks: list[str], episodes: int, large: int, starts: list[int], workers: int) -> dict:
-    """Per (task, range start): the comparisons of dv-mpc against rg-mpc, dv-mpc-ce and its noise floor."""
+def variant_name(settings: dict) -> str:
+    return "dv-mpc " + " ".join(f"{k}={v}" for k, v in settings.items())
+
+
+def _setting(text: str) -> dict:
+    key, _, value = text.partition("=")
+    if not key or not value:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected KEY=VALUE, a dv-mpc setting (agents.DeliverySettings)")
+    try:
+        number = float(value)
+    except ValueError:
+        return {key: value}
+    return {key: int(number) if number.is_integer() and "." not in value else number}
+
+
+def cost_table(tasks: list[str], episodes: int, large: int, starts: list[int], workers: int,
+               variants: list[dict]) -> dict:
+    """Per (task, range start): the comparisons of dv-mpc against rg-mpc, dv-mpc-ce and its noise floor,
+    and of each of ``variants`` (dv-mpc settings) against dv-mpc."""
     entries = []
     for task in tasks:
         config = presets.get(task)
         n = large if task in POOR_LINKS else episodes
         for i, start in enumerate(starts):
-            names = list(EXPERTS) + (["limit:perfect-links"] if task in STEADY and i == 0 else [])
+            names: list = list(EXPERTS) + (["limit:perfect-links"] if task in STEADY and i == 0 else [])
+            names += [("dv-mpc", v) for v in variants]
             entries += [(name, config, seed, task, start) for seed in range(start, start + n) for name in names]
     rows = _play(entries, workers, "dv-mpc: the suite")
     out = {}
@@ -92,6 +115,7 @@ def cost_table(tasks: list[str], episodes: int, large: int, starts: list[int], w
             perfect = _costs(part, "limit:perfect-links")
             if perfect:
                 entry["perfect"] = paired_geometric(perfect, rg)
+            entry["variants"] = {variant_name(v): paired_geometric(_costs(part, variant_name(v)), dv) for v in variants}
             out[(task, start)] = entry
     return out
 
@@ -200,6 +224,10 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--configs", type=int, default=50, help="random configurations (0: none)")
     parser.add_argument("--no-large", action="store_true", help="skip the 64-AGV episodes")
+    parser.add_argument("--variant", type=_setting, action="append", default=[], metavar="KEY=VALUE",
+                        help="also play dv-mpc with this setting changed, against dv-mpc (repeatable: one row each)")
+    parser.add_argument("--no-targets", action="store_true",
+                        help="print the tables without the marks (a run of variants, not of the expert)")
     parser.add_argument("--slots", type=int, default=None, help="slots of the timed episodes (default: all)")
     parser.add_argument("--no-timing", action="store_true", help="skip the decision times")
     parser.add_argument("--markdown", default=None, help="write the tables and marks here (a docs block)")
@@ -207,8 +235,10 @@ def main(argv=None) -> int:
     a, b = args.ranges
     if abs(a - b) < max(args.episodes, args.large_episodes):
         parser.error(f"--ranges {a} {b}: the ranges of {max(args.episodes, args.large_episodes)} seeds overlap")
+    for variant in args.variant:
+        make_policy("dv-mpc", presets.get("default"), **variant)  # a bad setting fails before any episode
     started = time.perf_counter()
-    table = cost_table(args.tasks, args.episodes, args.large_episodes, [a, b], args.workers)
+    table = cost_table(args.tasks, args.episodes, args.large_episodes, [a, b], args.workers, args.variant)
     targets: list[tuple[str, bool]] = []
     lines = [f"`dv-mpc` on `lawn/Joint-v1`, {args.episodes} seeds per range ({args.large_episodes} on "
              f"{', '.join(POOR_LINKS)}; seeds {a}.. and {b}..): geometric mean of the per-seed cost ratios − 1 "
@@ -217,6 +247,12 @@ def main(argv=None) -> int:
              "`dv-mpc`'s largest RMSE and diverged episodes; on the steady tasks the perfect-links headroom "
              "(`limit:perfect-links` against `rg-mpc`, first range) and the share of it `dv-mpc` closes.", ""]
     lines += _cost_lines(args.tasks, table, [a, b], targets)
+    if args.variant:
+        names = [variant_name(v) for v in args.variant]
+        lines += ["", "| task | range | " + " | ".join(f"`{n}` vs dv-mpc" for n in names) + " |",
+                  "|---|---|" + "---|" * len(names)]
+        lines += [f"| {task} | {start}.. | " + " | ".join(fmt_geometric(table[(task, start)]["variants"][n]) for n in names)
+                  + " |" for task in args.tasks for start in (a, b)]
     if not args.no_large:
         rows = large_fleet(args.large_episodes, [a, b], args.workers)
         dv, rg = _costs(rows, "dv-mpc", "rmse_m"), _costs(rows, "rg-mpc", "rmse_m")
@@ -251,7 +287,7 @@ def main(argv=None) -> int:
                             dv <= ref))
     lines += ["", f"{time.perf_counter() - started:.0f} s, {args.workers} workers."]
     print("\n".join(lines))
-    return finish([], args.markdown, lines, targets)
+    return finish([], args.markdown, lines, [] if args.no_targets else targets)
 
 
 if __name__ == "__main__":
