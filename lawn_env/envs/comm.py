@@ -73,7 +73,11 @@ class CommEnv(LawnEnv):
       ``lawn/Joint-v1``'s history says (one generator, episodes differ for N > 1). The MPC's QPs are
       solved by the compiled exact solver (``qp_backend="compiled"``, the default; the same
       decisions up to the solvers' rounding). Infos, spec, observation bound, rendering and the
-      entity layout as ``lawn/Joint-v1``'s history says.
+      entity layout as ``lawn/Joint-v1``'s history says. Later, within v1: ``control.law="delivery"``
+      (opt-in; the default law is the paper's, so every default episode is unchanged) became the
+      loss-aware tail's command (:class:`lawn_env.tail.DeliveryLaw`), the former delivery law kept as
+      ``"delivery-certainty-equivalent"``; ``info["episode_metrics"]`` gained ``max_tracking_error_m``
+      and ``diverged``.
     * v0: initial version; the ``interface`` keyword (opt-in) and ``info["stage_cost"]`` added
       later. Still registered: ``lawn/Comm-v0`` builds this class with ``planning_state="true"``
       (the MPC plans from the true state) and without a native vector env.
