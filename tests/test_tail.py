@@ -212,6 +212,10 @@ def test_bad_tail_settings_name_them():
         DeliverySettings(bounds_probability=0.0)
     with pytest.raises(ConfigError, match="delivery_memory"):
         DeliverySettings(delivery_memory=1.0)
+    with pytest.raises(ConfigError, match=r"delivery_weights.*'fleet'.*worth.*uniform"):
+        DeliverySettings(delivery_weights="fleet")
+    with pytest.raises(ConfigError, match="delivery_start_iterations"):
+        DeliverySettings(delivery_start_iterations=-1)
     with pytest.raises(ValueError, match=r"terminal_success.*tail='certainty-equivalent'"):
         make_policy("dv-mpc", CFG, terminal_success=0.5)
     make_policy("dv-mpc", CFG, terminal_success=0.5, tail="certainty-equivalent")
