@@ -209,7 +209,7 @@ def test_infeasible_state_falls_back_without_crashing():
 
 
 def test_registry_errors():
-    with pytest.raises(ValueError, match="valid policies: dv-mpc, rg-mpc, ao-mpc, epa, sf, pid, lqr, heuristic, global-mpc"):
+    with pytest.raises(ValueError, match="valid policies: dv-mpc, dv-mpc-ce, rg-mpc, ao-mpc, epa, sf, pid, lqr, heuristic, global-mpc"):
         make_policy("mpc-ao", CFG)
     with pytest.raises(ValueError, match="tolerance"):
         make_policy("ao-mpc", CFG, tolerance=-1.0)

@@ -384,7 +384,7 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
 
     hp = {"expert": "dv-mpc", "tasks": ["steady", "wide-k8"], "epochs": 1, "dagger_iterations": 0, "width": 16,
           "heads": 2, "interface": recipes_module.RECIPES["dv-joint"].hp["interface"],
-          "task_settings": {"control.law": "delivery"}}
+          "task_settings": {"control.law": "delivery-certainty-equivalent"}}
     tiny = dataclasses.replace(recipes_module.RECIPES["dv-joint"], timesteps=16, hp=hp)
     monkeypatch.setitem(recipes_module.RECIPES, "dv-joint", tiny)
     runs, docs = tmp_path / "runs", tmp_path / "docs"
@@ -416,9 +416,10 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
     assert set(record["benchmark"]["tasks"]) == {"steady", "wide-k8"}
     assert all(len(v) == 2 for per in record["benchmark"]["tasks"].values() for v in per.values())  # per range
     monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
-    delivery = {"control.law": "delivery"}
+    delivery = {"control.law": "delivery-certainty-equivalent"}
     assert make_policy("zoo:dv-joint", presets.get("wide-k8").override(delivery)).entities.num_agvs == 8
-    with pytest.raises(ValueError, match="zoo:dv-joint was trained on lawn/Joint-v1 with control.law='delivery'"):
+    with pytest.raises(ValueError, match="zoo:dv-joint was trained on lawn/Joint-v1 with "
+                                         "control.law='delivery-certainty-equivalent'"):
         make_policy("zoo:dv-joint", presets.get("wide-k8"))  # its MPC increment anchor plans by the law
     from training.benchmark import fleet_agents
 
