@@ -535,13 +535,13 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
         tail = self.tail
         assert tail is not None
 
-        def worth_at(psi_bar: float) -> tuple[np.ndarray, np.ndarray]:
+        def worth_at(psi_bar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             values = tail.delivery_values(z, reference, psi_bar, snapshot.slot)
             problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values)
             problem.reach *= self._moves(snapshot.slot)
             return self._search(problem).psi, self._weights(problem.worth)
 
-        return first_delivery(worth_at, self.settings.delivery_start_iterations)
+        return float(first_delivery(worth_at, self.settings.delivery_start_iterations))
 
     def _weights(self, worth: np.ndarray) -> np.ndarray:
         """psi-bar's weights of the AGVs (``delivery_weights``): their worth, or all alike."""

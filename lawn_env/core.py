@@ -227,7 +227,7 @@ def _accumulate(inp, out, err):  # pragma: no cover - compiled
             totals[b, 4 + i] += sq
             totals[b, 4 + k + i] += 0.0 if delivered[b, i] else sent
             totals[b, 4 + 2 * k + i] += sent * power[b, i]
-            totals[b, 4 + 3 * k] = max(totals[b, 4 + 3 * k], np.sqrt(sq))
+            totals[b, 4 + 3 * k] = max(totals[b, 4 + 3 * k], sq)
 
 
 @numba.njit([_SLOT_SIGNATURE], cache=True)
@@ -258,10 +258,10 @@ def _slot(inputs, packed, constants, outputs):  # pragma: no cover - compiled
 
 #: The columns of ``SimState.totals`` (B, 5 + 3K): the episode's running sums of the tracking
 #: and effort costs, the predicted outage probabilities, the drone's path length, then per AGV the
-#: squared position errors, the lost commands and the powers, and last the largest position error of
-#: any AGV so far (a running maximum). The outage and power sums count the slots that send a command
+#: squared position errors, the lost commands and the powers, and last the largest squared position
+#: error of any AGV so far (a running maximum). The outage and power sums count the slots that send a command
 #: only: on the others nothing is transmitted (MODEL.md §7).
-TOTALS = ("tracking", "effort", "outage_p", "path", "sq_error", "outages", "power", "max_error")
+TOTALS = ("tracking", "effort", "outage_p", "path", "sq_error", "outages", "power", "max_sq_error")
 #: An episode has diverged when some AGV's position error passed this many metres (the RL interface's
 #: termination distance; MODEL.md §6): ``episode_metrics``'s ``diverged``.
 DIVERGENCE_DISTANCE_M = 25.0
@@ -621,7 +621,7 @@ def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np
     sent = (n + period - 1) // period  # the command slots 0, P, 2P, ... among slots 0..n-1 (step's rule)
     nk, per = sent * k, sent[:, None]
     sq_error, outages, power = t[:, 4 : 4 + k], t[:, 4 + k : 4 + 2 * k], t[:, 4 + 2 * k : 4 + 3 * k]
-    largest = t[:, 4 + 3 * k]
+    largest = np.sqrt(t[:, 4 + 3 * k])
     columns = zip(n.tolist(), control_costs(state, rows).tolist(), t[:, 0].tolist(), t[:, 1].tolist(),
                   np.sqrt(sq_error.sum(axis=1) / (n * k)).tolist(), np.sqrt(sq_error / n[:, None]).tolist(),
                   (outages.sum(axis=1) / nk).tolist(), (t[:, 2] / nk).tolist(), (outages / per).tolist(),

@@ -187,7 +187,7 @@ def _value_iteration(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray,
                      s: np.ndarray) -> np.ndarray | None:
     """:func:`modified_riccati`'s iteration from ``s``; None when it diverges."""
     for _ in range(1_000_000):
-        gain = np.linalg.solve(r + b.T @ s @ b, b.T @ s @ a)
+        gain = loss_aware_gain(a, b, r, s)
         nxt = q + a.T @ s @ a - success * (a.T @ s @ b) @ gain
         nxt = 0.5 * (nxt + nxt.T)
         scale = np.abs(nxt).max()

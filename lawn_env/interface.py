@@ -238,14 +238,15 @@ class AnchoredActions(ActionCodec):
         self._delivery: DeliveryLaw | None = None
         self._lqr_model: PredictionModel | None = None
         lqr = role == "joint" and interface.increment_anchor == "lqr"
-        if (role == "joint" and not lqr) or self._stake:  # the residual's controller, and the stakes
-            self.mpc = OutageAwareMPC.from_config(config, backend=mpc_backend)
-        if role == "joint" and not lqr and self._law == "delivery":
+        mpc_anchor = role == "joint" and not lqr  # the residual's controller plans by the law
+        if mpc_anchor and self._law == "delivery":
             self._delivery = DeliveryLaw(config, backend=mpc_backend)
+        if (mpc_anchor and self._delivery is None) or self._stake:  # the residual's controller, the stakes
+            self.mpc = OutageAwareMPC.from_config(config, backend=mpc_backend)
         if lqr:
             self._lqr_model = PredictionModel.from_config(config)
             self._accel_max = config.control.accel_max_mps2
-        self.needs_reference = self.mpc is not None or self._lqr_model is not None
+        self.needs_reference = self.mpc is not None or self._lqr_model is not None or self._delivery is not None
 
     def reset(self, which: np.ndarray | None = None) -> None:
         """Start an episode (the anchor MPC's warm starts are per episode, like the envs' MPC);
@@ -333,7 +334,9 @@ class AnchoredActions(ActionCodec):
         start = "stakes" if self._stake else None
         psi = self._link.success_sq(power_w, d2)
         if self._delivery is not None:
-            assert reference is not None  # the MPC anchor: _prepare checked it
+            if reference is None:
+                raise ValueError("the anchored joint actions of this interface (increment_anchor='mpc' under "
+                                 "control.law='delivery') plan with the MPC: pass the reference window")
             solution = self._delivery.solve(x_aug, reference, psi, 0 if slot is None else slot)
             law_first: np.ndarray = solution.increments[..., 0, :].copy()
             return law_first

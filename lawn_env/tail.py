@@ -70,6 +70,7 @@ from .dynamics import (
     increment_sum_matrix,
     lag_alpha,
     lag_matrices,
+    loss_aware_gain,
     modified_riccati,
     planning_period,
     prediction_matrices,
@@ -112,14 +113,16 @@ def expected_delivery(previous: npt.ArrayLike, psi: np.ndarray, worth: np.ndarra
     return result
 
 
-def first_delivery(worth_at: Callable[[float], tuple[np.ndarray, np.ndarray]], iterations: int) -> float:
-    """psi-bar at an episode's first slot: ``iterations`` fixed-point steps from 1 of psi-bar -> the
-    worth-weighted success ``sum_k psi_k w_k / sum_k w_k``, with ``worth_at(psi_bar)`` the slot's
-    (psi_k, w_k) at that psi-bar (a planner's search, or a decided power and position)."""
-    psi_bar = 1.0
+def first_delivery(worth_at: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], iterations: int,
+                   shape: tuple[int, ...] = ()) -> np.ndarray:
+    """psi-bar at an episode's first slot (one per scenario, ``shape``): ``iterations`` fixed-point steps
+    from 1 of psi-bar -> the worth-weighted success ``sum_k psi_k w_k / sum_k w_k``, with
+    ``worth_at(psi_bar)`` the slot's (psi_k, w_k) (..., K) at that psi-bar (a planner's search, or the
+    drone's decided power and position)."""
+    psi_bar = np.ones(shape)
     for _ in range(iterations):
         psi, worth = worth_at(psi_bar)
-        psi_bar = float(expected_delivery(psi_bar, psi, worth, 0.0))
+        psi_bar = expected_delivery(psi_bar, psi, worth, 0.0)
     return psi_bar
 
 
@@ -179,7 +182,7 @@ class TailModel:
         n = self.state_dim
         if not command:
             return q + a.T @ p_next @ a, a.T, np.zeros((n, n)), q
-        gain = np.linalg.solve(self.r + b.T @ p_next @ b, b.T @ p_next @ a)  # L_i
+        gain = loss_aware_gain(a, b, self.r, p_next)  # L_i
         x = (a.T @ p_next @ b) @ gain  # X_i
         p = q + a.T @ p_next @ a - psi * x
         weight = q + (1.0 - psi) * x
@@ -494,11 +497,13 @@ class DeliveryLaw:
             slots = np.broadcast_to(np.asarray(slot, dtype=np.int64), lead).reshape(-1)[rows]
             z = state.reshape(-1, *state.shape[-2:])[rows]
             ref = chi_ref.reshape(-1, *chi_ref.shape[-3:])[rows]
-            start = np.ones(rows.size)
-            for _ in range(DELIVERY_START_ITERATIONS):
-                solution, lost = self.tail.delivery_values(z, ref, start, slots)
-                start = expected_delivery(start, psi.reshape(-1, psi.shape[-1])[rows], lost - solution.value, 0.0)
-            flat[rows] = start
+            decided = psi.reshape(-1, psi.shape[-1])[rows]
+
+            def worth_at(psi_bar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                solution, lost = self.tail.delivery_values(z, ref, psi_bar, slots)
+                return decided, lost - solution.value
+
+            flat[rows] = first_delivery(worth_at, DELIVERY_START_ITERATIONS, (rows.size,))
         solution, lost = self.tail.delivery_values(state, chi_ref, self.psi_bar, slot)
         self.psi_bar = expected_delivery(self.psi_bar, psi, lost - solution.value, DELIVERY_MEMORY)
         return solution

@@ -179,6 +179,10 @@ def test_the_expected_delivery_is_the_worth_weighted_success():
     steps = []
     assert first_delivery(lambda p: (steps.append(p), (np.full(3, 0.3), np.ones(3)))[1], 3) == pytest.approx(0.3)
     assert steps == [1.0, pytest.approx(0.3), pytest.approx(0.3)]
+    # one psi-bar per scenario (the AGVs' law of a batch): each row its own fixed point
+    decided = np.array([[0.2, 0.6], [0.9, 0.9]])
+    start = first_delivery(lambda p: (decided, np.array([[1.0, 1.0], [2.0, 0.0]])), 2, (2,))
+    assert start.shape == (2,) and np.allclose(start, [0.4, 0.9])
 
 
 def test_a_fleet_that_loses_most_commands_stays_on_its_paths():
@@ -283,3 +287,24 @@ def test_the_anchored_joint_increments_follow_the_delivery_law():
         expected = law.solve(snap.x_aug, snap.reference, psi, snap.slot).increments[:, 0]
         assert np.allclose(decision.increment, expected, atol=1e-12)
         env.step(zero)
+
+
+def test_the_episode_metrics_flag_a_diverged_episode():
+    """``max_tracking_error_m`` is the largest position error of any AGV after any slot (the simulator's
+    state against its reference), and ``diverged`` flags it past 25 m: equal power at K = 32 runs AGVs
+    off their paths, dv-mpc keeps them within a few metres on the same seed."""
+    from lawn_env.core import DIVERGENCE_DISTANCE_M
+
+    config = CFG.override({"num_agvs": 32, "num_slots": 60})
+    for name, diverged in (("epa", 1), ("dv-mpc", 0)):
+        env = gym.make("lawn/Joint-v1", config=config).unwrapped
+        largest = []
+
+        def on_step(step, env=env, largest=largest):
+            sim = env.sim  # one scenario's view: (K, ...) arrays, the slot after the step
+            ref = sim.reference[:, int(sim.slot), :2]
+            largest.append(np.linalg.norm(sim.x_aug[:, :2] - ref, axis=1).max())
+
+        metrics = rollout(env, make_policy(name, config), 700, on_step=on_step).metrics
+        assert metrics["max_tracking_error_m"] == pytest.approx(max(largest), rel=1e-9)
+        assert metrics["diverged"] == diverged == int(max(largest) > DIVERGENCE_DISTANCE_M)
