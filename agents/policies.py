@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from lawn_env import ObservationLayout, ScenarioConfig
-from lawn_env.core import Decisions, Snapshot
+from lawn_env.core import Decisions, Snapshot, later_increments
 from lawn_env.drone import move_drone
 from lawn_env.dynamics import command_mask, planning_period
 from lawn_env.presets import ConfigLike, resolve_config
@@ -75,7 +75,7 @@ def snapshot_from_observation(layout: ObservationLayout, config: ScenarioConfig,
     """The planner's state recovered from an observation (float32-exact, see ObservationLayout.decode)."""
     d = layout.decode(obs)
     return Snapshot(x_aug=d["x_aug"], reference=d["reference"], drone_position=d["drone_position"],
-                    slot=d["slot"], config=config, last_power_w=d["last_power_w"])
+                    slot=d["slot"], config=config, last_power_w=d["last_power_w"], buffer=d["buffer"])
 
 
 class PlannerPolicy(Policy):
@@ -108,10 +108,12 @@ class PlannerPolicy(Policy):
         return self.action(plan, snapshot)
 
     def action(self, plan: Plan, snapshot: Snapshot) -> np.ndarray:
-        """The normalized action of ``self.env_id`` that carries out ``plan``."""
+        """The normalized action of ``self.env_id`` that carries out ``plan`` (under the buffered
+        actuator Joint's carries the rest of the planned sequence, :func:`lawn_env.core.later_increments`)."""
         increment = plan.increments[:, 0] if self.env_id == JOINT else None
-        return self.actions.encode(Decisions(increment, plan.power_w, plan.drone_position), snapshot.x_aug, None,
-                                   snapshot.drone_position)
+        later = later_increments(plan.increments, self.actions.buffer_length) if self.actions.plan_size else None
+        return self.actions.encode(Decisions(increment, plan.power_w, plan.drone_position, later), snapshot.x_aug,
+                                   None, snapshot.drone_position)
 
 
 class AOMPCPolicy(PlannerPolicy):
@@ -237,6 +239,8 @@ class DVMPCPolicy(PlannerPolicy):
                 raise ValueError(f"tail={settings['tail']!r}: on {COMM} the AGVs apply control.law={law!r}, whose "
                                  f"command is the {tail} tail's (plan with tail={tail!r}, or set control.law)")
             settings = {**settings, "tail": tail}
+        elif self.config.control.actuator == "buffer":  # the buffer plays the plan through later losses
+            settings = {"tail": _CERTAINTY_EQUIVALENT, **settings}
         return DeliveryValuePlanner(self.config, DeliverySettings(**settings))
 
     def plan(self, snapshot: Snapshot) -> Plan:

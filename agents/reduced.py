@@ -243,7 +243,8 @@ class DeliveryProblem(ReducedProblem):
         Phi(p, q) = sum_k psi_k V_k^del + (1 - psi_k) V_k^lost = sum_k V_k^lost - psi_k(p_k, q) w_k,
 
     ``V^del`` the MPC's value with every planned increment delivered (psi = 1), ``V^lost`` the same
-    with the next command held at zero (:meth:`lawn_env.mpc.OutageAwareMPC.delivery_values`) and
+    with the next command lost (:meth:`lawn_env.mpc.OutageAwareMPC.delivery_values`: held at zero, or
+    under the buffered actuator the increment its buffer plays, ``snapshot.buffer``) and
     ``w = V^lost - V^del >= 0`` what delivering AGV k's command is worth. The increments are the
     psi = 1 solution's at every (p, q). Two QPs per AGV when it is built; an evaluation after that
     is the channel alone."""
@@ -252,7 +253,7 @@ class DeliveryProblem(ReducedProblem):
                  state: np.ndarray | None = None, values: tuple[MPCSolution, np.ndarray] | None = None):
         super().__init__(mpc, link, snapshot, config, state)
         # (V^del's solution, V^lost): the certainty-equivalent MPC's unless given (the loss-aware tail's)
-        self.delivered, self.lost = mpc.delivery_values(self.data) if values is None else values
+        self.delivered, self.lost = mpc.delivery_values(self.data, snapshot.buffer) if values is None else values
         self.worth = self.lost - self.delivered.value  # w_k >= 0
 
     def values_at_psi(self, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray, MPCSolution]:
@@ -522,7 +523,7 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
             reference = np.asarray(snapshot.reference, dtype=float)
             if self.psi_bar is None:
                 self.psi_bar = self._first_delivery(snapshot, state, z, reference)
-            values = self.tail.delivery_values(z, reference, self.psi_bar, snapshot.slot)
+            values = self.tail.delivery_values(z, reference, self.psi_bar, snapshot.slot, snapshot.buffer)
         problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values)
         problem.reach *= self._moves(snapshot.slot)
         self._worth = problem.worth
@@ -536,7 +537,7 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
         assert tail is not None
 
         def worth_at(psi_bar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            values = tail.delivery_values(z, reference, psi_bar, snapshot.slot)
+            values = tail.delivery_values(z, reference, psi_bar, snapshot.slot, snapshot.buffer)
             problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values)
             problem.reach *= self._moves(snapshot.slot)
             return self._search(problem).psi, self._weights(problem.worth)

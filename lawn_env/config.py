@@ -42,6 +42,24 @@ _PYDANTIC = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=
 PositiveFloat = Annotated[float, Field(gt=0)]
 PositiveInt = Annotated[int, Field(ge=1, strict=True)]
 
+#: The bits of one planned increment of one axis in a packet of the buffered actuator (MODEL.md §3).
+INCREMENT_BITS = 16
+
+
+def check_payload(config: ScenarioConfig) -> None:
+    """Raise ``ValueError`` when the buffered actuator's sequence (2 N_p increments of
+    :data:`INCREMENT_BITS` bits) does not fit the message of R_th l bits the link's outage is computed
+    for (``control.actuator="buffer"``; MODEL.md §3)."""
+    ch, horizon = config.channel, config.control.horizon
+    need, room = 2 * horizon * INCREMENT_BITS, ch.rate_threshold_bps_hz * ch.blocklength
+    if need > room:
+        raise ValueError(
+            f"control.actuator='buffer' with control.horizon={horizon}: a packet carries the planned sequence, "
+            f"2 x {horizon} increments of {INCREMENT_BITS} bits = {need} bits, but the message is "
+            f"channel.rate_threshold_bps_hz x channel.blocklength = {ch.rate_threshold_bps_hz:g} x {ch.blocklength} = "
+            f"{room:g} bits; shorten the horizon, raise the rate or the blocklength, or use control.actuator='hold'")
+
+
 #: Reference-path families of :mod:`lawn_env.references` (MODEL.md §1).
 REFERENCE_FAMILIES = ("lemniscate", "rounded_rectangle", "sinusoid", "spline")
 
@@ -142,6 +160,13 @@ class ControlConfig:
     ``"delivery-certainty-equivalent"``, the QP at psi = 1, every later command priced as delivered
     (MODEL.md §4, "Planning under delivery": the delivery law before the loss-aware tail, which
     diverges where links lose most commands) *(decided)*."""
+
+    actuator: Literal["hold", "buffer"] = "hold"
+    """What an AGV applies in a slot whose packet does not arrive (MODEL.md §3): ``"hold"``, a zero
+    increment (it keeps u[n-1]; the paper's actuator); ``"buffer"``, the next element of the last
+    increment sequence it received (packetized predictive control: every packet carries the sender's
+    whole planned sequence of N_p increments; an AGV whose buffer is spent holds). The sequence is
+    2 N_p numbers of 16 bits, which the message of R_th l bits must hold *(decided extension)*."""
 
     @model_validator(mode="after")
     def _check_weights(self) -> ControlConfig:
@@ -289,6 +314,8 @@ class ScenarioConfig:
                     f"channel.rate_threshold_bps_hz={ch.rate_threshold_bps_hz}, channel.blocklength={ch.blocklength}, "
                     f"channel.bler={ch.bler}: no SNR threshold reaches this rate at this blocklength ({exc})"
                 ) from None
+        if self.control.actuator == "buffer":
+            check_payload(self)
         from .dynamics import PredictionModel  # the MPC's terminal weight Q3 must exist for these weights
 
         ctl = self.control

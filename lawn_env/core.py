@@ -38,6 +38,7 @@ _POS0, _VEL0, _ACCEL0 = dynamics.POSITION.start, dynamics.VELOCITY.start, dynami
 
 __all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Snapshot", "Simulation", "ScenarioView",
            "Trail", "draw_slot", "reset", "step", "step_rows", "episode_metrics", "control_costs", "link_outage",
+           "buffer_queue", "later_increments",
            "link_success",
            "SLOT_CONSTANTS", "TOTALS", "DIVERGENCE_DISTANCE_M"]
 
@@ -97,6 +98,9 @@ class SlotInputs(NamedTuple):
     process_velocity: np.ndarray
     drone_prev: np.ndarray  # (B, 2)
     totals: np.ndarray  # (B, 5 + 3K)
+    plan: np.ndarray  # (B, K, L, 2): the later increments each packet carries (buffered actuator), L = N_p - 1
+    buffer: np.ndarray  # (B, K, L, 2): the AGVs' buffers; (B, K, 0, 2) under the hold actuator
+    buffer_age: np.ndarray  # (B, K): how many of the buffer's increments have been played (L: spent)
 
 
 class SlotOutputs(NamedTuple):
@@ -110,6 +114,8 @@ class SlotOutputs(NamedTuple):
     applied_next: np.ndarray  # (B, K, 2), under lag
     costs: np.ndarray  # (B, 3)
     totals_next: np.ndarray  # (B, 5 + 3K)
+    buffer_next: np.ndarray  # (B, K, L, 2)
+    buffer_age_next: np.ndarray  # (B, K)
 
 
 _F, _B, _I = numba.types.float64, numba.types.boolean, numba.types.int64
@@ -121,21 +127,24 @@ _C = numba.types.Array(numba.from_dtype(SLOT_CONSTANTS), 1, "C", readonly=True)
 _SLOT_SIGNATURE = numba.types.none(
     numba.types.Tuple([_array(_F, 3), _array(_F, 3), _array(_B, 1), _array(_F, 2), _array(_F, 2), _array(_F, 2),
                        _array(_F, 4), _array(_I, 1), _array(_F, 3), _array(_F, 3), _array(_F, 3), _array(_F, 2),
-                       _array(_F, 2)]),
+                       _array(_F, 2), _array(_F, 4), _array(_F, 4), _array(_I, 2)]),
     numba.types.Tuple([_array(_F, 2, layout="C")] * 3), _C,
     numba.types.Tuple([_array(_F, 4, out=True), _array(_F, 3, out=True), _array(_B, 2, out=True),
                        _array(_F, 2, out=True), _array(_F, 3, out=True), _array(_F, 2, out=True),
-                       _array(_F, 2, out=True)]))
+                       _array(_F, 2, out=True), _array(_F, 4, out=True), _array(_I, 2, out=True)]))
 
 
 @numba.njit(cache=True, inline="always")
 def _links(inp, c, out, rows):  # pragma: no cover - compiled
     """Step 1: per link, the outage argument at the drone's next position, the outage probability,
-    the delivery, and the packed row [x~, du delivered] with du saturated (zero without a command)."""
+    the delivery, and the packed row [x~, du applied] with du saturated: the command where it arrives;
+    where none arrives (lost, or a slot without commands) zero under the hold actuator and the
+    buffer's next increment under the buffered one (:func:`_played`)."""
     x_aug, increment, send, power, drone_next, fading = (inp.x_aug, inp.increment, inp.send, inp.power,
                                                          inp.drone_next, inp.fading)
     outage, delivered = out.outage, out.delivered
     k = x_aug.shape[1]
+    buffered = inp.buffer.shape[2] > 0
     altitude_sq, c_d, c_ce, m, accel_max = c.altitude_sq, c.c_d, c.c_ce, c.m, c.accel_max
     for b in range(x_aug.shape[0]):
         sending = send[b % send.shape[0]]
@@ -149,9 +158,38 @@ def _links(inp, c, out, rows):  # pragma: no cover - compiled
             delivered[b, i] = ok
             for j in range(6):
                 rows[r, j] = x_aug[b, i, j]
+            if buffered:
+                for a in range(2):
+                    du = increment[b, i, a] if sending and ok else _played(inp.buffer, inp.buffer_age, b, i, a)
+                    rows[r, 6 + a] = dynamics.saturate(x_aug[b, i, _ACCEL0 + a], du, accel_max)
+                continue
             for a in range(2):
                 du = dynamics.saturate(x_aug[b, i, _ACCEL0 + a], increment[b, i, a], accel_max) if sending else 0.0
                 rows[r, 6 + a] = du * (1.0 if ok else 0.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _played(buffer, age, b, i, a):  # pragma: no cover - compiled
+    """The increment AGV i of scenario b plays without a packet under the buffered actuator: its
+    buffer's next one, zero (a hold) once the buffer is spent."""
+    j = age[b, i]
+    return buffer[b, i, j, a] if j < buffer.shape[2] else 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _buffers(inp, out):  # pragma: no cover - compiled
+    """Step 1b (buffered actuator): a delivered packet replaces the AGV's buffer with the later
+    increments it carries (none played yet); otherwise the buffer advances by the one it played."""
+    buffer, age, plan, send, delivered = inp.buffer, inp.buffer_age, inp.plan, inp.send, out.delivered
+    length = buffer.shape[2]
+    for b in range(buffer.shape[0]):
+        sending = send[b % send.shape[0]]
+        for i in range(buffer.shape[1]):
+            fresh = sending and delivered[b, i]
+            out.buffer_age_next[b, i] = 0 if fresh else min(age[b, i] + 1, length)
+            for j in range(length):
+                for a in range(2):
+                    out.buffer_next[b, i, j, a] = plan[b, i, j, a] if fresh else buffer[b, i, j, a]
 
 
 @numba.njit(cache=True, inline="always")
@@ -232,7 +270,8 @@ def _accumulate(inp, out, err):  # pragma: no cover - compiled
 
 @numba.njit([_SLOT_SIGNATURE], cache=True)
 def _slot(inputs, packed, constants, outputs):  # pragma: no cover - compiled
-    """One slot of B scenarios (see :func:`step`): 1. the links (:func:`_links`); 2. the transition,
+    """One slot of B scenarios (see :func:`step`): 1. the links (:func:`_links`) and, under the
+    buffered actuator, the buffers (:func:`_buffers`); 2. the transition,
     [x~[n+1], du] = [x~, du delivered] @ step_t (BLAS, as numpy's ``@``); 3. the disturbance mode's
     actuator lag (``lag_alpha`` >= 0) and process noise (where the arrays are not empty); 4. the
     packed error and the stage terms (e' Q1 e, du' Q2 du) = err^2 @ cost_w; 5. the costs and the
@@ -243,6 +282,8 @@ def _slot(inputs, packed, constants, outputs):  # pragma: no cover - compiled
     n = num * k
     rows = np.empty((n, 8))
     _links(inp, c, out, rows)
+    if inp.buffer.shape[2] > 0:
+        _buffers(inp, out)
     packed_rows, err = out.rows[0], out.rows[1]
     flat = packed_rows.reshape((n, 8))
     np.dot(rows, mat.step_t, flat)
@@ -303,6 +344,7 @@ class SimParams:
     lag_alpha: float  # exp(-slot / lag) under actuator lag, else -1.0 (no lag)
     constants: np.ndarray  # (1,) of SLOT_CONSTANTS
     every_slot: np.ndarray  # (1,) True: the ``send`` of a config whose every slot sends its commands
+    buffer_length: int  # L = N_p - 1 later increments a packet carries under the buffered actuator; 0 under hold
 
     @classmethod
     def from_config(cls, config: ScenarioConfig) -> SimParams:
@@ -337,6 +379,7 @@ class SimParams:
             constants=_readonly(np.array([(lag_alpha, config.control.accel_max_mps2, link.altitude_sq,
                                            *link.coefficients, link.m)], dtype=SLOT_CONSTANTS)),
             every_slot=np.ones(1, dtype=bool),
+            buffer_length=horizon - 1 if config.control.actuator == "buffer" else 0,
         )
 
     @cached_property
@@ -392,11 +435,14 @@ class Decisions(NamedTuple):
     """A slot's decisions for B scenarios: increments to send (B, K, 2) m/s^2 (saturated by the
     step), feasible powers (B, K) W, the drone's next positions (B, 2) m; or one scenario's, the same
     without the B axis. An action decoded for ``lawn/Comm-v1``'s role has ``increment`` None (the
-    MPC decides it: :class:`lawn_env.envs.base.CommRole`)."""
+    MPC decides it: :class:`lawn_env.envs.base.CommRole`). Under the buffered actuator ``plan``
+    (B, K, N_p - 1, 2) is the rest of each AGV's planned sequence, which its packet carries after
+    the increment (None: zeros, a plan that holds)."""
 
     increment: np.ndarray | None
     power_w: np.ndarray
     drone_next: np.ndarray
+    plan: np.ndarray | None = None
 
 
 @dataclass(eq=False, slots=True)
@@ -420,6 +466,8 @@ class SimState:
     reference: np.ndarray  # (B, K, T, 6)
     paths: list  # per scenario, its K paths
     totals: np.ndarray  # (B, 5 + 3K), columns TOTALS
+    buffer: np.ndarray  # (B, K, L, 2) the AGVs' buffered increments (L = 0 under the hold actuator)
+    buffer_age: np.ndarray  # (B, K) int64: how many of them have been played since their packet (L: spent)
 
     @property
     def num_envs(self) -> int:
@@ -439,6 +487,8 @@ def empty_state(params: SimParams, num: int) -> SimState:
         last_outage_probability=np.zeros((num, k)), reference=reference,
         paths=[params.fixed_paths] * num,
         totals=np.zeros((num, 5 + 3 * k)),
+        buffer=np.zeros((num, k, params.buffer_length, 2)),
+        buffer_age=np.full((num, k), params.buffer_length, dtype=np.int64),
     )
 
 
@@ -452,7 +502,7 @@ def reset(params: SimParams, state: SimState, rngs: Sequence[np.random.Generator
     idx = np.arange(num) if which is None else np.flatnonzero(which)
     cfg = params.config
     for name in ("tracking_error", "applied", "drone_position", "slot", "last_power_w", "last_delivered",
-                 "last_outage_probability"):  # new arrays: records and infos keep the old ones
+                 "last_outage_probability", "buffer", "buffer_age"):  # new arrays: records and infos keep the old ones
         setattr(state, name, getattr(state, name).copy())
     if params.fixed_reference is None:  # every restarting scenario's paths drawn together, one table call
         paths = references.sample_paths([rngs[i] for i in idx.tolist()], k, cfg.reference.families, params.area,
@@ -483,6 +533,8 @@ def reset(params: SimParams, state: SimState, rngs: Sequence[np.random.Generator
     state.slot[idx] = 0
     state.last_power_w[idx] = params.power_budget_w / k
     state.last_delivered[idx] = True
+    state.buffer[idx] = 0.0  # an episode starts with every buffer spent: a first lost command holds
+    state.buffer_age[idx] = params.buffer_length
     state.last_outage_probability[idx] = link_outage(x_aug[idx], state.drone_position[idx], state.last_power_w[idx],
                                                      params.link)[1]
     state.totals = state.totals.copy()
@@ -517,6 +569,7 @@ class SlotRecord(NamedTuple):
 
 
 _NO_NOISE = np.zeros((0, 0, 2))  # the slot kernel's "no process noise"
+_NO_PLAN = np.zeros((0, 0, 0, 2))  # the slot kernel's plan under the hold actuator
 
 
 def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDraws) -> tuple[SimState, SlotRecord]:
@@ -543,26 +596,44 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     delivered, outage_p = np.empty((num, k), np.bool_), np.empty((num, k))
     applied = state.applied if params.lag_alpha < 0.0 else np.empty((num, k, 2))
     costs, totals = np.empty((num, 3)), np.empty(state.totals.shape)
+    plan, buffer_next, age_next = _NO_PLAN, state.buffer, state.buffer_age  # the hold actuator's: unread
+    if params.buffer_length:
+        plan = _plan(params, decisions.plan, num, k)
+        buffer_next, age_next = np.empty(state.buffer.shape), np.empty(state.buffer_age.shape, np.int64)
     inputs = (x_aug, increment, send, power, drone_next, draws.fading, state.reference, state.slot, state.applied,
               _NO_NOISE if draws.process_position is None else draws.process_position,
               _NO_NOISE if draws.process_velocity is None else draws.process_velocity, state.drone_position,
-              state.totals)  # SlotInputs' fields
-    _slot(inputs, params.packed_args, params.constants, (rows, terms, delivered, outage_p, applied, costs, totals))
+              state.totals, plan, state.buffer, state.buffer_age)  # SlotInputs' fields
+    _slot(inputs, params.packed_args, params.constants,
+          (rows, terms, delivered, outage_p, applied, costs, totals, buffer_next, age_next))
     packed, err = rows[0], rows[1]
     x_next, error, applied_increment, slot = packed[:, :, 0:6], err[:, :, 0:6], packed[:, :, 6:8], state.slot + 1
     x_obs, error_obs = x_next, error
     if draws.measurement_position is not None and draws.measurement_velocity is not None:  # drawn together
         x_obs, error_obs = measure(x_next, error, draws.measurement_position, draws.measurement_velocity)
     new = SimState(x_next, error, x_obs, error_obs, applied, drone_next, slot, power, delivered, outage_p,
-                   state.reference, state.paths, totals)  # SimState's field order
+                   state.reference, state.paths, totals, buffer_next, age_next)  # SimState's field order
     record = SlotRecord(terms, delivered, outage_p, applied_increment, power, drone_next, costs)
     return new, record
+
+
+def _plan(params: SimParams, plan: np.ndarray | None, num: int, k: int) -> np.ndarray:
+    """The slot kernel's ``plan`` (B, K, L, 2) float64 of a decision's under the buffered actuator
+    (zeros when it has none)."""
+    length = params.buffer_length
+    if plan is None:
+        return np.zeros((num, k, length, 2))
+    out = np.ascontiguousarray(plan, dtype=np.float64)
+    if out.shape != (num, k, length, 2):
+        raise ValueError(f"decisions.plan has shape {out.shape}; the buffered actuator takes the later increments "
+                         f"of each AGV's sequence, ({num}, {k}, {length}, 2) (N_p - 1 = {length})")
+    return out
 
 
 #: The state's arrays with a leading batch axis that a step replaces (the reference and the paths it
 #: never changes); ``x_obs`` and ``error_obs`` may be the same arrays as ``x_aug`` and ``tracking_error``.
 _STEPPED = ("x_aug", "tracking_error", "x_obs", "error_obs", "applied", "drone_position", "slot", "last_power_w",
-            "last_delivered", "last_outage_probability", "totals")
+            "last_delivered", "last_outage_probability", "totals", "buffer", "buffer_age")
 
 
 def step_rows(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDraws,
@@ -595,6 +666,28 @@ def step_rows(params: SimParams, state: SimState, decisions: Decisions, draws: S
     for whole, part in zip(full, record, strict=True):
         whole[idx] = part
     return SimState(**merged, reference=state.reference, paths=state.paths), full
+
+
+def buffer_queue(buffer: np.ndarray, age: np.ndarray) -> np.ndarray:
+    """The increments the AGVs of a buffered actuator play on their next slots without a packet, in
+    order: of buffers (..., K, L, 2) and their ages (..., K), (..., K, L, 2) with entry j the buffer's
+    element ``age + j``, zero past its end (a new array)."""
+    buffer = np.asarray(buffer, dtype=float)
+    length = buffer.shape[-2]
+    index = np.asarray(age, dtype=np.int64)[..., None] + np.arange(length)
+    out = np.take_along_axis(buffer, np.minimum(index, max(length - 1, 0))[..., None], axis=-2) if length else buffer
+    return np.where((index < length)[..., None], out, 0.0)
+
+
+def later_increments(sequence: np.ndarray, length: int) -> np.ndarray:
+    """What a buffered actuator's packet carries after the command of the planned increments
+    ``sequence`` (..., N, 2), the first being the command: its next ``length`` (L = N_p - 1), zeros past
+    the sequence's end (an AGV that has played them all holds), a new array (..., L, 2)."""
+    sequence = np.asarray(sequence, dtype=float)
+    plan = np.zeros((*sequence.shape[:-2], length, 2))
+    later = sequence[..., 1 : 1 + length, :]
+    plan[..., : later.shape[-2], :] = later
+    return plan
 
 
 def control_costs(state: SimState, rows: Any = slice(None)) -> np.ndarray:
@@ -652,6 +745,9 @@ class Snapshot:
     slot: int
     config: ScenarioConfig
     last_power_w: np.ndarray | None = None  # the powers of slot n-1 (warm starts); None when unknown
+    #: Under the buffered actuator, (K, N_p - 1, 2): the increments each AGV plays on its next slots
+    #: without a packet, in order, zeros once its buffer is spent (:func:`buffer_queue`); None under hold.
+    buffer: np.ndarray | None = None
 
 
 class Simulation:
@@ -670,6 +766,8 @@ class Simulation:
     last_delivered: np.ndarray
     last_outage_probability: np.ndarray
     reference: np.ndarray
+    buffer: np.ndarray
+    buffer_age: np.ndarray
     slot: np.ndarray
     paths: list
 
@@ -737,6 +835,8 @@ class ScenarioView:
     last_delivered: np.ndarray
     last_outage_probability: np.ndarray
     reference: np.ndarray
+    buffer: np.ndarray
+    buffer_age: np.ndarray
 
     def __init__(self, sim: Simulation, i: int):
         self._sim, self.i = sim, int(i)
@@ -790,6 +890,7 @@ class ScenarioView:
             slot=self.slot,
             config=self.config,
             last_power_w=self.last_power_w.copy(),
+            buffer=buffer_queue(self.buffer, self.buffer_age) if self._sim.params.buffer_length else None,
         )
 
     def episode_metrics(self) -> dict:
@@ -801,7 +902,7 @@ class ScenarioView:
 #: :class:`ScenarioView` as its row's arrays (``view.x_aug`` (K, 6), ...): properties, not a
 #: ``__getattr__`` (a failed attribute lookup costs a step microseconds).
 STATE_ARRAYS = ("x_aug", "tracking_error", "x_obs", "error_obs", "applied", "drone_position", "last_power_w",
-                "last_delivered", "last_outage_probability", "reference")
+                "last_delivered", "last_outage_probability", "reference", "buffer", "buffer_age")
 
 
 def _state_array(name: str) -> property:

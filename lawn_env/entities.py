@@ -11,7 +11,8 @@ so that one set or graph network reads any fleet size K <= MAX_AGVS:
   float32, F = ``agv_features``; the globals are the drone's position, slot n / N and
   K / MAX_AGVS; padded rows are zero and their mask 0;
 * action: ``Box(-1, 1, (MAX_AGVS * c + 2,))``: per AGV row i its ``c`` entries (``joint``:
-  increment x, y and power weight; ``comm``: power weight), then the drone's two. Padded rows are
+  increment x, y and power weight, then, with the direct actions of the buffered actuator, the
+  2 (N_p - 1) entries of its plan; ``comm``: power weight), then the drone's two. Padded rows are
   ignored; the entries of the present AGVs and the drone are the flat action's, decoded by the
   same action codec (the power split over the AGVs present).
 
@@ -40,9 +41,10 @@ GLOBALS = (*ObservationLayout.GLOBAL_FEATURES, "fleet_frac")
 
 class EntityLayout:
     """The entity observation and action of one role for a config (module docstring); ``bound``
-    is the observation's bound (the interface's)."""
+    is the observation's bound (the interface's); ``plans``: the flat actions end with the AGVs'
+    plans (:attr:`lawn_env.spaces.DirectActions.plan_size`), which each AGV's row then carries."""
 
-    def __init__(self, config: ScenarioConfig, role: str, bound: float):
+    def __init__(self, config: ScenarioConfig, role: str, bound: float, plans: bool = False):
         if role not in ROLES:
             raise ValueError(f"role={role!r}; valid: {', '.join(ROLES)}")
         k = config.num_agvs
@@ -59,13 +61,15 @@ class EntityLayout:
         self.observation_space = gym.spaces.Dict({
             "agvs": box((MAX_AGVS, self.agv_features)), "globals": box((len(GLOBALS),)),
             "mask": box((MAX_AGVS,), 0.0, 1.0)})
-        self.per_agv = 3 if role == "joint" else 1
+        plan = 2 * (config.control.horizon - 1) if plans and role == "joint" else 0
+        c = self.per_agv = 3 + plan if role == "joint" else 1
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(MAX_AGVS * self.per_agv + 2,), dtype=np.float32)
         rows = np.arange(k)
         drone = MAX_AGVS * self.per_agv + np.arange(2)
-        if role == "joint":  # flat: increments (2K), powers (K), drone (2)
-            increments = np.stack([3 * rows, 3 * rows + 1], axis=1).reshape(-1)
-            self.gather = np.concatenate([increments, 3 * rows + 2, drone])
+        if role == "joint":  # flat: increments (2K), powers (K), drone (2), plans (2K(N_p - 1) or none)
+            increments = np.stack([c * rows, c * rows + 1], axis=1).reshape(-1)
+            plans_at = (c * rows[:, None] + 3 + np.arange(plan)[None, :]).reshape(-1)
+            self.gather = np.concatenate([increments, c * rows + 2, drone, plans_at])
         else:  # flat: powers (K), drone (2)
             self.gather = np.concatenate([rows, drone])
         self.fleet_frac = np.float32(k / MAX_AGVS)

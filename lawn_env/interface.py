@@ -29,6 +29,8 @@ accelerating; single slots cost up to 1e7), so every environment also takes
       prior does not give it (docs/rl.md compares the two zero actions: ``python benchmarks/anchors.py``).
 
     Increments (Joint): a residual ``a * residual_scale * Delta-a_max`` on the first increment
+    (under ``control.actuator="buffer"`` the packet carries the rest of the anchor's planned
+    sequence as it planned it; the LQR anchor's rest is zeros, a hold)
     of the outage-aware MPC at each link's planned success probability (the QP P3 that drives
     the AGVs of ``lawn/Comm-v1``, :class:`lawn_env.mpc.OutageAwareMPC`), clipped to the control
     set; or, with ``increment_anchor="lqr"``, on the LQR baseline's first increment (no QP: the
@@ -65,7 +67,7 @@ from pydantic.dataclasses import dataclass
 
 from .channel import LinkParams
 from .config import PositiveFloat, ScenarioConfig
-from .core import Decisions
+from .core import Decisions, later_increments
 from .drone import toward
 from .dynamics import ACCELERATION, POSITION, PredictionModel, saturate_increment
 from .errors import raises_config_errors
@@ -284,10 +286,16 @@ class AnchoredActions(ActionCodec):
         power = w * (self._pmax / w.sum(axis=-1, keepdims=True))
         if not self.increment_size:
             return Decisions(None, power, drone_next)
-        increment = self._anchor_increment(data, power, d2, x_aug, reference, slot)
+        sequence = self._anchor_sequence(data, power, d2, x_aug, reference, slot)
+        increment = sequence[..., 0, :].copy()
         increment += a_increment.reshape(increment.shape) * (self.interface.residual_scale * self._inc_max)
         np.clip(increment, -self._inc_max, self._inc_max, out=increment)
-        return Decisions(increment, power, drone_next)
+        return Decisions(increment, power, drone_next, self._later(sequence))
+
+    def _later(self, sequence: np.ndarray) -> np.ndarray | None:
+        """The plan a buffered actuator's packet carries after the command (None under hold): the
+        anchor's later increments (:func:`lawn_env.core.later_increments`)."""
+        return later_increments(sequence, self.buffer_length) if self.buffer_length else None
 
     def _distance_sq(self, x_aug: np.ndarray, drone_next: np.ndarray) -> np.ndarray:
         """d_k^2 from the drone's next position to the AGVs, (..., K)."""
@@ -312,10 +320,11 @@ class AnchoredActions(ActionCodec):
         stake = np.where(floor > 0, np.maximum(stake, floor), 1.0)  # no stake anywhere: by distance alone
         return self._link.stake_power_weights(stake, d2)
 
-    def _anchor_increment(self, data: SlotData | None, power_w: np.ndarray, d2: np.ndarray, x_aug: np.ndarray,
-                          reference: np.ndarray | None, slot: int | np.ndarray | None = None) -> np.ndarray:
-        """The tracking controller under the residual, (..., K, 2) m/s^2 (a new array; before the
-        residual). ``increment_anchor="mpc"``: the outage-aware MPC's first increment at each link's
+    def _anchor_sequence(self, data: SlotData | None, power_w: np.ndarray, d2: np.ndarray, x_aug: np.ndarray,
+                         reference: np.ndarray | None, slot: int | np.ndarray | None = None) -> np.ndarray:
+        """The tracking controller under the residual: its planned increments (..., K, N, 2) m/s^2
+        (the first is the command; N = 1 for the LQR anchor). ``increment_anchor="mpc"``: the
+        outage-aware MPC's sequence at each link's
         planned success probability (with the stake prior it starts from this slot's stake solve's
         working sets: the same QPs at psi = 1, closer to these than the previous slot's).
         Under ``control.law="delivery"`` it is the loss-aware tail's command
@@ -330,21 +339,20 @@ class AnchoredActions(ActionCodec):
             feedforward = reference[..., 1, ACCELERATION] - reference[..., 0, ACCELERATION]
             free = feedforward - (x_aug - reference[..., 0, :]) @ self._lqr_model.lqr_gain.T
             increment: np.ndarray = saturate_increment(x_aug[..., ACCELERATION], free, self._accel_max)
-            return increment
+            return increment[..., None, :]
         start = "stakes" if self._stake else None
         psi = self._link.success_sq(power_w, d2)
         if self._delivery is not None:
             if reference is None:
                 raise ValueError("the anchored joint actions of this interface (increment_anchor='mpc' under "
                                  "control.law='delivery') plan with the MPC: pass the reference window")
-            solution = self._delivery.solve(x_aug, reference, psi, 0 if slot is None else slot)
-            law_first: np.ndarray = solution.increments[..., 0, :].copy()
-            return law_first
+            law: np.ndarray = self._delivery.solve(x_aug, reference, psi, 0 if slot is None else slot).increments
+            return law
         if self._law == "delivery-certainty-equivalent":
             psi = np.ones(d2.shape)
         assert self.mpc is not None and data is not None  # the MPC anchor: built, and _prepare gave its data
-        first: np.ndarray = self.mpc.solve_prepared(data, psi, start_from=start).increments[..., 0, :].copy()
-        return first
+        planned: np.ndarray = self.mpc.solve_prepared(data, psi, start_from=start).increments
+        return planned
 
     # ------------------------------------------------------------------ encode
     def encode(self, decision: Decisions, x_aug: np.ndarray, reference: np.ndarray | None,
@@ -371,7 +379,7 @@ class AnchoredActions(ActionCodec):
         a_power = np.clip(log_w / self.interface.power_log_range, -1.0, 1.0)
         parts = [a_power, a_drone]
         if self.increment_size:
-            anchor = self._anchor_increment(data, power, d2, x_aug, reference)
+            anchor = self._anchor_sequence(data, power, d2, x_aug, reference)[..., 0, :]
             scale = self.interface.residual_scale * self._inc_max
             parts.insert(0, np.clip((np.asarray(decision.increment, dtype=float) - anchor) / scale, -1, 1).reshape(-1))
         return np.concatenate(parts).astype(np.float32)

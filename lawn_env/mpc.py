@@ -481,12 +481,14 @@ class OutageAwareMPC:
         return np.maximum(data.constant - delivered, 0.0)
 
 
-    def lost_command(self, data: SlotData) -> SlotData:
-        """The slot's QPs with the next command's increment held at zero: the command lost, the AGV
-        keeping u[n-1] until the command after it (MODEL.md §4, "Planning under delivery"). The next
-        command is the horizon's first increment that may be non-zero (:func:`command_mask`; the
-        first with commands every slot; none when the period outlasts the horizon, and then nothing
-        is held). Its phases are ``P .. 2P-1`` of the compiled pencils."""
+    def lost_command(self, data: SlotData, queue: np.ndarray | None = None) -> SlotData:
+        """The slot's QPs with the next command lost: its increment held at zero, the AGV keeping
+        u[n-1] until the command after it (MODEL.md §4, "Planning under delivery"); or, with ``queue``
+        (..., K, L, 2), the increments a buffered actuator plays on the next slots without a packet
+        (:func:`lawn_env.core.buffer_queue`; MODEL.md §3), pinned to the one it plays then
+        (:meth:`_played`). The next command is the horizon's first increment that may be non-zero
+        (:func:`command_mask`; the first with commands every slot; none when the period outlasts the
+        horizon, and then nothing is held). Its phases are ``P .. 2P-1`` of the compiled pencils."""
         n, p = self._n, self.control_period
         phase = np.asarray(data.phase, dtype=np.int64)
         first = (p - phase) % p  # the horizon index of the next command: 0 on a command slot
@@ -498,18 +500,51 @@ class OutageAwareMPC:
         held &= (first < n)[..., None]  # a period longer than the horizon: no command in it to hold
         lower[held], upper[held] = 0.0, 0.0
         lost_phase = int(phase) + p if phase.ndim == 0 else phase + p
-        return SlotData(data.residual, data.linear, data.constant, lower, upper, lost_phase)
+        lost = SlotData(data.residual, data.linear, data.constant, lower, upper, lost_phase)
+        return lost if queue is None else self._played(lost, first, queue)
 
-    def delivery_values(self, data: SlotData) -> tuple[MPCSolution, np.ndarray]:
+    def _played(self, lost: SlotData, first: np.ndarray, queue: np.ndarray) -> SlotData:
+        """:meth:`lost_command`'s QPs with the held increment (horizon index ``first``) at the buffered
+        actuator's ``c`` instead of zero: the queue's element ``first`` (zero past its end: a spent
+        buffer holds), saturated into the control set as the simulator saturates it. With z = c + w and
+        w's held entries zero, ``z'Gz + 2 l'z + M`` (G = F'Q4F + Q5, psi = 1) is
+        ``w'Gw + 2 (l + G c)'w + c'Gc + 2 l'c + M``, and the running-sum bounds from ``first`` on move by c."""
+        n, horizon = self._n, self._n // 2
+        queue = np.asarray(queue, dtype=float)
+        length = queue.shape[-2]
+        if queue.shape[:-2] != first.shape or queue.shape[-1] != 2:
+            raise ValueError(f"queue has shape {queue.shape}; expected {(*first.shape, 'L', 2)}: the buffer's "
+                             "increments of each AGV in the order it plays them")
+        index = np.minimum(first, horizon - 1)
+        sums = n + 2 * index[..., None] + np.arange(2)  # the running sums' bounds there: -a_max - u, a_max - u
+        played = np.zeros((*first.shape, 2))
+        if length:
+            at = np.minimum(first, length - 1)[..., None, None].repeat(2, -1)
+            played = np.where((first < length)[..., None], np.take_along_axis(queue, at, axis=-2)[..., 0, :], 0.0)
+        c = np.zeros((*first.shape, horizon, 2))
+        step = np.clip(played, np.take_along_axis(lost.lower, sums, -1), np.take_along_axis(lost.upper, sums, -1))
+        np.put_along_axis(c, index[..., None, None].repeat(2, -1),
+                          np.where((first < horizon)[..., None], step, 0.0)[..., None, :], axis=-2)
+        flat = c.reshape((*first.shape, n))
+        shift = flat @ (0.5 * (self._ftq4f_2 + self._q5_2))  # G c, G of psi = 1
+        constant = lost.constant + np.einsum("...b,...b->...", shift + 2.0 * lost.linear, flat)
+        offset = np.cumsum(c, axis=-2).reshape(flat.shape)  # c's running sums, axes interleaved
+        lower, upper = lost.lower.copy(), lost.upper.copy()
+        lower[..., n:] -= offset
+        upper[..., n:] -= offset
+        return SlotData(lost.residual, lost.linear + shift, constant, lower, upper, lost.phase)
+
+    def delivery_values(self, data: SlotData, queue: np.ndarray | None = None) -> tuple[MPCSolution, np.ndarray]:
         """The two MPC values of each AGV's next command (any leading batch axes, (..., K)): the
         solution at psi = 1 (every planned increment delivered: its increments and ``value`` V^del)
-        and V^lost, the same problem's optimum with the next command held at zero (:meth:`lost_command`).
+        and V^lost, the same problem's optimum with the next command lost (:meth:`lost_command`: held
+        at zero, or with a buffered actuator's ``queue`` the buffer's increment played).
         The expected cost of a command sent with success probability psi is
         ``psi V^del + (1 - psi) V^lost`` (MODEL.md §4, "Planning under delivery"); ``V^lost - V^del``
         >= 0 is what its delivery is worth."""
         ones = np.ones(data.constant.shape)
         delivered = self.solve_prepared(data, ones, warm_key="delivered")
-        lost = self.solve_prepared(self.lost_command(data), ones, warm_key="lost")
+        lost = self.solve_prepared(self.lost_command(data, queue), ones, warm_key="lost")
         return delivered, np.maximum(lost.value, delivered.value)
 
 

@@ -10,6 +10,10 @@ Actions are normalized to [-1, 1]; the maps below turn them into physical decisi
   is the equal split for K >= 2.
 * Drone: ``v = a * V_max`` per axis, clipped radially to ``||v|| <= V_max``; the drone moves
   ``v * Delta-tau`` and is clipped into the area.
+* Plans (``lawn/Joint-v1`` under ``control.actuator="buffer"``): after the drone's two entries, the
+  rest of every AGV's planned sequence, ``a * Delta-a_max`` per entry: AGV by AGV, the increments
+  planned for slots n+1 .. n+N_p-1, x then y (2 K (N_p - 1) entries); the packet carries them and a
+  lost packet's AGV plays them (MODEL.md §3). The zero plan holds, as the hold actuator does.
 
 Observations are float32 vectors: K blocks of :attr:`ObservationLayout.agv_features` features
 followed by 3 global features (see :meth:`ObservationLayout.feature_names`).
@@ -23,7 +27,7 @@ import gymnasium as gym
 import numba
 import numpy as np
 
-from .core import Decisions
+from .core import Decisions, buffer_queue
 from .drone import move_rows
 from .dynamics import POSITION
 
@@ -172,6 +176,8 @@ class ActionCodec:
     needs_reference = False
     #: The MPC the scheme's anchor plans with (None: none).
     mpc: OutageAwareMPC | None = None
+    #: The entries of the AGVs' plans at the action's end (:class:`DirectActions` under the buffered actuator)
+    plan_size = 0
 
     def __init__(self, config: ScenarioConfig, role: str = "joint"):
         if role not in ROLES:
@@ -179,6 +185,8 @@ class ActionCodec:
         k = config.num_agvs
         self.role, self.num_agvs = role, k
         self.increment_size = 2 * k if role == "joint" else 0
+        #: L = N_p - 1, the later increments a packet carries under the buffered actuator (0 under hold)
+        self.buffer_length = config.control.horizon - 1 if config.control.actuator == "buffer" else 0
         self.size = self.increment_size + k + 2
         self.space = gym.spaces.Box(-1.0, 1.0, shape=(self.size,), dtype=np.float32)
         self.limits = np.array([(config.control.accel_increment_max_mps2, config.power_budget_w,
@@ -203,7 +211,8 @@ class ActionCodec:
         x = None if x_aug is None else np.asarray(x_aug)[None]
         d = self._decode_rows(a[None], x, ref, np.asarray(drone_position)[None],
                               None if slot is None else np.asarray(slot).reshape(1))
-        return Decisions(None if d.increment is None else d.increment[0], d.power_w[0], d.drone_next[0])
+        return Decisions(None if d.increment is None else d.increment[0], d.power_w[0], d.drone_next[0],
+                         None if d.plan is None else d.plan[0])
 
     def _decode_rows(self, actions, x_aug, reference, drone_position, slot) -> Decisions:  # pragma: no cover
         raise NotImplementedError
@@ -219,18 +228,31 @@ _NO_INCREMENT = np.empty((0, 0, 2))  # direct_rows' increment output of a role w
 
 class DirectActions(ActionCodec):
     """The v0 actions (module docstring): increments ``a * Delta-a_max``, power ``w = (a + 1) / 2``,
-    ``p = P_max w / max(1, sum w)``, drone velocity ``a * V_max``."""
+    ``p = P_max w / max(1, sum w)``, drone velocity ``a * V_max``; under the buffered actuator
+    Joint's action ends with the AGVs' plans, ``a * Delta-a_max``."""
 
     scheme = "direct"
+
+    def __init__(self, config: ScenarioConfig, role: str = "joint"):
+        super().__init__(config, role)
+        #: The plans' entries at the action's end: 2 K (N_p - 1) for Joint under the buffered actuator, else 0
+        self.plan_size = self.increment_size * self.buffer_length
+        if self.plan_size:
+            self.size += self.plan_size
+            self.space = gym.spaces.Box(-1.0, 1.0, shape=(self.size,), dtype=np.float32)
 
     def _decode_rows(self, actions, x_aug, reference, drone_position, slot) -> Decisions:
         num, k = actions.shape[0], self.num_agvs
         increment = np.empty((num, k, 2)) if self.increment_size else None
         power, drone_next = np.empty((num, k)), np.empty((num, 2))
-        direct_rows(np.ascontiguousarray(actions, dtype=np.float64), self.increment_size, self.limits,
-                    np.ascontiguousarray(drone_position, dtype=np.float64),
+        flat = np.ascontiguousarray(actions, dtype=np.float64)
+        direct_rows(flat, self.increment_size, self.limits, np.ascontiguousarray(drone_position, dtype=np.float64),
                     _NO_INCREMENT if increment is None else increment, power, drone_next)
-        return Decisions(increment, power, drone_next)
+        plan = None
+        if self.plan_size:
+            plan = flat[:, self.size - self.plan_size :].reshape(num, k, self.buffer_length, 2)
+            plan = plan * self.limits[0]["increment_max"]
+        return Decisions(increment, power, drone_next, plan)
 
     def encode(self, decision: Decisions, x_aug: np.ndarray | None, reference: np.ndarray | None,
                drone_position: np.ndarray, slot: int | None = None) -> np.ndarray:
@@ -245,6 +267,12 @@ class DirectActions(ActionCodec):
         parts = [2.0 * p / lim["power_budget"] - 1.0, move / (lim["slot_s"] * lim["max_speed"])]
         if self.increment_size:
             parts.insert(0, np.asarray(decision.increment, dtype=float).reshape(-1) / lim["increment_max"])
+        if self.plan_size:
+            plan = np.zeros(self.plan_size) if decision.plan is None else np.asarray(decision.plan, dtype=float)
+            if plan.size != self.plan_size:
+                raise ValueError(f"decision.plan has shape {plan.shape}; this action carries "
+                                 f"({self.num_agvs}, {self.buffer_length}, 2) (K, N_p - 1, 2)")
+            parts.append(plan.reshape(-1) / lim["increment_max"])
         return np.clip(np.concatenate(parts), -1.0, 1.0).astype(np.float32)
 
 
@@ -357,6 +385,10 @@ class ObservationLayout:
     next 1              outage probability of the last transmission                 probability
     next 1              last command delivered                                      0 or 1
     next 1              last power                                                  / P_max
+    next 2 (N_p - 1)    under ``control.actuator="buffer"`` only: the buffer's      / Delta-a_max
+                        increments in the order the AGV plays them on its next
+                        slots without a packet, zeros once spent
+                        (:func:`lawn_env.core.buffer_queue`)
     ==================  ==========================================================  ====================================
 
     Global features (3, at the end): drone position (2, like AGV positions), slot n / N.
@@ -374,6 +406,8 @@ class ObservationLayout:
         ("delivered", ("delivered",)),
         ("power", ("power_frac",)),
     )
+    #: The buffered actuator's feature, after the others (its entries repeated for i = 1 .. N_p - 1).
+    BUFFER_FEATURE = ("buffer", ("buffer{i}_ax", "buffer{i}_ay"))
     #: The global features after the K blocks: the drone's position, then slot n / N.
     GLOBAL_FEATURES = ("drone_x", "drone_y", "time_frac")
     global_features = len(GLOBAL_FEATURES)
@@ -388,12 +422,21 @@ class ObservationLayout:
         self.accel_max = config.control.accel_max_mps2
         self.power_budget_w = config.power_budget_w
         self.window = self.horizon + 1
+        self.buffer_length = self.horizon - 1 if config.control.actuator == "buffer" else 0
+        self.increment_max = config.control.accel_increment_max_mps2
+        #: The per-AGV features of this config: :attr:`AGV_FEATURES`, then the buffer's under the buffered actuator
+        self.agv_feature_table = self.AGV_FEATURES + ((self.BUFFER_FEATURE,) if self.buffer_length else ())
         self.slices, start = {}, 0
-        for name, entries in self.AGV_FEATURES:
-            width = len(entries) * (self.window if name == "reference" else 1)
+        for name, entries in self.agv_feature_table:
+            width = len(entries) * {"reference": self.window, "buffer": self.buffer_length}.get(name, 1)
             self.slices[name] = slice(start, start + width) if width > 1 else start
             start += width
         self.agv_features = start
+        if self.buffer_length:  # the buffer's columns in the flat vector, AGV by AGV
+            where = self.slices["buffer"]
+            assert isinstance(where, slice)  # 2 (N_p - 1) >= 2 entries
+            self._buffer_columns = (np.arange(self.num_agvs)[:, None] * start
+                                    + np.arange(where.start, where.stop)[None, :]).reshape(-1)
         self.size = self.num_agvs * self.agv_features + self.global_features
         self._ref_scale = np.array([1 / POSITION_ERROR_SCALE_M] * 2 + [1 / VELOCITY_SCALE_MPS] * 2
                                    + [1 / self.accel_max] * 2)
@@ -403,7 +446,8 @@ class ObservationLayout:
         self._no_table = np.zeros((1, self.size), dtype=np.float32)
         codec = np.zeros(1, dtype=OBS_CODEC)  # filled by name: the table's order is free
         for name, where in self.slices.items():
-            codec[name] = where.start if isinstance(where, slice) else where
+            if name != "buffer":  # written by encode after the compiled rows
+                codec[name] = where.start if isinstance(where, slice) else where
         codec["agv_features"], codec["window"] = self.agv_features, self.window
         codec["state_scale"], codec["state_shift"] = self._state_scale, self._state_shift * self._state_scale
         codec["reference_scale"], codec["center"] = self._ref_scale, self.center
@@ -413,8 +457,8 @@ class ObservationLayout:
     def feature_names(self) -> list[str]:
         """Human-readable names of the per-AGV block, then of the globals."""
         names = []
-        for name, entries in self.AGV_FEATURES:
-            repeats = range(self.window) if name == "reference" else [None]
+        for name, entries in self.agv_feature_table:
+            repeats = {"reference": range(self.window), "buffer": range(1, self.buffer_length + 1)}.get(name, [None])
             names += [e.format(i=i) for i in repeats for e in entries]
         return names + list(self.GLOBAL_FEATURES)
 
@@ -456,6 +500,10 @@ class ObservationLayout:
         _encode_rows(out, rows, st.slot, state, st.reference, self._codec, self.num_slots,
                      np.inf if bound is None else bound,
                      bound is not None and peak > bound)  # the table's features clipped only where they exceed it
+        if self.buffer_length:
+            queue = buffer_queue(st.buffer, st.buffer_age).reshape(sim.num_envs, -1)  # AGV by AGV, as the columns
+            feature = (queue * (1.0 / self.increment_max)).astype(np.float32)
+            out[:, self._buffer_columns] = feature if bound is None else np.clip(feature, -bound, bound)
         return out
 
     def slot_table(self, shared: np.ndarray | None) -> SlotTable | None:
@@ -497,7 +545,8 @@ class ObservationLayout:
 
     def decode(self, obs: np.ndarray) -> dict:
         """Planner state from an observation: ``x_aug`` (K, 6), ``reference`` (K, N_p+1, 6),
-        ``drone_position`` (2,), ``slot``, ``last_power_w`` (K,), ``outage_probability`` (K,).
+        ``drone_position`` (2,), ``slot``, ``last_power_w`` (K,), ``outage_probability`` (K,),
+        ``buffer`` (K, N_p - 1, 2) under the buffered actuator (:attr:`lawn_env.core.Snapshot.buffer`), else None.
 
         Exact up to float32 rounding of the observation (about 1e-5 m in positions)."""
         obs = self.check(np.asarray(obs, dtype=np.float64))
@@ -514,4 +563,6 @@ class ObservationLayout:
             "slot": round(float(obs[-1]) * self.num_slots),
             "last_power_w": blocks[:, self.slices["power"]] * self.power_budget_w,
             "outage_probability": blocks[:, self.slices["outage_probability"]],
+            "buffer": (blocks[:, self.slices["buffer"]].reshape(self.num_agvs, self.buffer_length, 2)
+                       * self.increment_max) if self.buffer_length else None,
         }

@@ -381,9 +381,11 @@ class LossAwareTail:
         return np.concatenate([ref, ref[..., ACCELERATION]], axis=-1)
 
     def delivery_values(self, state: np.ndarray, chi_ref: np.ndarray, psi_bar: npt.ArrayLike,
-                        slot: npt.ArrayLike = 0) -> tuple[MPCSolution, np.ndarray]:
+                        slot: npt.ArrayLike = 0, queue: np.ndarray | None = None) -> tuple[MPCSolution, np.ndarray]:
         """(the delivered solution: the planned increments (..., K, N, 2) and V^del (..., K); V^lost
-        (..., K)) at psi-bar and slot (each one per scenario (...), or one for all)."""
+        (..., K)) at psi-bar and slot (each one per scenario (...), or one for all). Under the buffered
+        actuator ``queue`` (..., K, L, 2) is what each AGV plays without a packet
+        (:func:`lawn_env.core.buffer_queue`), and V^lost plays it (:meth:`OutageAwareMPC.lost_command`)."""
         start = time.perf_counter()
         n, k = self.model.state_dim, self.num_agvs
         state = np.asarray(state, dtype=float)
@@ -396,11 +398,13 @@ class LossAwareTail:
         slots = np.asarray(slot, dtype=np.int64).reshape(-1)
         flat_z = state.reshape(scenarios, k, n)
         flat_ref = self.references(np.asarray(chi_ref, dtype=float)).reshape(scenarios, k, -1, n)
+        flat_queue = None if queue is None else np.asarray(queue, dtype=float).reshape(scenarios, k, -1, 2)
         if index.size == 1 and (slots.size == 1 or np.all(slots % self.model.period == slots[0] % self.model.period)):
-            solution, lost = self._solve(int(index[0]), int(slots[0] % self.model.period), flat_z, flat_ref, slots)
+            solution, lost = self._solve(int(index[0]), int(slots[0] % self.model.period), flat_z, flat_ref, slots,
+                                         flat_queue)
         else:  # scenarios at other psi-bars or phases: one QP stack per group
             solution, lost = self._groups(np.broadcast_to(index, (scenarios,)), np.broadcast_to(slots, (scenarios,)),
-                                          flat_z, flat_ref)
+                                          flat_z, flat_ref, flat_queue)
         shape = (*lead, k)
         horizon = self.model.horizon
         return (MPCSolution(increments=solution.increments.reshape((*shape, horizon, 2)),
@@ -408,8 +412,8 @@ class LossAwareTail:
                             iterations=solution.iterations.reshape(shape), solve_time_s=time.perf_counter() - start),
                 lost.reshape(shape))
 
-    def _groups(self, index: np.ndarray, slots: np.ndarray, z: np.ndarray, ref: np.ndarray
-                ) -> tuple[MPCSolution, np.ndarray]:
+    def _groups(self, index: np.ndarray, slots: np.ndarray, z: np.ndarray, ref: np.ndarray,
+                queue: np.ndarray | None) -> tuple[MPCSolution, np.ndarray]:
         """:meth:`_solve` per group of scenarios sharing psi-bar and phase, reassembled."""
         scenarios, k = z.shape[:2]
         increments = np.zeros((scenarios, k, self.model.horizon, 2))
@@ -418,14 +422,16 @@ class LossAwareTail:
         groups = index * self.model.period + slots % self.model.period
         for group in np.unique(groups).tolist():
             rows = np.flatnonzero(groups == group)
-            solution, lost[rows] = self._solve(*divmod(int(group), self.model.period), z[rows], ref[rows], slots[rows])
+            solution, lost[rows] = self._solve(*divmod(int(group), self.model.period), z[rows], ref[rows], slots[rows],
+                                               None if queue is None else queue[rows])
             increments[rows], delivered[rows] = solution.increments, solution.value
             status[rows], iterations[rows] = solution.status, solution.iterations
         return MPCSolution(increments, delivered, status, iterations, 0.0), lost
 
-    def _solve(self, index: int, phase: int, z: np.ndarray, ref: np.ndarray, slots: np.ndarray
-               ) -> tuple[MPCSolution, np.ndarray]:
-        """One group of scenarios sharing psi-bar and phase: z (B, K, n), ref (B, K, N+1, n)."""
+    def _solve(self, index: int, phase: int, z: np.ndarray, ref: np.ndarray, slots: np.ndarray,
+               queue: np.ndarray | None = None) -> tuple[MPCSolution, np.ndarray]:
+        """One group of scenarios sharing psi-bar and phase: z (B, K, n), ref (B, K, N+1, n), the
+        buffered actuator's queue (B, K, L, 2) or None."""
         stages = self.model.stages(index, phase)
         mpc = self._mpc(index, phase)
         maps = self.model.maps(index, phase)
@@ -441,7 +447,7 @@ class LossAwareTail:
         if released is not None:
             data.lower[..., released] = -np.inf
             data.upper[..., released] = np.inf
-        return mpc.delivery_values(data)
+        return mpc.delivery_values(data, queue)
 
     def _released(self, index: int, phase: int, stages: _Stages) -> np.ndarray | None:
         """The bounds (columns of the QPs' (4 N,) bounds) of the later commands, and of the accelerations
@@ -483,10 +489,11 @@ class DeliveryLaw:
         else:
             self.psi_bar[np.asarray(which, dtype=bool).reshape(self.psi_bar.shape)] = np.nan
 
-    def solve(self, state: np.ndarray, chi_ref: np.ndarray, psi: np.ndarray, slot: npt.ArrayLike
-              ) -> MPCSolution:
+    def solve(self, state: np.ndarray, chi_ref: np.ndarray, psi: np.ndarray, slot: npt.ArrayLike,
+              queue: np.ndarray | None = None) -> MPCSolution:
         """The AGVs' planned increments (..., K, N, 2) at the success probabilities ``psi`` (..., K) of the
-        drone's decisions; advances psi-bar by this slot."""
+        drone's decisions; advances psi-bar by this slot (the commands' worth with the buffered
+        actuator's ``queue`` (..., K, L, 2) played on a loss, where given)."""
         lead = state.shape[:-2]
         if self.psi_bar is None or self.psi_bar.shape != lead:
             self.psi_bar = np.full(lead, np.nan)
@@ -498,12 +505,13 @@ class DeliveryLaw:
             z = state.reshape(-1, *state.shape[-2:])[rows]
             ref = chi_ref.reshape(-1, *chi_ref.shape[-3:])[rows]
             decided = psi.reshape(-1, psi.shape[-1])[rows]
+            played = None if queue is None else queue.reshape(-1, *queue.shape[-3:])[rows]
 
             def worth_at(psi_bar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-                solution, lost = self.tail.delivery_values(z, ref, psi_bar, slots)
+                solution, lost = self.tail.delivery_values(z, ref, psi_bar, slots, played)
                 return decided, lost - solution.value
 
             flat[rows] = first_delivery(worth_at, DELIVERY_START_ITERATIONS, (rows.size,))
-        solution, lost = self.tail.delivery_values(state, chi_ref, self.psi_bar, slot)
+        solution, lost = self.tail.delivery_values(state, chi_ref, self.psi_bar, slot, queue)
         self.psi_bar = expected_delivery(self.psi_bar, psi, lost - solution.value, DELIVERY_MEMORY)
         return solution

@@ -23,6 +23,7 @@ BLOCKS = {"benchmark": "README.md", "benchmark-nominal": "docs/policies.md", "ga
           "parallel-scaling-16": "docs/performance.md", "zoo-fleet": "docs/LEARNED.md", "zoo-distil": "docs/LEARNED.md",
           "fleet-generalization": "docs/LEARNED.md", "fleet-decision": "docs/performance.md",
           "dv-mpc": "docs/experts.md", "dv-mpc-refinements": "docs/experts.md", "loss-stability": "docs/experts.md",
+          "buffer": "docs/experts.md",
           "beyond-the-paper": "docs/REPRODUCTION.md", "reproduction": "docs/REPRODUCTION.md",
           "reproduction-figures": "docs/REPRODUCTION.md",
           "reproduction-misses": "docs/REPRODUCTION.md", "zoo-main": "docs/LEARNED.md", "zoo-runs": "docs/LEARNED.md",

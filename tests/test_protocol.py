@@ -458,7 +458,7 @@ def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
     board = (out / "board.md").read_text()
     assert board.splitlines()[0] == "| policy | env | k3 | IQM over tasks [95 %] |"
     names = [line.split("|")[1].strip() for line in first_table(board)[2:]]
-    assert names == ["noise:dv-mpc", "limit:fast-drone", "limit:perfect-links", "anchor:stake"]
+    assert names == ["noise:dv-mpc", "limit:fast-drone", "limit:perfect-links", "actuator:buffer", "anchor:stake"]
     page = (docs / "LEADERBOARD.md").read_text()
     assert board.strip() in page and (out / "structure.md").read_text().strip() in page
     assert "1 policies x 1 tasks (k3), test seeds 0-2" in board and (docs / "figures" / "suite-per-slot.png").exists()

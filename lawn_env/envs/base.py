@@ -21,7 +21,17 @@ import gymnasium as gym
 import numpy as np
 
 from ..config import ScenarioConfig
-from ..core import Decisions, Simulation, SlotDraws, SlotRecord, Snapshot, Trail, link_success
+from ..core import (
+    Decisions,
+    Simulation,
+    SlotDraws,
+    SlotRecord,
+    Snapshot,
+    Trail,
+    buffer_queue,
+    later_increments,
+    link_success,
+)
 from ..dynamics import POSITION
 from ..entities import EntityLayout
 from ..interface import InterfaceLike, RLInterface, action_codec, resolve_interface
@@ -65,7 +75,8 @@ class CommRole:
 
     The MPC plans from the state a planner on the drone has, the measured one (``x_obs``: the
     snapshot's, every expert's; the true state without measurement noise), as does the RL
-    interface's anchor, which shares this MPC (one per env)."""
+    interface's anchor, which shares this MPC (one per env). Under the buffered actuator the packets
+    carry the rest of each AGV's planned sequence (MODEL.md §3)."""
 
     name = "comm"
 
@@ -91,14 +102,17 @@ class CommRole:
         x = sim.x_obs if self.planning_state == "measured" else sim.x_aug
         psi = link_success(x, decision.drone_next, decision.power_w, sim.params.planning_link)
         if self.delivery is not None:  # control.law="delivery": the loss-aware tail's command
-            solution = self.delivery.solve(x, windows, psi, sim.slot)
+            queue = buffer_queue(sim.buffer, sim.buffer_age) if sim.params.buffer_length else None
+            solution = self.delivery.solve(x, windows, psi, sim.slot, queue)
         else:  # the QP at the planned psi, or as if delivered
             solution = self.mpc.solve(x, windows, psi if self.law == "paper" else np.ones_like(psi), sim.slot)
         self.last_solve_time_s = solution.solve_time_s  # not in info: infos must be deterministic
         extra = {"mpc_iterations": solution.iterations.astype(np.int64),
                  "mpc_fallbacks": np.count_nonzero(solution.status, axis=-1).astype(np.int64),
                  "success_probability_planned": np.asarray(psi, dtype=np.float64)}
-        return Decisions(solution.increments[..., 0, :], decision.power_w, decision.drone_next), extra
+        length = sim.params.buffer_length  # the buffered actuator's plan: the sequence after the command
+        plan = later_increments(solution.increments, length) if length else None
+        return Decisions(solution.increments[..., 0, :], decision.power_w, decision.drone_next, plan), extra
 
     def reset_info(self, sim: Simulation) -> dict:
         b, k = sim.num_envs, sim.num_agvs
@@ -155,8 +169,8 @@ class Engine:
         self.slot_table = self.layout.slot_table(self.sim.params.fixed_reference)
         self._no_termination = np.zeros(self.num_envs, dtype=bool)
         #: The entity layout of the interface's ``layout="entities"`` (:mod:`lawn_env.entities`); None: flat.
-        self.entities = (EntityLayout(config, role, self.interface.obs_bound) if self.interface.layout == "entities"
-                         else None)
+        self.entities = (EntityLayout(config, role, self.interface.obs_bound, self.actions.plan_size > 0)
+                         if self.interface.layout == "entities" else None)
         self.trail: Trail | None = None
         if trail_row is not None:
             self.keep_trail(trail_row)

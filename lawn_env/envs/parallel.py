@@ -38,7 +38,8 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):  # type: ignore[misc]  # petti
     * ``"drone"``: ``Box(-1, 1, (K + 2,))``: K power weights, then the velocity (scalings of
       ``lawn/Comm-v1``).
     * ``"agv_k"``: ``Box(-1, 1, (2,))``: the increment, ``a * Delta-a_max`` m/s^2, saturated to
-      the acceleration bound.
+      the acceleration bound. Under ``control.actuator="buffer"`` (direct actions) ``(2 N_p,)``: the
+      increment, then the rest of its planned sequence, which its packet carries (MODEL.md §3).
     * With ``interface={"layout": "entities", ...}``: ``"drone"`` ``Box(-1, 1, (2,))``, its move;
       ``"agv_k"`` ``Box(-1, 1, (3,))``, its row of the entity action (the increment, then its
       power weight: the power split is normalised over the AGVs), so that the spaces do not
@@ -109,6 +110,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):  # type: ignore[misc]  # petti
         self.possible_agents = ["drone"] + [f"agv_{i}" for i in range(k)]
         self.agents: list[str] = []
         self._agv_index = {f"agv_{i}": i for i in range(k)}
+        self._plan = self.actions.plan_size // k  # an AGV's plan entries under the buffered actuator (else 0)
         if self.entities is None:
             self._flat_spaces(k)
         else:
@@ -125,7 +127,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):  # type: ignore[misc]  # petti
         }
         self._action_spaces = {
             "drone": gym.spaces.Box(-1.0, 1.0, shape=(k + 2,), dtype=np.float32),
-            **{a: gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for a in self._agv_index},
+            **{a: gym.spaces.Box(-1.0, 1.0, shape=(2 + self._plan,), dtype=np.float32) for a in self._agv_index},
         }
 
     def _entity_spaces(self, k: int) -> None:
@@ -235,10 +237,12 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):  # type: ignore[misc]  # petti
             for agent, i in self._agv_index.items():
                 entity[c * i : c * i + c] = check_action(actions[agent], c, name=f"actions[{agent!r}]")
             return self.entities.to_flat_actions(entity)
-        joint = np.empty(self.actions.size)
-        joint[2 * k :] = check_action(actions["drone"], k + 2, name="actions['drone']")
+        joint, plan = np.empty(self.actions.size), self._plan
+        joint[2 * k : 3 * k + 2] = check_action(actions["drone"], k + 2, name="actions['drone']")
         for agent, i in self._agv_index.items():
-            joint[2 * i : 2 * i + 2] = check_action(actions[agent], 2, name=f"actions[{agent!r}]")
+            own = check_action(actions[agent], 2 + plan, name=f"actions[{agent!r}]")
+            joint[2 * i : 2 * i + 2] = own[:2]
+            joint[3 * k + 2 + plan * i : 3 * k + 2 + plan * (i + 1)] = own[2:]
         return joint
 
     def _observations(self) -> dict[str, Any]:
