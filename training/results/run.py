@@ -9,7 +9,9 @@ read as CSV one way (:func:`write_csv`, :func:`read_csv`).
 **Reference rows** are names that play the best expert (:data:`~training.results.stats.SCORE_HIGH`)
 in a changed setting (docs/benchmark.md, "Headroom rows"): ``limit:fast-drone`` lifts the drone's
 speed bound to the largest value the configuration accepts (its drone grid capped at 1,000 points,
-``python benchmarks/fast_drone_grid.py``), ``limit:perfect-links`` delivers every command; a
+``python benchmarks/fast_drone_grid.py``), ``limit:perfect-links`` delivers every command,
+``actuator:buffer`` gives the AGVs the buffered actuator (``control.actuator="buffer"``: a lost
+command's AGV plays the rest of the last plan it received, MODEL.md §3; every other row holds); a
 noise-floor row ``noise:NAME`` plays expert NAME with its drone grid at 1.4 m instead of 1.5 m (a
 harmless change: a difference between two policies within its own is not one). They say how much
 of the cost the drone's reach and the links decide under the expert's own planning, not a bound.
@@ -78,10 +80,12 @@ def _max_speed() -> float:
     return float(cast(float, next(m.le for m in field.metadata if isinstance(m, Le))))
 
 
-#: name -> the lifted field (a dotted config key) and its value.
+#: name -> the lifted field (a dotted config key) and its value: the limits, and the buffered actuator
+#: (``actuator:buffer``: every packet carries the plan, MODEL.md §3), the one row on another actuator.
 LIMITS: dict[str, tuple[str, Any]] = {
     "limit:fast-drone": ("drone.max_speed_mps", _max_speed()),
     "limit:perfect-links": ("channel.perfect_links", True),
+    "actuator:buffer": ("control.actuator", "buffer"),
 }
 #: name -> the settings of the expert a limit row plays with (bounded time per decision).
 LIMIT_SETTINGS: dict[str, dict[str, Any]] = {
