@@ -157,7 +157,8 @@ class SB3Policy(InterfacePolicy):
         self.residual_settings: Mapping[str, Any] | None = None
         self._predict = _predictor(network)
         if self.interface.layout == "entities":
-            self.entities = EntityLayout(self.config, "joint" if env_id == JOINT else "comm", self.interface.obs_bound)
+            self.entities = EntityLayout(self.config, "joint" if env_id == JOINT else "comm", self.interface.obs_bound,
+                                         self.interface.action_scheme)
             seen = getattr(network.observation_space, "spaces", {})
             if {k: v for k, v in seen.items() if k != "me"} != self.entities.observation_space.spaces:
                 raise ValueError(f"{label} expects observations {network.observation_space}; this scenario gives "
@@ -307,7 +308,9 @@ class MARLPolicy(InterfacePolicy):
         actions, _ = self.network.predict(x, deterministic=True)
         actions = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
         k = self.config.num_agvs
-        central = np.concatenate([actions[1:, :2].reshape(-1), actions[0, : k + 2]])
+        plan = self.scheme.plan_size // k  # each AGV's plan after its increment (the buffered actuator's)
+        central = np.concatenate([actions[1:, :2].reshape(-1), actions[0, : k + 2],
+                                  actions[1:, 2 : 2 + plan].reshape(-1)])
         return self.to_v0(central, np.asarray(obs, dtype=np.float32))
 
 

@@ -225,7 +225,9 @@ class DVMPCPolicy(PlannerPolicy):
     under the paper's law (``control.law="paper"``, the env's AGVs apply the psi-scaled QP) that is the
     paper's problem: it plans as ``rg-mpc`` (its settings are then :class:`~agents.ReducedSettings`);
     under ``"delivery"`` with the loss-aware tail, under ``"delivery-certainty-equivalent"`` with the
-    certainty-equivalent one."""
+    certainty-equivalent one. On ``lawn/Joint-v1`` the tail defaults to the actuator's: loss-aware
+    under the hold, certainty-equivalent under ``control.actuator="buffer"`` (the buffer plays a
+    delivered plan through later losses), where V^lost plays the buffer's next increment."""
 
     name = "dv-mpc"
 

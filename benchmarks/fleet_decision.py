@@ -42,7 +42,7 @@ def _states(k: int) -> tuple[list, list, object]:
     obs, _ = env.reset(seed=0)
     expert.reset(0)
     iface = resolve_interface({"base": "rl", "layout": "entities"})
-    layout = EntityLayout(config, "joint", iface.obs_bound)
+    layout = EntityLayout(config, "joint", iface.obs_bound, iface.action_scheme)
     entity, expert_s = [], []
     for _ in range(STATES):
         entity.append({key: value[0] for key, value in layout.observe(iface.observe(obs.copy())[None]).items()})

@@ -238,8 +238,9 @@ class DisturbanceConfig:
     measurement_noise_velocity_mps: Annotated[float, Field(ge=0, le=1e3)] = 0.0
     """Std of the noise on the AGV velocities the policies observe, m/s per axis [0.1]."""
     control_period_slots: PositiveInt = 1
-    """Commands are sent every this many slots (a reduced control rate); in between the AGVs keep
-    their last acceleration and nothing is transmitted [2]."""
+    """Commands are sent every this many slots (a reduced control rate); in between nothing is
+    transmitted and the AGVs keep their last acceleration (under ``control.actuator="buffer"`` they
+    play their buffers, whose plans from a period-aware planner hold in between) [2]."""
     period_aware_planning: bool = True
     """The planners know ``control_period_slots`` *(decided, MODEL.md §7)*: the MPC (experts,
     baselines, ``lawn/Comm-v1``'s controller) and the PID/LQR rollouts plan with move blocking, an

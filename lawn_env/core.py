@@ -107,7 +107,7 @@ class SlotOutputs(NamedTuple):
     """What one slot writes, new arrays the caller allocates (a compiled function's returned arrays
     cost more to hand back)."""
 
-    rows: np.ndarray  # (2, B, K, 8): [x~[n+1], du delivered] and [x~[n+1] - x~_ref[n+1], du]
+    rows: np.ndarray  # (2, B, K, 8): [x~[n+1], du applied] and [x~[n+1] - x~_ref[n+1], du]
     terms: np.ndarray  # (B, K, 2): e' Q1 e, du' Q2 du
     delivered: np.ndarray  # (B, K) bool
     outage: np.ndarray  # (B, K)
@@ -272,7 +272,7 @@ def _accumulate(inp, out, err):  # pragma: no cover - compiled
 def _slot(inputs, packed, constants, outputs):  # pragma: no cover - compiled
     """One slot of B scenarios (see :func:`step`): 1. the links (:func:`_links`) and, under the
     buffered actuator, the buffers (:func:`_buffers`); 2. the transition,
-    [x~[n+1], du] = [x~, du delivered] @ step_t (BLAS, as numpy's ``@``); 3. the disturbance mode's
+    [x~[n+1], du] = [x~, du applied] @ step_t (BLAS, as numpy's ``@``); 3. the disturbance mode's
     actuator lag (``lag_alpha`` >= 0) and process noise (where the arrays are not empty); 4. the
     packed error and the stage terms (e' Q1 e, du' Q2 du) = err^2 @ cost_w; 5. the costs and the
     running sums. Reads ``inputs`` (the :class:`SlotInputs` fields), the :class:`Packed` matrices
@@ -544,7 +544,7 @@ def reset(params: SimParams, state: SimState, rngs: Sequence[np.random.Generator
 class SlotRecord(NamedTuple):
     """What one slot produced for B scenarios."""
 
-    terms: np.ndarray  # (B, K, 2) per AGV: e' Q1 e at slot n+1 (e: augmented tracking error), du' Q2 du delivered
+    terms: np.ndarray  # (B, K, 2) per AGV: e' Q1 e at slot n+1 (e: augmented tracking error), du' Q2 du applied
     delivered: np.ndarray  # (B, K) bool
     outage_probability: np.ndarray  # (B, K) closed form at (p, q[n]) for the true link
     applied_increment: np.ndarray  # (B, K, 2) after saturation and delivery, m/s^2
@@ -619,15 +619,17 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
 
 def _plan(params: SimParams, plan: np.ndarray | None, num: int, k: int) -> np.ndarray:
     """The slot kernel's ``plan`` (B, K, L, 2) float64 of a decision's under the buffered actuator
-    (zeros when it has none)."""
+    (zeros when it has none), each increment clipped to the increment bound Delta-a_max: the packet
+    carries the plan inside the control set, whatever a planner left unbounded."""
     length = params.buffer_length
     if plan is None:
         return np.zeros((num, k, length, 2))
-    out = np.ascontiguousarray(plan, dtype=np.float64)
-    if out.shape != (num, k, length, 2):
-        raise ValueError(f"decisions.plan has shape {out.shape}; the buffered actuator takes the later increments "
+    given = np.asarray(plan, dtype=np.float64)
+    if given.shape != (num, k, length, 2):
+        raise ValueError(f"decisions.plan has shape {given.shape}; the buffered actuator takes the later increments "
                          f"of each AGV's sequence, ({num}, {k}, {length}, 2) (N_p - 1 = {length})")
-    return out
+    bound = params.config.control.accel_increment_max_mps2
+    return np.clip(given, -bound, bound)
 
 
 #: The state's arrays with a leading batch axis that a step replaces (the reference and the paths it

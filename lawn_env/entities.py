@@ -41,10 +41,11 @@ GLOBALS = (*ObservationLayout.GLOBAL_FEATURES, "fleet_frac")
 
 class EntityLayout:
     """The entity observation and action of one role for a config (module docstring); ``bound``
-    is the observation's bound (the interface's); ``plans``: the flat actions end with the AGVs'
-    plans (:attr:`lawn_env.spaces.DirectActions.plan_size`), which each AGV's row then carries."""
+    is the observation's bound and ``scheme`` the action scheme (the interface's): Joint's direct
+    actions under the buffered actuator end with the AGVs' plans
+    (:attr:`lawn_env.spaces.DirectActions.plan_size`), which each AGV's row then carries."""
 
-    def __init__(self, config: ScenarioConfig, role: str, bound: float, plans: bool = False):
+    def __init__(self, config: ScenarioConfig, role: str, bound: float, scheme: str = "direct"):
         if role not in ROLES:
             raise ValueError(f"role={role!r}; valid: {', '.join(ROLES)}")
         k = config.num_agvs
@@ -61,7 +62,8 @@ class EntityLayout:
         self.observation_space = gym.spaces.Dict({
             "agvs": box((MAX_AGVS, self.agv_features)), "globals": box((len(GLOBALS),)),
             "mask": box((MAX_AGVS,), 0.0, 1.0)})
-        plan = 2 * (config.control.horizon - 1) if plans and role == "joint" else 0
+        buffered = config.control.actuator == "buffer" and scheme == "direct" and role == "joint"
+        plan = 2 * (config.control.horizon - 1) if buffered else 0
         c = self.per_agv = 3 + plan if role == "joint" else 1
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(MAX_AGVS * self.per_agv + 2,), dtype=np.float32)
         rows = np.arange(k)

@@ -29,12 +29,14 @@ accelerating; single slots cost up to 1e7), so every environment also takes
       prior does not give it (docs/rl.md compares the two zero actions: ``python benchmarks/anchors.py``).
 
     Increments (Joint): a residual ``a * residual_scale * Delta-a_max`` on the first increment
-    (under ``control.actuator="buffer"`` the packet carries the rest of the anchor's planned
-    sequence as it planned it; the LQR anchor's rest is zeros, a hold)
     of the outage-aware MPC at each link's planned success probability (the QP P3 that drives
     the AGVs of ``lawn/Comm-v1``, :class:`lawn_env.mpc.OutageAwareMPC`), clipped to the control
     set; or, with ``increment_anchor="lqr"``, on the LQR baseline's first increment (no QP: the
     from-scratch recipe's anchor, with the distance prior an interface without the expert's MPC).
+    Under ``control.actuator="buffer"`` the packet carries the rest of the anchor's planned
+    sequence as it planned it (the LQR anchor's rest is zeros, a hold); the anchor of the delivery
+    law weighs psi-bar by what each command is worth with a hold on loss (it does not see the
+    buffers; the Comm envs' AGVs do).
     (A cheaper anchor, the unconstrained MPC's linear gain saturated afterwards, costs many times
     the MPC even with perfect links: the reference paths ask for more than the AGVs' acceleration
     bounds at their corners, and only a controller that plans with the bounds takes them well.)

@@ -489,15 +489,15 @@ class OutageAwareMPC:
         (:meth:`_played`). The next command is the horizon's first increment that may be non-zero
         (:func:`command_mask`; the first with commands every slot; none when the period outlasts the
         horizon, and then nothing is held). Its phases are ``P .. 2P-1`` of the compiled pencils."""
-        n, p = self._n, self.control_period
+        n, p, horizon = self._n, self.control_period, self.model.horizon
         phase = np.asarray(data.phase, dtype=np.int64)
         first = (p - phase) % p  # the horizon index of the next command: 0 on a command slot
         lower, upper = data.lower.copy(), data.upper.copy()
         held = np.zeros((*data.lower.shape[:-1], 2 * n), dtype=bool)
         first = np.broadcast_to(first[..., None], data.constant.shape)
-        axes = 2 * np.minimum(first, n - 1)[..., None] + np.arange(2)
+        axes = 2 * np.minimum(first, horizon - 1)[..., None] + np.arange(2)
         np.put_along_axis(held, axes, True, axis=-1)
-        held &= (first < n)[..., None]  # a period longer than the horizon: no command in it to hold
+        held &= (first < horizon)[..., None]  # a period longer than the horizon: no command in it to hold
         lower[held], upper[held] = 0.0, 0.0
         lost_phase = int(phase) + p if phase.ndim == 0 else phase + p
         lost = SlotData(data.residual, data.linear, data.constant, lower, upper, lost_phase)
@@ -506,7 +506,10 @@ class OutageAwareMPC:
     def _played(self, lost: SlotData, first: np.ndarray, queue: np.ndarray) -> SlotData:
         """:meth:`lost_command`'s QPs with the held increment (horizon index ``first``) at the buffered
         actuator's ``c`` instead of zero: the queue's element ``first`` (zero past its end: a spent
-        buffer holds), saturated into the control set as the simulator saturates it. With z = c + w and
+        buffer holds), clipped to the increment bound and saturated into the control set as the
+        simulator does. The increments before ``first`` (slots without a command) stay zero, as a
+        period-aware planner's plans have them (other increments there the simulator plays but this
+        does not price). With z = c + w and
         w's held entries zero, ``z'Gz + 2 l'z + M`` (G = F'Q4F + Q5, psi = 1) is
         ``w'Gw + 2 (l + G c)'w + c'Gc + 2 l'c + M``, and the running-sum bounds from ``first`` on move by c."""
         n, horizon = self._n, self._n // 2
@@ -522,6 +525,7 @@ class OutageAwareMPC:
             at = np.minimum(first, length - 1)[..., None, None].repeat(2, -1)
             played = np.where((first < length)[..., None], np.take_along_axis(queue, at, axis=-2)[..., 0, :], 0.0)
         c = np.zeros((*first.shape, horizon, 2))
+        played = np.clip(played, -self.accel_increment_max, self.accel_increment_max)
         step = np.clip(played, np.take_along_axis(lost.lower, sums, -1), np.take_along_axis(lost.upper, sums, -1))
         np.put_along_axis(c, index[..., None, None].repeat(2, -1),
                           np.where((first < horizon)[..., None], step, 0.0)[..., None, :], axis=-2)

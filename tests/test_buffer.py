@@ -257,3 +257,29 @@ def test_the_buffer_beats_the_hold_on_a_poor_link_seed():
             done = terminated or truncated
         costs[actuator] = info["episode_metrics"]["control_cost"]
     assert costs["buffer"] < 0.85 * costs["hold"]
+
+
+def test_a_plan_outside_the_increment_bound_is_clipped_into_the_packet():
+    """The packet carries the plan inside the control set: a planner that left later increments unbounded
+    (the loss-aware tail releases their bounds) does not make an AGV play more than Delta-a_max."""
+    sim = _sim()
+    k, length, bound = sim.num_agvs, sim.params.buffer_length, CFG.control.accel_increment_max_mps2
+    plan = np.full((k, length, 2), 5.0 * bound)
+    sim.step(_decide(sim, np.zeros((k, 2)), plan), SlotDraws(np.full((1, k), DELIVERED)))
+    np.testing.assert_array_equal(sim.state.buffer[0], bound)
+
+
+def test_the_entity_rows_carry_the_plans_of_the_direct_actions_only():
+    """The entity layout's Joint row is (increment, power weight, plan) under the direct actions of the
+    buffered actuator and (increment, power weight) under the anchored ones; its gather is a bijection
+    between the present entries and the flat action."""
+    from lawn_env.entities import MAX_AGVS, EntityLayout
+
+    length = CFG.control.horizon - 1
+    direct, anchored = EntityLayout(CFG, "joint", 10.0, "direct"), EntityLayout(CFG, "joint", 10.0, "anchored")
+    assert (direct.per_agv, anchored.per_agv) == (3 + 2 * length, 3)
+    flat_size = gym.make("lawn/Joint-v1", config=CFG).action_space.shape[0]
+    assert sorted(direct.gather.tolist()) == sorted(set(direct.gather.tolist())) and direct.gather.size == flat_size
+    flat = np.random.default_rng(0).uniform(-1, 1, flat_size)
+    np.testing.assert_array_equal(direct.to_flat_actions(direct.to_entity_actions(flat)), flat.astype(np.float32))
+    assert direct.action_space.shape == (MAX_AGVS * (3 + 2 * length) + 2,)

@@ -32,7 +32,8 @@ def fleet_pairs(env_id: str, config: ScenarioConfig, steps: int, seed: int, inte
     which entries carry a label (steps, A): the AGVs present and the drone."""
     iface = resolve_interface(interface)
     obs, labels, _ = collect(env_id, config, expert, steps, seed, iface, actor=actor)
-    layout = EntityLayout(config, "joint" if env_id == "lawn/Joint-v1" else "comm", iface.obs_bound)
+    role = "joint" if env_id == "lawn/Joint-v1" else "comm"
+    layout = EntityLayout(config, role, iface.obs_bound, iface.action_scheme)
     present = np.zeros((len(labels), layout.action_space.shape[0]), dtype=bool)
     present[:, layout.gather] = True
     return layout.observe(obs), layout.to_entity_actions(labels), present

@@ -169,7 +169,7 @@ class Engine:
         self.slot_table = self.layout.slot_table(self.sim.params.fixed_reference)
         self._no_termination = np.zeros(self.num_envs, dtype=bool)
         #: The entity layout of the interface's ``layout="entities"`` (:mod:`lawn_env.entities`); None: flat.
-        self.entities = (EntityLayout(config, role, self.interface.obs_bound, self.actions.plan_size > 0)
+        self.entities = (EntityLayout(config, role, self.interface.obs_bound, self.interface.action_scheme)
                          if self.interface.layout == "entities" else None)
         self.trail: Trail | None = None
         if trail_row is not None:

@@ -77,7 +77,9 @@ class CommEnv(LawnEnv):
       (opt-in; the default law is the paper's, so every default episode is unchanged) became the
       loss-aware tail's command (:class:`lawn_env.tail.DeliveryLaw`), the former delivery law kept as
       ``"delivery-certainty-equivalent"``; ``info["episode_metrics"]`` gained ``max_tracking_error_m``
-      and ``diverged``.
+      and ``diverged``; the opt-in buffered actuator (``control.actuator="buffer"``: the AGVs' packets
+      carry their MPC's planned sequence, a lost one's AGV plays its buffer; the default hold's episodes
+      bit for bit as before).
     * v0: initial version; the ``interface`` keyword (opt-in) and ``info["stage_cost"]`` added
       later. Still registered: ``lawn/Comm-v0`` builds this class with ``planning_state="true"``
       (the MPC plans from the true state) and without a native vector env.

@@ -15,8 +15,9 @@ class JointEnv(LawnEnv):
     (0.5 s) the agent chooses each AGV's acceleration increment, the split of the transmit power
     budget over the K links and the drone's move. Each command reaches its AGV only if the
     short-packet link is not in outage (Nakagami-m fading, finite blocklength, MODEL.md §2); a
-    lost command leaves the AGV on its previous acceleration. This is problem P1 of the paper
-    with the agent in place of the optimizer.
+    lost command leaves the AGV on its previous acceleration (with ``control.actuator="buffer"``:
+    the AGV plays the next increment of the last plan it received, MODEL.md §3). This is problem
+    P1 of the paper with the agent in place of the optimizer.
 
     ## Action Space
 
@@ -27,6 +28,10 @@ class JointEnv(LawnEnv):
     | 0 .. 2K-1  | increment Delta-u of AGV k (x, y) | ``a * Delta-a_max`` m/s^2, saturated to ``abs(u) <= a_max`` |
     | 2K .. 3K-1 | power weight of link k            | ``w = (a+1)/2``, ``p = P_max w / max(1, sum w)``            |
     | 3K .. 3K+1 | drone velocity (x, y)             | ``a * V_max`` m/s, clipped to norm V_max, kept in area      |
+
+    Under ``control.actuator="buffer"`` the box grows by ``2 K (N_p - 1)`` entries at the end: AGV by
+    AGV, its planned increments for slots n+1 .. n+N_p-1 (x, y), ``a * Delta-a_max``, which its packet
+    carries and it plays while no new packet arrives (the zero plan holds).
 
     Actions outside [-1, 1], NaN, or of the wrong size raise ``ValueError``. With
     ``interface="rl"`` (or ``RLInterface(action_scheme="anchored")``) the same box is measured
@@ -43,7 +48,8 @@ class JointEnv(LawnEnv):
     saturate at the bound; with ``interface="rl"`` at ±10): per AGV its position, velocity and
     previous acceleration, its tracking error, the reference window of N_p + 1 slots
     (relative position, velocity, acceleration), its position relative to the drone, the last
-    outage probability, whether the last command arrived and the last power; then the drone
+    outage probability, whether the last command arrived and the last power (under the buffered
+    actuator also the ``2 (N_p - 1)`` increments its buffer would play next); then the drone
     position and the time. The table with scalings is :class:`lawn_env.spaces.ObservationLayout`;
     ``env.unwrapped.layout.decode(obs)`` inverts it.
 
@@ -91,7 +97,8 @@ class JointEnv(LawnEnv):
       env's spec carries ``max_episode_steps`` (= ``num_slots``; the env truncates itself); every
       view runs one compiled simulation core; ``render()`` frames gain a colour bar of the links'
       outage probability (green to red) and the running control cost, at 512 x 448 pixels (480 x
-      480 before); the interface's opt-in ``layout="entities"``.
+      480 before); the interface's opt-in ``layout="entities"``; the opt-in buffered actuator
+      (``control.actuator="buffer"``; the default hold's episodes bit for bit as before).
     * v0: initial version; the ``interface`` keyword (opt-in) and ``info["stage_cost"]`` added
       later. Still registered: ``lawn/Joint-v0`` builds this class without a native vector env
       (``gym.make_vec`` steps v0 scenarios side by side, each with its own generator).

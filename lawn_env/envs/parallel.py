@@ -42,8 +42,9 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):  # type: ignore[misc]  # petti
       increment, then the rest of its planned sequence, which its packet carries (MODEL.md §3).
     * With ``interface={"layout": "entities", ...}``: ``"drone"`` ``Box(-1, 1, (2,))``, its move;
       ``"agv_k"`` ``Box(-1, 1, (3,))``, its row of the entity action (the increment, then its
-      power weight: the power split is normalised over the AGVs), so that the spaces do not
-      depend on K (:mod:`lawn_env.entities`).
+      power weight: the power split is normalised over the AGVs; under the buffered actuator its
+      plan after them, ``(3 + 2 (N_p - 1),)``), so that the spaces do not depend on K
+      (:mod:`lawn_env.entities`).
 
     ## Observation Spaces
 
@@ -86,7 +87,8 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):  # type: ignore[misc]  # petti
       decisions the drone's observations, rewards and infos equal ``lawn/Joint-v1``'s bit for bit);
       ``render()`` frames as ``lawn/Joint-v1``'s history says; the opt-in entity layout
       (``interface={"layout": "entities"}``: spaces that do not depend on K, the power split decided
-      by the AGVs' own power weights).
+      by the AGVs' own power weights); the opt-in buffered actuator (``control.actuator="buffer"``: the
+      AGVs' actions carry their plans).
     """
 
     metadata = {"name": "lawn_v0", "render_modes": list(RENDER_MODES), "render_fps": 4, "is_parallelizable": True}
