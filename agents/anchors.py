@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from lawn_env import env_role
 from lawn_env.interface import InterfaceLike, action_codec, resolve_interface
 
 from .base import COMM, JOINT, Policy
@@ -49,7 +50,7 @@ class InterfacePolicy(Policy):
     def __init__(self, config: Any, env_id: str, interface: InterfaceLike = None, seed: int | None = None):
         super().__init__(config, env_id, seed)
         self.interface = resolve_interface(interface)
-        role = "joint" if env_id == JOINT else "comm"
+        role = env_role(env_id)
         self.scheme = action_codec(self.config, role, self.interface)
         self.v0 = action_codec(self.config, role, None)
 

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from lawn_env import ObservationLayout
+from lawn_env import ObservationLayout, env_role
 from lawn_env.core import Snapshot
 from lawn_env.presets import ConfigLike, resolve_config
 from lawn_env.spaces import DirectActions
@@ -49,7 +49,7 @@ class Policy:
         self.env_id = env_id
         self.layout = ObservationLayout(self.config)
         #: The v0 actions of ``env_id`` (what every policy's action is, whatever it plans with)
-        self.actions = DirectActions(self.config, "joint" if env_id == JOINT else "comm")
+        self.actions = DirectActions(self.config, env_role(env_id))
         self._seed_rng = np.random.default_rng(seed)
 
     def reset(self, seed: int | None = None) -> None:

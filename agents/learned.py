@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from lawn_env import PARALLEL_ENV_ID, ScenarioConfig
+from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, env_role
 from lawn_env.entities import MAX_AGVS, EntityLayout
 from lawn_env.interface import InterfaceLike, resolve_interface
 
@@ -157,7 +157,7 @@ class SB3Policy(InterfacePolicy):
         self.residual_settings: Mapping[str, Any] | None = None
         self._predict = _predictor(network)
         if self.interface.layout == "entities":
-            self.entities = EntityLayout(self.config, "joint" if env_id == JOINT else "comm", self.interface.obs_bound,
+            self.entities = EntityLayout(self.config, env_role(env_id), self.interface.obs_bound,
                                          self.interface.action_scheme)
             seen = getattr(network.observation_space, "spaces", {})
             if {k: v for k, v in seen.items() if k != "me"} != self.entities.observation_space.spaces:

@@ -30,9 +30,10 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 import numpy as np
 
+from lawn_env import role_env_id
 from lawn_env.envs.base import LawnEnv
 
-from .base import COMM, JOINT, Policy
+from .base import Policy
 from .policies import make_policy
 
 __all__ = ["PairedReward"]
@@ -54,7 +55,7 @@ class PairedReward(gym.Wrapper[Any, Any, Any, Any]):
             raise TypeError(f"PairedReward wraps a lawn env (lawn/Joint-v1, lawn/Comm-v1); got {type(base).__name__}")
         if not (isinstance(gamma, (int, float)) and 0.0 < gamma <= 1.0):
             raise ValueError(f"gamma={gamma!r}: must be a number in (0, 1]")
-        env_id = COMM if base.role == "comm" else JOINT
+        env_id = role_env_id(base.role)
         kwargs: dict[str, Any] = {"config": base.config}
         if base.planning_state != "measured":
             kwargs["planning_state"] = base.planning_state

@@ -27,7 +27,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from lawn_env import ObservationLayout, ScenarioConfig
+from lawn_env import ObservationLayout, ScenarioConfig, env_role, role_env_id
 from lawn_env.envs.base import LawnEnv
 from lawn_env.interface import InterfaceLike, action_codec, resolve_interface
 from lawn_env.spaces import check_action
@@ -70,7 +70,7 @@ class ResidualActions:
         self.anchor = anchor
         if self.anchor.env_id != env_id:
             raise ValueError(f"anchor {self.anchor.name!r} drives {self.anchor.env_id}, not {env_id}")
-        role = "joint" if env_id == JOINT else "comm"
+        role = env_role(env_id)
         self.scheme, self.v0 = action_codec(config, role, self.interface), action_codec(config, role, None)
         self.layout = ObservationLayout(config)
         self.scale = settings["scale"]
@@ -104,7 +104,7 @@ class AnchorResidual(gym.ActionWrapper[Any, np.ndarray, np.ndarray]):
         if not isinstance(base, LawnEnv):
             raise TypeError(f"AnchorResidual wraps a lawn env (lawn/Joint-v1, lawn/Comm-v1); got {type(base).__name__}")
         self.base: LawnEnv = base
-        self.residual = ResidualActions(anchor, base.config, COMM if base.role == "comm" else JOINT, base.interface,
+        self.residual = ResidualActions(anchor, base.config, role_env_id(base.role), base.interface,
                                         scale)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:

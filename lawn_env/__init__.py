@@ -83,6 +83,30 @@ for _env_id, (_base, _kwargs) in LEGACY_ENV_IDS.items():
     if _env_id not in registry:
         register(id=_env_id, entry_point=ENV_IDS[_base], kwargs=_kwargs, **_EPISODE)
 
+#: What the actions of each environment decide (a role of :data:`lawn_env.spaces.ROLES`): every
+#: increment, power and move (``joint``), or the power and the move (``comm``); the one place of it.
+ENV_ROLES = {"lawn/Joint-v1": "joint", "lawn/Comm-v1": "comm"}
+
+
+def env_role(env_id: str) -> str:
+    """The role of an env id of any kind (central, RL interface, earlier version or multi-agent):
+    ``"joint"`` or ``"comm"``; an unknown id raises ``ValueError`` naming the known ones."""
+    base = central_env_id(env_id)
+    base = RL_ENV_IDS.get(base, LEGACY_ENV_IDS[base][0] if base in LEGACY_ENV_IDS else base)
+    if base not in ENV_ROLES:
+        known = [*ENV_IDS, *RL_ENV_IDS, *LEGACY_ENV_IDS, *PARALLEL_ENV_IDS]
+        raise ValueError(f"unknown env id {env_id!r}; known: {', '.join(known)}")
+    return ENV_ROLES[base]
+
+
+def role_env_id(role: str) -> str:
+    """The central env id of a role (``"joint"``: ``lawn/Joint-v1``, ``"comm"``: ``lawn/Comm-v1``)."""
+    for env_id, own in ENV_ROLES.items():
+        if own == role:
+            return env_id
+    raise ValueError(f"role={role!r}; valid: {', '.join(ENV_ROLES.values())}")
+
+
 __all__ = [
     "ENV_IDS",
     "RL_ENV_IDS",
@@ -90,6 +114,9 @@ __all__ = [
     "PARALLEL_ENV_ID",
     "PARALLEL_ENV_IDS",
     "central_env_id",
+    "ENV_ROLES",
+    "env_role",
+    "role_env_id",
     "RLInterface",
     "RL_INTERFACE",
     "action_codec",

@@ -365,3 +365,19 @@ def test_a_run_recorded_under_a_v0_id_plays_its_current_version(tmp_path):
         assert RunDir(tmp_path, {"env": legacy, "algo": "ppo"}).env == current
     assert RunDir(tmp_path, {"env": "lawn/Comm-v1", "algo": "ppo"}).env == "lawn/Comm-v1"
     assert RunDir(tmp_path, {"env": lawn_env.PARALLEL_ENV_ID, "algo": "ppo"}).env == lawn_env.PARALLEL_ENV_ID
+
+
+def test_every_env_id_has_one_role_from_one_table():
+    """The role of an env id (what its actions decide) comes from ``lawn_env.ENV_ROLES`` alone, for the
+    central, RL, earlier and multi-agent ids; the role's central id inverts it; an unknown id is named."""
+    ids = {**{e: e for e in lawn_env.ENV_IDS}, **lawn_env.RL_ENV_IDS,
+           **{e: base for e, (base, _) in lawn_env.LEGACY_ENV_IDS.items()}, **lawn_env.PARALLEL_ENV_IDS}
+    for env_id, central in ids.items():
+        role = lawn_env.env_role(env_id)
+        assert role == lawn_env.ENV_ROLES[central] and lawn_env.role_env_id(role) == central
+    for env_id in (*lawn_env.ENV_IDS, *lawn_env.RL_ENV_IDS):
+        assert gym.make(env_id).unwrapped.role == lawn_env.env_role(env_id)
+    with pytest.raises(ValueError, match=r"unknown env id 'lawn/Nope-v1'; known: lawn/Joint-v1"):
+        lawn_env.env_role("lawn/Nope-v1")
+    with pytest.raises(ValueError, match=r"role='both'; valid: joint, comm"):
+        lawn_env.role_env_id("both")

@@ -26,7 +26,7 @@ from agents.errors import MissingExtra
 from agents.learned import ObsNormalizer, SB3Policy
 from agents.rollouts import Actor
 from agents.runs import algorithm_class
-from lawn_env import ENV_IDS, ObservationLayout, ScenarioConfig, presets
+from lawn_env import ENV_IDS, ObservationLayout, ScenarioConfig, env_role, presets
 from lawn_env.interface import InterfaceLike, RLInterface, action_codec, resolve_interface
 from lawn_env.presets import resolve_config
 from lawn_env.spaces import check_action
@@ -89,7 +89,7 @@ def label_transitions(config: ScenarioConfig, env_id: str, interface: InterfaceL
     """Behaviour-cloning pairs from v0 episodes ((T, n) observations, (T, m) actions): the observations
     as the learner sees them and the actions in the interface's scheme (decoded as v0, encoded in it)."""
     iface = resolve_interface(interface)
-    role = "joint" if env_id == "lawn/Joint-v1" else "comm"
+    role = env_role(env_id)
     v0, scheme = action_codec(config, role, None), action_codec(config, role, iface)
     layout = ObservationLayout(config)
     obs_out, act_out = [], []

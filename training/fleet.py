@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from agents.learned import SB3Policy
-from lawn_env import ScenarioConfig, presets
+from lawn_env import ScenarioConfig, env_role, presets
 from lawn_env.entities import EntityLayout
 from lawn_env.interface import InterfaceLike, resolve_interface
 
@@ -32,8 +32,7 @@ def fleet_pairs(env_id: str, config: ScenarioConfig, steps: int, seed: int, inte
     which entries carry a label (steps, A): the AGVs present and the drone."""
     iface = resolve_interface(interface)
     obs, labels, _ = collect(env_id, config, expert, steps, seed, iface, actor=actor)
-    role = "joint" if env_id == "lawn/Joint-v1" else "comm"
-    layout = EntityLayout(config, role, iface.obs_bound, iface.action_scheme)
+    layout = EntityLayout(config, env_role(env_id), iface.obs_bound, iface.action_scheme)
     present = np.zeros((len(labels), layout.action_space.shape[0]), dtype=bool)
     present[:, layout.gather] = True
     return layout.observe(obs), layout.to_entity_actions(labels), present

@@ -21,7 +21,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from agents.learned import load_saved
 from agents.runs import algorithm_class, read_run
-from lawn_env import ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig, parallel_env
+from lawn_env import ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig, parallel_env, role_env_id
 from lawn_env.interface import InterfaceLike
 
 from .callbacks import ActorWarmup, Checkpoint, ControlCostValidation, RunCheckpoint, save_model
@@ -156,13 +156,12 @@ def _lawn_wrappers(env: Any, paired: Mapping[str, Any] | None, residual: Mapping
     """A monitored env with the residual scheme (:class:`agents.residual.AnchorResidual`) and then
     the paired reward (:class:`agents.paired.PairedReward`), each when given its keywords."""
     from agents import make_policy
-    from agents.base import COMM, JOINT
     from agents.paired import PairedReward
     from agents.residual import AnchorResidual
 
     if residual is not None:
         base = env.unwrapped
-        anchor = make_policy(residual["anchor"], base.config, env_id=COMM if base.role == "comm" else JOINT)
+        anchor = make_policy(residual["anchor"], base.config, env_id=role_env_id(base.role))
         env = AnchorResidual(env, anchor, residual["scale"])
     return PairedReward(env, **paired) if paired is not None else env
 
