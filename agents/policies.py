@@ -87,10 +87,10 @@ class PlannerPolicy(Policy):
         super().__init__(config, env_id, seed)
         self.solver = self._make_solver(**settings)
 
-    def _make_solver(self, **settings: Any):
+    def _make_solver(self, **settings: Any) -> Any:
         return AOSolver(self.config, AOSettings(**settings))
 
-    def _on_reset(self, rng):
+    def _on_reset(self, rng: np.random.Generator) -> None:
         self.solver.reset()
         self.last_plan = None
 
@@ -122,7 +122,8 @@ class AOMPCPolicy(PlannerPolicy):
     name = "ao-mpc"
 
     def plan(self, snapshot: Snapshot) -> Plan:
-        return self.solver.solve(snapshot)
+        plan: Plan = self.solver.solve(snapshot)
+        return plan
 
 
 class EPAPolicy(PlannerPolicy):
@@ -131,7 +132,8 @@ class EPAPolicy(PlannerPolicy):
     name = "epa"
 
     def plan(self, snapshot: Snapshot) -> Plan:
-        return self.solver.solve(snapshot, blocks=("control", "drone"), power_w=self.solver.equal_power())
+        plan: Plan = self.solver.solve(snapshot, blocks=("control", "drone"), power_w=self.solver.equal_power())
+        return plan
 
 
 class SFPolicy(PlannerPolicy):
@@ -149,7 +151,7 @@ class SFPolicy(PlannerPolicy):
         self.heading = np.array([math.cos(heading_rad), math.sin(heading_rad)])
         self.speed_mps = self.config.drone.max_speed_mps  # drawn at reset
 
-    def _on_reset(self, rng):
+    def _on_reset(self, rng: np.random.Generator) -> None:
         super()._on_reset(rng)
         self.speed_mps = self.config.drone.max_speed_mps * (1.0 - rng.random())  # in (0, V_max]
 
@@ -157,7 +159,8 @@ class SFPolicy(PlannerPolicy):
         c = self.config
         q_next = move_drone(snapshot.drone_position, self.speed_mps * self.heading, c.drone.max_speed_mps, c.slot_s,
                             c.area_m)
-        return self.solver.solve(snapshot, blocks=("control", "power"), drone_position=q_next)
+        plan: Plan = self.solver.solve(snapshot, blocks=("control", "power"), drone_position=q_next)
+        return plan
 
 
 class PIDPolicy(PlannerPolicy):
@@ -172,7 +175,7 @@ class PIDPolicy(PlannerPolicy):
         self.gains = gains if isinstance(gains, PIDGains) else PIDGains(**dict(gains or {}))
         self.integral = np.zeros((self.config.num_agvs, 2))
 
-    def _on_reset(self, rng):
+    def _on_reset(self, rng: np.random.Generator) -> None:
         super()._on_reset(rng)
         self.integral = np.zeros((self.config.num_agvs, 2))
 
@@ -183,7 +186,8 @@ class PIDPolicy(PlannerPolicy):
             c.control.accel_max_mps2, c.control.accel_increment_max_mps2, commands=self._commands(snapshot),
         )
         self.integral = integral  # the integrator advances with the step that is sent
-        return self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
+        plan: Plan = self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
+        return plan
 
 
 class LQRPolicy(PlannerPolicy):
@@ -201,7 +205,8 @@ class LQRPolicy(PlannerPolicy):
         increments = lqr_rollout(snapshot.x_aug, snapshot.reference, self.solver.model, self.gain,
                                  c.control.accel_max_mps2, c.control.accel_increment_max_mps2,
                                  commands=self._commands(snapshot))
-        return self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
+        plan: Plan = self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
+        return plan
 
 
 class RGMPCPolicy(PlannerPolicy):
@@ -210,11 +215,12 @@ class RGMPCPolicy(PlannerPolicy):
 
     name = "rg-mpc"
 
-    def _make_solver(self, **settings: Any):
+    def _make_solver(self, **settings: Any) -> Any:
         return ReducedGradientPlanner(self.config, ReducedSettings(**settings))
 
     def plan(self, snapshot: Snapshot) -> Plan:
-        return self.solver.plan(snapshot)
+        plan: Plan = self.solver.plan(snapshot)
+        return plan
 
 
 class DVMPCPolicy(PlannerPolicy):
@@ -231,7 +237,7 @@ class DVMPCPolicy(PlannerPolicy):
 
     name = "dv-mpc"
 
-    def _make_solver(self, **settings: Any):
+    def _make_solver(self, **settings: Any) -> Any:
         law = self.config.control.law
         if self.env_id == COMM and law == "paper":
             return ReducedGradientPlanner(self.config, ReducedSettings(**settings))
@@ -246,7 +252,8 @@ class DVMPCPolicy(PlannerPolicy):
         return DeliveryValuePlanner(self.config, DeliverySettings(**settings))
 
     def plan(self, snapshot: Snapshot) -> Plan:
-        return self.solver.plan(snapshot)
+        plan: Plan = self.solver.plan(snapshot)
+        return plan
 
 
 class DVMPCCertaintyEquivalentPolicy(DVMPCPolicy):
@@ -256,7 +263,7 @@ class DVMPCCertaintyEquivalentPolicy(DVMPCPolicy):
 
     name = "dv-mpc-ce"
 
-    def _make_solver(self, **settings: Any):
+    def _make_solver(self, **settings: Any) -> Any:
         if settings.get("tail", _CERTAINTY_EQUIVALENT) != _CERTAINTY_EQUIVALENT:
             raise ValueError(f"tail={settings['tail']!r}: {self.name} is dv-mpc with tail='certainty-equivalent' "
                              "(use dv-mpc for another tail)")
@@ -272,11 +279,12 @@ class GlobalMPCPolicy(PlannerPolicy):
 
     name = "global-mpc"
 
-    def _make_solver(self, **settings: Any):
+    def _make_solver(self, **settings: Any) -> Any:
         return GlobalPlanner(self.config, GlobalSettings(**settings))
 
     def plan(self, snapshot: Snapshot) -> Plan:
-        return self.solver.plan(snapshot)
+        plan: Plan = self.solver.plan(snapshot)
+        return plan
 
 
 #: The one registry of policy names; the command line reads its choices from here.
@@ -312,7 +320,8 @@ def attach_residual(policy: Policy, settings: Mapping[str, Any] | None) -> Polic
     with_residual = getattr(policy, "with_residual", None)
     if with_residual is None:
         raise ValueError(f"{policy.name} records a residual scheme but cannot act by one")
-    return with_residual(ResidualActions(anchor, policy.config, policy.env_id, interface, checked["scale"]))
+    wrapped: Policy = with_residual(ResidualActions(anchor, policy.config, policy.env_id, interface, checked["scale"]))
+    return wrapped
 
 
 def policy_names() -> list[str]:
@@ -350,4 +359,5 @@ def make_policy(name: str, config: ConfigLike = None, env_id: str | None = None,
     except (KeyError, TypeError):
         raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICIES)}, "
                          f"or {learned_name_forms()} for trained agents") from None
-    return factory(config, env_id=env_id, seed=seed, **kwargs)
+    built: Policy = factory(config, env_id=env_id, seed=seed, **kwargs)
+    return built

@@ -89,7 +89,9 @@ class ResidualActions:
 
     def action(self, residual: np.ndarray, obs: np.ndarray) -> np.ndarray:
         """The interface's action: the anchor's, moved by ``scale`` times the learner's ``residual``."""
-        return np.clip(self.anchor_action(obs) + self.scale * np.asarray(residual, dtype=np.float64), -1.0, 1.0)
+        moved: np.ndarray = np.clip(self.anchor_action(obs) + self.scale * np.asarray(residual, dtype=np.float64),
+                                    -1.0, 1.0)
+        return moved
 
 
 class AnchorResidual(gym.ActionWrapper[Any, np.ndarray, np.ndarray]):

@@ -77,6 +77,10 @@ class SlotData:
         return np.broadcast_to(np.asarray(self.phase, dtype=np.int64)[..., None], self.constant.shape).reshape(-1)
 
 
+#: A reference backend's answer to one QP: (z or None when it failed, iterations, objective).
+Solved = tuple[np.ndarray | None, int, float]
+
+
 class _DaqpBackend:
     """One persistent ``daqp.Model`` per problem index (dual active set, exact, warm-started)."""
 
@@ -90,7 +94,7 @@ class _DaqpBackend:
         self._models: dict[int, Any] = {}
 
     def solve(self, k: int, p: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-              bounds_changed: bool = True):
+              bounds_changed: bool = True) -> Solved:
         model = self._models.get(k)
         if model is None:
             model = self._daqp.Model()
@@ -132,7 +136,8 @@ class _OsqpBackend:
         self._sparse = sparse
         self._solvers: dict[int, Any] = {}
 
-    def solve(self, k, p, q, lower, upper, bounds_changed: bool = True):
+    def solve(self, k: int, p: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+              bounds_changed: bool = True) -> Solved:
         solver = self._solvers.get(k)
         px = p[self._triu_csc]
         if solver is None:
@@ -170,7 +175,8 @@ class _QpsolversBackend:
         self._g = np.vstack([constraint_matrix, -constraint_matrix])
         self._n = constraint_matrix.shape[1]
 
-    def solve(self, k, p, q, lower, upper, bounds_changed: bool = True):
+    def solve(self, k: int, p: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+              bounds_changed: bool = True) -> Solved:
         n = self._n
         h = np.concatenate([upper[n:], -lower[n:]])
         x = self._qpsolvers.solve_qp(p, q, G=self._g, h=h, lb=lower[:n], ub=upper[:n], solver=self._solver)
@@ -201,8 +207,10 @@ class _CompiledBackend:
                 sets.reshape(shape + sets.shape[1:])[rows] = 0
 
     def solve_all(self, key: tuple[Any, ...], s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                  phase: np.ndarray, start: tuple[Any, ...] | None = None):
-        """Solve the stack from the working sets kept under ``key`` (or copied from ``start``'s)."""
+                  phase: np.ndarray, start: tuple[Any, ...] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Solve the stack from the working sets kept under ``key`` (or copied from ``start``'s):
+        (z, objective, iterations, settled) per problem."""
         source = self.working_sets.get(start) if start is not None else None
         if source is not None:
             self.working_sets[key] = source.copy()
@@ -216,9 +224,11 @@ class _CompiledBackend:
 
 #: The named backends.
 BACKENDS = ("compiled", "daqp", "osqp")
+#: A backend that solves one QP at a time through Python (the references of the compiled one).
+ReferenceBackend = _DaqpBackend | _OsqpBackend | _QpsolversBackend
 
 
-def _reference_backend(name: str, constraint_matrix: np.ndarray):
+def _reference_backend(name: str, constraint_matrix: np.ndarray) -> ReferenceBackend:
     if name == "daqp":
         return _DaqpBackend(constraint_matrix)
     if name == "osqp":
@@ -261,7 +271,7 @@ class OutageAwareMPC:
         # the reference backends' last bounds (their workspaces keep them)
         self._last_bounds: tuple[np.ndarray, np.ndarray] | None = None
 
-    def _make_backend(self, name: str):
+    def _make_backend(self, name: str) -> ReferenceBackend | _CompiledBackend:
         if name == "compiled":
             given = self._given_pencils
             return _CompiledBackend(given if given is not None else _pencils(self.model.key, self.control_period))
@@ -303,7 +313,7 @@ class OutageAwareMPC:
         if which is not None:
             which = np.asarray(which, dtype=bool)
             rows = np.flatnonzero(which)
-            if self.backend_name == "compiled":
+            if isinstance(self.backend, _CompiledBackend):
                 self.backend.forget(rows, which.shape[0])
                 return
         self.backend = self._make_backend(self.backend_name)
@@ -421,7 +431,7 @@ class OutageAwareMPC:
             phase = np.broadcast_to(np.asarray(data.phase, dtype=np.int64)[..., None], lead).reshape(count)
         q = ((2.0 * psi)[..., None] * data.linear).reshape(count, n)  # H' = 2 psi F'Q4 r
         s = (psi * psi).reshape(count)
-        if self.backend_name == "compiled":  # blocked increments come back exactly zero
+        if isinstance(self.backend, _CompiledBackend):  # blocked increments come back exactly zero
             z, fval, iterations, settled = self.backend.solve_all((lead, warm_key), s, q, lower, upper, phase,
                                                                   None if start_from is None else (lead, start_from))
             status = np.zeros(count, dtype=np.int8)
@@ -440,7 +450,8 @@ class OutageAwareMPC:
             solve_time_s=time.perf_counter() - start,
         )
 
-    def _solve_each(self, s, q, lower, upper):
+    def _solve_each(self, s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The reference backends: one problem at a time, each with its own warm workspace."""
         count, n = q.shape
         last = self._last_bounds
@@ -450,15 +461,18 @@ class OutageAwareMPC:
         fval = np.empty(count)
         status = np.zeros(count, dtype=np.int8)
         iterations = np.zeros(count, dtype=np.int64)
+        backend = self.backend
+        assert not isinstance(backend, _CompiledBackend)  # the reference backends solve one at a time
         for i in range(count):
             p = self.hessian(s[i])
-            x, its, f = self.backend.solve(i, p, q[i], lower[i], upper[i], bounds_changed)
+            x, its, f = backend.solve(i, p, q[i], lower[i], upper[i], bounds_changed)
             if x is None:
                 x, f, its, status[i] = self._fallback_solve(i, s[i], q[i], lower[i], upper[i])
             z[i], fval[i], iterations[i] = x, f, its
         return z, fval, iterations, status
 
-    def _fallback_solve(self, i: int, s: float, q: np.ndarray, lower: np.ndarray, upper: np.ndarray):
+    def _fallback_solve(self, i: int, s: float, q: np.ndarray, lower: np.ndarray, upper: np.ndarray
+                        ) -> tuple[np.ndarray, float, int, int]:
         """A problem the backend did not settle: a cold DAQP solve, then a cold OSQP solve, then the
         zero sequence (feasible whenever ``|u[n-1]| <= a_max``, which the simulator keeps). Returns
         (z, objective, iterations, status 1 or 2)."""
@@ -478,7 +492,8 @@ class OutageAwareMPC:
         (feasible, since the simulator keeps ``|u[n-1]| <= a_max``) and ``V_k(0) = r' Q4 r`` is the
         prepared constant; ``V_k(1)`` is one solve."""
         delivered = self.solve_prepared(data, np.ones(data.constant.shape), warm_key="stakes").value
-        return np.maximum(data.constant - delivered, 0.0)
+        stakes: np.ndarray = np.maximum(data.constant - delivered, 0.0)
+        return stakes
 
 
     def lost_command(self, data: SlotData, queue: np.ndarray | None = None) -> SlotData:

@@ -90,7 +90,8 @@ def _check_anchor(key: str, anchor: str | None, env_id: str) -> None:
     if env_id not in _LAWN:
         what = "paired reward" if key == "paired_anchor" else "residual scheme"
         raise ValueError(f"--hp {key}={anchor!r}: the {what} wraps {', '.join(_LAWN)}, not {env_id}")
-    from agents.policies import LOADERS, POLICIES
+    from agents.learned import LOADERS
+    from agents.policies import POLICIES
 
     prefix = anchor.split(":", 1)[0] if ":" in anchor else None
     if (anchor not in POLICIES) if prefix is None else (prefix not in LOADERS):

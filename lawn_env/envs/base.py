@@ -60,11 +60,12 @@ class JointRole:
     def reset(self, which: np.ndarray | None = None) -> None:
         """New episodes for the scenarios ``which`` (all when None)."""
 
-    def decide(self, sim: Simulation, decision: Decisions, windows: np.ndarray | None) -> tuple[Decisions, dict]:
+    def decide(self, sim: Simulation, decision: Decisions, windows: np.ndarray | None
+               ) -> tuple[Decisions, dict[str, Any]]:
         """The slot's decisions for the decoded actions (they are), and the role's info keys."""
         return decision, {}
 
-    def reset_info(self, sim: Simulation) -> dict:
+    def reset_info(self, sim: Simulation) -> dict[str, Any]:
         return {}
 
 
@@ -97,7 +98,8 @@ class CommRole:
         if self.delivery is not None:
             self.delivery.reset(which)
 
-    def decide(self, sim: Simulation, decision: Decisions, windows: np.ndarray | None) -> tuple[Decisions, dict]:
+    def decide(self, sim: Simulation, decision: Decisions, windows: np.ndarray | None
+               ) -> tuple[Decisions, dict[str, Any]]:
         assert windows is not None  # the engine passes them to a role that plans
         x = sim.x_obs if self.planning_state == "measured" else sim.x_aug
         psi = link_success(x, decision.drone_next, decision.power_w, sim.params.planning_link)
@@ -114,7 +116,7 @@ class CommRole:
         plan = later_increments(solution.increments, length) if length else None
         return Decisions(solution.increments[..., 0, :], decision.power_w, decision.drone_next, plan), extra
 
-    def reset_info(self, sim: Simulation) -> dict:
+    def reset_info(self, sim: Simulation) -> dict[str, Any]:
         b, k = sim.num_envs, sim.num_agvs
         return {"mpc_iterations": np.zeros((b, k), dtype=np.int64), "mpc_fallbacks": np.zeros(b, dtype=np.int64),
                 "success_probability_planned": link_success(
@@ -136,7 +138,7 @@ class SlotResult(NamedTuple):
     the rewards (B, M), and which scenarios terminate and are truncated (B,)."""
 
     record: SlotRecord
-    extra: dict
+    extra: dict[str, Any]
     reward: np.ndarray
     terminated: np.ndarray
     truncated: np.ndarray
@@ -188,7 +190,7 @@ class Engine:
         return self.trail
 
     @property
-    def observation_space(self) -> gym.spaces.Space:
+    def observation_space(self) -> gym.spaces.Space[Any]:
         """One scenario's observation space in the interface's layout."""
         if self.entities is None:
             return self.interface.observation_space(self.layout.size)
@@ -214,7 +216,7 @@ class Engine:
         a = check_action(actions, self.action_space.shape[0], name, self.num_envs if batch else None)
         return a if self.entities is None else self.entities.to_flat_actions(a)
 
-    def decide(self, actions: np.ndarray) -> tuple[Decisions, dict]:
+    def decide(self, actions: np.ndarray) -> tuple[Decisions, dict[str, Any]]:
         """The slot's decisions of every scenario for checked actions (B, size), and the role's info."""
         sim = self.sim
         windows = sim.reference_windows() if self.needs_windows else None
@@ -262,7 +264,8 @@ class Engine:
             reward[terminated] += iface.terminal_penalties(sim.num_slots - sim.state.slot[terminated])[:, None]
         return reward, terminated, ended & ~terminated
 
-    def info(self, record: SlotRecord | None = None, extra: dict | None = None, i: int | None = None) -> dict:
+    def info(self, record: SlotRecord | None = None, extra: dict[str, Any] | None = None,
+             i: int | None = None) -> dict[str, Any]:
         """The info keys (``INFO_KEYS`` and the role's) of every scenario with a leading B axis, or
         of scenario ``i`` alone: ``slot`` int64, ``stage_cost`` and its split ``reward_tracking`` +
         ``reward_effort`` (negated) float64, ``delivered`` (K,) bool, ``outage_probability`` and
@@ -323,7 +326,8 @@ class Engine:
 
             self._renderer = Renderer(self.config, human=render_mode == "human")
         trail = self.kept_trail
-        return self._renderer.draw(trail.view, trail)
+        frame: np.ndarray | None = self._renderer.draw(trail.view, trail)
+        return frame
 
     def close(self) -> None:
         if self._renderer is not None:
@@ -400,7 +404,8 @@ class LawnEnv(EngineAccess, gym.Env):
             value = dataclasses.replace(value, max_episode_steps=self.config.num_slots)
         self.__dict__["_spec"] = value
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Observation, dict[str, Any]]:
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[Observation, dict[str, Any]]:
         super().reset(seed=seed)
         # ``options`` is accepted for API compatibility (PettingZoo's test passes some); none is used.
         self.engine.reset([self.np_random])
@@ -434,17 +439,18 @@ class LawnEnv(EngineAccess, gym.Env):
         unclipped), whatever this env's interface: what the experts of ``agents`` act on."""
         if not self.engine.sim.started:
             raise RuntimeError("call reset() before benchmark_observation()")
-        return self.layout.encode(self.engine.sim, _BENCHMARK_BOUND, self.engine.slot_table)[0]
+        obs: np.ndarray = self.layout.encode(self.engine.sim, _BENCHMARK_BOUND, self.engine.slot_table)[0]
+        return obs
 
     def snapshot(self) -> Snapshot:
         """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""
         return self.engine.snapshot()
 
-    def trajectories(self) -> dict:
+    def trajectories(self) -> dict[str, Any]:
         """The current episode's drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions."""
         return self.engine.kept_trail.trajectories()
 
-    def episode_metrics(self) -> dict:
+    def episode_metrics(self) -> dict[str, Any]:
         return self.sim.episode_metrics()
 
     def render(self) -> np.ndarray | None:
