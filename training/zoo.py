@@ -335,9 +335,12 @@ def format_zoo_list() -> str:
                                   for ref, changes in refs.items())
                 lines.append(f"  {task}, test seeds {bench.get('test_seeds')} (geometric, per range): {cells}")
         else:
+            same = abs(gain[0]) <= gain[1]  # the interval holds zero: no measured change from the anchor
             lines.append(f"  test seeds {bench.get('test_seeds')}: cost vs rg-mpc {fmt_paired(*ship)}, vs its anchor "
-                         f"{bench.get('anchor', '?')} {fmt_paired(*gain)}, score v{bench.get('score_version', '?')} "
-                         f"{bench.get('score', [math.nan])[0]:.1f}")
+                         f"{bench.get('anchor', '?')} {fmt_paired(*gain)}"
+                         + (" (no different from its anchor)" if same else "")
+                         + f", score v{bench.get('score_version', '?')} {bench.get('score', [math.nan])[0]:.1f} "
+                         f"(recorded when the zoo was built; the leaderboard scores v{SCORE_VERSION})")
         lines.append(f"  trained with: {rec.get('command')}")
     return "\n".join(lines)
 
