@@ -54,10 +54,11 @@ class SlotProblem:
     ``config`` is the planner's own, the one its ``mpc`` and ``link`` were built from, not the
     snapshot's: the sizes, the power budget, the drone's reach V_max Δτ and the area are those of the
     system it plans for (a planner built for another drone speed than the environment's plans the
-    moves of the drone it was built for)."""
+    moves of the drone it was built for). ``moves``: the slots the drone moves before the decision
+    acts (its reach is that many slots'; ``dv-mpc`` under a control period)."""
 
     def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig,
-                 state: np.ndarray | None = None):
+                 state: np.ndarray | None = None, moves: int = 1):
         self.mpc = mpc
         self.link = link
         # x~ as the planner estimates it (``state``: a tracker's, with the applied acceleration after
@@ -75,7 +76,7 @@ class SlotProblem:
         self._state = self.x_aug if state is None else np.asarray(state, dtype=float)
         self._slot = snapshot.slot
         self.budget = config.power_budget_w
-        self.reach = float(config.drone_reach_m)
+        self.reach = float(config.drone_reach_m) * moves  # the drone's reach over ``moves`` slots
         self.area = config.area_m
 
     @functools.cached_property

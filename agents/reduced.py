@@ -61,8 +61,9 @@ from .estimation import AGVTracker
 from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
 from .problem import Plan, SlotProblem
 
-__all__ = ["ReducedProblem", "ValueTable", "ReducedSettings", "ReducedGradientPlanner", "GlobalPlanner",
-           "GlobalSettings", "DeliveryProblem", "DeliveryValue", "DeliverySettings", "DeliveryValuePlanner"]
+__all__ = ["ReducedProblem", "ValueTable", "PlannerSettings", "SearchSettings", "ReducedSettings",
+           "ReducedGradientPlanner", "GlobalPlanner", "GlobalSettings", "DeliveryProblem", "DeliveryValue",
+           "DeliverySettings", "DeliveryValuePlanner"]
 
 
 @dataclass
@@ -84,8 +85,8 @@ class ReducedProblem(SlotProblem):
     slot problem with the controls solved out."""
 
     def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig,
-                 state: np.ndarray | None = None):
-        super().__init__(mpc, link, snapshot, config, state)
+                 state: np.ndarray | None = None, moves: int = 1):
+        super().__init__(mpc, link, snapshot, config, state, moves)
         self.evaluations = 0
 
     # ------------------------------------------------------------------ exact
@@ -250,8 +251,9 @@ class DeliveryProblem(ReducedProblem):
     is the channel alone."""
 
     def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig,
-                 state: np.ndarray | None = None, values: tuple[MPCSolution, np.ndarray] | None = None):
-        super().__init__(mpc, link, snapshot, config, state)
+                 state: np.ndarray | None = None, values: tuple[MPCSolution, np.ndarray] | None = None,
+                 moves: int = 1):
+        super().__init__(mpc, link, snapshot, config, state, moves)
         # (V^del's solution, V^lost): the certainty-equivalent MPC's unless given (the loss-aware tail's)
         self.delivered, self.lost = mpc.delivery_values(self.data, snapshot.buffer) if values is None else values
         self.worth = self.lost - self.delivered.value  # w_k >= 0
@@ -290,20 +292,15 @@ _CFG = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 @raises_config_errors(noun="setting")
 @pydantic_dataclass(frozen=True, config=_CFG)
-class ReducedSettings:
-    """Resolution and iteration budget of ``rg-mpc``."""
+class PlannerSettings:
+    """What every reduced-problem planner's search reads (the fields once; each planner's settings
+    class below changes their defaults and adds its own)."""
 
-    psi_points: Annotated[int, Field(ge=2)] = 9
-    """psi grid points (uniform on [0, 1]) of the tabulated V_k used to pick the starting point."""
     drone_spacing_m: Annotated[float, Field(gt=0)] = 1.5
     """Spacing of the drone grid over the disc ∩ area for the starting point."""
     max_drone_points: Annotated[int, Field(ge=1)] = 10_000
     """Cap on the drone grid: a larger reach (V_max Δτ) widens the spacing instead (bounded time
     and memory whatever the config; the default reach of 7.5 m needs 81 points)."""
-    coarse_power_levels: Annotated[int, Field(ge=2)] = 12
-    """Every grid position is scored with power in units of P_max / coarse_power_levels ..."""
-    keep_positions: Annotated[int, Field(ge=1)] = 4
-    """... and the best ``keep_positions`` are split finely."""
     power_levels: Annotated[int, Field(ge=2)] = 40
     """Units of P_max / power_levels for the exact split of the starting point."""
     refine_iterations: Annotated[int, Field(ge=0)] = 4
@@ -313,29 +310,43 @@ class ReducedSettings:
 
 @raises_config_errors(noun="setting")
 @pydantic_dataclass(frozen=True, config=_CFG)
-class GlobalSettings:
-    """Resolution of the global reference ``global-mpc`` (same meanings as :class:`ReducedSettings`;
-    every drone position is split at the full power resolution, no coarse stage)."""
+class SearchSettings(PlannerSettings):
+    """:class:`PlannerSettings` with the coarse stage of the search (``rg-mpc``'s and ``dv-mpc``'s)."""
 
-    psi_points: Annotated[int, Field(ge=2)] = 401
-    drone_spacing_m: Annotated[float, Field(gt=0)] = 0.5
-    max_drone_points: Annotated[int, Field(ge=1)] = 20_000
-    power_levels: Annotated[int, Field(ge=2)] = 200
-    refine_iterations: Annotated[int, Field(ge=0)] = 60
-    qp_backend: str = DEFAULT_BACKEND
+    coarse_power_levels: Annotated[int, Field(ge=2)] = 12
+    """Every grid position is scored with power in units of P_max / coarse_power_levels ..."""
+    keep_positions: Annotated[int, Field(ge=1)] = 4
+    """... and the best ``keep_positions`` are split finely."""
 
 
 @raises_config_errors(noun="setting")
 @pydantic_dataclass(frozen=True, config=_CFG)
-class DeliverySettings:
+class ReducedSettings(SearchSettings):
+    """Resolution and iteration budget of ``rg-mpc``."""
+
+    psi_points: Annotated[int, Field(ge=2)] = 9
+    """psi grid points (uniform on [0, 1]) of the tabulated V_k used to pick the starting point."""
+
+
+@raises_config_errors(noun="setting")
+@pydantic_dataclass(frozen=True, config=_CFG)
+class GlobalSettings(PlannerSettings):
+    """Resolution of the global reference ``global-mpc`` (meanings as in :class:`ReducedSettings`;
+    every drone position is split at the full power resolution, no coarse stage)."""
+
+    drone_spacing_m: Annotated[float, Field(gt=0)] = 0.5
+    max_drone_points: Annotated[int, Field(ge=1)] = 20_000
+    power_levels: Annotated[int, Field(ge=2)] = 200
+    refine_iterations: Annotated[int, Field(ge=0)] = 60
+    psi_points: Annotated[int, Field(ge=2)] = 401
+
+
+@raises_config_errors(noun="setting")
+@pydantic_dataclass(frozen=True, config=_CFG)
+class DeliverySettings(SearchSettings):
     """Resolution and iteration budget of ``dv-mpc`` (meanings as in :class:`ReducedSettings`; no psi
     table: its values are linear in psi). An evaluation costs no QP, so it refines longer."""
 
-    drone_spacing_m: Annotated[float, Field(gt=0)] = 1.5
-    max_drone_points: Annotated[int, Field(ge=1)] = 10_000
-    coarse_power_levels: Annotated[int, Field(ge=2)] = 12
-    keep_positions: Annotated[int, Field(ge=1)] = 4
-    power_levels: Annotated[int, Field(ge=2)] = 40
     refine_iterations: Annotated[int, Field(ge=0)] = 8
     model_lag: bool = True
     """Predict with the actuator lag the config declares (``disturbance.actuator_lag_s``): the MPC's
@@ -370,7 +381,6 @@ class DeliverySettings:
     """The certainty-equivalent tail's terminal weight: 1, the loss-free DARE's (the paper's Q3); below 1,
     the modified Riccati equation's at that success probability behind stages priced as delivered
     (docs/experts.md: measured, not adopted; ``tail="certainty-equivalent"`` only)."""
-    qp_backend: str = DEFAULT_BACKEND
 
     def __post_init__(self) -> None:
         if self.tail == "loss-aware" and self.terminal_success != 1.0:
@@ -379,41 +389,21 @@ class DeliverySettings:
                              "delivery (set tail='certainty-equivalent' to use it)")
 
 
-class _PlannerSettings(Protocol):
-    """What :class:`_ReducedPlannerBase` reads of its planner's settings."""
-
-    @property
-    def qp_backend(self) -> str: ...
-    @property
-    def drone_spacing_m(self) -> float: ...
-    @property
-    def max_drone_points(self) -> int: ...
-    @property
-    def power_levels(self) -> int: ...
-    @property
-    def refine_iterations(self) -> int: ...
-
-
-class _SearchSettings(_PlannerSettings, Protocol):
-    """What :class:`ReducedGradientPlanner`'s coarse search reads besides (rg-mpc's and dv-mpc's)."""
-
-    @property
-    def coarse_power_levels(self) -> int: ...
-    @property
-    def keep_positions(self) -> int: ...
-
-
 class _ReducedPlannerBase:
-    settings_class: type[_PlannerSettings] = ReducedSettings
-    settings: _PlannerSettings
+    settings_class: type[PlannerSettings] = ReducedSettings
+    settings: PlannerSettings
 
-    def __init__(self, config: ScenarioConfig, settings: _PlannerSettings | None = None):
+    def __init__(self, config: ScenarioConfig, settings: PlannerSettings | None = None):
         self.config = config
         self.settings = settings if settings is not None else self.settings_class()
-        self.mpc = OutageAwareMPC.from_config(config, backend=self.settings.qp_backend)
+        self.mpc = self._make_mpc()
         self.link = channel.LinkParams.from_config(config, planning=True)
         points = getattr(self.settings, "psi_points", None)  # dv-mpc's values need no table
         self.psi_grid = np.linspace(0.0, 1.0, points) if points is not None else None
+
+    def _make_mpc(self) -> OutageAwareMPC:
+        """The planner's MPC (built once, with its settings' backend)."""
+        return OutageAwareMPC.from_config(self.config, backend=self.settings.qp_backend)
 
     def reset(self) -> None:
         self.mpc.reset()
@@ -430,9 +420,9 @@ class _ReducedPlannerBase:
 class ReducedGradientPlanner(_ReducedPlannerBase):
     """``rg-mpc``: coarse tabulated search, then projected gradient on the exact Phi."""
 
-    settings: _SearchSettings  # ReducedSettings (DeliveryValuePlanner: DeliverySettings)
+    settings: SearchSettings  # ReducedSettings (DeliveryValuePlanner: DeliverySettings)
 
-    def __init__(self, config: ScenarioConfig, settings: _SearchSettings | None = None):
+    def __init__(self, config: ScenarioConfig, settings: SearchSettings | None = None):
         super().__init__(config, settings)
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # previous slot's (p, velocity)
 
@@ -484,10 +474,7 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
     def __init__(self, config: ScenarioConfig, settings: DeliverySettings | None = None):
         super().__init__(config, settings)
         s = self.settings
-        lag = s.model_lag and config.disturbance.actuator_lag_s > 0
-        if s.terminal_success != 1.0 or lag:
-            self.mpc = OutageAwareMPC.from_config(config, backend=s.qp_backend, terminal_success=s.terminal_success,
-                                                  lag=lag)
+        lag = self._lag()
         self.tail = (LossAwareTail.from_config(config, lag, s.bounds_probability, s.qp_backend)
                      if s.tail == "loss-aware" else None)
         self.period = self.mpc.control_period
@@ -495,6 +482,16 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
         # the loss-aware tail's expected delivery (lawn_env.tail.expected_delivery); None: the episode's start
         self.psi_bar: float | None = None
         self._worth = np.zeros(config.num_agvs)  # the last problem's w_k
+
+    def _lag(self) -> bool:
+        """Whether the planner predicts with the config's actuator lag (``model_lag`` and a lag to model)."""
+        return bool(self.settings.model_lag and self.config.disturbance.actuator_lag_s > 0)
+
+    def _make_mpc(self) -> OutageAwareMPC:
+        """The psi = 1 MPC with the settings' terminal weight, predicting with the lag where modelled."""
+        s = self.settings
+        return OutageAwareMPC.from_config(self.config, backend=s.qp_backend, terminal_success=s.terminal_success,
+                                          lag=self._lag())
 
     def reset(self) -> None:
         super().reset()
@@ -524,8 +521,7 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
             if self.psi_bar is None:
                 self.psi_bar = self._first_delivery(snapshot, state, z, reference)
             values = self.tail.delivery_values(z, reference, self.psi_bar, snapshot.slot, snapshot.buffer)
-        problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values)
-        problem.reach *= self._moves(snapshot.slot)
+        problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values, self._moves(snapshot.slot))
         self._worth = problem.worth
         return problem
 
@@ -538,8 +534,8 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
 
         def worth_at(psi_bar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             values = tail.delivery_values(z, reference, psi_bar, snapshot.slot, snapshot.buffer)
-            problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values)
-            problem.reach *= self._moves(snapshot.slot)
+            problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values,
+                                      self._moves(snapshot.slot))
             return self._search(problem).psi, self._weights(problem.worth)
 
         return float(first_delivery(worth_at, self.settings.delivery_start_iterations))
