@@ -211,3 +211,26 @@ def test_two_ranges_are_compared_apart_with_the_tail_and_the_worst_seed():
     assert c.cell().count(" / ") == 1 and "4.00× (seed" in c.worst_cell()
     with pytest.raises(ValueError, match="share no seed"):
         compare_ranges({1: 1.0}, {2: 1.0})
+
+
+def test_compare_is_the_python_front_door_of_evaluate():
+    """``training.results.api.compare`` plays the same episodes as ``evaluate`` and returns them typed,
+    with each policy's geometric comparison against the reference computed on the same seeds; bad
+    requests are named."""
+    from training.results.api import EpisodeResult, compare
+
+    result = compare(["epa", "rg-mpc"], config="steady", seeds=[3, 4], settings={"rg-mpc": {"power_levels": 20}})
+    rows = evaluate([(p, "lawn/Joint-v1", presets.get("steady"), s, {"power_levels": 20} if p == "rg-mpc" else {})
+                     for p in ("epa", "rg-mpc") for s in (3, 4)], progress=False)
+    assert [(r.policy, r.seed, r.control_cost) for r in result.results] == [
+        (r["policy"], r["seed"], r["control_cost"]) for r in rows]
+    first = result.of("epa")[0]
+    assert isinstance(first, EpisodeResult) and first.stage_costs.shape == (presets.get("steady").num_slots,)
+    assert first.stage_costs.sum() == pytest.approx(first.control_cost, rel=1e-9)
+    assert result.reference == "epa" and set(result.geometric) == {"rg-mpc"}
+    np.testing.assert_equal(vars(result.geometric["rg-mpc"]),  # two seeds: no interval (NaN) on either side
+                            vars(paired_geometric(result.costs("rg-mpc"), result.costs("epa"))))
+    with pytest.raises(ValueError, match="policies is empty"):
+        compare([])
+    with pytest.raises(ValueError, match=r"settings for \['pid'\], which are not among the policies"):
+        compare(["epa"], settings={"pid": {}})

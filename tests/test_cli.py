@@ -331,3 +331,14 @@ def test_the_policy_arg_examples_of_the_help_run(tmp_path, policy, setting):
     assert f"{setting} for {policy}" in help_text
     assert main(["evaluate", "--policy", policy, "--policy-arg", setting, "--episodes", "1", "--set", "num_slots=3",
                  "--no-score", "--quiet", "--workers", "1", "--out", str(tmp_path / "r.csv")]) == 0
+
+
+def test_evaluate_without_out_writes_under_runs_evaluate(tmp_path, monkeypatch, capsys):
+    """Without --out the rows go to runs/evaluate/POLICY.csv (':' and '/' as '_'), never the main job's
+    runs/benchmark."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["evaluate", "--policy", "anchor:hover", "--episodes", "1", "--set", "num_slots=6", "--no-score",
+                 "--quiet"]) == 0
+    assert (tmp_path / "runs" / "evaluate" / "anchor_hover.csv").is_file()
+    assert not (tmp_path / "runs" / "benchmark").exists()
+    assert "wrote 1 row to runs/evaluate/anchor_hover.csv" in capsys.readouterr().out

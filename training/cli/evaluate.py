@@ -19,10 +19,17 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
                          "on an RL id plays its benchmark id through its own interface; default: lawn/Joint-v1, or "
                          "a trained agent's)")
     ev.add_argument("--episodes", type=count, default=10, help="episodes, seeds --seed.. (default: %(default)s)")
-    ev.add_argument("--out", required=True, help="rows file, .csv or .json")
+    ev.add_argument("--out", default=None,
+                    help="rows file, .csv or .json (default: runs/evaluate/POLICY.csv, the policy's name with ':' and "
+                         "'/' as '_'; never the main job's runs/benchmark)")
     ev.add_argument("--no-score", action="store_true",
                     help="skip the normalized score (which runs its references, epa and dv-mpc, on the same seeds)")
     return ev
+
+
+def default_out(policy: str) -> Path:
+    """Where ``lawn evaluate`` writes without ``--out``: ``runs/evaluate/POLICY.csv``."""
+    return Path("runs") / "evaluate" / (policy.replace(":", "_").replace("/", "_") + ".csv")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -31,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     from ..results.stats import SCORE_HIGH, SCORE_LOW, paired_cost_geometric, scores_by_policy, summarize
 
     cfg = config_of(args)
-    out = Path(args.out)
+    out = Path(args.out) if args.out is not None else default_out(args.policy)
     if out.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"--out {args.out!r}: the extension must be .csv or .json")
     kwargs = parse_overrides(args.policy_arg, "--policy-arg")

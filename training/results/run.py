@@ -27,7 +27,7 @@ import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, NamedTuple, cast
 
 import gymnasium as gym
 import numpy as np
@@ -46,7 +46,8 @@ from lawn_env.config import DroneConfig
 from ..pool import pool_map
 from .stats import SCORE_HIGH, SCORE_LOW
 
-__all__ = ["TRANSIENT_SLOTS", "Play", "DEFAULT_PLAY", "episode_row", "build_policy", "run_episode", "split_cost",
+__all__ = ["TRANSIENT_SLOTS", "EpisodeSpec", "Play", "DEFAULT_PLAY", "episode_row", "build_policy", "run_episode",
+           "split_cost",
            "evaluate", "run_entries", "per_slot_profile", "policy_env", "own_anchor", "learned_entries", "write_rows",
            "write_csv", "read_csv", "parse_bool", "LIMITS", "LIMIT_SETTINGS", "NOISE", "REFERENCE_ROWS",
            "is_reference_row", "limit_config", "resolve"]
@@ -58,6 +59,18 @@ __all__ = ["TRANSIENT_SLOTS", "Play", "DEFAULT_PLAY", "episode_row", "build_poli
 TRANSIENT_SLOTS = 20
 #: Rows without a per-slot trace keep the saved tables small (100 seeds x many agents).
 _DROPPED = ("stage_costs",)
+
+
+class EpisodeSpec(NamedTuple):
+    """One episode to play: the policy (or reference row) by name, the env it is evaluated on, the
+    scenario, the seed and the policy's settings (``policy_kwargs`` of :func:`agents.make_policy`). A
+    plain tuple of the same fields in this order is taken where a spec is."""
+
+    policy: str
+    env: str
+    config: ScenarioConfig
+    seed: int
+    settings: Mapping[str, Any] = {}
 
 
 @dataclass(frozen=True)
@@ -182,9 +195,9 @@ def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
     return row
 
 
-def _run_task(task: tuple[Any, ...], transient_slots: int = TRANSIENT_SLOTS) -> dict[str, Any]:
-    policy, env_id, config, seed, policy_kwargs = task
-    return run_episode(policy, env_id, config, seed, policy_kwargs, transient_slots)
+def _run_task(task: EpisodeSpec | tuple[Any, ...], transient_slots: int = TRANSIENT_SLOTS) -> dict[str, Any]:
+    spec = EpisodeSpec(*task)
+    return run_episode(spec.policy, spec.env, spec.config, spec.seed, spec.settings, transient_slots)
 
 
 def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SLOTS) -> tuple[float, float]:
@@ -197,9 +210,9 @@ def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SL
     return float(costs[:transient_slots].sum()), float(costs[transient_slots:].sum())
 
 
-def evaluate(tasks: Iterable[tuple[Any, ...]], workers: int = 1, progress: bool = True, desc: str = "episodes",
-             transient_slots: int = TRANSIENT_SLOTS) -> list[dict[str, Any]]:
-    """Run ``(policy, env_id, config, seed, policy_kwargs)`` tasks; rows in task order, each with its
+def evaluate(tasks: Iterable[EpisodeSpec | tuple[Any, ...]], workers: int = 1, progress: bool = True,
+             desc: str = "episodes", transient_slots: int = TRANSIENT_SLOTS) -> list[dict[str, Any]]:
+    """Play :class:`EpisodeSpec` tasks (or tuples of their fields); rows in task order, each with its
     ``transient_cost`` and ``sustained_cost`` split at ``transient_slots`` (:func:`split_cost`)."""
     split_cost((), transient_slots)  # a bad split fails before any episode
     return pool_map(functools.partial(_run_task, transient_slots=transient_slots), list(tasks), workers, progress, desc)
@@ -251,7 +264,7 @@ def run_entries(entries: Sequence[tuple[str, str]], config: ScenarioConfig, seed
     """Full episodes of every (policy, env) entry on every seed; rows with a ``task`` column and
     without the per-slot trace (its mean per slot appended to ``profiles`` when given,
     :func:`per_slot_profile`)."""
-    tasks: list[tuple[Any, ...]] = [(policy, env, config, int(s), {}) for policy, env in entries for s in seeds]
+    tasks = [EpisodeSpec(policy, env, config, int(s)) for policy, env in entries for s in seeds]
     rows = evaluate(tasks, play.workers, play.progress, desc, play.transient_slots)
     for row in rows:
         row["task"] = task
