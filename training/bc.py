@@ -40,6 +40,8 @@ from .protocol import (
     write_learning_curve,
 )
 from .provenance import provenance
+from .results.run import evaluate
+from .results.stats import SCORE_HIGH, SCORE_LOW
 
 if TYPE_CHECKING:
     import minari
@@ -332,8 +334,6 @@ def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_i
     from minari import DataCollector, StepDataCallback
     from tqdm.auto import tqdm
 
-    from .results.run import evaluate
-    from .results.stats import SCORE_HIGH, SCORE_LOW
 
     class LawnStepData(StepDataCallback):  # type: ignore[misc]  # minari is an optional extra, not followed
         """The env's per-step info without ``episode_metrics`` (present on the last step only)."""

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from agents.learned import SB3Policy
-from lawn_env import ScenarioConfig, env_role, presets
+from lawn_env import MixedFleetEnv, ScenarioConfig, env_role, presets
 from lawn_env.entities import EntityLayout
 from lawn_env.interface import InterfaceLike, resolve_interface
 
@@ -155,7 +155,6 @@ def train_fleet(spec: Any, params: Mapping[str, Any], version: int) -> dict[str,
     from stable_baselines3 import PPO
 
     from agents.fleet import FleetPolicy
-    from lawn_env import MixedFleetEnv
 
     limit_torch_threads()
     if spec.env_id not in ("lawn/Joint-v1", "lawn/Comm-v1"):

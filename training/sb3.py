@@ -19,7 +19,10 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
+from agents import make_policy
 from agents.learned import load_saved
+from agents.paired import PairedReward
+from agents.residual import AnchorResidual
 from agents.runs import algorithm_class, read_run
 from lawn_env import ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig, parallel_env, role_env_id
 from lawn_env.interface import InterfaceLike
@@ -155,9 +158,6 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
 def _lawn_wrappers(env: Any, paired: Mapping[str, Any] | None, residual: Mapping[str, Any] | None) -> Any:
     """A monitored env with the residual scheme (:class:`agents.residual.AnchorResidual`) and then
     the paired reward (:class:`agents.paired.PairedReward`), each when given its keywords."""
-    from agents import make_policy
-    from agents.paired import PairedReward
-    from agents.residual import AnchorResidual
 
     if residual is not None:
         base = env.unwrapped

@@ -30,10 +30,13 @@ from pathlib import Path
 from typing import Any
 
 import lawn_env
+from agents import make_policy
+from agents.errors import MissingExtra
 from lawn_env import presets
 
+from .pool import worker_pool
 from .results.report import markdown_table
-from .results.run import read_csv, write_csv
+from .results.run import read_csv, run_episode, write_csv
 from .results.stats import mean_ci
 
 __all__ = ["SweepSpec", "SweepTableError", "load_spec", "expand", "run_sweep", "read_table", "read_rows",
@@ -113,7 +116,6 @@ def load_spec(spec: str | Path | Mapping[str, Any]) -> SweepSpec:
     out["seeds"] = _seed_list(spec.get("seeds", 5), source)
     if out["env"] not in lawn_env.ENV_IDS:
         raise ValueError(f"sweep env {out['env']!r}; valid: {', '.join(lawn_env.ENV_IDS)}")
-    from agents import make_policy
 
     for point in expand(out):  # validate every grid point and policy before running anything
         cfg = point_config(out, point)
@@ -197,7 +199,6 @@ def read_table(path: Path) -> list[dict[str, Any]]:
 
 
 def _run(task: tuple[Any, ...]) -> dict[str, Any]:
-    from .results.run import run_episode
 
     point, policy, seed, env_id, cfg_dict, policy_kwargs, sweep_name = task
     cfg = lawn_env.ScenarioConfig.from_dict(cfg_dict)
@@ -287,7 +288,6 @@ def execute(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int, backen
         try:
             import ray
         except ImportError:
-            from agents.errors import MissingExtra
 
             raise MissingExtra("--backend ray needs Ray: pip install -e '.[ray]'") from None
         if not ray.is_initialized():
@@ -307,7 +307,6 @@ def execute(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int, backen
         return
     from concurrent.futures import FIRST_COMPLETED, wait
 
-    from .pool import worker_pool
 
     with worker_pool(workers) as pool:
         futures = {pool.submit(fn, t) for t in tasks}

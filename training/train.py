@@ -21,12 +21,17 @@ import gymnasium as gym
 from pydantic import ConfigDict, Field, StrictBool, TypeAdapter
 from pydantic.dataclasses import dataclass
 
+from agents.learned import LOADERS
+from agents.policies import POLICIES
+from agents.residual import check_residual
 from agents.runs import read_json, read_run
 from lawn_env import ENV_IDS, PARALLEL_ENV_ID, RL_ENV_IDS, ScenarioConfig
 from lawn_env.errors import raises_config_errors
 from lawn_env.interface import resolve_interface
 
 from .protocol import TRAIN_SEED_BASE, VALIDATION_SEED_BASE
+from .results.stats import mean_ci
+from .sweep import execute
 
 __all__ = ["ALGORITHMS", "ALGOS", "Algorithm", "TRAIN_ENV_IDS", "NATIVE_ENV_IDS", "LAWN_KEYS", "RunOptions",
            "TrainSpec", "load_hyperparams", "split_params", "train", "train_seeds", "resume",
@@ -90,8 +95,6 @@ def _check_anchor(key: str, anchor: str | None, env_id: str) -> None:
     if env_id not in _LAWN:
         what = "paired reward" if key == "paired_anchor" else "residual scheme"
         raise ValueError(f"--hp {key}={anchor!r}: the {what} wraps {', '.join(_LAWN)}, not {env_id}")
-    from agents.learned import LOADERS
-    from agents.policies import POLICIES
 
     prefix = anchor.split(":", 1)[0] if ":" in anchor else None
     if (anchor not in POLICIES) if prefix is None else (prefix not in LOADERS):
@@ -103,7 +106,6 @@ def _check_residual(options: RunOptions, env_id: str) -> None:
     """The residual scheme: its settings, its anchor, an anchored flat interface and single envs."""
     if options.residual is None:
         return
-    from agents.residual import check_residual
 
     try:
         options.residual = check_residual(options.residual)
@@ -310,8 +312,6 @@ def train(spec: TrainSpec, callbacks: list[Any] | None = None) -> dict[str, Any]
 def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: str = "process") -> dict[str, Any]:
     """Train ``spec`` once per seed into ``spec.out_dir/seed-<s>`` (``workers`` processes, or Ray, as
     ``lawn sweep``) and summarize the selected models' validation costs across seeds."""
-    from .results.stats import mean_ci
-    from .sweep import execute
 
     if len(set(seeds)) != len(seeds) or not seeds:
         raise ValueError(f"--seeds {seeds}: give one or more distinct seeds")

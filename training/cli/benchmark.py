@@ -7,21 +7,31 @@ from __future__ import annotations
 import argparse
 import shutil
 from pathlib import Path
-from typing import TYPE_CHECKING
 
+from agents import BENCHMARK_POLICIES
+from agents.learned import zoo_agents
 from lawn_env import presets
+from lawn_env.presets import SUITE
 
+from ..benchmark import (
+    FLEET_SIZES,
+    fleet_agents,
+    run_benchmark,
+    run_generalization,
+    run_learned_protocol,
+    run_suite,
+    suite_policies,
+)
+from ..pages import block_names, replace_block
+from ..protocol import TEST_EPISODES
+from ..results.ranges import TEST_RANGES, fleet_table
+from ..results.report import plot_profiles, skipped_summary, structure_table, suite_table, task_tables
+from ..results.run import REFERENCE_ROWS, Play, build_policy, read_csv, write_rows
+from ..results.stats import SCORE_HIGH, SCORE_LOW, SCORE_VERSION
 from .common import command, comparison_env, config_of, count, included, policy_help, policy_name
-
-if TYPE_CHECKING:
-    from ..results.run import Play
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-    from agents import BENCHMARK_POLICIES
-
-    from ..results.run import REFERENCE_ROWS
-
     bm = command(sub, "benchmark", "workers", "quiet", "seed", "config", "split",
                  epilog="--protocol learned and --suite fix the test seeds (0..N-1) and the scenario; "
                         "--seed, --preset, --set and --env belong to the paper protocol.")
@@ -51,10 +61,7 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-    from agents import BENCHMARK_POLICIES
 
-    from ..benchmark import run_benchmark
-    from ..results.run import REFERENCE_ROWS, build_policy
 
     if not args.suite and (args.tasks or args.docs):
         raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
@@ -94,7 +101,6 @@ def _check_fixed_protocol(args: argparse.Namespace) -> None:
 
 
 def _play(args: argparse.Namespace) -> Play:
-    from ..results.run import Play
 
     return Play(args.workers, not args.quiet, args.transient_slots)
 
@@ -105,14 +111,7 @@ SUITE_TABLES = {"board": "suite-board", "structure": "suite-structure", "tasks":
 
 
 def _suite(args: argparse.Namespace) -> int:
-    from lawn_env.presets import SUITE
 
-    from ..benchmark import fleet_agents, run_suite, suite_policies
-    from ..pages import block_names, replace_block
-    from ..protocol import TEST_EPISODES
-    from ..results.report import plot_profiles, skipped_summary, structure_table, suite_table, task_tables
-    from ..results.run import read_csv
-    from ..results.stats import SCORE_HIGH, SCORE_LOW, SCORE_VERSION
 
     episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
     tasks = args.tasks or list(SUITE)
@@ -162,11 +161,7 @@ def _fleet_sizes(args: argparse.Namespace, policies: list[str], out: Path) -> st
     ``fleet_sizes.csv`` and ``.md``, returns the block (empty without fleet networks)."""
     import time
 
-    from agents.learned import zoo_agents
 
-    from ..benchmark import FLEET_SIZES, fleet_agents, run_generalization
-    from ..results.ranges import TEST_RANGES, fleet_table
-    from ..results.run import write_rows
 
     agents = [p for p in fleet_agents() if p in policies]
     if not agents:
@@ -188,8 +183,6 @@ def _fleet_sizes(args: argparse.Namespace, policies: list[str], out: Path) -> st
 
 
 def _learned(args: argparse.Namespace) -> int:
-    from ..benchmark import run_learned_protocol
-    from ..protocol import TEST_EPISODES
 
     episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
     table = run_learned_protocol(list(args.policies or []) + included(args.include), out, episodes, _play(args))

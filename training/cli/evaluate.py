@@ -8,6 +8,9 @@ from pathlib import Path
 
 import lawn_env
 
+from ..results.report import format_table
+from ..results.run import build_policy, evaluate, write_rows
+from ..results.stats import SCORE_HIGH, SCORE_LOW, paired_cost_geometric, scores_by_policy, summarize
 from .common import command, comparison_env, config_of, count, parse_overrides, policy_help, policy_name
 
 
@@ -33,9 +36,6 @@ def default_out(policy: str) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..results.report import format_table
-    from ..results.run import build_policy, evaluate, write_rows
-    from ..results.stats import SCORE_HIGH, SCORE_LOW, paired_cost_geometric, scores_by_policy, summarize
 
     cfg = config_of(args)
     out = Path(args.out) if args.out is not None else default_out(args.policy)

@@ -7,11 +7,12 @@ import argparse
 import time
 from pathlib import Path
 
+from ..experiments import EXPERIMENTS, check_claims, format_claims, make_figures, write_claims
+from ..experiments.reproduction import write_reproduction
 from .common import command
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-    from ..experiments import EXPERIMENTS
 
     fg = command(sub, "figures", "workers", "quiet")
     fg.add_argument("names", nargs="*", choices=[[], *EXPERIMENTS], metavar="NAME",
@@ -24,7 +25,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..experiments import check_claims, format_claims, make_figures, write_claims
 
     if args.docs and args.quick:
         raise ValueError("--docs writes the published reproduction; it takes the full set, not --quick")
@@ -39,7 +39,6 @@ def run(args: argparse.Namespace) -> int:
     write_claims(claims, out)
     print(format_claims([c for c in claims if not args.names or c.figure in args.names]))
     if args.docs:
-        from ..experiments.reproduction import write_reproduction
 
         print(f"wrote {write_reproduction(out, Path(args.docs))}")
     return 0

@@ -6,14 +6,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from agents import make_policy, policy_names
+
+from ..experiments.gap import CONVERGENCE_SLOTS
+from ..results.run import Play
 from .common import command, config_of, count, parse_overrides, policy_help, policy_name
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-    from ..experiments.gap import CONVERGENCE_SLOTS
 
     gp = command(sub, "gap", "workers", "quiet", "seed", "config")
-    from agents import policy_names
 
     gp.add_argument("--policies", nargs="+", default=["ao-mpc", "rg-mpc"], type=policy_name, metavar="POLICY",
                     help=f"planners to compare: {', '.join(policy_names())} (default: ao-mpc rg-mpc)")
@@ -32,7 +34,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-    from agents import make_policy
 
     from ..experiments.gap import (
         convergence,
@@ -43,7 +44,6 @@ def run(args: argparse.Namespace) -> int:
         summarize_gaps,
         write_gap_outputs,
     )
-    from ..results.run import Play
 
     cfg = config_of(args)
     bad = [s for s in args.convergence_slots if not 0 <= s < cfg.num_slots]

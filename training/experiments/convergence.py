@@ -7,14 +7,16 @@ import itertools
 from pathlib import Path
 from typing import Any
 
+from agents import AOSettings
+from lawn_env import ScenarioConfig
+
 from .base import QUICK_SET, Experiment, Tables
 from .claims import Claim
+from .gap import CONVERGENCE_SLOTS, convergence, plot_convergence
 
 
 def _convergence_table(out: Path, quick: bool) -> list[dict[str, Any]]:
-    from lawn_env import ScenarioConfig
 
-    from .gap import CONVERGENCE_SLOTS, convergence
 
     cfg = ScenarioConfig(**QUICK_SET) if quick else ScenarioConfig()
     slots = CONVERGENCE_SLOTS[:2] if quick else CONVERGENCE_SLOTS
@@ -23,7 +25,6 @@ def _convergence_table(out: Path, quick: bool) -> list[dict[str, Any]]:
 
 
 def _convergence_plot(tables: Tables, path: Path) -> None:
-    from .gap import plot_convergence
 
     rows = [{**r, "slot": int(r["slot"]), "iteration": int(r["iteration"]),
              **{k: float(r[k]) for k in ("objective", "global_objective", "rg_mpc_objective")}}
@@ -33,7 +34,6 @@ def _convergence_plot(tables: Tables, path: Path) -> None:
 
 
 def _convergence_claims(tables: Tables) -> list[Claim]:
-    from agents import AOSettings
 
     tol = AOSettings().tolerance
     out = []

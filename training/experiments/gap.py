@@ -27,6 +27,7 @@ from agents.ao import AOSettings, AOSolver
 from agents.policies import PlannerPolicy
 from lawn_env import ScenarioConfig, Snapshot
 
+from ..pool import pool_map
 from ..results.report import markdown_table
 from ..results.run import DEFAULT_PLAY, Play, write_rows
 
@@ -86,7 +87,6 @@ def _gap_task(task: tuple[Any, ...]) -> list[dict[str, Any]]:
 def run_gap(policies: Sequence[str], driver: str, config: ScenarioConfig, seeds: Sequence[int], every: int,
             play: Play = DEFAULT_PLAY, global_settings: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
     """:func:`gap_episode` of every seed (``play``'s workers and progress bar), its rows in seed order."""
-    from ..pool import pool_map
 
     tasks = [(tuple(policies), driver, config, s, every, dict(global_settings or {})) for s in seeds]
     rows = []

@@ -12,6 +12,8 @@ from pathlib import Path
 from typing import Any
 
 from ..results.report import markdown_table
+from ..results.run import write_rows
+from ..sweep import SweepTableError, read_rows, read_table, run_sweep
 from .base import Experiment
 from .claims import Claim
 from .registry import EXPERIMENTS
@@ -22,8 +24,6 @@ __all__ = ["tables_of", "make_figures", "check_claims", "write_claims", "read_cl
 def tables_of(exp: Experiment, out: Path, quick: bool = False, workers: int = 1, progress: bool = False,
               run: bool = True) -> dict[str, list[dict[str, Any]]]:
     """The experiment's tables in ``out/data`` (with ``run``: their missing rows run first)."""
-    from ..results.run import write_rows
-    from ..sweep import SweepTableError, read_rows, read_table, run_sweep
 
     tables = {}
     for name, spec in exp.sweeps(quick).items():

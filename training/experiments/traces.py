@@ -7,6 +7,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, cast
 
+from agents import make_policy, rollout
+from lawn_env import presets
+from lawn_env.envs import JointEnv
+
 from .base import QUICK_SET
 from .plots import new_figure, save
 
@@ -17,9 +21,6 @@ def trace_rows(cases: Sequence[tuple[str, str, str]], quick: bool) -> list[dict[
     """Drone, AGV and reference positions of one episode (seed 0) per (label, preset, policy)."""
     import gymnasium as gym
 
-    from agents import make_policy, rollout
-    from lawn_env import presets
-    from lawn_env.envs import JointEnv
 
     rows = []
     for label, preset, policy in cases:
@@ -37,7 +38,6 @@ def trace_rows(cases: Sequence[tuple[str, str, str]], quick: bool) -> list[dict[
 
 
 def plot_traces(rows: Sequence[dict[str, Any]], path: Path, cases: Sequence[tuple[str, str, str]]) -> None:
-    from lawn_env import presets
 
     fig = new_figure(ncols=len(cases), width=3.3, height=3.6)
     for j, (label, preset, policy) in enumerate(cases):
