@@ -263,7 +263,7 @@ def test_comparisons_refuse_an_rl_id_naming_its_v0_id(tmp_path, capsys):
 
 
 def test_one_episode_commands_say_so_and_render_is_quiet(tmp_path, monkeypatch):
-    import training.render
+    import training.cli.render
     from training.cli import build_parser
 
     parser = build_parser()
@@ -272,8 +272,9 @@ def test_one_episode_commands_say_so_and_render_is_quiet(tmp_path, monkeypatch):
         seed = next(a for a in sub.choices[name]._actions if a.dest == "seed")
         assert seed.help.startswith("the episode's seed"), name
     calls = []
-    real = training.render.render_episode
-    monkeypatch.setattr(training.render, "render_episode", lambda *a, **k: calls.append(k["progress"]) or real(*a, **k))
+    real = training.cli.render.render_episode  # the command's own name for it (imported at its top)
+    monkeypatch.setattr(training.cli.render, "render_episode",
+                        lambda *a, **k: calls.append(k["progress"]) or real(*a, **k))
     out = tmp_path / "e.gif"
     for flags in (["--quiet"], []):
         assert main(["render", "--policy", "epa", "--set", "num_slots=4", *flags, "--out", str(out)]) == 0

@@ -33,6 +33,7 @@ from agents.learned import zoo_agents
 from lawn_env import ScenarioConfig, presets
 
 from .protocol import TEST_EPISODES
+from .recipes import RECIPES
 from .results.ranges import test_seeds
 from .results.report import learned_table, plot_summary, summary_markdown
 from .results.run import (
@@ -200,7 +201,6 @@ def fleet_agents() -> list[str]:
 
 
 def _distilled() -> list[str]:
-    from .recipes import RECIPES
 
     return [name for name, r in RECIPES.items() if r.section == "distil"]
 

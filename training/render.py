@@ -15,6 +15,7 @@ import lawn_env
 from agents import HeuristicPolicy, Step, make_policy, rollout
 from lawn_env import ScenarioConfig
 from lawn_env.envs.base import LawnEnv
+from lawn_env.render import plot_episode
 
 __all__ = ["FORMATS", "check_output", "record_frames", "write_animation", "render_episode", "run_demo"]
 
@@ -117,7 +118,6 @@ def run_demo(seed: int, out_dir: Path, config: ScenarioConfig | str | None = Non
     metrics["decision_time_median_s"] = episode.decision_time_median_s
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))
-    from lawn_env.render import plot_episode
 
     plot_episode(lawn.sim, lawn.engine.kept_trail, out_dir / "paths.png",
                  title=f"lawn/Joint-v1, scripted heuristic, seed {seed}: cost {metrics['control_cost']:.0f}")

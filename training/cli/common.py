@@ -11,8 +11,12 @@ from collections.abc import Callable
 from typing import Any
 
 import lawn_env
+from agents.learned import learned_name_forms
+from agents.policies import is_policy_name, policy_names
 from agents.runs import read_run
 from lawn_env import presets
+
+from ..results.run import REFERENCE_ROWS, TRANSIENT_SLOTS, is_reference_row
 
 __all__ = ["command", "count", "seed", "comparison_env", "policy_name", "policy_help", "parse_overrides", "config_of",
            "included"]
@@ -58,10 +62,7 @@ comparison_env.__name__ = "env id"
 def policy_name(value: str) -> str:
     """argparse type: a registered policy, a learned agent's name (``zoo:``, ``sb3:``, ...) or a
     benchmark reference row (``limit:...``, ``noise:...``, :mod:`training.results.run`)."""
-    from agents.learned import learned_name_forms
-    from agents.policies import is_policy_name, policy_names
 
-    from ..results.run import REFERENCE_ROWS, is_reference_row
 
     if not (is_policy_name(value) or is_reference_row(value)):
         raise argparse.ArgumentTypeError(
@@ -72,10 +73,7 @@ def policy_name(value: str) -> str:
 
 def policy_help(prefix: str = "") -> str:
     """The policy names a ``--policy`` flag takes, for its help."""
-    from agents import policy_names
-    from agents.learned import learned_name_forms
 
-    from ..results.run import REFERENCE_ROWS
 
     return (f"{prefix}{', '.join(policy_names())}, or {learned_name_forms(' / ')} for learned agents; "
             f"the benchmark's reference rows {', '.join(REFERENCE_ROWS)} (docs/benchmark.md)")
@@ -83,7 +81,6 @@ def policy_help(prefix: str = "") -> str:
 
 def _shared_flags() -> dict[str, list[tuple[str, dict[str, Any]]]]:
     """The shared flags by name: each one's ``add_argument`` flag and options."""
-    from ..results.run import TRANSIENT_SLOTS
 
     return {
         "debug": [("--debug", {"action": "store_true", "default": argparse.SUPPRESS,  # also after the subcommand

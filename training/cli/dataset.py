@@ -6,6 +6,7 @@ import argparse
 
 from lawn_env import presets
 
+from ..bc import create_dataset
 from .common import command, count, policy_help, policy_name
 
 
@@ -23,7 +24,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bc import create_dataset
 
     dataset = create_dataset(args.policy, args.env, args.episodes, args.seed, args.dataset_id, task=args.task,
                              progress=not args.quiet)

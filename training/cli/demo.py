@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..render import run_demo
 from .common import command, config_of
 
 
@@ -15,7 +16,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..render import run_demo
 
     cfg = config_of(args)
     metrics = run_demo(args.seed, Path(args.out), config=cfg)

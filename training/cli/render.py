@@ -7,6 +7,7 @@ from pathlib import Path
 
 import lawn_env
 
+from ..render import render_episode
 from .common import command, config_of, count, parse_overrides, policy_help, policy_name
 
 
@@ -22,7 +23,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..render import render_episode
     result = render_episode(args.policy, Path(args.out), env_id=args.env, seed=args.seed,
                             config=config_of(args), fps=args.fps, every=args.every, progress=not args.quiet,
                             **parse_overrides(args.policy_arg, "--policy-arg"))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..sweep import load_spec, run_sweep, summarize_sweep
 from .common import command
 
 
@@ -18,7 +19,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..sweep import load_spec, run_sweep, summarize_sweep
 
     spec = load_spec(args.spec)
     rows = run_sweep(spec, Path(args.out), workers=args.workers, backend=args.backend, progress=not args.quiet,

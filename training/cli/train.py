@@ -8,11 +8,11 @@ from typing import Any
 
 from agents.errors import MissingExtra
 
+from ..train import ALGOS, TRAIN_ENV_IDS, TrainSpec, resume, train, train_seeds
 from .common import command, config_of, count, parse_overrides, seed
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-    from ..train import ALGOS, TRAIN_ENV_IDS
 
     tr = command(sub, "train", "workers", "quiet", "seed", "config", "backend")
     tr.add_argument("--algo", choices=ALGOS,
@@ -63,7 +63,6 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"lawn train needs {', '.join(missing)} (or --resume DIR)")
     if args.timesteps is None:
         raise ValueError("lawn train needs --timesteps")
-    from ..train import TrainSpec, train, train_seeds
 
     spec = TrainSpec(algo=args.algo, env_id=args.env, config=config_of(args), timesteps=args.timesteps,
                      seed=args.seed, out_dir=Path(args.out), hp_overrides=parse_overrides(args.hp, "--hp"),
@@ -86,7 +85,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _resume(args: argparse.Namespace) -> int:
-    from ..train import resume
 
     summary = resume(Path(args.resume), timesteps=args.timesteps, progress=not args.quiet)
     start = summary["resumed_from"]

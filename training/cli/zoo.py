@@ -7,6 +7,7 @@ from pathlib import Path
 
 from agents.errors import MissingExtra
 
+from ..zoo import build_zoo, format_zoo_list, train_recipes
 from .common import command
 
 #: Where ``lawn zoo build`` exports the agents.
@@ -26,7 +27,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..zoo import build_zoo, format_zoo_list, train_recipes
 
     if args.action == "list":
         print(format_zoo_list())
