@@ -32,7 +32,7 @@ from report import finish  # benchmarks/report.py, beside this script
 
 import lawn_env  # noqa: F401
 from lawn_env import presets
-from training.results.report import fmt_geometric
+from training.results.cells import fmt_geometric
 from training.results.run import evaluate
 from training.results.stats import paired_geometric
 

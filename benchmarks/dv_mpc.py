@@ -35,12 +35,12 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from report import finish  # benchmarks/report.py, beside this script
 
 import lawn_env  # noqa: F401
 from agents import make_policy, rollout
 from lawn_env import ScenarioConfig, presets
-from report import finish  # benchmarks/report.py, beside this script
-from training.results.report import fmt_geometric
+from training.results.cells import fmt_geometric
 from training.results.run import evaluate
 from training.results.stats import Geometric, paired_geometric
 

@@ -13,9 +13,8 @@ import argparse
 import time
 
 from lawn_env import presets
-from training.results.run import evaluate
-from training.results.report import fmt_geometric
-from training.results.run import LIMIT_SETTINGS
+from training.results.cells import fmt_geometric
+from training.results.run import LIMIT_SETTINGS, evaluate
 from training.results.stats import paired_geometric
 
 DEFAULT_CAP = 10_000  # agents.reduced.ReducedSettings.max_drone_points

@@ -26,8 +26,8 @@ from lawn_env import ScenarioConfig, presets
 
 from .protocol import read_learning_curve, selected_validation, selection_key
 from .recipes import RECIPES, Recipe, finished
+from .results.cells import fmt_num, fmt_paired, markdown_table
 from .results.ranges import TEST_RANGES, compare_ranges, distil_table, test_seeds
-from .results.report import fmt_num, fmt_paired, markdown_table
 from .results.run import DEFAULT_PLAY, Play, policy_env, run_entries
 from .results.stats import SCORE_HIGH, costs_of
 

@@ -35,7 +35,7 @@ from agents.errors import MissingExtra
 from lawn_env import presets
 
 from .pool import worker_pool
-from .results.report import markdown_table
+from .results.cells import markdown_table
 from .results.run import read_csv, run_episode, write_csv
 from .results.stats import mean_ci
 

@@ -26,7 +26,8 @@ from .distil import evaluate_distil, export_distil
 from .pages import block_names, replace_body
 from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
 from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe, train_recipes
-from .results.report import fmt_num, fmt_paired, fmt_pct, markdown_table, protocol_cells
+from .results.cells import fmt_num, fmt_paired, fmt_pct, markdown_table
+from .results.report import protocol_cells
 from .results.run import Play, evaluate, learned_entries, own_anchor, read_csv, run_entries, write_csv
 from .results.stats import SCORE_HIGH, SCORE_VERSION, mean_ci, paired, scores_by_policy
 

@@ -7,9 +7,10 @@ import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from .claims import Claim
+if TYPE_CHECKING:  # an annotation only: the claims' module is not the records' import
+    from .claims import Claim
 
 __all__ = ["Experiment", "EXPERTS", "BASELINES", "REPORT_SLOT", "SEEDS", "QUICK_SEEDS", "QUICK_SET", "spec",
            "slot_cost", "by_seed", "values"]

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..results.report import fmt_paired
+from ..results.cells import fmt_paired
 from ..results.stats import paired_difference
 from .base import EXPERTS, REPORT_SLOT, SEEDS, Experiment, Tables, by_seed, slot_cost, spec, values
 from .claims import Claim, multi_claim, paired_claim

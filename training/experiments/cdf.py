@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..results.report import fmt_paired
+from ..results.cells import fmt_paired
 from ..results.stats import paired_difference, verdict
 from .base import EXPERTS, SEEDS, Experiment, Tables, by_seed, spec, values
 from .claims import Claim, paired_claim

@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from ..results.report import fmt_paired
+from ..results.cells import fmt_paired
 from ..results.stats import paired_difference, verdict
 
 __all__ = ["Claim", "paired_claim", "combine", "multi_claim"]

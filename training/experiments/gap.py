@@ -28,7 +28,7 @@ from agents.policies import PlannerPolicy
 from lawn_env import ScenarioConfig, Snapshot
 
 from ..pool import pool_map
-from ..results.report import markdown_table
+from ..results.cells import markdown_table
 from ..results.run import DEFAULT_PLAY, Play, write_rows
 
 __all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "global_power_shares", "format_gap_table",

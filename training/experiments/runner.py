@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ..results.report import markdown_table
+from ..results.cells import markdown_table
 from ..results.run import write_rows
 from ..sweep import SweepTableError, read_rows, read_table, run_sweep
 from .base import Experiment

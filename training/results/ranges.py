@@ -22,7 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from .report import fmt_geometric, fmt_num, markdown_table, mean_cell
+from .cells import fmt_geometric, fmt_num, markdown_table
+from .report import mean_cell
 from .run import policy_env
 from .stats import SCORE_HIGH, Geometric, costs_of, paired_geometric
 
