@@ -295,3 +295,37 @@ def test_no_issue_numbers_in_code():
     hash_, issue = "#", "issue"  # split, so this file's own examples are not findings
     assert _ISSUE_NUMBER.search(f"see {hash_}42") and _ISSUE_NUMBER.search(f"({issue} 12)")
     assert not _ISSUE_NUMBER.search(f"colour {hash_}1f77b4, {hash_}!/usr/bin/env, a{hash_}3")
+
+
+def _local_imports(path: Path) -> int:
+    """The imports of the project's own modules inside the functions of one module."""
+    count = 0
+    for fn in ast.walk(ast.parse(path.read_text())):
+        if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        for node in fn.body:
+            for inner in ast.walk(node):
+                own = (isinstance(inner, ast.ImportFrom) and (inner.level or (inner.module or "").split(".")[0] in PACKAGES)
+                       or isinstance(inner, ast.Import) and any(a.name.split(".")[0] in PACKAGES for a in inner.names))
+                count += bool(own) and not any(isinstance(p, (ast.FunctionDef, ast.AsyncFunctionDef))
+                                                for p in ast.walk(node) if p is not node and inner in ast.walk(p))
+    return count
+
+
+def test_training_imports_at_the_top_and_keeps_its_chains_short():
+    """training/ imports the project's modules at module level: at most 20 imports inside functions (the
+    CLI's lazy dispatch, optional extras, cycles broken), and no chain of imports within it (run-time
+    imports, function-local ones included) longer than 10 modules (the goal is 6)."""
+    mods = _modules()
+    local = {m: _local_imports(f) for m, f in mods.items() if m.startswith("training")}
+    assert sum(local.values()) <= 20, sorted((n, m) for m, n in local.items() if n)
+    edges = {m: {d for d in ds if d.startswith("training")} for m, ds in EDGES.items() if m.startswith("training")}
+    longest: dict[str, tuple[str, ...]] = {}
+
+    def chain(m: str) -> tuple[str, ...]:
+        if m not in longest:
+            longest[m] = max(((m, *chain(d)) for d in edges[m]), key=len, default=(m,))
+        return longest[m]
+
+    deepest = max((chain(m) for m in edges), key=len)
+    assert len(deepest) <= 10, " -> ".join(deepest)
