@@ -304,11 +304,14 @@ def _local_imports(path: Path) -> int:
         if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
             continue
         for node in fn.body:
+            nested = [p for p in ast.walk(node) if p is not node and isinstance(p, (ast.FunctionDef, ast.AsyncFunctionDef))]
             for inner in ast.walk(node):
-                own = (isinstance(inner, ast.ImportFrom) and (inner.level or (inner.module or "").split(".")[0] in PACKAGES)
-                       or isinstance(inner, ast.Import) and any(a.name.split(".")[0] in PACKAGES for a in inner.names))
-                count += bool(own) and not any(isinstance(p, (ast.FunctionDef, ast.AsyncFunctionDef))
-                                                for p in ast.walk(node) if p is not node and inner in ast.walk(p))
+                if any(inner in ast.walk(p) for p in nested):
+                    continue  # counted with its own function
+                if isinstance(inner, ast.ImportFrom):
+                    count += bool(inner.level or (inner.module or "").split(".")[0] in PACKAGES)
+                elif isinstance(inner, ast.Import):
+                    count += any(a.name.split(".")[0] in PACKAGES for a in inner.names)
     return count
 
 
