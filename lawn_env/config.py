@@ -168,6 +168,12 @@ class ControlConfig:
     whole planned sequence of N_p increments; an AGV whose buffer is spent holds). The sequence is
     2 N_p numbers of 16 bits, which the message of R_th l bits must hold *(decided extension)*."""
 
+    @property
+    def buffer_length(self) -> int:
+        """The planned increments a packet carries after the command, which a buffered actuator plays
+        on loss: N_p - 1 under ``actuator="buffer"``, 0 under the hold."""
+        return self.horizon - 1 if self.actuator == "buffer" else 0
+
     @model_validator(mode="after")
     def _check_weights(self) -> ControlConfig:
         if any(w < 0 or w > 1e6 for w in self.q1_diag) or min(self.q1_diag[:2]) <= 0:

@@ -379,7 +379,7 @@ class SimParams:
             constants=_readonly(np.array([(lag_alpha, config.control.accel_max_mps2, link.altitude_sq,
                                            *link.coefficients, link.m)], dtype=SLOT_CONSTANTS)),
             every_slot=np.ones(1, dtype=bool),
-            buffer_length=horizon - 1 if config.control.actuator == "buffer" else 0,
+            buffer_length=config.control.buffer_length,
         )
 
     @cached_property

@@ -62,8 +62,7 @@ class EntityLayout:
         self.observation_space = gym.spaces.Dict({
             "agvs": box((MAX_AGVS, self.agv_features)), "globals": box((len(GLOBALS),)),
             "mask": box((MAX_AGVS,), 0.0, 1.0)})
-        buffered = config.control.actuator == "buffer" and scheme == "direct" and role == "joint"
-        plan = 2 * (config.control.horizon - 1) if buffered else 0
+        plan = 2 * config.control.buffer_length if scheme == "direct" and role == "joint" else 0
         c = self.per_agv = 3 + plan if role == "joint" else 1
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(MAX_AGVS * self.per_agv + 2,), dtype=np.float32)
         rows = np.arange(k)

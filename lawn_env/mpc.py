@@ -533,21 +533,19 @@ class OutageAwareMPC:
         if queue.shape[:-2] != first.shape or queue.shape[-1] != 2:
             raise ValueError(f"queue has shape {queue.shape}; expected {(*first.shape, 'L', 2)}: the buffer's "
                              "increments of each AGV in the order it plays them")
-        index = np.minimum(first, horizon - 1)
-        sums = n + 2 * index[..., None] + np.arange(2)  # the running sums' bounds there: -a_max - u, a_max - u
+        cols = 2 * np.minimum(first, horizon - 1)[..., None] + np.arange(2)  # the held increment's columns
         played = np.zeros((*first.shape, 2))
         if length:
             at = np.minimum(first, length - 1)[..., None, None].repeat(2, -1)
             played = np.where((first < length)[..., None], np.take_along_axis(queue, at, axis=-2)[..., 0, :], 0.0)
-        c = np.zeros((*first.shape, horizon, 2))
         played = np.clip(played, -self.accel_increment_max, self.accel_increment_max)
+        sums = n + cols  # the running sums' bounds there: -a_max - u and a_max - u
         step = np.clip(played, np.take_along_axis(lost.lower, sums, -1), np.take_along_axis(lost.upper, sums, -1))
-        np.put_along_axis(c, index[..., None, None].repeat(2, -1),
-                          np.where((first < horizon)[..., None], step, 0.0)[..., None, :], axis=-2)
-        flat = c.reshape((*first.shape, n))
-        shift = flat @ (0.5 * (self._ftq4f_2 + self._q5_2))  # G c, G of psi = 1
+        flat = np.zeros((*first.shape, n))  # c
+        np.put_along_axis(flat, cols, np.where((first < horizon)[..., None], step, 0.0), axis=-1)
+        shift = flat @ (0.5 * self.hessian(1.0))  # G c, G of psi = 1
         constant = lost.constant + np.einsum("...b,...b->...", shift + 2.0 * lost.linear, flat)
-        offset = np.cumsum(c, axis=-2).reshape(flat.shape)  # c's running sums, axes interleaved
+        offset = np.cumsum(flat.reshape((*first.shape, horizon, 2)), axis=-2).reshape(flat.shape)  # c's running sums
         lower, upper = lost.lower.copy(), lost.upper.copy()
         lower[..., n:] -= offset
         upper[..., n:] -= offset

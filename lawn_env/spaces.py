@@ -186,7 +186,7 @@ class ActionCodec:
         self.role, self.num_agvs = role, k
         self.increment_size = 2 * k if role == "joint" else 0
         #: L = N_p - 1, the later increments a packet carries under the buffered actuator (0 under hold)
-        self.buffer_length = config.control.horizon - 1 if config.control.actuator == "buffer" else 0
+        self.buffer_length = config.control.buffer_length
         self.size = self.increment_size + k + 2
         self.space = gym.spaces.Box(-1.0, 1.0, shape=(self.size,), dtype=np.float32)
         self.limits = np.array([(config.control.accel_increment_max_mps2, config.power_budget_w,
@@ -422,7 +422,7 @@ class ObservationLayout:
         self.accel_max = config.control.accel_max_mps2
         self.power_budget_w = config.power_budget_w
         self.window = self.horizon + 1
-        self.buffer_length = self.horizon - 1 if config.control.actuator == "buffer" else 0
+        self.buffer_length = config.control.buffer_length
         self.increment_max = config.control.accel_increment_max_mps2
         #: The per-AGV features of this config: :attr:`AGV_FEATURES`, then the buffer's under the buffered actuator
         self.agv_feature_table = self.AGV_FEATURES + ((self.BUFFER_FEATURE,) if self.buffer_length else ())
