@@ -33,8 +33,8 @@ from report import finish  # benchmarks/report.py, beside this script
 import lawn_env  # noqa: F401
 from lawn_env import presets
 from training.results.cells import fmt_geometric
-from training.results.run import evaluate
-from training.results.stats import paired_geometric
+from training.results.run import EpisodeSpec, evaluate
+from training.results.stats import costs_of, paired_geometric
 
 JOINT = "lawn/Joint-v1"
 EXPERT = "dv-mpc"
@@ -45,59 +45,55 @@ TARGETS = {"k32": -0.60, "k16": -0.30, "steady": -0.20, "steady-low-power": -0.4
 HEADROOM_GOAL = 0.5
 
 
-def _costs(rows: list[dict], row: str, metric: str = "control_cost") -> dict[int, float]:
-    return {r["seed"]: r[metric] for r in rows if r["row"] == row}
+BUFFER, NOISE, PERFECT = "actuator:buffer", f"noise:{EXPERT}", "limit:perfect-links"  # the reference rows
 
 
 def play(tasks: list[str], episodes: int, large: int, starts: list[int], workers: int) -> list[dict]:
-    """Every row's episodes: (hold, buffer, noise floor; perfect links on the steady tasks' first range)."""
-    entries = []
+    """Every row's episodes, labelled with their task and range: the hold expert, the buffer's reference
+    row, the noise floor, and on the steady tasks' first range perfect links."""
+    specs, labels = [], []
     for task in tasks:
-        hold = presets.get(task)
-        rows = [("hold", EXPERT, hold), ("buffer", EXPERT, hold.override({"control.actuator": "buffer"})),
-                ("noise", f"noise:{EXPERT}", hold)]
         n = large if task in POOR_LINKS else episodes
         for i, start in enumerate(starts):
-            extra = [("perfect", "limit:perfect-links", hold)] if task in STEADY and i == 0 else []
-            entries += [(row, policy, config, seed, task, start) for seed in range(start, start + n)
-                        for row, policy, config in rows + extra]
-    played = evaluate([(policy, JOINT, config, seed, {}) for _, policy, config, seed, _, _ in entries],
-                      workers=workers, progress=True, desc="buffer against hold")
-    for entry, row in zip(entries, played, strict=True):
-        row["row"], row["task"], row["start"] = entry[0], entry[4], entry[5]
+            names = [EXPERT, BUFFER, NOISE] + ([PERFECT] if task in STEADY and i == 0 else [])
+            specs += [EpisodeSpec(name, JOINT, presets.get(task), seed) for seed in range(start, start + n)
+                      for name in names]
+            labels += [f"{task}@{start}"] * (n * len(names))
+    played = evaluate(specs, workers=workers, progress=True, desc="buffer against hold")
+    for label, row in zip(labels, played, strict=True):
+        row["task"] = label
     return played
 
 
 def table(tasks: list[str], rows: list[dict], starts: list[int]) -> tuple[list[str], list[tuple[str, bool]]]:
     lines = [("| task | range | buffer vs hold | worst | noise floor | largest RMSE hold / buffer | diverged hold / "
-             "buffer | perfect-links headroom | closed |"), "|---|---|---|---|---|---|---|---|---|"]
+              "buffer | perfect-links headroom | closed |"), "|---|---|---|---|---|---|---|---|---|"]
     targets: list[tuple[str, bool]] = []
     closed_all: dict[str, float] = {}
     for task in tasks:
         met_all = True
         for start in starts:
-            part = [r for r in rows if r["task"] == task and r["start"] == start]
-            hold, buffer = _costs(part, "hold"), _costs(part, "buffer")
+            label = f"{task}@{start}"
+            hold, buffer = costs_of(rows, EXPERT, task=label), costs_of(rows, BUFFER, task=label)
             g = paired_geometric(buffer, hold)
             worst = max(buffer[s] / hold[s] for s in buffer)
-            rmse = [max(_costs(part, name, "rmse_m").values()) for name in ("hold", "buffer")]
-            diverged = [int(sum(_costs(part, name, "diverged").values())) for name in ("hold", "buffer")]
-            perfect = _costs(part, "perfect")
+            rmse = [max(costs_of(rows, name, task=label, metric="rmse_m").values()) for name in (EXPERT, BUFFER)]
+            diverged = [int(sum(costs_of(rows, name, task=label, metric="diverged").values()))
+                        for name in (EXPERT, BUFFER)]
+            perfect = costs_of(rows, PERFECT, task=label)
             headroom = closed = ""
             if perfect:
                 gp = paired_geometric(perfect, hold)
                 headroom, closed_all[task] = fmt_geometric(gp), (1.0 - g.ratio) / (1.0 - gp.ratio)
                 closed = f"{closed_all[task]:.0%}"
-            lines.append(f"| {task} | {start}.. | {fmt_geometric(g)} | {worst:.2f}x | "
-                         f"{fmt_geometric(paired_geometric(_costs(part, 'noise'), hold))} | {rmse[0]:.2f} / "
-                         f"{rmse[1]:.2f} m | {diverged[0]} / {diverged[1]} | {headroom} | {closed} |")
-            tail_ok = worst <= TAIL_LIMIT if task in POOR_LINKS else True
-            met_all = met_all and met(g, TARGETS[task]) and tail_ok
-        if task in TARGETS:
-            bound = TARGETS[task]
-            what = f"at most {bound:+.0%}, interval below zero" if bound < 0 else "not worse (change at most +0 %)"
-            tail = f", no seed over {TAIL_LIMIT}x" if task in POOR_LINKS else ""
-            targets.append((f"{task}: the buffer against the hold actuator {what}{tail}, on both ranges", met_all))
+            noise = paired_geometric(costs_of(rows, NOISE, task=label), hold)
+            lines.append(f"| {task} | {start}.. | {fmt_geometric(g)} | {worst:.2f}x | {fmt_geometric(noise)} | "
+                         f"{rmse[0]:.2f} / {rmse[1]:.2f} m | {diverged[0]} / {diverged[1]} | {headroom} | {closed} |")
+            met_all = met_all and met(g, TARGETS[task]) and (worst <= TAIL_LIMIT or task not in POOR_LINKS)
+        bound = TARGETS[task]
+        what = f"at most {bound:+.0%}, interval below zero" if bound < 0 else "not worse (change at most +0 %)"
+        tail = f", no seed over {TAIL_LIMIT}x" if task in POOR_LINKS else ""
+        targets.append((f"{task}: the buffer against the hold actuator {what}{tail}, on both ranges", met_all))
     if closed_all:
         targets.append(("half of the perfect-links headroom closed on every steady task ("
                         + ", ".join(f"{t} {c:.0%}" for t, c in closed_all.items()) + ")",
@@ -122,9 +118,9 @@ def main(argv=None) -> int:
     rows = play(args.tasks, args.episodes, args.large_episodes, [a, b], args.workers)
     lines = [(f"`dv-mpc` on `lawn/Joint-v1` with the buffered actuator (`control.actuator=\"buffer\"`) against "
              f"the hold actuator, {args.episodes} seeds per range ({args.large_episodes} on {', '.join(POOR_LINKS)}; "
-             f"seeds {a}.. and {b}..): geometric mean of the per-seed cost ratios − 1 [95 % bootstrap] (seeds won), the "
-             "worst seed's ratio, the noise floor (`noise:dv-mpc` against `dv-mpc`, hold), the largest RMSE and the "
-             "diverged episodes of each; on the steady tasks the perfect-links headroom (`limit:perfect-links` "
+             f"seeds {a}.. and {b}..): geometric mean of the per-seed cost ratios − 1 [95 % bootstrap] (seeds won), "
+             "the worst seed's ratio, the noise floor (`noise:dv-mpc` against `dv-mpc`, hold), the largest RMSE "
+             "and the diverged episodes of each; on the steady tasks the perfect-links headroom (`limit:perfect-links` "
              "against the hold row, first range) and the share of it the buffer closes."), ""]
     body, targets = table(args.tasks, rows, [a, b])
     lines += [*body, "", f"{time.perf_counter() - started:.0f} s, {args.workers} workers."]

@@ -213,7 +213,7 @@ def test_two_ranges_are_compared_apart_with_the_tail_and_the_worst_seed():
         compare_ranges({1: 1.0}, {2: 1.0})
 
 
-def test_compare_is_the_python_front_door_of_evaluate():
+def test_compare_is_the_python_front_door_of_evaluate(tmp_path):
     """``training.results.api.compare`` plays the same episodes as ``evaluate`` and returns them typed,
     with each policy's geometric comparison against the reference computed on the same seeds; bad
     requests are named."""
@@ -230,6 +230,14 @@ def test_compare_is_the_python_front_door_of_evaluate():
     assert result.reference == "epa" and set(result.geometric) == {"rg-mpc"}
     np.testing.assert_equal(vars(result.geometric["rg-mpc"]),  # two seeds: no interval (NaN) on either side
                             vars(paired_geometric(result.costs("rg-mpc"), result.costs("epa"))))
+    from training.results.run import read_csv, write_csv
+
+    back = [EpisodeResult.from_row(r) for r in read_csv(write_csv(rows, tmp_path / "rows.csv"))]  # strings back
+    for fresh, read in zip(result.results, back, strict=True):
+        assert (read.diverged, read.control_cost, read.seed) == (fresh.diverged, fresh.control_cost, fresh.seed)
+        np.testing.assert_array_equal(read.stage_costs, fresh.stage_costs)
+        np.testing.assert_array_equal(read.mean_power_w, fresh.mean_power_w)
+    assert EpisodeResult.from_row({**rows[0], "diverged": "1", "stage_costs": ""}).diverged is True
     with pytest.raises(ValueError, match="policies is empty"):
         compare([])
     with pytest.raises(ValueError, match=r"settings for \['pid'\], which are not among the policies"):

@@ -93,7 +93,8 @@ def test_the_benchmark_table_is_its_episodes_statistics(tmp_path):
     in order, each mean ± 95 % interval and the paired and geometric comparisons with the first
     policy recomputed from the rows."""
     from training.pages import first_table
-    from training.results.report import RESULT_METRICS, fmt_geometric, fmt_stat
+    from training.results.cells import fmt_geometric, fmt_stat
+    from training.results.report import RESULT_METRICS
     from training.results.run import read_csv
     from training.results.stats import mean_ci, paired_cost_difference, paired_cost_geometric
 
@@ -343,3 +344,6 @@ def test_evaluate_without_out_writes_under_runs_evaluate(tmp_path, monkeypatch, 
     assert (tmp_path / "runs" / "evaluate" / "anchor_hover.csv").is_file()
     assert not (tmp_path / "runs" / "benchmark").exists()
     assert "wrote 1 row to runs/evaluate/anchor_hover.csv" in capsys.readouterr().out
+    (tmp_path / "runs" / "evaluate" / "epa.csv").mkdir()  # the default path checked before any episode
+    assert main(["evaluate", "--policy", "epa", "--episodes", "1", "--no-score", "--quiet"]) == 2
+    assert "runs/evaluate/epa.csv" in capsys.readouterr().err

@@ -298,21 +298,19 @@ def test_no_issue_numbers_in_code():
 
 
 def _local_imports(path: Path) -> int:
-    """The imports of the project's own modules inside the functions of one module."""
-    count = 0
-    for fn in ast.walk(ast.parse(path.read_text())):
-        if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
-            continue
-        for node in fn.body:
-            nested = [p for p in ast.walk(node) if p is not node and isinstance(p, (ast.FunctionDef, ast.AsyncFunctionDef))]
-            for inner in ast.walk(node):
-                if any(inner in ast.walk(p) for p in nested):
-                    continue  # counted with its own function
-                if isinstance(inner, ast.ImportFrom):
-                    count += bool(inner.level or (inner.module or "").split(".")[0] in PACKAGES)
-                elif isinstance(inner, ast.Import):
-                    count += any(a.name.split(".")[0] in PACKAGES for a in inner.names)
-    return count
+    """The imports of the project's own modules inside the functions of one module, each counted once."""
+
+    def own(node: ast.AST) -> bool:
+        if isinstance(node, ast.ImportFrom):
+            return bool(node.level or (node.module or "").split(".")[0] in PACKAGES)
+        return isinstance(node, ast.Import) and any(a.name.split(".")[0] in PACKAGES for a in node.names)
+
+    def count(node: ast.AST, inside: bool) -> int:
+        here = int(inside and own(node))
+        nested = inside or isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+        return here + sum(count(child, nested) for child in ast.iter_child_nodes(node))
+
+    return count(ast.parse(path.read_text()), False)
 
 
 def test_training_imports_at_the_top_and_keeps_its_chains_short():

@@ -151,7 +151,7 @@ def test_anchor_names_and_errors():
 def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     pytest.importorskip("stable_baselines3")
     from training.benchmark import run_learned_protocol
-    from training.results.report import fmt_geometric, fmt_paired
+    from training.results.cells import fmt_geometric, fmt_paired
     from training.results.run import Play, learned_entries, own_anchor, read_csv
     from training.results.stats import costs_of
     from training.results.stats import paired_difference, paired_geometric
@@ -462,7 +462,7 @@ def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
     page = (docs / "LEADERBOARD.md").read_text()
     assert board.strip() in page and (out / "structure.md").read_text().strip() in page
     assert "1 policies x 1 tasks (k3), test seeds 0-2" in board and (docs / "figures" / "suite-per-slot.png").exists()
-    from training.results.report import format_score
+    from training.results.cells import format_score
     from training.results.run import read_csv
     from training.results.stats import scores_by_policy
 

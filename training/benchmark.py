@@ -201,7 +201,6 @@ def fleet_agents() -> list[str]:
 
 
 def _distilled() -> list[str]:
-
     return [name for name, r in RECIPES.items() if r.section == "distil"]
 
 

@@ -199,7 +199,6 @@ def read_table(path: Path) -> list[dict[str, Any]]:
 
 
 def _run(task: tuple[Any, ...]) -> dict[str, Any]:
-
     point, policy, seed, env_id, cfg_dict, policy_kwargs, sweep_name = task
     cfg = lawn_env.ScenarioConfig.from_dict(cfg_dict)
     row = run_episode(policy, env_id, cfg, seed, policy_kwargs)

@@ -29,7 +29,7 @@ from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe, train_recipes
 from .results.cells import fmt_num, fmt_paired, fmt_pct, markdown_table
 from .results.report import protocol_cells
 from .results.run import Play, evaluate, learned_entries, own_anchor, read_csv, run_entries, write_csv
-from .results.stats import SCORE_HIGH, SCORE_VERSION, mean_ci, paired, scores_by_policy
+from .results.stats import SCORE_HIGH, SCORE_VERSION, mean_ci, paired, scores_by_policy, verdict
 
 __all__ = ["Recipe", "RECIPES", "recipe", "train_recipes", "finished_runs", "evaluate_zoo", "zoo_tables", "render_zoo",
            "plot_curves", "export_zoo", "build_zoo", "format_zoo_list", "ZooEvaluation", "ZooTables", "Shipped"]
@@ -336,7 +336,7 @@ def format_zoo_list() -> str:
                                   for ref, changes in refs.items())
                 lines.append(f"  {task}, test seeds {bench.get('test_seeds')} (geometric, per range): {cells}")
         else:
-            same = abs(gain[0]) <= gain[1]  # the interval holds zero: no measured change from the anchor
+            same = verdict(gain[0], gain[1], "negative") == "not significant"  # no measured change from its anchor
             lines.append(f"  test seeds {bench.get('test_seeds')}: cost vs rg-mpc {fmt_paired(*ship)}, vs its anchor "
                          f"{bench.get('anchor', '?')} {fmt_paired(*gain)}"
                          + (" (no different from its anchor)" if same else "")

@@ -176,6 +176,8 @@ def _run(argv: list[str] | None) -> int:
     from ..pool import HelperDied
 
     try:
+        if getattr(args, "out", "") is None and hasattr(args, "default_out"):  # a command's own default path
+            args.out = str(args.default_out(args))
         _check_out(args.command, getattr(args, "out", None))
         code: int = args.func(args)
         return code

@@ -61,8 +61,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-
-
     if not args.suite and (args.tasks or args.docs):
         raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
     if args.suite or args.protocol == "learned":
@@ -101,7 +99,6 @@ def _check_fixed_protocol(args: argparse.Namespace) -> None:
 
 
 def _play(args: argparse.Namespace) -> Play:
-
     return Play(args.workers, not args.quiet, args.transient_slots)
 
 
@@ -111,8 +108,6 @@ SUITE_TABLES = {"board": "suite-board", "structure": "suite-structure", "tasks":
 
 
 def _suite(args: argparse.Namespace) -> int:
-
-
     episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
     tasks = args.tasks or list(SUITE)
     policies = list(args.policies or suite_policies()) + included(args.include)
@@ -183,7 +178,6 @@ def _fleet_sizes(args: argparse.Namespace, policies: list[str], out: Path) -> st
 
 
 def _learned(args: argparse.Namespace) -> int:
-
     episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
     table = run_learned_protocol(list(args.policies or []) + included(args.include), out, episodes, _play(args))
     print(f"lawn benchmark --protocol learned: test seeds 0-{episodes - 1}, full unmodified episodes")

@@ -61,9 +61,8 @@ comparison_env.__name__ = "env id"
 
 def policy_name(value: str) -> str:
     """argparse type: a registered policy, a learned agent's name (``zoo:``, ``sb3:``, ...) or a
-    benchmark reference row (``limit:...``, ``noise:...``, :mod:`training.results.run`)."""
-
-
+    benchmark reference row (``limit:...``, ``noise:...``, ``actuator:buffer``;
+    :mod:`training.results.run`)."""
     if not (is_policy_name(value) or is_reference_row(value)):
         raise argparse.ArgumentTypeError(
             f"unknown policy {value!r}; valid: {', '.join(policy_names())}, the reference rows "
@@ -73,7 +72,6 @@ def policy_name(value: str) -> str:
 
 def policy_help(prefix: str = "") -> str:
     """The policy names a ``--policy`` flag takes, for its help."""
-
 
     return (f"{prefix}{', '.join(policy_names())}, or {learned_name_forms(' / ')} for learned agents; "
             f"the benchmark's reference rows {', '.join(REFERENCE_ROWS)} (docs/benchmark.md)")

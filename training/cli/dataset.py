@@ -24,7 +24,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-
     dataset = create_dataset(args.policy, args.env, args.episodes, args.seed, args.dataset_id, task=args.task,
                              progress=not args.quiet)
     steps = int(dataset.total_steps)

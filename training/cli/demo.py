@@ -16,7 +16,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-
     cfg = config_of(args)
     metrics = run_demo(args.seed, Path(args.out), config=cfg)
     print(f"lawn demo: lawn/Joint-v1, scripted heuristic, seed {args.seed}, K={cfg.num_agvs}, "

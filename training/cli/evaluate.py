@@ -27,18 +27,18 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
                          "'/' as '_'; never the main job's runs/benchmark)")
     ev.add_argument("--no-score", action="store_true",
                     help="skip the normalized score (which runs its references, epa and dv-mpc, on the same seeds)")
+    ev.set_defaults(default_out=default_out)  # resolved before the output is checked (training.cli.main)
     return ev
 
 
-def default_out(policy: str) -> Path:
+def default_out(args: argparse.Namespace) -> Path:
     """Where ``lawn evaluate`` writes without ``--out``: ``runs/evaluate/POLICY.csv``."""
-    return Path("runs") / "evaluate" / (policy.replace(":", "_").replace("/", "_") + ".csv")
+    return Path("runs") / "evaluate" / (str(args.policy).replace(":", "_").replace("/", "_") + ".csv")
 
 
 def run(args: argparse.Namespace) -> int:
-
     cfg = config_of(args)
-    out = Path(args.out) if args.out is not None else default_out(args.policy)
+    out = Path(args.out) if args.out is not None else default_out(args)
     if out.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"--out {args.out!r}: the extension must be .csv or .json")
     kwargs = parse_overrides(args.policy_arg, "--policy-arg")

@@ -13,7 +13,6 @@ from .common import command
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-
     fg = command(sub, "figures", "workers", "quiet")
     fg.add_argument("names", nargs="*", choices=[[], *EXPERIMENTS], metavar="NAME",
                     help=f"figures to make (default: all): {', '.join(EXPERIMENTS)}")
@@ -25,7 +24,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-
     if args.docs and args.quick:
         raise ValueError("--docs writes the published reproduction; it takes the full set, not --quick")
     start = time.perf_counter()

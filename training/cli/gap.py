@@ -8,13 +8,21 @@ from pathlib import Path
 
 from agents import make_policy, policy_names
 
-from ..experiments.gap import CONVERGENCE_SLOTS
+from ..experiments.gap import (
+    CONVERGENCE_SLOTS,
+    convergence,
+    format_convergence,
+    format_gap_table,
+    global_power_shares,
+    run_gap,
+    summarize_gaps,
+    write_gap_outputs,
+)
 from ..results.run import Play
 from .common import command, config_of, count, parse_overrides, policy_help, policy_name
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-
     gp = command(sub, "gap", "workers", "quiet", "seed", "config")
 
     gp.add_argument("--policies", nargs="+", default=["ao-mpc", "rg-mpc"], type=policy_name, metavar="POLICY",
@@ -34,17 +42,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-
-    from ..experiments.gap import (
-        convergence,
-        format_convergence,
-        format_gap_table,
-        global_power_shares,
-        run_gap,
-        summarize_gaps,
-        write_gap_outputs,
-    )
-
     cfg = config_of(args)
     bad = [s for s in args.convergence_slots if not 0 <= s < cfg.num_slots]
     if bad:

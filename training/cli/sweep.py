@@ -19,7 +19,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-
     spec = load_spec(args.spec)
     rows = run_sweep(spec, Path(args.out), workers=args.workers, backend=args.backend, progress=not args.quiet,
                      extend=args.extend)

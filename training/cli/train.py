@@ -13,7 +13,6 @@ from .common import command, config_of, count, parse_overrides, seed
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-
     tr = command(sub, "train", "workers", "quiet", "seed", "config", "backend")
     tr.add_argument("--algo", choices=ALGOS,
                     help="algorithm: SB3's, bc (behaviour cloning of an expert) or fleet (DAgger, one network "
@@ -85,7 +84,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _resume(args: argparse.Namespace) -> int:
-
     summary = resume(Path(args.resume), timesteps=args.timesteps, progress=not args.quiet)
     start = summary["resumed_from"]
     print(f"lawn train: resumed {args.resume} from its checkpoint at {start} steps" if start is not None else

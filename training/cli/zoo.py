@@ -27,7 +27,6 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 
 
 def run(args: argparse.Namespace) -> int:
-
     if args.action == "list":
         print(format_zoo_list())
         return 0

@@ -16,8 +16,6 @@ from .gap import CONVERGENCE_SLOTS, convergence, plot_convergence
 
 
 def _convergence_table(out: Path, quick: bool) -> list[dict[str, Any]]:
-
-
     cfg = ScenarioConfig(**QUICK_SET) if quick else ScenarioConfig()
     slots = CONVERGENCE_SLOTS[:2] if quick else CONVERGENCE_SLOTS
     glob = {"psi_points": 41, "drone_spacing_m": 2.5, "power_levels": 40} if quick else {}
@@ -25,7 +23,6 @@ def _convergence_table(out: Path, quick: bool) -> list[dict[str, Any]]:
 
 
 def _convergence_plot(tables: Tables, path: Path) -> None:
-
     rows = [{**r, "slot": int(r["slot"]), "iteration": int(r["iteration"]),
              **{k: float(r[k]) for k in ("objective", "global_objective", "rg_mpc_objective")}}
             for r in tables["convergence"]]
@@ -34,7 +31,6 @@ def _convergence_plot(tables: Tables, path: Path) -> None:
 
 
 def _convergence_claims(tables: Tables) -> list[Claim]:
-
     tol = AOSettings().tolerance
     out = []
     rows = tables["convergence"]

@@ -38,7 +38,6 @@ def trace_rows(cases: Sequence[tuple[str, str, str]], quick: bool) -> list[dict[
 
 
 def plot_traces(rows: Sequence[dict[str, Any]], path: Path, cases: Sequence[tuple[str, str, str]]) -> None:
-
     fig = new_figure(ncols=len(cases), width=3.3, height=3.6)
     for j, (label, preset, policy) in enumerate(cases):
         ax = fig.add_subplot(1, len(cases), j + 1)

@@ -24,7 +24,7 @@ import numpy as np
 from agents.base import JOINT
 from lawn_env.presets import ConfigLike, resolve_config
 
-from .run import TRANSIENT_SLOTS, EpisodeSpec, evaluate
+from .run import TRANSIENT_SLOTS, EpisodeSpec, evaluate, parse_bool
 from .stats import Geometric, paired_geometric
 
 __all__ = ["EpisodeResult", "Comparison", "compare"]
@@ -54,15 +54,17 @@ class EpisodeResult:
     @classmethod
     def from_row(cls, row: Mapping[str, Any]) -> EpisodeResult:
         """The result of a row of :func:`.run.evaluate` (its per-slot costs parsed from their JSON)."""
-        def array(value: Any) -> np.ndarray:
-            return np.asarray(json.loads(value) if isinstance(value, str) else value or [], dtype=float)
+        def array(value: Any) -> np.ndarray:  # a fresh row's list, or its JSON text read back from a CSV
+            if value is None or (isinstance(value, str) and not value.strip()):
+                return np.zeros(0)
+            return np.asarray(json.loads(value) if isinstance(value, str) else value, dtype=float)
 
         return cls(policy=str(row["policy"]), env=str(row["env"]), seed=int(row["seed"]),
                    control_cost=float(row["control_cost"]), tracking_cost=float(row["tracking_cost"]),
                    effort_cost=float(row["effort_cost"]), transient_cost=float(row["transient_cost"]),
                    sustained_cost=float(row["sustained_cost"]), rmse_m=float(row["rmse_m"]),
                    outage_rate=float(row["outage_rate"]), drone_path_length_m=float(row["drone_path_length_m"]),
-                   max_tracking_error_m=float(row["max_tracking_error_m"]), diverged=bool(row["diverged"]),
+                   max_tracking_error_m=float(row["max_tracking_error_m"]), diverged=parse_bool(row["diverged"]),
                    decision_time_median_s=float(row["decision_time_median_s"]),
                    mean_power_w=array(row["mean_power_w"]), stage_costs=array(row.get("stage_costs")))
 

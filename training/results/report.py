@@ -1,5 +1,5 @@
-"""Markdown tables and figures from evaluation rows and their statistics (:mod:`.stats`): the
-cells' formats, the benchmark's summary, the learned protocol's table, the suite's board,
+"""Markdown tables and figures from evaluation rows and their statistics (:mod:`.stats`; the cells'
+formats are :mod:`.cells`): the benchmark's summary, the learned protocol's table, the suite's board,
 references, cost structure and per-task tables, the fleet-size table, and their figures. Nothing
 here plays an episode; the pages' prose around the tables lives in ``docs/``."""
 
@@ -29,9 +29,9 @@ from .stats import (
     scores_by_policy,
 )
 
-__all__ = ["fmt_pct", "fmt_num", "fmt_stat", "fmt_geometric", "fmt_paired", "format_score", "RESULT_METRICS",
-           "TIMING_METRICS", "format_table", "summary_markdown", "plot_summary", "mean_cell", "protocol_cells",
-           "learned_table", "suite_table", "structure_table", "task_tables", "plot_profiles", "skipped_summary"]
+__all__ = ["RESULT_METRICS", "TIMING_METRICS", "format_table", "summary_markdown", "plot_summary", "mean_cell",
+           "protocol_cells", "learned_table", "suite_table", "structure_table", "task_tables", "plot_profiles",
+           "skipped_summary"]
 
 #: The summary's deterministic metrics (the same seeds give the same digits on any machine) and its
 #: measured ones (this machine's clock), in two tables.
@@ -40,12 +40,6 @@ TIMING_METRICS = tuple(m for m in SUMMARY_METRICS if m[0].startswith("decision_t
 #: The cost columns of the per-task and learned tables.
 _COSTS = ("control_cost", "transient_cost", "sustained_cost")
 Rows = Sequence[Mapping[str, Any]]  # evaluation rows (:mod:`.run`)
-
-
-
-
-
-
 
 
 def format_table(summary: list[dict[str, Any]], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS,
