@@ -26,8 +26,8 @@ from pathlib import Path
 
 from agents import ANCHORS
 from lawn_env import ScenarioConfig
-from training.results.run import evaluate
 from training.protocol import VALIDATION_SEED_BASE
+from training.results.run import evaluate
 from training.results.stats import mean_ci, paired_difference
 
 ENV_ID = "lawn/Comm-v1"
@@ -37,7 +37,7 @@ def episode_costs(anchor: str, seeds: list[int], workers: int) -> dict[int, floa
     """Realized control cost of a policy (an ``anchor:NAME``, or the reference) per seed (full episodes of the
     unmodified scenario, :class:`agents.AnchorPolicy`)."""
     rows = evaluate([(anchor, ENV_ID, ScenarioConfig(), s, {}) for s in seeds], workers=workers, progress=False)
-    return {int(r["seed"]): float(r["control_cost"]) for r in rows}
+    return {r.seed: r.control_cost for r in rows}
 
 
 def _relative(x: float, sign: bool = True) -> str:

@@ -60,9 +60,7 @@ def play(tasks: list[str], episodes: int, large: int, starts: list[int], workers
                       for name in names]
             labels += [f"{task}@{start}"] * (n * len(names))
     played = evaluate(specs, workers=workers, progress=True, desc="buffer against hold")
-    for label, row in zip(labels, played, strict=True):
-        row["task"] = label
-    return played
+    return [row.with_(task=label) for label, row in zip(labels, played, strict=True)]
 
 
 def table(tasks: list[str], rows: list[dict], starts: list[int]) -> tuple[list[str], list[tuple[str, bool]]]:

@@ -41,8 +41,9 @@ import lawn_env  # noqa: F401
 from agents import make_policy, rollout
 from lawn_env import ScenarioConfig, presets
 from training.results.cells import fmt_geometric
+from training.results.episode import EpisodeResult
 from training.results.run import evaluate
-from training.results.stats import Geometric, paired_geometric
+from training.results.stats import Geometric, costs_of, paired_geometric
 
 JOINT = "lawn/Joint-v1"
 #: Tasks where links are poor: fewer seeds per range (each episode costs K times more).
@@ -57,21 +58,18 @@ STEADY = ("steady", "steady-low-power", "steady-gusty")
 EXPERTS = ("dv-mpc", "rg-mpc", "dv-mpc-ce", "noise:dv-mpc")
 
 
-def _costs(rows: list[dict], policy: str, metric: str = "control_cost") -> dict[int, float]:
-    return {r["seed"]: r[metric] for r in rows if r["policy"] == policy}
+def _costs(rows: list[EpisodeResult], policy: str, metric: str = "control_cost") -> dict[int, float]:
+    return costs_of(rows, policy, metric=metric)
 
 
-def _play(entries: list[tuple], workers: int, desc: str) -> list[dict]:
-    """``entries``: (policy, config, seed, label...) -> rows labelled with the entry's extra fields; a
-    policy ``(name, settings)`` plays ``name`` with those settings under the row name ``variant_name``."""
+def _play(entries: list[tuple], workers: int, desc: str) -> list[tuple[tuple, EpisodeResult]]:
+    """``entries``: (policy, config, seed, label...) -> (the entry's extra fields, its result); a policy
+    ``(name, settings)`` plays ``name`` with those settings under the row name ``variant_name``."""
     tasks = [(e[0][0], JOINT, e[1], e[2], e[0][1]) if isinstance(e[0], tuple) else (e[0], JOINT, e[1], e[2], {})
              for e in entries]
     rows = evaluate(tasks, workers=workers, progress=True, desc=desc)
-    for entry, row in zip(entries, rows, strict=True):
-        row["label"] = entry[3:]
-        if isinstance(entry[0], tuple):
-            row["policy"] = variant_name(entry[0][1])
-    return rows
+    return [(entry[3:], row.with_(policy=variant_name(entry[0][1])) if isinstance(entry[0], tuple) else row)
+            for entry, row in zip(entries, rows, strict=True)]
 
 
 def variant_name(settings: dict) -> str:
@@ -105,7 +103,7 @@ def cost_table(tasks: list[str], episodes: int, large: int, starts: list[int], w
     out = {}
     for task in tasks:
         for start in starts:
-            part = [r for r in rows if r["label"] == (task, start)]
+            part = [r for label, r in rows if label == (task, start)]
             dv, rg, ce = (_costs(part, p) for p in ("dv-mpc", "rg-mpc", "dv-mpc-ce"))
             entry = {"rg": paired_geometric(dv, rg), "ce": paired_geometric(dv, ce),
                      "noise": paired_geometric(_costs(part, "noise:dv-mpc"), dv),
@@ -120,12 +118,12 @@ def cost_table(tasks: list[str], episodes: int, large: int, starts: list[int], w
     return out
 
 
-def large_fleet(episodes: int, starts: list[int], workers: int) -> list[dict]:
+def large_fleet(episodes: int, starts: list[int], workers: int) -> list[EpisodeResult]:
     """dv-mpc and rg-mpc on the default scenario with 64 AGVs, ``episodes`` seeds per range."""
     config = ScenarioConfig(num_agvs=64)
     entries = [(p, config, seed, start) for start in starts for seed in range(start, start + episodes)
                for p in ("dv-mpc", "rg-mpc")]
-    return _play(entries, workers, "dv-mpc: K = 64")
+    return [r for _, r in _play(entries, workers, "dv-mpc: K = 64")]
 
 
 def random_configs(count: int, seed: int = 50) -> list[ScenarioConfig]:
@@ -156,7 +154,7 @@ def fuzz(count: int, workers: int) -> list[tuple[ScenarioConfig, float, float]]:
     configs = random_configs(count)
     entries = [(p, config, 0, i) for i, config in enumerate(configs) for p in ("dv-mpc", "rg-mpc")]
     rows = _play(entries, workers, "dv-mpc: random configurations")
-    rmse = {(r["label"][0], r["policy"]): r["rmse_m"] for r in rows}
+    rmse = {(label[0], r.policy): r.rmse_m for label, r in rows}
     return [(c, rmse[(i, "dv-mpc")], rmse[(i, "rg-mpc")]) for i, c in enumerate(configs)]
 
 

@@ -26,9 +26,9 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from report import marks  # benchmarks/report.py, beside this script
 
 import lawn_env  # noqa: F401  (registers the ids)
-from report import marks  # benchmarks/report.py, beside this script
 
 
 def measure(env_id: str, steps: int, repeats: int, seed: int = 0, **kwargs) -> float:

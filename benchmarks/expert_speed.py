@@ -28,12 +28,12 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from report import marks  # benchmarks/report.py, beside this script
 
 import lawn_env  # noqa: F401
 from agents import AOSettings, AOSolver, make_policy, rollout
 from lawn_env import ScenarioConfig
 from lawn_env.mpc import OutageAwareMPC
-from report import marks  # benchmarks/report.py, beside this script
 
 
 def closed_loop(config: ScenarioConfig, episodes: int, slots: int | None = None, policy_name: str = "ao-mpc"):

@@ -37,14 +37,14 @@ def main() -> None:
         seeds = range(args.episodes)
         base = evaluate([("rg-mpc", "lawn/Joint-v1", config, s, {}) for s in seeds], workers=args.workers,
                         progress=False)
-        reference = {r["seed"]: r["control_cost"] for r in base}
+        reference = {r.seed: r.control_cost for r in base}
         times = {}
         for cap in args.caps:
             start = time.perf_counter()
             rows = evaluate([("rg-mpc", "lawn/Joint-v1", fast, s, {"max_drone_points": cap}) for s in seeds],
                             workers=args.workers, progress=False)
             times[cap] = time.perf_counter() - start
-            g = paired_geometric({r["seed"]: r["control_cost"] for r in rows}, reference)
+            g = paired_geometric({r.seed: r.control_cost for r in rows}, reference)
             ratio = times[cap] / times[args.caps[0]]
             mark = " (limit:fast-drone)" if cap == chosen else ""
             print(f"| {task} | {cap:,}{mark} | {times[cap]:.1f} s | {ratio:.2f} | {fmt_geometric(g)} |", flush=True)

@@ -22,11 +22,11 @@ import argparse
 import sys
 
 import numpy as np
+from report import finish  # benchmarks/report.py, beside this script
 from scipy import optimize
 
 from lawn_env import ScenarioConfig
 from lawn_env.dynamics import augmented_matrices, loss_aware_gain, mean_square_radius, modified_riccati
-from report import finish  # benchmarks/report.py, beside this script
 
 GRID = np.round(np.arange(1, 21) * 0.05, 2)
 

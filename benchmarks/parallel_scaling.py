@@ -109,7 +109,7 @@ def main() -> None:
         rows = evaluate(tasks, workers=w, progress=False)
         tw = time.perf_counter() - begin
         checks.append((f"{w} workers: every row equals the reference's",
-                       [r["control_cost"] for r in rows] == [r["control_cost"] for r in reference]))
+                       [r.control_cost for r in rows] == [r.control_cost for r in reference]))
         top = ceiling(args.episodes, w, t1)
         lines.append(f"| {w} | {startup:.2f} | {startup / (t1 / n):.1f} | {tw / n * 1e3:.1f} | {t1 / tw:.2f}x | {top:.2f}x |")
     pool.shutdown_shared_pool()

@@ -29,10 +29,10 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from report import finish  # benchmarks/report.py, beside this script
 
 import lawn_env  # noqa: F401  (registers the ids)
 from lawn_env.mpc import OutageAwareMPC
-from report import finish  # benchmarks/report.py, beside this script
 
 
 def capture(num_envs: int, steps: int, seed: int = 0):

@@ -19,9 +19,9 @@ import sys
 import time
 
 import gymnasium as gym
+from report import marks  # benchmarks/report.py, beside this script
 
 import lawn_env  # noqa: F401
-from report import marks  # benchmarks/report.py, beside this script
 
 
 def measure(env_id: str, timesteps: int, repeats: int) -> float:

@@ -16,12 +16,11 @@ import numpy as np
 
 import lawn_env  # noqa: F401
 from agents import rollout
-from agents.tracking import PIDGains
-from agents.tracking import pid_rollout
+from agents.tracking import PIDGains, pid_rollout
 from lawn_env import presets
 from lawn_env.core import Decisions
-from lawn_env.spaces import DirectActions
 from lawn_env.dynamics import PredictionModel
+from lawn_env.spaces import DirectActions
 
 
 class TrackingPID:

@@ -51,7 +51,7 @@ def main(argv=None) -> int:
     config = ScenarioConfig()
     tasks = [(policy, env, config, s, {}) for policy, env, _ in pairs for s in seeds]
     rows = evaluate(tasks, workers=args.workers, progress=False)
-    new = {(r["policy"], r["env"], int(r["seed"])): float(r["control_cost"]) for r in rows}
+    new = {(r.policy, r.env, r.seed): r.control_cost for r in rows}
     lines = [f"{len(seeds)} test seeds; the largest relative change of an episode's control cost against "
              "docs/learned/episodes.csv:", "", "| policy | env | max relative change | mean cost (recorded → now) |",
              "|---|---|---|---|"]
@@ -96,7 +96,7 @@ def _distil_drift(workers: int) -> list[tuple[str, str, np.ndarray, np.ndarray]]
             config = presets.get(task).override(law)
             rows = evaluate([(f"zoo:{name}", env, config, s, {}) for s in sorted(then)], workers=workers,
                             progress=False)
-            now = {int(r["seed"]): float(r["control_cost"]) for r in rows}
+            now = {r.seed: r.control_cost for r in rows}
             out.append((f"zoo:{name}", f"{env}, {task}", np.array([then[s] for s in sorted(then)]),
                         np.array([now[s] for s in sorted(then)])))
     return out

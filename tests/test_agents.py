@@ -4,10 +4,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from agents import AOSettings, AOSolver, PAPER_POLICIES, expected_cost, make_policy, policy_names
-from agents.problem import SlotProblem
+from agents import PAPER_POLICIES, AOSettings, AOSolver, expected_cost, make_policy, policy_names
 from agents.optim import linear_argmin_disc_box, project_budget
 from agents.policies import snapshot_from_observation
+from agents.problem import SlotProblem
 from lawn_env import ScenarioConfig
 from lawn_env.core import Snapshot
 from lawn_env.mpc import OutageAwareMPC
@@ -343,7 +343,7 @@ def test_period_aware_planning_keeps_tracking_where_the_unaware_ablation_collaps
     base = presets.get("paper-nominal").override(num_slots=60, **{"disturbance.control_period_slots": 3})
     aware = run_episode("epa", "lawn/Joint-v1", base, 0)
     unaware = run_episode("epa", "lawn/Joint-v1", base.override(**{"disturbance.period_aware_planning": False}), 0)
-    assert aware["rmse_m"] < 1.0 < 5 * aware["rmse_m"] < unaware["rmse_m"]
+    assert aware.rmse_m < 1.0 < 5 * aware.rmse_m < unaware.rmse_m
 
 
 

@@ -2,7 +2,6 @@
 transient/sustained split, the geometric paired comparison, the IQM aggregate, the headroom and
 noise-floor rows, the tasks of suite v2."""
 
-import json
 import math
 
 import gymnasium as gym
@@ -12,10 +11,19 @@ from scipy import stats
 
 import lawn_env
 from lawn_env import ScenarioConfig, presets
-from training.results.run import TRANSIENT_SLOTS, build_policy, evaluate, split_cost
-from training.results.run import LIMIT_SETTINGS, LIMITS, NOISE, REFERENCE_ROWS, limit_config, resolve
-from training.results.stats import aggregate_score, normalized_score
-from training.results.stats import paired_difference, paired_geometric
+from training.results.run import (
+    LIMIT_SETTINGS,
+    LIMITS,
+    NOISE,
+    REFERENCE_ROWS,
+    TRANSIENT_SLOTS,
+    build_policy,
+    evaluate,
+    limit_config,
+    resolve,
+    split_cost,
+)
+from training.results.stats import aggregate_score, normalized_score, paired_difference, paired_geometric
 
 
 def _flat(tree: dict, prefix: str = "") -> dict:
@@ -34,14 +42,14 @@ def test_transient_and_sustained_costs_add_up_to_the_episode_cost(env_id):
     rows = evaluate([("epa", env_id, ScenarioConfig(), 3, {}), ("rg-mpc", env_id, ScenarioConfig(), 3, {})],
                     progress=False)
     for row in rows:
-        stage = json.loads(row["stage_costs"])
-        assert len(stage) == 120 and row["transient_slots"] == TRANSIENT_SLOTS
-        assert row["transient_cost"] == pytest.approx(sum(stage[:TRANSIENT_SLOTS]), rel=1e-12)
-        assert row["transient_cost"] + row["sustained_cost"] == pytest.approx(row["control_cost"], rel=1e-9)
-        assert 0 < row["sustained_cost"] < row["control_cost"]
+        stage = row.stage_costs
+        assert len(stage) == 120 and row.transient_slots == TRANSIENT_SLOTS
+        assert row.transient_cost == pytest.approx(sum(stage[:TRANSIENT_SLOTS]), rel=1e-12)
+        assert row.transient_cost + row.sustained_cost == pytest.approx(row.control_cost, rel=1e-9)
+        assert 0 < row.sustained_cost < row.control_cost
     other = evaluate([("epa", env_id, ScenarioConfig(), 3, {})], progress=False, transient_slots=5)[0]
-    assert other["control_cost"] == rows[0]["control_cost"]  # the split only reads the episode
-    assert other["transient_cost"] < rows[0]["transient_cost"] and other["transient_slots"] == 5
+    assert other.control_cost == rows[0].control_cost  # the split only reads the episode
+    assert other.transient_cost < rows[0].transient_cost and other.transient_slots == 5
 
 
 def test_split_cost_edges_and_errors():
@@ -71,7 +79,7 @@ def test_geometric_comparison_equals_the_direct_computation():
 
 
 def test_geometric_and_mean_of_ratios_disagree_on_heavy_tails():
-    base = {s: 100.0 for s in range(10)}
+    base = dict.fromkeys(range(10), 100.0)
     policy = {s: 50.0 if s < 8 else 1000.0 for s in range(10)}  # halves 8 seeds, 10x on 2
     mean, _, _ = paired_difference(policy, base)
     g = paired_geometric(policy, base)
@@ -149,7 +157,7 @@ def test_perfect_links_deliver_every_command_and_planners_see_it():
 def test_reference_rows_run_under_their_names_and_beat_or_tie_the_expert():
     rows = evaluate([(p, "lawn/Joint-v1", ScenarioConfig(), 0, {}) for p in ("dv-mpc", "rg-mpc", *REFERENCE_ROWS,
                                                                              "noise:rg-mpc")], progress=False)
-    cost = {r["policy"]: r["control_cost"] for r in rows}
+    cost = {r.policy: r.control_cost for r in rows}
     assert set(cost) == {"dv-mpc", "rg-mpc", "noise:rg-mpc", *REFERENCE_ROWS}
     assert cost["limit:perfect-links"] < cost["dv-mpc"] and cost["limit:fast-drone"] < cost["dv-mpc"]
     assert cost["noise:dv-mpc"] == pytest.approx(cost["dv-mpc"], rel=0.05)
@@ -192,7 +200,8 @@ def test_suite_v3_adds_tasks_where_links_are_poor():
 
 
 def test_two_ranges_are_compared_apart_with_the_tail_and_the_worst_seed():
-    from training.results.ranges import TAIL_RATIO, TEST_RANGES, compare_ranges, range_of, test_seeds
+    from training.results.cells import fmt_ranges, fmt_worst
+    from training.results.stats import TAIL_RATIO, TEST_RANGES, compare_ranges, range_of, test_seeds
 
     seeds = test_seeds(5)
     assert seeds[:5] == list(range(5)) and seeds[5:] == [TEST_RANGES[1] + i for i in range(5)]
@@ -208,36 +217,43 @@ def test_two_ranges_are_compared_apart_with_the_tail_and_the_worst_seed():
     assert c.worst == pytest.approx(4.0) and c.worst_seed == TEST_RANGES[1] + 2
     assert c.below(1.03) is False  # the second range's interval reaches past +3 %
     assert compare_ranges({s: costs[s] for s in seeds[:5]}, reference).below(1.021)  # one range: its bound
-    assert c.cell().count(" / ") == 1 and "4.00× (seed" in c.worst_cell()
+    assert fmt_ranges(c).count(" / ") == 1 and "4.00× (seed" in fmt_worst(c)
     with pytest.raises(ValueError, match="share no seed"):
         compare_ranges({1: 1.0}, {2: 1.0})
 
 
 def test_compare_is_the_python_front_door_of_evaluate(tmp_path):
-    """``training.results.api.compare`` plays the same episodes as ``evaluate`` and returns them typed,
-    with each policy's geometric comparison against the reference computed on the same seeds; bad
-    requests are named."""
+    """``training.results.api.compare`` plays the same episodes as ``evaluate``, with each policy's
+    geometric comparison against the reference computed on the same seeds; a result survives its CSV
+    row; bad requests are named."""
     from training.results.api import EpisodeResult, compare
+    from training.results.episode import read_csv, read_results, write_results
 
     result = compare(["epa", "rg-mpc"], config="steady", seeds=[3, 4], settings={"rg-mpc": {"power_levels": 20}})
     rows = evaluate([(p, "lawn/Joint-v1", presets.get("steady"), s, {"power_levels": 20} if p == "rg-mpc" else {})
                      for p in ("epa", "rg-mpc") for s in (3, 4)], progress=False)
-    assert [(r.policy, r.seed, r.control_cost) for r in result.results] == [
-        (r["policy"], r["seed"], r["control_cost"]) for r in rows]
+    def played(r):  # the row less this machine's clock
+        return {k: v for k, v in r.as_row().items() if not k.startswith("decision_time")}
+
+    assert [played(r) for r in result.results] == [played(r) for r in rows]
     first = result.of("epa")[0]
     assert isinstance(first, EpisodeResult) and first.stage_costs.shape == (presets.get("steady").num_slots,)
     assert first.stage_costs.sum() == pytest.approx(first.control_cost, rel=1e-9)
     assert result.reference == "epa" and set(result.geometric) == {"rg-mpc"}
     np.testing.assert_equal(vars(result.geometric["rg-mpc"]),  # two seeds: no interval (NaN) on either side
                             vars(paired_geometric(result.costs("rg-mpc"), result.costs("epa"))))
-    from training.results.run import read_csv, write_csv
-
-    back = [EpisodeResult.from_row(r) for r in read_csv(write_csv(rows, tmp_path / "rows.csv"))]  # strings back
-    for fresh, read in zip(result.results, back, strict=True):
-        assert (read.diverged, read.control_cost, read.seed) == (fresh.diverged, fresh.control_cost, fresh.seed)
+    back = read_results(write_results(rows, tmp_path / "rows.csv"))  # strings back
+    for fresh, read in zip(rows, back, strict=True):
+        assert read.as_row() == fresh.as_row() and isinstance(read.diverged, bool) and isinstance(read.seed, int)
         np.testing.assert_array_equal(read.stage_costs, fresh.stage_costs)
-        np.testing.assert_array_equal(read.mean_power_w, fresh.mean_power_w)
-    assert EpisodeResult.from_row({**rows[0], "diverged": "1", "stage_costs": ""}).diverged is True
+    old = [{k: v for k, v in r.items() if k not in ("diverged", "max_tracking_error_m")}
+           for r in read_csv(tmp_path / "rows.csv")]  # an older table: two columns fewer
+    assert all(r.diverged is None and r.max_tracking_error_m is None for r in map(EpisodeResult.from_row, old))
+    assert EpisodeResult.from_row({**old[0], "diverged": "1", "stage_costs": ""}).diverged is True
+    with pytest.raises(ValueError, match=r"columns \['nope'\] are not fields of an episode result"):
+        EpisodeResult.from_row({**old[0], "nope": "1"})
+    with pytest.raises(ValueError, match="metric 'nope' is not a scalar field"):
+        back[0].value("nope")
     with pytest.raises(ValueError, match="policies is empty"):
         compare([])
     with pytest.raises(ValueError, match=r"settings for \['pid'\], which are not among the policies"):

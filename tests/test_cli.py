@@ -95,21 +95,21 @@ def test_the_benchmark_table_is_its_episodes_statistics(tmp_path):
     from training.pages import first_table
     from training.results.cells import fmt_geometric, fmt_stat
     from training.results.report import RESULT_METRICS
-    from training.results.run import read_csv
+    from training.results.episode import read_results
     from training.results.stats import mean_ci, paired_cost_difference, paired_cost_geometric
 
     out = tmp_path / "bench"
     policies = ["epa", "pid", "sf"]
     assert main(["benchmark", "--policies", *policies, "--episodes", "3", "--out", str(out), "--set", "num_slots=10",
                  "--quiet", "--workers", "1"]) == 0
-    rows = [{**r, "seed": int(r["seed"])} for r in read_csv(out / "episodes.csv")]
+    rows = read_results(out / "episodes.csv")
     table = [[c.strip() for c in line.strip("|").split("|")] for line in first_table((out / "summary.md").read_text())]
     assert table[0] == ["policy", "episodes", *(label for _, label in RESULT_METRICS), "cost vs epa (paired)",
                         "cost vs epa (geometric [95 %], seeds won)"]
     assert [r[0] for r in table[2:]] == policies and all(r[1] == "3" for r in table[2:])
     paired, geometric = paired_cost_difference(rows, "epa"), paired_cost_geometric(rows, "epa")
     for cells in table[2:]:
-        mine = [r for r in rows if r["policy"] == cells[0]]
+        mine = [r.as_row() for r in rows if r.policy == cells[0]]
         for (key, _), cell in zip(RESULT_METRICS, cells[2:]):
             mean, half = mean_ci(float(r[key]) for r in mine)
             if key == "diverged":  # a count of the episodes flagged (an AGV past 25 m)

@@ -97,8 +97,9 @@ def test_tianshou_vector_env():
 
 
 def _lawn_parallel(config):
-    import lawn_env  # inside the creator: RLlib's workers are fresh processes
     from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
+
+    import lawn_env  # inside the creator: RLlib's workers are fresh processes
 
     return ParallelPettingZooEnv(lawn_env.parallel_env(**config))
 

@@ -4,6 +4,7 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+from test_agents import _snapshots
 
 from agents import make_policy, rollout
 from agents.reduced import DeliveryProblem, DeliverySettings, DeliveryValuePlanner
@@ -12,7 +13,6 @@ from lawn_env.dynamics import command_mask
 from lawn_env.errors import ConfigError
 from lawn_env.mpc import OutageAwareMPC
 from lawn_env.tail import LossAwareTail
-from test_agents import _snapshots
 
 CFG = ScenarioConfig()
 DISTURBED = presets.get("disturbed")

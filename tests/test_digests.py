@@ -1,4 +1,4 @@
-"""Every row of the README's benchmark table replays its recorded episodes (training/benchmark.py):
+"""Every row of the README's benchmark table replays its recorded episodes (training/results/protocols.py):
 a change that moves any policy's episodes (ao-mpc and sf included) fails here until the digests and
 the tables are regenerated in the same commit (scripts/refresh_docs.sh --only benchmark)."""
 
@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from training import benchmark
+from training.results import protocols as benchmark
 from training.pages import ROOT, block_body, first_table
 
 RECORDED = json.loads(benchmark.DIGESTS.read_text())
@@ -31,21 +31,18 @@ def test_a_table_row_replays_its_recorded_episodes(row):
 def test_a_changed_episode_changes_its_digest(monkeypatch):
     """One slot's stage cost moved in its tenth significant digit changes the digest; a last-bit
     difference does not."""
-    import training.benchmark
-
     record = benchmark.episode_record("epa", 0)
-    real = training.benchmark.run_episode
+    real = benchmark.run_episode
 
     def moved(scale):
         def run(*args, **kwargs):
             row = real(*args, **kwargs)
-            costs = json.loads(row["stage_costs"])
+            costs = row.stage_costs.copy()
             costs[7] *= scale
-            row["stage_costs"] = json.dumps(costs)
-            return row
+            return row.with_(stage_costs=costs)
         return run
 
-    monkeypatch.setattr(training.benchmark, "run_episode", moved(1 + 1e-8))
+    monkeypatch.setattr(benchmark, "run_episode", moved(1 + 1e-8))
     assert benchmark.episode_record("epa", 0)["digest"] != record["digest"]
-    monkeypatch.setattr(training.benchmark, "run_episode", moved(1 + 1e-15))
+    monkeypatch.setattr(benchmark, "run_episode", moved(1 + 1e-15))
     assert benchmark.episode_record("epa", 0)["digest"] == record["digest"]

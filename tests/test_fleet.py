@@ -10,11 +10,13 @@ import pytest
 pytest.importorskip("torch")
 pytest.importorskip("stable_baselines3")
 
-from stable_baselines3 import PPO  # noqa: E402
+from stable_baselines3 import PPO
 
-from agents.fleet import FleetPolicy  # noqa: E402
-from lawn_env.entities import EntityLayout  # noqa: E402
-from lawn_env.entities import MAX_AGVS  # noqa: E402
+from agents.fleet import FleetPolicy
+from lawn_env.entities import (
+    MAX_AGVS,
+    EntityLayout,
+)
 
 
 def _env(env_id="lawn/Joint-v1", k=5):
@@ -202,9 +204,9 @@ def test_each_agent_of_the_multi_agent_env_gets_its_own_row_of_one_network():
     """In the multi-agent entity layout the shared network gives each agent its own row of the
     fleet network's action (the drone its move, padded) and its own token's value; permuting the
     AGVs permutes the agents' actions; the compiled copy gives every row at once."""
-    import lawn_env
     import torch
 
+    import lawn_env
     from agents.fleet import FleetInference
     from training.sb3 import make_marl_vec_env
 
@@ -265,14 +267,14 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     and the noise floor at every size."""
     import dataclasses
 
-    import agents.learned as learned
     import training.recipes as recipes_module
-    import training.zoo as zoo
-    from agents import make_policy
+    from agents import learned, make_policy
     from lawn_env import ScenarioConfig, presets
-    from training.benchmark import fleet_agents, run_generalization
-    from training.results.ranges import fleet_table
-    from training.results.run import Play, read_csv
+    from training import zoo
+    from training.results.episode import read_csv
+    from training.results.protocols import fleet_agents, fleet_target, run_generalization
+    from training.results.report import fleet_table
+    from training.results.run import Play
     from training.train import TrainSpec, train
 
     tiny = dataclasses.replace(recipes_module.RECIPES["fleet-comm"], timesteps=16)
@@ -305,9 +307,9 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     sizes = {3: 2, 5: 2}
     rows = run_generalization(fleet_agents(), sizes, Play(1, False),
                               base=presets.get("default").override(num_slots=6))
-    assert {(r["policy"], r["task"]) for r in rows} == {(p, f"k{k}") for p in ("dv-mpc", "noise:dv-mpc", "zoo:fleet-comm")
-                                                        for k in sizes}
-    text = fleet_table(rows, fleet_agents(), sizes, {"zoo:fleet-comm"})
+    assert {(r.policy, r.task) for r in rows} == {(p, f"k{k}") for p in ("dv-mpc", "noise:dv-mpc", "zoo:fleet-comm")
+                                                  for k in sizes}
+    text = fleet_table(rows, fleet_agents(), sizes, fleet_target)
     lines = [line for line in text.splitlines() if line.startswith("| zoo:fleet-comm")]
     assert [line.split(" | ")[2] for line in lines] == ["3", "5"] and all("×" in line for line in lines)
     assert [line.split(" | ")[3] for line in lines] == ["4", "4"]  # two seeds of each of the two test ranges
@@ -319,8 +321,7 @@ def test_a_multi_agent_fleet_run_ships_to_the_zoo_and_a_flat_policy_is_refused(t
     """The zoo exports a multi-agent fleet network as a fleet network (its own class loads it) and
     ``zoo:NAME`` drives lawn/Joint-v1 with it at another K; the multi-agent entity layout refuses a
     policy other than FleetPolicy before anything is written."""
-    import agents.learned as learned
-    from agents import make_policy
+    from agents import learned, make_policy
     from lawn_env import presets
     from training.train import TrainSpec, train
 
@@ -346,21 +347,17 @@ def test_the_suite_writes_the_table_over_fleet_sizes_for_the_shipped_fleet_netwo
     """``lawn benchmark --suite`` with a fleet network among the policies: every fleet size of the
     table (``--episodes`` caps its seeds), written beside the suite's files; with ``--docs`` a page
     without the block is refused before anything runs."""
-    import argparse
-
     from training.cli import main
-    from training.cli.benchmark import _fleet_sizes
-    from training.benchmark import FLEET_SIZES
-    from training.results.ranges import TEST_RANGES
-    from training.results.run import TRANSIENT_SLOTS, read_csv
+    from training.results.episode import read_csv
+    from training.results.protocols import FLEET_SIZES, fleet_block
+    from training.results.run import Play
+    from training.results.stats import TEST_RANGES
 
-    args = argparse.Namespace(episodes=1, workers=1, quiet=True, transient_slots=TRANSIENT_SLOTS)
-    block = _fleet_sizes(args, ["rg-mpc", "zoo:fleet-comm"], tmp_path)
+    block = fleet_block(["zoo:fleet-comm"], Play(1, False), tmp_path, cap=1)
     rows = read_csv(tmp_path / "fleet_sizes.csv")
     assert {r["task"] for r in rows if r["policy"] == "zoo:fleet-comm"} == {f"k{k}" for k in FLEET_SIZES}
     assert {r["seed"] for r in rows} == {str(base) for base in TEST_RANGES}  # the first seed of each test range
     assert block.count("| zoo:fleet-comm |") == len(FLEET_SIZES) and (tmp_path / "fleet_sizes.md").exists()
-    assert _fleet_sizes(args, ["rg-mpc"], tmp_path) == ""
     (tmp_path / "docs").mkdir()
     assert main(["benchmark", "--suite", "--docs", str(tmp_path / "docs"), "--policies", "zoo:fleet-comm",
                  "--episodes", "1", "--out", str(tmp_path / "suite"), "--quiet"]) == 2
@@ -373,13 +370,12 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
     acts at each task's K; a Comm agent refuses a scenario with another control law."""
     import dataclasses
 
-    import agents.learned as learned
     import training.recipes as recipes_module
-    import training.zoo as zoo
-    from agents import make_policy
+    from agents import learned, make_policy
     from lawn_env import presets
-    from training.results.ranges import TEST_RANGES
-    from training.results.run import read_csv
+    from training import zoo
+    from training.results.episode import read_csv
+    from training.results.stats import TEST_RANGES
     from training.train import TrainSpec, train
 
     hp = {"expert": "dv-mpc", "tasks": ["steady", "wide-k8"], "epochs": 1, "dagger_iterations": 0, "width": 16,
@@ -421,7 +417,7 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
     with pytest.raises(ValueError, match="zoo:dv-joint was trained on lawn/Joint-v1 with "
                                          "control.law='delivery-certainty-equivalent'"):
         make_policy("zoo:dv-joint", presets.get("wide-k8"))  # its MPC increment anchor plans by the law
-    from training.benchmark import fleet_agents
+    from training.results.protocols import fleet_agents
 
     assert "zoo:dv-joint" not in fleet_agents()  # the fleet-size table is for the default-scenario networks
     with pytest.raises(ValueError, match="control.law='delivery'.*control.law='paper'"):

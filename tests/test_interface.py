@@ -10,8 +10,8 @@ import lawn_env
 from agents import make_policy
 from lawn_env import ScenarioConfig
 from lawn_env.core import Decisions
-from lawn_env.interface import RL_INTERFACE, STAKE_FLOOR, RLInterface, action_codec, resolve_interface
 from lawn_env.dynamics import PredictionModel
+from lawn_env.interface import RL_INTERFACE, STAKE_FLOOR, RLInterface, action_codec, resolve_interface
 
 RL_IDS = list(lawn_env.RL_ENV_IDS)
 SHORT = ScenarioConfig(num_slots=30)
@@ -119,7 +119,7 @@ def test_zero_action_of_the_anchored_scheme_is_a_sound_policy(env_id):
 
     seeds = range(5)
     zero = np.mean([_zero_action_cost(env_id, s, "rl") for s in seeds])
-    epa = np.mean([run_episode("epa", env_id, ScenarioConfig(), s)["control_cost"] for s in seeds])
+    epa = np.mean([run_episode("epa", env_id, ScenarioConfig(), s).control_cost for s in seeds])
     plain_zero = _zero_action_cost("lawn/Comm-v1", 0, None)
     assert np.isfinite(zero) and zero < 3 * epa  # a small factor of EPA ...
     assert plain_zero > 100 * epa  # ... where the v0 zero action (hover at the start) is a catastrophe

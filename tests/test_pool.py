@@ -22,9 +22,8 @@ def _where(task):
     running count would launch numba's thread pool)."""
     import time
 
-    from threadpoolctl import threadpool_info
-
     from numba.core import config
+    from threadpoolctl import threadpool_info
 
     time.sleep(0.02)
     return task, os.getpid(), {info["num_threads"] for info in threadpool_info()}, config.NUMBA_NUM_THREADS

@@ -4,9 +4,9 @@ Minari datasets and behaviour cloning from them."""
 from __future__ import annotations
 
 import dataclasses
-import shutil
 import json
 import math
+import shutil
 
 import gymnasium as gym
 import numpy as np
@@ -15,13 +15,14 @@ import pytest
 from agents import ANCHORS, AnchorPolicy, anchor_name, make_policy
 from lawn_env import ScenarioConfig, presets
 from training.pages import ROOT, first_table
+from training.results.episode import EpisodeResult
 from training.results.run import run_episode
 from training.results.stats import normalized_score, scores_by_policy
 
 
 # ---------------------------------------------------------------------- normalized score
 def _rows(policy, costs, env="lawn/Joint-v1", task="default"):
-    return [{"policy": policy, "env": env, "task": task, "seed": s, "control_cost": c} for s, c in costs.items()]
+    return [EpisodeResult(policy, env, s, control_cost=c, task=task) for s, c in costs.items()]
 
 
 def test_score_is_zero_at_epa_and_one_hundred_at_rg_mpc():
@@ -131,8 +132,8 @@ def test_anchor_rows_equal_a_direct_rollout_of_the_zero_action(env_id, name):
     direct = _zero_action_cost(env_id, ANCHORS[name], seed)
     row = run_episode(f"anchor:{name}", env_id, ScenarioConfig(), seed)
     # the policy hands the env the float32 v0 action that carries out the zero action
-    assert row["control_cost"] == pytest.approx(direct, rel=1e-6)
-    assert row["policy"] == f"anchor:{name}"
+    assert row.control_cost == pytest.approx(direct, rel=1e-6)
+    assert row.policy == f"anchor:{name}"
 
 
 def test_anchor_names_and_errors():
@@ -150,18 +151,20 @@ def test_anchor_names_and_errors():
 # ---------------------------------------------------------------------- the learned protocol
 def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     pytest.importorskip("stable_baselines3")
-    from training.benchmark import run_learned_protocol
     from training.results.cells import fmt_geometric, fmt_paired
-    from training.results.run import Play, learned_entries, own_anchor, read_csv
-    from training.results.stats import costs_of
-    from training.results.stats import paired_difference, paired_geometric
+    from training.results.episode import Entry, read_results
+    from training.results.protocols import run_learned_protocol
+    from training.results.run import Play, learned_entries, own_anchor
+    from training.results.stats import costs_of, paired_difference, paired_geometric
 
     agents = ["zoo:ppo-comm", "zoo:bc-comm", "zoo:ppo-comm"]
     anchors = sorted({own_anchor(a) for a in agents})
     assert all(a.startswith("anchor:") for a in anchors)
     entries = learned_entries(agents)  # a repeated agent is one row
-    assert entries == [("dv-mpc", "lawn/Comm-v1"), ("epa", "lawn/Comm-v1"), *[(a, "lawn/Comm-v1") for a in anchors],
-                       ("zoo:ppo-comm", "lawn/Comm-v1"), ("zoo:bc-comm", "lawn/Comm-v1")]
+    assert entries == [("dv-mpc", "lawn/Comm-v1", None), ("epa", "lawn/Comm-v1", None),
+                       *[(a, "lawn/Comm-v1", None) for a in anchors],
+                       Entry("zoo:ppo-comm", "lawn/Comm-v1", own_anchor("zoo:ppo-comm")),
+                       Entry("zoo:bc-comm", "lawn/Comm-v1", own_anchor("zoo:bc-comm"))]
     with pytest.raises(ValueError, match="unknown zoo agent 'nope'"):
         run_learned_protocol(["zoo:nope"], tmp_path, episodes=3, play=Play(1, False))
     table = run_learned_protocol(["zoo:ppo-comm"], tmp_path, episodes=3, play=Play(1, False))
@@ -170,12 +173,12 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     agent = next(line for line in lines if line.startswith("| zoo:ppo-comm "))
     anchor = own_anchor("zoo:ppo-comm")
     assert f"| {anchor} |" in agent
-    rows = read_csv(tmp_path / "episodes.csv")
+    rows = read_results(tmp_path / "episodes.csv")
     diff = paired_difference(costs_of(rows, "zoo:ppo-comm", "lawn/Comm-v1"), costs_of(rows, anchor, "lawn/Comm-v1"))
     assert fmt_paired(*diff[:2]) in agent.split("|")[11]
     geo = paired_geometric(costs_of(rows, "zoo:ppo-comm", "lawn/Comm-v1"), costs_of(rows, anchor, "lawn/Comm-v1"))
     assert agent.split("|")[9].strip() == fmt_geometric(geo)
-    split = [float(r["transient_cost"]) + float(r["sustained_cost"]) - float(r["control_cost"]) for r in rows]
+    split = [r.transient_cost + r.sustained_cost - r.control_cost for r in rows]
     assert max(map(abs, split)) < 1e-6
     assert any(line.startswith("| anchor:stake | lawn/Comm-v1 |") for line in lines)
     assert any(line.startswith("| dv-mpc | lawn/Comm-v1 | – |") and "| 100.0 |" in line for line in lines)
@@ -227,15 +230,15 @@ def test_suite_tasks_are_presets_with_their_own_scenarios():
 
 def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(tmp_path):
     pytest.importorskip("stable_baselines3")
-    from training.benchmark import run_suite
-    from training.results.run import Play
+    from training.results.protocols import run_suite
     from training.results.report import suite_table
+    from training.results.run import Play
 
     policies = ["anchor:stake", "zoo:ppo-comm"]
     tasks = ["default", "wide-k8"]
-    rows, skipped, _ = run_suite(policies, tasks, 1, tmp_path, Play(1, False))
-    assert {r["task"] for r in rows} == set(tasks)
-    assert {r["policy"] for r in rows} >= {"dv-mpc", "epa", "noise:dv-mpc", "limit:fast-drone", "limit:perfect-links"}
+    rows, skipped, _, _ = run_suite(policies, tasks, 1, tmp_path, Play(1, False))
+    assert {r.task for r in rows} == set(tasks)
+    assert {r.policy for r in rows} >= {"dv-mpc", "epa", "noise:dv-mpc", "limit:fast-drone", "limit:perfect-links"}
     assert set(skipped) == {("wide-k8", "zoo:ppo-comm")}
     assert "expects observations of shape (335,)" in skipped[("wide-k8", "zoo:ppo-comm")]
     board, refs = suite_table(rows, policies, tasks, skipped)
@@ -267,13 +270,13 @@ def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
         assert episode.observations.shape == (121, 335) and episode.actions.shape == (120, 6)
         assert episode.truncations[-1] and not episode.terminations.any()
         assert set(episode.infos) >= {"stage_cost", "delivered", "power_w", "drone_position"}
-        expected = run_episode("rg-mpc", "lawn/Comm-v1", ScenarioConfig(), 7 + i)["control_cost"]
+        expected = run_episode("rg-mpc", "lawn/Comm-v1", ScenarioConfig(), 7 + i).control_cost
         assert float(np.sum(episode.infos["stage_cost"][1:])) == pytest.approx(expected, rel=1e-12)
         assert float(-np.sum(episode.rewards)) == pytest.approx(expected, rel=1e-12)
     # Minari's normalized score is the package's score / 100 (epa and dv-mpc on the same seeds)
     from training.results.stats import normalized_score
 
-    costs = {p: {7 + i: run_episode(p, "lawn/Comm-v1", ScenarioConfig(), 7 + i)["control_cost"] for i in range(2)}
+    costs = {p: {7 + i: run_episode(p, "lawn/Comm-v1", ScenarioConfig(), 7 + i).control_cost for i in range(2)}
              for p in ("epa", "dv-mpc")}
     returns = np.array([float(np.sum(e.rewards)) for e in episodes])
     recorded = {7 + i: -r for i, r in enumerate(returns)}
@@ -304,8 +307,7 @@ def test_dataset_errors_name_the_problem(datasets_path):
 
 
 def test_bc_data_from_a_dataset_equals_live_labelling(datasets_path):
-    from training.bc import collect, dataset_transitions
-    from training.bc import create_dataset
+    from training.bc import collect, create_dataset, dataset_transitions
 
     create_dataset("rg-mpc", "lawn/Joint-v1", 2, 11, "lawn/test/live-v0", progress=False)
     cfg = ScenarioConfig()
@@ -393,7 +395,7 @@ def test_zoo_stages_on_a_recorded_run(tmp_path):
     found = finished_runs(runs, tiny)
     assert [(r.name, [d.name for d in dirs]) for r, dirs in found] == [("bc-comm", ["seed-0", "seed-1"])]
     ev = evaluate_zoo(found, episodes=2, workers=1, progress=False)
-    assert ev.envs == ["lawn/Comm-v1"] and {r["seed"] for r in ev.rows} == {0, 1}
+    assert ev.envs == ["lawn/Comm-v1"] and {r.seed for r in ev.rows} == {0, 1}
     tables = zoo_tables(ev)
     assert [row["label"] for row in tables.recipe_rows][:2] == ["dv-mpc", "epa"]
     assert len(tables.run_rows) == 2 and sum("(shipped)" in row["recipe"] for row in tables.run_rows) == 1
@@ -408,7 +410,7 @@ def test_zoo_stages_on_a_recorded_run(tmp_path):
 # ---------------------------------------------------------------------- the command line
 def test_evaluate_prints_the_score_beside_the_cost(tmp_path, capsys):
     from training.cli import main
-    from training.results.run import read_csv
+    from training.results.episode import read_csv
 
     out = tmp_path / "rows.csv"
     common = ["--episodes", "3", "--set", "num_slots=15", "--workers", "1", "--quiet", "--out", str(out)]
@@ -463,10 +465,10 @@ def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
     assert board.strip() in page and (out / "structure.md").read_text().strip() in page
     assert "1 policies x 1 tasks (k3), test seeds 0-2" in board and (docs / "figures" / "suite-per-slot.png").exists()
     from training.results.cells import format_score
-    from training.results.run import read_csv
+    from training.results.episode import read_results
     from training.results.stats import scores_by_policy
 
-    scores = scores_by_policy(read_csv(out / "episodes.csv"))  # the board's scores are the episodes' statistics
+    scores = scores_by_policy(read_results(out / "episodes.csv"))  # the board's scores are the episodes' statistics
     for line in first_table(board)[2:]:
         policy, env, cell = (c.strip() for c in line.strip("|").split("|")[:3])
         assert cell == format_score(scores.get(("k3", env, policy))), policy

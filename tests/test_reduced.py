@@ -3,6 +3,7 @@ import itertools
 import gymnasium as gym
 import numpy as np
 import pytest
+from test_agents import _snapshots
 
 from agents import AOSolver, expected_cost, make_policy
 from agents.optim import disc_box_grid, min_plus_allocation, project_disc_box
@@ -10,7 +11,6 @@ from agents.reduced import GlobalPlanner, GlobalSettings, ReducedGradientPlanner
 from lawn_env import ScenarioConfig, channel
 from lawn_env.config import DroneConfig
 from lawn_env.mpc import OutageAwareMPC
-from test_agents import _snapshots
 
 CFG = ScenarioConfig()
 

@@ -14,7 +14,7 @@ def test_paper_paths_inside_area_and_distinct(k):
     table = references.reference_table(references.paper_paths(k), 131, 0.5)
     assert table.shape == (k, 131, 6) and _in_area(table)
     speeds = np.linalg.norm(table[..., 2:4], axis=-1)
-    assert 0.5 < speeds.min() and speeds.max() < 10.0
+    assert speeds.min() > 0.5 and speeds.max() < 10.0
     assert len({tuple(np.round(table[i, 0, :2], 3)) for i in range(k)}) == k
     # the raw (stress) set: its corners demand more than the AGV can follow (a_max = 2)
     assert np.abs(table[..., 4:6]).max() > 2.0

@@ -65,7 +65,7 @@ def test_bad_arguments_are_clear_errors(tmp_path, capsys):
 def test_a_missing_mp4_writer_is_refused_before_the_episode(tmp_path, monkeypatch):
     import sys
 
-    import training.render as render
+    from training import render
 
     monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # as if not installed
     played = []

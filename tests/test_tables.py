@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from training.results.run import parse_bool, read_csv, write_csv
+from training.results.episode import parse_bool, read_csv, write_csv
 from training.results.stats import mean_ci
 
 

@@ -12,15 +12,14 @@ import pytest
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
-from agents import make_policy  # noqa: E402
-from agents.rollouts import rollout  # noqa: E402
-from lawn_env import ScenarioConfig  # noqa: E402
-from training.cli import main  # noqa: E402
-from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
+from stable_baselines3.common.callbacks import BaseCallback
 
-from training.callbacks import latest_checkpoint  # noqa: E402
-from training.protocol import VALIDATION_SEED_BASE  # noqa: E402
-from training.train import TrainSpec, load_hyperparams, resume, train  # noqa: E402
+from agents import make_policy
+from lawn_env import ScenarioConfig
+from training.callbacks import latest_checkpoint
+from training.cli import main
+from training.protocol import VALIDATION_SEED_BASE
+from training.train import TrainSpec, load_hyperparams, resume, train
 
 SMALL = ScenarioConfig(num_slots=12)
 FAST = {"ppo": {"n_steps": 64, "batch_size": 64, "n_epochs": 2}, "a2c": {"n_steps": 8},
@@ -28,7 +27,7 @@ FAST = {"ppo": {"n_steps": 64, "batch_size": 64, "n_epochs": 2}, "a2c": {"n_step
         "td3": {"learning_starts": 64, "buffer_size": 2000, "batch_size": 32}}
 
 
-def _train(tmp_path, algo, env_id="lawn/Joint-v1", steps=256, name=None, **kwargs):  # noqa: D401
+def _train(tmp_path, algo, env_id="lawn/Joint-v1", steps=256, name=None, **kwargs):
     out = tmp_path / (name or f"{algo}-{env_id.split('/')[-1]}")
     hp = {**FAST.get(algo, {}), **kwargs.pop("hp_overrides", {})}
     n_envs = kwargs.pop("n_envs", 2 if algo in ("ppo", "a2c") else 1)
@@ -216,11 +215,10 @@ def test_errors_name_the_problem(tmp_path, capsys):
 
 
 def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_path):
-    from training.results.run import episode_row
-    from training.train import VALIDATION_SEED_BASE
-
     from training.protocol import read_learning_curve
+    from training.results.run import episode_row
     from training.results.stats import paired_difference
+    from training.train import VALIDATION_SEED_BASE
 
     out, summary = _train(tmp_path, "ppo", "lawn/Comm-v1", steps=256, name="rl")
     curve = read_learning_curve(out)
@@ -238,10 +236,10 @@ def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_
     assert policy.interface.action_scheme == "anchored" and policy.env_id == "lawn/Comm-v1"
     seeds = [VALIDATION_SEED_BASE]  # _train validates on one episode
     rows = {s: episode_row(policy, "lawn/Comm-v1", SMALL, seed=s) for s in seeds}
-    assert all(r["slots"] == SMALL.num_slots for r in rows.values())  # no termination on the unmodified scenario
+    assert all(r.slots == SMALL.num_slots for r in rows.values())  # no termination on the unmodified scenario
     reference = {s: episode_row(make_policy("rg-mpc", SMALL, env_id="lawn/Comm-v1"), "lawn/Comm-v1", SMALL, s)
-                 ["control_cost"] for s in seeds}
-    selected = paired_difference({s: r["control_cost"] for s, r in rows.items()}, reference)[0]
+                 .control_cost for s in seeds}
+    selected = paired_difference({s: r.control_cost for s, r in rows.items()}, reference)[0]
     assert best["vs_reference"] == pytest.approx(selected, rel=1e-9)  # sb3:DIR plays the selected model
 
 
@@ -273,7 +271,7 @@ def test_several_training_seeds_in_one_command(tmp_path):
 
 
 def test_exported_agent_loads_as_zoo_name(tmp_path, monkeypatch):
-    import agents.learned as learned
+    from agents import learned
 
     out, _ = _train(tmp_path, "ppo", "lawn/Comm-v1", steps=128, name="exp")
     monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
@@ -463,7 +461,7 @@ def _truncate(path):
 def test_a_damaged_checkpoint_names_its_file(tmp_path, monkeypatch, capsys):
     import shutil
 
-    import agents.learned as learned
+    from agents import learned
 
     zoo = tmp_path / "zoo"
     shutil.copytree(learned.ZOO_DIR / "ppo-comm", zoo / "ppo-comm")
@@ -552,7 +550,7 @@ def test_the_registry_matches_the_hyperparameter_files_and_the_loaders():
 
 
 def test_rl_zoo_reads_the_recipes_module():
-    import training.recipes as recipes
+    from training import recipes
 
     assert set(recipes.hyperparams) == {"lawn/JointRL-v1", "lawn/CommRL-v1"}
     entry = next(iter(recipes.hyperparams.values()))

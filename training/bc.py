@@ -40,6 +40,7 @@ from .protocol import (
     write_learning_curve,
 )
 from .provenance import provenance
+from .results.episode import EpisodeSpec
 from .results.run import evaluate
 from .results.stats import SCORE_HIGH, SCORE_LOW
 
@@ -355,8 +356,9 @@ def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_i
         raise ValueError(f"--dataset-id {dataset_id!r} already exists under MINARI_DATASETS_PATH; choose another id "
                          f"or delete it (minari delete {dataset_id})")
     references = (SCORE_LOW, SCORE_HIGH)  # Minari's reference scores: their mean returns on the same seeds
-    rows = evaluate([(p, env_id, config, seed + i, {}) for p in references for i in range(episodes)], progress=False)
-    low, high = (-float(np.mean([r["control_cost"] for r in rows if r["policy"] == p])) for p in references)
+    specs = [EpisodeSpec(p, env_id, config, seed + i) for p in references for i in range(episodes)]
+    rows = evaluate(specs, progress=False)
+    low, high = (-float(np.mean([r.control_cost for r in rows if r.policy == p])) for p in references)
     env = DataCollector(gym.make(env_id, config=task), step_data_callback=LawnStepData, record_infos=True)
     for i in tqdm(range(episodes), desc=f"dataset {dataset_id}", unit="ep", disable=None if progress else True):
         rollout(env, agent, seed + i)

@@ -1,6 +1,6 @@
 """The distilled agents (the ``distil`` recipes of :mod:`training.recipes`: one fleet network
 cloned from ``dv-mpc`` on the steady suite tasks) compared on those tasks, on two disjoint ranges of
-test seeds (:mod:`training.results.ranges`), and shipped: ``lawn zoo build`` runs
+test seeds (:func:`training.results.stats.compare_ranges`), and shipped: ``lawn zoo build`` runs
 :func:`evaluate_distil` for the page's ``zoo-distil`` block and :func:`export_distil`.
 
 Each agent plays its own env with its own control law (``zoo:dv-comm``'s AGVs apply the delivery
@@ -27,14 +27,23 @@ from lawn_env import ScenarioConfig, presets
 from .protocol import read_learning_curve, selected_validation, selection_key
 from .recipes import RECIPES, Recipe, finished
 from .results.cells import fmt_num, fmt_paired, markdown_table
-from .results.ranges import TEST_RANGES, compare_ranges, distil_table, test_seeds
+from .results.episode import Entry, EpisodeResult
+from .results.report import distil_table
 from .results.run import DEFAULT_PLAY, Play, policy_env, run_entries
-from .results.stats import SCORE_HIGH, costs_of
+from .results.stats import SCORE_HIGH, TEST_RANGES, RangeComparison, compare_ranges, costs_of, test_seeds
 
 __all__ = ["DISTIL_EPISODES", "own_law", "run_distil", "Distilled", "evaluate_distil", "export_distil"]
 
 #: Test seeds per range and task.
 DISTIL_EPISODES = 100
+#: The clones' targets: the upper bound against rg-mpc below zero and against dv-mpc at most +3 % on
+#: both ranges, and a decision in at most 1 ms (the median).
+DISTIL_VS_RG, DISTIL_VS_DV, DISTIL_MS = 1.0, 1.03, 1.0
+
+
+def distil_target(rg: RangeComparison, dv: RangeComparison, ms: float) -> str:
+    """The verdict of the clones' targets (:data:`DISTIL_VS_RG`, :data:`DISTIL_VS_DV`, :data:`DISTIL_MS`)."""
+    return "met" if rg.below(DISTIL_VS_RG - 1e-12) and dv.below(DISTIL_VS_DV) and ms <= DISTIL_MS else "missed"
 
 
 def own_law(policy: str) -> dict[str, Any]:
@@ -55,19 +64,19 @@ def recipe_tasks(r: Recipe) -> list[str]:
 
 
 def run_distil(agents: Mapping[str, Sequence[str]], episodes: int = DISTIL_EPISODES, play: Play = DEFAULT_PLAY
-               ) -> list[dict[str, Any]]:
+               ) -> list[EpisodeResult]:
     """Full episodes of ``dv-mpc`` and ``rg-mpc`` (on ``lawn/Joint-v1``) and of every agent (``{policy:
     tasks}``, on its env, with its law) on each of its tasks, on the first ``episodes`` seeds of both
     test ranges."""
     seeds = test_seeds(episodes)
-    rows: list[dict[str, Any]] = []
+    rows: list[EpisodeResult] = []
     for task in dict.fromkeys(t for tasks in agents.values() for t in tasks):
         config = presets.get(task)
-        rows += run_entries([(SCORE_HIGH, JOINT), ("rg-mpc", JOINT)], config, seeds, play, task=task,
+        rows += run_entries([Entry(SCORE_HIGH, JOINT), Entry("rg-mpc", JOINT)], config, seeds, play, task=task,
                             desc=f"distil: {task}, experts")
         for agent in (a for a, tasks in agents.items() if task in tasks):
-            rows += run_entries([(agent, policy_env(agent))], config.override(own_law(agent)), seeds, play, task=task,
-                                desc=f"distil: {task}, {agent}")
+            rows += run_entries([Entry(agent, policy_env(agent))], config.override(own_law(agent)), seeds, play,
+                                task=task, desc=f"distil: {task}, {agent}")
     return rows
 
 
@@ -78,7 +87,7 @@ class Distilled:
 
     found: dict[str, Path]
     names: dict[str, str]
-    rows: list[dict[str, Any]]
+    rows: list[EpisodeResult]
     block: str
     episodes: int
 
@@ -99,7 +108,7 @@ def _chosen(r: Recipe, runs: Path) -> Path | None:
 def evaluate_distil(runs: Path, workers: int = 2, progress: bool = True, episodes: int = DISTIL_EPISODES
                     ) -> Distilled:
     """The section's recipes: each one's validation-selected run compared on its tasks
-    (:func:`run_distil`) and rendered (:func:`~training.results.ranges.distil_table`; the RL runs'
+    (:func:`run_distil`) and rendered (:func:`~training.results.report.distil_table`; the RL runs'
     learning curves on the validation seeds beside it)."""
     section = {name: r for name, r in RECIPES.items() if r.section == "distil"}
     found = {name: d for name, r in section.items() if (d := _chosen(r, Path(runs))) is not None}
@@ -108,13 +117,17 @@ def evaluate_distil(runs: Path, workers: int = 2, progress: bool = True, episode
     names = {name: read_run(d).policy_name for name, d in found.items()}
     rows = run_distil({names[n]: recipe_tasks(section[n]) for n in found}, episodes, Play(workers, progress))
     labels = {names[n]: (f"`zoo:{n}`", section[n].evaluated_on) for n in found}
-    targeted = {names[n] for n in found if section[n].algo == "fleet"}
+    targeted = {names[n] for n in found if section[n].algo == "fleet"}  # the clones of dv-mpc
+
+    def target(policy: str, rg: RangeComparison, dv: RangeComparison, ms: float) -> str:
+        return distil_target(rg, dv, ms) if policy in targeted else "–"
+
     tasks = list(dict.fromkeys(t for n in found for t in recipe_tasks(section[n])))
     note = (f"{episodes} test seeds from each of {', '.join(map(str, TEST_RANGES))} per task. Trained by: "
             + "; ".join(f"`{section[n].command()}`" for n in found) + ".")
     curves = [_curve_table(n, d, d == found[n]) for n in found if section[n].algo != "fleet"
               for d in _finished(section[n], Path(runs))]
-    block = "\n\n".join([distil_table(rows, labels, tasks, JOINT, targeted), note, *curves])
+    block = "\n\n".join([distil_table(rows, labels, tasks, JOINT, target), note, *curves])
     return Distilled(found, names, rows, block, episodes)
 
 

@@ -16,7 +16,8 @@ import lawn_env
 from agents import make_policy
 
 from .provenance import provenance
-from .results.run import episode_row, read_csv
+from .results.episode import read_csv
+from .results.run import episode_row
 from .results.stats import mean_ci, paired_difference
 
 __all__ = ["TRAIN_SEED_BASE", "VALIDATION_SEED_BASE", "TEST_EPISODES", "VALIDATION_REFERENCE", "CURVE_FIELDS",
@@ -88,7 +89,7 @@ def validation_reference(env_id: str, config: Any, episodes: int, seed_base: int
                          ) -> dict[int, float]:
     """``rg-mpc``'s control cost on the validation seeds ``seed_base + i`` of ``env_id``."""
     policy = make_policy(VALIDATION_REFERENCE, config, env_id=env_id)
-    return {seed_base + i: float(episode_row(policy, env_id, config, seed_base + i)["control_cost"])
+    return {seed_base + i: episode_row(policy, env_id, config, seed_base + i).control_cost
             for i in range(episodes)}
 
 

@@ -36,7 +36,8 @@ from lawn_env import presets
 
 from .pool import worker_pool
 from .results.cells import markdown_table
-from .results.run import read_csv, run_episode, write_csv
+from .results.episode import read_csv, write_csv
+from .results.run import run_episode
 from .results.stats import mean_ci
 
 __all__ = ["SweepSpec", "SweepTableError", "load_spec", "expand", "run_sweep", "read_table", "read_rows",
@@ -203,7 +204,7 @@ def _run(task: tuple[Any, ...]) -> dict[str, Any]:
     cfg = lawn_env.ScenarioConfig.from_dict(cfg_dict)
     row = run_episode(policy, env_id, cfg, seed, policy_kwargs)
     out = {"sweep": sweep_name, **point}
-    out.update(row)
+    out.update(row.as_row())
     out["lawn_version"] = lawn_env.__version__
     out["config_hash"] = config_hash(cfg_dict)
     out["policy_args"] = json.dumps(dict(policy_kwargs), sort_keys=True)

@@ -1,6 +1,6 @@
 """The shipped learned agents: how they compare and what is exported, in four stages a test can
 call one by one: :func:`evaluate_zoo` (every finished run of every recipe of :mod:`training.recipes`
-by the learned protocol of :mod:`training.benchmark`), :func:`zoo_tables` (the table cells and the
+by the learned protocol of :mod:`training.results.protocols`), :func:`zoo_tables` (the table cells and the
 run each recipe ships, selected on the validation seeds), :func:`render_zoo` (Markdown;
 :func:`plot_curves` the learning curves) and :func:`export_zoo` (``agents/zoo/<name>``: policy
 weights and observation statistics only). ``lawn zoo build`` (:func:`build_zoo`) runs them and
@@ -27,13 +27,13 @@ from .pages import block_names, replace_body
 from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
 from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe, train_recipes
 from .results.cells import fmt_num, fmt_paired, fmt_pct, markdown_table
+from .results.episode import Entry, EpisodeResult, EpisodeSpec, read_results, write_results
 from .results.report import protocol_cells
-from .results.run import Play, evaluate, learned_entries, own_anchor, read_csv, run_entries, write_csv
+from .results.run import Play, evaluate, learned_entries, run_entries
 from .results.stats import SCORE_HIGH, SCORE_VERSION, mean_ci, paired, scores_by_policy, verdict
 
 __all__ = ["Recipe", "RECIPES", "recipe", "train_recipes", "finished_runs", "evaluate_zoo", "zoo_tables", "render_zoo",
            "plot_curves", "export_zoo", "build_zoo", "format_zoo_list", "ZooEvaluation", "ZooTables", "Shipped"]
-
 
 
 @dataclass
@@ -43,14 +43,22 @@ class ZooEvaluation:
 
     found: list[tuple[Recipe, list[Path]]]
     runs: dict[Path, RunDir]
-    entries: list[tuple[str, str]]
-    rows: list[dict[str, Any]]
+    entries: list[Entry]
+    rows: list[EpisodeResult]
     scores: dict[tuple[str, str, str], tuple[Any, ...]]
     episodes: int
 
     @property
     def envs(self) -> list[str]:
-        return list(dict.fromkeys(env for _, env in self.entries))
+        return list(dict.fromkeys(e.env for e in self.entries))
+
+    def entry(self, policy: str, env: str) -> Entry:
+        """The protocol's entry of ``policy`` on ``env`` (with its anchor)."""
+        return next(e for e in self.entries if e.policy == policy and e.env == env)
+
+    def anchor(self, policy: str) -> str:
+        """The anchor a learned agent acts around; "" (no seeds, a NaN comparison) for one that records none."""
+        return next((e.anchor for e in self.entries if e.policy == policy and e.anchor), "")
 
 
 @dataclass
@@ -104,7 +112,8 @@ def zoo_tables(ev: ZooEvaluation) -> ZooTables:
     (the seed whose selected validation is lowest); every run in the per-run table."""
     recipe_rows, run_rows, shipped = [], [], []
     for env in ev.envs:
-        for policy, _ in [e for e in ev.entries if e[1] == env and not e[0].startswith(("sb3:", "bc:", "marl:"))]:
+        learned = ("sb3:", "bc:", "marl:")
+        for policy in [e.policy for e in ev.entries if e.env == env and not e.policy.startswith(learned)]:
             how = "expert" if ":" not in policy else "zero action"
             recipe_rows.append(_cells(ev, policy, env, policy, how, "–"))
         for r, dirs in ev.found:
@@ -112,7 +121,7 @@ def zoo_tables(ev: ZooEvaluation) -> ZooTables:
                 continue
             validation = [_best_validation(d) for d in dirs]
             chosen = dirs[int(np.argmin([selection_key(v) for v in validation]))]
-            gains = [paired(ev.rows, ev.runs[d].policy_name, _anchor(ev.runs[d].policy_name), env) for d in dirs]
+            gains = [paired(ev.rows, ev.runs[d].policy_name, ev.anchor(ev.runs[d].policy_name), env) for d in dirs]
             across = mean_ci(g[0] for g in gains)
             run_rows += [_run_cells(ev, r, d, best, d == chosen, env) for d, best in zip(dirs, validation, strict=True)]
             specs = [ev.runs[d].record for d in dirs]
@@ -125,7 +134,7 @@ def zoo_tables(ev: ZooEvaluation) -> ZooTables:
                                       f"{fmt_paired(*across)} ({len(dirs)} seeds)"))
             shipped.append(Shipped(r, chosen, specs, env, across))
     sources = sorted({rd.record.get("versions", {}).get("source", "not recorded") for rd in ev.runs.values()})
-    floor = [f"`{a}` on {env} {fmt_paired(*paired(ev.rows, SCORE_HIGH, a, env))}" for a, env in ev.entries
+    floor = [f"`{a}` on {env} {fmt_paired(*paired(ev.rows, SCORE_HIGH, a, env))}" for a, env, _ in ev.entries
              if a.startswith("anchor:")]
     return ZooTables(recipe_rows, run_rows, shipped, sources, floor, ev.episodes)
 
@@ -136,14 +145,15 @@ _RUN_COLUMNS = ("recipe", "seed", "anchor", "validation", "score", "vs_ref", "vs
 
 def _cells(ev: ZooEvaluation, policy: str, env: str, label: str, how: str, across: str) -> dict[str, str]:
     """One row of the recipe table: an expert, an anchor or a recipe's shipped run."""
-    return {"label": label, "env": env, "how": how, **protocol_cells(ev.rows, ev.scores, policy, env), "across": across}
+    cells = protocol_cells(ev.rows, ev.scores, ev.entry(policy, env))
+    return {"label": label, "env": env, "how": how, **cells, "across": across}
 
 
 def _run_cells(ev: ZooEvaluation, r: Recipe, run_dir: Path, best: Mapping[str, Any], chosen: bool,
                env: str) -> dict[str, str]:
     """One row of the per-run table."""
     spec = ev.runs[run_dir].record
-    c = protocol_cells(ev.rows, ev.scores, ev.runs[run_dir].policy_name, env)
+    c = protocol_cells(ev.rows, ev.scores, ev.entry(ev.runs[run_dir].policy_name, env))
     return {"recipe": f"`{r.name}`{' (shipped)' if chosen else ''}", "seed": str(spec["seed"]),
             "anchor": c["anchor"], "validation": _validation_cell(best, spec.get("eval_episodes", "?")),
             "score": c["score"], "vs_ref": c["vs_ref"], "vs_anchor": c["vs_anchor"], "worst": c["worst"],
@@ -202,12 +212,12 @@ def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True
     if distilled is not None:
         page = replace_body(page, "zoo-distil", distilled.block, source=source, where=str(out_doc))
         (out_doc.parent / "learned").mkdir(parents=True, exist_ok=True)
-        write_csv(distilled.rows, out_doc.parent / "learned" / "distil.csv", atomic=True)
+        write_results(distilled.rows, out_doc.parent / "learned" / "distil.csv", atomic=True)
     if "main" in built:
         _plot_main_curves(built["main"][0], out_doc, workers)
     if built:
-        rows = merged_rows(read_csv(out_doc.parent / "learned" / "episodes.csv"), built)
-        write_csv(rows, out_doc.parent / "learned" / "episodes.csv", atomic=True)
+        rows = merged_rows(read_results(out_doc.parent / "learned" / "episodes.csv"), built)
+        write_results(rows, out_doc.parent / "learned" / "episodes.csv", atomic=True)
     write_atomic(out_doc, page)
     if export:
         for ev, tables in built.values():
@@ -242,10 +252,11 @@ def _wanted(section: str, sections: list[str], names: list[str], runs: Path) -> 
 def _plot_main_curves(ev: ZooEvaluation, out_doc: Path, workers: int) -> None:
     """The main section's learning curves (``learned/curves.png`` beside the page), with rg-mpc's
     cost on the first ten validation seeds."""
-    reference = {env: evaluate([("rg-mpc", env, ScenarioConfig(), VALIDATION_SEED_BASE + i, {}) for i in range(10)],
-                               workers=workers, progress=False) for env in ev.envs}
+    specs = {env: [EpisodeSpec("rg-mpc", env, ScenarioConfig(), VALIDATION_SEED_BASE + i) for i in range(10)]
+             for env in ev.envs}
+    reference = {env: evaluate(s, workers=workers, progress=False) for env, s in specs.items()}
     (out_doc.parent / "learned").mkdir(parents=True, exist_ok=True)
-    plot_curves(ev.found, {env: float(np.mean([r["control_cost"] for r in rs])) for env, rs in reference.items()},
+    plot_curves(ev.found, {env: float(np.mean([r.control_cost for r in rs])) for env, rs in reference.items()},
                 out_doc.parent / "learned" / "curves.png")
 
 
@@ -276,11 +287,6 @@ def plot_curves(found: list[tuple[Recipe, list[Path]]], reference: dict[str, flo
     fig.savefig(path)
 
 
-def _anchor(policy: str) -> str:
-    """The anchor a learned agent acts around; "" (no seeds, a NaN comparison) for a run that records none."""
-    return own_anchor(policy) or ""
-
-
 def _best_validation(run_dir: Path) -> Mapping[str, float]:
     """The run's selected validation (:func:`~training.protocol.selected_validation`)."""
     return selected_validation(list(read_learning_curve(run_dir))) or {"control_cost": math.inf}
@@ -294,7 +300,7 @@ def _validation_cell(best: Mapping[str, float], episodes: int) -> str:
 def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
     r, run = s.recipe, ev.runs[s.run_dir]
     policy, episodes = run.policy_name, ev.episodes
-    anchor = own_anchor(policy)
+    anchor = ev.anchor(policy) or None
     record = {
         "name": r.name, "label": r.label, "trained_on": r.env_id, "evaluated_on": s.env,
         "command": r.command(), "budget_steps": int(s.specs[0].get("num_timesteps", r.timesteps)),
@@ -305,7 +311,7 @@ def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
         "benchmark": {"test_seeds": f"0-{episodes - 1}", "reference": SCORE_HIGH, "anchor": anchor,
                       "score_version": SCORE_VERSION, "score": list(ev.scores[("default", s.env, policy)][:3]),
                       "shipped_vs_reference": list(paired(ev.rows, policy, SCORE_HIGH, s.env)),
-                      "shipped_vs_anchor": list(paired(ev.rows, policy, _anchor(policy), s.env)),
+                      "shipped_vs_anchor": list(paired(ev.rows, policy, ev.anchor(policy), s.env)),
                       "across_training_seeds_vs_anchor": list(s.across)},
     }
     target = target_dir / r.name
@@ -366,18 +372,16 @@ def _run_of(policy: str) -> str | None:
         else None
 
 
-def merged_rows(old: list[dict[str, Any]], built: Mapping[str, tuple[Any, Any]]) -> list[dict[str, Any]]:
+def merged_rows(old: list[EpisodeResult], built: Mapping[str, tuple[ZooEvaluation, Any]]) -> list[EpisodeResult]:
     """The episodes of the rebuilt sections (each (policy, env, seed) once: the sections share
     their references), with, when a section was not rebuilt, the recorded episodes the new ones do
     not replace, less the rebuilt sections' runs."""
-    new: dict[tuple[Any, ...], dict[str, Any]] = {}
+    new: dict[tuple[str, str, int], EpisodeResult] = {}
     for ev, _ in built.values():
-        for row in ev.rows:
-            new.setdefault((row["policy"], row["env"], str(row["seed"])), row)
+        for r in ev.rows:
+            new.setdefault((r.policy, r.env, r.seed), r)
     if all(section in built for section in SECTIONS if section != "distil"):  # the distil episodes: distil.csv
         return list(new.values())
     rebuilt = {name for name, r in RECIPES.items() if r.section in built}
-    columns = list(next(iter(new.values())))
-    kept = [{k: r.get(k, "") for k in columns} for r in old
-            if (r["policy"], r["env"], str(r["seed"])) not in new and _run_of(r["policy"]) not in rebuilt]
+    kept = [r for r in old if (r.policy, r.env, r.seed) not in new and _run_of(r.policy) not in rebuilt]
     return kept + list(new.values())

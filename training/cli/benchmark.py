@@ -5,28 +5,15 @@ the task suite's leaderboard (normalized scores, :mod:`training.results.stats`).
 from __future__ import annotations
 
 import argparse
-import shutil
 from pathlib import Path
 
 from agents import BENCHMARK_POLICIES
-from agents.learned import zoo_agents
 from lawn_env import presets
 from lawn_env.presets import SUITE
 
-from ..benchmark import (
-    FLEET_SIZES,
-    fleet_agents,
-    run_benchmark,
-    run_generalization,
-    run_learned_protocol,
-    run_suite,
-    suite_policies,
-)
-from ..pages import block_names, replace_block
 from ..protocol import TEST_EPISODES
-from ..results.ranges import TEST_RANGES, fleet_table
-from ..results.report import plot_profiles, skipped_summary, structure_table, suite_table, task_tables
-from ..results.run import REFERENCE_ROWS, Play, build_policy, read_csv, write_rows
+from ..results.protocols import run_benchmark, run_learned_protocol, suite_pages, suite_policies
+from ..results.run import REFERENCE_ROWS, Play, build_policy
 from ..results.stats import SCORE_HIGH, SCORE_LOW, SCORE_VERSION
 from .common import command, comparison_env, config_of, count, included, policy_help, policy_name
 
@@ -102,79 +89,24 @@ def _play(args: argparse.Namespace) -> Play:
     return Play(args.workers, not args.quiet, args.transient_slots)
 
 
-#: The suite's tables: the file each is written to in --out, and the block of --docs DIR/LEADERBOARD.md.
-SUITE_TABLES = {"board": "suite-board", "structure": "suite-structure", "tasks": "suite-tasks",
-                "references": "suite-references"}
-
-
 def _suite(args: argparse.Namespace) -> int:
     episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
     tasks = args.tasks or list(SUITE)
     policies = list(args.policies or suite_policies()) + included(args.include)
-    pages = {"LEADERBOARD.md": list(SUITE_TABLES.values())}
-    if set(fleet_agents()) & set(policies):
-        pages["LEARNED.md"] = ["fleet-generalization"]
-    for page, names in pages.items() if args.docs else ():  # a missing block fails before any episode
-        path = Path(args.docs) / page
-        missing = [n for n in names if n not in block_names(path.read_text() if path.exists() else "")]
-        if missing:
-            raise ValueError(f"--docs {args.docs}: {path} has no generated block {', '.join(missing)}")
-    rows, skipped, seconds = run_suite(policies, tasks, episodes, out, _play(args))
-    board, refs = suite_table(rows, policies, tasks, skipped)
-    reasons = skipped_summary(skipped)
-    board += (f"\n\n{len(policies)} policies x {len(tasks)} tasks ({', '.join(tasks)}), test seeds 0-{episodes - 1}, "
-              f"{seconds / 60:.1f} min with {args.workers} workers. n/a: the policy cannot act on the task"
-              + (": " + "; ".join(reasons) + "." if reasons else ".")
-              + " –: no score (the references do not separate on that task's seeds).")
-    tables = {"board": board, "references": refs, "structure": structure_table(rows, tasks),
-              "tasks": task_tables(rows, policies, tasks, skipped)}
-    print(f"lawn benchmark --suite: {len(policies)} policies x {len(tasks)} tasks, {episodes} seeds each, "
-          f"{seconds / 60:.1f} min; normalized score v{SCORE_VERSION} [95 %] (0 = {SCORE_LOW}, 100 = {SCORE_HIGH})")
-    print(board)
+    docs = Path(args.docs) if args.docs else None
+    tables = suite_pages(policies, tasks, episodes, out, _play(args), docs)
+    print(f"lawn benchmark --suite: {len(policies)} policies x {len(tasks)} tasks, {episodes} seeds each; normalized "
+          f"score v{SCORE_VERSION} [95 %] (0 = {SCORE_LOW}, 100 = {SCORE_HIGH})")
+    print(tables["board"])
     print(tables["structure"])
-    for name, text in tables.items():
-        (out / f"{name}.md").write_text(text + "\n")
-    plot_profiles(read_csv(out / "per_slot.csv"), out / "per_slot.png", tasks, args.transient_slots)
     print(f"wrote {out}/episodes.csv, per_slot.csv, board.md (the scores), references.md (the references' costs), "
           "structure.md (cost structure, noise floor, headroom), tasks.md (every row per task) and per_slot.png")
-    fleet = _fleet_sizes(args, policies, out)
-    if args.docs:
-        source = "lawn benchmark --suite --docs " + args.docs
-        for name, text in tables.items():
-            replace_block(Path(args.docs) / "LEADERBOARD.md", SUITE_TABLES[name], text, source=source)
-        (Path(args.docs) / "figures").mkdir(parents=True, exist_ok=True)
-        shutil.copy2(out / "per_slot.png", Path(args.docs) / "figures" / "suite-per-slot.png")
-        if fleet:
-            replace_block(Path(args.docs) / "LEARNED.md", "fleet-generalization", fleet, source=source)
-        print(f"wrote the suite's blocks of {args.docs}/LEADERBOARD.md" + (" and LEARNED.md" if fleet else ""))
+    if tables["fleet"]:
+        print(tables["fleet"])
+        print(f"wrote {out}/fleet_sizes.csv and fleet_sizes.md (the fleet networks on K = 3 ... 64)")
+    if docs:
+        print(f"wrote the suite's blocks of {docs}/LEADERBOARD.md" + (" and LEARNED.md" if tables["fleet"] else ""))
     return 0
-
-
-def _fleet_sizes(args: argparse.Namespace, policies: list[str], out: Path) -> str:
-    """The fleet networks among ``policies`` on every fleet size of the fleet-size table
-    (:func:`training.benchmark.run_generalization`; ``--episodes`` caps its seeds per size); writes
-    ``fleet_sizes.csv`` and ``.md``, returns the block (empty without fleet networks)."""
-    import time
-
-
-
-    agents = [p for p in fleet_agents() if p in policies]
-    if not agents:
-        return ""
-    start = time.perf_counter()
-    sizes = {k: min(n, args.episodes) if args.episodes else n for k, n in FLEET_SIZES.items()}
-    rows = run_generalization(agents, sizes, _play(args))
-    seeds = ", ".join(f"K = {k}: {n}" for k, n in sizes.items())
-    # the targets are for the networks trained on mixed fleets, not the multi-agent ones trained at one K
-    targeted = {a for a in agents if zoo_agents()[a.partition(":")[2]].get("trainer") == "fleet"}
-    block = (f"Test seeds S..S+n-1 of each range S = {', '.join(map(str, TEST_RANGES))}, n per fleet size ({seeds}); "
-             f"{args.workers} worker processes, {(time.perf_counter() - start) / 60:.1f} min.\n\n"
-             + fleet_table(rows, agents, sizes, targeted))
-    write_rows(rows, out / "fleet_sizes.csv")
-    (out / "fleet_sizes.md").write_text(block + "\n")
-    print(block)
-    print(f"wrote {out}/fleet_sizes.csv and fleet_sizes.md (the fleet networks on K = 3 ... 64)")
-    return block
 
 
 def _learned(args: argparse.Namespace) -> int:

@@ -8,8 +8,9 @@ from pathlib import Path
 
 import lawn_env
 
+from ..results.episode import EpisodeSpec, write_results
 from ..results.report import format_table
-from ..results.run import build_policy, evaluate, write_rows
+from ..results.run import build_policy, evaluate
 from ..results.stats import SCORE_HIGH, SCORE_LOW, paired_cost_geometric, scores_by_policy, summarize
 from .common import command, comparison_env, config_of, count, parse_overrides, policy_help, policy_name
 
@@ -48,12 +49,12 @@ def run(args: argparse.Namespace) -> int:
     # a reference run with --policy-arg is another policy under the reference's name: no score for it
     scored = not args.no_score and not (kwargs and args.policy in (SCORE_HIGH, SCORE_LOW))
     references = [p for p in (SCORE_HIGH, SCORE_LOW) if p != args.policy] if scored else []
-    tasks = [(name, args.env, cfg, s, kwargs if name == args.policy else {}) for name in [args.policy, *references]
-             for s in seeds]
-    rows = evaluate(tasks, workers=args.workers, progress=not args.quiet, desc=args.policy,
+    specs = [EpisodeSpec(name, args.env, cfg, s, kwargs if name == args.policy else {})
+             for name in [args.policy, *references] for s in seeds]
+    rows = evaluate(specs, workers=args.workers, progress=not args.quiet, desc=args.policy,
                     transient_slots=args.transient_slots)
-    mine = [r for r in rows if r["policy"] == args.policy]
-    write_rows(mine, out)
+    mine = [r for r in rows if r.policy == args.policy]
+    write_results(mine, out)
     scores = None if not scored else {
         p: score for (_, _, p), score in scores_by_policy(rows).items() if p == args.policy}
     note = f" (score: {SCORE_LOW} and {SCORE_HIGH} on the same seeds)" if scored else \

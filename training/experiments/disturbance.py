@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..results.run import parse_bool
+from ..results.episode import parse_bool
 from ..results.stats import mean_ci
 from .base import EXPERTS, SEEDS, Experiment, Tables, by_seed, spec, values
 from .claims import Claim, multi_claim, paired_claim

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..results.cells import markdown_table
-from ..results.run import write_rows
+from ..results.episode import write_rows
 from ..sweep import SweepTableError, read_rows, read_table, run_sweep
 from .base import Experiment
 from .claims import Claim

@@ -6,7 +6,7 @@ command line (Stable-Baselines3's ``evaluate_policy`` for one policy; this compa
 
     result = compare(["dv-mpc", "rg-mpc", "epa"], config="steady", seeds=range(20))
     result.geometric["rg-mpc"]          # rg-mpc against dv-mpc: geometric mean of per-seed cost ratios
-    result.of("epa")[0].control_cost    # one EpisodeResult per seed
+    result.of("epa")[0].control_cost    # one EpisodeResult per seed (training.results.episode)
 
 Every episode is a full one of the unmodified scenario (:func:`.run.run_episode`); the policies are
 any name ``lawn evaluate --policy`` takes (experts, baselines, anchors, reference rows, learned agents).
@@ -14,59 +14,18 @@ any name ``lawn evaluate --policy`` takes (experts, baselines, anchors, referenc
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
-
-import numpy as np
 
 from agents.base import JOINT
 from lawn_env.presets import ConfigLike, resolve_config
 
-from .run import TRANSIENT_SLOTS, EpisodeSpec, evaluate, parse_bool
+from .episode import EpisodeResult, EpisodeSpec
+from .run import TRANSIENT_SLOTS, evaluate
 from .stats import Geometric, paired_geometric
 
-__all__ = ["EpisodeResult", "Comparison", "compare"]
-
-
-@dataclass(frozen=True)
-class EpisodeResult:
-    """One played episode: the metrics of MODEL.md §6 as fields, the per-slot stage costs as an array."""
-
-    policy: str
-    env: str
-    seed: int
-    control_cost: float
-    tracking_cost: float
-    effort_cost: float
-    transient_cost: float
-    sustained_cost: float
-    rmse_m: float
-    outage_rate: float
-    drone_path_length_m: float
-    max_tracking_error_m: float
-    diverged: bool
-    decision_time_median_s: float
-    mean_power_w: np.ndarray = field(repr=False)  # (K,): per link, every slot counted
-    stage_costs: np.ndarray = field(repr=False)  # (slots,)
-
-    @classmethod
-    def from_row(cls, row: Mapping[str, Any]) -> EpisodeResult:
-        """The result of a row of :func:`.run.evaluate` (its per-slot costs parsed from their JSON)."""
-        def array(value: Any) -> np.ndarray:  # a fresh row's list, or its JSON text read back from a CSV
-            if value is None or (isinstance(value, str) and not value.strip()):
-                return np.zeros(0)
-            return np.asarray(json.loads(value) if isinstance(value, str) else value, dtype=float)
-
-        return cls(policy=str(row["policy"]), env=str(row["env"]), seed=int(row["seed"]),
-                   control_cost=float(row["control_cost"]), tracking_cost=float(row["tracking_cost"]),
-                   effort_cost=float(row["effort_cost"]), transient_cost=float(row["transient_cost"]),
-                   sustained_cost=float(row["sustained_cost"]), rmse_m=float(row["rmse_m"]),
-                   outage_rate=float(row["outage_rate"]), drone_path_length_m=float(row["drone_path_length_m"]),
-                   max_tracking_error_m=float(row["max_tracking_error_m"]), diverged=parse_bool(row["diverged"]),
-                   decision_time_median_s=float(row["decision_time_median_s"]),
-                   mean_power_w=array(row["mean_power_w"]), stage_costs=array(row.get("stage_costs")))
+__all__ = ["EpisodeResult", "EpisodeSpec", "Comparison", "compare"]
 
 
 @dataclass(frozen=True)
@@ -106,8 +65,7 @@ def compare(policies: Sequence[str], config: ConfigLike = None, seeds: Iterable[
         raise ValueError(f"settings for {unknown}, which are not among the policies {names}")
     cfg, seed_list = resolve_config(config), [int(s) for s in seeds]
     specs = [EpisodeSpec(p, env, cfg, s, dict((settings or {}).get(p, {}))) for p in names for s in seed_list]
-    rows = evaluate(specs, workers=workers, progress=progress, desc="compare", transient_slots=TRANSIENT_SLOTS)
-    results = [EpisodeResult.from_row(row) for row in rows]
+    results = evaluate(specs, workers=workers, progress=progress, desc="compare", transient_slots=TRANSIENT_SLOTS)
     out = Comparison(results, reference, {})
     base = out.costs(reference)
     out.geometric.update({p: paired_geometric(out.costs(p), base) for p in names if p != reference})

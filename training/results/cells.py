@@ -6,9 +6,10 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 
-from .stats import Geometric
+from .stats import Geometric, RangeComparison
 
-__all__ = ["markdown_table", "fmt_pct", "fmt_num", "fmt_geometric", "fmt_paired", "format_score", "fmt_stat"]
+__all__ = ["markdown_table", "fmt_pct", "fmt_num", "fmt_geometric", "fmt_paired", "format_score", "fmt_stat",
+           "fmt_ranges", "fmt_tail", "fmt_worst"]
 
 
 def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
@@ -66,3 +67,18 @@ def fmt_stat(x: float) -> str:
     if x == 0 or 1e-2 <= abs(x) < 1e5:
         return f"{x:.4g}" if abs(x) < 10 else f"{x:,.1f}" if abs(x) < 1000 else f"{x:,.0f}"
     return f"{x:.3g}"
+
+
+def fmt_ranges(c: RangeComparison) -> str:
+    """One geometric cell per test range, separated by slashes: ``+1.2 % [-0.4, +2.9] / ...``."""
+    return " / ".join(fmt_geometric(g, wins=False) for g in c.ranges)
+
+
+def fmt_tail(c: RangeComparison) -> str:
+    """The share of seeds in the tail: ``3 %``."""
+    return f"{c.tail * 100:.0f} %"
+
+
+def fmt_worst(c: RangeComparison) -> str:
+    """The worst seed's ratio: ``2.14× (seed 100017)``."""
+    return f"{c.worst:.2f}× (seed {c.worst_seed})"

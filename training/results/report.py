@@ -1,26 +1,45 @@
-"""Markdown tables and figures from evaluation rows and their statistics (:mod:`.stats`; the cells'
-formats are :mod:`.cells`): the benchmark's summary, the learned protocol's table, the suite's board,
-references, cost structure and per-task tables, the fleet-size table, and their figures. Nothing
-here plays an episode; the pages' prose around the tables lives in ``docs/``."""
+"""Markdown tables and figures from evaluation results and their statistics (:mod:`.stats`; the
+cells' formats are :mod:`.cells`): the benchmark's summary, the learned protocol's table, the suite's
+board, references, cost structure and per-task tables, the fleet-size and distillation tables, and
+their figures. Nothing here plays an episode or reads a file; a table's targets come from the
+protocol that owns them (:mod:`.protocols`); the pages' prose around the tables lives in ``docs/``."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from agents.base import JOINT
 
-from .cells import fmt_geometric, fmt_num, fmt_paired, fmt_pct, fmt_stat, format_score, markdown_table
-from .run import REFERENCE_ROWS, TRANSIENT_SLOTS, is_reference_row, own_anchor, policy_env
+from .cells import (
+    fmt_geometric,
+    fmt_num,
+    fmt_paired,
+    fmt_pct,
+    fmt_ranges,
+    fmt_stat,
+    fmt_tail,
+    fmt_worst,
+    format_score,
+    markdown_table,
+)
+from .episode import Entry, Results
+from .run import REFERENCE_ROWS, TRANSIENT_SLOTS, is_reference_row, policy_env
 from .stats import (
     SCORE_HIGH,
     SCORE_LOW,
     SCORE_VERSION,
     SUMMARY_METRICS,
+    TAIL_RATIO,
+    TEST_RANGES,
     Geometric,
+    RangeComparison,
     aggregate_score,
+    compare_ranges,
     costs_of,
     geometric,
     mean_ci,
@@ -31,7 +50,7 @@ from .stats import (
 
 __all__ = ["RESULT_METRICS", "TIMING_METRICS", "format_table", "summary_markdown", "plot_summary", "mean_cell",
            "protocol_cells", "learned_table", "suite_table", "structure_table", "task_tables", "plot_profiles",
-           "skipped_summary"]
+           "skipped_summary", "fleet_table", "distil_table"]
 
 #: The summary's deterministic metrics (the same seeds give the same digits on any machine) and its
 #: measured ones (this machine's clock), in two tables.
@@ -39,7 +58,7 @@ RESULT_METRICS = tuple(m for m in SUMMARY_METRICS if not m[0].startswith("decisi
 TIMING_METRICS = tuple(m for m in SUMMARY_METRICS if m[0].startswith("decision_time"))
 #: The cost columns of the per-task and learned tables.
 _COSTS = ("control_cost", "transient_cost", "sustained_cost")
-Rows = Sequence[Mapping[str, Any]]  # evaluation rows (:mod:`.run`)
+Rows = Sequence[Mapping[str, Any]]  # the rows of a table other than episodes' (summaries, per-slot means)
 
 
 def format_table(summary: list[dict[str, Any]], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS,
@@ -75,7 +94,6 @@ def format_table(summary: list[dict[str, Any]], metrics: Sequence[tuple[str, str
             cells.append("–" if entry[by] == reference else fmt_geometric(geometric.get(entry[by])))
         table.append(cells)
     return markdown_table(header, table)
-
 
 
 def summary_markdown(summary: list[dict[str, Any]], paired: dict[str, tuple[float, float]], reference: str,
@@ -115,18 +133,18 @@ def plot_summary(summary: list[dict[str, Any]], path: Path, title: str = "") -> 
     fig.savefig(path)
 
 
-def mean_cell(rows: Rows, policy: str, env: str, task: str | None, metric: str) -> str:
+def mean_cell(rows: Results, policy: str, env: str, task: str | None, metric: str) -> str:
     """``mean ± 95 % half-width`` of ``metric`` over the seeds of ``policy`` on ``env`` (and ``task``)."""
     mean, half = mean_ci(costs_of(rows, policy, env, task, metric).values())
     return f"{fmt_num(mean)} ± {fmt_num(half)}"
 
 
-def protocol_cells(rows: Rows, scores: Mapping[tuple[str, str, str], Any], policy: str, env: str) -> dict[str, str]:
-    """The cells every learned-protocol table shows for ``policy`` on ``env``: its anchor, control
-    cost, score, paired difference against the best expert and against its own anchor, and its worst seed
+def protocol_cells(rows: Results, scores: Mapping[tuple[str, str, str], Any], entry: Entry) -> dict[str, str]:
+    """The cells every learned-protocol table shows for an entry: its anchor, control cost, score,
+    paired difference against the best expert and against its own anchor, and its worst seed
     against the anchor."""
+    policy, env, anchor = entry
     cost = costs_of(rows, policy, env)
-    anchor = own_anchor(policy)
     cells = {"anchor": anchor or "–", "cost": mean_cell(rows, policy, env, None, "control_cost"),
              "transient": mean_cell(rows, policy, env, None, "transient_cost"),
              "sustained": mean_cell(rows, policy, env, None, "sustained_cost"),
@@ -147,19 +165,19 @@ _LEARNED_CELLS = ("anchor", "cost", "transient", "sustained", "score", "geo_ref"
                   "worst")
 
 
-def learned_table(rows: Rows, entries: Sequence[tuple[str, str]], labels: Mapping[str, str] | None = None) -> str:
-    """The learned protocol's Markdown table of ``entries`` from their rows."""
+def learned_table(rows: Results, entries: Sequence[Entry], labels: Mapping[str, str] | None = None) -> str:
+    """The learned protocol's Markdown table of ``entries`` from their results."""
     scores = scores_by_policy(rows)
-    seeds = len({int(r["seed"]) for r in rows})
+    seeds = len({r.seed for r in rows})
     header = ["policy", "env", "acts around", "control cost", "transient", "sustained",
               f"score v{SCORE_VERSION} [95 %]", f"vs {SCORE_HIGH} (geometric, seeds won)",
               "vs own anchor (geometric, seeds won)",
               f"vs {SCORE_HIGH} (paired mean)", "vs own anchor (paired mean)", "worst seed vs own anchor"]
     table = []
-    for policy, env in entries:
-        c = protocol_cells(rows, scores, policy, env)
-        table.append([(labels or {}).get(policy, policy), env, *(c[k] for k in _LEARNED_CELLS)])
-    split = rows[0]["transient_slots"]
+    for entry in entries:
+        c = protocol_cells(rows, scores, entry)
+        table.append([(labels or {}).get(entry.policy, entry.policy), entry.env, *(c[k] for k in _LEARNED_CELLS)])
+    split = int(rows[0].transient_slots or TRANSIENT_SLOTS)
     note = (f"{seeds} test seeds; control cost split into the transient (slots 0-{split - 1}) and the sustained part "
             f"(slots {split} on); score v{SCORE_VERSION}: 0 = {SCORE_LOW}, 100 = {SCORE_HIGH} "
             "(training/results/stats.py); geometric columns (the deciding statistic, docs/benchmark.md): the geometric "
@@ -168,7 +186,7 @@ def learned_table(rows: Rows, entries: Sequence[tuple[str, str]], labels: Mappin
     return f"{markdown_table(header, table)}\n\n{note}"
 
 
-def suite_table(rows: Rows, policies: Sequence[str], tasks: Sequence[str],
+def suite_table(rows: Results, policies: Sequence[str], tasks: Sequence[str],
                 skipped: Mapping[tuple[str, str], str]) -> tuple[str, str]:
     """The leaderboard (score per task, the IQM over tasks with its stratified bootstrap interval)
     and the references' costs per task."""
@@ -178,7 +196,7 @@ def suite_table(rows: Rows, policies: Sequence[str], tasks: Sequence[str],
     board = []
     for p in names:
         env = JOINT if is_reference_row(p) else policy_env(p)
-        if is_reference_row(p) and not any(r["policy"] == p for r in rows):
+        if is_reference_row(p) and not any(r.policy == p for r in rows):
             continue
         cells = ["n/a" if (task, p) in skipped else format_score(scores.get((task, env, p))) for task in tasks]
         iqm, lo, hi, n = aggregate_score({t: inputs[(t, env, p)] for t in tasks if (t, env, p) in inputs})
@@ -187,11 +205,11 @@ def suite_table(rows: Rows, policies: Sequence[str], tasks: Sequence[str],
     return markdown_table(["policy", "env", *tasks, "IQM over tasks [95 %]"], board), _references_table(rows, tasks)
 
 
-def _references_table(rows: Rows, tasks: Sequence[str]) -> str:
+def _references_table(rows: Results, tasks: Sequence[str]) -> str:
     """The references' costs per task and env, their gap and how it varies over the seeds."""
     refs = []
     for task in tasks:
-        for env in dict.fromkeys(r["env"] for r in rows if r.get("task") == task):
+        for env in dict.fromkeys(r.env for r in rows if r.task == task):
             low, high = costs_of(rows, SCORE_LOW, env, task), costs_of(rows, SCORE_HIGH, env, task)
             if not low or not high:
                 continue
@@ -205,16 +223,16 @@ def _references_table(rows: Rows, tasks: Sequence[str]) -> str:
                           refs)
 
 
-def structure_table(rows: Rows, tasks: Sequence[str]) -> str:
+def structure_table(rows: Results, tasks: Sequence[str]) -> str:
     """Per task, what decides it on ``lawn/Joint-v1``: the best expert's control cost, its transient and
     sustained parts (the sustained share), the noise floor and the headroom rows against it."""
     table = []
     for task in tasks:
-        high = [r for r in rows if r["policy"] == SCORE_HIGH and r["env"] == JOINT and r.get("task") == task]
+        high = [r for r in rows if r.policy == SCORE_HIGH and r.env == JOINT and r.task == task]
         if not high:
             continue
-        total = sum(float(r["control_cost"]) for r in high)
-        share = sum(float(r["sustained_cost"]) for r in high) / total
+        total = sum(r.control_cost for r in high)
+        share = sum(costs_of(rows, SCORE_HIGH, JOINT, task, "sustained_cost").values()) / total
         cells = [mean_cell(rows, SCORE_HIGH, JOINT, task, m) for m in _COSTS]
         cells[2] += f" ({share * 100:.0f} %)"
         for p in REFERENCE_ROWS:
@@ -226,7 +244,7 @@ def structure_table(rows: Rows, tasks: Sequence[str]) -> str:
     return markdown_table(header, table)
 
 
-def task_tables(rows: Rows, policies: Sequence[str], tasks: Sequence[str],
+def task_tables(rows: Results, policies: Sequence[str], tasks: Sequence[str],
                 skipped: Mapping[tuple[str, str], str]) -> str:
     """One Markdown table per task: every row's control cost, its transient and sustained parts, the
     score, and the comparison with the best expert on the same env (geometric and paired mean)."""
@@ -235,7 +253,7 @@ def task_tables(rows: Rows, policies: Sequence[str], tasks: Sequence[str],
     for task in tasks:
         table = []
         names = list(dict.fromkeys([SCORE_HIGH, SCORE_LOW, *REFERENCE_ROWS, *policies]))
-        for env in dict.fromkeys(r["env"] for r in rows if r.get("task") == task):
+        for env in dict.fromkeys(r.env for r in rows if r.task == task):
             for p in names:
                 if (task, p) in skipped or not costs_of(rows, p, env, task):
                     continue
@@ -295,3 +313,60 @@ def skipped_summary(skipped: Mapping[tuple[str, str], str]) -> list[str]:
     for task, policy in skipped:
         by_task.setdefault(task, []).append(policy)
     return [f"on `{task}`: {', '.join(ps)} ({skipped[(task, ps[0])]})" for task, ps in by_task.items()]
+
+
+def _decision_ms(rows: Results, policy: str, env: str, task: str) -> float:
+    return 1e3 * float(np.median(list(costs_of(rows, policy, env, task, "decision_time_median_s").values())))
+
+
+def fleet_table(rows: Results, agents: Sequence[str], sizes: Mapping[int, int],
+                target: Callable[[str, int, RangeComparison], str]) -> str:
+    """Per env and K: the noise-floor row and every agent against dv-mpc on both test ranges, the
+    tail, the worst seed, ``target(policy, K, comparison)`` (the verdict of the protocol's target,
+    "–" for a row without one) and the decision times."""
+    table = []
+    noise = f"noise:{SCORE_HIGH}"
+    for env in dict.fromkeys(policy_env(a) for a in agents):
+        for policy in [noise, *(a for a in agents if policy_env(a) == env)]:
+            for k in sizes:
+                task = f"k{k}"
+                mine, ref = costs_of(rows, policy, env, task), costs_of(rows, SCORE_HIGH, env, task)
+                if not mine or not ref:
+                    continue
+                c = compare_ranges(mine, ref)
+                ms, ref_ms = _decision_ms(rows, policy, env, task), _decision_ms(rows, SCORE_HIGH, env, task)
+                table.append([policy, env, str(k), str(len(mine)), mean_cell(rows, policy, env, task, "control_cost"),
+                              mean_cell(rows, SCORE_HIGH, env, task, "control_cost"), fmt_ranges(c), fmt_tail(c),
+                              fmt_worst(c), target(policy, k, c), f"{ms:.3g}",
+                              f"{ref_ms / ms:.1f}×"])
+    header = ["policy", "env", "K", "seeds", "control cost", f"{SCORE_HIGH} cost",
+              f"vs {SCORE_HIGH}, geometric [95 %]: seeds {TEST_RANGES[0]}.. / {TEST_RANGES[1]}..",
+              f"seeds > {TAIL_RATIO:g}× {SCORE_HIGH}", "worst seed", "target (both ranges)", "decision time (ms)",
+              f"{SCORE_HIGH} / policy time"]
+    return markdown_table(header, table)
+
+
+def distil_table(rows: Results, agents: Mapping[str, tuple[str, str]], tasks: Sequence[str], reference_env: str,
+                 target: Callable[[str, RangeComparison, RangeComparison, float], str]) -> str:
+    """Per agent (``{policy: (label, env)}``) and task: its cost against ``rg-mpc`` and ``dv-mpc``
+    (played on ``reference_env``, the same scenario and seeds) on both ranges, the tail and worst
+    seed against dv-mpc, the decision time and ``target(policy, vs rg-mpc, vs dv-mpc, ms)``, the verdict
+    of the protocol's targets for that agent ("–" for one without)."""
+    table = []
+    for policy, (label, env) in agents.items():
+        for task in tasks:
+            mine = costs_of(rows, policy, env, task)
+            if not mine:
+                continue
+            rg = compare_ranges(mine, costs_of(rows, "rg-mpc", reference_env, task))
+            dv = compare_ranges(mine, costs_of(rows, SCORE_HIGH, reference_env, task))
+            ms = _decision_ms(rows, policy, env, task)
+            table.append([label, env, task, str(len(mine)), mean_cell(rows, policy, env, task, "control_cost"),
+                          fmt_num(float(np.mean(list(costs_of(rows, SCORE_HIGH, reference_env, task).values())))),
+                          fmt_ranges(rg), fmt_ranges(dv), fmt_tail(dv), fmt_worst(dv), f"{ms:.3g}",
+                          target(policy, rg, dv, ms)])
+    header = ["agent", "env", "task", "seeds", "control cost", f"{SCORE_HIGH} cost",
+              f"vs rg-mpc, geometric [95 %]: seeds {TEST_RANGES[0]}.. / {TEST_RANGES[1]}..",
+              f"vs {SCORE_HIGH}, same", f"seeds > {TAIL_RATIO:g}× {SCORE_HIGH}", f"worst seed vs {SCORE_HIGH}",
+              "decision time (ms)", "target: < 0 vs rg-mpc, ≤ +3 % vs dv-mpc, ≤ 1 ms"]
+    return markdown_table(header, table)

@@ -19,15 +19,11 @@ of the cost the drone's reach and the links decide under the expert's own planni
 
 from __future__ import annotations
 
-import csv
 import functools
-import json
 import math
-import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any, NamedTuple, cast
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -44,33 +40,18 @@ from lawn_env import ScenarioConfig, central_env_id
 from lawn_env.config import DroneConfig
 
 from ..pool import pool_map
+from .episode import Entry, EpisodeResult, EpisodeSpec, Results
 from .stats import SCORE_HIGH, SCORE_LOW
 
-__all__ = ["TRANSIENT_SLOTS", "EpisodeSpec", "Play", "DEFAULT_PLAY", "episode_row", "build_policy", "run_episode",
-           "split_cost",
-           "evaluate", "run_entries", "per_slot_profile", "policy_env", "own_anchor", "learned_entries", "write_rows",
-           "write_csv", "read_csv", "parse_bool", "LIMITS", "LIMIT_SETTINGS", "NOISE", "REFERENCE_ROWS",
-           "is_reference_row", "limit_config", "resolve"]
+__all__ = ["TRANSIENT_SLOTS", "Play", "DEFAULT_PLAY", "episode_row", "build_policy", "run_episode", "split_cost",
+           "evaluate", "run_entries", "per_slot_profile", "policy_env", "own_anchor", "learned_entries", "LIMITS",
+           "LIMIT_SETTINGS", "NOISE", "REFERENCE_ROWS", "is_reference_row", "limit_config", "resolve"]
 
 #: Where an episode's control cost splits (docs/benchmark.md, "The cost's structure"): slots
 #: 0..TRANSIENT_SLOTS-1 are the transient (the AGVs' recovery from their initial offsets while the
 #: drone flies in from the area's edge), the slots from TRANSIENT_SLOTS on the sustained part.
 #: ``--transient-slots`` of ``lawn evaluate`` and ``lawn benchmark`` moves it.
 TRANSIENT_SLOTS = 20
-#: Rows without a per-slot trace keep the saved tables small (100 seeds x many agents).
-_DROPPED = ("stage_costs",)
-
-
-class EpisodeSpec(NamedTuple):
-    """One episode to play: the policy (or reference row) by name, the env it is evaluated on, the
-    scenario, the seed and the policy's settings (``policy_kwargs`` of :func:`agents.make_policy`). A
-    plain tuple of the same fields in this order is taken where a spec is."""
-
-    policy: str
-    env: str
-    config: ScenarioConfig
-    seed: int
-    settings: Mapping[str, Any] = {}
 
 
 @dataclass(frozen=True)
@@ -141,10 +122,10 @@ def resolve(name: str, config: ScenarioConfig, policy_kwargs: Mapping[str, Any] 
 
 
 def episode_row(policy: Policy, env_id: str, config: ScenarioConfig, seed: int,
-                transient_slots: int = TRANSIENT_SLOTS) -> dict[str, Any]:
+                transient_slots: int = TRANSIENT_SLOTS) -> EpisodeResult:
     """One seeded, full episode of the unmodified scenario (``env_id`` of ``lawn_env.ENV_IDS``)
-    under a built policy (:func:`agents.rollout`); returns a flat row of MODEL.md §6 metrics plus
-    decision statistics and the control cost's transient and sustained parts (:func:`split_cost`)."""
+    under a built policy (:func:`agents.rollout`): MODEL.md §6's metrics, the decision statistics and
+    the control cost's transient and sustained parts (:func:`split_cost`)."""
     if env_id not in lawn_env.ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; valid: {', '.join(lawn_env.ENV_IDS)}")
     ao_iterations, stage_costs = [], []
@@ -162,17 +143,14 @@ def episode_row(policy: Policy, env_id: str, config: ScenarioConfig, seed: int,
     env = gym.make(env_id, config=config)
     episode = rollout(env, policy, seed, on_step=on_step)
     env.close()
-    row = {"policy": policy.name, "env": env_id, "seed": seed}
-    for key, value in episode.metrics.items():
-        row[key] = json.dumps(value) if isinstance(value, list) else value
-    row["decision_time_median_s"] = episode.decision_time_median_s
-    row["decision_time_p95_s"] = float(np.percentile(episode.decision_s, 95))
-    row["ao_iterations_mean"] = float(np.mean(ao_iterations)) if ao_iterations else math.nan
-    row["qp_fallbacks"] = fallbacks
-    row["transient_cost"], row["sustained_cost"] = split_cost(stage_costs, transient_slots)
-    row["transient_slots"] = int(transient_slots)
-    row["stage_costs"] = json.dumps(stage_costs)  # realized stage cost per slot (the per-slot figures read it)
-    return row
+    transient, sustained = split_cost(stage_costs, transient_slots)
+    return EpisodeResult.from_row({
+        "policy": policy.name, "env": env_id, "seed": seed, **episode.metrics,
+        "decision_time_median_s": episode.decision_time_median_s,
+        "decision_time_p95_s": float(np.percentile(episode.decision_s, 95)),
+        "ao_iterations_mean": float(np.mean(ao_iterations)) if ao_iterations else math.nan,
+        "qp_fallbacks": fallbacks, "transient_cost": transient, "sustained_cost": sustained,
+        "transient_slots": int(transient_slots), "stage_costs": stage_costs})
 
 
 def build_policy(policy: str, config: ScenarioConfig, env_id: str | None = None,
@@ -186,16 +164,14 @@ def build_policy(policy: str, config: ScenarioConfig, env_id: str | None = None,
 
 def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
                 policy_kwargs: Mapping[str, Any] | None = None,
-                transient_slots: int = TRANSIENT_SLOTS) -> dict[str, Any]:
+                transient_slots: int = TRANSIENT_SLOTS) -> EpisodeResult:
     """One seeded episode of the named policy or reference row (:func:`build_policy`,
-    :func:`episode_row`)."""
+    :func:`episode_row`), under that name."""
     agent, played = build_policy(policy, config, env_id, policy_kwargs)
-    row = episode_row(agent, env_id, played, seed, transient_slots)
-    row["policy"] = policy
-    return row
+    return episode_row(agent, env_id, played, seed, transient_slots).with_(policy=policy)
 
 
-def _run_task(task: EpisodeSpec | tuple[Any, ...], transient_slots: int = TRANSIENT_SLOTS) -> dict[str, Any]:
+def _run_task(task: EpisodeSpec | tuple[Any, ...], transient_slots: int = TRANSIENT_SLOTS) -> EpisodeResult:
     spec = EpisodeSpec(*task)
     return run_episode(spec.policy, spec.env, spec.config, spec.seed, spec.settings, transient_slots)
 
@@ -211,9 +187,10 @@ def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SL
 
 
 def evaluate(tasks: Iterable[EpisodeSpec | tuple[Any, ...]], workers: int = 1, progress: bool = True,
-             desc: str = "episodes", transient_slots: int = TRANSIENT_SLOTS) -> list[dict[str, Any]]:
-    """Play :class:`EpisodeSpec` tasks (or tuples of their fields); rows in task order, each with its
-    ``transient_cost`` and ``sustained_cost`` split at ``transient_slots`` (:func:`split_cost`)."""
+             desc: str = "episodes", transient_slots: int = TRANSIENT_SLOTS) -> list[EpisodeResult]:
+    """Play :class:`.episode.EpisodeSpec` tasks (or tuples of their fields); results in task order,
+    each with its ``transient_cost`` and ``sustained_cost`` split at ``transient_slots``
+    (:func:`split_cost`)."""
     split_cost((), transient_slots)  # a bad split fails before any episode
     return pool_map(functools.partial(_run_task, transient_slots=transient_slots), list(tasks), workers, progress, desc)
 
@@ -245,102 +222,43 @@ def own_anchor(policy: str) -> str | None:
     return None
 
 
-def learned_entries(agents: Sequence[str], envs: Sequence[str] | None = None) -> list[tuple[str, str]]:
-    """(policy, env) pairs of the learned protocol: per env, the two references, the anchors the
-    env's agents act around, then the agents."""
+def learned_entries(agents: Sequence[str], envs: Sequence[str] | None = None) -> list[Entry]:
+    """The learned protocol's entries: per env, the two references, the anchors the env's agents act
+    around, then the agents (each with its anchor, :func:`own_anchor`)."""
     by_env: dict[str, list[str]] = {env: [] for env in (envs or ())}
     for agent in dict.fromkeys(agents):  # a repeated agent is one row
         by_env.setdefault(policy_env(agent), []).append(agent)
-    out: list[tuple[str, str]] = []
+    out: list[Entry] = []
     for env, members in by_env.items():
-        anchors = sorted({a for a in map(own_anchor, members) if a is not None})
-        out += [(p, env) for p in (SCORE_HIGH, SCORE_LOW, *anchors, *members)]
+        anchors = {a: own_anchor(a) for a in members}
+        out += [Entry(p, env) for p in (SCORE_HIGH, SCORE_LOW, *sorted({a for a in anchors.values() if a}))]
+        out += [Entry(a, env, anchors[a]) for a in members]
     return out
 
 
-def run_entries(entries: Sequence[tuple[str, str]], config: ScenarioConfig, seeds: Sequence[int],
+def run_entries(entries: Sequence[Entry | tuple[str, str]], config: ScenarioConfig, seeds: Sequence[int],
                 play: Play = DEFAULT_PLAY, task: str = "default", desc: str = "benchmark",
-                profiles: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
-    """Full episodes of every (policy, env) entry on every seed; rows with a ``task`` column and
+                profiles: list[dict[str, Any]] | None = None) -> list[EpisodeResult]:
+    """Full episodes of every entry (policy, env) on every seed; results with their ``task`` and
     without the per-slot trace (its mean per slot appended to ``profiles`` when given,
     :func:`per_slot_profile`)."""
-    tasks = [EpisodeSpec(policy, env, config, int(s)) for policy, env in entries for s in seeds]
-    rows = evaluate(tasks, play.workers, play.progress, desc, play.transient_slots)
-    for row in rows:
-        row["task"] = task
+    tasks = [EpisodeSpec(e[0], e[1], config, int(s)) for e in entries for s in seeds]
+    results = [r.with_(task=task) for r in evaluate(tasks, play.workers, play.progress, desc, play.transient_slots)]
     if profiles is not None:
-        profiles += per_slot_profile(rows)
-    for row in rows:
-        for key in _DROPPED:
-            row.pop(key, None)
-    return rows
+        profiles += per_slot_profile(results)
+    return [r.with_(stage_costs=None) for r in results]
 
 
-def per_slot_profile(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """The mean stage cost per slot over the episodes of every (task, env, policy) of rows that
-    hold their per-slot trace (``stage_costs``): one row per slot."""
-    groups: dict[tuple[str, str, str], list[list[float]]] = {}
-    for r in rows:
-        key = (str(r.get("task", "default")), str(r["env"]), str(r["policy"]))
-        groups.setdefault(key, []).append(json.loads(r["stage_costs"]))
+def per_slot_profile(results: Results) -> list[dict[str, Any]]:
+    """The mean stage cost per slot over the episodes of every (task, env, policy) of results that
+    hold their per-slot trace (``stage_costs``): one row per slot (``per_slot.csv``)."""
+    groups: dict[tuple[str, str, str], list[np.ndarray]] = {}
+    for r in results:
+        if r.stage_costs is not None:
+            groups.setdefault((r.task or "default", r.env, r.policy), []).append(r.stage_costs)
     out = []
     for (task, env, policy), traces in groups.items():
         mean = np.mean(np.asarray(traces, dtype=float), axis=0)
         out += [{"task": task, "env": env, "policy": policy, "slot": n, "mean_stage_cost": float(c),
                  "episodes": len(traces)} for n, c in enumerate(mean)]
     return out
-
-
-def write_rows(rows: list[dict[str, Any]], path: str | Path) -> Path:
-    """Write rows as CSV or JSON, chosen by the file extension (``.csv`` or ``.json``)."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".csv", ".json"):
-        raise ValueError(f"--out {str(path)!r}: the extension must be .csv or .json, got {suffix or 'none'!r}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if suffix == ".json":
-        path.write_text(json.dumps(rows, indent=2))
-    else:
-        write_csv(rows, path)
-    return path
-
-
-def write_csv(rows: list[dict[str, Any]], path: Path | str, atomic: bool = False) -> Path:
-    """Rows as CSV with the union of their keys as columns (first-seen order). ``atomic`` writes a
-    temporary file, syncs it and renames it over ``path``, so a reader never sees half a table."""
-    path = Path(path)
-    fields: list[str] = []
-    for row in rows:
-        fields += [k for k in row if k not in fields]
-    target = path.with_suffix(path.suffix + ".tmp") if atomic else path
-    with target.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=fields)
-        writer.writeheader()
-        writer.writerows(rows)
-        if atomic:
-            fh.flush()
-            os.fsync(fh.fileno())
-    if atomic:
-        os.replace(target, path)
-    return path
-
-
-def read_csv(path: Path | str) -> list[dict[str, str]]:
-    """The rows of a CSV file as dicts of strings (an empty list when the file does not exist)."""
-    path = Path(path)
-    if not path.exists():
-        return []
-    with path.open(newline="") as fh:
-        return list(csv.DictReader(fh))
-
-
-def parse_bool(value: object) -> bool:
-    """A boolean table cell: a bool, or ``true``/``false``/``1``/``0`` in any case."""
-    if isinstance(value, bool):
-        return value
-    text = str(value).strip().lower()
-    if text in ("true", "1"):
-        return True
-    if text in ("false", "0"):
-        return False
-    raise ValueError(f"not a boolean table value: {value!r}")

@@ -1,0 +1,218 @@
+"""The pipeline's two records and their one file format: an :class:`EpisodeSpec` in (what to play), an
+:class:`EpisodeResult` out (what happened), from the worker pool to the CSV on disk and back.
+
+Every stage between passes these: :mod:`.run` plays specs into results, :mod:`.stats` reduces
+results, :mod:`.report` formats the statistics, :mod:`.protocols` declares which specs to play.
+A CSV of results (:func:`write_results`, :func:`read_results`) has one row per episode with the
+fields' names as columns, in field order; a per-AGV or per-slot field is a JSON list in its cell, a
+field a run did not record (an older file's) is no column at all, and reads back as None.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from lawn_env import ScenarioConfig
+
+__all__ = ["EpisodeSpec", "Entry", "EpisodeResult", "Results", "write_results", "read_results", "write_rows",
+           "write_csv", "read_csv", "parse_bool"]
+
+
+class EpisodeSpec(NamedTuple):
+    """One episode to play: the policy (or reference row) by name, the env it is evaluated on, the
+    scenario, the seed and the policy's settings (``policy_kwargs`` of :func:`agents.make_policy`). A
+    plain tuple of the same fields in this order is taken where a spec is."""
+
+    policy: str
+    env: str
+    config: ScenarioConfig
+    seed: int
+    settings: Mapping[str, Any] = {}
+
+
+class Entry(NamedTuple):
+    """One row of a protocol's table before its seeds: a policy on an env, and the ``anchor:NAME`` a
+    learned agent acts around (None for the others), found once when the protocol is declared."""
+
+    policy: str
+    env: str
+    anchor: str | None = None
+
+
+#: The fields written as a JSON list in one cell.
+_ARRAYS = ("rmse_per_agv_m", "outage_rate_per_agv", "mean_power_w", "stage_costs")
+
+
+@dataclass(frozen=True, eq=False)
+class EpisodeResult:
+    """One played episode: the metrics of MODEL.md §6 as fields (``lawn_env.core.episode_metrics``),
+    the decision statistics, the control cost's transient and sustained parts (split at
+    ``transient_slots``), the per-slot stage costs and the task (the preset) it was played on. Only
+    the policy, env, seed and control cost are always there: a field an older table did not record is
+    None, and the statistics skip it."""
+
+    policy: str
+    env: str
+    seed: int
+    slots: int | None = None
+    control_cost: float = math.nan
+    tracking_cost: float | None = None
+    effort_cost: float | None = None
+    rmse_m: float | None = None
+    rmse_per_agv_m: np.ndarray | None = field(default=None, repr=False)  # (K,)
+    outage_rate: float | None = None
+    outage_rate_predicted: float | None = None
+    outage_rate_per_agv: np.ndarray | None = field(default=None, repr=False)  # (K,)
+    mean_power_w: np.ndarray | None = field(default=None, repr=False)  # (K,): per link, every slot counted
+    drone_path_length_m: float | None = None
+    max_tracking_error_m: float | None = None
+    diverged: bool | None = None
+    decision_time_median_s: float | None = None
+    decision_time_p95_s: float | None = None
+    ao_iterations_mean: float | None = None
+    qp_fallbacks: int | None = None
+    transient_cost: float | None = None
+    sustained_cost: float | None = None
+    transient_slots: int | None = None
+    stage_costs: np.ndarray | None = field(default=None, repr=False)  # (slots,); None once a table drops it
+    task: str | None = None  # the preset; None: the one scenario of a paper-protocol run
+
+    def value(self, metric: str) -> float | None:
+        """A scalar field as a float (None when not recorded); ValueError naming the fields otherwise."""
+        if metric not in _SCALARS:
+            raise ValueError(f"metric {metric!r} is not a scalar field of an episode result; valid: "
+                             f"{', '.join(_SCALARS)}")
+        got = getattr(self, metric)
+        return None if got is None else float(got)
+
+    def with_(self, **changes: Any) -> EpisodeResult:
+        """A copy with ``changes`` (``dataclasses.replace``)."""
+        return dataclasses.replace(self, **changes)
+
+    def as_row(self) -> dict[str, Any]:
+        """The CSV row: every recorded field in field order (arrays as JSON lists, the flag as 0/1)."""
+        row: dict[str, Any] = {}
+        for f in _FIELDS:
+            got = getattr(self, f.name)
+            if got is None:
+                continue
+            if f.name in _ARRAYS:
+                got = json.dumps(np.asarray(got, dtype=float).tolist())
+            elif f.name == "diverged":
+                got = int(got)
+            row[f.name] = got
+        return row
+
+    @classmethod
+    def from_row(cls, row: Mapping[str, Any]) -> EpisodeResult:
+        """The result of a row: a CSV row's strings or a dict of values (the metrics of an episode);
+        an absent or empty cell is None. ValueError naming a column that is not a field."""
+        unknown = [k for k in row if k not in _TYPES]
+        if unknown:
+            raise ValueError(f"columns {unknown} are not fields of an episode result; valid: {', '.join(_TYPES)}")
+        values = {k: _parse(k, v) for k, v in row.items() if not (isinstance(v, str) and not v.strip())}
+        return cls(**{k: v for k, v in values.items() if v is not None})
+
+
+_FIELDS = dataclasses.fields(EpisodeResult)
+_TYPES = {f.name: str(f.type) for f in _FIELDS}
+#: The fields a statistic can reduce (every number that is not a per-AGV or per-slot list).
+_SCALARS = tuple(f.name for f in _FIELDS if f.name not in _ARRAYS and f.name not in ("policy", "env", "task"))
+#: Evaluation results, the input of every statistic and table.
+Results = Sequence[EpisodeResult]
+
+
+def _parse(name: str, value: Any) -> Any:
+    if value is None:
+        return None
+    if name in _ARRAYS:
+        return np.asarray(json.loads(value) if isinstance(value, str) else value, dtype=float)
+    if name in ("policy", "env", "task"):
+        return str(value)
+    if name == "diverged":
+        return parse_bool(value)
+    if _TYPES[name].startswith("int"):
+        return int(value)
+    return float(value)
+
+
+def write_results(results: Iterable[EpisodeResult], path: str | Path, atomic: bool = False) -> Path:
+    """Results as one CSV row each (:meth:`EpisodeResult.as_row`; the columns in field order, a field
+    some results do not record empty in theirs), or as JSON by the extension; ``atomic`` as
+    :func:`write_csv`'s."""
+    rows = [r.as_row() for r in results]
+    if Path(path).suffix.lower() == ".json" or not atomic:
+        return write_rows(rows, path)
+    return write_csv(rows, path, atomic=True)
+
+
+def read_results(path: str | Path) -> list[EpisodeResult]:
+    """The results of a CSV written by :func:`write_results` (an empty list when it does not exist)."""
+    return [EpisodeResult.from_row(row) for row in read_csv(path)]
+
+
+def write_rows(rows: Sequence[Mapping[str, Any]], path: str | Path) -> Path:
+    """Write rows as CSV or JSON, chosen by the file extension (``.csv`` or ``.json``)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".json"):
+        raise ValueError(f"--out {str(path)!r}: the extension must be .csv or .json, got {suffix or 'none'!r}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".json":
+        path.write_text(json.dumps(list(rows), indent=2))
+    else:
+        write_csv(rows, path)
+    return path
+
+
+def write_csv(rows: Sequence[Mapping[str, Any]], path: Path | str, atomic: bool = False) -> Path:
+    """Rows as CSV with the union of their keys as columns (first-seen order). ``atomic`` writes a
+    temporary file, syncs it and renames it over ``path``, so a reader never sees half a table."""
+    path = Path(path)
+    fields: list[str] = []
+    for row in rows:
+        fields += [k for k in row if k not in fields]
+    if all(f in _TYPES for f in fields):  # episode results: their fields' order
+        fields = [f for f in _TYPES if f in fields]
+    target = path.with_suffix(path.suffix + ".tmp") if atomic else path
+    with target.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(rows)
+        if atomic:
+            fh.flush()
+            os.fsync(fh.fileno())
+    if atomic:
+        os.replace(target, path)
+    return path
+
+
+def read_csv(path: Path | str) -> list[dict[str, str]]:
+    """The rows of a CSV file as dicts of strings (an empty list when the file does not exist)."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def parse_bool(value: object) -> bool:
+    """A boolean table cell: a bool, or ``true``/``false``/``1``/``0`` in any case."""
+    if isinstance(value, bool):
+        return value
+    text = str(value).strip().lower()
+    if text in ("true", "1"):
+        return True
+    if text in ("false", "0"):
+        return False
+    raise ValueError(f"not a boolean table value: {value!r}")
