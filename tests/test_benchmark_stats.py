@@ -11,12 +11,12 @@ from scipy import stats
 
 import lawn_env
 from lawn_env import ScenarioConfig, presets
+from training.results.episode import TRANSIENT_SLOTS
 from training.results.run import (
     LIMIT_SETTINGS,
     LIMITS,
     NOISE,
     REFERENCE_ROWS,
-    TRANSIENT_SLOTS,
     build_policy,
     evaluate,
     limit_config,

@@ -94,8 +94,8 @@ def test_the_benchmark_table_is_its_episodes_statistics(tmp_path):
     policy recomputed from the rows."""
     from training.pages import first_table
     from training.results.cells import fmt_geometric, fmt_stat
-    from training.results.report import RESULT_METRICS
     from training.results.episode import read_results
+    from training.results.report import RESULT_METRICS
     from training.results.stats import mean_ci, paired_cost_difference, paired_cost_geometric
 
     out = tmp_path / "bench"

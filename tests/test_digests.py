@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from training.results import protocols as benchmark
 from training.pages import ROOT, block_body, first_table
+from training.results import protocols as benchmark
 
 RECORDED = json.loads(benchmark.DIGESTS.read_text())
 

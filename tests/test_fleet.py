@@ -185,7 +185,8 @@ def test_lawn_train_fleet_runs_dagger_and_its_network_drives_any_k(tmp_path):
     and that drives the unmodified v0 env at K = 8; a bad hyperparameter is named."""
     from agents import make_policy, rollout
     from lawn_env import presets
-    from training.train import TrainSpec, train
+    from training.spec import TrainSpec
+    from training.train import train
 
     config = presets.get("default").override(num_agvs=4, num_slots=8)
     hp = {"fleet_sizes": [3, 4], "epochs": 2, "dagger_iterations": 1, "dagger_timesteps": 8, "width": 16, "heads": 2}
@@ -244,7 +245,8 @@ def test_multi_agent_ppo_trains_the_fleet_network_and_drives_any_k(tmp_path):
     the unmodified ``lawn/Joint-v1`` at K = 6 (``marl:DIR``)."""
     from agents import make_policy, rollout
     from lawn_env import presets
-    from training.train import TrainSpec, train
+    from training.spec import TrainSpec
+    from training.train import train
 
     config = presets.get("default").override(num_agvs=3, num_slots=8)
     hp = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,
@@ -271,11 +273,11 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     from agents import learned, make_policy
     from lawn_env import ScenarioConfig, presets
     from training import zoo
-    from training.results.episode import read_csv
+    from training.results.episode import Play, read_csv
     from training.results.protocols import fleet_agents, fleet_target, run_generalization
     from training.results.report import fleet_table
-    from training.results.run import Play
-    from training.train import TrainSpec, train
+    from training.spec import TrainSpec
+    from training.train import train
 
     tiny = dataclasses.replace(recipes_module.RECIPES["fleet-comm"], timesteps=16)
     monkeypatch.setitem(recipes_module.RECIPES, "fleet-comm", tiny)
@@ -323,7 +325,8 @@ def test_a_multi_agent_fleet_run_ships_to_the_zoo_and_a_flat_policy_is_refused(t
     policy other than FleetPolicy before anything is written."""
     from agents import learned, make_policy
     from lawn_env import presets
-    from training.train import TrainSpec, train
+    from training.spec import TrainSpec
+    from training.train import train
 
     config = presets.get("default").override(num_agvs=3, num_slots=6)
     hp = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,
@@ -348,9 +351,8 @@ def test_the_suite_writes_the_table_over_fleet_sizes_for_the_shipped_fleet_netwo
     table (``--episodes`` caps its seeds), written beside the suite's files; with ``--docs`` a page
     without the block is refused before anything runs."""
     from training.cli import main
-    from training.results.episode import read_csv
+    from training.results.episode import Play, read_csv
     from training.results.protocols import FLEET_SIZES, fleet_block
-    from training.results.run import Play
     from training.results.stats import TEST_RANGES
 
     block = fleet_block(["zoo:fleet-comm"], Play(1, False), tmp_path, cap=1)
@@ -376,7 +378,8 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
     from training import zoo
     from training.results.episode import read_csv
     from training.results.stats import TEST_RANGES
-    from training.train import TrainSpec, train
+    from training.spec import TrainSpec
+    from training.train import train
 
     hp = {"expert": "dv-mpc", "tasks": ["steady", "wide-k8"], "epochs": 1, "dagger_iterations": 0, "width": 16,
           "heads": 2, "interface": recipes_module.RECIPES["dv-joint"].hp["interface"],

@@ -152,9 +152,9 @@ def test_anchor_names_and_errors():
 def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     pytest.importorskip("stable_baselines3")
     from training.results.cells import fmt_geometric, fmt_paired
-    from training.results.episode import Entry, read_results
+    from training.results.episode import Entry, Play, read_results
     from training.results.protocols import run_learned_protocol
-    from training.results.run import Play, learned_entries, own_anchor
+    from training.results.run import learned_entries, own_anchor
     from training.results.stats import costs_of, paired_difference, paired_geometric
 
     agents = ["zoo:ppo-comm", "zoo:bc-comm", "zoo:ppo-comm"]
@@ -230,9 +230,9 @@ def test_suite_tasks_are_presets_with_their_own_scenarios():
 
 def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(tmp_path):
     pytest.importorskip("stable_baselines3")
+    from training.results.episode import Play
     from training.results.protocols import run_suite
     from training.results.report import suite_table
-    from training.results.run import Play
 
     policies = ["anchor:stake", "zoo:ppo-comm"]
     tasks = ["default", "wide-k8"]
@@ -331,7 +331,8 @@ def test_bc_from_a_dataset_is_the_clone_of_live_labelling(datasets_path, tmp_pat
 
     from training.bc import create_dataset
     from training.protocol import TRAIN_SEED_BASE
-    from training.train import TrainSpec, train
+    from training.spec import TrainSpec
+    from training.train import train
 
     create_dataset("rg-mpc", "lawn/Comm-v1", 1, TRAIN_SEED_BASE, "lawn/test/bc-v0", progress=False)
     common = dict(algo="bc", env_id="lawn/Comm-v1", config=ScenarioConfig(), timesteps=120, seed=0,
@@ -349,8 +350,10 @@ def test_bc_from_a_dataset_is_the_clone_of_live_labelling(datasets_path, tmp_pat
 
 def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     pytest.importorskip("stable_baselines3")
-    from training.train import TrainSpec, train
-    from training.zoo import RECIPES, build_zoo
+    from training.recipes import RECIPES
+    from training.spec import TrainSpec
+    from training.train import train
+    from training.zoo import build_zoo
 
     runs = tmp_path / "runs"
     (tmp_path / "docs").mkdir()
@@ -383,8 +386,10 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
 def test_zoo_stages_on_a_recorded_run(tmp_path):
     """The zoo's stages one by one: finished runs, evaluation, table rows, render, export."""
     pytest.importorskip("stable_baselines3")
-    from training.train import TrainSpec, train
-    from training.zoo import RECIPES, evaluate_zoo, export_zoo, finished_runs, render_zoo, zoo_tables
+    from training.recipes import RECIPES
+    from training.spec import TrainSpec
+    from training.train import train
+    from training.zoo import evaluate_zoo, export_zoo, finished_runs, render_zoo, zoo_tables
 
     runs = tmp_path / "runs"
     with pytest.raises(ValueError, match="no finished recipe runs"):
@@ -501,11 +506,14 @@ def test_train_recipes_skips_finished_runs_restarts_unfinished_ones_and_trains_f
     """``lawn zoo train``: a finished run is kept, an unfinished one deleted and trained again, and a
     recipe that starts from another trains in a second phase from that recipe's run of the same seed."""
     import training.recipes as recipes_module
-    from training.recipes import Recipe, finished, train_recipes
+    import training.train as train_module
+    from training.recipes import Recipe, finished
+    from training.train import train_recipes
 
     tiny = {"clone": Recipe("clone", "BC", "bc", "lawn/Comm-v1", 100, seeds=(0, 1)),
             "tune": Recipe("tune", "PPO from the clone", "ppo", "lawn/Comm-v1", 50, seeds=(0, 1), init_from="clone")}
     monkeypatch.setattr(recipes_module, "RECIPES", tiny)
+    monkeypatch.setattr(train_module, "RECIPES", tiny)
     runs = tmp_path / "runs"
     done0 = runs / "clone" / "seed-0"
     done0.mkdir(parents=True)
@@ -517,7 +525,7 @@ def test_train_recipes_skips_finished_runs_restarts_unfinished_ones_and_trains_f
     phases = []
 
     def fake_pool_map(fn, tasks, workers, progress, desc=""):
-        assert fn is recipes_module.train
+        assert fn is train_module.train
         phases.append([(t.out_dir.parent.name, t.seed, t.init_from) for t in tasks])
         for t in tasks:  # the unfinished run was deleted before its task was made
             assert not t.out_dir.exists()
@@ -527,7 +535,7 @@ def test_train_recipes_skips_finished_runs_restarts_unfinished_ones_and_trains_f
                                                             "env": t.env_id, "seed": t.seed}))
         return []
 
-    monkeypatch.setattr(recipes_module, "pool_map", fake_pool_map)
+    monkeypatch.setattr(train_module, "pool_map", fake_pool_map)
     dirs = train_recipes(runs, workers=1, progress=False)
     assert phases == [[("clone", 1, None)],
                       [("tune", 0, runs / "clone" / "seed-0"), ("tune", 1, runs / "clone" / "seed-1")]]

@@ -19,7 +19,8 @@ from lawn_env import ScenarioConfig
 from training.callbacks import latest_checkpoint
 from training.cli import main
 from training.protocol import VALIDATION_SEED_BASE
-from training.train import TrainSpec, load_hyperparams, resume, train
+from training.spec import TrainSpec, load_hyperparams
+from training.train import resume, train
 
 SMALL = ScenarioConfig(num_slots=12)
 FAST = {"ppo": {"n_steps": 64, "batch_size": 64, "n_epochs": 2}, "a2c": {"n_steps": 8},
@@ -215,10 +216,9 @@ def test_errors_name_the_problem(tmp_path, capsys):
 
 
 def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_path):
-    from training.protocol import read_learning_curve
+    from training.protocol import VALIDATION_SEED_BASE, read_learning_curve
     from training.results.run import episode_row
     from training.results.stats import paired_difference
-    from training.train import VALIDATION_SEED_BASE
 
     out, summary = _train(tmp_path, "ppo", "lawn/Comm-v1", steps=256, name="rl")
     curve = read_learning_curve(out)
@@ -379,7 +379,7 @@ def test_recipe_commands_parse_as_lawn_train():
 
     from training.cli import build_parser
     from training.cli.common import parse_overrides
-    from training.zoo import RECIPES
+    from training.recipes import RECIPES
 
     for recipe in RECIPES.values():
         argv = shlex.split(recipe.command().replace("<s>", "0"))
@@ -434,7 +434,7 @@ def test_a_failed_lawn_train_leaves_nothing_and_the_corrected_command_runs(tmp_p
 
 
 def test_the_valid_keys_are_the_public_ones():
-    from training.train import split_params
+    from training.spec import split_params
 
     with pytest.raises(ValueError) as info:
         split_params("ppo", "lawn/Joint-v1", {"learnin_rate": 1e-4})
@@ -533,7 +533,7 @@ def test_the_registry_matches_the_hyperparameter_files_and_the_loaders():
     import yaml
 
     from agents.runs import ALGORITHMS as LOADERS
-    from training.train import ALGORITHMS, ALGOS, HYPERPARAMS_DIR, TRAIN_ENV_IDS
+    from training.spec import ALGORITHMS, ALGOS, HYPERPARAMS_DIR, TRAIN_ENV_IDS
 
     assert ALGOS == ("ppo", "a2c", "sac", "td3", "fleet", "bc")
     for name, algo in ALGORITHMS.items():

@@ -259,7 +259,8 @@ def test_sb3_trains_on_the_native_vector_env(tmp_path):
     from stable_baselines3.common.vec_env import VecMonitor
 
     from training.sb3 import NativeVecEnv
-    from training.train import TrainSpec, train
+    from training.spec import TrainSpec
+    from training.train import train
 
     venv = VecMonitor(NativeVecEnv(ScenarioConfig(num_slots=4), 2))
     venv.seed(0)

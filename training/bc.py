@@ -276,7 +276,7 @@ def _expert_data(spec: Any, st: BCSettings, episode_seed: int) -> tuple[Any, ...
 
 
 def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> dict[str, Any]:
-    """Clone, DAgger and save the run of ``spec`` (a :class:`training.train.TrainSpec`)."""
+    """Clone, DAgger and save the run of ``spec`` (a :class:`training.spec.TrainSpec`)."""
     limit_torch_threads()
     st = bc_settings(params)
     start = time.perf_counter()

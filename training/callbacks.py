@@ -31,10 +31,10 @@ from .protocol import (
     append_learning_curve,
     read_learning_curve,
     selected_validation,
+    validation_costs,
     validation_reference,
     validation_row,
 )
-from .results.run import episode_row
 
 __all__ = ["ControlCostValidation", "RunCheckpoint", "ActorWarmup", "Checkpoint", "latest_checkpoint",
            "write_checkpoint", "restore_history", "clear_history", "save_model"]
@@ -194,7 +194,7 @@ class ControlCostValidation(BaseCallback):
         env_id = central_env_id(self.env_id)
         if self._reference is None:  # rg-mpc on the validation seeds, once per process (deterministic)
             self._reference = validation_reference(env_id, self.config, self.episodes, self.seed_base)
-        costs = {s: episode_row(policy, env_id, self.config, s).control_cost for s in self._reference}
+        costs = validation_costs(policy, env_id, self.config, self._reference)
         if start:
             self._start = costs
             (self.out_dir / "validation_start.json").write_text(json.dumps({str(k): v for k, v in costs.items()}))

@@ -27,9 +27,9 @@ from lawn_env import ScenarioConfig, presets
 from .protocol import read_learning_curve, selected_validation, selection_key
 from .recipes import RECIPES, Recipe, finished
 from .results.cells import fmt_num, fmt_paired, markdown_table
-from .results.episode import Entry, EpisodeResult
+from .results.episode import DEFAULT_PLAY, Entry, EpisodeResult, Play
 from .results.report import distil_table
-from .results.run import DEFAULT_PLAY, Play, policy_env, run_entries
+from .results.run import policy_env, run_entries
 from .results.stats import SCORE_HIGH, TEST_RANGES, RangeComparison, compare_ranges, costs_of, test_seeds
 
 __all__ = ["DISTIL_EPISODES", "own_law", "run_distil", "Distilled", "evaluate_distil", "export_distil"]

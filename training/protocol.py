@@ -6,23 +6,24 @@ from __future__ import annotations
 
 import csv
 import platform
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 import lawn_env
-from agents import make_policy
+from agents import Policy, make_policy, rollout
 
 from .provenance import provenance
 from .results.episode import read_csv
-from .results.run import episode_row
 from .results.stats import mean_ci, paired_difference
 
 __all__ = ["TRAIN_SEED_BASE", "VALIDATION_SEED_BASE", "TEST_EPISODES", "VALIDATION_REFERENCE", "CURVE_FIELDS",
            "limit_torch_threads", "versions", "read_learning_curve", "selection_key", "selected_validation",
-           "validation_reference", "validation_row", "append_learning_curve", "write_learning_curve"]
+           "validation_costs", "validation_reference", "validation_row", "append_learning_curve",
+           "write_learning_curve"]
 
 #: Training environments of seed s start at TRAIN_SEED_BASE + 1000 s (disjoint from test seeds 0-19).
 TRAIN_SEED_BASE = 1_000_000
@@ -85,12 +86,20 @@ def selected_validation(rows: Sequence[Mapping[str, float]]) -> Mapping[str, flo
     return min(eligible, key=selection_key, default=None)
 
 
+def validation_costs(policy: Policy, env_id: str, config: Any, seeds: Iterable[int]) -> dict[int, float]:
+    """Seed -> the control cost of a full episode of the unmodified scenario under a built policy."""
+    env = gym.make(env_id, config=config)
+    try:
+        return {int(s): float(rollout(env, policy, int(s)).metrics["control_cost"]) for s in seeds}
+    finally:
+        env.close()
+
+
 def validation_reference(env_id: str, config: Any, episodes: int, seed_base: int = VALIDATION_SEED_BASE
                          ) -> dict[int, float]:
     """``rg-mpc``'s control cost on the validation seeds ``seed_base + i`` of ``env_id``."""
     policy = make_policy(VALIDATION_REFERENCE, config, env_id=env_id)
-    return {seed_base + i: episode_row(policy, env_id, config, seed_base + i).control_cost
-            for i in range(episodes)}
+    return validation_costs(policy, env_id, config, range(seed_base, seed_base + episodes))
 
 
 def validation_row(costs: Mapping[int, float], reference: Mapping[int, float],

@@ -1,5 +1,5 @@
-"""The recipes of the shipped learned agents (:data:`RECIPES`), ``lawn zoo train``
-(:func:`train_recipes`) and lawn's PPO hyperparameters in rl-baselines3-zoo's form
+"""The recipes of the shipped learned agents (:data:`RECIPES`; ``lawn zoo train`` runs them,
+:func:`training.train.train_recipes`) and lawn's PPO hyperparameters in rl-baselines3-zoo's form
 (:func:`zoo_hyperparams`; this module's ``hyperparams``, made when read)::
 
     python -m rl_zoo3.train --algo ppo --env lawn/CommRL-v1 --gym-packages lawn_env --conf-file training.recipes
@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import shlex
-import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -17,10 +16,9 @@ from typing import Any, Literal
 from agents.runs import read_run
 from lawn_env import PARALLEL_ENV_ID, RL_ENV_IDS, ScenarioConfig, central_env_id, presets
 
-from .pool import pool_map
-from .train import LAWN_KEYS, TrainSpec, load_hyperparams, train
+from .spec import LAWN_KEYS, TrainSpec, load_hyperparams
 
-__all__ = ["Recipe", "RECIPES", "SECTIONS", "DISTIL_TASKS", "recipe", "finished", "train_recipes",
+__all__ = ["Recipe", "RECIPES", "SECTIONS", "DISTIL_TASKS", "recipe", "finished",
            "ZOO_VALIDATION_EPISODES", "zoo_hyperparams"]
 
 
@@ -188,29 +186,6 @@ def finished(run_dir: Path, timesteps: int) -> bool:
         return False
     data = read_run(run_dir).record
     return int(data.get("num_timesteps", 0)) >= (timesteps if data.get("trainer") != "bc" else 1)
-
-
-def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, progress: bool = True) -> list[Path]:
-    """Train the missing runs of the chosen recipes (all by default; a recipe that starts from another
-    in a second phase); returns the run directories."""
-    runs = Path(runs)
-    chosen = [recipe(n) for n in names] if names else list(RECIPES.values())
-    done: list[Path] = []
-    for phase in (False, True):
-        specs = []
-        for r in chosen:
-            if bool(r.init_from) != phase:
-                continue
-            for s in r.seeds:
-                out = runs / r.name / f"seed-{s}"
-                done.append(out)
-                if finished(out, r.timesteps):
-                    continue
-                if out.exists():
-                    shutil.rmtree(out)  # an unfinished run: start it again from scratch
-                specs.append(r.spec(runs, s))
-        pool_map(train, specs, workers, progress, desc="training runs")
-    return done
 
 
 def zoo_hyperparams(algo: str = "ppo") -> dict[str, dict[str, Any]]:

@@ -168,8 +168,8 @@ def _lawn_wrappers(env: Any, paired: Mapping[str, Any] | None, residual: Mapping
 
 def train_sb3(spec: Any, params: dict[str, Any], options: Any, version: int,
               callbacks: list[Any] | None = None) -> dict[str, Any]:
-    """Train the SB3 run of ``spec`` (a :class:`training.train.TrainSpec`) with its hyperparameters and
-    their :class:`~training.train.RunOptions`; a model SB3 refuses to build leaves nothing behind."""
+    """Train the SB3 run of ``spec`` (a :class:`training.spec.TrainSpec`) with its hyperparameters and
+    their :class:`~training.spec.RunOptions`; a model SB3 refuses to build leaves nothing behind."""
     if spec.init_from is not None:
         _check_init_from(spec.init_from, spec.algo, params)
     record = {"algo": spec.algo, "env": spec.env_id, "seed": spec.seed, "timesteps": spec.timesteps,

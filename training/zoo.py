@@ -25,14 +25,14 @@ from lawn_env import ScenarioConfig
 from .distil import evaluate_distil, export_distil
 from .pages import block_names, replace_body
 from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
-from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe, train_recipes
+from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe
 from .results.cells import fmt_num, fmt_paired, fmt_pct, markdown_table
-from .results.episode import Entry, EpisodeResult, EpisodeSpec, read_results, write_results
+from .results.episode import Entry, EpisodeResult, EpisodeSpec, Play, read_results, write_results
 from .results.report import protocol_cells
-from .results.run import Play, evaluate, learned_entries, run_entries
+from .results.run import evaluate, learned_entries, run_entries
 from .results.stats import SCORE_HIGH, SCORE_VERSION, mean_ci, paired, scores_by_policy, verdict
 
-__all__ = ["Recipe", "RECIPES", "recipe", "train_recipes", "finished_runs", "evaluate_zoo", "zoo_tables", "render_zoo",
+__all__ = ["finished_runs", "evaluate_zoo", "zoo_tables", "render_zoo",
            "plot_curves", "export_zoo", "build_zoo", "format_zoo_list", "ZooEvaluation", "ZooTables", "Shipped"]
 
 

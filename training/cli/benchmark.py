@@ -12,8 +12,9 @@ from lawn_env import presets
 from lawn_env.presets import SUITE
 
 from ..protocol import TEST_EPISODES
+from ..results.episode import Play
 from ..results.protocols import run_benchmark, run_learned_protocol, suite_pages, suite_policies
-from ..results.run import REFERENCE_ROWS, Play, build_policy
+from ..results.run import REFERENCE_ROWS, build_policy
 from ..results.stats import SCORE_HIGH, SCORE_LOW, SCORE_VERSION
 from .common import command, comparison_env, config_of, count, included, policy_help, policy_name
 

@@ -16,7 +16,8 @@ from agents.policies import is_policy_name, policy_names
 from agents.runs import read_run
 from lawn_env import presets
 
-from ..results.run import REFERENCE_ROWS, TRANSIENT_SLOTS, is_reference_row
+from ..results.episode import TRANSIENT_SLOTS
+from ..results.run import REFERENCE_ROWS, is_reference_row
 
 __all__ = ["command", "count", "seed", "comparison_env", "policy_name", "policy_help", "parse_overrides", "config_of",
            "included"]

@@ -7,8 +7,10 @@ import argparse
 import time
 from pathlib import Path
 
-from ..experiments import EXPERIMENTS, check_claims, format_claims, make_figures, write_claims
+from ..experiments.claims import format_claims, write_claims
+from ..experiments.registry import EXPERIMENTS
 from ..experiments.reproduction import write_reproduction
+from ..experiments.runner import check_claims, make_figures
 from .common import command
 
 
@@ -37,6 +39,5 @@ def run(args: argparse.Namespace) -> int:
     write_claims(claims, out)
     print(format_claims([c for c in claims if not args.names or c.figure in args.names]))
     if args.docs:
-
         print(f"wrote {write_reproduction(out, Path(args.docs))}")
     return 0

@@ -18,7 +18,7 @@ from ..experiments.gap import (
     summarize_gaps,
     write_gap_outputs,
 )
-from ..results.run import Play
+from ..results.episode import Play
 from .common import command, config_of, count, parse_overrides, policy_help, policy_name
 
 

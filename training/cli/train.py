@@ -8,7 +8,8 @@ from typing import Any
 
 from agents.errors import MissingExtra
 
-from ..train import ALGOS, TRAIN_ENV_IDS, TrainSpec, resume, train, train_seeds
+from ..spec import ALGOS, TRAIN_ENV_IDS, TrainSpec
+from ..train import resume, train, train_seeds
 from .common import command, config_of, count, parse_overrides, seed
 
 

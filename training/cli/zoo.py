@@ -7,7 +7,8 @@ from pathlib import Path
 
 from agents.errors import MissingExtra
 
-from ..zoo import build_zoo, format_zoo_list, train_recipes
+from ..train import train_recipes
+from ..zoo import build_zoo, format_zoo_list
 from .common import command
 
 #: Where ``lawn zoo build`` exports the agents.

@@ -16,9 +16,9 @@ this package), each labelled.
 from __future__ import annotations
 
 from .base import REPORT_SLOT, SEEDS, Experiment
-from .claims import Claim
+from .claims import Claim, format_claims, read_claims, tally, write_claims
 from .registry import EXPERIMENTS
-from .runner import check_claims, format_claims, make_figures, read_claims, tables_of, tally, write_claims
+from .runner import check_claims, make_figures, tables_of
 
 __all__ = ["EXPERIMENTS", "Experiment", "Claim", "REPORT_SLOT", "SEEDS", "make_figures", "check_claims", "write_claims",
            "read_claims", "tables_of", "format_claims", "tally"]

@@ -1,15 +1,20 @@
-"""The claims checked on an experiment's tables: the :class:`Claim` record and paired comparisons
-(:func:`training.results.stats.paired_difference`) turned into claims."""
+"""The claims checked on an experiment's tables: the :class:`Claim` record, paired comparisons
+(:func:`training.results.stats.paired_difference`) turned into claims, and the claims' results on
+disk (:func:`write_claims`, :func:`read_claims`: ``OUT/claims.json``, what the reproduction page
+reads) and as a table (:func:`format_claims`, :func:`tally`)."""
 
 from __future__ import annotations
 
+import dataclasses
+import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
-from ..results.cells import fmt_paired
+from ..results.cells import fmt_paired, markdown_table
 from ..results.stats import paired_difference, verdict
 
-__all__ = ["Claim", "paired_claim", "combine", "multi_claim"]
+__all__ = ["Claim", "paired_claim", "combine", "multi_claim", "write_claims", "read_claims", "format_claims", "tally"]
 
 
 @dataclass(frozen=True)
@@ -55,3 +60,41 @@ def multi_claim(figure: str, key: str, claim: str, metric: str,
         verdicts.append(verdict(mean, half, expect))
         counts.append(n)
     return Claim(figure, key, claim, metric, "; ".join(cells), combine(verdicts), min(counts, default=0))
+
+
+def write_claims(claims: Sequence[Claim], out: Path) -> Path:
+    """The claims' results as ``out/claims.json`` (what the reproduction page reads) and their
+    table as ``out/claims.md``."""
+    out = Path(out)
+    (out / "claims.md").write_text(format_claims(claims) + "\n")
+    path = out / "claims.json"
+    path.write_text(json.dumps([dataclasses.asdict(c) for c in claims], indent=1) + "\n")
+    return path
+
+
+def read_claims(out: Path) -> list[Claim]:
+    """The claims :func:`write_claims` wrote to ``out/claims.json``."""
+    path = Path(out) / "claims.json"
+    if not path.exists():
+        raise FileNotFoundError(f"{path} does not exist: run `lawn figures --out {out}` first")
+    return [Claim(**c) for c in json.loads(path.read_text())]
+
+
+def tally(claims: Sequence[Claim]) -> str:
+    """One sentence counting the verdicts of the paper's claims and of the project's own checks."""
+    paper = [c for c in claims if "project's check" not in c.claim]
+    own = [c for c in claims if "project's check" in c.claim]
+
+    def count(cs: Sequence[Claim]) -> str:
+        return ", ".join(f"{sum(c.verdict == v for c in cs)} {v}" for v in ("holds", "not significant", "differs"))
+
+    return (f"Of the paper's {len(paper)} claims checked here: {count(paper)}. "
+            f"Of the project's own {len(own)} checks: {count(own)}.")
+
+
+def format_claims(claims: Sequence[Claim]) -> str:
+    """The claims as a Markdown table."""
+    marks = {"differs": "**differs**", "not significant": "*not significant*"}
+    return markdown_table(["figure", "claim", "checked on", "project's number (paired mean ± 95 % interval)", "seeds",
+                           "verdict"], ([c.figure, c.claim, c.metric, c.value, str(c.seeds or "–"),
+                                         marks.get(c.verdict, c.verdict)] for c in claims))

@@ -14,8 +14,7 @@ from ..results.episode import parse_bool
 from ..results.stats import mean_ci
 from .base import EXPERTS, SEEDS, Experiment, Tables, by_seed, spec, values
 from .claims import Claim, multi_claim, paired_claim
-from .plots import STYLE, curve, label_axes, new_figure, save
-from .traces import plot_traces, trace_rows
+from .plots import STYLE, curve, label_axes, new_figure, plot_traces, save, trace_rows
 
 DIST_CASES = [("nominal", "default", "rg-mpc"), ("nominal", "default", "epa"), ("disturbed", "disturbed", "rg-mpc"),
               ("disturbed", "disturbed", "epa")]

@@ -29,8 +29,7 @@ from lawn_env import ScenarioConfig, Snapshot
 
 from ..pool import pool_map
 from ..results.cells import markdown_table
-from ..results.episode import write_rows
-from ..results.run import DEFAULT_PLAY, Play
+from ..results.episode import DEFAULT_PLAY, Play, write_rows
 
 __all__ = ["CONVERGENCE_SLOTS", "gap_episode", "run_gap", "summarize_gaps", "global_power_shares", "format_gap_table",
            "convergence", "format_convergence", "plot_gaps", "plot_convergence", "write_gap_outputs"]

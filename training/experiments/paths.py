@@ -8,7 +8,7 @@ from typing import Any
 
 from .base import EXPERTS, SEEDS, Experiment, Tables, by_seed, spec
 from .claims import Claim, paired_claim
-from .traces import plot_traces, trace_rows
+from .plots import plot_traces, trace_rows
 
 PATH_CASES = [("K=3", "k3", "rg-mpc"), ("K=3", "k3", "ao-mpc"), ("K=4", "default", "rg-mpc"),
               ("K=4", "default", "ao-mpc"), ("K=4", "default", "epa")]

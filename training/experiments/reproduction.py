@@ -13,10 +13,10 @@ import re
 import shutil
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    from .claims import Claim
+from ..pages import replace_body
+from .claims import Claim, format_claims, read_claims, tally
+from .registry import EXPERIMENTS
 
 __all__ = ["EXPLANATIONS", "write_reproduction"]
 
@@ -89,9 +89,6 @@ def write_reproduction(out: Path, docs: Path, explanations: Mapping[str, str] | 
     to ``docs/figures/reproduction/``). Every claim that does not hold gets the explanation keyed by
     its claim key's prefix in ``explanations`` (prefix -> the page's section heading; default
     :data:`EXPLANATIONS`)."""
-    from ..pages import replace_body
-    from . import EXPERIMENTS, format_claims, read_claims, tally
-
     out, docs = Path(out), Path(docs)
     path = docs / "REPRODUCTION.md"
     claims = read_claims(out)

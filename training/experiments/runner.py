@@ -1,24 +1,23 @@
 """Run any experiment: its tables (missing sweep rows run, builders for the rest), its plot, its
 claims checked on the tables; the claims' results go to ``OUT/claims.json`` and ``OUT/claims.md``,
-which is all the reproduction page reads (:func:`training.reproduction.write_reproduction`)."""
+which is all the reproduction page reads (:func:`training.experiments.reproduction.write_reproduction`;
+:func:`.claims.write_claims` writes them)."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ..results.cells import markdown_table
 from ..results.episode import write_rows
 from ..sweep import SweepTableError, read_rows, read_table, run_sweep
 from .base import Experiment
 from .claims import Claim
 from .registry import EXPERIMENTS
 
-__all__ = ["tables_of", "make_figures", "check_claims", "write_claims", "read_claims", "format_claims", "tally"]
+__all__ = ["tables_of", "make_figures", "check_claims"]
 
 
 def tables_of(exp: Experiment, out: Path, quick: bool = False, workers: int = 1, progress: bool = False,
@@ -79,41 +78,3 @@ def check_claims(out: Path) -> list[Claim]:
             continue
         claims += exp.claims(tables_of(exp, out, run=False))
     return claims
-
-
-def write_claims(claims: Sequence[Claim], out: Path) -> Path:
-    """The claims' results as ``out/claims.json`` (what the reproduction page reads) and their
-    table as ``out/claims.md``."""
-    out = Path(out)
-    (out / "claims.md").write_text(format_claims(claims) + "\n")
-    path = out / "claims.json"
-    path.write_text(json.dumps([dataclasses.asdict(c) for c in claims], indent=1) + "\n")
-    return path
-
-
-def read_claims(out: Path) -> list[Claim]:
-    """The claims :func:`write_claims` wrote to ``out/claims.json``."""
-    path = Path(out) / "claims.json"
-    if not path.exists():
-        raise FileNotFoundError(f"{path} does not exist: run `lawn figures --out {out}` first")
-    return [Claim(**c) for c in json.loads(path.read_text())]
-
-
-def tally(claims: Sequence[Claim]) -> str:
-    """One sentence counting the verdicts of the paper's claims and of the project's own checks."""
-    paper = [c for c in claims if "project's check" not in c.claim]
-    own = [c for c in claims if "project's check" in c.claim]
-
-    def count(cs: Sequence[Claim]) -> str:
-        return ", ".join(f"{sum(c.verdict == v for c in cs)} {v}" for v in ("holds", "not significant", "differs"))
-
-    return (f"Of the paper's {len(paper)} claims checked here: {count(paper)}. "
-            f"Of the project's own {len(own)} checks: {count(own)}.")
-
-
-def format_claims(claims: Sequence[Claim]) -> str:
-    """The claims as a Markdown table."""
-    marks = {"differs": "**differs**", "not significant": "*not significant*"}
-    return markdown_table(["figure", "claim", "checked on", "project's number (paired mean ± 95 % interval)", "seeds",
-                           "verdict"], ([c.figure, c.claim, c.metric, c.value, str(c.seeds or "–"),
-                                         marks.get(c.verdict, c.verdict)] for c in claims))

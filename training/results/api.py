@@ -21,8 +21,8 @@ from typing import Any
 from agents.base import JOINT
 from lawn_env.presets import ConfigLike, resolve_config
 
-from .episode import EpisodeResult, EpisodeSpec
-from .run import TRANSIENT_SLOTS, evaluate
+from .episode import TRANSIENT_SLOTS, EpisodeResult, EpisodeSpec
+from .run import evaluate
 from .stats import Geometric, paired_geometric
 
 __all__ = ["EpisodeResult", "EpisodeSpec", "Comparison", "compare"]

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
 
-from .stats import Geometric, RangeComparison
+if TYPE_CHECKING:
+    from .stats import Geometric, RangeComparison
 
 __all__ = ["markdown_table", "fmt_pct", "fmt_num", "fmt_geometric", "fmt_paired", "format_score", "fmt_stat",
            "fmt_ranges", "fmt_tail", "fmt_worst"]

@@ -1,5 +1,6 @@
-"""The pipeline's two records and their one file format: an :class:`EpisodeSpec` in (what to play), an
-:class:`EpisodeResult` out (what happened), from the worker pool to the CSV on disk and back.
+"""The pipeline's records and their one file format: an :class:`EpisodeSpec` in (what to play, with
+:class:`Play`, how), an :class:`EpisodeResult` out (what happened), from the worker pool to the CSV on
+disk and back.
 
 Every stage between passes these: :mod:`.run` plays specs into results, :mod:`.stats` reduces
 results, :mod:`.report` formats the statistics, :mod:`.protocols` declares which specs to play.
@@ -24,8 +25,28 @@ import numpy as np
 
 from lawn_env import ScenarioConfig
 
-__all__ = ["EpisodeSpec", "Entry", "EpisodeResult", "Results", "write_results", "read_results", "write_rows",
-           "write_csv", "read_csv", "parse_bool"]
+__all__ = ["TRANSIENT_SLOTS", "Play", "DEFAULT_PLAY", "EpisodeSpec", "Entry", "EpisodeResult", "Results",
+           "write_results", "read_results", "write_rows", "write_csv", "read_csv", "parse_bool"]
+
+#: Where an episode's control cost splits (docs/benchmark.md, "The cost's structure"): slots
+#: 0..TRANSIENT_SLOTS-1 are the transient (the AGVs' recovery from their initial offsets while the
+#: drone flies in from the area's edge), the slots from TRANSIENT_SLOTS on the sustained part.
+#: ``--transient-slots`` of ``lawn evaluate`` and ``lawn benchmark`` moves it.
+TRANSIENT_SLOTS = 20
+
+
+@dataclass(frozen=True)
+class Play:
+    """How a batch of episodes is played: ``workers`` processes, a progress bar or not, and the
+    transient/sustained split of the control cost (:func:`.run.split_cost`)."""
+
+    workers: int = 1
+    progress: bool = True
+    transient_slots: int = TRANSIENT_SLOTS
+
+
+#: The default way to play: one process, a progress bar, the default split.
+DEFAULT_PLAY = Play()
 
 
 class EpisodeSpec(NamedTuple):

@@ -36,7 +36,7 @@ from lawn_env import ScenarioConfig, presets
 from ..pages import block_names, replace_block
 from ..protocol import TEST_EPISODES
 from ..recipes import RECIPES
-from .episode import Entry, EpisodeResult, EpisodeSpec, write_results, write_rows
+from .episode import DEFAULT_PLAY, Entry, EpisodeResult, EpisodeSpec, Play, write_results, write_rows
 from .report import (
     fleet_table,
     learned_table,
@@ -49,10 +49,8 @@ from .report import (
     task_tables,
 )
 from .run import (
-    DEFAULT_PLAY,
     NOISE,
     REFERENCE_ROWS,
-    Play,
     build_policy,
     evaluate,
     learned_entries,

@@ -27,8 +27,8 @@ from .cells import (
     format_score,
     markdown_table,
 )
-from .episode import Entry, Results
-from .run import REFERENCE_ROWS, TRANSIENT_SLOTS, is_reference_row, policy_env
+from .episode import TRANSIENT_SLOTS, Entry, Results
+from .run import REFERENCE_ROWS, is_reference_row, policy_env
 from .stats import (
     SCORE_HIGH,
     SCORE_LOW,

@@ -22,7 +22,6 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any, cast
 
 import gymnasium as gym
@@ -40,32 +39,12 @@ from lawn_env import ScenarioConfig, central_env_id
 from lawn_env.config import DroneConfig
 
 from ..pool import pool_map
-from .episode import Entry, EpisodeResult, EpisodeSpec, Results
+from .episode import DEFAULT_PLAY, TRANSIENT_SLOTS, Entry, EpisodeResult, EpisodeSpec, Play, Results
 from .stats import SCORE_HIGH, SCORE_LOW
 
-__all__ = ["TRANSIENT_SLOTS", "Play", "DEFAULT_PLAY", "episode_row", "build_policy", "run_episode", "split_cost",
+__all__ = ["episode_row", "build_policy", "run_episode", "split_cost",
            "evaluate", "run_entries", "per_slot_profile", "policy_env", "own_anchor", "learned_entries", "LIMITS",
            "LIMIT_SETTINGS", "NOISE", "REFERENCE_ROWS", "is_reference_row", "limit_config", "resolve"]
-
-#: Where an episode's control cost splits (docs/benchmark.md, "The cost's structure"): slots
-#: 0..TRANSIENT_SLOTS-1 are the transient (the AGVs' recovery from their initial offsets while the
-#: drone flies in from the area's edge), the slots from TRANSIENT_SLOTS on the sustained part.
-#: ``--transient-slots`` of ``lawn evaluate`` and ``lawn benchmark`` moves it.
-TRANSIENT_SLOTS = 20
-
-
-@dataclass(frozen=True)
-class Play:
-    """How a batch of episodes is played: ``workers`` processes, a progress bar or not, and the
-    transient/sustained split of the control cost (:func:`split_cost`)."""
-
-    workers: int = 1
-    progress: bool = True
-    transient_slots: int = TRANSIENT_SLOTS
-
-
-#: The default way to play: one process, a progress bar, the default split.
-DEFAULT_PLAY = Play()
 
 
 def _max_speed() -> float:

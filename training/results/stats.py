@@ -18,11 +18,12 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .episode import EpisodeResult, Results
+if TYPE_CHECKING:
+    from .episode import EpisodeResult, Results
 
 __all__ = ["SUMMARY_METRICS", "mean_ci", "paired_difference", "Geometric", "paired_geometric", "verdict", "costs_of",
            "paired", "geometric", "summarize", "paired_cost_difference", "paired_cost_geometric", "SCORE_VERSION",
