@@ -258,3 +258,27 @@ def test_compare_is_the_python_front_door_of_evaluate(tmp_path):
         compare([])
     with pytest.raises(ValueError, match=r"settings for \['pid'\], which are not among the policies"):
         compare(["epa"], settings={"pid": {}})
+
+
+def test_statistics_reduce_results_once_per_row_and_compare_any_two_rows():
+    """``stats.reduce``: per (task, env, policy) the seeds, each cost's mean and interval and sum, the
+    decision time and the score; a comparison of two rows computes what is read, from the same costs
+    the functions on results take; a missing row compares to nothing."""
+    from training.results.episode import EpisodeResult
+    from training.results.stats import costs_of, geometric, mean_ci, paired, reduce
+
+    rng = np.random.default_rng(3)
+    rows = [EpisodeResult(p, "lawn/Joint-v1", s, control_cost=c, transient_cost=c / 2, sustained_cost=c / 2,
+                          decision_time_median_s=1e-3 * (1 + s), task=t)
+            for t in ("a", "b") for p, scale in (("epa", 3.0), ("dv-mpc", 1.0), ("x", 1.5)) for s in range(6)
+            for c in [scale * float(rng.uniform(1, 2))]]
+    stats = reduce(rows)
+    row = stats.row("a", "lawn/Joint-v1", "x")
+    assert row.seeds == 6 and row.means["control_cost"] == mean_ci(costs_of(rows, "x", task="a").values())
+    assert row.totals["sustained_cost"] == pytest.approx(sum(costs_of(rows, "x", task="a").values()) / 2)
+    assert row.decision_ms == pytest.approx(3.5) and row.score is not None
+    vs = stats.versus(("a", "lawn/Joint-v1", "x"), ("a", "lawn/Joint-v1", "dv-mpc"))
+    assert vs.geometric == geometric(rows, "x", "dv-mpc", "lawn/Joint-v1", "a")
+    assert vs.paired == paired(rows, "x", "dv-mpc", "lawn/Joint-v1", "a") and len(vs.relative) == 6
+    assert stats.aggregate("lawn/Joint-v1", "x", ["a", "b"])[3] == 2 and stats.envs("b") == ["lawn/Joint-v1"]
+    assert stats.versus(("a", "lawn/Joint-v1", "x"), ("a", "lawn/Joint-v1", "nope")) is None

@@ -276,6 +276,7 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     from training.results.episode import Play, read_csv
     from training.results.protocols import fleet_agents, fleet_target, run_generalization
     from training.results.report import fleet_table
+    from training.results.stats import reduce
     from training.spec import TrainSpec
     from training.train import train
 
@@ -311,7 +312,7 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
                               base=presets.get("default").override(num_slots=6))
     assert {(r.policy, r.task) for r in rows} == {(p, f"k{k}") for p in ("dv-mpc", "noise:dv-mpc", "zoo:fleet-comm")
                                                   for k in sizes}
-    text = fleet_table(rows, fleet_agents(), sizes, fleet_target)
+    text = fleet_table(reduce(rows), fleet_agents(), sizes, fleet_target)
     lines = [line for line in text.splitlines() if line.startswith("| zoo:fleet-comm")]
     assert [line.split(" | ")[2] for line in lines] == ["3", "5"] and all("×" in line for line in lines)
     assert [line.split(" | ")[3] for line in lines] == ["4", "4"]  # two seeds of each of the two test ranges

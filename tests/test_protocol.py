@@ -233,6 +233,7 @@ def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(t
     from training.results.episode import Play
     from training.results.protocols import run_suite
     from training.results.report import suite_table
+    from training.results.stats import reduce
 
     policies = ["anchor:stake", "zoo:ppo-comm"]
     tasks = ["default", "wide-k8"]
@@ -241,7 +242,7 @@ def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(t
     assert {r.policy for r in rows} >= {"dv-mpc", "epa", "noise:dv-mpc", "limit:fast-drone", "limit:perfect-links"}
     assert set(skipped) == {("wide-k8", "zoo:ppo-comm")}
     assert "expects observations of shape (335,)" in skipped[("wide-k8", "zoo:ppo-comm")]
-    board, refs = suite_table(rows, policies, tasks, skipped)
+    board, refs = suite_table(reduce(rows), policies, tasks, skipped)
     agent = next(line for line in board.splitlines() if line.startswith("| zoo:ppo-comm"))
     assert agent.count("n/a") == 1 and "(1 task)" in agent
     assert all(f"| {task} |" in refs for task in tasks)

@@ -30,7 +30,7 @@ from .results.cells import fmt_num, fmt_paired, markdown_table
 from .results.episode import DEFAULT_PLAY, Entry, EpisodeResult, Play
 from .results.report import distil_table
 from .results.run import policy_env, run_entries
-from .results.stats import SCORE_HIGH, TEST_RANGES, RangeComparison, compare_ranges, costs_of, test_seeds
+from .results.stats import SCORE_HIGH, TEST_RANGES, RangeComparison, compare_ranges, costs_of, reduce, test_seeds
 
 __all__ = ["DISTIL_EPISODES", "own_law", "run_distil", "Distilled", "evaluate_distil", "export_distil"]
 
@@ -127,7 +127,7 @@ def evaluate_distil(runs: Path, workers: int = 2, progress: bool = True, episode
             + "; ".join(f"`{section[n].command()}`" for n in found) + ".")
     curves = [_curve_table(n, d, d == found[n]) for n in found if section[n].algo != "fleet"
               for d in _finished(section[n], Path(runs))]
-    block = "\n\n".join([distil_table(rows, labels, tasks, JOINT, target), note, *curves])
+    block = "\n\n".join([distil_table(reduce(rows), labels, tasks, JOINT, target), note, *curves])
     return Distilled(found, names, rows, block, episodes)
 
 

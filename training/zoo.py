@@ -30,7 +30,7 @@ from .results.cells import fmt_num, fmt_paired, fmt_pct, markdown_table
 from .results.episode import Entry, EpisodeResult, EpisodeSpec, Play, read_results, write_results
 from .results.report import protocol_cells
 from .results.run import evaluate, learned_entries, run_entries
-from .results.stats import SCORE_HIGH, SCORE_VERSION, mean_ci, paired, scores_by_policy, verdict
+from .results.stats import SCORE_HIGH, SCORE_VERSION, Statistics, mean_ci, paired, reduce, verdict
 
 __all__ = ["finished_runs", "evaluate_zoo", "zoo_tables", "render_zoo",
            "plot_curves", "export_zoo", "build_zoo", "format_zoo_list", "ZooEvaluation", "ZooTables", "Shipped"]
@@ -45,7 +45,7 @@ class ZooEvaluation:
     runs: dict[Path, RunDir]
     entries: list[Entry]
     rows: list[EpisodeResult]
-    scores: dict[tuple[str, str, str], tuple[Any, ...]]
+    stats: Statistics
     episodes: int
 
     @property
@@ -55,6 +55,13 @@ class ZooEvaluation:
     def entry(self, policy: str, env: str) -> Entry:
         """The protocol's entry of ``policy`` on ``env`` (with its anchor)."""
         return next(e for e in self.entries if e.policy == policy and e.env == env)
+
+    def score(self, policy: str, env: str) -> tuple[Any, ...]:
+        """The policy's normalized score on ``env`` (its references beside it on the same seeds)."""
+        row = self.stats.row("default", env, policy)
+        if row is None or row.score is None:
+            raise ValueError(f"{policy} on {env}: no score (its references did not run beside it)")
+        return row.score
 
     def anchor(self, policy: str) -> str:
         """The anchor a learned agent acts around; "" (no seeds, a NaN comparison) for one that records none."""
@@ -104,7 +111,7 @@ def evaluate_zoo(found: list[tuple[Recipe, list[Path]]], episodes: int = TEST_EP
     run = {d: read_run(d) for _, dirs in found for d in dirs}
     entries = learned_entries([run[d].policy_name for _, dirs in found for d in dirs])
     rows = run_entries(entries, ScenarioConfig(), range(episodes), Play(workers, progress), desc="zoo benchmark")
-    return ZooEvaluation(found, run, entries, rows, scores_by_policy(rows), episodes)
+    return ZooEvaluation(found, run, entries, rows, reduce(rows), episodes)
 
 
 def zoo_tables(ev: ZooEvaluation) -> ZooTables:
@@ -145,7 +152,7 @@ _RUN_COLUMNS = ("recipe", "seed", "anchor", "validation", "score", "vs_ref", "vs
 
 def _cells(ev: ZooEvaluation, policy: str, env: str, label: str, how: str, across: str) -> dict[str, str]:
     """One row of the recipe table: an expert, an anchor or a recipe's shipped run."""
-    cells = protocol_cells(ev.rows, ev.scores, ev.entry(policy, env))
+    cells = protocol_cells(ev.stats, ev.entry(policy, env))
     return {"label": label, "env": env, "how": how, **cells, "across": across}
 
 
@@ -153,7 +160,7 @@ def _run_cells(ev: ZooEvaluation, r: Recipe, run_dir: Path, best: Mapping[str, A
                env: str) -> dict[str, str]:
     """One row of the per-run table."""
     spec = ev.runs[run_dir].record
-    c = protocol_cells(ev.rows, ev.scores, ev.entry(ev.runs[run_dir].policy_name, env))
+    c = protocol_cells(ev.stats, ev.entry(ev.runs[run_dir].policy_name, env))
     return {"recipe": f"`{r.name}`{' (shipped)' if chosen else ''}", "seed": str(spec["seed"]),
             "anchor": c["anchor"], "validation": _validation_cell(best, spec.get("eval_episodes", "?")),
             "score": c["score"], "vs_ref": c["vs_ref"], "vs_anchor": c["vs_anchor"], "worst": c["worst"],
@@ -309,7 +316,7 @@ def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
                        "never the test seeds",
         "wall_time_s": [round(spec["wall_time_s"], 1) for spec in s.specs],
         "benchmark": {"test_seeds": f"0-{episodes - 1}", "reference": SCORE_HIGH, "anchor": anchor,
-                      "score_version": SCORE_VERSION, "score": list(ev.scores[("default", s.env, policy)][:3]),
+                      "score_version": SCORE_VERSION, "score": list(ev.score(policy, s.env)[:3]),
                       "shipped_vs_reference": list(paired(ev.rows, policy, SCORE_HIGH, s.env)),
                       "shipped_vs_anchor": list(paired(ev.rows, policy, ev.anchor(policy), s.env)),
                       "across_training_seeds_vs_anchor": list(s.across)},

@@ -65,6 +65,7 @@ from .stats import (
     RangeComparison,
     paired_cost_difference,
     paired_cost_geometric,
+    reduce,
     scores_by_policy,
     summarize,
     test_seeds,
@@ -153,7 +154,7 @@ def run_learned_protocol(agents: Sequence[str], out_dir: Path, episodes: int = T
         make_policy(policy, config, env_id=env)  # a bad name or a mismatched agent fails before any episode
     results = run_entries(entries, config, range(episodes), play, desc="learned protocol")
     runtime = f" Runtime {time.perf_counter() - start:.0f} s with {play.workers} workers."
-    table = learned_table(results, entries) + runtime
+    table = learned_table(reduce(results), entries) + runtime
     write_results(results, Path(out_dir) / "episodes.csv")
     (Path(out_dir) / "summary.md").write_text(table + "\n")
     return table
@@ -234,14 +235,15 @@ def suite_pages(policies: Sequence[str], tasks: Sequence[str], episodes: int, ou
         if missing:
             raise ValueError(f"--docs {docs}: {path} has no generated block {', '.join(missing)}")
     suite = run_suite(policies, tasks, episodes, out, play)
-    board, refs = suite_table(suite.results, policies, tasks, suite.skipped)
+    stats = reduce(suite.results)
+    board, refs = suite_table(stats, policies, tasks, suite.skipped)
     reasons = skipped_summary(suite.skipped)
     board += (f"\n\n{len(policies)} policies x {len(tasks)} tasks ({', '.join(tasks)}), test seeds 0-{episodes - 1}, "
               f"{suite.seconds / 60:.1f} min with {play.workers} workers. n/a: the policy cannot act on the task"
               + (": " + "; ".join(reasons) + "." if reasons else ".")
               + " –: no score (the references do not separate on that task's seeds).")
-    tables = {"board": board, "references": refs, "structure": structure_table(suite.results, tasks),
-              "tasks": task_tables(suite.results, policies, tasks, suite.skipped)}
+    tables = {"board": board, "references": refs, "structure": structure_table(stats, tasks),
+              "tasks": task_tables(stats, policies, tasks, suite.skipped)}
     for name, text in tables.items():
         (out / f"{name}.md").write_text(text + "\n")
     plot_profiles(suite.per_slot, out / "per_slot.png", tasks, play.transient_slots)
@@ -305,7 +307,7 @@ def fleet_block(agents: Sequence[str], play: Play, out: Path, cap: int | None = 
     seeds = ", ".join(f"K = {k}: {n}" for k, n in sizes.items())
     block = (f"Test seeds S..S+n-1 of each range S = {', '.join(map(str, TEST_RANGES))}, n per fleet size ({seeds}); "
              f"{play.workers} worker processes, {(time.perf_counter() - start) / 60:.1f} min.\n\n"
-             + fleet_table(results, agents, sizes, fleet_target))
+             + fleet_table(reduce(results), agents, sizes, fleet_target))
     write_results(results, out / "fleet_sizes.csv")
     (out / "fleet_sizes.md").write_text(block + "\n")
     return block

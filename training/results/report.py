@@ -11,8 +11,6 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from agents.base import JOINT
 
 from .cells import (
@@ -27,7 +25,7 @@ from .cells import (
     format_score,
     markdown_table,
 )
-from .episode import TRANSIENT_SLOTS, Entry, Results
+from .episode import TRANSIENT_SLOTS, Entry
 from .run import REFERENCE_ROWS, is_reference_row, policy_env
 from .stats import (
     SCORE_HIGH,
@@ -37,15 +35,11 @@ from .stats import (
     TAIL_RATIO,
     TEST_RANGES,
     Geometric,
+    Key,
     RangeComparison,
-    aggregate_score,
-    compare_ranges,
-    costs_of,
-    geometric,
-    mean_ci,
-    paired,
-    score_inputs,
-    scores_by_policy,
+    RowStats,
+    Statistics,
+    Versus,
 )
 
 __all__ = ["RESULT_METRICS", "TIMING_METRICS", "format_table", "summary_markdown", "plot_summary", "mean_cell",
@@ -133,136 +127,136 @@ def plot_summary(summary: list[dict[str, Any]], path: Path, title: str = "") -> 
     fig.savefig(path)
 
 
-def mean_cell(rows: Results, policy: str, env: str, task: str | None, metric: str) -> str:
-    """``mean ± 95 % half-width`` of ``metric`` over the seeds of ``policy`` on ``env`` (and ``task``)."""
-    mean, half = mean_ci(costs_of(rows, policy, env, task, metric).values())
+def mean_cell(row: RowStats | None, metric: str = "control_cost") -> str:
+    """``mean ± 95 % half-width`` of a cost metric of a row (``n/a`` for no row)."""
+    mean, half = row.means[metric] if row is not None else (math.nan, math.nan)
     return f"{fmt_num(mean)} ± {fmt_num(half)}"
 
 
-def protocol_cells(rows: Results, scores: Mapping[tuple[str, str, str], Any], entry: Entry) -> dict[str, str]:
+def protocol_cells(stats: Statistics, entry: Entry, task: str = "default") -> dict[str, str]:
     """The cells every learned-protocol table shows for an entry: its anchor, control cost, score,
     paired difference against the best expert and against its own anchor, and its worst seed
     against the anchor."""
     policy, env, anchor = entry
-    cost = costs_of(rows, policy, env)
-    cells = {"anchor": anchor or "–", "cost": mean_cell(rows, policy, env, None, "control_cost"),
-             "transient": mean_cell(rows, policy, env, None, "transient_cost"),
-             "sustained": mean_cell(rows, policy, env, None, "sustained_cost"),
-             "score": format_score(scores.get(("default", env, policy))),
-             "vs_ref": "–" if policy == SCORE_HIGH else fmt_paired(*paired(rows, policy, SCORE_HIGH, env)),
-             "vs_anchor": "–", "worst": "–", "geo_ref": "–", "geo_anchor": "–"}
-    if policy != SCORE_HIGH:
-        cells["geo_ref"] = fmt_geometric(geometric(rows, policy, SCORE_HIGH, env))
-    if anchor is not None:
-        base = costs_of(rows, anchor, env)
-        cells["vs_anchor"] = fmt_paired(*paired(rows, policy, anchor, env))
-        cells["geo_anchor"] = fmt_geometric(geometric(rows, policy, anchor, env))
-        cells["worst"] = fmt_pct(max((cost[s] - base[s]) / base[s] for s in cost if s in base))
+    row = stats.row(task, env, policy)
+    cells = {"anchor": anchor or "–", **{name: mean_cell(row, m) for name, m in zip(_CELLS, _COSTS, strict=True)},
+             "score": format_score(row.score if row else None), "vs_ref": "–", "vs_anchor": "–", "worst": "–",
+             "geo_ref": "–", "geo_anchor": "–"}
+    ref = stats.versus((task, env, policy), (task, env, SCORE_HIGH))
+    if policy != SCORE_HIGH and ref is not None:
+        cells["vs_ref"], cells["geo_ref"] = fmt_paired(*ref.paired), fmt_geometric(ref.geometric)
+    own = stats.versus((task, env, policy), (task, env, anchor)) if anchor else None
+    if own is not None:
+        cells["vs_anchor"], cells["geo_anchor"] = fmt_paired(*own.paired), fmt_geometric(own.geometric)
+        cells["worst"] = fmt_pct(max(own.relative))
     return cells
 
 
+_CELLS = ("cost", "transient", "sustained")
 _LEARNED_CELLS = ("anchor", "cost", "transient", "sustained", "score", "geo_ref", "geo_anchor", "vs_ref", "vs_anchor",
                   "worst")
 
 
-def learned_table(rows: Results, entries: Sequence[Entry], labels: Mapping[str, str] | None = None) -> str:
-    """The learned protocol's Markdown table of ``entries`` from their results."""
-    scores = scores_by_policy(rows)
-    seeds = len({r.seed for r in rows})
+def learned_table(stats: Statistics, entries: Sequence[Entry], labels: Mapping[str, str] | None = None) -> str:
+    """The learned protocol's Markdown table of ``entries``."""
     header = ["policy", "env", "acts around", "control cost", "transient", "sustained",
               f"score v{SCORE_VERSION} [95 %]", f"vs {SCORE_HIGH} (geometric, seeds won)",
               "vs own anchor (geometric, seeds won)",
               f"vs {SCORE_HIGH} (paired mean)", "vs own anchor (paired mean)", "worst seed vs own anchor"]
     table = []
     for entry in entries:
-        c = protocol_cells(rows, scores, entry)
+        c = protocol_cells(stats, entry)
         table.append([(labels or {}).get(entry.policy, entry.policy), entry.env, *(c[k] for k in _LEARNED_CELLS)])
-    split = int(rows[0].transient_slots or TRANSIENT_SLOTS)
-    note = (f"{seeds} test seeds; control cost split into the transient (slots 0-{split - 1}) and the sustained part "
-            f"(slots {split} on); score v{SCORE_VERSION}: 0 = {SCORE_LOW}, 100 = {SCORE_HIGH} "
+    split = stats.transient_slots or TRANSIENT_SLOTS
+    note = (f"{len(stats.seeds)} test seeds; control cost split into the transient (slots 0-{split - 1}) and the "
+            f"sustained part (slots {split} on); score v{SCORE_VERSION}: 0 = {SCORE_LOW}, 100 = {SCORE_HIGH} "
             "(training/results/stats.py); geometric columns (the deciding statistic, docs/benchmark.md): the geometric "
             "mean of the per-seed cost ratios - 1 with its 95 % bootstrap interval and the share of seeds won; "
             "paired-mean columns: the mean per-seed relative difference and its 95 % t-interval.")
     return f"{markdown_table(header, table)}\n\n{note}"
 
 
-def suite_table(rows: Results, policies: Sequence[str], tasks: Sequence[str],
+def suite_table(stats: Statistics, policies: Sequence[str], tasks: Sequence[str],
                 skipped: Mapping[tuple[str, str], str]) -> tuple[str, str]:
     """The leaderboard (score per task, the IQM over tasks with its stratified bootstrap interval)
     and the references' costs per task."""
-    scores, inputs = scores_by_policy(rows), score_inputs(rows)
     at = list(policies).index(SCORE_HIGH) + 1 if SCORE_HIGH in policies else 0  # the reference rows after the expert
     names = list(dict.fromkeys([*policies[:at], *REFERENCE_ROWS, *policies[at:]]))
+    present = {policy for _, _, policy in stats.rows}
     board = []
     for p in names:
         env = JOINT if is_reference_row(p) else policy_env(p)
-        if is_reference_row(p) and not any(r.policy == p for r in rows):
+        if is_reference_row(p) and p not in present:
             continue
-        cells = ["n/a" if (task, p) in skipped else format_score(scores.get((task, env, p))) for task in tasks]
-        iqm, lo, hi, n = aggregate_score({t: inputs[(t, env, p)] for t in tasks if (t, env, p) in inputs})
+        cells = ["n/a" if (task, p) in skipped else format_score(_score(stats, task, env, p)) for task in tasks]
+        iqm, lo, hi, n = stats.aggregate(env, p, tasks)
         overall = "–" if n == 0 else format_score((iqm, lo, hi, n))
         board.append([p, env, *cells, overall + ("" if n in (0, len(tasks)) else f" ({n} task{'s' * (n != 1)})")])
-    return markdown_table(["policy", "env", *tasks, "IQM over tasks [95 %]"], board), _references_table(rows, tasks)
+    return markdown_table(["policy", "env", *tasks, "IQM over tasks [95 %]"], board), _references_table(stats, tasks)
 
 
-def _references_table(rows: Results, tasks: Sequence[str]) -> str:
+def _score(stats: Statistics, task: str, env: str, policy: str) -> tuple[Any, ...] | None:
+    row = stats.row(task, env, policy)
+    return row.score if row is not None else None
+
+
+def _references_table(stats: Statistics, tasks: Sequence[str]) -> str:
     """The references' costs per task and env, their gap and how it varies over the seeds."""
     refs = []
     for task in tasks:
-        for env in dict.fromkeys(r.env for r in rows if r.task == task):
-            low, high = costs_of(rows, SCORE_LOW, env, task), costs_of(rows, SCORE_HIGH, env, task)
-            if not low or not high:
+        for env in stats.envs(task):
+            low, high = stats.row(task, env, SCORE_LOW), stats.row(task, env, SCORE_HIGH)
+            gap = stats.versus((task, env, SCORE_LOW), (task, env, SCORE_HIGH))
+            if low is None or high is None or gap is None:
                 continue
-            gap = mean_ci(low.values())[0] - mean_ci(high.values())[0]
-            per_seed = [(low[s] - high[s]) / high[s] for s in low if s in high]
-            refs.append([task, env, str(len(low)), mean_cell(rows, SCORE_LOW, env, task, "control_cost"),
-                         mean_cell(rows, SCORE_HIGH, env, task, "control_cost"), fmt_num(gap),
+            per_seed = gap.relative
+            refs.append([task, env, str(low.seeds), mean_cell(low), mean_cell(high),
+                         fmt_num(low.means["control_cost"][0] - high.means["control_cost"][0]),
                          f"{fmt_pct(min(per_seed))} to {fmt_pct(max(per_seed))}", str(sum(g <= 0 for g in per_seed))])
     return markdown_table(["task", "env", "episodes", f"{SCORE_LOW} cost", f"{SCORE_HIGH} cost", "gap (mean)",
                            f"per-seed gap / {SCORE_HIGH} cost, min to max", f"seeds where {SCORE_LOW} costs no more"],
                           refs)
 
 
-def structure_table(rows: Results, tasks: Sequence[str]) -> str:
+def structure_table(stats: Statistics, tasks: Sequence[str]) -> str:
     """Per task, what decides it on ``lawn/Joint-v1``: the best expert's control cost, its transient and
     sustained parts (the sustained share), the noise floor and the headroom rows against it."""
     table = []
     for task in tasks:
-        high = [r for r in rows if r.policy == SCORE_HIGH and r.env == JOINT and r.task == task]
-        if not high:
+        high = stats.row(task, JOINT, SCORE_HIGH)
+        if high is None:
             continue
-        total = sum(r.control_cost for r in high)
-        share = sum(costs_of(rows, SCORE_HIGH, JOINT, task, "sustained_cost").values()) / total
-        cells = [mean_cell(rows, SCORE_HIGH, JOINT, task, m) for m in _COSTS]
+        share = high.totals["sustained_cost"] / high.totals["control_cost"]
+        cells = [mean_cell(high, m) for m in _COSTS]
         cells[2] += f" ({share * 100:.0f} %)"
         for p in REFERENCE_ROWS:
-            cost = costs_of(rows, p, JOINT, task)
-            cells.append(fmt_geometric(geometric(rows, p, SCORE_HIGH, JOINT, task)) if cost else "–")
+            vs = stats.versus((task, JOINT, p), (task, JOINT, SCORE_HIGH))
+            cells.append(fmt_geometric(vs.geometric) if vs is not None else "–")
         table.append([task, *cells])
     header = ["task", f"{SCORE_HIGH} cost", "transient", "sustained (share)",
               *(f"{p} vs {SCORE_HIGH} (geometric, seeds won)" for p in REFERENCE_ROWS)]
     return markdown_table(header, table)
 
 
-def task_tables(rows: Results, policies: Sequence[str], tasks: Sequence[str],
+def task_tables(stats: Statistics, policies: Sequence[str], tasks: Sequence[str],
                 skipped: Mapping[tuple[str, str], str]) -> str:
     """One Markdown table per task: every row's control cost, its transient and sustained parts, the
     score, and the comparison with the best expert on the same env (geometric and paired mean)."""
-    scores = scores_by_policy(rows)
     out = []
     for task in tasks:
         table = []
         names = list(dict.fromkeys([SCORE_HIGH, SCORE_LOW, *REFERENCE_ROWS, *policies]))
-        for env in dict.fromkeys(r.env for r in rows if r.task == task):
+        for env in stats.envs(task):
             for p in names:
-                if (task, p) in skipped or not costs_of(rows, p, env, task):
+                row = stats.row(task, env, p)
+                if (task, p) in skipped or row is None:
                     continue
-                cells = [mean_cell(rows, p, env, task, m) for m in _COSTS] + [format_score(scores.get((task, env, p)))]
-                if p == SCORE_HIGH:
-                    cells += ["–", "–"]
+                cells = [mean_cell(row, m) for m in _COSTS] + [format_score(row.score)]
+                vs = stats.versus((task, env, p), (task, env, SCORE_HIGH))
+                if p == SCORE_HIGH or vs is None:
+                    cells += ["–", "–"] if p == SCORE_HIGH else ["n/a", "n/a"]
                 else:
-                    cells += [fmt_geometric(geometric(rows, p, SCORE_HIGH, env, task)),
-                              fmt_paired(*paired(rows, p, SCORE_HIGH, env, task))]
+                    cells += [fmt_geometric(vs.geometric), fmt_paired(*vs.paired)]
                 table.append([p, env, *cells])
         header = ["policy", "env", "control cost", "transient", "sustained", f"score v{SCORE_VERSION} [95 %]",
                   f"vs {SCORE_HIGH} (geometric, seeds won)", f"vs {SCORE_HIGH} (paired mean)"]
@@ -315,11 +309,14 @@ def skipped_summary(skipped: Mapping[tuple[str, str], str]) -> list[str]:
     return [f"on `{task}`: {', '.join(ps)} ({skipped[(task, ps[0])]})" for task, ps in by_task.items()]
 
 
-def _decision_ms(rows: Results, policy: str, env: str, task: str) -> float:
-    return 1e3 * float(np.median(list(costs_of(rows, policy, env, task, "decision_time_median_s").values())))
+def _versus(stats: Statistics, key: Key, reference: Key) -> Versus:
+    """A comparison of two rows the caller found."""
+    vs = stats.versus(key, reference)
+    assert vs is not None, (key, reference)
+    return vs
 
 
-def fleet_table(rows: Results, agents: Sequence[str], sizes: Mapping[int, int],
+def fleet_table(stats: Statistics, agents: Sequence[str], sizes: Mapping[int, int],
                 target: Callable[[str, int, RangeComparison], str]) -> str:
     """Per env and K: the noise-floor row and every agent against dv-mpc on both test ranges, the
     tail, the worst seed, ``target(policy, K, comparison)`` (the verdict of the protocol's target,
@@ -330,15 +327,13 @@ def fleet_table(rows: Results, agents: Sequence[str], sizes: Mapping[int, int],
         for policy in [noise, *(a for a in agents if policy_env(a) == env)]:
             for k in sizes:
                 task = f"k{k}"
-                mine, ref = costs_of(rows, policy, env, task), costs_of(rows, SCORE_HIGH, env, task)
-                if not mine or not ref:
+                mine, ref = stats.row(task, env, policy), stats.row(task, env, SCORE_HIGH)
+                if mine is None or ref is None:
                     continue
-                c = compare_ranges(mine, ref)
-                ms, ref_ms = _decision_ms(rows, policy, env, task), _decision_ms(rows, SCORE_HIGH, env, task)
-                table.append([policy, env, str(k), str(len(mine)), mean_cell(rows, policy, env, task, "control_cost"),
-                              mean_cell(rows, SCORE_HIGH, env, task, "control_cost"), fmt_ranges(c), fmt_tail(c),
-                              fmt_worst(c), target(policy, k, c), f"{ms:.3g}",
-                              f"{ref_ms / ms:.1f}×"])
+                c = _versus(stats, (task, env, policy), (task, env, SCORE_HIGH)).ranges
+                table.append([policy, env, str(k), str(mine.seeds), mean_cell(mine), mean_cell(ref), fmt_ranges(c),
+                              fmt_tail(c), fmt_worst(c), target(policy, k, c), f"{mine.decision_ms:.3g}",
+                              f"{ref.decision_ms / mine.decision_ms:.1f}×"])
     header = ["policy", "env", "K", "seeds", "control cost", f"{SCORE_HIGH} cost",
               f"vs {SCORE_HIGH}, geometric [95 %]: seeds {TEST_RANGES[0]}.. / {TEST_RANGES[1]}..",
               f"seeds > {TAIL_RATIO:g}× {SCORE_HIGH}", "worst seed", "target (both ranges)", "decision time (ms)",
@@ -346,7 +341,7 @@ def fleet_table(rows: Results, agents: Sequence[str], sizes: Mapping[int, int],
     return markdown_table(header, table)
 
 
-def distil_table(rows: Results, agents: Mapping[str, tuple[str, str]], tasks: Sequence[str], reference_env: str,
+def distil_table(stats: Statistics, agents: Mapping[str, tuple[str, str]], tasks: Sequence[str], reference_env: str,
                  target: Callable[[str, RangeComparison, RangeComparison, float], str]) -> str:
     """Per agent (``{policy: (label, env)}``) and task: its cost against ``rg-mpc`` and ``dv-mpc``
     (played on ``reference_env``, the same scenario and seeds) on both ranges, the tail and worst
@@ -355,16 +350,15 @@ def distil_table(rows: Results, agents: Mapping[str, tuple[str, str]], tasks: Se
     table = []
     for policy, (label, env) in agents.items():
         for task in tasks:
-            mine = costs_of(rows, policy, env, task)
-            if not mine:
+            mine = stats.row(task, env, policy)
+            rg_row, dv_row = stats.row(task, reference_env, "rg-mpc"), stats.row(task, reference_env, SCORE_HIGH)
+            if mine is None or rg_row is None or dv_row is None:
                 continue
-            rg = compare_ranges(mine, costs_of(rows, "rg-mpc", reference_env, task))
-            dv = compare_ranges(mine, costs_of(rows, SCORE_HIGH, reference_env, task))
-            ms = _decision_ms(rows, policy, env, task)
-            table.append([label, env, task, str(len(mine)), mean_cell(rows, policy, env, task, "control_cost"),
-                          fmt_num(float(np.mean(list(costs_of(rows, SCORE_HIGH, reference_env, task).values())))),
-                          fmt_ranges(rg), fmt_ranges(dv), fmt_tail(dv), fmt_worst(dv), f"{ms:.3g}",
-                          target(policy, rg, dv, ms)])
+            rg = _versus(stats, (task, env, policy), (task, reference_env, "rg-mpc")).ranges
+            dv = _versus(stats, (task, env, policy), (task, reference_env, SCORE_HIGH)).ranges
+            table.append([label, env, task, str(mine.seeds), mean_cell(mine), fmt_num(dv_row.means["control_cost"][0]),
+                          fmt_ranges(rg), fmt_ranges(dv), fmt_tail(dv), fmt_worst(dv), f"{mine.decision_ms:.3g}",
+                          target(policy, rg, dv, mine.decision_ms)])
     header = ["agent", "env", "task", "seeds", "control cost", f"{SCORE_HIGH} cost",
               f"vs rg-mpc, geometric [95 %]: seeds {TEST_RANGES[0]}.. / {TEST_RANGES[1]}..",
               f"vs {SCORE_HIGH}, same", f"seeds > {TAIL_RATIO:g}× {SCORE_HIGH}", f"worst seed vs {SCORE_HIGH}",
