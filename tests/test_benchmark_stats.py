@@ -265,7 +265,8 @@ def test_statistics_reduce_results_once_per_row_and_compare_any_two_rows():
     decision time and the score; a comparison of two rows computes what is read, from the same costs
     the functions on results take; a missing row compares to nothing."""
     from training.results.episode import EpisodeResult
-    from training.results.stats import costs_of, geometric, mean_ci, paired, reduce
+    from training.results.rows import reduce
+    from training.results.stats import costs_of, geometric, mean_ci, paired
 
     rng = np.random.default_rng(3)
     rows = [EpisodeResult(p, "lawn/Joint-v1", s, control_cost=c, transient_cost=c / 2, sustained_cost=c / 2,

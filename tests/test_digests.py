@@ -1,4 +1,4 @@
-"""Every row of the README's benchmark table replays its recorded episodes (training/results/protocols.py):
+"""Every row of the README's benchmark table replays its recorded episodes (training/results/digests.py):
 a change that moves any policy's episodes (ao-mpc and sf included) fails here until the digests and
 the tables are regenerated in the same commit (scripts/refresh_docs.sh --only benchmark)."""
 
@@ -7,7 +7,7 @@ import json
 import pytest
 
 from training.pages import ROOT, block_body, first_table
-from training.results import protocols as benchmark
+from training.results import digests as benchmark
 
 RECORDED = json.loads(benchmark.DIGESTS.read_text())
 

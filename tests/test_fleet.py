@@ -274,9 +274,7 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     from lawn_env import ScenarioConfig, presets
     from training import zoo
     from training.results.episode import Play, read_csv
-    from training.results.protocols import fleet_agents, fleet_target, run_generalization
-    from training.results.report import fleet_table
-    from training.results.stats import reduce
+    from training.results.protocols import execute, fleet_agents, fleet_protocol
     from training.spec import TrainSpec
     from training.train import train
 
@@ -308,11 +306,13 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     policy = make_policy("zoo:fleet-comm", ScenarioConfig(num_agvs=7), env_id="lawn/Comm-v1")
     assert policy.entities.num_agvs == 7
     sizes = {3: 2, 5: 2}
-    rows = run_generalization(fleet_agents(), sizes, Play(1, False),
-                              base=presets.get("default").override(num_slots=6))
+    outcome = execute(fleet_protocol(fleet_agents(), sizes, base=presets.get("default").override(num_slots=6)),
+                      Play(1, False))
+    rows = outcome.results
     assert {(r.policy, r.task) for r in rows} == {(p, f"k{k}") for p in ("dv-mpc", "noise:dv-mpc", "zoo:fleet-comm")
                                                   for k in sizes}
-    text = fleet_table(reduce(rows), fleet_agents(), sizes, fleet_target)
+    text = outcome.tables["fleet_sizes.md"]
+    assert text.startswith("Test seeds S..S+n-1 of each range S = 0, 100000, n per fleet size (K = 3: 2, K = 5: 2)")
     lines = [line for line in text.splitlines() if line.startswith("| zoo:fleet-comm")]
     assert [line.split(" | ")[2] for line in lines] == ["3", "5"] and all("×" in line for line in lines)
     assert [line.split(" | ")[3] for line in lines] == ["4", "4"]  # two seeds of each of the two test ranges
@@ -353,10 +353,11 @@ def test_the_suite_writes_the_table_over_fleet_sizes_for_the_shipped_fleet_netwo
     without the block is refused before anything runs."""
     from training.cli import main
     from training.results.episode import Play, read_csv
-    from training.results.protocols import FLEET_SIZES, fleet_block
+    from training.results.protocols import FLEET_SIZES, execute, fleet_protocol
     from training.results.stats import TEST_RANGES
 
-    block = fleet_block(["zoo:fleet-comm"], Play(1, False), tmp_path, cap=1)
+    sizes = dict.fromkeys(FLEET_SIZES, 1)  # what --episodes 1 caps them to
+    block = execute(fleet_protocol(["zoo:fleet-comm"], sizes), Play(1, False), tmp_path).tables["fleet_sizes.md"]
     rows = read_csv(tmp_path / "fleet_sizes.csv")
     assert {r["task"] for r in rows if r["policy"] == "zoo:fleet-comm"} == {f"k{k}" for k in FLEET_SIZES}
     assert {r["seed"] for r in rows} == {str(base) for base in TEST_RANGES}  # the first seed of each test range

@@ -153,7 +153,7 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     pytest.importorskip("stable_baselines3")
     from training.results.cells import fmt_geometric, fmt_paired
     from training.results.episode import Entry, Play, read_results
-    from training.results.protocols import run_learned_protocol
+    from training.results.protocols import execute, learned_protocol
     from training.results.run import learned_entries, own_anchor
     from training.results.stats import costs_of, paired_difference, paired_geometric
 
@@ -166,8 +166,11 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
                        Entry("zoo:ppo-comm", "lawn/Comm-v1", own_anchor("zoo:ppo-comm")),
                        Entry("zoo:bc-comm", "lawn/Comm-v1", own_anchor("zoo:bc-comm"))]
     with pytest.raises(ValueError, match="unknown zoo agent 'nope'"):
-        run_learned_protocol(["zoo:nope"], tmp_path, episodes=3, play=Play(1, False))
-    table = run_learned_protocol(["zoo:ppo-comm"], tmp_path, episodes=3, play=Play(1, False))
+        learned_protocol(["zoo:nope"], episodes=3)  # a bad name fails before any episode
+    protocol = learned_protocol(["zoo:ppo-comm"], episodes=3)
+    assert protocol.entries == learned_entries(["zoo:ppo-comm"]) and protocol.tables == {"summary.md": "learned"}
+    table = execute(protocol, Play(1, False), tmp_path).tables["summary.md"]
+    assert (tmp_path / "summary.md").read_text().strip() == table.strip()
     lines = table.splitlines()
     assert "vs own anchor (paired mean)" in lines[0] and "vs own anchor (geometric" in lines[0] and "score v3" in lines[0]
     agent = next(line for line in lines if line.startswith("| zoo:ppo-comm "))
@@ -231,18 +234,20 @@ def test_suite_tasks_are_presets_with_their_own_scenarios():
 def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(tmp_path):
     pytest.importorskip("stable_baselines3")
     from training.results.episode import Play
-    from training.results.protocols import run_suite
-    from training.results.report import suite_table
-    from training.results.stats import reduce
+    from training.results.protocols import execute, suite_protocol
 
     policies = ["anchor:stake", "zoo:ppo-comm"]
     tasks = ["default", "wide-k8"]
-    rows, skipped, _, _ = run_suite(policies, tasks, 1, tmp_path, Play(1, False))
+    protocol = suite_protocol(policies, tasks, 1)
+    outcome = execute(protocol, Play(1, False), tmp_path)
+    rows, skipped = outcome.results, protocol.skipped
     assert {r.task for r in rows} == set(tasks)
     assert {r.policy for r in rows} >= {"dv-mpc", "epa", "noise:dv-mpc", "limit:fast-drone", "limit:perfect-links"}
     assert set(skipped) == {("wide-k8", "zoo:ppo-comm")}
     assert "expects observations of shape (335,)" in skipped[("wide-k8", "zoo:ppo-comm")]
-    board, refs = suite_table(reduce(rows), policies, tasks, skipped)
+    board, refs = outcome.tables["board.md"], outcome.tables["references.md"]
+    assert {p.name for p in tmp_path.iterdir()} == {"episodes.csv", "per_slot.csv", "board.md", "references.md",
+                                                    "structure.md", "tasks.md"}
     agent = next(line for line in board.splitlines() if line.startswith("| zoo:ppo-comm"))
     assert agent.count("n/a") == 1 and "(1 task)" in agent
     assert all(f"| {task} |" in refs for task in tasks)

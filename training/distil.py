@@ -27,12 +27,13 @@ from lawn_env import ScenarioConfig, presets
 from .protocol import read_learning_curve, selected_validation, selection_key
 from .recipes import RECIPES, Recipe, finished
 from .results.cells import fmt_num, fmt_paired, markdown_table
-from .results.episode import DEFAULT_PLAY, Entry, EpisodeResult, Play
+from .results.episode import Entry, EpisodeResult, Play
+from .results.protocols import Batch, Protocol, execute
 from .results.report import distil_table
-from .results.run import policy_env, run_entries
-from .results.stats import SCORE_HIGH, TEST_RANGES, RangeComparison, compare_ranges, costs_of, reduce, test_seeds
+from .results.run import policy_env
+from .results.stats import SCORE_HIGH, TEST_RANGES, RangeComparison, compare_ranges, costs_of, test_seeds
 
-__all__ = ["DISTIL_EPISODES", "own_law", "run_distil", "Distilled", "evaluate_distil", "export_distil"]
+__all__ = ["DISTIL_EPISODES", "own_law", "distil_protocol", "Distilled", "evaluate_distil", "export_distil"]
 
 #: Test seeds per range and task.
 DISTIL_EPISODES = 100
@@ -63,27 +64,23 @@ def recipe_tasks(r: Recipe) -> list[str]:
     return list(r.hp.get("tasks") or [r.preset])
 
 
-def run_distil(agents: Mapping[str, Sequence[str]], episodes: int = DISTIL_EPISODES, play: Play = DEFAULT_PLAY
-               ) -> list[EpisodeResult]:
-    """Full episodes of ``dv-mpc`` and ``rg-mpc`` (on ``lawn/Joint-v1``) and of every agent (``{policy:
-    tasks}``, on its env, with its law) on each of its tasks, on the first ``episodes`` seeds of both
-    test ranges."""
-    seeds = test_seeds(episodes)
-    rows: list[EpisodeResult] = []
+def distil_protocol(agents: Mapping[str, Sequence[str]], episodes: int = DISTIL_EPISODES) -> Protocol:
+    """``dv-mpc`` and ``rg-mpc`` (on ``lawn/Joint-v1``) and every agent (``{policy: tasks}``, on its env,
+    with its law) on each of its tasks, on the first ``episodes`` seeds of both test ranges."""
+    seeds = tuple(test_seeds(episodes))
+    batches = []
     for task in dict.fromkeys(t for tasks in agents.values() for t in tasks):
         config = presets.get(task)
-        rows += run_entries([Entry(SCORE_HIGH, JOINT), Entry("rg-mpc", JOINT)], config, seeds, play, task=task,
-                            desc=f"distil: {task}, experts")
-        for agent in (a for a, tasks in agents.items() if task in tasks):
-            rows += run_entries([Entry(agent, policy_env(agent))], config.override(own_law(agent)), seeds, play,
-                                task=task, desc=f"distil: {task}, {agent}")
-    return rows
+        batches.append(Batch(task, config, (Entry(SCORE_HIGH, JOINT), Entry("rg-mpc", JOINT)), seeds))
+        batches += [Batch(task, config.override(own_law(a)), (Entry(a, policy_env(a)),), seeds)
+                    for a, tasks in agents.items() if task in tasks]
+    return Protocol("distil", tuple(batches), {})
 
 
 @dataclass
 class Distilled:
     """The section's shipped runs (``{recipe: run dir}``, the validation-selected seed), their policy
-    names, the episodes of :func:`run_distil` and the page block (tables and note)."""
+    names, the episodes of :func:`distil_protocol` and the page block (tables and note)."""
 
     found: dict[str, Path]
     names: dict[str, str]
@@ -108,14 +105,16 @@ def _chosen(r: Recipe, runs: Path) -> Path | None:
 def evaluate_distil(runs: Path, workers: int = 2, progress: bool = True, episodes: int = DISTIL_EPISODES
                     ) -> Distilled:
     """The section's recipes: each one's validation-selected run compared on its tasks
-    (:func:`run_distil`) and rendered (:func:`~training.results.report.distil_table`; the RL runs'
+    (:func:`distil_protocol`) and rendered (:func:`~training.results.report.distil_table`; the RL runs'
     learning curves on the validation seeds beside it)."""
     section = {name: r for name, r in RECIPES.items() if r.section == "distil"}
     found = {name: d for name, r in section.items() if (d := _chosen(r, Path(runs))) is not None}
     if not found:
         raise ValueError(f"{runs}: no finished distil recipe runs ({', '.join(section)}; lawn zoo train --only ...)")
     names = {name: read_run(d).policy_name for name, d in found.items()}
-    rows = run_distil({names[n]: recipe_tasks(section[n]) for n in found}, episodes, Play(workers, progress))
+    played = execute(distil_protocol({names[n]: recipe_tasks(section[n]) for n in found}, episodes),
+                     Play(workers, progress))
+    rows = played.results
     labels = {names[n]: (f"`zoo:{n}`", section[n].evaluated_on) for n in found}
     targeted = {names[n] for n in found if section[n].algo == "fleet"}  # the clones of dv-mpc
 
@@ -127,7 +126,7 @@ def evaluate_distil(runs: Path, workers: int = 2, progress: bool = True, episode
             + "; ".join(f"`{section[n].command()}`" for n in found) + ".")
     curves = [_curve_table(n, d, d == found[n]) for n in found if section[n].algo != "fleet"
               for d in _finished(section[n], Path(runs))]
-    block = "\n\n".join([distil_table(reduce(rows), labels, tasks, JOINT, target), note, *curves])
+    block = "\n\n".join([distil_table(played.stats, labels, tasks, JOINT, target), note, *curves])
     return Distilled(found, names, rows, block, episodes)
 
 

@@ -28,9 +28,11 @@ from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, 
 from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe
 from .results.cells import fmt_num, fmt_paired, fmt_pct, markdown_table
 from .results.episode import Entry, EpisodeResult, EpisodeSpec, Play, read_results, write_results
+from .results.protocols import execute, learned_protocol
 from .results.report import protocol_cells
-from .results.run import evaluate, learned_entries, run_entries
-from .results.stats import SCORE_HIGH, SCORE_VERSION, Statistics, mean_ci, paired, reduce, verdict
+from .results.rows import Statistics
+from .results.run import evaluate
+from .results.stats import SCORE_HIGH, SCORE_VERSION, mean_ci, paired, verdict
 
 __all__ = ["finished_runs", "evaluate_zoo", "zoo_tables", "render_zoo",
            "plot_curves", "export_zoo", "build_zoo", "format_zoo_list", "ZooEvaluation", "ZooTables", "Shipped"]
@@ -107,11 +109,11 @@ def finished_runs(runs: Path, recipes: Mapping[str, Recipe] | None = None) -> li
 def evaluate_zoo(found: list[tuple[Recipe, list[Path]]], episodes: int = TEST_EPISODES, workers: int = 2,
                  progress: bool = True) -> ZooEvaluation:
     """Stage 1: every run by the learned protocol on test seeds 0..episodes-1
-    (:func:`training.results.run.run_entries`)."""
+    (:func:`training.results.protocols.learned_protocol`)."""
     run = {d: read_run(d) for _, dirs in found for d in dirs}
-    entries = learned_entries([run[d].policy_name for _, dirs in found for d in dirs])
-    rows = run_entries(entries, ScenarioConfig(), range(episodes), Play(workers, progress), desc="zoo benchmark")
-    return ZooEvaluation(found, run, entries, rows, reduce(rows), episodes)
+    protocol = learned_protocol([run[d].policy_name for _, dirs in found for d in dirs], episodes)
+    outcome = execute(protocol, Play(workers, progress))
+    return ZooEvaluation(found, run, protocol.entries, outcome.results, outcome.stats, episodes)
 
 
 def zoo_tables(ev: ZooEvaluation) -> ZooTables:

@@ -13,7 +13,7 @@ from lawn_env.presets import SUITE
 
 from ..protocol import TEST_EPISODES
 from ..results.episode import Play
-from ..results.protocols import run_benchmark, run_learned_protocol, suite_pages, suite_policies
+from ..results.protocols import execute, learned_protocol, run_benchmark, suite_pages, suite_policies
 from ..results.run import REFERENCE_ROWS, build_policy
 from ..results.stats import SCORE_HIGH, SCORE_LOW, SCORE_VERSION
 from .common import command, comparison_env, config_of, count, included, policy_help, policy_name
@@ -112,8 +112,9 @@ def _suite(args: argparse.Namespace) -> int:
 
 def _learned(args: argparse.Namespace) -> int:
     episodes, out = args.episodes or TEST_EPISODES, Path(args.out)
-    table = run_learned_protocol(list(args.policies or []) + included(args.include), out, episodes, _play(args))
+    protocol = learned_protocol(list(args.policies or []) + included(args.include), episodes)
+    outcome = execute(protocol, _play(args), out)
     print(f"lawn benchmark --protocol learned: test seeds 0-{episodes - 1}, full unmodified episodes")
-    print(table)
+    print(outcome.tables["summary.md"])
     print(f"wrote {out}/episodes.csv and {out}/summary.md")
     return 0

@@ -10,8 +10,9 @@ import lawn_env
 
 from ..results.episode import EpisodeSpec, write_results
 from ..results.report import format_table
+from ..results.rows import reduce
 from ..results.run import build_policy, evaluate
-from ..results.stats import SCORE_HIGH, SCORE_LOW, paired_cost_geometric, scores_by_policy, summarize
+from ..results.stats import SCORE_HIGH, SCORE_LOW
 from .common import command, comparison_env, config_of, count, parse_overrides, policy_help, policy_name
 
 
@@ -55,13 +56,15 @@ def run(args: argparse.Namespace) -> int:
                     transient_slots=args.transient_slots)
     mine = [r for r in rows if r.policy == args.policy]
     write_results(mine, out)
-    scores = None if not scored else {
-        p: score for (_, _, p), score in scores_by_policy(rows).items() if p == args.policy}
+    stats = reduce(rows)
+    row = stats.row("default", args.env, args.policy)
+    scores = None if not scored or row is None or row.score is None else {args.policy: row.score}
     note = f" (score: {SCORE_LOW} and {SCORE_HIGH} on the same seeds)" if scored else \
         "" if args.no_score else f" (no score: --policy-arg changes the reference {args.policy} itself)"
     print(f"lawn evaluate: {args.policy} on {args.env}, {args.episodes} episodes from seed {args.seed}{note}")
-    geometric = None if not scored or args.policy == SCORE_HIGH else {
-        p: g for p, g in paired_cost_geometric(rows, SCORE_HIGH).items() if p == args.policy}
-    print(format_table(summarize(mine), scores=scores, geometric=geometric, reference=SCORE_HIGH))
+    vs = stats.versus(("default", args.env, args.policy), ("default", args.env, SCORE_HIGH))
+    geometric = None if not scored or vs is None or args.policy == SCORE_HIGH else {args.policy: vs.geometric}
+    print(format_table(stats.summary(args.env, [args.policy]), scores=scores, geometric=geometric,
+                       reference=SCORE_HIGH))
     print(f"wrote {len(mine)} {'row' if len(mine) == 1 else 'rows'} to {out}")
     return 0

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from agents.base import JOINT
 
@@ -26,7 +26,6 @@ from .cells import (
     markdown_table,
 )
 from .episode import TRANSIENT_SLOTS, Entry
-from .run import REFERENCE_ROWS, is_reference_row, policy_env
 from .stats import (
     SCORE_HIGH,
     SCORE_LOW,
@@ -35,16 +34,15 @@ from .stats import (
     TAIL_RATIO,
     TEST_RANGES,
     Geometric,
-    Key,
     RangeComparison,
-    RowStats,
-    Statistics,
-    Versus,
 )
 
+if TYPE_CHECKING:
+    from .rows import Key, RowStats, Statistics, Versus
+
 __all__ = ["RESULT_METRICS", "TIMING_METRICS", "format_table", "summary_markdown", "plot_summary", "mean_cell",
-           "protocol_cells", "learned_table", "suite_table", "structure_table", "task_tables", "plot_profiles",
-           "skipped_summary", "fleet_table", "distil_table"]
+           "protocol_cells", "learned_table", "board_table", "references_table", "structure_table", "task_tables",
+           "plot_profiles", "skipped_summary", "fleet_table", "distil_table"]
 
 #: The summary's deterministic metrics (the same seeds give the same digits on any machine) and its
 #: measured ones (this machine's clock), in two tables.
@@ -176,23 +174,17 @@ def learned_table(stats: Statistics, entries: Sequence[Entry], labels: Mapping[s
     return f"{markdown_table(header, table)}\n\n{note}"
 
 
-def suite_table(stats: Statistics, policies: Sequence[str], tasks: Sequence[str],
-                skipped: Mapping[tuple[str, str], str]) -> tuple[str, str]:
-    """The leaderboard (score per task, the IQM over tasks with its stratified bootstrap interval)
-    and the references' costs per task."""
-    at = list(policies).index(SCORE_HIGH) + 1 if SCORE_HIGH in policies else 0  # the reference rows after the expert
-    names = list(dict.fromkeys([*policies[:at], *REFERENCE_ROWS, *policies[at:]]))
-    present = {policy for _, _, policy in stats.rows}
+def board_table(stats: Statistics, rows: Sequence[Entry], tasks: Sequence[str],
+                skipped: Mapping[tuple[str, str], str]) -> str:
+    """The leaderboard, a row per entry (a policy on its env) in order: its score per task and the IQM
+    over tasks with its stratified bootstrap interval (``n/a`` where it cannot act, :func:`skipped_summary`)."""
     board = []
-    for p in names:
-        env = JOINT if is_reference_row(p) else policy_env(p)
-        if is_reference_row(p) and p not in present:
-            continue
+    for p, env, _ in rows:
         cells = ["n/a" if (task, p) in skipped else format_score(_score(stats, task, env, p)) for task in tasks]
         iqm, lo, hi, n = stats.aggregate(env, p, tasks)
         overall = "–" if n == 0 else format_score((iqm, lo, hi, n))
         board.append([p, env, *cells, overall + ("" if n in (0, len(tasks)) else f" ({n} task{'s' * (n != 1)})")])
-    return markdown_table(["policy", "env", *tasks, "IQM over tasks [95 %]"], board), _references_table(stats, tasks)
+    return markdown_table(["policy", "env", *tasks, "IQM over tasks [95 %]"], board)
 
 
 def _score(stats: Statistics, task: str, env: str, policy: str) -> tuple[Any, ...] | None:
@@ -200,7 +192,7 @@ def _score(stats: Statistics, task: str, env: str, policy: str) -> tuple[Any, ..
     return row.score if row is not None else None
 
 
-def _references_table(stats: Statistics, tasks: Sequence[str]) -> str:
+def references_table(stats: Statistics, tasks: Sequence[str]) -> str:
     """The references' costs per task and env, their gap and how it varies over the seeds."""
     refs = []
     for task in tasks:
@@ -218,9 +210,10 @@ def _references_table(stats: Statistics, tasks: Sequence[str]) -> str:
                           refs)
 
 
-def structure_table(stats: Statistics, tasks: Sequence[str]) -> str:
+def structure_table(stats: Statistics, tasks: Sequence[str], references: Sequence[str]) -> str:
     """Per task, what decides it on ``lawn/Joint-v1``: the best expert's control cost, its transient and
-    sustained parts (the sustained share), the noise floor and the headroom rows against it."""
+    sustained parts (the sustained share), and each reference row (the noise floor, the headroom rows)
+    against it."""
     table = []
     for task in tasks:
         high = stats.row(task, JOINT, SCORE_HIGH)
@@ -229,23 +222,23 @@ def structure_table(stats: Statistics, tasks: Sequence[str]) -> str:
         share = high.totals["sustained_cost"] / high.totals["control_cost"]
         cells = [mean_cell(high, m) for m in _COSTS]
         cells[2] += f" ({share * 100:.0f} %)"
-        for p in REFERENCE_ROWS:
+        for p in references:
             vs = stats.versus((task, JOINT, p), (task, JOINT, SCORE_HIGH))
             cells.append(fmt_geometric(vs.geometric) if vs is not None else "–")
         table.append([task, *cells])
     header = ["task", f"{SCORE_HIGH} cost", "transient", "sustained (share)",
-              *(f"{p} vs {SCORE_HIGH} (geometric, seeds won)" for p in REFERENCE_ROWS)]
+              *(f"{p} vs {SCORE_HIGH} (geometric, seeds won)" for p in references)]
     return markdown_table(header, table)
 
 
-def task_tables(stats: Statistics, policies: Sequence[str], tasks: Sequence[str],
+def task_tables(stats: Statistics, names: Sequence[str], tasks: Sequence[str],
                 skipped: Mapping[tuple[str, str], str]) -> str:
-    """One Markdown table per task: every row's control cost, its transient and sustained parts, the
-    score, and the comparison with the best expert on the same env (geometric and paired mean)."""
+    """One Markdown table per task: every row (``names`` in order, on each env of the task) with its
+    control cost, its transient and sustained parts, the score, and the comparison with the best
+    expert on the same env (geometric and paired mean)."""
     out = []
     for task in tasks:
         table = []
-        names = list(dict.fromkeys([SCORE_HIGH, SCORE_LOW, *REFERENCE_ROWS, *policies]))
         for env in stats.envs(task):
             for p in names:
                 row = stats.row(task, env, p)
@@ -316,15 +309,15 @@ def _versus(stats: Statistics, key: Key, reference: Key) -> Versus:
     return vs
 
 
-def fleet_table(stats: Statistics, agents: Sequence[str], sizes: Mapping[int, int],
+def fleet_table(stats: Statistics, agents: Sequence[Entry], sizes: Mapping[int, int],
                 target: Callable[[str, int, RangeComparison], str]) -> str:
-    """Per env and K: the noise-floor row and every agent against dv-mpc on both test ranges, the
-    tail, the worst seed, ``target(policy, K, comparison)`` (the verdict of the protocol's target,
-    "–" for a row without one) and the decision times."""
+    """Per env and K: the noise-floor row and every agent (on its env) against dv-mpc on both test
+    ranges, the tail, the worst seed, ``target(policy, K, comparison)`` (the verdict of the protocol's
+    target, "–" for a row without one) and the decision times."""
     table = []
     noise = f"noise:{SCORE_HIGH}"
-    for env in dict.fromkeys(policy_env(a) for a in agents):
-        for policy in [noise, *(a for a in agents if policy_env(a) == env)]:
+    for env in dict.fromkeys(a.env for a in agents):
+        for policy in [noise, *(a.policy for a in agents if a.env == env)]:
             for k in sizes:
                 task = f"k{k}"
                 mine, ref = stats.row(task, env, policy), stats.row(task, env, SCORE_HIGH)

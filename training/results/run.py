@@ -39,11 +39,11 @@ from lawn_env import ScenarioConfig, central_env_id
 from lawn_env.config import DroneConfig
 
 from ..pool import pool_map
-from .episode import DEFAULT_PLAY, TRANSIENT_SLOTS, Entry, EpisodeResult, EpisodeSpec, Play, Results
+from .episode import TRANSIENT_SLOTS, Entry, EpisodeResult, EpisodeSpec, Results
 from .stats import SCORE_HIGH, SCORE_LOW
 
 __all__ = ["episode_row", "build_policy", "run_episode", "split_cost",
-           "evaluate", "run_entries", "per_slot_profile", "policy_env", "own_anchor", "learned_entries", "LIMITS",
+           "evaluate", "per_slot_profile", "policy_env", "own_anchor", "learned_entries", "LIMITS",
            "LIMIT_SETTINGS", "NOISE", "REFERENCE_ROWS", "is_reference_row", "limit_config", "resolve"]
 
 
@@ -213,19 +213,6 @@ def learned_entries(agents: Sequence[str], envs: Sequence[str] | None = None) ->
         out += [Entry(p, env) for p in (SCORE_HIGH, SCORE_LOW, *sorted({a for a in anchors.values() if a}))]
         out += [Entry(a, env, anchors[a]) for a in members]
     return out
-
-
-def run_entries(entries: Sequence[Entry | tuple[str, str]], config: ScenarioConfig, seeds: Sequence[int],
-                play: Play = DEFAULT_PLAY, task: str = "default", desc: str = "benchmark",
-                profiles: list[dict[str, Any]] | None = None) -> list[EpisodeResult]:
-    """Full episodes of every entry (policy, env) on every seed; results with their ``task`` and
-    without the per-slot trace (its mean per slot appended to ``profiles`` when given,
-    :func:`per_slot_profile`)."""
-    tasks = [EpisodeSpec(e[0], e[1], config, int(s)) for e in entries for s in seeds]
-    results = [r.with_(task=task) for r in evaluate(tasks, play.workers, play.progress, desc, play.transient_slots)]
-    if profiles is not None:
-        profiles += per_slot_profile(results)
-    return [r.with_(stage_costs=None) for r in results]
 
 
 def per_slot_profile(results: Results) -> list[dict[str, Any]]:

@@ -16,9 +16,8 @@ v1 on cost with 100 at ``rg-mpc``.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -27,11 +26,11 @@ if TYPE_CHECKING:
     from .episode import EpisodeResult, Results
 
 __all__ = ["SUMMARY_METRICS", "mean_ci", "paired_difference", "Geometric", "paired_geometric", "verdict", "costs_of",
-           "paired", "geometric", "summarize", "paired_cost_difference", "paired_cost_geometric", "SCORE_VERSION",
+           "paired", "geometric", "SCORE_VERSION",
            "SCORE_REFERENCES", "SCORE_SCALES", "SCORE_LOW", "SCORE_HIGH", "score_references", "score_version",
            "normalized_score", "score_inputs",
            "scores_by_policy", "aggregate_score", "TEST_RANGES", "TAIL_RATIO", "test_seeds", "range_of",
-           "RangeComparison", "compare_ranges", "Key", "Versus", "RowStats", "Statistics", "reduce"]
+           "RangeComparison", "compare_ranges"]
 
 #: Resamples of every bootstrap interval of the tables (the score's and the geometric comparison's).
 BOOTSTRAP_RESAMPLES = 2000
@@ -162,43 +161,6 @@ def verdict(mean: float, half: float, expect: str, tie_tolerance: float = 0.01) 
     if lo > 0:
         return "differs"
     return "not significant"
-
-
-def summarize(results: Results, metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS) -> list[dict[str, Any]]:
-    """Per policy, in first-seen order: the episodes, and the mean and 95 % t-interval half-width of
-    each metric (``METRIC`` and ``METRIC_ci95``; NaN for a metric the results do not record)."""
-    groups: dict[str, list[EpisodeResult]] = {}
-    for r in results:
-        groups.setdefault(r.policy, []).append(r)
-    out = []
-    for name, members in groups.items():
-        entry: dict[str, Any] = {"policy": name, "episodes": len(members)}
-        for key, _ in metrics:
-            entry[key], entry[f"{key}_ci95"] = mean_ci(v for v in (r.value(key) for r in members) if v is not None)
-        out.append(entry)
-    return out
-
-
-def paired_cost_difference(rows: Results, reference: str, metric: str = "control_cost"
-                           ) -> dict[str, tuple[float, float]]:
-    """Per policy: mean and 95 % t-interval half-width of the per-seed relative difference
-    ``(x - x_ref) / x_ref`` against ``reference`` on the seeds both ran (:func:`paired_difference`)."""
-    ref = costs_of(rows, reference, metric=metric)
-    out = {}
-    for name in dict.fromkeys(r.policy for r in rows):
-        mean, half, n = paired_difference(costs_of(rows, name, metric=metric), ref)
-        if n > 1:
-            out[name] = (mean, half)
-    return out
-
-
-def paired_cost_geometric(rows: Results, reference: str,
-                          metric: str = "control_cost") -> dict[str, Geometric]:
-    """Per policy but ``reference``: :func:`paired_geometric` of its per-seed costs against the reference's."""
-    ref = costs_of(rows, reference, metric=metric)
-    mine = {name: costs_of(rows, name, metric=metric) for name in dict.fromkeys(r.policy for r in rows)}
-    return {name: paired_geometric(cost, ref) for name, cost in mine.items()
-            if name != reference and any(s in ref for s in cost)}
 
 
 def costs_of(rows: Results, policy: str, env: str | None = None, task: str | None = None,
@@ -386,108 +348,3 @@ def compare_ranges(costs: Mapping[int, float], reference: Mapping[int, float]) -
     ratio = np.array([costs[s] / reference[s] for s in seeds])
     worst = int(np.argmax(ratio))
     return RangeComparison(ranges, float(np.mean(ratio > TAIL_RATIO)), float(ratio[worst]), seeds[worst])
-
-
-# ---------------------------------------------------------------------- results reduced for the tables
-#: A row of a table: (task, env, policy); a result without a task is on ``"default"``.
-Key = tuple[str, str, str]
-#: The cost metrics every row carries a mean of.
-COST_METRICS = ("control_cost", "transient_cost", "sustained_cost")
-
-
-@dataclass(frozen=True)
-class Versus:
-    """A row's per-seed control costs against a reference row's, on the seeds both hold: each
-    statistic is computed when first read (a table reads what it shows)."""
-
-    costs: Mapping[int, float]
-    reference: Mapping[int, float]
-
-    @cached_property
-    def geometric(self) -> Geometric:
-        """:func:`paired_geometric`: the geometric mean of the cost ratios, its interval, the seeds won."""
-        return paired_geometric(self.costs, self.reference)
-
-    @cached_property
-    def paired(self) -> tuple[float, float]:
-        """:func:`paired_difference`: the mean relative difference and its 95 % half-width."""
-        mean, half, _ = paired_difference(self.costs, self.reference)
-        return mean, half
-
-    @cached_property
-    def relative(self) -> list[float]:
-        """The per-seed relative differences (cost - reference) / reference."""
-        return [(self.costs[s] - self.reference[s]) / self.reference[s] for s in self.costs if s in self.reference]
-
-    @cached_property
-    def ranges(self) -> RangeComparison:
-        """:func:`compare_ranges`: per test range, with the tail and the worst seed."""
-        return compare_ranges(self.costs, self.reference)
-
-
-@dataclass(frozen=True)
-class RowStats:
-    """One row's statistics: its seeds, the mean and 95 % half-width of each cost metric
-    (:data:`COST_METRICS`) and their sums, the median of its episodes' decision times (ms) and its
-    normalized score (None where the references are not beside it)."""
-
-    key: Key
-    costs: Mapping[int, float]
-    means: Mapping[str, tuple[float, float]]
-    totals: Mapping[str, float]
-    decision_ms: float
-    score: tuple[Any, ...] | None
-
-    @property
-    def seeds(self) -> int:
-        return len(self.costs)
-
-
-class Statistics:
-    """Evaluation results reduced per row (:class:`RowStats`, by :data:`Key`), with each row's
-    comparisons against any other (:meth:`versus`) and the IQM of a policy's scores over tasks
-    (:meth:`aggregate`): what every table formats (:mod:`.report`), computed once per row."""
-
-    def __init__(self, results: Results, version: int = SCORE_VERSION) -> None:
-        groups: dict[Key, list[EpisodeResult]] = {}
-        for r in results:
-            groups.setdefault((r.task or "default", r.env, r.policy), []).append(r)
-        scores = scores_by_policy(results, version=version)
-        self.rows = {key: _row(key, members, scores.get(key)) for key, members in groups.items()}
-        self.inputs = score_inputs(results, version=version)
-        self.seeds = sorted({r.seed for r in results})
-        self.transient_slots = next((r.transient_slots for r in results if r.transient_slots is not None), None)
-        self._versus: dict[tuple[Key, Key], Versus] = {}
-
-    def row(self, task: str, env: str, policy: str) -> RowStats | None:
-        return self.rows.get((task, env, policy))
-
-    def envs(self, task: str) -> list[str]:
-        """The envs of ``task``'s rows, in the results' order."""
-        return list(dict.fromkeys(env for t, env, _ in self.rows if t == task))
-
-    def versus(self, key: Key, reference: Key) -> Versus | None:
-        """Row ``key`` against row ``reference`` (None when either has no results)."""
-        if key not in self.rows or reference not in self.rows:
-            return None
-        if (key, reference) not in self._versus:
-            self._versus[(key, reference)] = Versus(self.rows[key].costs, self.rows[reference].costs)
-        return self._versus[(key, reference)]
-
-    def aggregate(self, env: str, policy: str, tasks: Sequence[str]) -> tuple[float, float, float, int]:
-        """:func:`aggregate_score` of ``policy`` on ``env`` over ``tasks``."""
-        return aggregate_score({t: self.inputs[(t, env, policy)] for t in tasks if (t, env, policy) in self.inputs})
-
-
-def _row(key: Key, members: Sequence[EpisodeResult], score: tuple[Any, ...] | None) -> RowStats:
-    task, env, policy = key
-    values = {m: costs_of(members, policy, env, task, m) for m in COST_METRICS}
-    times = costs_of(members, policy, env, task, "decision_time_median_s")
-    return RowStats(key, values["control_cost"], {m: mean_ci(v.values()) for m, v in values.items()},
-                    {m: sum(v.values()) for m, v in values.items()},
-                    1e3 * float(np.median(list(times.values()))) if times else math.nan, score)
-
-
-def reduce(results: Results, version: int = SCORE_VERSION) -> Statistics:
-    """The :class:`Statistics` of evaluation results (score ``version``)."""
-    return Statistics(results, version)
