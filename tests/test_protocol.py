@@ -552,3 +552,28 @@ def test_train_recipes_skips_finished_runs_restarts_unfinished_ones_and_trains_f
     assert phases == [[], []]
     with pytest.raises(ValueError, match="unknown recipe 'nope'; valid: clone, tune"):
         train_recipes(runs, ["nope"])
+
+
+def test_the_learning_curve_shows_the_paired_interval_against_the_start(tmp_path):
+    """``write_learning_curve``: the selected validation's paired change against the run's start and
+    its 95 % interval in the summary, and a second panel of that change when the curve has it."""
+    from training.protocol import append_learning_curve, write_learning_curve
+
+    spec = {"algo": "ppo", "env": "lawn/Joint-v1", "seed": 0}
+    rows = [(0, {"control_cost": 10.0, "control_cost_ci95": 1.0, "vs_reference": 0.1, "vs_reference_ci95": 0.02,
+                 "vs_start": 0.0, "vs_start_ci95": 0.0}),
+            (64, {"control_cost": 9.0, "control_cost_ci95": 1.0, "vs_reference": 0.0, "vs_reference_ci95": 0.02,
+                  "vs_start": -0.05, "vs_start_ci95": 0.01})]
+    for steps, row in rows:
+        append_learning_curve(tmp_path, steps, row)
+    summary = write_learning_curve(tmp_path, spec)
+    assert summary["best_at_timesteps"] == 64  # -5 % ± 1 %: significantly better than the start
+    assert (summary["best_validation_vs_start"], summary["best_validation_vs_start_ci95"]) == (-0.05, 0.01)
+    from PIL import Image
+
+    with Image.open(tmp_path / "learning_curve.png") as image:
+        tall = image.size[1]
+    (tmp_path / "learning_curve.csv").write_text("timesteps,control_cost,control_cost_ci95\n0,10,1\n64,9,1\n")
+    write_learning_curve(tmp_path, spec)  # behaviour cloning's curve: no start to pair with, one panel
+    with Image.open(tmp_path / "learning_curve.png") as image:
+        assert image.size[1] < tall

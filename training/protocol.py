@@ -127,7 +127,9 @@ def append_learning_curve(run_dir: Path, timesteps: int, row: Mapping[str, float
 
 
 def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict[str, Any]:
-    """learning_curve.png and summary.md from the periodic validation (``learning_curve.csv``)."""
+    """learning_curve.png and summary.md from the periodic validation (``learning_curve.csv``): the
+    validation cost, and the paired change against the run's start with its 95 % interval (what model
+    selection reads: a change within the interval is not one)."""
     out_dir = Path(out_dir)
     rows = read_learning_curve(out_dir)
     if rows:
@@ -139,6 +141,8 @@ def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict[str, An
         "final_validation_cost": rows[-1]["control_cost"] if rows else None,
         "best_validation_cost": best["control_cost"] if best else None,
         "best_validation_vs_reference": best.get("vs_reference") if best else None,
+        "best_validation_vs_start": best.get("vs_start") if best else None,
+        "best_validation_vs_start_ci95": best.get("vs_start_ci95") if best else None,
         "best_at_timesteps": int(best["timesteps"]) if best else None,
     }
     lines = [f"# {spec['algo']} on {spec['env']}", ""]
@@ -151,17 +155,29 @@ def _plot_curve(rows: list[dict[str, float]], path: Path, title: str) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(6, 3.5), dpi=110)
+    paired = [r for r in rows if "vs_start" in r and "vs_start_ci95" in r]
+    fig = Figure(figsize=(6, 5.5 if paired else 3.5), dpi=110)
     FigureCanvasAgg(fig)
-    ax = fig.add_subplot(111)
+    ax = fig.add_subplot(2 if paired else 1, 1, 1)
     t = [r["timesteps"] for r in rows]
     m = np.array([r["control_cost"] for r in rows])
     s = np.array([r["control_cost_ci95"] for r in rows])
     ax.plot(t, m, "-o", ms=3)
     ax.fill_between(t, np.maximum(m - s, m * 0.1), m + s, alpha=0.2)
     ax.set_yscale("log")
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("validation control cost (mean, 95 % CI)")
+    ax.set_ylabel("validation control cost\n(mean, 95 % CI)")
     ax.set_title(title, fontsize=10)
+    if paired:  # the same seeds as the start: common random numbers, so a few percent can show
+        ax = fig.add_subplot(2, 1, 2, sharex=ax)
+        t = [r["timesteps"] for r in paired]
+        d = 100 * np.array([r["vs_start"] for r in paired])
+        h = 100 * np.nan_to_num(np.array([r["vs_start_ci95"] for r in paired]))
+        ax.plot(t, d, "-o", ms=3, color="C1")
+        ax.fill_between(t, d - h, d + h, alpha=0.2, color="C1")
+        ax.axhline(0.0, color="k", lw=0.8)
+        for bound in (-2.0, 2.0):
+            ax.axhline(bound, color="0.6", lw=0.8, ls=":")
+        ax.set_ylabel("vs the run's start (%)\n(paired, 95 % CI)")
+    ax.set_xlabel("environment steps")
     fig.tight_layout()
     fig.savefig(path)
