@@ -428,3 +428,28 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
     with pytest.raises(ValueError, match="control.law='delivery'.*control.law='paper'"):
         learned.check_law("zoo:x", "lawn/Comm-v1", presets.get("steady").override({"control.law": "delivery"}),
                           presets.get("steady"))
+
+
+def test_lawn_benchmark_protocol_fleet_plays_named_networks_on_chosen_sizes(tmp_path, capsys):
+    """``lawn benchmark --protocol fleet``: the named networks beside dv-mpc and its noise floor at each
+    of --sizes, --episodes seeds of each test range; a network that cannot act at a size, sizes without
+    the protocol and two protocols at once are refused before any episode."""
+    pytest.importorskip("stable_baselines3")
+    from training.cli import main
+    from training.results.episode import read_results
+
+    out = tmp_path / "fleet"
+    assert main(["benchmark", "--protocol", "fleet", "--policies", "zoo:fleet-comm", "--sizes", "3", "--episodes", "1",
+                 "--workers", "1", "--quiet", "--out", str(out)]) == 0
+    rows = read_results(out / "fleet_sizes.csv")
+    assert {(r.policy, r.task) for r in rows} == {(p, "k3") for p in ("dv-mpc", "noise:dv-mpc", "zoo:fleet-comm")}
+    assert sorted({r.seed for r in rows}) == [0, 100_000]
+    assert "| zoo:fleet-comm | lawn/Comm-v1 | 3 | 2 |" in (out / "fleet_sizes.md").read_text()
+    capsys.readouterr()
+    cases = [(["--protocol", "fleet", "--policies", "zoo:ppo-comm", "--sizes", "3"], "zoo:ppo-comm cannot act with 3 AGVs"),
+             (["--sizes", "3"], "--sizes 3: fleet sizes belong to --protocol fleet"),
+             (["--suite", "--protocol", "fleet"], "--suite and --protocol fleet are two protocols")]
+    for flags, message in cases:
+        assert main(["benchmark", *flags, "--quiet", "--out", str(tmp_path / "refused")]) == 2, flags
+        assert message in capsys.readouterr().err, flags
+    assert not (tmp_path / "refused").exists() or not any((tmp_path / "refused").iterdir())

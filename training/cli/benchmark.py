@@ -13,7 +13,16 @@ from lawn_env.presets import SUITE
 
 from ..protocol import TEST_EPISODES
 from ..results.episode import Play
-from ..results.protocols import execute, learned_protocol, run_benchmark, suite_pages, suite_policies
+from ..results.protocols import (
+    FLEET_SIZES,
+    execute,
+    fleet_agents,
+    fleet_protocol,
+    learned_protocol,
+    run_benchmark,
+    suite_pages,
+    suite_policies,
+)
 from ..results.run import REFERENCE_ROWS, build_policy
 from ..results.stats import SCORE_HIGH, SCORE_LOW, SCORE_VERSION
 from .common import command, comparison_env, config_of, count, included, policy_help, policy_name
@@ -28,9 +37,14 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
                          f"{' '.join(REFERENCE_ROWS)}; with --protocol learned every "
                          "shipped agent with its anchor and the references; with --suite every expert, baseline, "
                          "shipped agent and the stake and distance anchors, beside the reference rows)")
-    bm.add_argument("--protocol", choices=["paper", "learned"], default="paper",
+    bm.add_argument("--protocol", choices=["paper", "learned", "fleet"], default="paper",
                     help="paper (default): the policies on --episodes seeds of one scenario; learned: agents beside "
-                         "the best expert, epa and their own anchors on the 100 test seeds, with the normalized score")
+                         "the best expert, epa and their own anchors on the 100 test seeds, with the normalized score; "
+                         "fleet: networks that read the entity layout (default: the shipped ones) beside dv-mpc and "
+                         "its noise floor with each fleet size of --sizes, on both test ranges")
+    bm.add_argument("--sizes", nargs="+", type=count, default=None, metavar="K",
+                    help="--protocol fleet: the fleet sizes (default: 3 4 8 16 32 64, with 100, 100, 100, 40, 40 "
+                         "and 20 seeds per test range; --episodes caps them)")
     bm.add_argument("--suite", action="store_true",
                     help="the task suite (lawn_env.presets.SUITE): normalized score of every policy on every task")
     bm.add_argument("--tasks", nargs="+", default=None, choices=presets.names(), metavar="TASK",
@@ -51,9 +65,11 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
 def run(args: argparse.Namespace) -> int:
     if not args.suite and (args.tasks or args.docs):
         raise ValueError("--tasks and --docs belong to --suite (the task suite's leaderboard)")
-    if args.suite or args.protocol == "learned":
+    if args.sizes and args.protocol != "fleet":
+        raise ValueError(f"--sizes {' '.join(map(str, args.sizes))}: fleet sizes belong to --protocol fleet")
+    if args.suite or args.protocol != "paper":
         _check_fixed_protocol(args)
-        return _suite(args) if args.suite else _learned(args)
+        return _suite(args) if args.suite else _learned(args) if args.protocol == "learned" else _fleet(args)
     args.env = args.env or "lawn/Joint-v1"
     args.seed = 0 if args.seed is None else args.seed
     cfg = config_of(args)
@@ -70,11 +86,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _check_fixed_protocol(args: argparse.Namespace) -> None:
-    """``--protocol learned`` and ``--suite`` fix the scenario, the seeds and each policy's env."""
-    mode = "--suite" if args.suite else "--protocol learned"
-    if args.suite and args.protocol == "learned":
-        raise ValueError("--suite and --protocol learned are two protocols: give one (the suite already runs the "
-                         "shipped agents on the 100 test seeds of every task)")
+    """``--protocol learned``, ``--protocol fleet`` and ``--suite`` fix the scenario, the seeds and each
+    policy's env."""
+    mode = "--suite" if args.suite else f"--protocol {args.protocol}"
+    if args.suite and args.protocol != "paper":
+        raise ValueError(f"--suite and --protocol {args.protocol} are two protocols: give one (the suite already "
+                         "runs the shipped agents on the 100 test seeds of every task, the fleet networks on every "
+                         "size)")
     if args.preset != "default" or args.set:
         hint = "choose tasks with --tasks" if args.suite else "it runs the default task; --suite runs the other tasks"
         raise ValueError(f"{mode} fixes the scenario: drop --preset {args.preset} / --set ({hint})")
@@ -117,4 +135,19 @@ def _learned(args: argparse.Namespace) -> int:
     print(f"lawn benchmark --protocol learned: test seeds 0-{episodes - 1}, full unmodified episodes")
     print(outcome.tables["summary.md"])
     print(f"wrote {out}/episodes.csv and {out}/summary.md")
+    return 0
+
+
+def _fleet(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    agents = list(args.policies or fleet_agents()) + included(args.include)
+    if not agents:
+        raise ValueError("--protocol fleet: no shipped fleet network; name the networks with --policies (zoo:NAME, "
+                         "sb3:DIR of a run whose interface reads the entity layout)")
+    sizes = {k: min(FLEET_SIZES.get(k, 20), args.episodes or FLEET_SIZES.get(k, 20))
+             for k in (args.sizes or FLEET_SIZES)}
+    outcome = execute(fleet_protocol(agents, sizes), _play(args), out)
+    print(f"lawn benchmark --protocol fleet: {len(agents)} networks, K = {', '.join(map(str, sizes))}")
+    print(outcome.tables["fleet_sizes.md"])
+    print(f"wrote {out}/fleet_sizes.csv and {out}/fleet_sizes.md")
     return 0

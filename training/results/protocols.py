@@ -372,12 +372,16 @@ def fleet_protocol(agents: Sequence[str], sizes: Mapping[int, int] = FLEET_SIZES
                    ) -> Protocol:
     """Every agent, the best expert and its noise floor on the default task (or ``base``) with each fleet
     size (task ``k<K>``), on the first n seeds of both test ranges (n per size): ``fleet_sizes.csv`` and
-    the table with the targets (``fleet_sizes.md``)."""
+    the table with the targets (``fleet_sizes.md``). An agent that cannot act at a size fails here."""
     envs = list(dict.fromkeys(policy_env(a) for a in agents))
     noise = next(iter(NOISE))
     batches = []
     for k, seeds in sizes.items():
         config = (base or presets.get("default")).override(num_agvs=int(k))
+        for a in agents:
+            if (reason := _applicable(a, policy_env(a), config)) is not None:
+                raise ValueError(f"{a} cannot act with {k} AGVs (the fleet sizes need a network that reads the "
+                                 f"entity layout): {reason}")
         entries = [Entry(p, env) for env in envs for p in (SCORE_HIGH, noise)]
         entries += [Entry(a, policy_env(a)) for a in agents]
         batches.append(Batch(f"k{k}", config, tuple(entries), tuple(test_seeds(int(seeds)))))
