@@ -577,3 +577,14 @@ def test_the_learning_curve_shows_the_paired_interval_against_the_start(tmp_path
     write_learning_curve(tmp_path, spec)  # behaviour cloning's curve: no start to pair with, one panel
     with Image.open(tmp_path / "learning_curve.png") as image:
         assert image.size[1] < tall
+
+
+def test_a_protocol_names_only_tables_it_can_make():
+    from lawn_env import ScenarioConfig
+    from training.results.episode import Entry
+    from training.results.protocols import Batch, Protocol
+
+    batch = Batch("default", ScenarioConfig(), (Entry("epa", "lawn/Joint-v1"),), (0,))
+    with pytest.raises(ValueError, match=r"unknown tables \['boards'\]; valid: summary, learned, board"):
+        Protocol("mine", (batch,), {"board.md": "boards"})
+    assert Protocol("mine", (batch, batch), {"tasks.md": "tasks"}).entries == [Entry("epa", "lawn/Joint-v1")]

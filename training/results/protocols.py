@@ -109,6 +109,11 @@ class Protocol:
     sizes: Mapping[int, int] = field(default_factory=dict)
     episodes_file: str = "episodes.csv"
 
+    def __post_init__(self) -> None:
+        unknown = sorted(set(self.tables.values()) - set(TABLES))
+        if unknown:  # before any episode is played
+            raise ValueError(f"Protocol {self.name!r}: unknown tables {unknown}; valid: {', '.join(TABLES)}")
+
     @property
     def tasks(self) -> list[str]:
         return list(dict.fromkeys(b.task or "default" for b in self.batches))
