@@ -266,7 +266,7 @@ def test_statistics_reduce_results_once_per_row_and_compare_any_two_rows():
     the functions on results take; a missing row compares to nothing."""
     from training.results.episode import EpisodeResult
     from training.results.rows import reduce
-    from training.results.stats import costs_of, geometric, mean_ci, paired
+    from training.results.stats import costs_of, mean_ci, paired, paired_geometric
 
     rng = np.random.default_rng(3)
     rows = [EpisodeResult(p, "lawn/Joint-v1", s, control_cost=c, transient_cost=c / 2, sustained_cost=c / 2,
@@ -279,7 +279,7 @@ def test_statistics_reduce_results_once_per_row_and_compare_any_two_rows():
     assert row.totals["sustained_cost"] == pytest.approx(sum(costs_of(rows, "x", task="a").values()) / 2)
     assert row.decision_ms == pytest.approx(3.5) and row.score is not None
     vs = stats.versus(("a", "lawn/Joint-v1", "x"), ("a", "lawn/Joint-v1", "dv-mpc"))
-    assert vs.geometric == geometric(rows, "x", "dv-mpc", "lawn/Joint-v1", "a")
+    assert vs.geometric == paired_geometric(costs_of(rows, "x", task="a"), costs_of(rows, "dv-mpc", task="a"))
     assert vs.paired == paired(rows, "x", "dv-mpc", "lawn/Joint-v1", "a") and len(vs.relative) == 6
     assert stats.aggregate("lawn/Joint-v1", "x", ["a", "b"])[3] == 2 and stats.envs("b") == ["lawn/Joint-v1"]
     assert stats.versus(("a", "lawn/Joint-v1", "x"), ("a", "lawn/Joint-v1", "nope")) is None

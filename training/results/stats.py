@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from .episode import EpisodeResult, Results
 
 __all__ = ["SUMMARY_METRICS", "mean_ci", "paired_difference", "Geometric", "paired_geometric", "verdict", "costs_of",
-           "paired", "geometric", "SCORE_VERSION",
+           "paired", "SCORE_VERSION",
            "SCORE_REFERENCES", "SCORE_SCALES", "SCORE_LOW", "SCORE_HIGH", "score_references", "score_version",
            "normalized_score", "score_inputs",
            "scores_by_policy", "aggregate_score", "TEST_RANGES", "TAIL_RATIO", "test_seeds", "range_of",
@@ -169,13 +169,6 @@ def costs_of(rows: Results, policy: str, env: str | None = None, task: str | Non
     given) in evaluation results that record it."""
     return {r.seed: v for r in rows if r.policy == policy and (env is None or r.env == env)
             and (task is None or (r.task or "default") == task) and (v := r.value(metric)) is not None}
-
-
-def geometric(rows: Results, policy: str, reference: str, env: str,
-              task: str | None = None) -> Geometric:
-    """:func:`paired_geometric` of ``policy``'s per-seed costs against ``reference``'s (on ``env``, and
-    ``task`` when given)."""
-    return paired_geometric(costs_of(rows, policy, env, task), costs_of(rows, reference, env, task))
 
 
 def paired(rows: Results, policy: str, reference: str, env: str, task: str | None = None
