@@ -47,8 +47,9 @@ from .reduced import (
     ReducedGradientPlanner,
     ReducedSettings,
 )
-from .residual import ResidualActions, check_residual
+from .residual import PARTS, ResidualActions, check_residual
 from .scripted import HeuristicPolicy
+from .timing import DecisionClock
 from .tracking import PIDGains, lqr_gain, lqr_rollout, pid_rollout
 
 __all__ = [
@@ -308,19 +309,22 @@ PAPER_POLICIES = ("ao-mpc", "epa", "sf", "pid", "lqr")
 BENCHMARK_POLICIES = ("dv-mpc", "rg-mpc", *PAPER_POLICIES)
 
 
-def attach_residual(policy: Policy, settings: Mapping[str, Any] | None) -> Policy:
+def attach_residual(policy: Policy, settings: Mapping[str, Any] | None, clock: DecisionClock | None = None) -> Policy:
     """``policy`` (a trained :class:`~agents.learned.SB3Policy`) acting by the residual scheme its run
-    recorded, ``{"anchor": NAME, "scale": s}`` (:mod:`agents.residual`), the anchor built for the
-    policy's scenario; ``None``: the policy as it is."""
+    recorded, ``{"anchor": NAME, "scale": s, "moves": [...]}`` (:mod:`agents.residual`), the anchor built for the
+    policy's scenario (timed on ``clock`` when given); ``None``: the policy as it is."""
     if settings is None:
         return policy
     checked = check_residual(settings)
     anchor = make_policy(checked["anchor"], policy.config, env_id=policy.env_id)
+    if clock is not None:
+        anchor = clock.timed(anchor)
     interface = getattr(policy, "interface", None)
     with_residual = getattr(policy, "with_residual", None)
     if with_residual is None:
         raise ValueError(f"{policy.name} records a residual scheme but cannot act by one")
-    wrapped: Policy = with_residual(ResidualActions(anchor, policy.config, policy.env_id, interface, checked["scale"]))
+    wrapped: Policy = with_residual(ResidualActions(anchor, policy.config, policy.env_id, interface, checked["scale"],
+                                                    checked.get("moves", PARTS)))
     return wrapped
 
 

@@ -266,7 +266,7 @@ def datasets_path(tmp_path, monkeypatch):
 def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
     import minari
 
-    from training.bc import create_dataset
+    from training.datasets import create_dataset
 
     create_dataset("rg-mpc", "lawn/Comm-v1", episodes=2, seed=7, dataset_id="lawn/test/rg-mpc-v0", progress=False)
     dataset = minari.load_dataset("lawn/test/rg-mpc-v0")
@@ -296,7 +296,7 @@ def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
 
 
 def test_dataset_errors_name_the_problem(datasets_path):
-    from training.bc import create_dataset, load_dataset
+    from training.datasets import create_dataset, load_dataset
 
     with pytest.raises(ValueError, match="datasets record lawn/Joint-v1 or lawn/Comm-v1"):
         create_dataset("rg-mpc", "lawn/CommRL-v1", 1, 0, "lawn/test/x-v0")
@@ -313,7 +313,8 @@ def test_dataset_errors_name_the_problem(datasets_path):
 
 
 def test_bc_data_from_a_dataset_equals_live_labelling(datasets_path):
-    from training.bc import collect, create_dataset, dataset_transitions
+    from training.bc import collect
+    from training.datasets import create_dataset, dataset_transitions
 
     create_dataset("rg-mpc", "lawn/Joint-v1", 2, 11, "lawn/test/live-v0", progress=False)
     cfg = ScenarioConfig()
@@ -335,7 +336,7 @@ def test_bc_from_a_dataset_is_the_clone_of_live_labelling(datasets_path, tmp_pat
     import torch
     from stable_baselines3 import PPO
 
-    from training.bc import create_dataset
+    from training.datasets import create_dataset
     from training.protocol import TRAIN_SEED_BASE
     from training.spec import TrainSpec
     from training.train import train

@@ -98,3 +98,44 @@ def test_a_residual_agent_acts_at_evaluation_as_in_training(tmp_path):
     assert evaluated == pytest.approx(trained, rel=1e-5)
     plain = rollout(gym.make("lawn/Joint-v1", config=config), SB3Policy(model, config, "lawn/Joint-v1", NO_MPC), 4)
     assert plain.metrics["control_cost"] != pytest.approx(trained, rel=1e-3)  # without the residual: another agent
+
+
+def test_a_residual_of_some_parts_moves_only_those():
+    # moves=("power", "drone"): the learner's action is the K powers and the drone's offsets; the increments
+    # stay the anchor's, and the zero action still plays it
+    config = lawn_env.ScenarioConfig(**SHORT)
+    k = config.num_agvs
+    env = AnchorResidual(gym.make("lawn/Joint-v1", config=config, interface=NO_MPC), make_policy("epa", config),
+                         scale=0.5, moves=["drone", "power"])
+    assert env.action_space.shape == (k + 2,)
+    assert env.residual.moved.tolist() == list(range(2 * k, 3 * k + 2))  # the action's order, whatever the list's
+    env.reset(seed=1)
+    probe = ResidualActions(make_policy("epa", config), config, "lawn/Joint-v1", NO_MPC, 0.5)
+    probe.reset(1)
+    anchor = probe.anchor_action(env.unwrapped.benchmark_observation())
+    a = np.linspace(-1, 1, k + 2).astype(np.float32)
+    moved = env.action(a)
+    assert np.allclose(moved[: 2 * k], anchor[: 2 * k], atol=1e-6)  # the increments: the anchor's
+    assert np.allclose(moved[2 * k :], np.clip(anchor[2 * k :] + 0.5 * a, -1, 1), atol=1e-6)
+    steady = lawn_env.presets.get("steady").override(SHORT)  # dv-mpc's decisions lie inside the interface's range
+    expert = rollout(gym.make("lawn/Joint-v1", config=steady), make_policy("dv-mpc", steady), 2)
+    env = AnchorResidual(gym.make("lawn/Joint-v1", config=steady, interface=NO_MPC), make_policy("dv-mpc", steady),
+                         scale=0.5, moves=["drone", "power"])
+    cost, _ = _episode(env, lambda obs: np.zeros(k + 2, np.float32), seed=2)
+    assert cost == pytest.approx(expert.metrics["control_cost"], rel=1e-6)
+    drone = AnchorResidual(gym.make("lawn/Comm-v1", config=config, interface=NO_MPC),
+                           make_policy("epa", config, env_id="lawn/Comm-v1"), moves=["drone"])
+    assert drone.action_space.shape == (2,) and drone.residual.moved.tolist() == [k, k + 1]
+
+
+def test_bad_moves_are_named():
+    assert check_residual({"anchor": "dv-mpc", "moves": ["drone", "power", "increment"]}) == \
+        {"anchor": "dv-mpc", "scale": 0.25}  # every part: the record stays as before
+    assert check_residual({"anchor": "dv-mpc", "moves": ("drone", "power")})["moves"] == ["power", "drone"]
+    for bad in ([], "drone", ["wing"], ["drone", "drone"], 3):
+        with pytest.raises(ValueError, match="residual moves="):
+            check_residual({"anchor": "dv-mpc", "moves": bad})
+    config = lawn_env.ScenarioConfig(**SHORT)
+    with pytest.raises(ValueError, match="lawn/Comm-v1 has no"):  # Comm's AGVs plan their own increments
+        ResidualActions(make_policy("epa", config, env_id="lawn/Comm-v1"), config, "lawn/Comm-v1", NO_MPC,
+                        moves=["increment"])

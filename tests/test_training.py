@@ -160,6 +160,10 @@ def test_behaviour_cloning_reduces_loss_and_warm_starts_ppo(tmp_path):
     assert history[0]["losses"][-1] < history[0]["losses"][0]
     assert history[1]["samples"] == 156
     assert summary["bc_loss_last"] < summary["bc_loss_first"]
+    record = json.loads((out / "run.json").read_text())  # the expert's labels: 156 decisions of the run's time
+    assert 0 < record["expert_decision_s"] < record["wall_time_s"]
+    assert summary["expert_share"] == round(record["expert_decision_s"] / record["wall_time_s"], 3)
+    assert f"- expert_share: {summary['expert_share']}" in (out / "summary.md").read_text()
     with pytest.raises(ValueError, match="bc runs are not resumable"):
         resume(out, timesteps=10_000)
     metrics = _run_episode(make_policy(f"bc:{out}"), "lawn/Comm-v1")
@@ -616,3 +620,19 @@ def test_residual_run_records_its_scheme_and_acts_by_it(tmp_path):
 
     with pytest.raises(ValueError, match="residual scheme wraps single envs"):
         make_train_env("lawn/Joint-v1", SMALL, 1, 0, False, None, interface="rl", vec="native", residual=residual)
+
+
+def test_a_residual_of_the_link_on_the_paired_reward_records_its_expert_time(tmp_path):
+    # the learner moves the power and the drone only; both anchors (the residual's and the paired reward's
+    # shadow) and validation's decide on the run's clock, which run.json and summary.md report
+    residual = {"anchor": "epa", "scale": 0.3, "moves": ["power", "drone"]}
+    out, summary = _train(tmp_path, "ppo", steps=128, interface="rl", n_envs=1,
+                          hp_overrides={"residual": residual, "paired_anchor": "epa", "start_at_anchor": True})
+    record = json.loads((out / "run.json").read_text())
+    assert record["residual"] == residual
+    assert 0 < record["expert_decision_s"] < record["wall_time_s"]
+    assert summary["expert_share"] == round(record["expert_decision_s"] / record["wall_time_s"], 3) > 0
+    policy = make_policy(f"sb3:{out}", SMALL)
+    assert policy.residual.size == SMALL.num_agvs + 2 and policy.network.action_space.shape == (SMALL.num_agvs + 2,)
+    plain, _ = _train(tmp_path, "ppo", steps=128, interface="rl", n_envs=1, name="plain")
+    assert json.loads((plain / "run.json").read_text())["expert_decision_s"] == 0.0  # no expert decides

@@ -1,11 +1,9 @@
-"""Behaviour cloning of an expert with DAgger relabelling (``lawn train --algo bc``), and episodes
-of any policy as a Minari dataset (``lawn dataset create``, the ``data`` extra) to clone from.
+"""Behaviour cloning of an expert with DAgger relabelling (``lawn train --algo bc``).
 
 Cloning fits the policy network of an SB3 algorithm (``target``) by mean-squared error to the
-expert's actions (live or from a dataset) on normalized observations; each DAgger round lets the
-clone drive, labels the states it visits with the expert's actions and fits again. A dataset's
-reference scores are ``epa``'s and ``dv-mpc``'s mean returns on its seeds, so
-``minari.get_normalized_score`` is the normalized score / 100.
+expert's actions (live, or from a Minari dataset: :mod:`training.datasets`) on normalized
+observations; each DAgger round lets the clone drive, labels the states it visits with the
+expert's actions and fits again. The expert decides on the run's clock (:class:`Labeller`).
 """
 
 from __future__ import annotations
@@ -13,57 +11,58 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
-import warnings
-from collections.abc import Iterable, Mapping
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-import lawn_env
 from agents import Step, make_policy, rollout
-from agents.errors import MissingExtra
+from agents.base import Policy
 from agents.learned import ObsNormalizer, SB3Policy
 from agents.rollouts import Actor
 from agents.runs import algorithm_class
-from lawn_env import ENV_IDS, ObservationLayout, ScenarioConfig, env_role, presets
-from lawn_env.interface import InterfaceLike, RLInterface, action_codec, resolve_interface
-from lawn_env.presets import resolve_config
-from lawn_env.spaces import check_action
+from agents.timing import DecisionClock
+from lawn_env import ScenarioConfig
+from lawn_env.interface import InterfaceLike, RLInterface, resolve_interface
 
+from .datasets import dataset_transitions, label_transitions
 from .protocol import (
     TRAIN_SEED_BASE,
-    VALIDATION_SEED_BASE,
     append_learning_curve,
     limit_torch_threads,
     versions,
     write_learning_curve,
 )
-from .provenance import provenance
-from .results.episode import EpisodeSpec
-from .results.run import evaluate
-from .results.stats import SCORE_HIGH, SCORE_LOW
 
-if TYPE_CHECKING:
-    import minari
-
-__all__ = ["collect", "label_transitions", "fit", "BCSettings", "bc_settings", "train_bc", "BC_TARGETS",
-           "create_dataset", "load_dataset", "dataset_transitions", "DATA_EXTRA"]
+__all__ = ["Labeller", "collect", "fit", "BCSettings", "bc_settings", "train_bc", "BC_TARGETS"]
 
 #: The algorithms whose policy network behaviour cloning fits (the ``target`` hyperparameter).
 BC_TARGETS = ("ppo", "sac")
-DATA_EXTRA = "datasets need the data extra (minari): pip install -e '.[data]' (bash scripts/setup.sh full installs it)"
-#: Datasets record the benchmark envs (the RL ids reshape the reward and end episodes early).
-DATASET_ENV_IDS = ("lawn/Joint-v1", "lawn/Comm-v1")
 
 
-def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, seed: int, interface: InterfaceLike,
-            actor: Actor | None = None) -> tuple[np.ndarray, np.ndarray, list[float]]:
+
+@dataclasses.dataclass(frozen=True)
+class Labeller:
+    """The expert that labels a run's transitions (a policy name, :func:`agents.make_policy`), deciding
+    on the run's ``clock`` (how much of the run its decisions take: ``run.json``'s ``expert_decision_s``)."""
+
+    name: str
+    clock: DecisionClock = dataclasses.field(default_factory=DecisionClock)
+
+    def policy(self, config: ScenarioConfig, env_id: str) -> Policy:
+        """The expert for ``config`` on ``env_id``, timed on the clock."""
+        return self.clock.timed(make_policy(self.name, config, env_id=env_id))
+
+
+def collect(env_id: str, config: ScenarioConfig, expert: str | Labeller, steps: int, seed: int,
+            interface: InterfaceLike, actor: Actor | None = None) -> tuple[np.ndarray, np.ndarray, list[float]]:
     """``steps`` transitions of seeded episodes (seed, seed + 1, ...) of the benchmark env: the states ``actor``
-    (default: the expert) visits labelled with the expert's action, and the costs of the episodes that ended."""
+    (default: the expert, a policy name or a :class:`Labeller`) visits labelled with the expert's action,
+    and the costs of the episodes that ended."""
     env = gym.make(env_id, config=config)
-    expert = make_policy(expert_name, config, env_id=env_id)
-    driver = _Labelling(expert, actor)
+    labeller = expert if isinstance(expert, Labeller) else Labeller(expert)
+    driver = _Labelling(labeller.policy(config, env_id), actor)
     episodes: list[tuple[list[Any], list[Any]]] = []
     costs = []
     count = 0
@@ -85,26 +84,6 @@ def collect(env_id: str, config: ScenarioConfig, expert_name: str, steps: int, s
     env.close()
     obs, labels = label_transitions(config, env_id, interface, [(np.array(o), np.array(a)) for o, a in episodes])
     return obs, labels, costs
-
-
-def label_transitions(config: ScenarioConfig, env_id: str, interface: InterfaceLike,
-                      episodes: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Behaviour-cloning pairs from v0 episodes ((T, n) observations, (T, m) actions): the observations
-    as the learner sees them and the actions in the interface's scheme (decoded as v0, encoded in it)."""
-    iface = resolve_interface(interface)
-    role = env_role(env_id)
-    v0, scheme = action_codec(config, role, None), action_codec(config, role, iface)
-    layout = ObservationLayout(config)
-    obs_out, act_out = [], []
-    for observations, actions in episodes:
-        scheme.reset()  # the stake prior's MPC starts every episode afresh, as the envs' MPC does
-        for o, a in zip(observations, actions, strict=True):
-            state = layout.decode(o)
-            args = (state["x_aug"], state["reference"], state["drone_position"], state["slot"])
-            act_out.append(scheme.encode(v0.decode(check_action(a, v0.size), *args), *args))
-            obs_out.append(iface.observe(np.array(o, dtype=np.float32)))
-    n, m = layout.size, scheme.size
-    return (np.array(obs_out, dtype=np.float32).reshape(-1, n), np.array(act_out, dtype=np.float32).reshape(-1, m))
 
 
 class _Labelling:
@@ -163,32 +142,6 @@ def fit(model: Any, obs: np.ndarray, actions: np.ndarray, epochs: int, batch_siz
     return losses
 
 
-def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, steps: int, interface: InterfaceLike
-                        ) -> tuple[np.ndarray, np.ndarray, list[float], list[Any], str | None]:
-    """The first ``steps`` transitions of a Minari dataset of ``env_id`` with ``config`` as pairs
-    (:func:`label_transitions`), their episodes' control costs and seeds and the policy that recorded them."""
-    dataset = load_dataset(dataset_id)
-    spec = dataset.spec.env_spec
-    recorded_env, recorded_config = spec.id, (spec.kwargs or {}).get("config", "default")
-    if recorded_env != env_id:
-        raise ValueError(f"--dataset {dataset_id!r} holds episodes of {recorded_env}; this run trains on {env_id}")
-    if resolve_config(recorded_config) != config:
-        raise ValueError(f"--dataset {dataset_id!r} was recorded with config {recorded_config!r}, not this run's "
-                         "scenario: pass the same --preset/--set")
-    chosen, seeds, costs, left = [], [], [], steps
-    metadata = dataset.storage.get_episode_metadata(dataset.episode_indices)
-    for episode, meta in zip(dataset.iterate_episodes(), metadata, strict=False):
-        if left <= 0:
-            break
-        obs, actions = np.asarray(episode.observations, dtype=np.float32)[:-1], np.asarray(episode.actions, np.float32)
-        chosen.append((obs[:left], actions[:left]))
-        seeds.append(meta.get("seed"))
-        costs.append(float(np.sum(episode.infos["stage_cost"][1:])))
-        left -= len(actions)
-    obs, labels = label_transitions(config, env_id, interface, chosen)
-    return obs, labels, costs, seeds, dataset.storage.metadata.get("algorithm_name")
-
-
 #: A BC run's hyperparameters and their defaults (``bc.yml`` and ``--hp``).
 _BC_KEYS = {"expert": "rg-mpc", "target": "ppo", "interface": "v0", "epochs": 30, "batch_size": 256,
             "learning_rate": 1e-3, "dagger_iterations": 0, "dagger_timesteps": 1200, "policy_kwargs": {}}
@@ -229,7 +182,7 @@ def bc_settings(params: Mapping[str, Any]) -> BCSettings:
     return BCSettings(**p | {"interface": resolve_interface(p["interface"])})
 
 
-def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: BCSettings, expert: str, obs: np.ndarray,
+def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: BCSettings, expert: Labeller, obs: np.ndarray,
                        actions: np.ndarray, seed: int, episode_seed: int
                        ) -> tuple[Any, Any, np.ndarray, list[dict[str, Any]]]:
     """Fit the clone, then the DAgger rounds; the normalizing env (the expert's observation statistics),
@@ -261,11 +214,12 @@ def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: BCSettings, expe
     return venv, model, obs, history
 
 
-def _expert_data(spec: Any, st: BCSettings, episode_seed: int) -> tuple[Any, ...]:
-    """The expert's transitions (live, or a dataset's: DAgger then asks the policy that recorded them),
-    costs, the dataset record and the expert."""
+def _expert_data(spec: Any, st: BCSettings, episode_seed: int, clock: DecisionClock) -> tuple[Any, ...]:
+    """The expert's transitions (live, deciding on ``clock``, or a dataset's: DAgger then asks the
+    policy that recorded them), costs, the dataset record and the expert's name."""
     if spec.dataset is None:
-        obs, actions, costs = collect(spec.env_id, spec.config, st.expert, spec.timesteps, episode_seed, st.interface)
+        obs, actions, costs = collect(spec.env_id, spec.config, Labeller(st.expert, clock), spec.timesteps,
+                                      episode_seed, st.interface)
         return obs, actions, costs, None, st.expert
     obs, actions, costs, seeds, recorded = dataset_transitions(spec.dataset, spec.env_id, spec.config, spec.timesteps,
                                                                st.interface)
@@ -281,13 +235,14 @@ def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> dict[str, An
     st = bc_settings(params)
     start = time.perf_counter()
     episode_seed = TRAIN_SEED_BASE + 1000 * spec.seed  # expert episodes never use test or validation seeds
-    obs, actions, expert_costs, dataset, expert = _expert_data(spec, st, episode_seed)
-    venv, model, obs, history = _clone_with_dagger(spec.env_id, spec.config, st, expert, obs, actions, spec.seed,
-                                                   episode_seed)
+    clock = DecisionClock()
+    obs, actions, expert_costs, dataset, expert = _expert_data(spec, st, episode_seed, clock)
+    venv, model, obs, history = _clone_with_dagger(spec.env_id, spec.config, st, Labeller(expert, clock), obs,
+                                                   actions, spec.seed, episode_seed)
     record = {"algo": st.target, "target": st.target, "trainer": "bc", "env": spec.env_id, "seed": spec.seed,
               "timesteps": spec.timesteps, "interface": st.interface.to_dict(), "num_timesteps": len(obs),
               "hyperparams_version": version, "wall_time_s": time.perf_counter() - start,
-              "eval_episodes": spec.eval_episodes,
+              "expert_decision_s": clock.seconds, "eval_episodes": spec.eval_episodes,
               "expert_mean_control_cost": float(np.mean(expert_costs)) if expert_costs else None,
               "dataset": dataset, "versions": versions()}
     hyperparams = vars(st) | {"expert": expert, "interface": st.interface.to_dict()}
@@ -303,7 +258,7 @@ def save_imitation(spec: Any, model: Any, record: dict[str, Any], hyperparams: d
     from .callbacks import ControlCostValidation, save_model
 
     validation = ControlCostValidation(spec.env_id, spec.config, record["interface"], spec.eval_episodes, 1,
-                                       spec.out_dir, VALIDATION_SEED_BASE)
+                                       spec.out_dir)
     validation.model = model
     row = validation.validate()
     out_dir = spec.out_dir
@@ -319,81 +274,3 @@ def save_imitation(spec: Any, model: Any, record: dict[str, Any], hyperparams: d
     return summary | {"bc_loss_first": history[0]["losses"][0], "bc_loss_last": history[-1]["losses"][-1]}
 
 
-def _minari() -> Any:  # the minari module (an optional extra: not followed)
-    try:
-        import minari
-    except ImportError:
-        raise MissingExtra(DATA_EXTRA) from None
-    return minari
-
-
-def create_dataset(policy: str, env_id: str, episodes: int, seed: int, dataset_id: str, task: str = "default",
-                   progress: bool = True) -> minari.MinariDataset:
-    """Record ``episodes`` seeded episodes of ``policy`` on ``env_id`` (the scenario of preset ``task``)
-    as the Minari dataset ``dataset_id``; returns the ``MinariDataset``."""
-    minari = _minari()
-    from minari import DataCollector, StepDataCallback
-    from tqdm.auto import tqdm
-
-
-    class LawnStepData(StepDataCallback):  # type: ignore[misc]  # minari is an optional extra, not followed
-        """The env's per-step info without ``episode_metrics`` (present on the last step only)."""
-
-        def __call__(self, env: Any, **kwargs: Any) -> Any:
-            data = super().__call__(env, **kwargs)
-            data["info"] = {k: np.asarray(v) for k, v in data["info"].items() if k != "episode_metrics"}
-            return data
-
-    if env_id not in DATASET_ENV_IDS:
-        raise ValueError(f"--env {env_id!r}: datasets record {' or '.join(DATASET_ENV_IDS)} (the unmodified "
-                         f"scenario every policy acts on); registered ids: {', '.join(ENV_IDS)}")
-    if episodes < 1 or seed < 0:
-        raise ValueError(f"episodes={episodes}, seed={seed}: episodes must be >= 1 and the seed >= 0")
-    _check_dataset_id(dataset_id)
-    config = presets.get(task)
-    agent = make_policy(policy, config, env_id=env_id)  # fails fast on a bad name or a mismatched agent
-    if dataset_id in minari.list_local_datasets():
-        raise ValueError(f"--dataset-id {dataset_id!r} already exists under MINARI_DATASETS_PATH; choose another id "
-                         f"or delete it (minari delete {dataset_id})")
-    references = (SCORE_LOW, SCORE_HIGH)  # Minari's reference scores: their mean returns on the same seeds
-    specs = [EpisodeSpec(p, env_id, config, seed + i) for p in references for i in range(episodes)]
-    rows = evaluate(specs, progress=False)
-    low, high = (-float(np.mean([r.control_cost for r in rows if r.policy == p])) for p in references)
-    env = DataCollector(gym.make(env_id, config=task), step_data_callback=LawnStepData, record_infos=True)
-    for i in tqdm(range(episodes), desc=f"dataset {dataset_id}", unit="ep", disable=None if progress else True):
-        rollout(env, agent, seed + i)
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="`author_email` is set to None")
-        plain = gym.make(env_id, config=task)  # the recorded env without the recorder: Minari checks the scores
-        dataset = env.create_dataset(
-            dataset_id=dataset_id, eval_env=plain.spec, algorithm_name=policy, author="lawn dataset create",
-            code_permalink=provenance(),
-            description=f"{episodes} full episodes (seeds {seed}-{seed + episodes - 1}) of {policy} on {env_id}, "
-                        f"task {task!r}: the unmodified scenario",
-            requirements=[f"lawn=={lawn_env.__version__}"], ref_min_score=low, ref_max_score=high)
-    plain.close()
-    env.close()
-    return dataset
-
-
-def _check_dataset_id(dataset_id: str) -> None:
-    """ValueError naming ``--dataset-id`` unless the id has Minari's form ``(NAMESPACE/)NAME-vN``."""
-    from minari.utils import parse_dataset_id
-
-    try:
-        name, version = parse_dataset_id(dataset_id)[1:]
-    except (ValueError, TypeError):
-        name = version = None
-    if not name or version is None:
-        raise ValueError(f"--dataset-id {dataset_id!r}: Minari ids have the form NAMESPACE/NAME-vN (the namespace "
-                         "optional), e.g. lawn/comm/rg-mpc-v0")
-
-
-def load_dataset(dataset_id: str) -> minari.MinariDataset:
-    """``minari.load_dataset``, naming the extra when minari is missing and the local ids otherwise."""
-    minari = _minari()
-    local = minari.list_local_datasets()
-    if dataset_id not in local:
-        raise ValueError(f"unknown dataset {dataset_id!r} under MINARI_DATASETS_PATH; local datasets: "
-                         f"{', '.join(local) or 'none'} (lawn dataset create records one)")
-    return minari.load_dataset(dataset_id)

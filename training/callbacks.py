@@ -24,10 +24,12 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.learned import ObsNormalizer, SB3Policy, marl_policy
 from agents.policies import attach_residual
+from agents.timing import DecisionClock
 from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
 from lawn_env.interface import InterfaceLike
 
 from .protocol import (
+    VALIDATION_SEED_BASE,
     append_learning_curve,
     read_learning_curve,
     selected_validation,
@@ -157,17 +159,19 @@ def _next_mark(steps: int, every: int) -> int:
 
 class ControlCostValidation(BaseCallback):
     """Every ``every`` environment steps, run the current policy (deterministic, as ``sb3:DIR`` runs it)
-    on ``episodes`` full episodes of the unmodified scenario with the validation seeds ``seed_base + i``;
+    on ``episodes`` full episodes of the unmodified scenario with the validation seeds ``VALIDATION_SEED_BASE + i``;
     append its learning-curve row (:func:`~training.protocol.validation_row`) and keep the model
     :func:`~training.protocol.selected_validation` chooses as ``best_model.zip``. A fresh run is
     validated before its first step (its costs kept in ``validation_start.json``), so selection keeps
     the starting policy (the anchor, or the clone it fine-tunes) unless training beats it significantly."""
 
     def __init__(self, env_id: str, config: ScenarioConfig, interface: InterfaceLike, episodes: int, every: int,
-                 out_dir: Path, seed_base: int, residual: Mapping[str, Any] | None = None):
+                 out_dir: Path, residual: Mapping[str, Any] | None = None,
+                 clock: DecisionClock | None = None):
         super().__init__(verbose=0)
         self.env_id, self.config, self.interface, self.residual = env_id, config, interface, residual
-        self.episodes, self.every, self.out_dir, self.seed_base = episodes, every, Path(out_dir), seed_base
+        self.clock = clock  # the run's expert time: the residual's anchor decides on it
+        self.episodes, self.every, self.out_dir = episodes, every, Path(out_dir)
         self._next = every
         self._reference: dict[int, float] | None = None
         rows = read_learning_curve(self.out_dir)  # a resumed run: keep its history and its start
@@ -185,7 +189,7 @@ class ControlCostValidation(BaseCallback):
         if self.env_id == PARALLEL_ENV_ID:
             return marl_policy(self.model, self.config, self.interface, normalizer, None, "marl")
         return attach_residual(SB3Policy(self.model, self.config, self.env_id, self.interface, normalizer),
-                               self.residual)
+                               self.residual, self.clock)
 
     def validate(self, start: bool = False) -> dict[str, float]:
         """The learning-curve columns of the current policy; ``start``: it is the run's starting policy,
@@ -193,7 +197,7 @@ class ControlCostValidation(BaseCallback):
         policy = self._policy()
         env_id = central_env_id(self.env_id)
         if self._reference is None:  # rg-mpc on the validation seeds, once per process (deterministic)
-            self._reference = validation_reference(env_id, self.config, self.episodes, self.seed_base)
+            self._reference = validation_reference(env_id, self.config, self.episodes, VALIDATION_SEED_BASE)
         costs = validation_costs(policy, env_id, self.config, self._reference)
         if start:
             self._start = costs

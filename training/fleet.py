@@ -18,7 +18,7 @@ from lawn_env import MixedFleetEnv, ScenarioConfig, env_role, presets
 from lawn_env.entities import EntityLayout
 from lawn_env.interface import InterfaceLike, resolve_interface
 
-from .bc import checked_settings, collect, save_imitation
+from .bc import Labeller, checked_settings, collect, save_imitation
 from .protocol import TRAIN_SEED_BASE, limit_torch_threads, versions
 
 __all__ = ["fleet_pairs", "fit_fleet", "dagger_round", "fleet_settings", "task_config", "training_configs",
@@ -26,7 +26,8 @@ __all__ = ["fleet_pairs", "fit_fleet", "dagger_round", "fleet_settings", "task_c
 
 
 def fleet_pairs(env_id: str, config: ScenarioConfig, steps: int, seed: int, interface: InterfaceLike,
-                expert: str = "rg-mpc", actor: Any = None) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+                expert: str | Labeller = "rg-mpc", actor: Any = None
+                ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
     """``steps`` labelled transitions of the benchmark env of ``config`` (:func:`training.bc.collect`) in the
     entity layout: the observations (a dict of arrays), the expert's entity actions (steps, A) and
     which entries carry a label (steps, A): the AGVs present and the drone."""
@@ -80,10 +81,11 @@ def fit_fleet(model: Any, obs: dict[str, np.ndarray], actions: np.ndarray, prese
 
 
 def dagger_round(model: Any, env_id: str, configs: Sequence[ScenarioConfig], steps: int, seed: int,
-                 interface: InterfaceLike, expert: str = "rg-mpc"
+                 interface: InterfaceLike, expert: str | Labeller = "rg-mpc"
                  ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
     """The states ``model`` visits on the benchmark env of every config (``steps`` each, seeds from
-    ``seed``), labelled by the expert (``model`` None: the expert's own states), concatenated."""
+    ``seed``), labelled by the expert (a policy name or a :class:`~training.bc.Labeller`; ``model``
+    None: the expert's own states), concatenated."""
     parts = []
     for i, config in enumerate(configs):
         actor = None if model is None else SB3Policy(model, config, env_id, interface)
@@ -132,16 +134,16 @@ def training_configs(config: ScenarioConfig, st: Mapping[str, Any]) -> list[Scen
 
 
 def _dagger(model: Any, env_id: str, configs: list[Any], st: dict[str, Any], timesteps: int,
-            episode_seed: int) -> list[dict[str, Any]]:
+            episode_seed: int, expert: Labeller) -> list[dict[str, Any]]:
     """The expert's round and the DAgger rounds, each followed by a fit; the loss history."""
     per_size = max(1, timesteps // len(configs))
-    obs, actions, present = dagger_round(None, env_id, configs, per_size, episode_seed, st["interface"], st["expert"])
+    obs, actions, present = dagger_round(None, env_id, configs, per_size, episode_seed, st["interface"], expert)
     fit_args = (st["epochs"], st["batch_size"], st["learning_rate"])
     history = [{"round": 0, "samples": len(actions), "losses": fit_fleet(model, obs, actions, present, *fit_args,
                                                                           seed=episode_seed)}]
     for it in range(1, st["dagger_iterations"] + 1):
         more = dagger_round(model, env_id, configs, max(1, st["dagger_timesteps"] // len(configs)),
-                            episode_seed + 100 * it, st["interface"], st["expert"])
+                            episode_seed + 100 * it, st["interface"], expert)
         obs = {key: np.concatenate([obs[key], more[0][key]]) for key in obs}
         actions, present = np.concatenate([actions, more[1]]), np.concatenate([present, more[2]])
         history.append({"round": it, "samples": len(actions),
@@ -165,12 +167,14 @@ def train_fleet(spec: Any, params: Mapping[str, Any], version: int) -> dict[str,
     model = PPO(FleetPolicy, env, seed=spec.seed, device="cpu", verbose=0,
                 policy_kwargs={**st["network"], "log_std_init": -1.0})
     configs = training_configs(spec.config, st)
-    history = _dagger(model, spec.env_id, configs, st, spec.timesteps, TRAIN_SEED_BASE + 1000 * spec.seed)
+    expert = Labeller(st["expert"])
+    history = _dagger(model, spec.env_id, configs, st, spec.timesteps, TRAIN_SEED_BASE + 1000 * spec.seed, expert)
     record = {"algo": "fleet", "target": "fleet", "trainer": "fleet", "env": spec.env_id, "seed": spec.seed,
               "timesteps": spec.timesteps, "interface": st["interface"], "fleet_sizes": st["fleet_sizes"],
               "tasks": st["tasks"], "task_settings": st["task_settings"],
               "num_timesteps": int(history[-1]["samples"]), "hyperparams_version": version,
-              "wall_time_s": time.perf_counter() - start, "eval_episodes": spec.eval_episodes, "versions": versions()}
+              "wall_time_s": time.perf_counter() - start, "expert_decision_s": expert.clock.seconds,
+              "eval_episodes": spec.eval_episodes, "versions": versions()}
     summary = save_imitation(spec, model, record, st, history)
     env.close()
     return summary

@@ -137,7 +137,9 @@ def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict[str, An
     best = selected_validation(rows)
     summary = {
         "algo": spec["algo"], "env": spec["env"], "seed": spec["seed"], "timesteps": spec.get("num_timesteps"),
-        "wall_time_s": spec.get("wall_time_s"), "interface": spec.get("interface"),
+        "wall_time_s": spec.get("wall_time_s"), "expert_decision_s": spec.get("expert_decision_s"),
+        "expert_share": _share(spec.get("expert_decision_s"), spec.get("wall_time_s")),
+        "interface": spec.get("interface"),
         "final_validation_cost": rows[-1]["control_cost"] if rows else None,
         "best_validation_cost": best["control_cost"] if best else None,
         "best_validation_vs_reference": best.get("vs_reference") if best else None,
@@ -149,6 +151,11 @@ def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict[str, An
     lines += [f"- {k}: {v}" for k, v in summary.items()]
     (out_dir / "summary.md").write_text("\n".join(lines) + "\n")
     return summary
+
+
+def _share(part: float | None, whole: float | None) -> float | None:
+    """``part / whole`` rounded to 3 digits (None when either is unknown or ``whole`` is 0)."""
+    return round(part / whole, 3) if part is not None and whole else None
 
 
 def _plot_curve(rows: list[dict[str, float]], path: Path, title: str) -> None:

@@ -22,13 +22,14 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 from agents import make_policy
 from agents.learned import load_saved
 from agents.paired import PairedReward
-from agents.residual import AnchorResidual
+from agents.residual import PARTS, AnchorResidual
 from agents.runs import algorithm_class, read_run
+from agents.timing import DecisionClock
 from lawn_env import ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig, parallel_env, role_env_id
 from lawn_env.interface import InterfaceLike
 
 from .callbacks import ActorWarmup, Checkpoint, ControlCostValidation, RunCheckpoint, save_model
-from .protocol import TRAIN_SEED_BASE, VALIDATION_SEED_BASE, limit_torch_threads, versions, write_learning_curve
+from .protocol import TRAIN_SEED_BASE, limit_torch_threads, versions, write_learning_curve
 
 __all__ = ["NativeVecEnv", "make_marl_vec_env", "make_train_env", "train_sb3", "setup", "learn", "init_from",
            "start_at_anchor"]
@@ -128,7 +129,7 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
     monitor logs keep the env's own rewards)."""
     from stable_baselines3.common.env_util import make_vec_env
 
-    unknown = set(kwargs) - {"interface", "append_monitor", "vec", "paired", "residual"}
+    unknown = set(kwargs) - {"interface", "append_monitor", "vec", "paired", "residual", "clock"}
     if unknown:
         raise TypeError(f"make_train_env: unexpected keywords {sorted(unknown)}")
     interface, paired, residual = kwargs.get("interface"), kwargs.get("paired"), kwargs.get("residual")
@@ -147,7 +148,8 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
                             monitor_dir=str(monitor_dir) if monitor_dir else None,
                             monitor_kwargs={"override_existing": not kwargs.get("append_monitor", False)},
                             wrapper_class=_lawn_wrappers if paired or residual else None,  # type: ignore[arg-type]
-                            wrapper_kwargs={"paired": paired, "residual": residual})
+                            wrapper_kwargs={"paired": paired, "residual": residual,
+                                            "clock": kwargs.get("clock") or DecisionClock()})
     if vecnormalize_path is not None:
         return VecNormalize.load(str(vecnormalize_path), venv)
     if normalize:
@@ -155,15 +157,20 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
     return venv
 
 
-def _lawn_wrappers(env: Any, paired: Mapping[str, Any] | None, residual: Mapping[str, Any] | None) -> Any:
+def _lawn_wrappers(env: Any, paired: Mapping[str, Any] | None, residual: Mapping[str, Any] | None,
+                   clock: DecisionClock) -> Any:
     """A monitored env with the residual scheme (:class:`agents.residual.AnchorResidual`) and then
-    the paired reward (:class:`agents.paired.PairedReward`), each when given its keywords."""
-
+    the paired reward (:class:`agents.paired.PairedReward`), each when given its keywords; both
+    anchors decide on ``clock`` (the run's expert time)."""
+    base = env.unwrapped
+    env_id = role_env_id(base.role)
     if residual is not None:
-        base = env.unwrapped
-        anchor = make_policy(residual["anchor"], base.config, env_id=role_env_id(base.role))
-        env = AnchorResidual(env, anchor, residual["scale"])
-    return PairedReward(env, **paired) if paired is not None else env
+        anchor = clock.timed(make_policy(residual["anchor"], base.config, env_id=env_id))
+        env = AnchorResidual(env, anchor, residual["scale"], residual.get("moves", PARTS))
+    if paired is None:
+        return env
+    shadow = clock.timed(make_policy(paired["anchor"], base.config, env_id=env_id))
+    return PairedReward(env, shadow, **{k: v for k, v in paired.items() if k != "anchor"})
 
 
 def train_sb3(spec: Any, params: dict[str, Any], options: Any, version: int,
@@ -229,6 +236,7 @@ class Run:
     out_dir: Path
     wall_before: float
     resumed: bool
+    clock: DecisionClock  # the anchors' decisions: the residual's, the paired reward's shadow, validation's
 
 
 def setup(record: dict[str, Any], options: Any, config: ScenarioConfig, out_dir: Path, start: Checkpoint | None,
@@ -239,13 +247,14 @@ def setup(record: dict[str, Any], options: Any, config: ScenarioConfig, out_dir:
     limit_torch_threads()
     done_steps = start.steps if start else 0
     env_seed = TRAIN_SEED_BASE + 1000 * int(record["seed"]) + done_steps  # a resumed run: fresh, seeded episodes
+    clock = DecisionClock()
     set_random_seed(env_seed)
     env = make_train_env(record["env"], config, options.n_envs, env_seed, options.normalize, out_dir / "monitor",
                          vecnormalize_path=start.file("vecnormalize.pkl") if start else None,
                          interface=options.interface, append_monitor=start is not None, vec=record.get("vec", "dummy"),
                          paired=None if options.paired_anchor is None else
                          {"anchor": options.paired_anchor, "gamma": float(options.algo_kwargs.get("gamma", 0.99))},
-                         residual=options.residual)
+                         residual=options.residual, clock=clock)
     try:
         model = _model(record, env, start, out_dir, options)
     except BaseException:
@@ -255,12 +264,11 @@ def setup(record: dict[str, Any], options: Any, config: ScenarioConfig, out_dir:
     hooks: list[BaseCallback] = []
     if record["env"] != "CartPole-v1":
         hooks.append(ControlCostValidation(record["env"], config, options.interface, int(record["eval_episodes"]),
-                                           max(int(record["eval_every"]), 1), out_dir, VALIDATION_SEED_BASE,
-                                           options.residual))
+                                           max(int(record["eval_every"]), 1), out_dir, options.residual, clock))
     hooks.append(RunCheckpoint(out_dir, max(int(record["checkpoint_every"]), 1), wall_time_before=wall_before))
     if options.actor_warmup_steps > 0:
         hooks.append(ActorWarmup(options.actor_warmup_steps))
-    return Run(record, model, env, hooks + list(callbacks or []), out_dir, wall_before, start is not None)
+    return Run(record, model, env, hooks + list(callbacks or []), out_dir, wall_before, start is not None, clock)
 
 
 def learn(run: Run, progress: bool) -> dict[str, Any]:
@@ -273,8 +281,9 @@ def learn(run: Run, progress: bool) -> dict[str, Any]:
                     progress_bar=progress, tb_log_name="run")
     elapsed = time.perf_counter() - began
     save_model(model, out_dir)
+    expert_s = float(run.record.get("expert_decision_s", 0.0)) + run.clock.seconds  # a resumed run: both parts
     record = dict(run.record, num_timesteps=int(model.num_timesteps), updates=int(getattr(model, "_n_updates", 0)),
-                  wall_time_s=float(elapsed + run.wall_before))
+                  wall_time_s=float(elapsed + run.wall_before), expert_decision_s=expert_s)
     (out_dir / "run.json").write_text(json.dumps(record, indent=2))
     summary = write_learning_curve(out_dir, record)
     env.close()

@@ -58,7 +58,8 @@ def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: st
     mean, half = mean_ci(best)
     result = {"algo": spec.algo, "env": spec.env_id, "seeds": list(seeds), "runs": summaries,
               "best_validation_cost_mean": mean, "best_validation_cost_ci95": half,
-              "wall_time_s": [s["wall_time_s"] for s in summaries]}
+              "wall_time_s": [s["wall_time_s"] for s in summaries],
+              "expert_share": [s.get("expert_share") for s in summaries]}
     (spec.out_dir / "seeds.json").write_text(json.dumps(result, indent=2))
     return result
 

@@ -6,7 +6,7 @@ import argparse
 
 from lawn_env import presets
 
-from ..bc import create_dataset
+from ..datasets import create_dataset
 from .common import command, count, policy_help, policy_name
 
 

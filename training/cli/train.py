@@ -77,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"lawn train: {args.algo} on {args.env}, seeds {args.seeds}")
     for r in result["runs"]:
         print(f"  seed {r['seed']}: best validation cost {r['best_validation_cost']:.6g} "
-              f"at {r['best_at_timesteps']} steps, {r['timesteps']} steps in {r['wall_time_s']:.0f} s")
+              f"at {r['best_at_timesteps']} steps, {r['timesteps']} steps in {r['wall_time_s']:.0f} s"
+              f"{_expert_part(r)}")
     print(f"  across seeds: {result['best_validation_cost_mean']:.6g} ± "
           f"{result['best_validation_cost_ci95']:.3g} (95 % interval)")
     print(f"wrote {args.out}/seed-*/ and {args.out}/seeds.json")
@@ -95,8 +96,15 @@ def _resume(args: argparse.Namespace) -> int:
 
 def _report(summary: dict[str, Any], out: str) -> None:
     print(f"lawn train: {summary['algo']} on {summary['env']}, seed {summary['seed']}, "
-          f"{summary['timesteps']} steps in {summary['wall_time_s']:.1f} s")
+          f"{summary['timesteps']} steps in {summary['wall_time_s']:.1f} s{_expert_part(summary)}")
     for key in ("final_validation_cost", "best_validation_cost", "best_at_timesteps", "bc_loss_first", "bc_loss_last"):
         if summary.get(key) is not None:
             print(f"  {key:<24}{summary[key]:.6g}")
     print(f"wrote {out}/ (model.zip, run.json, config.json, hyperparams.json, learning curve, summary.md)")
+
+
+def _expert_part(summary: dict[str, Any]) -> str:
+    """How much of the run the expert's decisions took (a run where no expert decides: nothing)."""
+    share = summary.get("expert_share")
+    return f" ({100 * share:.0f} % of it in the expert's decisions)" if share else ""
+
