@@ -193,6 +193,15 @@ class SB3Policy(InterfacePolicy):
         self.stateful = True  # the anchor keeps per-episode state
         return self
 
+    def at_zero(self) -> SB3Policy:
+        """The network's zero action every slot: the anchor of its own action scheme (a residual
+        agent's anchor policy through the scheme, else its interface's anchor), what a run started at
+        the anchor starts from; named ``zero:<name>``."""
+        shape = self.network.action_space.shape
+        self._predict = lambda inputs: np.zeros(shape, dtype=np.float32)
+        self.name = f"zero:{self.name}"
+        return self
+
     def _recorded(self, residual: Mapping[str, Any] | None) -> SB3Policy:
         """Keep the residual scheme a run records, for :func:`agents.make_policy` to attach."""
         self.residual_settings = residual
@@ -410,12 +419,30 @@ def _no_settings(loader: Callable[..., Policy]) -> Callable[..., Policy]:
     return load
 
 
+def _load_zero(name: str, config: ScenarioConfig | None = None, env_id: str | None = None, seed: int | None = None,
+               **kwargs: Any) -> Policy:
+    """``zero:zoo:NAME``, ``zero:sb3:DIR``, ``zero:bc:DIR``: the agent's zero action in its own action
+    scheme (:meth:`SB3Policy.at_zero`), on the agent's scenario and env."""
+    prefix, _, rest = name.partition(":")
+    if prefix not in ("zoo", "sb3", "bc"):
+        raise ValueError(f"zero:{name}: the zero action of a learned agent is zero:zoo:NAME, zero:sb3:DIR or "
+                         "zero:bc:DIR")
+    policy = LOADERS[prefix](rest, config, env_id=env_id, seed=seed, **kwargs)
+    if not isinstance(policy, SB3Policy):
+        raise ValueError(f"zero:{name}: {type(policy).__name__} has no zero action of its own; zero: takes "
+                         "single-agent networks")
+    return policy.at_zero()
+
+
 #: Prefixes of ``make_policy`` names for learned agents and their anchors: ``zoo:NAME``, ``sb3:DIR``,
-#: ``bc:DIR``, ``marl:DIR``, and ``anchor:NAME`` (the zero action of an interface, :mod:`agents.anchors`).
-LOADERS = {"zoo": _no_settings(_load_zoo), "sb3": _no_settings(SB3Policy.from_run),
-           "bc": _no_settings(SB3Policy.from_run), "marl": _no_settings(MARLPolicy.from_run), "anchor": load_anchor}
+#: ``bc:DIR``, ``marl:DIR``, ``anchor:NAME`` (the zero action of an interface, :mod:`agents.anchors`)
+#: and ``zero:AGENT`` (a learned agent's zero action in its own scheme: a residual agent's start).
+LOADERS: dict[str, Callable[..., Policy]] = {
+    "zoo": _no_settings(_load_zoo), "sb3": _no_settings(SB3Policy.from_run), "bc": _no_settings(SB3Policy.from_run),
+    "marl": _no_settings(MARLPolicy.from_run), "anchor": load_anchor, "zero": _load_zero}
+_FORMS = {"zoo": "NAME", "anchor": "NAME", "zero": "AGENT"}
 
 
 def learned_name_forms(sep: str = ", ") -> str:
     """The forms of learned agents' names, for messages and help texts: ``zoo:NAME, sb3:DIR, ...``."""
-    return sep.join(f"{prefix}:{'NAME' if prefix in ('zoo', 'anchor') else 'DIR'}" for prefix in LOADERS)
+    return sep.join(f"{prefix}:{_FORMS.get(prefix, 'DIR')}" for prefix in LOADERS)

@@ -608,8 +608,19 @@ def test_residual_run_records_its_scheme_and_acts_by_it(tmp_path):
     zero.reset(seed=VALIDATION_SEED_BASE)
     while not zero.unwrapped.sim.done:
         zero.step(np.zeros(zero.action_space.shape, np.float32))
-    # the run starts at the anchor: its first validation is the zero residual's episode
+    # the run starts at the anchor: its first validation is the zero residual's episode, which zero:sb3:DIR plays
     assert float(start["control_cost"]) == pytest.approx(zero.unwrapped.episode_metrics()["control_cost"], rel=1e-6)
+    from agents.rollouts import rollout
+    from training.results.run import own_anchor, policy_env
+
+    at_zero = make_policy(f"zero:sb3:{out}", SMALL)
+    assert at_zero.name == f"zero:sb3:{out}" and own_anchor(f"sb3:{out}") == at_zero.name
+    assert policy_env(at_zero.name) == "lawn/Joint-v1"
+    played = rollout(gym.make("lawn/Joint-v1", config=SMALL), at_zero, VALIDATION_SEED_BASE).metrics["control_cost"]
+    assert played == pytest.approx(float(start["control_cost"]), rel=1e-6)
+    for bad, match in (("zero:epa", "zero:zoo:NAME"), ("zero:anchor:stake", "zero:zoo:NAME")):
+        with pytest.raises(ValueError, match=match):
+            make_policy(bad, SMALL)
     with pytest.raises(ValueError, match="action_scheme='direct'"):
         TrainSpec(algo="ppo", env_id="lawn/Joint-v1", timesteps=64, out_dir=tmp_path / "x",
                   hp_overrides={"residual": residual, "interface": "v0"})

@@ -176,8 +176,10 @@ def evaluate(tasks: Iterable[EpisodeSpec | tuple[Any, ...]], workers: int = 1, p
 
 def policy_env(policy: str) -> str:
     """The env a policy is benchmarked on: a learned agent's own (multi-agent agents drive
-    ``lawn/Joint-v1``), ``lawn/Joint-v1`` for everything else."""
+    ``lawn/Joint-v1``; ``zero:AGENT`` the agent's), ``lawn/Joint-v1`` for everything else."""
     prefix, _, rest = policy.partition(":")
+    if prefix == "zero":
+        return policy_env(rest)
     if prefix == "zoo":
         agents = zoo_agents()
         if rest not in agents:
@@ -191,14 +193,17 @@ def policy_env(policy: str) -> str:
 
 
 def own_anchor(policy: str) -> str | None:
-    """The ``anchor:NAME`` whose zero action a learned agent acts around (from its recorded training
-    interface); None for experts, baselines and anchors."""
+    """What a learned agent acts around: ``zero:AGENT`` for a residual agent (its anchor policy
+    through its scheme), else the ``anchor:NAME`` of its recorded training interface; None for
+    experts, baselines and anchors."""
     prefix, _, rest = policy.partition(":")
     if prefix == "zoo":
-        return anchor_name(zoo_agents()[rest].get("interface"))
-    if prefix in ("sb3", "bc", "marl"):
-        return anchor_name(read_run(rest).interface)
-    return None
+        record = zoo_agents()[rest]
+    elif prefix in ("sb3", "bc", "marl"):
+        record = read_run(rest).record
+    else:
+        return None
+    return f"zero:{policy}" if record.get("residual") else anchor_name(record.get("interface"))
 
 
 def learned_entries(agents: Sequence[str], envs: Sequence[str] | None = None) -> list[Entry]:
