@@ -16,6 +16,7 @@ ROOT = Path(__file__).resolve().parent.parent
 #: Every generated block and the page that holds it.
 BLOCKS = {"benchmark": "README.md", "benchmark-nominal": "docs/policies.md", "gap": "docs/experts.md",
           "expert-speed": "docs/experts.md", "anchors": "docs/rl.md", "paired-reward": "docs/rl.md", "zoo-drift": "docs/training.md",
+          "validation-power": "docs/training.md",
           "train-throughput": "docs/training.md", "env-throughput": "docs/performance.md",
           "vector-step": "docs/performance.md", "numba-jit": "docs/performance.md",
           "qp-speed": "docs/performance.md",
