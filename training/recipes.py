@@ -122,6 +122,17 @@ _RESIDUAL_DV: dict[str, Any] = {
     "residual": {"anchor": "dv-mpc", "scale": 0.25}, "paired_anchor": "dv-mpc", "start_at_anchor": True,
     "actor_warmup_steps": 20_000, "n_envs": 4, "n_steps": 256, "batch_size": 256, "learning_rate": "lin_5e-5",
     "policy_kwargs": {"net_arch": [128, 128], "log_std_init": -2.0}}
+#: On the poor-link task k16 (65 % of the commands lost) the same scheme, with the reward unclipped
+#: (interface cost_clip 1e4: 8 % of k16's slots cost over the default clip of 100 and carry its tail), found
+#: nothing either (150,000 steps, seeds 0 and 1, 24 minutes each two side by side, 72 % of it in dv-mpc's
+#: decisions). Moving the power and the drone (``"moves": ["power", "drone"]``, scale 0.25, lin_5e-5): no
+#: validation beat the start (the best -1.4 % ± 1.4 %, 50 seeds), and the final networks were +1.5 / -0.2 %
+#: and +1.1 / +1.6 % against dv-mpc on 50 test seeds of each range. Moving the drone alone (``["drone"]``,
+#: scale 0.5, lin_2e-4, 100 validation seeds): +1.4 % ± 0.9 % after 30,000 steps, +5.7 % ± 2.0 % and
+#: +4.8 % ± 3.0 % at the end. A change of one slot's power or drone flips deliveries that send the episode
+#: elsewhere, so the per-slot credit PPO assigns is mostly that noise; constant reshapings of dv-mpc's split
+#: (sharper or flatter, 24 seeds) and of its drone target (nearer the centroid, 40 seeds) were not
+#: significantly better than it.
 #: Multi-agent PPO with the fleet network (training/sb3.py): every agent sees the fleet and which
 #: entity it is, and acts with its own row; started at the anchor (the heads zeroed), small steps.
 _MARL_FLEET = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,
