@@ -299,6 +299,8 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     assert rows[0]["policy"] == other["policy"] and any("/fleet-comm/seed-0" in r["policy"] for r in rows)
     record = json.loads((tmp_path / "zoo" / "fleet-comm" / "agent.json").read_text())
     assert record["algo"] == "fleet" and record["interface"]["layout"] == "entities"
+    assert record["selected_at_steps"] == int(read_csv(runs / "fleet-comm" / "seed-0" / "learning_curve.csv")[-1]
+                                              ["timesteps"])  # a clone: its one validation, after the fit
     with pytest.raises(ValueError, match="unknown recipe 'nope'"):
         zoo.build_zoo(runs, docs / "LEARNED.md", only=["nope"])
 
@@ -405,7 +407,11 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
     rl = [line for line in table.splitlines() if line.startswith("| `zoo:ppo-dv-residual`")]
     assert len(rl) == 1 and rl[0].split(" | ")[2] == "steady" and rl[0].endswith("| – |")  # no clone target
     assert "`ppo-dv-residual` (seed-0, shipped;" in table and "| 64 |" in table  # the learning curve
-    assert json.loads((tmp_path / "zoo" / "ppo-dv-residual" / "agent.json").read_text())["residual"]["anchor"] == "dv-mpc"
+    record = json.loads((tmp_path / "zoo" / "ppo-dv-residual" / "agent.json").read_text())
+    assert record["residual"]["anchor"] == "dv-mpc"
+    assert record["selected_at_steps"] == 0  # one validation episode: no interval, so no step beats the start
+    monkeypatch.setattr(zoo, "zoo_agents", lambda: {"ppo-dv-residual": record})
+    assert "ships its start: no validation beat the policy it started from" in zoo.format_zoo_list()
     lines = [line for line in table.splitlines() if line.startswith("| `zoo:dv-joint`")]
     assert [line.split(" | ")[2] for line in lines] == ["steady", "wide-k8"]
     assert all(line.split(" | ")[3] == "2" and line.endswith(("| met |", "| missed |")) for line in lines)

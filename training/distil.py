@@ -24,7 +24,7 @@ from agents.learned import ZOO_DIR, export_agent, zoo_agents
 from agents.runs import read_run
 from lawn_env import ScenarioConfig, presets
 
-from .protocol import read_learning_curve, selected_validation, selection_key
+from .protocol import read_learning_curve, selected_at, selected_validation, selection_key
 from .recipes import RECIPES, Recipe, finished
 from .results.cells import fmt_num, fmt_paired, markdown_table
 from .results.episode import Entry, EpisodeResult, Play
@@ -160,6 +160,7 @@ def _export(name: str, run_dir: Path, policy: str, d: Distilled, target: Path) -
               "budget_steps": int(run.record.get("num_timesteps", r.timesteps)), "training_seeds": list(r.seeds),
               "shipped_seed": run.record["seed"], "wall_time_s": [round(float(run.record["wall_time_s"]), 1)],
               "selected_on": "lowest selected validation against rg-mpc on the validation seeds (500000 + i)",
+              "selected_at_steps": selected_at(run_dir),
               "benchmark": {"test_seeds": " and ".join(f"{b}-{b + d.episodes - 1}" for b in TEST_RANGES),
                             "reference": SCORE_HIGH, "tasks": per_task}}
     out = Path(target) / name

@@ -86,6 +86,13 @@ def selected_validation(rows: Sequence[Mapping[str, float]]) -> Mapping[str, flo
     return min(eligible, key=selection_key, default=None)
 
 
+def selected_at(run_dir: Path) -> int | None:
+    """The steps of a run's selected validation (0: the run ships its start, no validation beat it;
+    None: a run without a learning curve)."""
+    best = selected_validation(read_learning_curve(Path(run_dir)))
+    return int(best["timesteps"]) if best is not None else None
+
+
 def validation_costs(policy: Policy, env_id: str, config: Any, seeds: Iterable[int]) -> dict[int, float]:
     """Seed -> the control cost of a full episode of the unmodified scenario under a built policy."""
     env = gym.make(env_id, config=config)

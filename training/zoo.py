@@ -24,7 +24,14 @@ from lawn_env import ScenarioConfig
 
 from .distil import evaluate_distil, export_distil
 from .pages import block_names, replace_body
-from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
+from .protocol import (
+    TEST_EPISODES,
+    VALIDATION_SEED_BASE,
+    read_learning_curve,
+    selected_at,
+    selected_validation,
+    selection_key,
+)
 from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe
 from .results.cells import fmt_num, fmt_paired, fmt_pct, markdown_table
 from .results.episode import Entry, EpisodeResult, EpisodeSpec, Play, read_results, write_results
@@ -316,6 +323,7 @@ def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
         "training_seeds": [spec["seed"] for spec in s.specs], "shipped_seed": run.record["seed"],
         "selected_on": "lowest paired relative difference against rg-mpc on the validation seeds (500000 + i), "
                        "never the test seeds",
+        "selected_at_steps": selected_at(s.run_dir),
         "wall_time_s": [round(spec["wall_time_s"], 1) for spec in s.specs],
         "benchmark": {"test_seeds": f"0-{episodes - 1}", "reference": SCORE_HIGH, "anchor": anchor,
                       "score_version": SCORE_VERSION, "score": list(ev.score(policy, s.env)[:3]),
@@ -345,6 +353,8 @@ def format_zoo_list() -> str:
         lines.append(f"  drives {rec.get('evaluated_on')} (trained on {rec.get('trained_on')}, {algo}), "
                      f"{rec.get('budget_steps', 0):,} steps, training seeds {rec.get('training_seeds')}, shipped seed "
                      f"{rec.get('shipped_seed')}")
+        if rec.get("selected_at_steps") == 0 and trainer not in ("bc", "fleet"):
+            lines.append("  ships its start: no validation beat the policy it started from (selected at 0 steps)")
         if "tasks" in bench:  # a steady-task agent: geometric change per task and test range
             for task, refs in bench["tasks"].items():
                 cells = ", ".join(f"vs {ref} {' / '.join(fmt_pct(x) for x in changes)}"
