@@ -24,14 +24,7 @@ from lawn_env import ScenarioConfig
 
 from .distil import evaluate_distil, export_distil
 from .pages import block_names, replace_body
-from .protocol import (
-    TEST_EPISODES,
-    VALIDATION_SEED_BASE,
-    read_learning_curve,
-    selected_at,
-    selected_validation,
-    selection_key,
-)
+from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
 from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe
 from .results.cells import fmt_num, fmt_paired, fmt_pct, markdown_table
 from .results.episode import Entry, EpisodeResult, EpisodeSpec, Play, read_results, write_results
@@ -323,7 +316,7 @@ def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
         "training_seeds": [spec["seed"] for spec in s.specs], "shipped_seed": run.record["seed"],
         "selected_on": "lowest paired relative difference against rg-mpc on the validation seeds (500000 + i), "
                        "never the test seeds",
-        "selected_at_steps": selected_at(s.run_dir),
+        "selected_at_steps": int(best["timesteps"]) if "timesteps" in (best := _best_validation(s.run_dir)) else None,
         "wall_time_s": [round(spec["wall_time_s"], 1) for spec in s.specs],
         "benchmark": {"test_seeds": f"0-{episodes - 1}", "reference": SCORE_HIGH, "anchor": anchor,
                       "score_version": SCORE_VERSION, "score": list(ev.score(policy, s.env)[:3]),
