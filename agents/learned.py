@@ -153,7 +153,7 @@ class SB3Policy(InterfacePolicy):
         self.config_given = config_given
         self.entities = None
         self.residual: Any = None  # agents.residual.ResidualActions: with_residual
-        #: the residual scheme the agent's run records ({"anchor": NAME, "scale": s}; None: none)
+        #: the residual scheme the agent's run records ({"anchor": NAME, "scale": s, "moves": [...]}; None: none)
         self.residual_settings: Mapping[str, Any] | None = None
         self._predict = _predictor(network)
         if self.interface.layout == "entities":

@@ -18,7 +18,7 @@ budget is split, the decisions a one-slot planner makes greedily, while the AGVs
 the expert's MPC solution. One class holds the
 equation: :class:`ResidualActions`; :class:`AnchorResidual` puts it in front of a Gymnasium env
 for training, and a trained agent (:class:`agents.learned.SB3Policy`) applies it when it acts, from
-the ``residual`` its run records (``{"anchor": NAME, "scale": s}``: :func:`agents.make_policy` and
+the ``residual`` its run records (``{"anchor": NAME, "scale": s, "moves": [...]}``: :func:`agents.make_policy` and
 :func:`agents.policies.attach_residual` build the anchor).
 
 The anchor's cost is paid every slot: a ``dv-mpc`` decision is about 1.7 ms at K = 4.
@@ -94,10 +94,11 @@ class ResidualActions:
         self.layout = ObservationLayout(config)
         self.scale = settings["scale"]
         #: the entries of the interface's action the learner moves (``moves``' parts)
+        parts = [p for p in PARTS if p != "increment" or self.scheme.increment_size]
+        missing = [p for p in settings.get("moves", parts) if p not in parts]
+        if missing:
+            raise ValueError(f"residual moves={list(moves)!r}: {env_id} has no {missing} (its parts: {parts})")
         self.moved = _entries(self.scheme.increment_size, config.num_agvs, settings.get("moves", PARTS))
-        if not self.moved.size:
-            raise ValueError(f"residual moves={list(moves)!r}: {env_id} has no {list(moves)} "
-                             f"(its parts: {[p for p in PARTS if p != 'increment' or self.scheme.increment_size]})")
         self.size = int(self.moved.size)
 
     def reset(self, seed: int | None = None) -> None:

@@ -21,21 +21,16 @@ __all__ = ["DecisionClock", "TimedPolicy"]
 
 
 class DecisionClock:
-    """The summed wall time (``seconds``) and count (``decisions``) of the timed policies' ``act``."""
+    """The summed wall time (``seconds``) of the timed policies' ``act``."""
 
     def __init__(self) -> None:
         self.seconds = 0.0
-        self.decisions = 0
 
     def timed(self, policy: Policy) -> TimedPolicy:
         """``policy`` acting on this clock (a policy already timed on it is returned as it is)."""
         if isinstance(policy, TimedPolicy) and policy.clock is self:
             return policy
         return TimedPolicy(policy, self)
-
-    def share(self, wall_time_s: float) -> float:
-        """The part of ``wall_time_s`` the timed decisions took (nan for no wall time)."""
-        return self.seconds / wall_time_s if wall_time_s > 0 else float("nan")
 
 
 class TimedPolicy(Policy):
@@ -49,7 +44,10 @@ class TimedPolicy(Policy):
         self.policy, self.clock = policy, clock
         self.name, self.env_ids, self.env_id = policy.name, policy.env_ids, policy.env_id
         self.config, self.layout, self.actions = policy.config, policy.layout, policy.actions
-        self.stateful = policy.stateful
+
+    @property
+    def stateful(self) -> bool:  # type: ignore[override]
+        return self.policy.stateful
 
     @property
     def last_plan(self) -> Any:  # type: ignore[override]
@@ -58,10 +56,12 @@ class TimedPolicy(Policy):
     def reset(self, seed: int | None = None) -> None:
         self.policy.reset(seed)
 
+    def observation_hint(self, shape: tuple[int, ...]) -> str:
+        return self.policy.observation_hint(shape)
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         start = time.perf_counter()
         try:
             return self.policy.act(obs)
         finally:
             self.clock.seconds += time.perf_counter() - start
-            self.clock.decisions += 1

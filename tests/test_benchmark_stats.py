@@ -261,7 +261,7 @@ def test_compare_is_the_python_front_door_of_evaluate(tmp_path):
 
 
 def test_statistics_reduce_results_once_per_row_and_compare_any_two_rows():
-    """``stats.reduce``: per (task, env, policy) the seeds, each cost's mean and interval and sum, the
+    """``rows.reduce``: per (task, env, policy) the seeds, each cost's mean and interval and sum, the
     decision time and the score; a comparison of two rows computes what is read, from the same costs
     the functions on results take; a missing row compares to nothing."""
     from training.results.episode import EpisodeResult

@@ -136,6 +136,7 @@ def test_bad_moves_are_named():
         with pytest.raises(ValueError, match="residual moves="):
             check_residual({"anchor": "dv-mpc", "moves": bad})
     config = lawn_env.ScenarioConfig(**SHORT)
-    with pytest.raises(ValueError, match="lawn/Comm-v1 has no"):  # Comm's AGVs plan their own increments
-        ResidualActions(make_policy("epa", config, env_id="lawn/Comm-v1"), config, "lawn/Comm-v1", NO_MPC,
-                        moves=["increment"])
+    for moves in (["increment"], ["increment", "power"]):  # Comm's AGVs plan their own increments: no part dropped
+        with pytest.raises(ValueError, match=r"lawn/Comm-v1 has no \['increment'\]"):
+            ResidualActions(make_policy("epa", config, env_id="lawn/Comm-v1"), config, "lawn/Comm-v1", NO_MPC,
+                            moves=moves)

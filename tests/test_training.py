@@ -645,5 +645,9 @@ def test_a_residual_of_the_link_on_the_paired_reward_records_its_expert_time(tmp
     assert summary["expert_share"] == round(record["expert_decision_s"] / record["wall_time_s"], 3) > 0
     policy = make_policy(f"sb3:{out}", SMALL)
     assert policy.residual.size == SMALL.num_agvs + 2 and policy.network.action_space.shape == (SMALL.num_agvs + 2,)
+    state = json.loads(next((out / "checkpoints").glob("*/state.json")).read_text())
+    assert state["expert_decision_s"] == pytest.approx(record["expert_decision_s"])  # the final checkpoint's
+    resume(out, timesteps=256, progress=False)  # the resumed run adds its expert time to the checkpoint's
+    assert json.loads((out / "run.json").read_text())["expert_decision_s"] > record["expert_decision_s"]
     plain, _ = _train(tmp_path, "ppo", steps=128, interface="rl", n_envs=1, name="plain")
     assert json.loads((plain / "run.json").read_text())["expert_decision_s"] == 0.0  # no expert decides

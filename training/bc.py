@@ -41,7 +41,6 @@ __all__ = ["Labeller", "collect", "fit", "BCSettings", "bc_settings", "train_bc"
 BC_TARGETS = ("ppo", "sac")
 
 
-
 @dataclasses.dataclass(frozen=True)
 class Labeller:
     """The expert that labels a run's transitions (a policy name, :func:`agents.make_policy`), deciding
@@ -272,5 +271,3 @@ def save_imitation(spec: Any, model: Any, record: dict[str, Any], hyperparams: d
     summary = write_learning_curve(out_dir, record)
     (out_dir / "run.json").write_text(json.dumps(record, indent=2))
     return summary | {"bc_loss_first": history[0]["losses"][0], "bc_loss_last": history[-1]["losses"][-1]}
-
-

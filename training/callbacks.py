@@ -4,7 +4,7 @@ rollout boundaries, actor warm-up) and the checkpoints a run resumes from.
 A checkpoint is taken after the algorithm has trained on every step it collected (SB3 calls
 ``on_rollout_start`` after ``train()``), so a resumed run repeats no update and loses none. It is
 ``checkpoints/<steps>/``: the model, its normalization statistics, an off-policy replay buffer,
-the validation-selected model and ``state.json`` (steps, updates, wall time, the byte length of
+the validation-selected model and ``state.json`` (steps, updates, wall time, expert time, the byte length of
 every history file), renamed into place; only the newest is kept. Resuming truncates the history
 files to those lengths and appends from there.
 """
@@ -228,11 +228,14 @@ class ControlCostValidation(BaseCallback):
 class RunCheckpoint(BaseCallback):
     """A checkpoint (:func:`write_checkpoint`) at the first rollout boundary at least ``every``
     steps after the previous one, and one at the end of training; its ``state.json`` holds the
-    run's wall time so far (``wall_time_before`` this process)."""
+    run's wall time and its expert's decision time so far (``wall_time_before`` and
+    ``expert_before`` this process, then the process's time and ``clock``'s)."""
 
-    def __init__(self, out_dir: Path, every: int, wall_time_before: float = 0.0):
+    def __init__(self, out_dir: Path, every: int, wall_time_before: float = 0.0, clock: DecisionClock | None = None,
+                 expert_before: float = 0.0):
         super().__init__(verbose=0)
         self.out_dir, self.every, self.wall_time_before = Path(out_dir), every, wall_time_before
+        self.clock, self.expert_before = clock or DecisionClock(), expert_before
         self._next = every
         self._start = 0.0
 
@@ -242,7 +245,8 @@ class RunCheckpoint(BaseCallback):
 
     def _save(self) -> None:
         write_checkpoint(self.out_dir, self.model,
-                         {"wall_time_s": self.wall_time_before + time.perf_counter() - self._start})
+                         {"wall_time_s": self.wall_time_before + time.perf_counter() - self._start,
+                          "expert_decision_s": self.expert_before + self.clock.seconds})
         self._next = _next_mark(self.num_timesteps, self.every)
 
     def _on_rollout_start(self) -> None:  # after train(): every collected step has been learned from

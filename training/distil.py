@@ -24,7 +24,7 @@ from agents.learned import ZOO_DIR, export_agent, zoo_agents
 from agents.runs import read_run
 from lawn_env import ScenarioConfig, presets
 
-from .protocol import read_learning_curve, selected_at, selected_validation, selection_key
+from .protocol import best_validation, read_learning_curve, selected_at, selection_key
 from .recipes import RECIPES, Recipe, finished
 from .results.cells import fmt_num, fmt_paired, markdown_table
 from .results.episode import Entry, EpisodeResult, Play
@@ -98,7 +98,7 @@ def _chosen(r: Recipe, runs: Path) -> Path | None:
     dirs = _finished(r, runs)
     if not dirs:
         return None
-    keys = [selection_key(selected_validation(read_learning_curve(d)) or {"control_cost": math.inf}) for d in dirs]
+    keys = [selection_key(best_validation(d)) for d in dirs]
     return dirs[int(np.argmin(keys))]
 
 

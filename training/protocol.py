@@ -86,11 +86,17 @@ def selected_validation(rows: Sequence[Mapping[str, float]]) -> Mapping[str, flo
     return min(eligible, key=selection_key, default=None)
 
 
+def best_validation(run_dir: Path) -> Mapping[str, float]:
+    """A run's selected validation (:func:`selected_validation` over its learning curve); a run
+    without one: an infinite cost, which selection never prefers."""
+    return selected_validation(read_learning_curve(Path(run_dir))) or {"control_cost": float("inf")}
+
+
 def selected_at(run_dir: Path) -> int | None:
     """The steps of a run's selected validation (0: the run ships its start, no validation beat it;
     None: a run without a learning curve)."""
-    best = selected_validation(read_learning_curve(Path(run_dir)))
-    return int(best["timesteps"]) if best is not None else None
+    best = best_validation(run_dir)
+    return int(best["timesteps"]) if "timesteps" in best else None
 
 
 def validation_costs(policy: Policy, env_id: str, config: Any, seeds: Iterable[int]) -> dict[int, float]:

@@ -122,17 +122,27 @@ _RESIDUAL_DV: dict[str, Any] = {
     "residual": {"anchor": "dv-mpc", "scale": 0.25}, "paired_anchor": "dv-mpc", "start_at_anchor": True,
     "actor_warmup_steps": 20_000, "n_envs": 4, "n_steps": 256, "batch_size": 256, "learning_rate": "lin_5e-5",
     "policy_kwargs": {"net_arch": [128, 128], "log_std_init": -2.0}}
-#: On the poor-link task k16 (65 % of the commands lost) the same scheme, with the reward unclipped
-#: (interface cost_clip 1e4: 8 % of k16's slots cost over the default clip of 100 and carry its tail), found
-#: nothing either (150,000 steps, seeds 0 and 1, 24 minutes each two side by side, 72 % of it in dv-mpc's
-#: decisions). Moving the power and the drone (``"moves": ["power", "drone"]``, scale 0.25, lin_5e-5): no
-#: validation beat the start (the best -1.4 % ± 1.4 %, 50 seeds), and the final networks were +1.5 / -0.2 %
-#: and +1.1 / +1.6 % against dv-mpc on 50 test seeds of each range. Moving the drone alone (``["drone"]``,
-#: scale 0.5, lin_2e-4, 100 validation seeds): +1.4 % ± 0.9 % after 30,000 steps, +5.7 % ± 2.0 % and
-#: +4.8 % ± 3.0 % at the end. A change of one slot's power or drone flips deliveries that send the episode
-#: elsewhere, so the per-slot credit PPO assigns is mostly that noise; constant reshapings of dv-mpc's split
-#: (sharper or flatter, 24 seeds) and of its drone target (nearer the centroid, 40 seeds) were not
-#: significantly better than it.
+# On the poor-link task k16 (65 % of the commands lost) the same scheme, with the reward unclipped
+# (interface cost_clip 1e4: 8 % of k16's slots cost over the default clip of 100 and carry its tail), found
+# nothing either (150,000 steps, seeds 0 and 1, 24 minutes each two side by side, 72 % of it in dv-mpc's
+# decisions). Moving the power and the drone (``"moves": ["power", "drone"]``, scale 0.25, lin_5e-5): no
+# validation beat the start (the best -1.4 % ± 1.4 %, 50 seeds), and the final networks were +1.5 / -0.2 %
+# and +1.1 / +1.6 % against dv-mpc on 50 test seeds of each range. Moving the drone alone (``["drone"]``,
+# scale 0.5, lin_2e-4, 100 validation seeds): +1.4 % ± 0.9 % after 30,000 steps, +5.7 % ± 2.0 % and
+# +4.8 % ± 3.0 % at the end. A change of one slot's power or drone flips deliveries that send the episode
+# elsewhere, so the per-slot credit PPO assigns is mostly that noise; constant reshapings of dv-mpc's split
+# (sharper or flatter, 24 seeds) and of its drone target (nearer the centroid, 40 seeds) were not
+# significantly better than it. The runs: lawn train --algo ppo --env lawn/Joint-v1 --preset k16
+# --timesteps 150000 --seeds 0 1 --eval-every 25000 --eval-episodes 50 --hp 'interface={"base": "rl",
+# "power_anchor": "distance", "increment_anchor": "lqr", "residual_scale": 2.0, "power_log_range": 4.0,
+# "cost_clip": 10000.0}' --hp 'residual={"anchor": "dv-mpc", "scale": 0.25, "moves": ["power", "drone"]}'
+# --hp paired_anchor=dv-mpc --hp start_at_anchor=true --hp actor_warmup_steps=20000 --hp n_envs=4
+# --hp n_steps=256 --hp batch_size=256 --hp learning_rate=lin_5e-5 --hp 'policy_kwargs={"net_arch": [128, 128],
+# "log_std_init": -2.0}' --out RUNS/ppo-link-k16; the drone alone: --eval-every 30000 --eval-episodes 100,
+# "scale": 0.5, "moves": ["drone"], actor_warmup_steps=10000, learning_rate=lin_2e-4, log_std_init -1.5;
+# the test seeds: training.results.api.compare(["dv-mpc", "sb3:DIR", "zero:sb3:DIR", "noise:dv-mpc"],
+# config="k16", seeds=range(S, S + 50)) for S = 0 and 100000, .geometric (DIR: a copy of the run without
+# best_model.zip, so that sb3:DIR loads the final model).
 #: Multi-agent PPO with the fleet network (training/sb3.py): every agent sees the fleet and which
 #: entity it is, and acts with its own row; started at the anchor (the heads zeroed), small steps.
 _MARL_FLEET = {"interface": {"base": "rl", "layout": "entities"}, "policy": "FleetPolicy", "normalize": False,

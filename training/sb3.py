@@ -124,9 +124,11 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
                    monitor_dir: Path | None, vecnormalize_path: Path | None = None, **kwargs: Any) -> Any:
     """A seeded, monitored SB3 VecEnv with optional VecNormalize (``normalize``: true or its options;
     ``vecnormalize_path``: saved statistics). Keywords: ``interface``, ``append_monitor`` (a resumed
-    run's monitor logs), ``vec`` (``"native"``: :class:`NativeVecEnv`, no monitor files) and ``paired``
+    run's monitor logs), ``vec`` (``"native"``: :class:`NativeVecEnv`, no monitor files), ``paired``
     (:class:`agents.paired.PairedReward`'s keywords: every env's reward paired with an anchor's; the
-    monitor logs keep the env's own rewards)."""
+    monitor logs keep the env's own rewards), ``residual`` (the residual scheme's settings,
+    :func:`agents.residual.check_residual`) and ``clock`` (the :class:`agents.timing.DecisionClock`
+    both anchors decide on)."""
     from stable_baselines3.common.env_util import make_vec_env
 
     unknown = set(kwargs) - {"interface", "append_monitor", "vec", "paired", "residual", "clock"}
@@ -265,7 +267,8 @@ def setup(record: dict[str, Any], options: Any, config: ScenarioConfig, out_dir:
     if record["env"] != "CartPole-v1":
         hooks.append(ControlCostValidation(record["env"], config, options.interface, int(record["eval_episodes"]),
                                            max(int(record["eval_every"]), 1), out_dir, options.residual, clock))
-    hooks.append(RunCheckpoint(out_dir, max(int(record["checkpoint_every"]), 1), wall_time_before=wall_before))
+    hooks.append(RunCheckpoint(out_dir, max(int(record["checkpoint_every"]), 1), wall_time_before=wall_before,
+                               clock=clock, expert_before=float(record.get("expert_decision_s", 0.0))))
     if options.actor_warmup_steps > 0:
         hooks.append(ActorWarmup(options.actor_warmup_steps))
     return Run(record, model, env, hooks + list(callbacks or []), out_dir, wall_before, start is not None, clock)

@@ -19,7 +19,7 @@ import gymnasium as gym
 from pydantic import ConfigDict, Field, StrictBool, TypeAdapter
 from pydantic.dataclasses import dataclass
 
-from agents.learned import LOADERS
+from agents.learned import LOADERS, learned_name_forms
 from agents.policies import POLICIES
 from agents.residual import check_residual
 from lawn_env import ENV_IDS, PARALLEL_ENV_ID, RL_ENV_IDS, ScenarioConfig
@@ -64,7 +64,8 @@ class RunOptions:
     paired_anchor: str | None = None
     """Train on the paired reward against this policy (:class:`agents.paired.PairedReward`)."""
     residual: dict[str, Any] | None = None
-    """Act by the residual scheme around a policy, ``{"anchor": NAME, "scale": s}`` (:mod:`agents.residual`)."""
+    """Act by the residual scheme around a policy, ``{"anchor": NAME, "scale": s, "moves": [...]}``
+    (:mod:`agents.residual`)."""
     algo_kwargs: dict[str, Any] = Field(default_factory=dict)
 
 
@@ -91,7 +92,7 @@ def _check_anchor(key: str, anchor: str | None, env_id: str) -> None:
     prefix = anchor.split(":", 1)[0] if ":" in anchor else None
     if (anchor not in POLICIES) if prefix is None else (prefix not in LOADERS):
         raise ValueError(f"--hp {key}={anchor!r}: unknown policy; valid: {', '.join(POLICIES)}, or "
-                         f"{', '.join(f'{p}:NAME' for p in LOADERS)}")
+                         f"{learned_name_forms()}")
 
 
 def _check_residual(options: RunOptions, env_id: str) -> None:

@@ -99,10 +99,11 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
                          "older lawn, which checkpointed before the update; retrain the run")
     if checkpoint is None:  # killed before its first checkpoint: start over, cleanly
         clear_history(out_dir)
-        record["wall_time_s"] = 0.0
+        record["wall_time_s"] = record["expert_decision_s"] = 0.0
     else:
         restore_history(out_dir, checkpoint)
         record["wall_time_s"] = float(checkpoint.state.get("wall_time_s", 0.0))
+        record["expert_decision_s"] = float(checkpoint.state.get("expert_decision_s", 0.0))
     (out_dir / "run.json").write_text(json.dumps(record, indent=2))
     summary = learn(setup(record, options, config, out_dir, checkpoint), progress=progress)
     summary["resumed_from"] = checkpoint.steps if checkpoint is not None else None

@@ -24,7 +24,14 @@ from lawn_env import ScenarioConfig
 
 from .distil import evaluate_distil, export_distil
 from .pages import block_names, replace_body
-from .protocol import TEST_EPISODES, VALIDATION_SEED_BASE, read_learning_curve, selected_validation, selection_key
+from .protocol import (
+    TEST_EPISODES,
+    VALIDATION_SEED_BASE,
+    best_validation,
+    read_learning_curve,
+    selected_at,
+    selection_key,
+)
 from .recipes import RECIPES, SECTIONS, Recipe, finished, recipe
 from .results.cells import fmt_num, fmt_paired, fmt_pct, markdown_table
 from .results.episode import Entry, EpisodeResult, EpisodeSpec, Play, read_results, write_results
@@ -128,7 +135,7 @@ def zoo_tables(ev: ZooEvaluation) -> ZooTables:
         for r, dirs in ev.found:
             if r.evaluated_on != env:
                 continue
-            validation = [_best_validation(d) for d in dirs]
+            validation = [best_validation(d) for d in dirs]
             chosen = dirs[int(np.argmin([selection_key(v) for v in validation]))]
             gains = [paired(ev.rows, ev.runs[d].policy_name, ev.anchor(ev.runs[d].policy_name), env) for d in dirs]
             across = mean_ci(g[0] for g in gains)
@@ -163,8 +170,10 @@ def _run_cells(ev: ZooEvaluation, r: Recipe, run_dir: Path, best: Mapping[str, A
     """One row of the per-run table."""
     spec = ev.runs[run_dir].record
     c = protocol_cells(ev.stats, ev.entry(ev.runs[run_dir].policy_name, env))
+    vs = fmt_pct(best["vs_reference"]) if "vs_reference" in best else "–"
+    validation = f"{vs} ({fmt_num(best['control_cost'])}, {spec.get('eval_episodes', '?')})"
     return {"recipe": f"`{r.name}`{' (shipped)' if chosen else ''}", "seed": str(spec["seed"]),
-            "anchor": c["anchor"], "validation": _validation_cell(best, spec.get("eval_episodes", "?")),
+            "anchor": c["anchor"], "validation": validation,
             "score": c["score"], "vs_ref": c["vs_ref"], "vs_anchor": c["vs_anchor"], "worst": c["worst"],
             "wall_time": f"{spec['wall_time_s']:.0f} s"}
 
@@ -296,16 +305,6 @@ def plot_curves(found: list[tuple[Recipe, list[Path]]], reference: dict[str, flo
     fig.savefig(path)
 
 
-def _best_validation(run_dir: Path) -> Mapping[str, float]:
-    """The run's selected validation (:func:`~training.protocol.selected_validation`)."""
-    return selected_validation(list(read_learning_curve(run_dir))) or {"control_cost": math.inf}
-
-
-def _validation_cell(best: Mapping[str, float], episodes: int) -> str:
-    vs = fmt_pct(best["vs_reference"]) if "vs_reference" in best else "–"
-    return f"{vs} ({fmt_num(best['control_cost'])}, {episodes})"
-
-
 def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
     r, run = s.recipe, ev.runs[s.run_dir]
     policy, episodes = run.policy_name, ev.episodes
@@ -316,7 +315,7 @@ def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
         "training_seeds": [spec["seed"] for spec in s.specs], "shipped_seed": run.record["seed"],
         "selected_on": "lowest paired relative difference against rg-mpc on the validation seeds (500000 + i), "
                        "never the test seeds",
-        "selected_at_steps": int(best["timesteps"]) if "timesteps" in (best := _best_validation(s.run_dir)) else None,
+        "selected_at_steps": selected_at(s.run_dir),
         "wall_time_s": [round(spec["wall_time_s"], 1) for spec in s.specs],
         "benchmark": {"test_seeds": f"0-{episodes - 1}", "reference": SCORE_HIGH, "anchor": anchor,
                       "score_version": SCORE_VERSION, "score": list(ev.score(policy, s.env)[:3]),

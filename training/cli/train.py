@@ -107,4 +107,3 @@ def _expert_part(summary: dict[str, Any]) -> str:
     """How much of the run the expert's decisions took (a run where no expert decides: nothing)."""
     share = summary.get("expert_share")
     return f" ({100 * share:.0f} % of it in the expert's decisions)" if share else ""
-

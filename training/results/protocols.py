@@ -1,7 +1,7 @@
 """``lawn benchmark``'s protocols as data: a :class:`Protocol` declares the batches of episodes to
 play (:class:`Batch`: a task, its scenario, the rows, the seeds) and the tables to make of their
 statistics; :func:`execute` plays any protocol the same way (:mod:`.run`), reduces its results
-(:func:`.stats.reduce`), makes its tables (:data:`TABLES`, over :mod:`.report`) and writes them. A new
+(:func:`.rows.reduce`), makes its tables (:data:`TABLES`, over :mod:`.report`) and writes them. A new
 protocol is a declaration:
 
 * **Paper protocol** (:func:`paper_protocol`, ``lawn benchmark``; :func:`run_benchmark`): the
@@ -159,8 +159,9 @@ def execute(protocol: Protocol, play: Play = DEFAULT_PLAY, out: Path | None = No
             write_rows(per_slot, Path(out) / "per_slot.csv")
     stats, seconds = reduce(results), time.perf_counter() - start
     tables = {file: TABLES[name](protocol, stats, seconds, play) for file, name in protocol.tables.items()}
-    for file, text in tables.items() if out is not None else ():
-        (Path(out or ".") / file).write_text(text + ("" if text.endswith("\n") else "\n"))
+    if out is not None:
+        for file, text in tables.items():
+            (Path(out) / file).write_text(text + ("" if text.endswith("\n") else "\n"))
     return Outcome(results, stats, tables, per_slot, seconds)
 
 
@@ -329,16 +330,18 @@ def suite_pages(policies: Sequence[str], tasks: Sequence[str], episodes: int, ou
     pages = {"LEADERBOARD.md": list(SUITE_BLOCKS.values())}
     if fleet:
         pages["LEARNED.md"] = ["fleet-generalization"]
-    for page, names in pages.items() if docs else ():
-        path = Path(docs or ".") / page
-        missing = [n for n in names if n not in block_names(path.read_text() if path.exists() else "")]
-        if missing:
-            raise ValueError(f"--docs {docs}: {path} has no generated block {', '.join(missing)}")
-    outcome = execute(suite_protocol(policies, tasks, episodes), play, out)
+    if docs is not None:
+        for page, names in pages.items():
+            path = docs / page
+            missing = [n for n in names if n not in block_names(path.read_text() if path.exists() else "")]
+            if missing:
+                raise ValueError(f"--docs {docs}: {path} has no generated block {', '.join(missing)}")
+    suite = suite_protocol(policies, tasks, episodes)  # both declared (and checked) before any episode
+    sized = fleet_protocol(fleet, {k: min(n, episodes) for k, n in FLEET_SIZES.items()}) if fleet else None
+    outcome = execute(suite, play, out)
     tables = {name: outcome.tables[f"{name}.md"] for name in SUITE_BLOCKS}
     plot_profiles(outcome.per_slot, out / "per_slot.png", tasks, play.transient_slots)
-    sizes = {k: min(n, episodes) for k, n in FLEET_SIZES.items()}
-    tables["fleet"] = execute(fleet_protocol(fleet, sizes), play, out).tables["fleet_sizes.md"] if fleet else ""
+    tables["fleet"] = execute(sized, play, out).tables["fleet_sizes.md"] if sized is not None else ""
     if docs:
         source = f"lawn benchmark --suite --docs {docs}"
         for name, block in SUITE_BLOCKS.items():
