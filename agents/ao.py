@@ -48,6 +48,7 @@ from lawn_env.core import Snapshot
 from lawn_env.dynamics import POSITION, PredictionModel
 from lawn_env.errors import raises_config_errors
 from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
+from lawn_env.products import matmul
 
 from .optim import linear_argmin_disc_box, project_budget
 from .problem import Coefficients, Plan, SlotProblem
@@ -111,7 +112,7 @@ class PowerObjective:
         pf = np.maximum(p, channel.POWER_FLOOR_W)
         x = self._link.outage_argument_sq(pf, self._d2)
         psi = self._link.success_at(x)
-        return float(self._l @ (psi * psi) + self._two_s @ psi) + self._w, (psi, pf, x)
+        return float(matmul(self._l, psi * psi) + matmul(self._two_s, psi)) + self._w, (psi, pf, x)
 
     def gradient(self, state: tuple[np.ndarray, ...]) -> np.ndarray:
         psi, pf, x = state
@@ -135,7 +136,7 @@ class DroneObjective:
 
     def gradient(self, q: np.ndarray) -> np.ndarray:
         psi, _, dpsi_dq = channel.success_and_gradients(self._power, q, self._agv, self._link)
-        grad: np.ndarray = (2.0 * self._l * psi + 2.0 * self._s) @ dpsi_dq
+        grad: np.ndarray = matmul(2.0 * self._l * psi + 2.0 * self._s, dpsi_dq)
         return grad
 
 
@@ -214,7 +215,7 @@ class AOSolver:
         trial = self._memory.get("pgd_trial")  # the last BB step of this slot, if any
         iterations = 0
         for iterations in range(1, s.pgd_max_iterations + 1):  # noqa: B007 - the count is read after the loop
-            gnorm = math.sqrt(float(grad @ grad))
+            gnorm = math.sqrt(float(matmul(grad, grad)))
             if gnorm == 0.0:
                 break
             rho = (trial if trial is not None else budget / gnorm) * grow
@@ -223,17 +224,17 @@ class AOSolver:
                 rho /= grow
                 p_new = project_budget(p - rho * grad, budget)
                 value_new, state_new = objective.value(p_new)
-                if value_new <= value + armijo * float(grad @ (p_new - p)):
+                if value_new <= value + armijo * float(matmul(grad, p_new - p)):
                     accepted = True
                     break
             if not accepted:
                 break
             step = p_new - p
             grad_new = objective.gradient(state_new)
-            sy = float(step @ (grad_new - grad))
-            trial = float(step @ step) / sy if sy > 0 else None
+            sy = float(matmul(step, grad_new - grad))
+            trial = float(matmul(step, step)) / sy if sy > 0 else None
             p, grad, value = p_new, grad_new, value_new
-            if math.sqrt(float(step @ step)) < s.pgd_tolerance * budget:
+            if math.sqrt(float(matmul(step, step))) < s.pgd_tolerance * budget:
                 break
         self._memory["pgd_trial"] = trial
         if value <= current:
@@ -407,7 +408,7 @@ def expected_cost(snapshot: Snapshot, accel_increments: npt.ArrayLike, power_w: 
     x_aug = np.asarray(snapshot.x_aug, dtype=float)
     r = model.residual(x_aug, np.asarray(snapshot.reference, dtype=float))
     z = dmu.reshape(k, -1)
-    fz = z @ model.f.T
+    fz = matmul(z, model.f.T)
     psi = link.success_sq(p, link.distance_sq(q, x_aug[:, POSITION]))
     e = r + psi[:, None] * fz  # chi - chi_ref with the expected dynamics
     per = np.einsum("ki,ij,kj->k", e, model.q4, e) + np.einsum("ki,ij,kj->k", z, model.q5, z)

@@ -21,6 +21,7 @@ import numpy as np
 from lawn_env import dynamics
 from lawn_env.config import ScenarioConfig
 from lawn_env.dynamics import ACCELERATION
+from lawn_env.products import matmul, solve
 
 __all__ = ["AGVTracker"]
 
@@ -70,8 +71,8 @@ class AGVTracker:
         f = self._f
         moving = np.concatenate([self.estimate, moved], axis=1)  # [p, v] and the acceleration they moved with
         predicted = dynamics.step_augmented(moving, np.zeros_like(moved), self._a_aug, self._b_aug)[:, 0:4]
-        prior = f @ self.covariance @ f.T + self._q
-        gain = np.linalg.solve(prior + self._r + 1e-12 * np.eye(4), prior).T  # P (P + R)^-1, P and R symmetric
-        self.covariance = (np.eye(4) - gain) @ prior
-        self.estimate = predicted + (measured - predicted) @ gain.T
+        prior = matmul(matmul(f, self.covariance), f.T) + self._q
+        gain = solve(prior + self._r + 1e-12 * np.eye(4), prior).T  # P (P + R)^-1, P and R symmetric
+        self.covariance = matmul(np.eye(4) - gain, prior)
+        self.estimate = predicted + matmul(measured - predicted, gain.T)
         return self.estimate

@@ -48,6 +48,7 @@ from lawn_env.core import Snapshot
 from lawn_env.dynamics import cost_coefficients
 from lawn_env.errors import raises_config_errors
 from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
+from lawn_env.products import matmul
 from lawn_env.tail import (
     BOUNDS_PROBABILITY,
     DELIVERY_MEMORY,
@@ -107,7 +108,7 @@ class ReducedProblem(SlotProblem):
     def gradient(self, ev: Evaluation) -> tuple[np.ndarray, np.ndarray]:
         """(dPhi/dp (K,), dPhi/dq (2,)) by the envelope theorem and the analytic dpsi."""
         _, dpsi_dp, dpsi_dq = channel.success_and_gradients(ev.power_w, ev.drone_position, self.agv_xy, self.link)
-        return ev.slopes * dpsi_dp, ev.slopes @ dpsi_dq
+        return ev.slopes * dpsi_dp, matmul(ev.slopes, dpsi_dq)
 
     # ------------------------------------------------------------------ refinement
     def refine(self, ev: Evaluation, iterations: int, armijo: float = 1e-4, max_backtracks: int = 20,
@@ -125,7 +126,7 @@ class ReducedProblem(SlotProblem):
             for block in ("p", "q"):
                 g = grad_p if block == "p" else grad_q
                 x = ev.power_w if block == "p" else ev.drone_position
-                gnorm = math.sqrt(float(g @ g))
+                gnorm = math.sqrt(float(matmul(g, g)))
                 if gnorm == 0.0 or not math.isfinite(gnorm):  # flat, or under/overflowed at extreme configs
                     continue
                 alpha = steps[block] or 0.5 * (self.budget if block == "p" else self.reach) / gnorm
@@ -138,10 +139,10 @@ class ReducedProblem(SlotProblem):
                     else:
                         x_new = project_disc_box(x - alpha * g, self.q_prev, self.reach, self.area)
                     delta = x_new - x
-                    if not np.all(np.isfinite(delta)) or float(delta @ delta) == 0.0:
+                    if not np.all(np.isfinite(delta)) or float(matmul(delta, delta)) == 0.0:
                         break
                     cand = self.evaluate(x_new, ev.drone_position) if block == "p" else self.evaluate(ev.power_w, x_new)
-                    if cand.phi <= ev.phi + armijo * float(g @ delta):
+                    if cand.phi <= ev.phi + armijo * float(matmul(g, delta)):
                         accepted = cand
                         break
                     alpha *= 0.5
@@ -149,8 +150,8 @@ class ReducedProblem(SlotProblem):
                     continue
                 new_grad_p, new_grad_q = self.gradient(accepted)
                 y = (new_grad_p - grad_p) if block == "p" else (new_grad_q - grad_q)
-                sy = float(delta @ y)
-                steps[block] = float(delta @ delta) / sy if sy > 0 else None
+                sy = float(matmul(delta, y))
+                steps[block] = float(matmul(delta, delta)) / sy if sy > 0 else None
                 if ev.phi - accepted.phi > tolerance * abs(ev.phi):
                     improved = True
                 ev, grad_p, grad_q = accepted, new_grad_p, new_grad_q

@@ -13,6 +13,8 @@ reasonable" reference point for the demo and for smoke tests.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from lawn_env.channel import LinkParams
@@ -50,7 +52,7 @@ class HeuristicPolicy(Policy):
         power = cfg.power_budget_w * d2 / d2.sum()
         centroid = x[:, POSITION].mean(axis=0)
         step = centroid - q
-        dist = np.linalg.norm(step)
+        dist = math.hypot(*step.tolist())
         reach = cfg.drone_reach_m
         q_next = centroid if dist <= reach else q + step * (reach / dist)
         return self.actions.encode(Decisions(du, power, q_next), x, None, q)

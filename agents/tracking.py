@@ -16,6 +16,7 @@ from pydantic.dataclasses import dataclass as pydantic_dataclass
 
 from lawn_env.dynamics import ACCELERATION, POSITION, VELOCITY, PredictionModel, step_augmented
 from lawn_env.errors import raises_config_errors
+from lawn_env.products import matmul
 
 __all__ = ["PIDGains", "saturate", "pid_rollout", "lqr_gain", "lqr_rollout"]
 
@@ -87,7 +88,7 @@ def lqr_rollout(x_aug: np.ndarray, reference: np.ndarray, model: PredictionModel
     out = np.empty((x.shape[0], model.horizon, 2))
     for i in range(model.horizon):
         feedforward = reference[:, i + 1, ACCELERATION] - reference[:, i, ACCELERATION]
-        du_free = feedforward - (x - reference[:, i]) @ gain.T
+        du_free = feedforward - matmul(x - reference[:, i], gain.T)
         du = saturate(x[:, ACCELERATION] + du_free, x[:, ACCELERATION], accel_max, accel_increment_max)
         if commands is not None and not commands[i]:
             du = np.zeros_like(du)

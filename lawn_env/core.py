@@ -32,6 +32,7 @@ import numpy as np
 from . import channel, drone, dynamics, references
 from .config import DisturbanceConfig, ScenarioConfig
 from .dynamics import POSITION, PredictionModel, initial_state, measure, packed_step_matrices
+from .products import product_into
 
 # the first columns of dynamics.POSITION / VELOCITY / ACCELERATION in x~, as integers the kernels can index with
 _POS0, _VEL0, _ACCEL0 = dynamics.POSITION.start, dynamics.VELOCITY.start, dynamics.ACCELERATION.start
@@ -205,7 +206,8 @@ def _lag(x_aug, applied, lag_alpha, applied_next, flat, accel_effect_t):  # prag
                 commanded = x_aug[b, i, _ACCEL0 + a] + flat[r, 6 + a]
                 applied_next[b, i, a] = dynamics.lagged_acceleration(applied[b, i, a], commanded, lag_alpha)
                 gap[r, a] = applied_next[b, i, a] - commanded
-    correction = gap @ accel_effect_t
+    correction = np.empty((num * k, accel_effect_t.shape[1]))
+    product_into(gap, accel_effect_t, correction)
     for r in range(num * k):
         for j in range(4):
             flat[r, j] += correction[r, j]
@@ -272,9 +274,10 @@ def _accumulate(inp, out, err):  # pragma: no cover - compiled
 def _slot(inputs, packed, constants, outputs):  # pragma: no cover - compiled
     """One slot of B scenarios (see :func:`step`): 1. the links (:func:`_links`) and, under the
     buffered actuator, the buffers (:func:`_buffers`); 2. the transition,
-    [x~[n+1], du] = [x~, du applied] @ step_t (BLAS, as numpy's ``@``); 3. the disturbance mode's
-    actuator lag (``lag_alpha`` >= 0) and process noise (where the arrays are not empty); 4. the
-    packed error and the stage terms (e' Q1 e, du' Q2 du) = err^2 @ cost_w; 5. the costs and the
+    [x~[n+1], du] = [x~, du applied] @ step_t (:func:`lawn_env.products.product_into`: one summation
+    order on every machine and batch size, not BLAS); 3. the disturbance mode's actuator lag (``lag_alpha`` >=
+    0) and process noise (where the arrays are not empty); 4. the packed error and the stage terms (e' Q1 e, du'
+    Q2 du) = err^2 @ cost_w; 5. the costs and the
     running sums. Reads ``inputs`` (the :class:`SlotInputs` fields), the :class:`Packed` matrices
     and the :data:`SLOT_CONSTANTS` record; writes ``outputs`` (the :class:`SlotOutputs` fields)."""
     inp, mat, out, c = SlotInputs(*inputs), Packed(*packed), SlotOutputs(*outputs), constants[0]
@@ -286,13 +289,13 @@ def _slot(inputs, packed, constants, outputs):  # pragma: no cover - compiled
         _buffers(inp, out)
     packed_rows, err = out.rows[0], out.rows[1]
     flat = packed_rows.reshape((n, 8))
-    np.dot(rows, mat.step_t, flat)
+    product_into(rows, mat.step_t, flat)
     if c.lag_alpha >= 0.0:
         _lag(inp.x_aug, inp.applied, c.lag_alpha, out.applied_next, flat, mat.accel_effect_t)
     _process_noise(packed_rows, inp.process_position, inp.process_velocity)
     squares = np.empty((n, 8))
     _errors(packed_rows, inp.reference, inp.slot, err, squares)
-    np.dot(squares, mat.cost_w, out.terms.reshape((n, 2)))
+    product_into(squares, mat.cost_w, out.terms.reshape((n, 2)))
     out.totals_next[:] = inp.totals
     _accumulate(inp, out, err)
 

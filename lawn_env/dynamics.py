@@ -25,12 +25,15 @@ import numpy as np
 import numpy.typing as npt
 from scipy import linalg
 
+from .products import matmul, solve
+
 __all__ = [
     "ScenarioSettings",
     "agv_matrices",
     "augmented_matrices",
     "terminal_weight",
     "modified_riccati",
+    "dare",
     "loss_aware_gain",
     "mean_square_radius",
     "prediction_matrices",
@@ -165,13 +168,13 @@ def modified_riccati(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray,
 
         S = A'SA + Q - psi A'SB (R + B'SB)^-1 B'SA.
 
-    At psi = 1 it is the discrete algebraic Riccati equation (scipy's solver); below, value iteration
+    At psi = 1 it is the discrete algebraic Riccati equation (:func:`dare`); below, value iteration
     from ``start`` (default: the DARE's solution, a lower bound: the iterates rise monotonically to the
     solution) until the largest change is 1e-12 of the largest entry. Raises ``ValueError`` where no
     finite solution exists (psi at or below the critical arrival probability of ``a``)."""
     if not 0.0 < success <= 1.0:
         raise ValueError(f"success={success!r}: the arrival probability must lie in (0, 1]")
-    s = linalg.solve_discrete_are(a, b, q, r) if start is None else np.array(start, dtype=float)
+    s = dare(a, b, q, r) if start is None else np.array(start, dtype=float)
     if not np.all(np.isfinite(s)):
         raise ValueError("the discrete Riccati equation has no finite solution for these weights")
     if success < 1.0 or start is not None:
@@ -188,7 +191,7 @@ def _value_iteration(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray,
     """:func:`modified_riccati`'s iteration from ``s``; None when it diverges."""
     for _ in range(1_000_000):
         gain = loss_aware_gain(a, b, r, s)
-        nxt = q + a.T @ s @ a - success * (a.T @ s @ b) @ gain
+        nxt = q + matmul(matmul(a.T, s), a) - success * matmul(matmul(matmul(a.T, s), b), gain)
         nxt = 0.5 * (nxt + nxt.T)
         scale = np.abs(nxt).max()
         if not np.isfinite(scale):
@@ -203,7 +206,34 @@ def _value_iteration(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray,
 def loss_aware_gain(a: np.ndarray, b: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
     """The state feedback ``L = (R + B'SB)^-1 B'SA`` of the cost-to-go ``s`` (the command is -L x):
     the LQR gain at the DARE's S, the loss-aware gain at the modified Riccati equation's."""
-    return np.linalg.solve(r + b.T @ s @ b, b.T @ s @ a)
+    bts = matmul(b.T, s)
+    return solve(r + matmul(bts, b), matmul(bts, a))
+
+
+def dare(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, max_iterations: int = 64) -> np.ndarray:
+    """The stabilizing solution X of the discrete algebraic Riccati equation
+    ``X = A'XA - A'XB (R + B'XB)^-1 B'XA + Q`` by the structure-preserving doubling algorithm (Chu, Fan,
+    Lin and Wang, 2004): ``A_0 = A``, ``G_0 = B R^-1 B'``, ``H_0 = Q``, ``W_k = I + G_k H_k``,
+    ``A_{k+1} = A_k W_k^-1 A_k``, ``G_{k+1} = G_k + A_k W_k^-1 G_k A_k'``, ``H_{k+1} = H_k + A_k' H_k W_k^-1 A_k``;
+    ``H_k`` converges quadratically to X. Every product and solve in one fixed order
+    (:mod:`lawn_env.products`), so X is the same to the last bit on every machine, which scipy's
+    ``solve_discrete_are`` (LAPACK on the CPU's BLAS kernel) is not; scipy is the tests' oracle. Raises
+    ``ValueError`` when the iteration does not settle (no stabilizing solution)."""
+    n = a.shape[0]
+    ak, gk, hk = np.array(a, dtype=float), matmul(b, solve(r, b.T)), np.array(q, dtype=float)
+    for _ in range(max_iterations):
+        w = np.eye(n) + matmul(gk, hk)
+        w_a, w_g = solve(w, ak), solve(w, gk)
+        h_next = hk + matmul(matmul(ak.T, hk), w_a)
+        g_next = gk + matmul(matmul(ak, w_g), ak.T)
+        ak = matmul(ak, w_a)
+        change = np.abs(h_next - hk).max()
+        hk, gk = 0.5 * (h_next + h_next.T), 0.5 * (g_next + g_next.T)
+        if not np.all(np.isfinite(hk)):
+            break
+        if change <= 1e-15 * np.abs(hk).max():
+            return hk
+    raise ValueError("the discrete Riccati equation has no stabilizing solution for these weights")
 
 
 def mean_square_radius(a: np.ndarray, b: np.ndarray, gain: np.ndarray, success: float) -> float:
@@ -236,12 +266,12 @@ def prediction_matrices(a_aug: np.ndarray, b_aug: np.ndarray, horizon: int) -> t
     nx, nu = b_aug.shape
     powers = [np.eye(nx)]
     for _ in range(horizon):
-        powers.append(a_aug @ powers[-1])
+        powers.append(matmul(a_aug, powers[-1]))
     c = np.vstack(powers)
     f = np.zeros((nx * (horizon + 1), nu * horizon))
     for i in range(1, horizon + 1):
         for j in range(i):
-            f[nx * i : nx * (i + 1), nu * j : nu * (j + 1)] = powers[i - 1 - j] @ b_aug
+            f[nx * i : nx * (i + 1), nu * j : nu * (j + 1)] = matmul(powers[i - 1 - j], b_aug)
     return c, f
 
 
@@ -331,13 +361,13 @@ class PredictionModel:
         """The infinite-horizon gain of the DARE that gives Q3: ``(Q2 + B~'Q3B~)^-1 B~'Q3A~`` (2 x 6):
         the LQR baseline's (``agents.tracking``) and the RL interface's ``increment_anchor="lqr"``."""
         b, a, q3 = self.b_aug, self.a_aug, self.q3
-        return np.linalg.solve(self.q2 + b.T @ q3 @ b, b.T @ q3 @ a)
+        return loss_aware_gain(a, b, self.q2, q3)
 
     def residual(self, x_aug: np.ndarray, chi_ref: np.ndarray) -> np.ndarray:
         """r = C x~ - chi_ref per AGV: (..., K, 6) and (..., K, N_p+1, 6) -> (..., K, 6(N_p+1)) (one
         2-D product over all leading axes: numpy's stacked (B, K, 6) @ (6, m) is several times slower)."""
         lead = x_aug.shape[:-1]
-        flat = np.reshape(x_aug, (-1, x_aug.shape[-1])) @ self.c.T
+        flat = matmul(np.reshape(x_aug, (-1, x_aug.shape[-1])), self.c.T)
         return flat.reshape((*lead, -1)) - chi_ref.reshape((*lead, -1))
 
     def cost_to_go(self, r: np.ndarray) -> np.ndarray:
@@ -345,15 +375,15 @@ class PredictionModel:
         first N_p blocks are a weighted sum of squares and only the terminal block is a 6 x 6 form
         (a model whose stage weights are not Q1's, ``q1_tiled`` None: the full form)."""
         if self.q1_tiled is None:
-            return ((r @ self.q4) * r).sum(axis=-1)
+            return (matmul(r, self.q4) * r).sum(axis=-1)
         head, tail = r[..., :-6], r[..., -6:]
-        return (head * head) @ self.q1_tiled + ((tail @ self.q3) * tail).sum(axis=-1)
+        return matmul(head * head, self.q1_tiled) + (matmul(tail, self.q3) * tail).sum(axis=-1)
 
     def predict(self, x_aug: np.ndarray, dmu: np.ndarray, psi: npt.ArrayLike) -> np.ndarray:
         """Expected predicted states chi = C x~ + psi F Delta-mu, (K, N_p+1, 6)."""
         k = x_aug.shape[0]
         psi = np.broadcast_to(np.asarray(psi, dtype=float), (k,))
-        chi = x_aug @ self.c.T + psi[:, None] * (dmu.reshape(k, -1) @ self.f.T)
+        chi = matmul(x_aug, self.c.T) + psi[:, None] * matmul(dmu.reshape(k, -1), self.f.T)
         return chi.reshape(k, self.horizon + 1, -1)
 
 
@@ -372,10 +402,10 @@ def _build_model(slot_s: float, horizon: int, q1_diag: tuple, q2_diag: tuple,
     else:
         c, f = prediction_matrices(a_aug, b_aug, horizon)
     q4, q5 = horizon_weights(q1, q2, q3, horizon)
-    ftq4 = f.T @ q4
+    ftq4 = matmul(f.T, q4)
     arrays = {
         "a_aug": a_aug, "b_aug": b_aug, "q1": q1, "q2": q2, "q3": q3, "c": c, "f": f, "q4": q4, "q5": q5,
-        "ftq4f": ftq4 @ f, "ftq4": ftq4, "increment_sum": increment_sum_matrix(horizon),
+        "ftq4f": matmul(ftq4, f), "ftq4": ftq4, "increment_sum": increment_sum_matrix(horizon),
         "q1_tiled": np.tile(np.asarray(q1_diag, dtype=float), horizon),
     }
     for arr in arrays.values():
@@ -390,7 +420,7 @@ def step_augmented(x_aug: np.ndarray, du: np.ndarray, a_aug: np.ndarray, b_aug: 
 
     A lost command is ``du = 0`` (the AGV keeps u[n-1]; MODEL.md §3).
     """
-    return x_aug @ a_aug.T + du @ b_aug.T
+    return matmul(x_aug, a_aug.T) + matmul(du, b_aug.T)
 
 
 def packed_step_matrices(a_aug: np.ndarray, b_aug: np.ndarray, q1_diag: npt.ArrayLike,
@@ -417,7 +447,7 @@ def cost_coefficients(model: PredictionModel, linear: np.ndarray, constant: np.n
     coefficients of P4. The envelope derivative of the QP's value in psi is ``2 psi L + 2 S``.
     ``dmu`` (..., K, N_p, 2) may carry leading axes of its own (one per psi value of a table)."""
     z = dmu.reshape((*dmu.shape[:-2], -1))
-    lcoef = ((z @ model.ftq4f) * z).sum(axis=-1)
+    lcoef = (matmul(z, model.ftq4f) * z).sum(axis=-1)
     scoef = (linear * z).sum(axis=-1)
-    wcoef = ((z @ model.q5) * z).sum(axis=-1) + constant
+    wcoef = (matmul(z, model.q5) * z).sum(axis=-1) + constant
     return lcoef, scoef, wcoef

@@ -74,6 +74,7 @@ from .drone import toward
 from .dynamics import ACCELERATION, POSITION, PredictionModel, saturate_increment
 from .errors import raises_config_errors
 from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
+from .products import matmul
 from .spaces import ActionCodec, DirectActions
 from .tail import DeliveryLaw
 
@@ -339,7 +340,7 @@ class AnchoredActions(ActionCodec):
                 raise ValueError("the anchored joint actions of this interface (increment_anchor='lqr') track the "
                                  "reference: pass the reference window")
             feedforward = reference[..., 1, ACCELERATION] - reference[..., 0, ACCELERATION]
-            free = feedforward - (x_aug - reference[..., 0, :]) @ self._lqr_model.lqr_gain.T
+            free = feedforward - matmul(x_aug - reference[..., 0, :], self._lqr_model.lqr_gain.T)
             increment: np.ndarray = saturate_increment(x_aug[..., ACCELERATION], free, self._accel_max)
             return increment[..., None, :]
         start = "stakes" if self._stake else None
@@ -369,7 +370,7 @@ class AnchoredActions(ActionCodec):
         reach = self._reach
         if dist >= reach * (1 - 1e-9):  # a full-speed move: any target further along the ray gives it
             u = move / dist
-            target = drone_position + max(dist, float((centroid - drone_position) @ u)) * u
+            target = drone_position + max(dist, float(matmul(centroid - drone_position, u))) * u
         a_drone = np.clip((target - centroid) / self.interface.drone_offset_m, -1.0, 1.0)
         data = self._prepare(x_aug, reference, slot)
         d2 = self._distance_sq(x_aug, drone_next)

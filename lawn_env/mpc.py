@@ -34,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .dynamics import ACCELERATION, PredictionModel, command_mask, planning_period
+from .products import matmul
 from .qp import AxisPencils
 
 if TYPE_CHECKING:
@@ -43,6 +44,11 @@ __all__ = ["MPCSolution", "OutageAwareMPC", "SlotData", "BACKENDS", "DEFAULT_BAC
 
 #: The backend every caller uses unless told otherwise.
 DEFAULT_BACKEND = "compiled"
+
+
+def _qp_value(x: np.ndarray, p: np.ndarray, q: np.ndarray) -> float:
+    """``x'Px / 2 + q'x``, the objective at a fallback's answer, in one fixed order (:mod:`lawn_env.products`)."""
+    return float(0.5 * matmul(matmul(x, p), x) + matmul(q, x))
 
 
 @dataclass(frozen=True)
@@ -155,7 +161,7 @@ class _OsqpBackend:
             self._solvers.pop(k, None)
             return None, int(res.info.iter), 0.0
         x = np.asarray(res.x)
-        return x, int(res.info.iter), float(0.5 * x @ p @ x + q @ x)
+        return x, int(res.info.iter), _qp_value(x, p, q)
 
 
 class _QpsolversBackend:
@@ -183,7 +189,7 @@ class _QpsolversBackend:
         if x is None or not np.all(np.isfinite(x)):
             return None, 0, 0.0
         x = np.asarray(x)
-        return x, 0, float(0.5 * x @ p @ x + q @ x)
+        return x, 0, _qp_value(x, p, q)
 
 
 class _CompiledBackend:
@@ -342,7 +348,7 @@ class OutageAwareMPC:
         shape = (*lead, k)
         return SlotData(
             residual=r.reshape((*shape, -1)),
-            linear=(r @ self.model.ftq4.T).reshape((*shape, n)),  # F' Q4 r, so H = 2 psi (F' Q4 r)'
+            linear=matmul(r, self.model.ftq4.T).reshape((*shape, n)),  # F' Q4 r, so H = 2 psi (F' Q4 r)'
             constant=self.model.cost_to_go(r).reshape(shape),
             lower=lower.reshape((*shape, 2 * n)),
             upper=upper.reshape((*shape, 2 * n)),
@@ -482,7 +488,7 @@ class OutageAwareMPC:
                 continue
             x, its, _ = _reference_backend(name, self._constraint).solve(0, p, q, lower, upper)
             if x is not None:
-                return x, float(0.5 * x @ p @ x + q @ x), its, 1
+                return x, _qp_value(x, p, q), its, 1
         return np.zeros(self._n), 0.0, 0, 2
 
     def command_stakes(self, data: SlotData) -> np.ndarray:
@@ -543,7 +549,7 @@ class OutageAwareMPC:
         step = np.clip(played, np.take_along_axis(lost.lower, sums, -1), np.take_along_axis(lost.upper, sums, -1))
         flat = np.zeros((*first.shape, n))  # c
         np.put_along_axis(flat, cols, np.where((first < horizon)[..., None], step, 0.0), axis=-1)
-        shift = flat @ (0.5 * self.hessian(1.0))  # G c, G of psi = 1
+        shift = matmul(flat, 0.5 * self.hessian(1.0))  # G c, G of psi = 1
         constant = lost.constant + np.einsum("...b,...b->...", shift + 2.0 * lost.linear, flat)
         offset = np.cumsum(flat.reshape((*first.shape, horizon, 2)), axis=-2).reshape(flat.shape)  # c's running sums
         lower, upper = lost.lower.copy(), lost.upper.copy()

@@ -165,7 +165,13 @@ class Lemniscate(_Curve):
         local = np.stack([sx * cos, 0.5 * sy * sin2], axis=-1)
         d1 = np.stack([-sx * np.sin(theta), sy * np.cos(2 * theta)], axis=-1)
         d2 = np.stack([-sx * cos, -2 * sy * sin2], axis=-1)
-        return center + local @ rot_t, d1 @ rot_t, d2 @ rot_t
+        return center + _rotate(local, rot_t), _rotate(d1, rot_t), _rotate(d2, rot_t)
+
+
+def _rotate(v: np.ndarray, rot_t: np.ndarray) -> np.ndarray:
+    """``v @ rot_t`` per path for (P, N, 2) points and (P, 2, 2) rotations, as two products and one sum
+    (numpy's ``@`` hands it to BLAS, whose rounding depends on the CPU; :mod:`lawn_env.products`)."""
+    return v[..., 0:1] * rot_t[:, None, 0, :] + v[..., 1:2] * rot_t[:, None, 1, :]
 
 
 @dataclass(frozen=True)

@@ -76,6 +76,7 @@ from .dynamics import (
     prediction_matrices,
 )
 from .mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
+from .products import matmul
 from .qp import AxisPencils
 
 if TYPE_CHECKING:
@@ -181,12 +182,14 @@ class TailModel:
         a, b, q = self.a, self.b, self.q
         n = self.state_dim
         if not command:
-            return q + a.T @ p_next @ a, a.T, np.zeros((n, n)), q
+            return q + matmul(matmul(a.T, p_next), a), a.T, np.zeros((n, n)), q
         gain = loss_aware_gain(a, b, self.r, p_next)  # L_i
-        x = (a.T @ p_next @ b) @ gain  # X_i
-        p = q + a.T @ p_next @ a - psi * x
+        at_p = matmul(a.T, p_next)
+        x = matmul(matmul(at_p, b), gain)  # X_i
+        p = q + matmul(at_p, a) - psi * x
         weight = q + (1.0 - psi) * x
-        return 0.5 * (p + p.T), (a - psi * b @ gain).T, (1.0 - psi) * gain.T @ b.T, 0.5 * (weight + weight.T)
+        return (0.5 * (p + p.T), (a - psi * matmul(b, gain)).T, (1.0 - psi) * matmul(gain.T, b.T),
+                0.5 * (weight + weight.T))
 
     def terminal(self, index: int) -> np.ndarray:
         """The stationary cost-to-go at psi-bar = PSI_GRID[index], per slot phase (P, n, n): the modified
@@ -259,9 +262,9 @@ class TailModel:
         stages = self.stages(index, phase)
         q4 = linalg.block_diag(*stages.weight, stages.quad[-1])
         q5 = linalg.block_diag(*([self.r] * self.horizon))
-        ftq4 = self.f.T @ q4
+        ftq4 = matmul(self.f.T, q4)
         arrays = {"a_aug": self.a, "b_aug": self.b, "q1": self.q, "q2": self.r, "q3": stages.quad[-1], "c": self.c,
-                  "f": self.f, "q4": q4, "q5": q5, "ftq4f": ftq4 @ self.f, "ftq4": ftq4,
+                  "f": self.f, "q4": q4, "q5": q5, "ftq4f": matmul(ftq4, self.f), "ftq4": ftq4,
                   "increment_sum": increment_sum_matrix(self.horizon)}
         for arr in arrays.values():
             arr.setflags(write=False)
@@ -284,15 +287,16 @@ class TailModel:
         size = n * (horizon + 1)
         basis = np.eye(size).reshape(size, horizon + 1, n)  # every reference window of one unit entry
         h = np.empty(basis.shape)
-        g = basis[:, horizon] @ stages.quad[horizon]
+        g = matmul(basis[:, horizon], stages.quad[horizon])
         h[:, horizon] = g
         for i in range(horizon - 1, -1, -1):
-            weighted = basis[:, i] @ self.q
-            h[:, i] = weighted + g @ stages.push[i].T
-            g = weighted + g @ stages.carry[i].T
+            weighted = matmul(basis[:, i], self.q)
+            h[:, i] = weighted + matmul(g, stages.push[i].T)
+            g = weighted + matmul(g, stages.carry[i].T)
         hmat = h.reshape(size, size)
         c, f, q4 = model.c, model.f, model.q4
-        maps = _Maps(c.T @ q4 @ f, hmat @ f, c.T @ q4 @ c, c.T @ hmat.T, q4)
+        ctq4 = matmul(c.T, q4)
+        maps = _Maps(matmul(ctq4, f), matmul(hmat, f), matmul(ctq4, c), matmul(c.T, hmat.T), q4)
         for arr in maps:
             arr.setflags(write=False)
         return maps
@@ -437,9 +441,9 @@ class LossAwareTail:
         maps = self.model.maps(index, phase)
         rows = z.shape[0] * z.shape[1]
         zr, rr = z.reshape(rows, -1), ref.reshape(rows, -1)
-        linear = (zr @ maps.zf - rr @ maps.rf).reshape((*z.shape[:2], -1))
-        constant = (((zr @ maps.zz) * zr).sum(-1) - 2.0 * ((zr @ maps.zr) * rr).sum(-1)
-                    + ((rr @ maps.rr) * rr).sum(-1))
+        linear = (matmul(zr, maps.zf) - matmul(rr, maps.rf)).reshape((*z.shape[:2], -1))
+        constant = ((matmul(zr, maps.zz) * zr).sum(-1) - 2.0 * (matmul(zr, maps.zr) * rr).sum(-1)
+                    + (matmul(rr, maps.rr) * rr).sum(-1))
         data = mpc.objective_data(z, linear, constant.reshape(z.shape[:2]), slots if slots.size > 1 else slots[0])
         if not self.warm:
             mpc.reset()
