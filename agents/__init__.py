@@ -1,11 +1,13 @@
 """Policies that drive the lawn environments: the delivery-value expert ``dv-mpc``, the paper's
 AO-MPC expert and its exact solution ``rg-mpc``, the paper's baselines, a
 scripted heuristic, and wrappers for learned policies. ``make_policy(name, config)`` builds any
-of them; ``POLICIES`` is the registry; ``rollout(env, policy, seed)`` runs one episode."""
+of them (``trained_config(name)``: a learned agent's training scenario); ``POLICIES`` is the
+registry; ``rollout(env, policy, seed)`` runs one episode."""
 
 from .anchors import ANCHORS, AnchorPolicy, anchor_name
 from .ao import AOSettings, AOSolver, expected_cost
 from .base import Planner
+from .learned import trained_config
 from .policies import BENCHMARK_POLICIES, PAPER_POLICIES, POLICIES, Policy, make_policy, policy_names
 from .problem import Plan
 from .reduced import DeliverySettings, DeliveryValuePlanner, GlobalPlanner, ReducedGradientPlanner, ReducedSettings
@@ -31,6 +33,7 @@ __all__ = [
     "DeliverySettings",
     "GlobalPlanner",
     "make_policy",
+    "trained_config",
     "policy_names",
     "HeuristicPolicy",
     "rollout",

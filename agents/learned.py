@@ -31,7 +31,7 @@ from .errors import MissingExtra
 from .runs import RL_EXTRA, RunDir, algorithm_class, policy_network_class, read_json, read_run
 
 __all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "marl_policy", "LOADERS", "learned_name_forms", "ZOO_DIR",
-           "zoo_agents", "export_agent"]
+           "zoo_agents", "export_agent", "check_scenario", "trained_config", "zoo_agents_for", "GUARDED_SETTINGS"]
 
 #: Shipped agents: one folder per agent (``lawn zoo`` lists them).
 ZOO_DIR = Path(__file__).parent / "zoo"
@@ -144,13 +144,11 @@ class SB3Policy(InterfacePolicy):
     env_ids = (JOINT, COMM)
 
     def __init__(self, network: Any, config: ScenarioConfig, env_id: str, interface: InterfaceLike = None,
-                 normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "sb3",
-                 config_given: bool = True):
+                 normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "sb3"):
         super().__init__(config, env_id, interface, seed)
         self.network = network
         self.normalizer = normalizer
         self.name = label
-        self.config_given = config_given
         self.entities = None
         self.residual: Any = None  # agents.residual.ResidualActions: with_residual
         #: the residual scheme the agent's run records ({"anchor": NAME, "scale": s, "moves": [...]}; None: none)
@@ -162,7 +160,8 @@ class SB3Policy(InterfacePolicy):
             seen = getattr(network.observation_space, "spaces", {})
             if {k: v for k, v in seen.items() if k != "me"} != self.entities.observation_space.spaces:
                 raise ValueError(f"{label} expects observations {network.observation_space}; this scenario gives "
-                                 f"{self.entities.observation_space}: evaluate it with its training horizon")
+                                 f"{self.entities.observation_space}: evaluate it on the scenario it was trained for "
+                                 "(agents.trained_config)")
         elif tuple(network.observation_space.shape) != (self.layout.size,):
             raise ValueError(f"{label} expects observations of shape {tuple(network.observation_space.shape)}; this "
                              f"scenario gives ({self.layout.size},): evaluate it with its training config")
@@ -178,10 +177,11 @@ class SB3Policy(InterfacePolicy):
         if env_id not in (None, trained_env):
             raise ValueError(f"{path} was trained on {trained_env}, not {env_id}")
         trained = run.load_config()
-        check_law(f"sb3:{path}", trained_env, trained, config if config is not None else trained, run.interface)
-        return cls(_load_model(run), config if config is not None else trained, trained_env, run.interface,
-                   ObsNormalizer.load(_selected(path)[1]), seed, label=f"sb3:{path}",
-                   config_given=config is not None)._recorded(run.record.get("residual"))
+        played = config if config is not None else trained
+        check_scenario(f"sb3:{path}", trained_env, trained, played, run.interface)
+        policy = cls(_load_model(run), played, trained_env, run.interface, ObsNormalizer.load(_selected(path)[1]), seed,
+                     label=f"sb3:{path}")
+        return policy._recorded(run.record.get("residual"))
 
     def with_residual(self, actions: Any) -> SB3Policy:
         """Act by the residual scheme (an :class:`agents.residual.ResidualActions` around its anchor:
@@ -231,16 +231,70 @@ class SB3Policy(InterfacePolicy):
         return self.to_v0(action, raw)
 
 
-def check_law(label: str, env_id: str, trained: ScenarioConfig, config: ScenarioConfig,
-              interface: InterfaceLike = None) -> None:
-    """An agent acts under the control law it was trained with: on Comm the env's AGVs apply it (its
+#: The settings a network is tied to by its training: the AGVs' control law (where the agent acts
+#: through it), the actuator (the buffer in its observations and actions), the horizon (its reference
+#: window) and, for a network that is not a fleet network (the entity layout), the fleet size.
+GUARDED_SETTINGS = ("control.law", "control.actuator", "control.horizon", "num_agvs")
+
+
+def check_scenario(label: str, env_id: str, trained: ScenarioConfig, config: ScenarioConfig,
+                   interface: InterfaceLike = None) -> None:
+    """Refuse to build an agent for a scenario that differs from its training scenario in a setting of
+    :data:`GUARDED_SETTINGS`: one error naming the setting, the value it was trained with and this
+    scenario's, whichever entry point builds the agent (``make_policy``, ``compare``, the CLI, the
+    protocols). The law counts where the agent acts through it: on Comm the env's AGVs apply it (its
     power and drone decisions assume their increments), on Joint an anchored interface's MPC increment
-    anchor plans by it. Another law is an error naming both."""
+    anchor plans by it. A fleet network acts at any K up to ``MAX_AGVS``."""
     iface = resolve_interface(interface)
+    fleet = iface.layout == "entities"
     uses_law = env_id == COMM or (iface.action_scheme == "anchored" and iface.increment_anchor == "mpc")
-    if uses_law and config.control.law != trained.control.law:
-        raise ValueError(f"{label} was trained on {env_id} with control.law={trained.control.law!r}; this scenario "
-                         f"has control.law={config.control.law!r} (pass --set control.law={trained.control.law})")
+    pairs = [("control.law", trained.control.law, config.control.law)] if uses_law else []
+    pairs += [("control.actuator", trained.control.actuator, config.control.actuator),
+              ("control.horizon", trained.control.horizon, config.control.horizon)]
+    if not fleet:
+        pairs.append(("num_agvs", trained.num_agvs, config.num_agvs))
+    for setting, was, now in pairs:
+        if was != now:
+            raise ValueError(f"{label} was trained on {env_id} with {setting}={was!r} and acts only there; this "
+                             f"scenario has {setting}={now!r} (command line: --set {setting}={was}; Python: "
+                             f"config=trained_config({label!r}) or a config with {setting}={was!r})")
+    if fleet and config.num_agvs > MAX_AGVS:
+        raise ValueError(f"{label} is a fleet network: it acts at K <= {MAX_AGVS}; this scenario has "
+                         f"num_agvs={config.num_agvs}")
+
+
+def zoo_agents_for(config: ScenarioConfig) -> list[str]:
+    """The shipped agents (``zoo:NAME``) that act on ``config``: those :func:`check_scenario` lets
+    through (the learned protocol's and the suite's agents on the default scenario; ``zoo:dv-comm`` and
+    ``zoo:dv-joint``, trained under the delivery law, are compared on their own scenarios)."""
+    names = []
+    for name, record in zoo_agents().items():
+        try:
+            check_scenario(f"zoo:{name}", record["env"], ScenarioConfig.from_dict(record["config"]), config,
+                           record["interface"])
+        except ValueError:
+            continue
+        names.append(f"zoo:{name}")
+    return names
+
+
+def trained_config(name: str) -> ScenarioConfig:
+    """The scenario a learned agent (``zoo:NAME``, ``sb3:DIR``, ``bc:DIR``, ``marl:DIR``, ``zero:AGENT``)
+    was trained on: ``make_policy(name, config=trained_config(name))`` builds it there, and
+    ``gym.make(env_id, config=trained_config(name))`` is its env."""
+    prefix, _, rest = name.partition(":")
+    if prefix == "zero":
+        return trained_config(rest)
+    if prefix == "zoo":
+        agents = zoo_agents()
+        if rest not in agents:
+            raise ValueError(f"unknown zoo agent {rest!r}; shipped: {', '.join(agents) or 'none'} (lawn zoo lists "
+                             "them)")
+        return ScenarioConfig.from_dict(agents[rest]["config"])
+    if prefix in ("sb3", "bc", "marl"):
+        return read_run(rest).load_config()
+    raise ValueError(f"trained_config({name!r}): not a learned agent; valid forms: zoo:NAME, sb3:DIR, bc:DIR, "
+                     "marl:DIR, zero:AGENT")
 
 
 def _predictor(network: Any) -> Any:
@@ -266,13 +320,11 @@ class MARLPolicy(InterfacePolicy):
     env_ids = (JOINT,)
 
     def __init__(self, network: Any, config: ScenarioConfig, interface: InterfaceLike = None,
-                 normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "marl",
-                 config_given: bool = True):
+                 normalizer: ObsNormalizer | None = None, seed: int | None = None, label: str = "marl"):
         super().__init__(config, JOINT, interface, seed)
         self.network = network
         self.normalizer = normalizer
         self.name = label
-        self.config_given = config_given
         k = self.config.num_agvs
         self.n_agents = k + 1
         self.obs_width = network.observation_space.shape[0] - self.n_agents
@@ -289,9 +341,10 @@ class MARLPolicy(InterfacePolicy):
             raise ValueError(f"{path} was trained on {run.env}, not the multi-agent env; use sb3:{path}")
         if env_id not in (None, JOINT):
             raise ValueError(f"{path} is a multi-agent policy; it drives {JOINT}, not {env_id}")
-        return marl_policy(_load_model(run), config if config is not None else run.load_config(), run.interface,
-                           ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}",
-                           config_given=config is not None)
+        trained = run.load_config()
+        check_scenario(f"marl:{path}", run.env, trained, config if config is not None else trained, run.interface)
+        return marl_policy(_load_model(run), config if config is not None else trained, run.interface,
+                           ObsNormalizer.load(_selected(path)[1]), seed, label=f"marl:{path}")
 
     def observation_hint(self, shape: tuple[int, ...]) -> str:
         return _built_for(self, shape, False)
@@ -331,8 +384,7 @@ def _built_for(policy: Any, shape: tuple[int, ...], fleet: bool) -> str:
     if seen is None:  # not an observation of another K: the shape alone says what is wrong
         return ""
     label, k = policy.name, policy.config.num_agvs
-    source = "the config it was given" if policy.config_given else "its training config"
-    head = f"{label} was built for K = {k} ({source}) and this observation is of K = {seen}"
+    head = f"{label} was built for K = {k} and this observation is of K = {seen}"
     if fleet and seen > MAX_AGVS:
         return f"{head}; a fleet network acts at K <= {MAX_AGVS} only"
     if fleet:
@@ -342,7 +394,7 @@ def _built_for(policy: Any, shape: tuple[int, ...], fleet: bool) -> str:
 
 
 def marl_policy(network: Any, config: ScenarioConfig, interface: InterfaceLike, normalizer: ObsNormalizer | None,
-                seed: int | None, label: str, config_given: bool = True) -> InterfacePolicy:
+                seed: int | None, label: str) -> InterfacePolicy:
     """A multi-agent network on ``lawn/Joint-v1``: :class:`MARLPolicy`, or for the entity layout
     (a fleet network, which computes every agent's row at once) :class:`SB3Policy`."""
     if resolve_interface(interface).layout == "entities":
@@ -352,8 +404,8 @@ def marl_policy(network: Any, config: ScenarioConfig, interface: InterfaceLike, 
             raise ValueError(f"{label}: a multi-agent network of the entity layout drives {JOINT} when it is a "
                              f"FleetPolicy (lawn train --hp policy=FleetPolicy), got "
                              f"{type(getattr(network, 'policy', network)).__name__}")
-        return SB3Policy(network, config, JOINT, interface, normalizer, seed, label=label, config_given=config_given)
-    return MARLPolicy(network, config, interface, normalizer, seed, label=label, config_given=config_given)
+        return SB3Policy(network, config, JOINT, interface, normalizer, seed, label=label)
+    return MARLPolicy(network, config, interface, normalizer, seed, label=label)
 
 
 # ---------------------------------------------------------------------- shipped agents (zoo)
@@ -396,17 +448,16 @@ def _load_zoo(name: str, config: ScenarioConfig | None = None, env_id: str | Non
                          f"zoo agent's {record['algo']} network")
     trained = ScenarioConfig.from_dict(record["config"])
     cfg = config if config is not None else trained
-    check_law(f"zoo:{name}", record["env"], trained, cfg, record["interface"])
+    check_scenario(f"zoo:{name}", record["env"], trained, cfg, record["interface"])
     normalizer = ObsNormalizer.load(ZOO_DIR / name / "normalizer.npz")
     if record["env"] == PARALLEL_ENV_ID:
         if env_id not in (None, JOINT):
             raise ValueError(f"zoo:{name} is a multi-agent policy; it drives {JOINT}, not {env_id}")
-        return marl_policy(network, cfg, record["interface"], normalizer, seed, label=f"zoo:{name}",
-                           config_given=config is not None)
+        return marl_policy(network, cfg, record["interface"], normalizer, seed, label=f"zoo:{name}")
     if env_id not in (None, record["env"]):
         raise ValueError(f"zoo:{name} was trained on {record['env']}, not {env_id}")
-    return SB3Policy(network, cfg, record["env"], record["interface"], normalizer, seed, label=f"zoo:{name}",
-                     config_given=config is not None)._recorded(record.get("residual"))
+    policy = SB3Policy(network, cfg, record["env"], record["interface"], normalizer, seed, label=f"zoo:{name}")
+    return policy._recorded(record.get("residual"))
 
 
 def _no_settings(loader: Callable[..., Policy]) -> Callable[..., Policy]:

@@ -343,9 +343,13 @@ def is_policy_name(name: str) -> bool:
 
 def make_policy(name: str, config: ConfigLike = None, env_id: str | None = None,
                 seed: int | None = None, **kwargs: Any) -> Policy:
-    """Build a registered policy for ``config`` driving ``env_id``.
+    """Build a registered policy for ``config`` (a config, a preset name, a dict; default: the default
+    scenario, ``gym.make(env_id)``'s) driving ``env_id``.
 
-    ``env_id`` defaults to ``lawn/Joint-v1`` (for trained agents: the env they were trained on).
+    ``env_id`` defaults to ``lawn/Joint-v1`` (for trained agents: the env they were trained on). A
+    learned agent is built for ``config`` too, and refused where ``config`` differs from its training
+    scenario in a setting its network is tied to (:func:`agents.learned.check_scenario`: the law, the
+    actuator, the horizon, a fixed fleet size); ``config=trained_config(name)`` builds it on its own.
     Unknown names raise ``ValueError`` listing the valid ones; unknown or invalid settings raise
     ``ValueError`` naming the setting.
     """
@@ -353,9 +357,9 @@ def make_policy(name: str, config: ConfigLike = None, env_id: str | None = None,
         prefix, path = name.split(":", 1)
         if prefix not in LOADERS:
             raise ValueError(f"unknown policy prefix {prefix!r} in {name!r}; valid: {learned_name_forms()}")
-        # no config: the agent's own training config (DIR/config.json)
-        policy = LOADERS[prefix](path, resolve_config(config) if config is not None else None,
-                                 env_id=env_id, seed=seed, **kwargs)
+        # no config: the default scenario, as for every policy; an agent trained elsewhere is refused there
+        # (agents.learned.check_scenario), and config=trained_config(name) builds it on its own scenario
+        policy = LOADERS[prefix](path, resolve_config(config), env_id=env_id, seed=seed, **kwargs)
         return attach_residual(policy, getattr(policy, "residual_settings", None))
     env_id = env_id or JOINT
     try:

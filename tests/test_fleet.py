@@ -144,7 +144,7 @@ def test_a_fleet_network_acts_on_the_unmodified_v0_envs_of_any_k(env_id):
             np.testing.assert_allclose(decided.power_w, expected.power_w, rtol=1e-5, atol=1e-9)
             obs, *_ = v0.step(action)
             twin_obs, *_ = twin.step(np.clip(entity, -1, 1))
-    with pytest.raises(ValueError, match="training horizon"):
+    with pytest.raises(ValueError, match=r"evaluate it on the scenario it was trained for \(agents.trained_config\)"):
         SB3Policy(model, presets.get("default").override(control={"horizon": 5}), env_id, interface=iface)
 
 
@@ -433,8 +433,8 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
 
     assert "zoo:dv-joint" not in fleet_agents()  # the fleet-size table is for the default-scenario networks
     with pytest.raises(ValueError, match="control.law='delivery'.*control.law='paper'"):
-        learned.check_law("zoo:x", "lawn/Comm-v1", presets.get("steady").override({"control.law": "delivery"}),
-                          presets.get("steady"))
+        learned.check_scenario("zoo:x", "lawn/Comm-v1", presets.get("steady").override({"control.law": "delivery"}),
+                               presets.get("steady"))
 
 
 def test_lawn_benchmark_protocol_fleet_plays_named_networks_on_chosen_sizes(tmp_path, capsys):

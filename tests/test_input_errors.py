@@ -113,18 +113,21 @@ def test_learned_policies_check_the_observation_shape_like_the_planners():
     env = gym.make("lawn/Joint-v1", num_agvs=3)
     obs, _ = env.reset(seed=0)
     with pytest.raises(ValueError, match=r"^observation has shape \(252,\); expected \(335,\): zoo:bc-joint was built "
-                                         r"for K = 4 \(its training config\) and this observation is of K = 3"):
+                                         r"for K = 4 and this observation is of K = 3"):
         make_policy("zoo:bc-joint").act(obs)
 
 
 def test_a_fleet_agent_acts_at_the_env_k_given_its_config_and_says_how_otherwise():
-    """zoo:ppo-marl-fleet-k16 (trained at K = 16) on lawn/Joint-v1 (K = 4): with the env's config it
-    acts there; built from its own config it raises naming K = 16 and the keyword to pass."""
+    """zoo:ppo-marl-fleet-k16 (trained at K = 16) on lawn/Joint-v1 (K = 4): with the env's config (or
+    none: the default scenario) it acts there; built on its training scenario it raises naming K = 16
+    and the keyword to pass."""
     pytest.importorskip("stable_baselines3")
+    from agents import trained_config
+
     env = gym.make("lawn/Joint-v1")
     obs, _ = env.reset(seed=0)
     with pytest.raises(ValueError) as err:
-        make_policy("zoo:ppo-marl-fleet-k16").act(obs)
+        make_policy("zoo:ppo-marl-fleet-k16", trained_config("zoo:ppo-marl-fleet-k16")).act(obs)
     text = str(err.value)
     assert text.startswith("observation has shape (335,); expected (1331,): "), text
     assert "built for K = 16" in text and "this observation is of K = 4" in text, text
@@ -191,3 +194,40 @@ def test_a_batched_action_error_counts_the_bad_entries_across_envs():
 
 def test_config_error_is_exported():
     assert lawn_env.ConfigError is ConfigError and issubclass(UnknownConfigKeyError, ConfigError)
+
+
+# ---------------------------------------------------------------------- 5. agents trained elsewhere
+@pytest.mark.parametrize(("agent", "env_id", "settings", "needle"), [
+    ("zoo:dv-comm", "lawn/Comm-v1", {}, "with control.law='delivery-certainty-equivalent' and acts only there; "
+                                        "this scenario has control.law='paper'"),
+    ("zoo:fleet-joint", "lawn/Joint-v1", {"control.actuator": "buffer"},
+     "with control.actuator='hold' and acts only there; this scenario has control.actuator='buffer'"),
+    ("zoo:bc-joint", "lawn/Joint-v1", {"control.horizon": 6},
+     "with control.horizon=10 and acts only there; this scenario has control.horizon=6"),
+    ("zoo:bc-joint", "lawn/Joint-v1", {"num_agvs": 3}, "with num_agvs=4 and acts only there; this scenario has num_agvs=3"),
+])
+def test_make_policy_compare_and_the_cli_refuse_an_agent_trained_elsewhere_alike(agent, env_id, settings, needle,
+                                                                                 tmp_path, capsys):
+    """The guard of agents.learned.check_scenario, whatever the entry point: the same message naming the
+    setting, the value the agent was trained with and the scenario's; make_policy without a config is
+    the default scenario, as for every policy (gym.make(env_id)'s)."""
+    pytest.importorskip("stable_baselines3")
+    from agents import trained_config
+    from lawn_env import ScenarioConfig
+    from training.cli import main
+    from training.results.api import compare
+
+    config = ScenarioConfig().override(settings) if settings else None
+    with pytest.raises(ValueError) as made:
+        make_policy(agent, config, env_id=env_id)
+    message = str(made.value)
+    assert message.startswith(f"{agent} was trained on {env_id} ") and needle in message, message
+    with pytest.raises(ValueError) as compared:
+        compare([agent], config, seeds=[0], env=env_id)
+    assert str(compared.value) == message
+    argv = ["evaluate", "--policy", agent, "--env", env_id, "--episodes", "1", "--quiet", "--out",
+            str(tmp_path / "r.csv"), *[w for k, v in settings.items() for w in ("--set", f"{k}={v}")]]
+    assert main(argv) == 2  # bad input
+    assert capsys.readouterr().err.strip() == f"lawn evaluate: error: {message}"
+    assert not (tmp_path / "r.csv").exists()
+    make_policy(agent, trained_config(agent), env_id=env_id)  # on its own scenario it is made

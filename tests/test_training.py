@@ -294,10 +294,12 @@ def test_exported_agent_loads_as_zoo_name(tmp_path, monkeypatch):
 def test_shipped_agents_load_and_act(name):
     from agents.learned import zoo_agents
 
+    from agents import trained_config
+
     record = zoo_agents()[name]
-    policy = make_policy(f"zoo:{name}")
+    policy = make_policy(f"zoo:{name}", trained_config(f"zoo:{name}"))  # its training scenario (K = 16, 64, a law)
     assert policy.env_id == record["evaluated_on"]
-    env = gym.make(policy.env_id, config=policy.config)  # its training scenario (a multi-agent fleet run: K = 16, 64)
+    env = gym.make(policy.env_id, config=policy.config)
     obs, _ = env.reset(seed=0)
     policy.reset(0)
     for _ in range(5):

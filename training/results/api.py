@@ -22,7 +22,7 @@ from agents.base import JOINT
 from lawn_env.presets import ConfigLike, resolve_config
 
 from .episode import TRANSIENT_SLOTS, EpisodeResult, EpisodeSpec
-from .run import evaluate
+from .run import build_policy, evaluate
 from .stats import Geometric, paired_geometric
 
 __all__ = ["EpisodeResult", "EpisodeSpec", "Comparison", "compare"]
@@ -64,6 +64,8 @@ def compare(policies: Sequence[str], config: ConfigLike = None, seeds: Iterable[
     if unknown:
         raise ValueError(f"settings for {unknown}, which are not among the policies {names}")
     cfg, seed_list = resolve_config(config), [int(s) for s in seeds]
+    for p in names:  # a bad name or setting, or an agent trained elsewhere, fails before any episode
+        build_policy(p, cfg, env, (settings or {}).get(p))
     specs = [EpisodeSpec(p, env, cfg, s, dict((settings or {}).get(p, {}))) for p in names for s in seed_list]
     results = evaluate(specs, workers=workers, progress=progress, desc="compare", transient_slots=TRANSIENT_SLOTS)
     out = Comparison(results, reference, {})

@@ -4,9 +4,8 @@ statistics; :func:`execute` plays any protocol the same way (:mod:`.run`), reduc
 (:func:`.rows.reduce`), makes its tables (:data:`TABLES`, over :mod:`.report`) and writes them. A new
 protocol is a declaration:
 
-* **Paper protocol** (:func:`paper_protocol`, ``lawn benchmark``; :func:`run_benchmark`): the
-  policies on the same seeds of one scenario, compared with the first per seed and scored (every row
-  of the README's table replays recorded episodes, :mod:`.digests`).
+* **Paper protocol** (:func:`paper_protocol`, ``lawn benchmark``; :func:`run_benchmark`): the policies on the
+  same seeds of one scenario, compared with the first per seed and scored (:mod:`.digests` replays the README's).
 * **Learned protocol** (:func:`learned_protocol`, ``--protocol learned``, ``lawn zoo build``): every
   agent on the test seeds beside the best expert, ``epa`` and the zero action of the interface it
   acts through.
@@ -14,9 +13,9 @@ protocol is a declaration:
   experts, baselines, shipped agents and the reference rows on every preset of
   :data:`lawn_env.presets.SUITE`; an agent that cannot act on a task (a network built for K = 4) is
   reported as such.
-* **Fleet sizes** (:func:`fleet_protocol`, docs/LEARNED.md): the networks that read the entity layout
-  on K = 3..64 AGVs beside the best expert and its noise floor, with their targets
-  (:data:`FLEET_TARGETS`). The distilled agents' protocol is declared by :mod:`training.distil`.
+* **Fleet sizes** (:func:`fleet_protocol`, docs/LEARNED.md): the networks that read the entity layout on
+  K = 3..64 AGVs beside the best expert and its noise floor, with their targets (:data:`FLEET_TARGETS`).
+  The distilled agents' protocol is declared by :mod:`training.distil`.
 """
 
 from __future__ import annotations
@@ -31,7 +30,7 @@ from typing import Any, NamedTuple
 from agents import make_policy
 from agents.base import JOINT
 from agents.errors import MissingExtra
-from agents.learned import zoo_agents
+from agents.learned import zoo_agents, zoo_agents_for
 from lawn_env import ScenarioConfig, presets
 
 from ..pages import block_names, replace_block
@@ -265,24 +264,26 @@ def run_benchmark(policies: Sequence[str], env_id: str, config: ScenarioConfig, 
 # ---------------------------------------------------------------------- the learned protocol
 def learned_protocol(agents: Sequence[str], episodes: int = TEST_EPISODES, config: ScenarioConfig | None = None
                      ) -> Protocol:
-    """Every agent of ``agents`` (default: every shipped one) on test seeds 0..episodes-1 beside the best
-    expert, ``epa`` and its own anchor (``summary.md``); a bad name or a mismatched agent fails here."""
+    """Every agent of ``agents`` (default: the shipped ones that act on ``config``, ``zoo_agents_for``) on test
+    seeds 0..episodes-1 beside the best expert, ``epa`` and its own anchor; a bad or mismatched agent fails here."""
     config = config or ScenarioConfig()
-    entries = learned_entries(list(agents) or [f"zoo:{n}" for n in zoo_agents()])
-    for policy, env, _ in entries:
-        make_policy(policy, config, env_id=env)
+    entries = learned_entries(list(agents) or zoo_agents_for(config))
+    for policy, env, _ in entries:  # an agent trained elsewhere: agents.learned.check_scenario's refusal
+        try:
+            make_policy(policy, config, env_id=env)
+        except ValueError as exc:  # noqa: PERF203 - once per agent, before any episode
+            raise ValueError(f"{exc}; the learned protocol plays one scenario, the default (lawn benchmark --env "
+                             f"{env} --policies {policy} with that setting plays the agent on its own)") from None
     return Protocol("learned protocol", (Batch("default", config, tuple(entries), tuple(range(episodes))),),
                     {"summary.md": "learned"})
 
 
 # ---------------------------------------------------------------------- the task suite
 def suite_policies() -> list[str]:
-    """The experts, baselines and anchors of :data:`SUITE_POLICIES` (``anchor:hover`` left out: its
-    cost is thousands of times the experts') and every shipped agent that acts under the paper's
-    control law (not one trained with the delivery law, ``zoo:dv-joint`` and ``zoo:dv-comm``, compared
-    on their own tasks in docs/LEARNED.md)."""
-    return list(SUITE_POLICIES) + [f"zoo:{n}" for n, rec in zoo_agents().items()
-                                   if rec.get("config", {}).get("control", {}).get("law", "paper") == "paper"]
+    """The experts, baselines and anchors of :data:`SUITE_POLICIES` (``anchor:hover`` left out: its cost is
+    thousands of times the experts') and every shipped agent that acts on the default scenario (not
+    ``zoo:dv-joint`` and ``zoo:dv-comm``, trained under the delivery law: docs/LEARNED.md compares them)."""
+    return list(SUITE_POLICIES) + zoo_agents_for(ScenarioConfig())
 
 
 def _applicable(policy: str, env: str, config: ScenarioConfig) -> str | None:
