@@ -3,8 +3,8 @@
 # The blocks' markers name the command and the table file that fill them (training/pages.py); this
 # runs `python -m training.pages refresh`, each distinct command once, one at a time, then the
 # episode animations (lawn render). --only takes block names or groups (figures benchmark gap dv
-# speed throughput parallel qp fleet learned suite) and render; --train retrains the agents first
-# (scripts/train_agents.sh: about 100 min on 2 cores). Generated data goes to runs/ (not committed).
+# speed throughput parallel qp fleet learned suite reference) and render; --train retrains the agents first
+# (scripts/train_agents.sh; each run's wall time is in docs/LEARNED.md). Generated data goes to runs/ (not committed).
 #   bash scripts/refresh_docs.sh [--train] [--only NAME ...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -31,9 +31,9 @@ fi
 if [ ${#only[@]} -eq 0 ] || [[ " ${only[*]} " == *" render "* ]]; then
   lawn=.venv/bin/lawn
   mkdir -p docs/figures/episodes
-  "$lawn" render --policy rg-mpc --env lawn/Joint-v1 --seed 0 --every 2 --out docs/figures/episodes/rg-mpc.gif
-  "$lawn" render --policy zoo:ppo-comm --env lawn/Comm-v1 --seed 0 --every 2 --out docs/figures/episodes/zoo-comm.gif
-  "$lawn" render --policy rg-mpc --env lawn/Joint-v1 --preset disturbed --seed 0 --every 2 \
+  "$lawn" render --policy rg-mpc --env lawn/Joint-v1 --seed 0 --every 2 --overwrite --out docs/figures/episodes/rg-mpc.gif
+  "$lawn" render --policy zoo:ppo-comm --env lawn/Comm-v1 --seed 0 --every 2 --overwrite --out docs/figures/episodes/zoo-comm.gif
+  "$lawn" render --policy rg-mpc --env lawn/Joint-v1 --preset disturbed --seed 0 --every 2 --overwrite \
     --out docs/figures/episodes/rg-mpc-disturbed.gif
 fi
 echo "refresh_docs: done; review with git diff README.md docs/"

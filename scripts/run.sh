@@ -3,4 +3,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh core
-exec .venv/bin/lawn benchmark --episodes 20 --seed 0 --out runs/benchmark "$@"
+exec .venv/bin/lawn benchmark --episodes 20 --seed 0 --out runs/benchmark --overwrite "$@"  # the main job owns runs/benchmark

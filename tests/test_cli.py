@@ -136,7 +136,7 @@ def test_gap_command_writes_tables_and_figures(tmp_path, capsys):
     assert "| ao-mpc | 2 |" in table and "| rg-mpc | 2 |" in table
     printed = capsys.readouterr().out
     assert "slot 2: after iteration 1" in printed
-    assert main(args[:-2] + ["--global-arg", "bogus=1"]) == 2
+    assert main(args[:-2] + ["--global-arg", "bogus=1", "--overwrite"]) == 2
     assert "bogus" in capsys.readouterr().err
 
 
@@ -279,7 +279,7 @@ def test_one_episode_commands_say_so_and_render_is_quiet(tmp_path, monkeypatch):
     monkeypatch.setattr(training.cli.render, "render_episode",
                         lambda *a, **k: calls.append(k["progress"]) or real(*a, **k))
     out = tmp_path / "e.gif"
-    for flags in (["--quiet"], []):
+    for flags in (["--quiet"], ["--overwrite"]):
         assert main(["render", "--policy", "epa", "--set", "num_slots=4", *flags, "--out", str(out)]) == 0
     assert calls == [False, True] and out.stat().st_size > 0
 
@@ -346,6 +346,90 @@ def test_evaluate_without_out_writes_under_runs_evaluate(tmp_path, monkeypatch, 
     assert (tmp_path / "runs" / "evaluate" / "anchor_hover.csv").is_file()
     assert not (tmp_path / "runs" / "benchmark").exists()
     assert "wrote 1 row to runs/evaluate/anchor_hover.csv" in capsys.readouterr().out
-    (tmp_path / "runs" / "evaluate" / "epa.csv").mkdir()  # the default path checked before any episode
-    assert main(["evaluate", "--policy", "epa", "--episodes", "1", "--no-score", "--quiet"]) == 2
-    assert "runs/evaluate/epa.csv" in capsys.readouterr().err
+    (tmp_path / "runs" / "evaluate" / "epa.csv").mkdir()  # something in the way: the next free name, said
+    assert main(["evaluate", "--policy", "epa", "--episodes", "1", "--no-score", "--quiet"]) == 0
+    assert "runs/evaluate/epa.csv holds an earlier run's results; writing runs/evaluate/epa-2.csv" in \
+        capsys.readouterr().out
+    assert (tmp_path / "runs" / "evaluate" / "epa-2.csv").is_file()
+
+
+# ---------------------------------------------------------------------- no result overwritten in silence
+SHORT = ["--set", "num_slots=5"]
+WRITERS = {  # command -> (its arguments without --out, the --out it is given: a file or a folder)
+    "evaluate": (["evaluate", "--policy", "epa", "--episodes", "1", "--no-score", "--workers", "1", "--quiet", *SHORT],
+                 "rows.csv"),
+    "benchmark": (["benchmark", "--policies", "epa", "--episodes", "1", "--workers", "1", "--quiet", *SHORT], "bm"),
+    "render": (["render", "--policy", "epa", "--quiet", "--set", "num_slots=3"], "episode.gif"),
+    "demo": (["demo", *SHORT], "demo"),
+    "gap": (["gap", "--policies", "rg-mpc", "--driver", "rg-mpc", "--episodes", "1", "--every", "4", "--set",
+             "num_slots=4", "--convergence-slots", "1", "--quiet", "--workers", "1", "--global-arg", "psi_points=21",
+             "--global-arg", "drone_spacing_m=5", "--global-arg", "power_levels=20"], "gap"),
+}
+
+
+def _contents(path):
+    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    return {str(p): p.read_bytes() for p in files}
+
+
+@pytest.mark.parametrize("command", list(WRITERS))
+def test_an_out_holding_results_is_refused_unless_overwrite(command, tmp_path, capsys):
+    args, name = WRITERS[command]
+    out = tmp_path / name
+    assert main([*args, "--out", str(out)]) == 0
+    before = _contents(out)
+    capsys.readouterr()
+    assert main([*args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"lawn {command}: error: --out {out} holds the results of an earlier run: pass --overwrite to "
+                   "replace them, or give another --out"), err
+    assert _contents(out) == before  # nothing written, nothing touched
+    assert main([*args, "--out", str(out), "--overwrite"]) == 0
+
+
+@pytest.mark.parametrize(("command", "default"), [("evaluate", "runs/evaluate/epa.csv"),
+                                                  ("benchmark", "runs/benchmark-paper"), ("demo", "runs/demo"),
+                                                  ("gap", "runs/gap")])
+def test_a_default_out_holding_results_becomes_a_new_numbered_path(command, default, tmp_path, monkeypatch, capsys):
+    """Without --out a command writes its default path, or where that holds an earlier run's results
+    the first free NAME-2, NAME-3, ... (said); the earlier results stay as they were."""
+    monkeypatch.chdir(tmp_path)
+    args, _ = WRITERS[command]
+    assert main(args) == 0
+    first = tmp_path / default
+    before = _contents(first)
+    second = first.with_name(f"{first.stem}-2{first.suffix}")
+    capsys.readouterr()
+    assert main(args) == 0
+    assert (f"lawn {command}: {default} holds an earlier run's results; writing {second.relative_to(tmp_path)}"
+            in capsys.readouterr().out)
+    assert _contents(first) == before and second.exists()
+    assert main([*args, "--overwrite"]) == 0 and not first.with_name(f"{first.stem}-3{first.suffix}").exists()
+
+
+def test_benchmark_never_writes_the_main_jobs_folder_by_default(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(WRITERS["benchmark"][0]) == 0
+    assert (tmp_path / "runs" / "benchmark-paper" / "summary.md").exists()
+    assert not (tmp_path / "runs" / "benchmark").exists()
+
+
+def test_figures_resume_their_own_mode_and_refuse_the_other(tmp_path, capsys):
+    """lawn figures keeps its tables and redraws from them on a rerun of its mode (mode.json); a
+    folder of the other mode's figures is refused before any work, unless --overwrite."""
+    from training.cli.figures import holds_results
+
+    out = tmp_path / "figures"
+    (out / "data").mkdir(parents=True)
+    (out / "mode.json").write_text('{"mode": "full"}\n')
+    (out / "rate.png").write_bytes(b"full figure")
+    assert main(["figures", "rate", "--quick", "--out", str(out), "--quiet"]) == 2
+    assert "--out " + str(out) + " holds the results of an earlier run" in capsys.readouterr().err
+    assert (out / "rate.png").read_bytes() == b"full figure"
+
+    class Args:
+        quick = False
+
+    assert not holds_results(Args(), out)  # the same mode resumes
+    Args.quick = True
+    assert holds_results(Args(), out) and not holds_results(Args(), tmp_path / "empty")

@@ -8,6 +8,7 @@ import argparse
 import importlib
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 
@@ -81,6 +82,48 @@ def _light_parser() -> argparse.ArgumentParser:
 #: Commands whose --out is a file (its folder must be writable) or a folder, checked before any work.
 _FILE_OUT = ("evaluate", "sweep", "render")
 _DIR_OUT = ("demo", "benchmark", "gap", "figures")
+
+
+def _holds_results(args: argparse.Namespace, path: Path) -> bool:
+    """Whether ``path`` holds an earlier run's results: a file there, a folder with anything in it, or
+    what the command says (``holds_results``: ``lawn figures`` resumes the tables of its own mode)."""
+    if hasattr(args, "holds_results"):
+        return bool(args.holds_results(args, path))
+    if args.command in _FILE_OUT:
+        return path.exists()
+    return path.is_dir() and any(path.iterdir())
+
+
+def _numbered(path: Path, taken: Callable[[Path], bool]) -> Path:
+    """``path``, or the first of ``NAME-2``, ``NAME-3``, ... (before the suffix) that ``taken`` lets through."""
+    n = 1
+    candidate = path
+    while taken(candidate):
+        n += 1
+        candidate = path.with_name(f"{path.stem}-{n}{path.suffix}")
+    return candidate
+
+
+def _claim_out(args: argparse.Namespace) -> None:
+    """Resolve ``--out`` of a command that writes results and make sure it replaces none in silence
+    (``lawn sweep`` resumes its own table, ``lawn train`` refuses a run directory with its own message):
+    an ``--out`` that holds an earlier run's results is refused unless ``--overwrite``; without ``--out``,
+    the command's default path, or where that holds results the first free ``NAME-2``, ``NAME-3``, ...
+    (printed)."""
+    if not hasattr(args, "overwrite"):
+        return
+    if args.out is not None:
+        path = Path(args.out)
+        if _holds_results(args, path) and not args.overwrite:
+            raise ValueError(f"--out {args.out} holds the results of an earlier run: pass --overwrite to replace "
+                             "them, or give another --out")
+        return
+    default = Path(args.default_out(args))
+    path = default if args.overwrite else _numbered(default, lambda p: _holds_results(args, p))
+    if path != default:
+        print(f"lawn {args.command}: {default} holds an earlier run's results; writing {path} (--out PATH chooses "
+              "the place, --overwrite replaces them)")
+    args.out = str(path)
 
 
 def _check_out(command: str, out: str | None) -> None:
@@ -176,6 +219,7 @@ def _run(argv: list[str] | None) -> int:
     from ..pool import HelperDied
 
     try:
+        _claim_out(args)  # never an earlier run's results without --overwrite
         if getattr(args, "out", "") is None and hasattr(args, "default_out"):  # a command's own default path
             args.out = str(args.default_out(args))
         _check_out(args.command, getattr(args, "out", None))

@@ -29,7 +29,7 @@ from .common import command, comparison_env, config_of, count, included, policy_
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-    bm = command(sub, "benchmark", "workers", "quiet", "seed", "config", "split",
+    bm = command(sub, "benchmark", "workers", "quiet", "seed", "config", "split", "overwrite",
                  epilog="--protocol learned and --suite fix the test seeds (0..N-1) and the scenario; "
                         "--seed, --preset, --set and --env belong to the paper protocol.")
     bm.add_argument("--policies", nargs="+", default=None, type=policy_name,
@@ -57,9 +57,18 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
                     help="trained run directories (lawn train) to add to the comparison")
     bm.add_argument("--episodes", type=count, default=None,
                     help="seeds from --seed (default: 20; 100 test seeds for --protocol learned and --suite)")
-    bm.add_argument("--out", default="runs/benchmark", help="output directory (default: %(default)s)")
-    bm.set_defaults(seed=None)  # None: the paper protocol's 0, refused by the other protocols
+    bm.add_argument("--out", default=None,
+                    help="output directory (default: runs/benchmark-MODE, MODE paper, learned, suite or fleet, or "
+                         "runs/benchmark-MODE-2, ... when an earlier run's results are there; runs/benchmark is the "
+                         "main job's, scripts/run.sh)")
+    bm.set_defaults(seed=None, default_out=default_out)  # seed None: the paper protocol's 0, refused by the others
     return bm
+
+
+def default_out(args: argparse.Namespace) -> Path:
+    """Where ``lawn benchmark`` writes without ``--out``: ``runs/benchmark-MODE`` (never the main job's
+    ``runs/benchmark``)."""
+    return Path("runs") / f"benchmark-{'suite' if args.suite else args.protocol}"
 
 
 def run(args: argparse.Namespace) -> int:

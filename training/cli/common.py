@@ -103,6 +103,10 @@ def _shared_flags() -> dict[str, list[tuple[str, dict[str, Any]]]]:
             "help": "policy setting, e.g. --policy-arg power_levels=60 for rg-mpc or tolerance=1e-3 for ao-mpc "
                     "(repeatable; the fields of agents.DeliverySettings for dv-mpc, agents.ReducedSettings for "
                     "rg-mpc, agents.AOSettings for the AO planners)"})],
+        "overwrite": [("--overwrite", {
+            "action": "store_true",
+            "help": "replace the results an earlier run left at --out (without it, such an --out is refused, and a "
+                    "default one becomes a new numbered path)"})],
         "backend": [("--backend", {"choices": ["process", "ray"], "default": "process",
                                    "help": "a process pool (default) or Ray (local, or the cluster at $RAY_ADDRESS)"})],
     }
@@ -112,7 +116,7 @@ def command(sub: argparse._SubParsersAction[argparse.ArgumentParser], name: str,
             **kwargs: Any) -> argparse.ArgumentParser:
     """The parser of subcommand ``name`` with ``--debug`` and the named shared flags (``"workers"``,
     ``"quiet"``, ``"seed"`` (a first seed), ``"one_seed"`` (one episode's), ``"config"``, ``"split"``,
-    ``"policy_arg"``, ``"backend"``), each with one meaning everywhere."""
+    ``"policy_arg"``, ``"overwrite"``, ``"backend"``), each with one meaning everywhere."""
     from . import COMMAND_HELP
 
     parser = sub.add_parser(name, help=COMMAND_HELP[name], **kwargs)

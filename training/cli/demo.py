@@ -10,8 +10,10 @@ from .common import command, config_of
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-    demo = command(sub, "demo", "one_seed", "config")
-    demo.add_argument("--out", default="runs/demo", help="output directory (default: %(default)s)")
+    demo = command(sub, "demo", "one_seed", "config", "overwrite")
+    demo.add_argument("--out", default=None, help="output directory (default: runs/demo, or runs/demo-2, ... when an "
+                                                  "earlier run's results are there)")
+    demo.set_defaults(default_out=lambda args: Path("runs/demo"))
     return demo
 
 

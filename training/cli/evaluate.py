@@ -17,7 +17,7 @@ from .common import command, comparison_env, config_of, count, parse_overrides, 
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-    ev = command(sub, "evaluate", "workers", "quiet", "seed", "config", "split", "policy_arg")
+    ev = command(sub, "evaluate", "workers", "quiet", "seed", "config", "split", "policy_arg", "overwrite")
     ev.add_argument("--policy", required=True, type=policy_name, help=policy_help())
     ev.add_argument("--env", default=None, type=comparison_env, metavar="ENV",
                     help=f"{', '.join(lawn_env.ENV_IDS)}: full episodes of the unmodified scenario (an agent trained "
@@ -26,7 +26,7 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
     ev.add_argument("--episodes", type=count, default=10, help="episodes, seeds --seed.. (default: %(default)s)")
     ev.add_argument("--out", default=None,
                     help="rows file, .csv or .json (default: runs/evaluate/POLICY.csv, the policy's name with ':' and "
-                         "'/' as '_'; never the main job's runs/benchmark)")
+                         "'/' as '_', or POLICY-2.csv, ... when an earlier run's rows are there)")
     ev.add_argument("--no-score", action="store_true",
                     help="skip the normalized score (which runs its references, epa and dv-mpc, on the same seeds)")
     ev.set_defaults(default_out=default_out)  # resolved before the output is checked (training.cli.main)
@@ -40,7 +40,7 @@ def default_out(args: argparse.Namespace) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     cfg = config_of(args)
-    out = Path(args.out) if args.out is not None else default_out(args)
+    out = Path(args.out)  # resolved and claimed by training.cli before any work (never an earlier run's rows)
     if out.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"--out {args.out!r}: the extension must be .csv or .json")
     kwargs = parse_overrides(args.policy_arg, "--policy-arg")

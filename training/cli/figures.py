@@ -10,19 +10,32 @@ from pathlib import Path
 from ..experiments.claims import format_claims, write_claims
 from ..experiments.registry import EXPERIMENTS
 from ..experiments.reproduction import write_reproduction
-from ..experiments.runner import check_claims, make_figures
+from ..experiments.runner import check_claims, make_figures, read_mode
 from .common import command
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-    fg = command(sub, "figures", "workers", "quiet")
+    fg = command(sub, "figures", "workers", "quiet", "overwrite")
     fg.add_argument("names", nargs="*", choices=[[], *EXPERIMENTS], metavar="NAME",
                     help=f"figures to make (default: all): {', '.join(EXPERIMENTS)}")
-    fg.add_argument("--out", default="runs/figures", help="output directory (default: %(default)s)")
+    fg.add_argument("--out", default=None,
+                    help="output directory (default: runs/figures, runs/figures-quick with --quick); a rerun of the "
+                         "same mode there resumes (its tables are kept, the figures redrawn from them), another mode "
+                         "is refused without --overwrite")
     fg.add_argument("--quick", action="store_true", help="reduced seeds, grids and episode length (tests)")
     fg.add_argument("--docs", default=None, metavar="DIR",
                     help="also write DIR/REPRODUCTION.md and copy the figures to DIR/figures/reproduction/")
+    fg.set_defaults(default_out=lambda args: Path("runs/figures-quick" if args.quick else "runs/figures"),
+                    holds_results=holds_results)
     return fg
+
+
+def holds_results(args: argparse.Namespace, out: Path) -> bool:
+    """Whether ``out`` holds figures of the other mode (``--quick`` or the full set, ``mode.json``): a
+    rerun of the same mode resumes there, so its results are not replaced."""
+    if not out.is_dir() or not any(out.iterdir()):
+        return False
+    return read_mode(out) != ("quick" if args.quick else "full")
 
 
 def run(args: argparse.Namespace) -> int:

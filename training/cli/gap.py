@@ -23,7 +23,7 @@ from .common import command, config_of, count, parse_overrides, policy_help, pol
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-    gp = command(sub, "gap", "workers", "quiet", "seed", "config")
+    gp = command(sub, "gap", "workers", "quiet", "seed", "config", "overwrite")
 
     gp.add_argument("--policies", nargs="+", default=["ao-mpc", "rg-mpc"], type=policy_name, metavar="POLICY",
                     help=f"planners to compare: {', '.join(policy_names())} (default: ao-mpc rg-mpc)")
@@ -37,7 +37,9 @@ def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.Ar
                          "(none to skip; default: %(default)s)")
     gp.add_argument("--global-arg", action="append", default=[], metavar="KEY=VALUE",
                     help="resolution of the global reference, e.g. --global-arg drone_spacing_m=0.25")
-    gp.add_argument("--out", default="runs/gap", help="output directory (default: %(default)s)")
+    gp.add_argument("--out", default=None, help="output directory (default: runs/gap, or runs/gap-2, ... when an "
+                                                "earlier run's results are there)")
+    gp.set_defaults(default_out=lambda args: Path("runs/gap"))
     return gp
 
 

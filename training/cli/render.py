@@ -12,7 +12,7 @@ from .common import command, config_of, count, parse_overrides, policy_help, pol
 
 
 def add(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
-    re = command(sub, "render", "quiet", "one_seed", "config", "policy_arg")
+    re = command(sub, "render", "quiet", "one_seed", "config", "policy_arg", "overwrite")
     re.add_argument("--policy", default="rg-mpc", type=policy_name, help=policy_help("default: rg-mpc; "))
     re.add_argument("--env", default=None, choices=[*lawn_env.ENV_IDS, *lawn_env.RL_ENV_IDS],
                     help="default: lawn/Joint-v1, or the env a trained agent was trained on")

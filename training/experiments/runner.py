@@ -17,7 +17,7 @@ from .base import Experiment
 from .claims import Claim
 from .registry import EXPERIMENTS
 
-__all__ = ["tables_of", "make_figures", "check_claims"]
+__all__ = ["tables_of", "make_figures", "read_mode", "check_claims"]
 
 
 def tables_of(exp: Experiment, out: Path, quick: bool = False, workers: int = 1, progress: bool = False,
@@ -53,6 +53,7 @@ def make_figures(names: Sequence[str], out: Path, quick: bool = False, workers: 
         raise ValueError(f"unknown figures {unknown}; valid: {', '.join(EXPERIMENTS)}")
     out = Path(out)
     (out / "data").mkdir(parents=True, exist_ok=True)
+    (out / "mode.json").write_text(json.dumps({"mode": "quick" if quick else "full"}) + "\n")
     timings = {}
     record = out / "timings.json"
     computed = json.loads(record.read_text()) if record.exists() else {}
@@ -67,6 +68,16 @@ def make_figures(names: Sequence[str], out: Path, quick: bool = False, workers: 
             computed[name] = timings[name]
     record.write_text(json.dumps(computed, indent=2) + "\n")
     return timings
+
+
+def read_mode(out: Path) -> str | None:
+    """The mode (``"quick"`` or ``"full"``) of the figures in ``out`` (:func:`make_figures` records it in
+    ``mode.json``); None where none is recorded."""
+    try:
+        mode = json.loads((Path(out) / "mode.json").read_text()).get("mode")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return mode if mode in ("quick", "full") else None
 
 
 def check_claims(out: Path) -> list[Claim]:
