@@ -200,3 +200,23 @@ def test_parallel_map_compiles_in_the_helpers_from_an_empty_kernel_cache(tmp_pat
     assert values.strip() == str([float(sum(i * i for i in range(n))) for n in range(1, 13)])
     assert processes == "2"  # the caller and its helper both compiled and played
     assert any((tmp_path / "cache").rglob("*.nbi"))
+
+
+def test_a_script_without_the_main_guard_gets_one_line_not_a_spawn_traceback(tmp_path):
+    """A plain script that calls compare(workers=2) at its top level: each spawned helper imports the
+    script again; it ends at once with one line saying what to do, and the script's own process plays
+    the comparison (the same results as workers=1) instead of a traceback per helper."""
+    script = tmp_path / "unguarded.py"
+    script.write_text("from training.results.api import compare\n"
+                      "result = compare(['epa', 'pid'], config={'num_slots': 5}, seeds=range(4), workers=2)\n"
+                      "print(result.costs('pid'))\n")
+    done = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                          check=False)
+    assert done.returncode == 0, done.stderr
+    from training.results.api import compare
+
+    assert done.stdout.strip() == str(compare(["epa", "pid"], {"num_slots": 5}, range(4)).costs("pid"))
+    assert "Traceback" not in done.stderr, done.stderr
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert lines and all(line == f"lawn: {pool.UNGUARDED_MAIN}" for line in lines), done.stderr
+    assert 'if __name__ == "__main__":' in pool.UNGUARDED_MAIN

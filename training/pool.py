@@ -83,6 +83,20 @@ def _die_with_parent(parent_pid: int) -> None:
             os._exit(1)
 
 
+#: What a helper says when the main script starts helpers at its top level (the map goes on here without it).
+UNGUARDED_MAIN = ("a helper process could not start: spawned helpers import the main script again, and this one "
+                  "starts helpers at its top level; put that code under `if __name__ == \"__main__\":` (Python's "
+                  "multiprocessing guide), or pass workers=1")
+
+
+def _refuse_while_bootstrapping() -> None:
+    """In a spawned helper that is importing the main script (multiprocessing's bootstrapping), a call
+    that would start helpers ends the helper with :data:`UNGUARDED_MAIN` in one line instead of the
+    main script's whole work and a spawn traceback; the calling process plays the map without it."""
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise SystemExit(f"lawn: {UNGUARDED_MAIN}")
+
+
 def _init_worker(parent_pid: int) -> None:
     """Worker initializer: die with the parent, one thread per library, and the simulation and the
     policies imported (numba's compiled kernels loaded from its cache) before the first task."""
@@ -94,6 +108,7 @@ def _init_worker(parent_pid: int) -> None:
 def worker_pool(workers: int, start_method: str | None = None) -> ProcessPoolExecutor:
     """A new pool of ``workers`` worker processes (children of this process that die with it, one
     thread per library; :func:`resolve_start_method`); the caller shuts it down (``with worker_pool(n) as pool``)."""
+    _refuse_while_bootstrapping()
     context = multiprocessing.get_context(resolve_start_method(start_method))
     return ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker,
                                initargs=(os.getpid(),))
@@ -188,6 +203,8 @@ def pool_map(fn: Callable[[Any], Any], tasks: list[Any], workers: int, progress:
     or inside a worker."""
     from tqdm.auto import tqdm
 
+    if workers > 1:
+        _refuse_while_bootstrapping()
     bar = tqdm(total=len(tasks), desc=desc, unit="ep", disable=None if progress else True, leave=False)
     try:
         if workers <= 1 or len(tasks) <= 1 or multiprocessing.parent_process() is not None:  # in a worker: serially
