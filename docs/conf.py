@@ -16,7 +16,6 @@ extensions = [
     "myst_parser",
     "sphinx.ext.autodoc",
     "sphinx.ext.intersphinx",
-    "sphinxarg.ext",
     "lawn_docs",
 ]
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
