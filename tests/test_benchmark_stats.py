@@ -283,3 +283,90 @@ def test_statistics_reduce_results_once_per_row_and_compare_any_two_rows():
     assert vs.paired == paired(rows, "x", "dv-mpc", "lawn/Joint-v1", "a") and len(vs.relative) == 6
     assert stats.aggregate("lawn/Joint-v1", "x", ["a", "b"])[3] == 2 and stats.envs("b") == ["lawn/Joint-v1"]
     assert stats.versus(("a", "lawn/Joint-v1", "x"), ("a", "lawn/Joint-v1", "nope")) is None
+
+
+def _benchmark_summary(diverged: float) -> list[dict]:
+    """A summary of the main job's eleven rows (their long names), ``diverged`` on ``epa`` only."""
+    from training.results.stats import SUMMARY_METRICS
+
+    names = ["dv-mpc", "rg-mpc", "ao-mpc", "epa", "sf", "pid", "lqr", "noise:dv-mpc", "limit:fast-drone",
+             "limit:perfect-links", "actuator:buffer"]
+    summary = []
+    for i, name in enumerate(names):
+        entry = {"policy": name, "episodes": 20}
+        for key, _ in SUMMARY_METRICS:
+            entry[key], entry[f"{key}_ci95"] = 100.0 + 10 * i, 5.0
+        entry["diverged"], entry["diverged_ci95"] = (diverged if name == "epa" else 0.0), 0.0
+        summary.append(entry)
+    return summary
+
+
+def test_plot_summary_names_never_overlap_and_shows_no_empty_diverged_panel(tmp_path):
+    """``benchmark.png``: the eleven names stand upright and apart under every panel; with no
+    episode diverged there is no (empty) diverged panel and the title says so; with one there is."""
+    import itertools
+
+    from matplotlib.backends.backend_agg import RendererAgg
+
+    from training.results.report import plot_summary
+    from training.results.stats import SUMMARY_METRICS
+
+    fig = plot_summary(_benchmark_summary(0.0), tmp_path / "none.png", title="t")
+    assert (tmp_path / "none.png").stat().st_size > 0
+    titles = [ax.get_title() for ax in fig.axes]
+    assert "diverged" not in titles and len(titles) == len(SUMMARY_METRICS) - 1
+    assert fig.get_suptitle() == "t; no episode diverged"
+    renderer = fig.canvas.get_renderer()
+    assert isinstance(renderer, RendererAgg)
+    for ax in fig.axes:
+        labels = [t for t in ax.get_xticklabels() if t.get_text()]
+        assert len(labels) == 11 and all(t.get_rotation() == 90 for t in labels)
+        boxes = [t.get_window_extent(renderer) for t in labels]
+        for left, right in itertools.pairwise(boxes):
+            assert left.x1 < right.x0, (ax.get_title(), left, right)  # apart, in order
+        assert min(b.y0 for b in boxes) >= 0  # inside the figure
+    panels = [ax.get_window_extent(renderer) for ax in fig.axes]
+    for left, right in itertools.pairwise(panels):
+        assert left.x1 < right.x0  # the panels themselves apart
+
+    fig = plot_summary(_benchmark_summary(0.1), tmp_path / "some.png", title="t")
+    assert [ax.get_title() for ax in fig.axes][5] == "diverged" and fig.get_suptitle() == "t"
+    plot_summary(_benchmark_summary(0.0), tmp_path / "again.png", title="t")
+    assert (tmp_path / "again.png").read_bytes() == (tmp_path / "none.png").read_bytes()  # deterministic
+
+
+def test_results_json_holds_arrays_of_numbers_and_reads_back(tmp_path):
+    """``write_results`` to ``.json``: every per-AGV and per-slot field a JSON array of numbers, the
+    file valid JSON (NaN as null, infinities as strings); ``read_results`` gives the same results."""
+    import json
+
+    from training.results.episode import EpisodeResult, read_results, write_results
+
+    rows = evaluate([("epa", "lawn/Joint-v1", presets.get("steady"), s, {}) for s in (3, 4)], progress=False)
+    odd = rows[1].with_(rmse_m=math.nan, tracking_cost=math.inf, stage_costs=np.array([1.5, math.nan, -math.inf]),
+                        mean_power_w=None)  # a NaN, infinities and a field not recorded
+    rows = [rows[0], odd]
+    path = write_results(rows, tmp_path / "rows.json")
+    text = path.read_text()
+    data = json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} is not JSON"))
+    arrays = ("rmse_per_agv_m", "outage_rate_per_agv", "mean_power_w", "stage_costs")
+    for name in arrays:
+        assert isinstance(data[0][name], list) and all(type(x) is float for x in data[0][name]), name
+    assert len(data[0]["stage_costs"]) == rows[0].slots and data[0]["stage_costs"] == rows[0].stage_costs.tolist()
+    assert data[1]["stage_costs"] == [1.5, None, "-Infinity"] and "mean_power_w" not in data[1]
+    assert data[1]["rmse_m"] is None and data[1]["tracking_cost"] == "Infinity"
+    back = read_results(path)
+    assert all(isinstance(r, EpisodeResult) for r in back) and len(back) == 2
+    for fresh, read in zip(rows, back, strict=True):
+        np.testing.assert_equal(read.as_row(), fresh.as_row())  # NaN equals NaN here
+        for name in arrays:
+            got, want = getattr(read, name), getattr(fresh, name)
+            assert (got is None) == (want is None)
+            if want is not None:
+                assert got.dtype == float
+                np.testing.assert_array_equal(got, want)
+        assert isinstance(read.diverged, bool) and isinstance(read.seed, int)
+    assert math.isnan(back[1].rmse_m) and back[1].tracking_cost == math.inf and back[1].mean_power_w is None
+    assert read_results(tmp_path / "missing.json") == []
+    csv_back = read_results(write_results(rows, tmp_path / "rows.csv"))  # the CSV as it was: strings in cells
+    assert csv_back[1].as_row()["stage_costs"] == "[1.5, NaN, -Infinity]"

@@ -6,7 +6,10 @@ Every stage between passes these: :mod:`.run` plays specs into results, :mod:`.s
 results, :mod:`.report` formats the statistics, :mod:`.protocols` declares which specs to play.
 A CSV of results (:func:`write_results`, :func:`read_results`) has one row per episode with the
 fields' names as columns, in field order; a per-AGV or per-slot field is a JSON list in its cell, a
-field a run did not record (an older file's) is no column at all, and reads back as None.
+field a run did not record (an older file's) is no column at all, and reads back as None. A JSON file
+of results is a list of objects with the same keys, a per-AGV or per-slot field a JSON array of
+numbers; it stays valid JSON: a NaN is ``null``, an infinity the string ``"Infinity"`` or
+``"-Infinity"``, both read back as the float they were.
 """
 
 from __future__ import annotations
@@ -171,15 +174,60 @@ def write_results(results: Iterable[EpisodeResult], path: str | Path, atomic: bo
     """Results as one CSV row each (:meth:`EpisodeResult.as_row`; the columns in field order, a field
     some results do not record empty in theirs), or as JSON by the extension; ``atomic`` as
     :func:`write_csv`'s."""
+    if Path(path).suffix.lower() == ".json":
+        return write_rows([_json_row(r) for r in results], path)
     rows = [r.as_row() for r in results]
-    if Path(path).suffix.lower() == ".json" or not atomic:
+    if not atomic:
         return write_rows(rows, path)
     return write_csv(rows, path, atomic=True)
 
 
 def read_results(path: str | Path) -> list[EpisodeResult]:
-    """The results of a CSV written by :func:`write_results` (an empty list when it does not exist)."""
-    return [EpisodeResult.from_row(row) for row in read_csv(path)]
+    """The results of a CSV or, by the extension, a JSON file written by :func:`write_results` (an
+    empty list when it does not exist)."""
+    path = Path(path)
+    if path.suffix.lower() != ".json":
+        return [EpisodeResult.from_row(row) for row in read_csv(path)]
+    if not path.exists():
+        return []
+    rows = json.loads(path.read_text())
+    if not isinstance(rows, list) or not all(isinstance(row, dict) for row in rows):
+        raise ValueError(f"{str(path)!r}: not a JSON list of episode results (objects)")
+    return [EpisodeResult.from_row({k: _from_json(k, v) for k, v in row.items()}) for row in rows]
+
+
+def _json_row(result: EpisodeResult) -> dict[str, Any]:
+    """:meth:`EpisodeResult.as_row` for a JSON file: the arrays as lists of numbers, every float
+    finite or null (NaN) or ``"Infinity"``/``"-Infinity"``, so that the file is valid JSON."""
+    row = result.as_row()
+    for name in row:
+        got = getattr(result, name)
+        if name in _ARRAYS:
+            row[name] = [_json_float(x) for x in np.asarray(got, dtype=float).reshape(-1).tolist()]
+        elif isinstance(got, (float, np.floating)):
+            row[name] = _json_float(float(got))
+        elif isinstance(got, np.integer):
+            row[name] = int(got)
+    return row
+
+
+def _json_float(x: float) -> float | str | None:
+    """A float as JSON has it: NaN as null, an infinity as ``"Infinity"`` or ``"-Infinity"``."""
+    if math.isnan(x):
+        return None
+    if math.isinf(x):
+        return "Infinity" if x > 0 else "-Infinity"
+    return x
+
+
+def _from_json(name: str, value: Any) -> Any:
+    """A JSON file's value as :meth:`EpisodeResult.from_row` takes it: a float field's (or an
+    array's element's) null is NaN and its ``"Infinity"``/``"-Infinity"`` the infinity."""
+    if name in _ARRAYS and isinstance(value, list):
+        return [math.nan if x is None else float(x) for x in value]
+    if value is None and _TYPES.get(name, "").startswith("float"):
+        return math.nan
+    return value
 
 
 def write_rows(rows: Sequence[Mapping[str, Any]], path: str | Path) -> Path:

@@ -38,6 +38,8 @@ from .stats import (
 )
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
     from .rows import Key, RowStats, Statistics, Versus
 
 __all__ = ["RESULT_METRICS", "TIMING_METRICS", "format_table", "summary_markdown", "plot_summary", "mean_cell",
@@ -99,30 +101,41 @@ def summary_markdown(summary: list[dict[str, Any]], paired: dict[str, tuple[floa
             f"machine that ran it:\n\n{timing}\n")
 
 
-def plot_summary(summary: list[dict[str, Any]], path: Path, title: str = "") -> None:
-    """Bar chart of each summary metric with its 95 % interval."""
+def plot_summary(summary: list[dict[str, Any]], path: Path, title: str = "") -> Figure:
+    """Bar chart of each summary metric with its 95 % interval, one panel per metric, the policies'
+    names upright under every panel (the figure widens with the number of policies so that they never
+    overlap); the ``diverged`` panel only when some episode diverged (the title says when none did).
+    Returns the figure, which is also written to ``path``."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(16, 3.6), dpi=110)
-    FigureCanvasAgg(fig)
     names = [entry["policy"] for entry in summary]
-    colors = [f"C{i}" for i in range(len(names))]
-    for j, (key, label) in enumerate(SUMMARY_METRICS):
-        ax = fig.add_subplot(1, len(SUMMARY_METRICS), j + 1)
+    colors = [f"C{i % 10}" for i in range(len(names))]
+    diverged = [entry["diverged"] for entry in summary]
+    metrics = [(key, label) for key, label in SUMMARY_METRICS if key != "diverged" or any(d > 0 for d in diverged)]
+    notes = [title] if title else []
+    if all(d == 0 for d in diverged):
+        notes.append("no episode diverged")
+    fig = Figure(figsize=(max(16.0, len(metrics) * (0.8 + 0.2 * len(names))), 4.6), dpi=110)
+    FigureCanvasAgg(fig)
+    for j, (key, label) in enumerate(metrics):
+        ax = fig.add_subplot(1, len(metrics), j + 1)
         scale = 1e3 if key.startswith("decision_time") else 1.0
         means = [entry[key] * scale for entry in summary]
         errs = [entry[f"{key}_ci95"] * scale for entry in summary]
-        ax.bar(names, means, yerr=errs, color=colors, capsize=4)
+        ax.bar(names, means, yerr=errs, color=colors, capsize=3)
         ax.set_title(label.replace("(s)", "(ms)"), fontsize=10)
-        ax.tick_params(axis="x", labelrotation=45, labelsize=8)
+        ax.set_xlim(-0.6, len(names) - 0.4)
+        ax.tick_params(axis="x", labelrotation=90, labelsize=8)
+        ax.tick_params(axis="y", labelsize=8)
         positive = [m for m in means if m > 0]
         if key.endswith("_cost") and positive and max(positive) > 20 * min(positive):
             ax.set_yscale("log")
-    if title:
-        fig.suptitle(title, fontsize=10)
+    if notes:
+        fig.suptitle("; ".join(notes), fontsize=10)
     fig.tight_layout()
     fig.savefig(path)
+    return fig
 
 
 def mean_cell(row: RowStats | None, metric: str = "control_cost") -> str:
