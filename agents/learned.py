@@ -248,7 +248,8 @@ def check_scenario(label: str, env_id: str, trained: ScenarioConfig, config: Sce
     iface = resolve_interface(interface)
     fleet = iface.layout == "entities"
     uses_law = env_id == COMM or (iface.action_scheme == "anchored" and iface.increment_anchor == "mpc")
-    pairs = [("control.law", trained.control.law, config.control.law)] if uses_law else []
+    pairs: list[tuple[str, object, object]] = [("control.law", trained.control.law, config.control.law)] if uses_law \
+        else []
     pairs += [("control.actuator", trained.control.actuator, config.control.actuator),
               ("control.horizon", trained.control.horizon, config.control.horizon)]
     if not fleet:

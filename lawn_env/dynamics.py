@@ -179,10 +179,11 @@ def modified_riccati(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray,
         raise ValueError("the discrete Riccati equation has no finite solution for these weights")
     if success < 1.0 or start is not None:
         with np.errstate(over="ignore", invalid="ignore"):  # a diverging iteration stops at the check below
-            s = _value_iteration(a, b, q, r, success, s)
-        if s is None:
+            settled = _value_iteration(a, b, q, r, success, s)
+        if settled is None:
             raise ValueError(f"success={success!r}: the modified Riccati equation does not converge (at or below "
                              "the critical arrival probability of these dynamics)")
+        s = settled
     return 0.5 * (s + s.T)
 
 

@@ -33,19 +33,30 @@ def product_into(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:  # prag
             out[r, c] = acc
 
 
+@numba.njit(cache=True)
+def _dot(a: np.ndarray, b: np.ndarray) -> float:  # pragma: no cover - compiled
+    """``sum_j a[j] * b[j]`` with ``j`` ascending."""
+    acc = 0.0
+    for j in range(a.shape[0]):
+        acc += a[j] * b[j]
+    return acc
+
+
 def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``a @ b`` in float64 by :func:`product_into`, for ``a`` of shape (..., n) (any leading axes,
     or a vector (n,)) and ``b`` of shape (n, p) or (n,), with numpy's result shape: (..., p), (...),
-    (p,) or a 0-d array for two vectors. Raises ``ValueError`` naming both shapes when ``n`` differs."""
+    (p,) or a scalar for two vectors. Raises ``ValueError`` naming both shapes when ``n`` differs."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     if a.ndim == 0 or b.ndim not in (1, 2) or a.shape[-1] != b.shape[0]:
         raise ValueError(f"matmul: shapes {a.shape} and {b.shape} do not multiply (a (..., n), b (n, p) or (n,))")
-    columns = b if b.ndim == 2 else b[:, None]
-    out = np.empty((int(np.prod(a.shape[:-1], dtype=np.int64)), columns.shape[1]))
-    product_into(np.ascontiguousarray(a.reshape(-1, a.shape[-1])), np.ascontiguousarray(columns), out)
-    shape = a.shape[:-1] + (b.shape[1:] if b.ndim == 2 else ())
-    return out.reshape(shape)
+    if a.ndim == 1 and b.ndim == 1:
+        return np.float64(_dot(a, b))  # numpy's scalar, as a @ b gives
+    columns = b if b.ndim == 2 else b.reshape(b.shape[0], 1)
+    rows = a.reshape(-1, a.shape[-1])
+    out = np.empty((rows.shape[0], columns.shape[1]))
+    product_into(rows, columns, out)
+    return out.reshape(a.shape[:-1] + (b.shape[1:] if b.ndim == 2 else ()))
 
 
 @numba.njit(cache=True)

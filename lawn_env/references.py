@@ -171,7 +171,8 @@ class Lemniscate(_Curve):
 def _rotate(v: np.ndarray, rot_t: np.ndarray) -> np.ndarray:
     """``v @ rot_t`` per path for (P, N, 2) points and (P, 2, 2) rotations, as two products and one sum
     (numpy's ``@`` hands it to BLAS, whose rounding depends on the CPU; :mod:`lawn_env.products`)."""
-    return v[..., 0:1] * rot_t[:, None, 0, :] + v[..., 1:2] * rot_t[:, None, 1, :]
+    out: np.ndarray = v[..., 0:1] * rot_t[:, None, 0, :] + v[..., 1:2] * rot_t[:, None, 1, :]
+    return out
 
 
 @dataclass(frozen=True)
