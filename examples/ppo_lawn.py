@@ -20,6 +20,7 @@ import importlib.util
 import inspect
 import time
 from dataclasses import dataclass, fields
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -82,6 +83,8 @@ class Args:
     """full episodes (seeds 500000..) of the trained policy and of the zero action at the end (0: none)"""
     torch_threads: int = 1
     """torch CPU threads"""
+    markdown: str = ""
+    """also write the run's summary and evaluation as a Markdown table to this file (docs/clients.md's)"""
 
 
 def parse_args() -> Args:
@@ -167,7 +170,7 @@ def _obs_normalizer(env: gym.Env) -> gym.wrappers.NormalizeObservation:
     return env
 
 
-def evaluate(agent: Agent, args: Args, train_env: gym.Env) -> None:
+def evaluate(agent: Agent, args: Args, train_env: gym.Env) -> tuple[float, float, float]:
     """The trained policy's mean action and the zero action on the same seeds, on the training
     interface with the training run's observation statistics frozen: full episodes, their cost."""
     env = make_env(args)()
@@ -190,6 +193,24 @@ def evaluate(agent: Agent, args: Args, train_env: gym.Env) -> None:
           f"(full episodes {sum(f for _, f in learned)}), zero action {np.mean([c for c, _ in anchor]):.1f}; "
           f"learned vs zero action {np.expm1(ratios.mean()) * 100:+.1f} % (geometric mean of the per-seed ratios)")
     env.close()
+    return float(np.mean([c for c, _ in learned])), float(np.mean([c for c, _ in anchor])), float(np.expm1(ratios.mean()))
+
+
+def write_markdown(path: str, args: Args, episodes: list, evaluation: tuple[float, float, float] | None) -> None:
+    """The run's summary (episodes, full-length ones, the first and last logged returns) and its
+    evaluation (control cost of the trained policy and of the zero action) as one Markdown table."""
+    k = min(args.summary_episodes, len(episodes))
+    returns = np.array([e[1] for e in episodes]) if episodes else np.zeros(0)
+    cells = [f"{args.total_timesteps:,}", f"{len(episodes):,}", f"{sum(e[2] == 120 for e in episodes):,}",
+             f"{returns[:k].mean():.1f}" if k else "n/a", f"{returns[-k:].mean():.1f}" if k else "n/a"]
+    cells += [f"{evaluation[0]:.1f}", f"{evaluation[1]:.1f}", f"{evaluation[2] * 100:+.1f} %"] if evaluation else \
+        ["n/a"] * 3
+    header = ["steps", "episodes", "of 120 slots", f"mean return, first {k}", f"mean return, last {k}",
+              f"control cost, trained ({args.eval_episodes} validation seeds)", "control cost, zero action",
+              "trained vs zero action (geometric)"]
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text("\n".join(["| " + " | ".join(header) + " |", "|" + "---|" * len(header),
+                                     "| " + " | ".join(cells) + " |"]) + "\n")
 
 
 if __name__ == "__main__":
@@ -293,9 +314,10 @@ if __name__ == "__main__":
               f"v_loss={v_loss.item():.4f} pg_loss={pg_loss.item():.4f} approx_kl={approx_kl.item():.4f} "
               f"clipfrac={np.mean(clipfracs):.3f} SPS={sps}")
 
-    if args.eval_episodes > 0:
-        evaluate(agent, args, envs.envs[0])
+    evaluation = evaluate(agent, args, envs.envs[0]) if args.eval_episodes > 0 else None
     envs.close()
+    if args.markdown:
+        write_markdown(args.markdown, args, episodes, evaluation)
     k = min(args.summary_episodes, len(episodes))
     if k:
         first, last = np.array(episodes[:k])[:, 1:], np.array(episodes[-k:])[:, 1:]

@@ -3,7 +3,7 @@
 # The blocks' markers name the command and the table file that fill them (training/pages.py); this
 # runs `python -m training.pages refresh`, each distinct command once, one at a time, then the
 # episode animations (lawn render). --only takes block names or groups (figures benchmark gap dv
-# speed throughput parallel qp fleet learned suite reference) and render; --train retrains the agents first
+# speed throughput parallel qp fleet learned suite reference clients) and render; --train retrains the agents first
 # (scripts/train_agents.sh; each run's wall time is in docs/LEARNED.md). Generated data goes to runs/ (not committed).
 #   bash scripts/refresh_docs.sh [--train] [--only NAME ...]
 set -euo pipefail

@@ -21,7 +21,7 @@ BLOCKS = {"benchmark": "README.md", "benchmark-nominal": "docs/policies.md", "ga
           "vector-step": "docs/performance.md", "numba-jit": "docs/performance.md",
           "qp-speed": "docs/performance.md",
           "fast-drone-grid": "docs/benchmark.md", "parallel-scaling": "docs/performance.md",
-          "parallel-scaling-16": "docs/performance.md", "zoo-fleet": "docs/LEARNED.md", "zoo-distil": "docs/LEARNED.md",
+          "parallel-scaling-16": "docs/performance.md", "ppo-example": "docs/clients.md", "zoo-fleet": "docs/LEARNED.md", "zoo-distil": "docs/LEARNED.md",
           "fleet-generalization": "docs/LEARNED.md", "fleet-decision": "docs/performance.md",
           "dv-mpc": "docs/experts.md", "dv-mpc-refinements": "docs/experts.md", "loss-stability": "docs/experts.md",
           "buffer": "docs/experts.md",
