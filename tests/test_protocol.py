@@ -496,6 +496,9 @@ def test_dataset_command_and_bc_from_it(datasets_path, tmp_path, capsys):
                  "--dataset-id", "lawn/test/epa-v0", "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "--preset default --dataset lawn/test/epa-v0 --timesteps 120 --out runs/bc-epa-v0 --hp expert=epa" in printed
+    assert main(["dataset", "create", "--policy", "pid", "--env", "lawn/Comm-v1", "--episodes", "1",
+                 "--dataset-id", "lawn/test/epa-v0", "--quiet"]) == 2  # never over an existing dataset
+    assert "--dataset-id 'lawn/test/epa-v0' already exists under MINARI_DATASETS_PATH" in capsys.readouterr().err
     assert main(["dataset", "create", "--policy", "epa", "--env", "lawn/Comm-v1", "--episodes", "1",
                  "--dataset-id", "epa", "--quiet"]) == 2
     assert "--dataset-id 'epa': Minari ids have the form" in capsys.readouterr().err
