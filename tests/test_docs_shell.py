@@ -38,8 +38,8 @@ SHELLS = ("bash", "sh", "console")
 NOT_RUN = {
     "ci": "CI runs it: .ci/run calls the README's two commands on a fresh clone",
     "install": "it installs into the reader's environment; tests/test_install.py builds and installs the wheel",
-    "docs": "it rewrites the repository's pages; scripts/refresh_docs.sh regenerates them, its blocks each run "
-            "by tests/test_docs.py's refresh tests",
+    "docs": "it rewrites the repository's own pages (what scripts/refresh_docs.sh is for); the commands it runs "
+            "are the generated blocks' own, named in each block",
     "placeholder": "it shows a command's form, with placeholders for the reader's own files (SPEC, TABLE, a run)",
 }
 #: The small budget: flag -> the value it gets (a list keeps only the first value), per command.
