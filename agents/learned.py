@@ -164,7 +164,8 @@ class SB3Policy(InterfacePolicy):
                                  "(agents.trained_config)")
         elif tuple(network.observation_space.shape) != (self.layout.size,):
             raise ValueError(f"{label} expects observations of shape {tuple(network.observation_space.shape)}; this "
-                             f"scenario gives ({self.layout.size},): evaluate it with its training config")
+                             f"scenario gives ({self.layout.size},): evaluate it on the scenario it was trained for "
+                             "(agents.trained_config)")
 
     @classmethod
     def from_run(cls, path: str | Path, config: ScenarioConfig | None = None, env_id: str | None = None,
@@ -331,7 +332,7 @@ class MARLPolicy(InterfacePolicy):
         self.obs_width = network.observation_space.shape[0] - self.n_agents
         if self.obs_width != self.layout.size:
             raise ValueError(f"{label} expects {network.observation_space.shape[0]} inputs; this scenario "
-                             f"has K={k}: evaluate it with its training config")
+                             f"has K={k}: evaluate it on the scenario it was trained for (agents.trained_config)")
 
     @classmethod
     def from_run(cls, path: str | Path, config: ScenarioConfig | None = None, env_id: str | None = None,
