@@ -52,7 +52,9 @@ def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: st
     if len(set(seeds)) != len(seeds) or not seeds:
         raise ValueError(f"--seeds {seeds}: give one or more distinct seeds")
     progress = spec.progress and workers <= 1
-    specs = [dataclasses.replace(spec, seed=s, out_dir=spec.out_dir / f"seed-{s}", progress=progress) for s in seeds]
+    # absolute: a worker writes where this process means, whatever its own working directory
+    specs = [dataclasses.replace(spec, seed=s, out_dir=(spec.out_dir / f"seed-{s}").absolute(), progress=progress)
+             for s in seeds]
     summaries = sorted(execute(train, specs, workers, backend), key=lambda r: seeds.index(r["seed"]))
     best = [s["best_validation_cost"] for s in summaries]
     mean, half = mean_ci(best)
