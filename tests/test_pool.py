@@ -220,3 +220,17 @@ def test_a_script_without_the_main_guard_gets_one_line_not_a_spawn_traceback(tmp
     lines = [line for line in done.stderr.splitlines() if line.strip()]
     assert lines and all(line == f"lawn: {pool.UNGUARDED_MAIN}" for line in lines), done.stderr
     assert 'if __name__ == "__main__":' in pool.UNGUARDED_MAIN
+
+
+def test_the_persistent_pool_follows_the_working_directory(tmp_path, monkeypatch):
+    """Helpers resolve a task's relative paths (sb3:runs/..., --out) in their own working directory:
+    after a chdir the persistent pool is replaced, so they resolve them where the caller does."""
+    first = pool.shared_pool(1)
+    try:
+        assert pool.shared_pool(1) is first
+        monkeypatch.chdir(tmp_path)
+        second = pool.shared_pool(1)
+        assert second is not first
+        assert second.submit(os.getcwd).result(timeout=240) == str(tmp_path)
+    finally:
+        pool.shutdown_shared_pool()

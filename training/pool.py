@@ -29,7 +29,7 @@ from typing import Any
 __all__ = ["worker_pool", "shared_pool", "start_helpers", "stop_helpers", "shutdown_shared_pool", "HelperDied",
            "pool_map", "single_threaded", "chunk_size", "resolve_start_method"]
 
-_SHARED: dict[str, Any] = {"pool": None, "helpers": 0, "pid": 0, "method": None, "starts": []}
+_SHARED: dict[str, Any] = {"pool": None, "helpers": 0, "pid": 0, "method": None, "starts": [], "cwd": None}
 
 #: The environment variable that picks the helpers' start method (default ``spawn``).
 START_METHOD_VARIABLE = "LAWN_START_METHOD"
@@ -120,20 +120,20 @@ def _ready() -> int:
 
 def shared_pool(helpers: int, start_method: str | None = None) -> ProcessPoolExecutor:
     """This process's persistent pool of ``helpers`` helper processes: made on first use, reused by
-    every later call with the same count and start method, replaced when either changes or the pool
-    broke."""
+    every later call with the same count, start method and working directory, replaced when one of
+    them changes or the pool broke."""
     method = resolve_start_method(start_method)
     pool: ProcessPoolExecutor | None = _SHARED["pool"]
     if pool is not None and _SHARED["pid"] != os.getpid():  # a forked child: the parent's pool is not its own
         _forget()
         pool = None
     if pool is not None and (_SHARED["helpers"] != helpers or _SHARED["method"] != method
-                             or getattr(pool, "_broken", False)):
-        shutdown_shared_pool()
+                             or _SHARED["cwd"] != os.getcwd() or getattr(pool, "_broken", False)):
+        shutdown_shared_pool()  # a new working directory too: the helpers resolve the tasks' relative paths
         pool = None
     if pool is None:
         pool = worker_pool(helpers, method)
-        _SHARED.update(pool=pool, helpers=helpers, pid=os.getpid(), method=method, starts=[])
+        _SHARED.update(pool=pool, helpers=helpers, pid=os.getpid(), method=method, starts=[], cwd=os.getcwd())
     return pool
 
 
