@@ -31,7 +31,8 @@ from .errors import MissingExtra
 from .runs import RL_EXTRA, RunDir, algorithm_class, policy_network_class, read_json, read_run
 
 __all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "marl_policy", "LOADERS", "learned_name_forms", "ZOO_DIR",
-           "zoo_agents", "export_agent", "check_scenario", "trained_config", "zoo_agents_for", "GUARDED_SETTINGS"]
+           "zoo_agents", "zoo_record", "export_agent", "check_scenario", "trained_config", "zoo_agents_for",
+           "GUARDED_SETTINGS"]
 
 #: Shipped agents: one folder per agent (``lawn zoo`` lists them).
 ZOO_DIR = Path(__file__).parent / "zoo"
@@ -249,20 +250,24 @@ def check_scenario(label: str, env_id: str, trained: ScenarioConfig, config: Sce
     iface = resolve_interface(interface)
     fleet = iface.layout == "entities"
     uses_law = env_id == COMM or (iface.action_scheme == "anchored" and iface.increment_anchor == "mpc")
-    pairs: list[tuple[str, object, object]] = [("control.law", trained.control.law, config.control.law)] if uses_law \
-        else []
-    pairs += [("control.actuator", trained.control.actuator, config.control.actuator),
-              ("control.horizon", trained.control.horizon, config.control.horizon)]
-    if not fleet:
-        pairs.append(("num_agvs", trained.num_agvs, config.num_agvs))
-    for setting, was, now in pairs:
-        if was != now:
+    unused = {name for name, skip in (("control.law", not uses_law), ("num_agvs", fleet)) if skip}
+    for setting in GUARDED_SETTINGS:
+        was, now = _setting(trained, setting), _setting(config, setting)
+        if setting not in unused and was != now:
             raise ValueError(f"{label} was trained on {env_id} with {setting}={was!r} and acts only there; this "
                              f"scenario has {setting}={now!r} (command line: --set {setting}={was}; Python: "
                              f"config=trained_config({label!r}) or a config with {setting}={was!r})")
     if fleet and config.num_agvs > MAX_AGVS:
         raise ValueError(f"{label} is a fleet network: it acts at K <= {MAX_AGVS}; this scenario has "
                          f"num_agvs={config.num_agvs}")
+
+
+def _setting(config: ScenarioConfig, dotted: str) -> object:
+    """The value of a config field by its dotted name (``control.law``)."""
+    value: object = config
+    for part in dotted.split("."):
+        value = getattr(value, part)
+    return value
 
 
 def zoo_agents_for(config: ScenarioConfig) -> list[str]:
@@ -288,11 +293,7 @@ def trained_config(name: str) -> ScenarioConfig:
     if prefix == "zero":
         return trained_config(rest)
     if prefix == "zoo":
-        agents = zoo_agents()
-        if rest not in agents:
-            raise ValueError(f"unknown zoo agent {rest!r}; shipped: {', '.join(agents) or 'none'} (lawn zoo lists "
-                             "them)")
-        return ScenarioConfig.from_dict(agents[rest]["config"])
+        return ScenarioConfig.from_dict(zoo_record(rest)["config"])
     if prefix in ("sb3", "bc", "marl"):
         return read_run(rest).load_config()
     raise ValueError(f"trained_config({name!r}): not a learned agent; valid forms: zoo:NAME, sb3:DIR, bc:DIR, "
@@ -438,12 +439,18 @@ def zoo_agents() -> dict[str, dict[str, Any]]:
     return {p.parent.name: read_json(p) for p in sorted(ZOO_DIR.glob("*/agent.json"))}
 
 
-def _load_zoo(name: str, config: ScenarioConfig | None = None, env_id: str | None = None, seed: int | None = None
-              ) -> Policy:
+def zoo_record(name: str) -> dict[str, Any]:
+    """The ``agent.json`` record of the shipped agent ``name``; an unknown name is an error listing the
+    shipped ones."""
     agents = zoo_agents()
     if name not in agents:
         raise ValueError(f"unknown zoo agent {name!r}; shipped: {', '.join(agents) or 'none'} (lawn zoo lists them)")
-    record = agents[name]
+    return agents[name]
+
+
+def _load_zoo(name: str, config: ScenarioConfig | None = None, env_id: str | None = None, seed: int | None = None
+              ) -> Policy:
+    record = zoo_record(name)
     _sb3()
     network_class = policy_network_class(record["algo"], f"zoo:{name}: agent.json: ")
     network = load_saved(lambda p: network_class.load(p, device="cpu"), ZOO_DIR / name / "policy.zip",

@@ -45,15 +45,6 @@ def product_into(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:  # prag
             out[r, c] = acc
 
 
-@numba.njit(cache=True)
-def _dot(a: np.ndarray, b: np.ndarray) -> float:  # pragma: no cover - compiled
-    """``sum_j a[j] * b[j]`` with ``j`` ascending."""
-    acc = 0.0
-    for j in range(a.shape[0]):
-        acc += a[j] * b[j]
-    return acc
-
-
 def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``a @ b`` in float64 by :func:`product_into`, for ``a`` of shape (..., n) (any leading axes,
     or a vector (n,)) and ``b`` of shape (n, p) or (n,), with numpy's result shape: (..., p), (...),
@@ -62,12 +53,12 @@ def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     b = np.asarray(b, dtype=np.float64)
     if a.ndim == 0 or b.ndim not in (1, 2) or a.shape[-1] != b.shape[0]:
         raise ValueError(f"matmul: shapes {a.shape} and {b.shape} do not multiply (a (..., n), b (n, p) or (n,))")
-    if a.ndim == 1 and b.ndim == 1:
-        return np.float64(_dot(a, b))  # numpy's scalar, as a @ b gives
     columns = b if b.ndim == 2 else b.reshape(b.shape[0], 1)
     rows = a.reshape(-1, a.shape[-1])
     out = np.empty((rows.shape[0], columns.shape[1]))
     product_into(rows, columns, out)
+    if a.ndim == 1 and b.ndim == 1:
+        return np.float64(out[0, 0])  # numpy's scalar, as a @ b gives
     return out.reshape(a.shape[:-1] + (b.shape[1:] if b.ndim == 2 else ()))
 
 

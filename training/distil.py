@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 
 from agents.base import JOINT
-from agents.learned import ZOO_DIR, export_agent, zoo_agents
+from agents.learned import ZOO_DIR, export_agent, trained_config
 from agents.runs import read_run
-from lawn_env import ScenarioConfig, presets
+from lawn_env import presets
 
 from .protocol import best_validation, read_learning_curve, selected_at, selection_key
 from .recipes import RECIPES, Recipe, finished
@@ -48,15 +48,9 @@ def distil_target(rg: RangeComparison, dv: RangeComparison, ms: float) -> str:
 
 
 def own_law(policy: str) -> dict[str, Any]:
-    """The control law ``policy`` (``zoo:NAME`` or ``sb3:DIR``) was trained with, as config settings."""
-    prefix, _, rest = policy.partition(":")
-    if prefix == "zoo":
-        config = ScenarioConfig.from_dict(zoo_agents()[rest]["config"])
-    elif prefix in ("sb3", "bc"):
-        config = read_run(rest).load_config()
-    else:
-        raise ValueError(f"own_law: {policy!r} is not a learned agent (zoo:NAME or sb3:DIR)")
-    return {"control.law": config.control.law}
+    """The control law ``policy`` (a learned agent, :func:`agents.learned.trained_config`) was trained
+    with, as config settings."""
+    return {"control.law": trained_config(policy).control.law}
 
 
 def recipe_tasks(r: Recipe) -> list[str]:

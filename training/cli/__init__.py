@@ -219,9 +219,7 @@ def _run(argv: list[str] | None) -> int:
     from ..pool import HelperDied
 
     try:
-        _claim_out(args)  # never an earlier run's results without --overwrite
-        if getattr(args, "out", "") is None and hasattr(args, "default_out"):  # a command's own default path
-            args.out = str(args.default_out(args))
+        _claim_out(args)  # the default path resolved; never an earlier run's results without --overwrite
         _check_out(args.command, getattr(args, "out", None))
         code: int = args.func(args)
         return code

@@ -32,7 +32,7 @@ import lawn_env
 from agents import Policy, make_policy
 from agents.anchors import anchor_name
 from agents.base import JOINT
-from agents.learned import zoo_agents
+from agents.learned import zoo_record
 from agents.rollouts import Step, rollout
 from agents.runs import read_run
 from lawn_env import ScenarioConfig, central_env_id
@@ -181,10 +181,7 @@ def policy_env(policy: str) -> str:
     if prefix == "zero":
         return policy_env(rest)
     if prefix == "zoo":
-        agents = zoo_agents()
-        if rest not in agents:
-            raise ValueError(f"unknown zoo agent {rest!r}; shipped: {', '.join(agents)}")
-        env: str = agents[rest]["evaluated_on"]
+        env: str = zoo_record(rest)["evaluated_on"]
         return env
     if prefix in ("sb3", "bc", "marl"):
         env = read_run(rest).env
@@ -198,7 +195,7 @@ def own_anchor(policy: str) -> str | None:
     experts, baselines and anchors."""
     prefix, _, rest = policy.partition(":")
     if prefix == "zoo":
-        record = zoo_agents()[rest]
+        record = zoo_record(rest)
     elif prefix in ("sb3", "bc", "marl"):
         record = read_run(rest).record
     else:
