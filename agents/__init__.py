@@ -4,6 +4,13 @@ scripted heuristic, and wrappers for learned policies. ``make_policy(name, confi
 of them (``trained_config(name)``: a learned agent's training scenario); ``POLICIES`` is the
 registry; ``rollout(env, policy, seed)`` runs one episode."""
 
+from pathlib import Path
+
+from lawn_env import kernel_cache
+
+kernel_cache.register(Path(__file__).parent)  # before any kernel here: they compile lawn_env's equations in
+
+
 from .anchors import ANCHORS, AnchorPolicy, anchor_name
 from .ao import AOSettings, AOSolver, expected_cost
 from .base import Planner

@@ -32,12 +32,12 @@ Two planners use this:
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, replace
 from typing import Annotated, Any, Literal, Protocol
 
-import numba
 import numpy as np
 from pydantic import ConfigDict, Field
 from pydantic.dataclasses import dataclass as pydantic_dataclass
@@ -58,8 +58,9 @@ from lawn_env.tail import (
     first_delivery,
 )
 
+from . import search
 from .estimation import AGVTracker
-from .optim import disc_box_grid, min_plus_allocation, project_budget, project_disc_box
+from .optim import disc_box_grid, project_budget, project_disc_box
 from .problem import Plan, SlotProblem
 
 __all__ = ["ReducedProblem", "ValueTable", "PlannerSettings", "SearchSettings", "ReducedSettings",
@@ -171,72 +172,55 @@ class ReducedProblem(SlotProblem):
                     keep: int = 4) -> tuple[float, np.ndarray, np.ndarray]:
         """Best (p, q) of the tabulated Phi over ``positions`` (n, 2) and power splits in units of
         P_max / levels (exact on that grid, min-plus DP). With ``coarse_levels`` every position is
-        first scored on the coarser power grid and only the ``keep`` best are split finely.
-        Returns (value, p, q)."""
-        if coarse_levels is not None and coarse_levels < levels and positions.shape[0] > keep:
-            scores, _ = self._split(table, positions, coarse_levels)
-            positions = positions[np.argsort(scores)[:keep]]
-        values, alloc = self._split(table, positions, levels)
-        best = int(np.argmin(values))
-        return float(values[best]), alloc[best] * (self.budget / levels), positions[best]
+        first scored on the coarser power grid and only the ``keep`` best are split finely
+        (:func:`agents.search.grid_search`, compiled). Returns (value, p, q)."""
+        coarse = levels if coarse_levels is None else coarse_levels
+        value, power, q = search.grid_search(table.kind, table.grid, table.table, np.ascontiguousarray(self.agv_xy),
+                                             np.ascontiguousarray(positions, dtype=float), (levels, coarse, keep),
+                                             float(self.budget), self.link_array)
+        return float(value), power, q
 
-    def _split(self, table: ValueFunction, positions: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
-        units = np.arange(levels + 1) * (self.budget / levels)
-        d2 = self.link.distance_sq(positions[:, None, :], self.agv_xy[None, :, :])  # (n, K)
-        psi = self.link.success_sq(units[None, None, :], d2[:, :, None])
-        return min_plus_allocation(table(psi))  # tabulated V_k for every (position, AGV, power level)
+    @functools.cached_property
+    def link_array(self) -> np.ndarray:
+        """The planning link as the compiled search reads it: (m, c_d, c_ce, H^2)."""
+        return link_array(self.link)
+
+
+def link_array(link: channel.LinkParams) -> np.ndarray:
+    """(m, c_d, c_ce, H^2) of ``link``: what :mod:`agents.search`'s kernels read."""
+    c_d, c_ce = link.coefficients
+    return np.array([float(link.m), c_d, c_ce, link.altitude_sq])
 
 
 class ValueFunction(Protocol):
-    """V_k(psi) for psi of shape (..., K, L) (AGVs on axis -2) or (K,): what the grid search reads
+    """V_k(psi) as the compiled grid search reads it (:func:`agents.search.grid_search`): ``kind``
+    (:data:`agents.search.LINEAR` or :data:`agents.search.HERMITE`), ``grid`` and ``table``
     (:class:`ValueTable`, :class:`DeliveryValue`)."""
 
-    def __call__(self, psi: np.ndarray) -> np.ndarray: ...
+    kind: int
+    grid: np.ndarray
+    table: np.ndarray
 
 
 class ValueTable:
     """V_k(psi) on a psi grid with envelope slopes; cubic Hermite interpolation between points."""
 
+    kind = search.HERMITE
+
     def __init__(self, grid: np.ndarray, values: np.ndarray, slopes: np.ndarray):
         self.grid = np.asarray(grid, dtype=float)
         self.values = values  # (M, K)
         self.slopes = slopes
+        self.table = np.ascontiguousarray(np.concatenate([values, slopes]), dtype=float)  # what the search reads
 
     def __call__(self, psi: np.ndarray) -> np.ndarray:
-        """Interpolated V for psi of shape (..., K, L) (AGVs on axis -2) or (K,) (compiled: the grid
-        searches of rg-mpc and global-mpc evaluate it on every position, AGV and power level)."""
+        """Interpolated V for psi of shape (K,) (:func:`agents.search.hermite`, compiled)."""
         psi = np.asarray(psi, dtype=float)
-        if psi.ndim == 1:
-            return self(psi[:, None])[:, 0]
         k = self.values.shape[1]
-        if psi.shape[-2] != k:
-            raise ValueError(f"psi has shape {psi.shape}; expected (..., {k}, L) (AGVs on axis -2)")
-        flat = np.ascontiguousarray(psi.reshape(-1, k, psi.shape[-1]))
-        out: np.ndarray = _hermite(self.grid, np.ascontiguousarray(self.values, dtype=float),
-                       np.ascontiguousarray(self.slopes, dtype=float), flat)
-        return out.reshape(psi.shape)
-
-
-@numba.njit(cache=True)  # type: ignore[untyped-decorator]  # numba is not followed (pyproject.toml: numba's follow_imports)
-def _hermite(grid: np.ndarray, values: np.ndarray, slopes: np.ndarray, psi: np.ndarray
-             ) -> np.ndarray:  # pragma: no cover - compiled
-    """Cubic Hermite interpolation of each AGV's column at psi (B, K, L). The order of the
-    expression's terms is part of the result (floating point): reordering them changes the
-    tabulated V in the last bits, and with it the grid searches' choices."""
-    out = np.empty_like(psi)
-    top = grid.size - 2
-    for b in range(psi.shape[0]):
-        for k in range(psi.shape[1]):
-            for j in range(psi.shape[2]):
-                x = psi[b, k, j]
-                i = min(max(np.searchsorted(grid, x, side="right") - 1, 0), top)
-                h = grid[i + 1] - grid[i]
-                t = (x - grid[i]) / h
-                t2 = t * t
-                t3 = t2 * t
-                out[b, k, j] = ((2 * t3 - 3 * t2 + 1) * values[i, k] + (t3 - 2 * t2 + t) * h * slopes[i, k]
-                                + (-2 * t3 + 3 * t2) * values[i + 1, k] + (t3 - t2) * h * slopes[i + 1, k])
-    return out
+        if psi.shape != (k,):
+            raise ValueError(f"psi has shape {psi.shape}; expected ({k},), one per AGV")
+        out: np.ndarray = search.hermite(self.grid, self.table, psi)
+        return out
 
 
 class DeliveryProblem(ReducedProblem):
@@ -271,20 +255,15 @@ class DeliveryProblem(ReducedProblem):
 
 
 class DeliveryValue:
-    """V_k(psi) = V_k^lost - psi w_k for psi of shape (..., K, L) (AGVs on axis -2) or (K,): the
-    grid search's value function of :class:`DeliveryProblem`."""
+    """V_k(psi) = V_k^lost - psi w_k: the grid search's value function of :class:`DeliveryProblem`
+    (:data:`agents.search.LINEAR`: ``table`` (2, K), lost then worth)."""
+
+    kind = search.LINEAR
 
     def __init__(self, lost: np.ndarray, worth: np.ndarray):
         self.lost, self.worth = lost, worth
-
-    def __call__(self, psi: np.ndarray) -> np.ndarray:
-        psi = np.asarray(psi, dtype=float)
-        value: np.ndarray
-        if psi.ndim == 1:
-            value = self.lost - psi * self.worth
-            return value
-        value = self.lost[:, None] - psi * self.worth[:, None]
-        return value
+        self.grid = np.empty(0)
+        self.table = np.ascontiguousarray(np.stack([lost, worth]), dtype=float)
 
 
 # ---------------------------------------------------------------------- planners
@@ -399,6 +378,7 @@ class _ReducedPlannerBase:
         self.settings = settings if settings is not None else self.settings_class()
         self.mpc = self._make_mpc()
         self.link = channel.LinkParams.from_config(config, planning=True)
+        self.link_array = link_array(self.link)
         points = getattr(self.settings, "psi_points", None)  # dv-mpc's values need no table
         self.psi_grid = np.linspace(0.0, 1.0, points) if points is not None else None
 
@@ -416,6 +396,14 @@ class _ReducedPlannerBase:
         return Plan(increments=best.increments, power_w=best.power_w, drone_position=best.drone_position,
                     objective=best.phi, objective_trace=trace, iterations=1, solve_time_s=time.perf_counter() - start,
                     info=info)
+
+
+def _decided(problem: DeliveryProblem, decided: search.Decisions, i: int) -> Evaluation:
+    """Scenario ``i``'s decision of ``decided`` as an :class:`Evaluation` of ``problem``."""
+    psi = decided.psi[i]
+    return Evaluation(float(decided.phi[i]), problem.lost - psi * problem.worth, -problem.worth, psi,
+                      problem.delivered.increments, decided.power[i], decided.position[i],
+                      problem.delivered.num_fallbacks)
 
 
 class ReducedGradientPlanner(_ReducedPlannerBase):
@@ -537,7 +525,7 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
             values = tail.delivery_values(z, reference, psi_bar, snapshot.slot, snapshot.buffer)
             problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values,
                                       self._moves(snapshot.slot))
-            return self._search(problem).psi, self._weights(problem.worth)
+            return self._decide([problem], search_only=True).psi[0], self._weights(problem.worth)
 
         return float(first_delivery(worth_at, self.settings.delivery_start_iterations))
 
@@ -545,8 +533,24 @@ class DeliveryValuePlanner(ReducedGradientPlanner):
         """psi-bar's weights of the AGVs (``delivery_weights``): their worth, or all alike."""
         return worth if self.settings.delivery_weights == "worth" else np.ones_like(worth)
 
+    def _decide(self, problems: list[DeliveryProblem], search_only: bool = False) -> search.Decisions:
+        """The compiled decisions (:func:`agents.search.delivery_decisions`) of ``problems``, one per
+        scenario, continuing each from this planner's previous slot (the batch's planners' own)."""
+        s = self.settings
+        last = [self._last] * len(problems)
+        return search.decide(problems, last, self.link_array, s, search_only)
+
     def plan(self, snapshot: Snapshot) -> Plan:
-        plan = super().plan(snapshot)
+        start = time.perf_counter()
+        problem = self._problem(snapshot)
+        decided = self._decide([problem])
+        best = _decided(problem, decided, 0)
+        self._last = (best.power_w.copy(), best.drone_position - problem.q_prev)
+        origin = search.STARTS[int(decided.origin[0])]
+        tried = {name: float(decided.start_values[0, i]) for i, name in enumerate(search.STARTS)
+                 if math.isfinite(decided.start_values[0, i])}
+        plan = self._plan(problem, best, start, {"start": origin, "start_values": tried})
+        plan.info["qp_evaluations"] = int(decided.evaluations[0])
         if self.tail is not None:
             assert self.psi_bar is not None
             plan.info["expected_delivery"] = self.psi_bar

@@ -10,7 +10,9 @@ compiled code: an edit of any of them recompiles them all (once; about 20 s), an
 package loads from the cache as before.
 
 :func:`install` wraps numba's cache locators (before any kernel of the package is decorated;
-``lawn_env/__init__.py`` calls it first); files outside the package keep numba's own stamp.
+``lawn_env/__init__.py`` calls it first). A package whose kernels compile this one's in (``agents``: the
+experts' searches call the link's equations) registers itself with :func:`register`: its kernels are
+stamped with this package's stamp and its own. Files elsewhere keep numba's own stamp.
 """
 
 from __future__ import annotations
@@ -22,21 +24,31 @@ from typing import Any
 
 from numba.core import caching
 
-__all__ = ["install", "package_stamp"]
+__all__ = ["install", "register", "package_stamp"]
 
 PACKAGE = Path(__file__).resolve().parent
+#: The packages whose kernels are stamped (:func:`register`): this one, and those that compile it in.
+_PACKAGES: list[Path] = [PACKAGE]
 
 
-@functools.lru_cache(maxsize=1)
-def package_stamp() -> str:
-    """SHA-256 of the package's source files that hold compiled code (their names and contents),
+@functools.cache
+def package_stamp(package: Path = PACKAGE) -> str:
+    """SHA-256 of a package's source files that hold compiled code (their names and contents),
     computed once per process."""
     digest = hashlib.sha256()
-    for path in sorted(PACKAGE.glob("*.py")):
+    for path in sorted(package.glob("*.py")):
         text = path.read_bytes()
         if b"numba" in text:
             digest.update(path.name.encode() + b"\0" + text + b"\0")
     return digest.hexdigest()
+
+
+def register(package: Path) -> None:
+    """Stamp the kernels of the package in directory ``package`` with this package's stamp and its own
+    (before any of its kernels is decorated): its kernels compile this package's functions in."""
+    package = Path(package).resolve()
+    if package not in _PACKAGES:
+        _PACKAGES.append(package)
 
 
 def _stamped(locator: type) -> type:
@@ -46,8 +58,11 @@ def _stamped(locator: type) -> type:
     class PackageStamped(locator):  # type: ignore[misc]
         def get_source_stamp(self) -> Any:
             stamp = super().get_source_stamp()
-            if Path(self._py_file).resolve().parent == PACKAGE:
+            home = Path(self._py_file).resolve().parent
+            if home == PACKAGE:
                 return stamp, package_stamp()
+            if home in _PACKAGES:
+                return stamp, package_stamp(), package_stamp(home)
             return stamp
 
     PackageStamped.__name__ = PackageStamped.__qualname__ = f"PackageStamped{locator.__name__}"

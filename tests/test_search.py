@@ -1,0 +1,95 @@
+"""The compiled search and refinement of the reduced planners (:mod:`agents.search`) against the Python
+code they replaced (``tests/oracle_search.py``), and a batch against its scenarios one by one."""
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import oracle_search as oracle
+import pytest
+
+import lawn_env  # noqa: F401
+from agents import make_policy, rollout, search
+from lawn_env import ScenarioConfig, presets
+
+AREA = (0.0, 100.0, 0.0, 100.0)
+
+
+def test_vector_sum_is_numpys_sum_bit_for_bit(rng):
+    for n in [*range(0, 300), 1000, 4097]:
+        a = rng.standard_normal(n) * 10.0 ** rng.uniform(-6, 6, n)
+        assert search.vector_sum(a) == a.sum(), n
+
+
+def test_the_projections_and_the_grid_are_the_python_ones(rng):
+    area = np.array(AREA)
+    for _ in range(3000):
+        center, radius = rng.uniform(0, 100, 2), rng.uniform(0, 30)
+        point = center + rng.normal(0, 40, 2)
+        assert np.array_equal(search.project_disc_box(point, center, radius, area),
+                              oracle.project_disc_box(point, center, radius, AREA))
+        v, total = rng.normal(0, 1, rng.integers(1, 40)), rng.uniform(0.1, 3)
+        assert np.array_equal(search.project_budget(v, total), oracle.project_budget(v, total))
+        spacing, cap = rng.uniform(0.3, 3), int(rng.integers(5, 500))
+        assert np.array_equal(search.disc_box_grid(center, radius, area, spacing, cap),
+                              oracle.disc_box_grid(center, radius, AREA, spacing, cap))
+
+
+def _recorded(config, slots, seed=0, settings=None):
+    """(problem, the planner's previous slot) at every decision of a dv-mpc episode on ``config``."""
+    policy = make_policy("dv-mpc", config, **(settings or {}))
+    planner = policy.solver
+    env = gym.make("lawn/Joint-v1", config=config).unwrapped
+    recorded = []
+    make = planner._problem
+
+    def problem(snapshot):
+        made = make(snapshot)
+        recorded.append((made, planner._last))
+        return made
+
+    planner._problem = problem
+    rollout(env, policy, seed, max_steps=slots)
+    return planner, recorded
+
+
+CASES = {
+    "default": (ScenarioConfig(), None),
+    "disturbed (lag, period 2, measurement noise)": (presets.get("disturbed"), None),
+    "buffered actuator": (ScenarioConfig(control={"actuator": "buffer"}), None),
+    "certainty-equivalent tail": (ScenarioConfig(), {"tail": "certainty-equivalent"}),
+    "k1": (ScenarioConfig(num_agvs=1), None),
+    "k32": (presets.get("k32"), None),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_compiled_decisions_are_the_python_planners(case):
+    """On recorded slots of each task: the compiled decision (search, starts, refinement) is the Python
+    planner's to the last bit; a batch of them is each one alone."""
+    config, settings = CASES[case]
+    planner, recorded = _recorded(config, 6 if config.num_agvs > 8 else 12, settings=settings)
+    problems = [problem for problem, _ in recorded]
+    lasts = [last for _, last in recorded]
+    batch = search.decide(problems, lasts, planner.link_array, planner.settings)
+    for i, (problem, last) in enumerate(recorded):
+        phi, power, q, origin = oracle.decide(problem, last, planner.settings)
+        alone = search.decide([problem], [last], planner.link_array, planner.settings)
+        assert search.STARTS[int(alone.origin[0])] == origin
+        assert alone.phi[0] == phi and np.array_equal(alone.power[0], power) and np.array_equal(alone.position[0], q)
+        for field in search.Decisions._fields:
+            assert np.array_equal(getattr(batch, field)[i], getattr(alone, field)[0], equal_nan=True), field
+
+
+def test_a_search_only_decision_is_the_searchs_point():
+    config = ScenarioConfig()
+    planner, recorded = _recorded(config, 3)
+    s = planner.settings
+    for problem, last in recorded:
+        decided = search.decide([problem], [last], planner.link_array, s, search_only=True)
+        positions = oracle.disc_box_grid(problem.q_prev, problem.reach, problem.area, s.drone_spacing_m,
+                                         s.max_drone_points)
+        power, q = oracle.grid_search(problem, positions, s.power_levels, s.coarse_power_levels, s.keep_positions)
+        phi, psi = oracle.phi_at(problem, power, q)
+        assert decided.phi[0] == phi and np.array_equal(decided.psi[0], psi)
+        assert decided.evaluations[0] == 1 and math.isnan(decided.start_values[0, search.EQUAL])
