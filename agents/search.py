@@ -401,8 +401,8 @@ def grid_search(kind: int, grid: np.ndarray, table: np.ndarray, agv: np.ndarray,
     for the AGVs at ``agv`` (K, 2) over ``positions`` (n, 2) and power splits in units of
     ``budget / levels`` (exact on that grid, min-plus DP); ``resolution`` is (levels, coarse_levels,
     keep). With ``coarse_levels < levels`` and more than ``keep`` positions every position is first
-    scored on the coarser power grid and only the ``keep`` best (ties in grid order) are split finely. ``link``: (m, c_d, c_ce, H^2) of the planning link.
-    Returns (value, p (K,), q (2,))."""
+    scored on the coarser power grid and only the ``keep`` best (ties in grid order) are split finely.
+    ``link``: (m, c_d, c_ce, H^2) of the planning link. Returns (value, p (K,), q (2,))."""
     levels, coarse_levels, keep = resolution
     if coarse_levels < levels and positions.shape[0] > keep:
         scores, _ = _split(kind, grid, table, agv, positions, coarse_levels, budget, link)
