@@ -37,11 +37,11 @@ from lawn_env.presets import ConfigLike, resolve_config
 
 from .ao import AOSettings, AOSolver
 from .base import COMM, JOINT, Policy
+from .dv_mpc import DeliveryValuePlanner
 from .learned import LOADERS, learned_name_forms
 from .problem import Plan
 from .reduced import (
     DeliverySettings,
-    DeliveryValuePlanner,
     GlobalPlanner,
     GlobalSettings,
     ReducedGradientPlanner,

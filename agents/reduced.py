@@ -23,9 +23,9 @@ Two planners use this:
   it is compared by exact Phi with the previous slot's solution and with equal power at hover,
   and the best is refined by projected gradient with Armijo backtracking and Barzilai-Borwein
   steps on the exact Phi, alternating p and q, each evaluation K warm-started QPs.
-* :class:`DeliveryValuePlanner` (``"dv-mpc"``): the same search and refinement on the objective of
-  MODEL.md §4, "Planning under delivery": a command acts only if it arrives and a lost one is seen
-  and replanned at the next slot, so the increments are the psi = 1 MPC's and AGV k's expected cost
+* :class:`agents.dv_mpc.DeliveryValuePlanner` (``"dv-mpc"``): the same search and refinement on the
+  objective of MODEL.md §4, "Planning under delivery": a command acts only if it arrives and a lost one
+  is seen and replanned at the next slot, so the increments are the psi = 1 MPC's and AGV k's expected cost
   is ``V_k(psi) = V_k^lost - psi w_k``, linear in psi (:class:`DeliveryProblem`): two QPs per AGV per
   slot, then no QP in the search or the refinement.
 """
@@ -35,7 +35,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Annotated, Any, Literal, Protocol
 
 import numpy as np
@@ -53,19 +53,15 @@ from lawn_env.tail import (
     BOUNDS_PROBABILITY,
     DELIVERY_MEMORY,
     DELIVERY_START_ITERATIONS,
-    LossAwareTail,
-    expected_delivery,
-    first_delivery,
 )
 
 from . import search
-from .estimation import AGVTracker
 from .optim import disc_box_grid, project_budget, project_disc_box
 from .problem import Plan, SlotProblem
 
 __all__ = ["ReducedProblem", "ValueTable", "PlannerSettings", "SearchSettings", "ReducedSettings",
            "ReducedGradientPlanner", "GlobalPlanner", "GlobalSettings", "DeliveryProblem", "DeliveryValue",
-           "DeliverySettings", "DeliveryValuePlanner"]
+           "DeliverySettings"]
 
 
 @dataclass
@@ -398,14 +394,6 @@ class _ReducedPlannerBase:
                     info=info)
 
 
-def _decided(problem: DeliveryProblem, decided: search.Decisions, i: int) -> Evaluation:
-    """Scenario ``i``'s decision of ``decided`` as an :class:`Evaluation` of ``problem``."""
-    psi = decided.psi[i]
-    return Evaluation(float(decided.phi[i]), problem.lost - psi * problem.worth, -problem.worth, psi,
-                      problem.delivered.increments, decided.power[i], decided.position[i],
-                      problem.delivered.num_fallbacks)
-
-
 class ReducedGradientPlanner(_ReducedPlannerBase):
     """``rg-mpc``: coarse tabulated search, then projected gradient on the exact Phi."""
 
@@ -444,125 +432,6 @@ class ReducedGradientPlanner(_ReducedPlannerBase):
         self._last = (best.power_w.copy(), best.drone_position - problem.q_prev)
         return self._plan(problem, best, start, {"start": origin,
                                                  "start_values": {n: e.phi for n, e in starts.items()}})
-
-
-class DeliveryValuePlanner(ReducedGradientPlanner):
-    """``dv-mpc``: :class:`ReducedGradientPlanner`'s search and refinement on :class:`DeliveryProblem`
-    (MODEL.md §4, "Planning under delivery"). The increments are the psi = 1 MPC's; power and the
-    drone maximise ``sum_k psi_k w_k``, the expected worth of the commands delivered.
-
-    With commands every P slots (a control period the planner knows, MODEL.md §7) the command is
-    the increment of the next command slot, held P slots, and ``w`` its worth. On a slot without a
-    command nothing is sent: the drone serves the next command, planned from where it could be by
-    then (the reach of the moves until that slot, this one included), and this slot's move heads
-    straight for it (``info["command_position"]``)."""
-
-    settings_class = DeliverySettings
-    settings: DeliverySettings
-
-    def __init__(self, config: ScenarioConfig, settings: DeliverySettings | None = None):
-        super().__init__(config, settings)
-        s = self.settings
-        lag = self._lag()
-        self.tail = (LossAwareTail.from_config(config, lag, s.bounds_probability, s.qp_backend)
-                     if s.tail == "loss-aware" else None)
-        self.period = self.mpc.control_period
-        self.tracker = AGVTracker(config, lag=lag, filter=s.filter_measurements)
-        # the loss-aware tail's expected delivery (lawn_env.tail.expected_delivery); None: the episode's start
-        self.psi_bar: float | None = None
-        self._worth = np.zeros(config.num_agvs)  # the last problem's w_k
-
-    def _lag(self) -> bool:
-        """Whether the planner predicts with the config's actuator lag (``model_lag`` and a lag to model)."""
-        return bool(self.settings.model_lag and self.config.disturbance.actuator_lag_s > 0)
-
-    def _make_mpc(self) -> OutageAwareMPC:
-        """The psi = 1 MPC with the settings' terminal weight, predicting with the lag where modelled."""
-        s = self.settings
-        return OutageAwareMPC.from_config(self.config, backend=s.qp_backend, terminal_success=s.terminal_success,
-                                          lag=self._lag())
-
-    def reset(self) -> None:
-        super().reset()
-        self.tracker.reset()
-        if self.tail is not None:
-            self.tail.reset()
-        self.psi_bar = None
-
-    def _state(self, snapshot: Snapshot) -> np.ndarray | None:
-        """The MPC's state from the tracker (:class:`agents.estimation.AGVTracker`: filtered under
-        measurement noise, the applied acceleration appended under a lag); None when it has nothing to
-        add (the observed x~ as it is)."""
-        if self.tracker.lag_alpha is None and not self.tracker.filtering:
-            return None
-        return self.tracker.state(snapshot.x_aug)
-
-    def _moves(self, slot: int) -> int:
-        """The drone's moves until the next command goes out, the one of this slot included."""
-        return 1 + (-int(slot)) % self.period
-
-    def _problem(self, snapshot: Snapshot) -> DeliveryProblem:
-        state = self._state(snapshot)
-        values = None
-        if self.tail is not None:
-            z = np.asarray(snapshot.x_aug if state is None else state, dtype=float)
-            reference = np.asarray(snapshot.reference, dtype=float)
-            if self.psi_bar is None:
-                self.psi_bar = self._first_delivery(snapshot, state, z, reference)
-            values = self.tail.delivery_values(z, reference, self.psi_bar, snapshot.slot, snapshot.buffer)
-        problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values, self._moves(snapshot.slot))
-        self._worth = problem.worth
-        return problem
-
-    def _first_delivery(self, snapshot: Snapshot, state: np.ndarray | None, z: np.ndarray,
-                        reference: np.ndarray) -> float:
-        """psi-bar at an episode's first slot (:func:`lawn_env.tail.first_delivery`): the search's (p, q)
-        at each step's psi-bar."""
-        tail = self.tail
-        assert tail is not None
-
-        def worth_at(psi_bar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            values = tail.delivery_values(z, reference, psi_bar, snapshot.slot, snapshot.buffer)
-            problem = DeliveryProblem(self.mpc, self.link, snapshot, self.config, state, values,
-                                      self._moves(snapshot.slot))
-            return self._decide([problem], search_only=True).psi[0], self._weights(problem.worth)
-
-        return float(first_delivery(worth_at, self.settings.delivery_start_iterations))
-
-    def _weights(self, worth: np.ndarray) -> np.ndarray:
-        """psi-bar's weights of the AGVs (``delivery_weights``): their worth, or all alike."""
-        return worth if self.settings.delivery_weights == "worth" else np.ones_like(worth)
-
-    def _decide(self, problems: list[DeliveryProblem], search_only: bool = False) -> search.Decisions:
-        """The compiled decisions (:func:`agents.search.delivery_decisions`) of ``problems``, one per
-        scenario, continuing each from this planner's previous slot (the batch's planners' own)."""
-        s = self.settings
-        last = [self._last] * len(problems)
-        return search.decide(problems, last, self.link_array, s, search_only)
-
-    def plan(self, snapshot: Snapshot) -> Plan:
-        start = time.perf_counter()
-        problem = self._problem(snapshot)
-        decided = self._decide([problem])
-        best = _decided(problem, decided, 0)
-        self._last = (best.power_w.copy(), best.drone_position - problem.q_prev)
-        origin = search.STARTS[int(decided.origin[0])]
-        tried = {name: float(decided.start_values[0, i]) for i, name in enumerate(search.STARTS)
-                 if math.isfinite(decided.start_values[0, i])}
-        plan = self._plan(problem, best, start, {"start": origin, "start_values": tried})
-        plan.info["qp_evaluations"] = int(decided.evaluations[0])
-        if self.tail is not None:
-            assert self.psi_bar is not None
-            plan.info["expected_delivery"] = self.psi_bar
-            self.psi_bar = float(expected_delivery(self.psi_bar, plan.info["success_probability"],
-                                                   self._weights(self._worth),
-                                                   self.settings.delivery_memory))
-        if self._moves(snapshot.slot) == 1:
-            return plan
-        target = plan.drone_position  # where the next command goes out from: one move toward it now
-        step = project_disc_box(target, np.asarray(snapshot.drone_position, dtype=float),
-                                float(self.config.drone_reach_m), self.config.area_m)
-        return replace(plan, drone_position=step, info={**plan.info, "command_position": target})
 
 
 class GlobalPlanner(_ReducedPlannerBase):

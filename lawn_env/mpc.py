@@ -40,7 +40,7 @@ from .qp import AxisPencils
 if TYPE_CHECKING:
     from .config import ScenarioConfig
 
-__all__ = ["MPCSolution", "OutageAwareMPC", "SlotData", "BACKENDS", "DEFAULT_BACKEND"]
+__all__ = ["MPCSolution", "OutageAwareMPC", "SlotData", "Rows", "BACKENDS", "DEFAULT_BACKEND"]
 
 #: The backend every caller uses unless told otherwise.
 DEFAULT_BACKEND = "compiled"
@@ -213,10 +213,13 @@ class _CompiledBackend:
                 sets.reshape(shape + sets.shape[1:])[rows] = 0
 
     def solve_all(self, key: tuple[Any, ...], s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                  phase: np.ndarray, start: tuple[Any, ...] | None = None
+                  phase: np.ndarray, start: tuple[Any, ...] | None = None, rows: Rows | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Solve the stack from the working sets kept under ``key`` (or copied from ``start``'s):
-        (z, objective, iterations, settled) per problem."""
+        (z, objective, iterations, settled) per problem. With ``rows`` the stack is those scenarios of a
+        batch (:class:`Rows`), each from its own working sets, kept per scenario of the batch."""
+        if rows is not None:
+            return self._solve_rows(key, s, q, lower, upper, phase, rows)
         source = self.working_sets.get(start) if start is not None else None
         if source is not None:
             self.working_sets[key] = source.copy()
@@ -226,6 +229,35 @@ class _CompiledBackend:
         if not (lower.flags.c_contiguous and upper.flags.c_contiguous):
             lower, upper = _writable(lower), _writable(upper)
         return self.pencils.solve(s, q, lower, upper, phase, sets)
+
+    def _solve_rows(self, key: tuple[Any, ...], s: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                    phase: np.ndarray, rows: Rows) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`solve_all` of the scenarios ``rows.index`` of a batch of ``rows.batch``: their working sets
+        gathered from the batch's (kept under the batch's stack shape, so :meth:`forget` reaches them),
+        solved, and put back. A scenario's sets change only when it is solved: it continues as when it
+        is planned alone."""
+        count = rows.index.size
+        per = s.shape[0] // count  # the problems of one scenario (its AGVs)
+        full = ((rows.batch, per), ("rows", key[1]))
+        sets = self.working_sets.get(full)
+        if sets is None:
+            sets = self.working_sets[full] = np.zeros((rows.batch * per, 2, 2 * self.pencils.horizon), dtype=np.int8)
+        by_row = sets.reshape(rows.batch, per, *sets.shape[1:])
+        mine = np.ascontiguousarray(by_row[rows.index]).reshape(count * per, *sets.shape[1:])
+        if not (lower.flags.c_contiguous and upper.flags.c_contiguous):
+            lower, upper = _writable(lower), _writable(upper)
+        solved = self.pencils.solve(s, q, lower, upper, phase, mine)
+        by_row[rows.index] = mine.reshape(count, per, *sets.shape[1:])
+        return solved
+
+
+@dataclass(frozen=True)
+class Rows:
+    """Which scenarios of a batch a solve's stack holds: their indices ``index`` (a leading axis of the
+    stack, in order) among ``batch`` scenarios that keep their own warm starts (a batched planner's)."""
+
+    index: np.ndarray
+    batch: int
 
 
 #: The named backends.
@@ -403,14 +435,16 @@ class OutageAwareMPC:
         return self.solve_prepared(self.prepare(x_aug, chi_ref, slot), psi)
 
     def solve_prepared(self, data: SlotData, psi: npt.ArrayLike, warm_key: str = "",
-                       start_from: str | None = None) -> MPCSolution:
+                       start_from: str | None = None, rows: Rows | None = None) -> MPCSolution:
         """Solve the QPs of a prepared slot at success probabilities ``psi`` (broadcast to the
         data's (..., K)): the planners call this many times with the same ``data``. ``data`` may
         also be evaluated at a stack of psi values with leading axes of their own, e.g. ``psi``
         (L, K) on data (K,): one call for a planner's psi table. Calls with another ``warm_key``
         keep warm starts of their own (a caller that alternates two kinds of solves of one shape);
         ``start_from`` names another key whose working sets (of the same shape) this solve starts
-        from instead, when they exist (the compiled backend; the others ignore both)."""
+        from instead, when they exist (the compiled backend; the others ignore both). ``rows``: the data's
+        leading axis is those scenarios of a batch, each warm-started from its own last solve (:class:`Rows`;
+        the compiled backend)."""
         start = time.perf_counter()
         psi = np.asarray(psi, dtype=float)
         if not ((psi >= 0.0) & (psi <= 1.0)).all():  # NaN fails both
@@ -439,7 +473,8 @@ class OutageAwareMPC:
         s = (psi * psi).reshape(count)
         if isinstance(self.backend, _CompiledBackend):  # blocked increments come back exactly zero
             z, fval, iterations, settled = self.backend.solve_all((lead, warm_key), s, q, lower, upper, phase,
-                                                                  None if start_from is None else (lead, start_from))
+                                                                  None if start_from is None else (lead, start_from),
+                                                                  rows)
             status = np.zeros(count, dtype=np.int8)
             if not settled.all():
                 for i in np.flatnonzero(~settled).tolist():
@@ -557,17 +592,18 @@ class OutageAwareMPC:
         upper[..., n:] -= offset
         return SlotData(lost.residual, lost.linear + shift, constant, lower, upper, lost.phase)
 
-    def delivery_values(self, data: SlotData, queue: np.ndarray | None = None) -> tuple[MPCSolution, np.ndarray]:
+    def delivery_values(self, data: SlotData, queue: np.ndarray | None = None,
+                        rows: Rows | None = None) -> tuple[MPCSolution, np.ndarray]:
         """The two MPC values of each AGV's next command (any leading batch axes, (..., K)): the
         solution at psi = 1 (every planned increment delivered: its increments and ``value`` V^del)
         and V^lost, the same problem's optimum with the next command lost (:meth:`lost_command`: held
         at zero, or with a buffered actuator's ``queue`` the buffer's increment played).
         The expected cost of a command sent with success probability psi is
         ``psi V^del + (1 - psi) V^lost`` (MODEL.md §4, "Planning under delivery"); ``V^lost - V^del``
-        >= 0 is what its delivery is worth."""
+        >= 0 is what its delivery is worth. ``rows``: :meth:`solve_prepared`'s."""
         ones = np.ones(data.constant.shape)
-        delivered = self.solve_prepared(data, ones, warm_key="delivered")
-        lost = self.solve_prepared(self.lost_command(data, queue), ones, warm_key="lost")
+        delivered = self.solve_prepared(data, ones, warm_key="delivered", rows=rows)
+        lost = self.solve_prepared(self.lost_command(data, queue), ones, warm_key="lost", rows=rows)
         return delivered, np.maximum(lost.value, delivered.value)
 
 

@@ -75,7 +75,7 @@ from .dynamics import (
     planning_period,
     prediction_matrices,
 )
-from .mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
+from .mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC, Rows
 from .products import matmul
 from .qp import AxisPencils
 
@@ -357,10 +357,10 @@ class LossAwareTail:
     def state_dim(self) -> int:
         return int(self.model.state_dim)
 
-    def reset(self) -> None:
-        """Drop every QP's warm starts."""
+    def reset(self, which: np.ndarray | None = None) -> None:
+        """Drop every QP's warm starts (``which``: a mask over a batch's scenarios, only theirs)."""
         for mpc in self._mpcs.values():
-            mpc.reset()
+            mpc.reset(which)
 
     def _mpc(self, index: int, phase: int) -> OutageAwareMPC:
         key = (index, phase)
@@ -385,11 +385,14 @@ class LossAwareTail:
         return np.concatenate([ref, ref[..., ACCELERATION]], axis=-1)
 
     def delivery_values(self, state: np.ndarray, chi_ref: np.ndarray, psi_bar: npt.ArrayLike,
-                        slot: npt.ArrayLike = 0, queue: np.ndarray | None = None) -> tuple[MPCSolution, np.ndarray]:
+                        slot: npt.ArrayLike = 0, queue: np.ndarray | None = None,
+                        rows: Rows | None = None) -> tuple[MPCSolution, np.ndarray]:
         """(the delivered solution: the planned increments (..., K, N, 2) and V^del (..., K); V^lost
         (..., K)) at psi-bar and slot (each one per scenario (...), or one for all). Under the buffered
         actuator ``queue`` (..., K, L, 2) is what each AGV plays without a packet
-        (:func:`lawn_env.core.buffer_queue`), and V^lost plays it (:meth:`OutageAwareMPC.lost_command`)."""
+        (:func:`lawn_env.core.buffer_queue`), and V^lost plays it (:meth:`OutageAwareMPC.lost_command`).
+        ``rows``: the leading axis is those scenarios of a batch, each continuing its own warm starts
+        (:class:`lawn_env.mpc.Rows`; a batched planner's: its scenarios decide as each would alone)."""
         start = time.perf_counter()
         n, k = self.model.state_dim, self.num_agvs
         state = np.asarray(state, dtype=float)
@@ -403,12 +406,13 @@ class LossAwareTail:
         flat_z = state.reshape(scenarios, k, n)
         flat_ref = self.references(np.asarray(chi_ref, dtype=float)).reshape(scenarios, k, -1, n)
         flat_queue = None if queue is None else np.asarray(queue, dtype=float).reshape(scenarios, k, -1, 2)
-        if index.size == 1 and (slots.size == 1 or np.all(slots % self.model.period == slots[0] % self.model.period)):
+        if rows is None and index.size == 1 and (
+                slots.size == 1 or np.all(slots % self.model.period == slots[0] % self.model.period)):
             solution, lost = self._solve(int(index[0]), int(slots[0] % self.model.period), flat_z, flat_ref, slots,
                                          flat_queue)
         else:  # scenarios at other psi-bars or phases: one QP stack per group
             solution, lost = self._groups(np.broadcast_to(index, (scenarios,)), np.broadcast_to(slots, (scenarios,)),
-                                          flat_z, flat_ref, flat_queue)
+                                          flat_z, flat_ref, flat_queue, rows)
         shape = (*lead, k)
         horizon = self.model.horizon
         return (MPCSolution(increments=solution.increments.reshape((*shape, horizon, 2)),
@@ -417,25 +421,27 @@ class LossAwareTail:
                 lost.reshape(shape))
 
     def _groups(self, index: np.ndarray, slots: np.ndarray, z: np.ndarray, ref: np.ndarray,
-                queue: np.ndarray | None) -> tuple[MPCSolution, np.ndarray]:
-        """:meth:`_solve` per group of scenarios sharing psi-bar and phase, reassembled."""
+                queue: np.ndarray | None, rows: Rows | None = None) -> tuple[MPCSolution, np.ndarray]:
+        """:meth:`_solve` per group of scenarios sharing psi-bar and phase, reassembled (``rows``: the
+        scenarios' places in their batch)."""
         scenarios, k = z.shape[:2]
         increments = np.zeros((scenarios, k, self.model.horizon, 2))
         delivered, lost = np.empty((scenarios, k)), np.empty((scenarios, k))
         status, iterations = np.zeros((scenarios, k), np.int8), np.zeros((scenarios, k), np.int64)
         groups = index * self.model.period + slots % self.model.period
         for group in np.unique(groups).tolist():
-            rows = np.flatnonzero(groups == group)
-            solution, lost[rows] = self._solve(*divmod(int(group), self.model.period), z[rows], ref[rows], slots[rows],
-                                               None if queue is None else queue[rows])
-            increments[rows], delivered[rows] = solution.increments, solution.value
-            status[rows], iterations[rows] = solution.status, solution.iterations
+            mine = np.flatnonzero(groups == group)
+            batch = None if rows is None else Rows(rows.index[mine], rows.batch)
+            solution, lost[mine] = self._solve(*divmod(int(group), self.model.period), z[mine], ref[mine], slots[mine],
+                                               None if queue is None else queue[mine], batch)
+            increments[mine], delivered[mine] = solution.increments, solution.value
+            status[mine], iterations[mine] = solution.status, solution.iterations
         return MPCSolution(increments, delivered, status, iterations, 0.0), lost
 
     def _solve(self, index: int, phase: int, z: np.ndarray, ref: np.ndarray, slots: np.ndarray,
-               queue: np.ndarray | None = None) -> tuple[MPCSolution, np.ndarray]:
+               queue: np.ndarray | None = None, batch: Rows | None = None) -> tuple[MPCSolution, np.ndarray]:
         """One group of scenarios sharing psi-bar and phase: z (B, K, n), ref (B, K, N+1, n), the
-        buffered actuator's queue (B, K, L, 2) or None."""
+        buffered actuator's queue (B, K, L, 2) or None; ``batch``: the scenarios' places in their batch."""
         stages = self.model.stages(index, phase)
         mpc = self._mpc(index, phase)
         maps = self.model.maps(index, phase)
@@ -451,7 +457,7 @@ class LossAwareTail:
         if released is not None:
             data.lower[..., released] = -np.inf
             data.upper[..., released] = np.inf
-        return mpc.delivery_values(data, queue)
+        return mpc.delivery_values(data, queue, batch)
 
     def _released(self, index: int, phase: int, stages: _Stages) -> np.ndarray | None:
         """The bounds (columns of the QPs' (4 N,) bounds) of the later commands, and of the accelerations

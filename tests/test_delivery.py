@@ -7,7 +7,8 @@ import pytest
 from test_agents import _snapshots
 
 from agents import make_policy, rollout
-from agents.reduced import DeliveryProblem, DeliverySettings, DeliveryValuePlanner
+from agents.dv_mpc import DeliveryValuePlanner
+from agents.reduced import DeliveryProblem, DeliverySettings
 from lawn_env import ScenarioConfig, channel, presets
 from lawn_env.dynamics import command_mask
 from lawn_env.errors import ConfigError
@@ -226,7 +227,7 @@ def test_without_a_lag_or_measurement_noise_the_tracker_changes_nothing():
     assert planner.tracker.lag_alpha is None and not planner.tracker.filtering
     assert planner.mpc.model.state_dim == 6
     off = DeliveryValuePlanner(DISTURBED, DeliverySettings(model_lag=False, filter_measurements=False))
-    assert off.mpc.model.state_dim == 6 and off._state(_snapshots(1, seed=1, config=DISTURBED)[0]) is None
+    assert off.mpc.model.state_dim == 6 and off._state(off._first(), _snapshots(1, seed=1, config=DISTURBED)[0]) is None
 
 
 def test_a_control_period_longer_than_the_horizon_holds_nothing_it_cannot_see():

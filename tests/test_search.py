@@ -41,14 +41,14 @@ def _recorded(config, slots, seed=0, settings=None):
     planner = policy.solver
     env = gym.make("lawn/Joint-v1", config=config).unwrapped
     recorded = []
-    make = planner._problem
+    make = planner._problems
 
-    def problem(snapshot):
-        made = make(snapshot)
-        recorded.append((made, planner._last))
+    def problems(snapshots):
+        made = make(snapshots)
+        recorded.append((made[0], planner.last))
         return made
 
-    planner._problem = problem
+    planner._problems = problems
     rollout(env, policy, seed, max_steps=slots)
     return planner, recorded
 
@@ -93,3 +93,60 @@ def test_a_search_only_decision_is_the_searchs_point():
         phi, psi = oracle.phi_at(problem, power, q)
         assert decided.phi[0] == phi and np.array_equal(decided.psi[0], psi)
         assert decided.evaluations[0] == 1 and math.isnan(decided.start_values[0, search.EQUAL])
+
+
+@pytest.mark.parametrize("case", ["default", "disturbed (lag, period 2, measurement noise)", "buffered actuator",
+                                  "certainty-equivalent tail", "k1"])
+def test_a_batch_of_scenarios_plans_as_each_one_alone(case):
+    """dv-mpc's plan_batch over B scenarios (their own seeds, one restarting mid-way) gives each scenario
+    the plans it gets when planned alone, bit for bit (each keeps its own warm starts, tracker and
+    psi-bar)."""
+    config, settings = CASES[case]
+    seeds, slots = (3, 4, 5), 14
+    alone = {}
+    for seed in seeds:
+        policy = make_policy("dv-mpc", config, **(settings or {}))
+        env = gym.make("lawn/Joint-v1", config=config).unwrapped
+        alone[seed] = list(_planned(policy, env, seed, slots))
+    batch = make_policy("dv-mpc", config, **(settings or {}))
+    envs = [gym.make("lawn/Joint-v1", config=config).unwrapped for _ in seeds]
+    for env, seed in zip(envs, seeds):
+        env.reset(seed=seed)
+    planner = batch.solver
+    for t in range(slots):
+        snapshots = [env.snapshot() for env in envs]
+        plans = planner.plan_batch(snapshots)
+        for env, seed, plan, snap in zip(envs, seeds, plans, snapshots):
+            expected = alone[seed][t]
+            assert np.array_equal(plan.increments, expected.increments) and plan.objective == expected.objective
+            assert np.array_equal(plan.power_w, expected.power_w)
+            assert np.array_equal(plan.drone_position, expected.drone_position), (seed, t)
+            env.step(batch.action(plan, snap))
+
+
+def _planned(policy, env, seed, slots):
+    env.reset(seed=seed)
+    policy.reset(seed)
+    for _ in range(slots):
+        snap = env.snapshot()
+        plan = policy.plan(snap)
+        yield plan
+        env.step(policy.action(plan, snap))
+
+
+def test_a_batch_restarts_one_scenario_and_refuses_another_size():
+    config = ScenarioConfig()
+    planner = make_policy("dv-mpc", config).solver
+    env = gym.make("lawn/Joint-v1", config=config).unwrapped
+    env.reset(seed=1)
+    fresh = make_policy("dv-mpc", config).solver.plan(env.snapshot())
+    planner.plan_batch([env.snapshot(), env.snapshot()])
+    planner.plan_batch([env.snapshot(), env.snapshot()])
+    planner.reset(np.array([False, True]))  # the second scenario starts a new episode
+    plans = planner.plan_batch([env.snapshot(), env.snapshot()])
+    assert plans[1].objective == fresh.objective and np.array_equal(plans[1].drone_position, fresh.drone_position)
+    assert "previous" in plans[0].info["start_values"] and "previous" not in plans[1].info["start_values"]
+    with pytest.raises(ValueError, match="3 snapshots for a planner playing 2 scenarios"):
+        planner.plan_batch([env.snapshot()] * 3)
+    with pytest.raises(ValueError, match="which has shape"):
+        planner.reset(np.array([True]))
