@@ -4,6 +4,8 @@ of named policies)."""
 
 from __future__ import annotations
 
+import copy
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
@@ -40,6 +42,12 @@ class Policy:
     stateful = False
     #: The plan behind the last action (planner policies; None for policies that do not plan)
     last_plan: Plan | None = None
+    #: The plans behind the last :meth:`act_scenarios`'s actions, one per scenario (None entries: no plan)
+    last_plans: list[Plan | None] | None = None
+    #: True when :meth:`act_scenarios` decides the batch in one call (the others play it scenario by scenario)
+    batched = False
+    _rows: list[Policy] | None = None  # the scenarios' copies (a policy playing them one by one)
+    _batch = 0  # the scenarios reset_scenarios started
 
     def __init__(self, config: ConfigLike = None, env_id: str = JOINT,
                  seed: int | None = None):
@@ -62,6 +70,53 @@ class Policy:
 
     def act(self, obs: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
+
+    # ------------------------------------------------------------------ B scenarios at once
+    def reset_scenarios(self, seeds: Sequence[int | None]) -> None:
+        """Start B episodes for :meth:`act_scenarios`, scenario i's as ``reset(seeds[i])`` starts one. Here
+        (a policy without a batched decision, a user's own among them) each scenario gets a copy of this
+        policy that plays it alone; a policy with no per-episode state and no randomness serves every
+        scenario itself."""
+        seeds = list(seeds)
+        if not seeds:
+            raise ValueError("seeds is empty: reset_scenarios starts one episode per seed")
+        self._rows, self._batch = None, len(seeds)
+        if not self.stateful and type(self)._on_reset is Policy._on_reset:
+            self.reset(seeds[0])
+            self._rows = [self] * len(seeds)
+            return
+        template = copy.deepcopy(self)
+        self._rows = [copy.deepcopy(template) for _ in seeds]
+        for row, seed in zip(self._rows, seeds, strict=True):
+            row.reset(seed)
+
+    def act_scenarios(self, observations: np.ndarray) -> np.ndarray:
+        """The actions (B, ...) of the observations (B, obs) of the B scenarios :meth:`reset_scenarios` started,
+        each continuing its own episode: scenario i's action is the one it gets played alone. Here one
+        scenario at a time (:meth:`act` of its copy); :attr:`last_plans` holds the plans behind them."""
+        obs = self.check_scenarios(observations)
+        rows = self._rows
+        assert rows is not None
+        actions = np.stack([row.act(o) for row, o in zip(rows, obs, strict=True)])
+        self.last_plans = [row.last_plan for row in rows]
+        return actions
+
+    def check_scenarios(self, observations: Any) -> np.ndarray:
+        """``observations`` as float32 (B, obs) after checking they are one per scenario of the batch
+        :meth:`reset_scenarios` started, each an observation of this policy's scenario, none of them NaN."""
+        size = self._batch
+        if not size:
+            raise ValueError("act_scenarios before reset_scenarios: start the scenarios' episodes with "
+                             "reset_scenarios(seeds)")
+        obs = np.asarray(observations)
+        if obs.ndim != 2 or obs.shape[0] != size:
+            raise ValueError(f"observations has shape {obs.shape}; this batch has {size} scenarios: expected "
+                             f"({size}, {self.layout.size})")
+        checked = np.stack([self.check_observation(o) for o in obs])
+        if np.isnan(checked).any():
+            raise ValueError(f"observations of scenarios {np.flatnonzero(np.isnan(checked).any(axis=1)).tolist()} "
+                             "hold NaN")
+        return checked
 
     def check_observation(self, obs: Any) -> np.ndarray:
         """``obs`` as float32 after checking it is one observation of this policy's scenario: every

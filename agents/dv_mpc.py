@@ -8,7 +8,7 @@ loss-aware tail's, :class:`lawn_env.tail.LossAwareTail`, or the certainty-equiva
 position and the power split then maximise ``sum_k psi_k w_k`` by the compiled search and refinement
 of :func:`agents.search.delivery_decisions`.
 
-:class:`DeliveryValuePlanner` plans B scenarios at once (:meth:`~DeliveryValuePlanner.plan_batch`):
+:class:`DeliveryValuePlanner` plans B scenarios at once (:meth:`~DeliveryValuePlanner.plan_scenarios`):
 their QPs in one stack per psi-bar and slot phase, each scenario warm-started from its own last solve,
 their searches in one compiled call. Each scenario keeps what it carries across slots (the tracker,
 psi-bar, the previous decision), so a scenario of a batch decides exactly as it does alone; a single
@@ -33,7 +33,7 @@ from . import search
 from .estimation import AGVTracker
 from .optim import project_disc_box
 from .problem import Plan
-from .reduced import DeliveryProblem, DeliverySettings, Evaluation, _ReducedPlannerBase
+from .reduced import DeliveryProblem, DeliverySettings, Evaluation, ReducedPlannerBase
 
 __all__ = ["DeliveryValuePlanner"]
 
@@ -48,7 +48,7 @@ class _Scenario:
     worth: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
-class DeliveryValuePlanner(_ReducedPlannerBase):
+class DeliveryValuePlanner(ReducedPlannerBase):
     """``dv-mpc``: the delivery problem's search and refinement (module docstring). The increments are the
     psi = 1 MPC's; power and the drone maximise ``sum_k psi_k w_k``, the expected worth of the commands
     delivered.
@@ -129,15 +129,15 @@ class DeliveryValuePlanner(_ReducedPlannerBase):
 
     # ------------------------------------------------------------------ planning
     def plan(self, snapshot: Snapshot) -> Plan:
-        """One scenario's decision: :meth:`plan_batch` of one."""
-        return self.plan_batch([snapshot])[0]
+        """One scenario's decision: :meth:`plan_scenarios` of one."""
+        return self.plan_scenarios([snapshot])[0]
 
-    def plan_batch(self, snapshots: Sequence[Snapshot]) -> list[Plan]:
+    def plan_scenarios(self, snapshots: Sequence[Snapshot]) -> list[Plan]:
         """The decisions of B scenarios of this planner's config, each from its own episode so far (the
         batch's size is fixed by the first call after a full :meth:`reset`)."""
         start = time.perf_counter()
         if not snapshots:
-            raise ValueError("snapshots is empty: plan_batch needs one snapshot per scenario")
+            raise ValueError("snapshots is empty: plan_scenarios needs one snapshot per scenario")
         if not self.scenarios:
             self.scenarios = [self._scenario() for _ in snapshots]
         if len(snapshots) != len(self.scenarios):

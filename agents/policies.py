@@ -24,7 +24,7 @@ Registered names (``make_policy(name, config)``):
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -107,6 +107,32 @@ class PlannerPolicy(Policy):
         plan = self.plan(snapshot)
         self.last_plan = plan
         return self.action(plan, snapshot)
+
+    @property
+    def batched(self) -> bool:  # type: ignore[override]  # a property of the solver here
+        """True when the solver plans a batch at once (``plan_scenarios``: ``dv-mpc``'s)."""
+        return hasattr(self.solver, "plan_scenarios")
+
+    def reset_scenarios(self, seeds: Sequence[int | None]) -> None:
+        """:meth:`Policy.reset_scenarios`; a solver that plans batches starts them all itself."""
+        if not self.batched:
+            super().reset_scenarios(seeds)
+            return
+        seeds = list(seeds)
+        if not seeds:
+            raise ValueError("seeds is empty: reset_scenarios starts one episode per seed")
+        self.reset(seeds[0])
+        self._rows, self._batch = None, len(seeds)
+
+    def act_scenarios(self, observations: np.ndarray) -> np.ndarray:
+        """:meth:`Policy.act_scenarios`; a solver that plans batches plans the B scenarios in one call."""
+        if not self.batched:
+            return super().act_scenarios(observations)
+        obs = self.check_scenarios(observations)
+        snapshots = [snapshot_from_observation(self.layout, self.config, o) for o in obs]
+        plans = self.solver.plan_scenarios(snapshots)
+        self.last_plans = list(plans)
+        return np.stack([self.action(plan, snapshot) for plan, snapshot in zip(plans, snapshots, strict=True)])
 
     def action(self, plan: Plan, snapshot: Snapshot) -> np.ndarray:
         """The normalized action of ``self.env_id`` that carries out ``plan`` (under the buffered

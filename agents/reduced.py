@@ -365,7 +365,7 @@ class DeliverySettings(SearchSettings):
                              "delivery (set tail='certainty-equivalent' to use it)")
 
 
-class _ReducedPlannerBase:
+class ReducedPlannerBase:
     settings_class: type[PlannerSettings] = ReducedSettings
     settings: PlannerSettings
 
@@ -394,7 +394,7 @@ class _ReducedPlannerBase:
                     info=info)
 
 
-class ReducedGradientPlanner(_ReducedPlannerBase):
+class ReducedGradientPlanner(ReducedPlannerBase):
     """``rg-mpc``: coarse tabulated search, then projected gradient on the exact Phi."""
 
     settings: SearchSettings  # ReducedSettings (DeliveryValuePlanner: DeliverySettings)
@@ -434,7 +434,7 @@ class ReducedGradientPlanner(_ReducedPlannerBase):
                                                  "start_values": {n: e.phi for n, e in starts.items()}})
 
 
-class GlobalPlanner(_ReducedPlannerBase):
+class GlobalPlanner(ReducedPlannerBase):
     """``global-mpc``: fine tabulated search, exact power split on a grid, exact polish."""
 
     settings_class = GlobalSettings

@@ -126,8 +126,9 @@ def _success_series(m: float, x: float) -> float:  # pragma: no cover - compiled
 def outage_law(m: float, x: float, part: int) -> float:  # pragma: no cover - compiled
     """The outage law of one link at the outage argument x (Prop. 1): ``part`` OUTAGE gives
     ``P = Pr(m |h|^2 < x) = gammainc(m, x)``, SUCCESS psi = 1 - P = gammaincc(m, x) (accurate when
-    psi is tiny, where 1 - P has no digits left; Erlang's closed form for integer m, :func:`_success_series`), DENSITY -d psi / dx = x^(m-1) e^(-x) / Gamma(m)
-    (in log form, accurate for large x), ORDER the exponent a of its high-SNR form P ∝ x^a
+    psi is tiny, where 1 - P has no digits left; Erlang's closed form for integer m,
+    :func:`_success_series`), DENSITY -d psi / dx = x^(m-1) e^(-x) / Gamma(m) (in log form, accurate
+    for large x), ORDER the exponent a of its high-SNR form P ∝ x^a
     (P ~ x^m / Gamma(m+1) as x -> 0: the diversity order m, which the stake prior's closed form
     uses). The four are one law: they change together."""
     if part == OUTAGE:

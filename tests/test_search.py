@@ -98,7 +98,7 @@ def test_a_search_only_decision_is_the_searchs_point():
 @pytest.mark.parametrize("case", ["default", "disturbed (lag, period 2, measurement noise)", "buffered actuator",
                                   "certainty-equivalent tail", "k1"])
 def test_a_batch_of_scenarios_plans_as_each_one_alone(case):
-    """dv-mpc's plan_batch over B scenarios (their own seeds, one restarting mid-way) gives each scenario
+    """dv-mpc's plan_scenarios over B scenarios (their own seeds, one restarting mid-way) gives each scenario
     the plans it gets when planned alone, bit for bit (each keeps its own warm starts, tracker and
     psi-bar)."""
     config, settings = CASES[case]
@@ -115,7 +115,7 @@ def test_a_batch_of_scenarios_plans_as_each_one_alone(case):
     planner = batch.solver
     for t in range(slots):
         snapshots = [env.snapshot() for env in envs]
-        plans = planner.plan_batch(snapshots)
+        plans = planner.plan_scenarios(snapshots)
         for env, seed, plan, snap in zip(envs, seeds, plans, snapshots):
             expected = alone[seed][t]
             assert np.array_equal(plan.increments, expected.increments) and plan.objective == expected.objective
@@ -140,13 +140,13 @@ def test_a_batch_restarts_one_scenario_and_refuses_another_size():
     env = gym.make("lawn/Joint-v1", config=config).unwrapped
     env.reset(seed=1)
     fresh = make_policy("dv-mpc", config).solver.plan(env.snapshot())
-    planner.plan_batch([env.snapshot(), env.snapshot()])
-    planner.plan_batch([env.snapshot(), env.snapshot()])
+    planner.plan_scenarios([env.snapshot(), env.snapshot()])
+    planner.plan_scenarios([env.snapshot(), env.snapshot()])
     planner.reset(np.array([False, True]))  # the second scenario starts a new episode
-    plans = planner.plan_batch([env.snapshot(), env.snapshot()])
+    plans = planner.plan_scenarios([env.snapshot(), env.snapshot()])
     assert plans[1].objective == fresh.objective and np.array_equal(plans[1].drone_position, fresh.drone_position)
     assert "previous" in plans[0].info["start_values"] and "previous" not in plans[1].info["start_values"]
     with pytest.raises(ValueError, match="3 snapshots for a planner playing 2 scenarios"):
-        planner.plan_batch([env.snapshot()] * 3)
+        planner.plan_scenarios([env.snapshot()] * 3)
     with pytest.raises(ValueError, match="which has shape"):
         planner.reset(np.array([True]))

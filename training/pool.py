@@ -194,28 +194,35 @@ def _run_chunk(fn: Callable[[Any], Any], chunk: list[Any]) -> list[Any]:
 
 
 def pool_map(fn: Callable[[Any], Any], tasks: list[Any], workers: int, progress: bool, desc: str,
-             start_method: str | None = None) -> list[Any]:
+             start_method: str | None = None, weight: Callable[[Any], int] | None = None) -> list[Any]:
     """``[fn(t) for t in tasks]`` over ``workers`` processes: this one and ``workers - 1`` helpers of
     this process's persistent pool (:func:`shared_pool`), with a progress bar; results in task order
     whatever the scheduling. This process plays one task at a time while each helper holds at most
     two chunks, so it starts at once and no helper waits for it. ``fn`` must be picklable (a
     module-level function or a ``functools.partial`` of one). Serial for ``workers <= 1``, one task,
-    or inside a worker."""
+    or inside a worker. ``weight(task)``: what a task counts for on the bar (the episodes of a task that
+    plays several; 1 each by default)."""
     from tqdm.auto import tqdm
 
     if workers > 1:
         _refuse_while_bootstrapping()
-    bar = tqdm(total=len(tasks), desc=desc, unit="ep", disable=None if progress else True, leave=False)
+    weigh = weight if weight is not None else _one
+    bar = tqdm(total=sum(weigh(t) for t in tasks), desc=desc, unit="ep", disable=None if progress else True,
+               leave=False)
     try:
         if workers <= 1 or len(tasks) <= 1 or multiprocessing.parent_process() is not None:  # in a worker: serially
             out = []
             for task in tasks:
                 out.append(fn(task))
-                bar.update()
+                bar.update(weigh(task))
             return out
-        return _HelperMap(fn, tasks, workers, bar, start_method).run()
+        return _HelperMap(fn, tasks, workers, bar, start_method, weigh).run()
     finally:
         bar.close()
+
+
+def _one(task: Any) -> int:
+    return 1
 
 
 class HelperDied(RuntimeError):
@@ -230,8 +237,9 @@ class _HelperMap:
     only for the chunks the helpers hold: a short map, or one whose helpers are still starting, is
     played here alone."""
 
-    def __init__(self, fn: Callable[[Any], Any], tasks: list[Any], workers: int, bar: Any, start_method: str | None):
-        self.fn, self.tasks, self.workers, self.bar = fn, tasks, workers, bar
+    def __init__(self, fn: Callable[[Any], Any], tasks: list[Any], workers: int, bar: Any, start_method: str | None,
+                 weight: Callable[[Any], int]):
+        self.fn, self.tasks, self.workers, self.bar, self.weight = fn, tasks, workers, bar, weight
         self.starts = start_helpers(workers, start_method)
         self.pool = _SHARED["pool"]
         self.lock = threading.RLock()  # a callback may run in the thread that holds it (a future already done)
@@ -269,7 +277,7 @@ class _HelperMap:
                 if error is None:
                     for i, row in zip(chunk, future.result(), strict=True):
                         self.results[i] = row
-                    self.bar.update(len(chunk))
+                    self.bar.update(sum(self.weight(self.tasks[i]) for i in chunk))
                     self.hand_out()
                 else:
                     self.failure.append(self.died(error, chunk) if isinstance(error, BrokenProcessPool) else error)
@@ -284,7 +292,7 @@ class _HelperMap:
             with threadpool_limits(1):  # this process's tasks on one thread, as the helpers'
                 while (i := self.next_here()) is not None:
                     self.results[i] = self.fn(self.tasks[i])
-                    self.bar.update()
+                    self.bar.update(self.weight(self.tasks[i]))
             with self.lock:
                 while self.in_flight and not self.failure:
                     self.returned.wait()

@@ -15,7 +15,12 @@ Gymnasium's vector ones (as ``CartPoleVectorEnv``):
   seeds sets them one by one; ``reset()`` without a seed continues every scenario's generator, as
   the single env's ``reset()`` does. Each slot's randomness for all N scenarios
   (:func:`lawn_env.core.draw_slot`) comes from scenario 0's generator, the env's ``np_random``:
-  with N = 1 an episode is bitwise the single env's with the same seed and actions;
+  with N = 1 an episode is bitwise the single env's with the same seed and actions. With independent
+  draws each scenario draws its slot's randomness from its own generator, as its
+  single env does: scenario i's episode is then bitwise ``gym.make(...)``'s with seed ``s + i`` and the
+  same actions, whatever N (what evaluation plays seeds in lockstep with; a few microseconds a scenario
+  more per step). ``reset(options={"independent_draws": True})`` sets it for the episodes that reset
+  starts and their autoresets (a reset without it goes back to the shared generator);
 * ``info`` holds arrays with a leading N axis for every key of the single env's info
   (``lawn_env.envs.base.INFO_KEYS``); on the step an episode ends, ``episode_metrics`` (an object
   array of N, the single env's dict where an episode ended, else None) with its mask
@@ -42,13 +47,21 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..core import SlotDraws, control_costs
+from ..core import SlotDraws, control_costs, draw_slot
 from ..interface import InterfaceLike
 from ..mpc import DEFAULT_BACKEND
 from ..presets import ConfigLike, resolve_config
 from .base import Engine, EngineAccess, Observation
 
 __all__ = ["CommVectorEnv", "JointVectorEnv"]
+
+
+def _independent_draws(options: dict[str, Any] | None) -> bool:
+    """The ``independent_draws`` option of a reset (False when absent); the other options are ignored."""
+    value = (options or {}).get("independent_draws", False)
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"options['independent_draws']={value!r}: must be True or False")
+    return bool(value)
 
 
 class JointVectorEnv(EngineAccess, VectorEnv):
@@ -85,6 +98,7 @@ class JointVectorEnv(EngineAccess, VectorEnv):
         self.single_action_space = self.engine.action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.independent_draws = False  # reset(options={"independent_draws": True})
         self._rngs: list[np.random.Generator] = []
         self._done = np.zeros(self.num_envs, dtype=bool)
         self._started = False
@@ -94,9 +108,28 @@ class JointVectorEnv(EngineAccess, VectorEnv):
         """This slot's randomness for every scenario, from the env's generator (scenario 0's)."""
         return self.sim.draw(self.np_random)
 
+    def _draw_each(self, active: np.ndarray | None) -> SlotDraws:
+        """This slot's randomness for each scenario from its own generator (``independent_draws``): the
+        scenarios ``active`` alone (a single env draws nothing on the step that restarts it; the others'
+        entries are zeros)."""
+        rows = range(self.num_envs) if active is None else np.flatnonzero(active).tolist()
+        drawn = {i: draw_slot(self._rngs[i], self.sim.params, 1) for i in rows}
+        first = next(iter(drawn.values()))
+        fields: list[np.ndarray | None] = []
+        for j, value in enumerate(first):
+            if value is None:
+                fields.append(None)
+                continue
+            stacked = np.zeros((self.num_envs, *value.shape[1:]))
+            for i, draws in drawn.items():
+                stacked[i] = draws[j][0]  # type: ignore[index]  # present in every scenario's draws as in the first's
+            fields.append(stacked)
+        return SlotDraws(*fields)  # type: ignore[arg-type]  # the fading is always drawn
+
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | list[int] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Observation, dict[str, Any]]:
+        independent = _independent_draws(options)
         if isinstance(seed, (list, tuple)):
             if len(seed) != self.num_envs:
                 raise ValueError(f"seed: a list of {len(seed)} seeds for {self.num_envs} envs")
@@ -108,7 +141,8 @@ class JointVectorEnv(EngineAccess, VectorEnv):
         if seeds is not None:  # scenario 0's generator is the env's own (= gymnasium's seeding.np_random(s))
             super().reset(seed=seeds[0])
             self._rngs = [self.np_random] + [np.random.default_rng(s) for s in seeds[1:]]
-        elif not self._rngs:  # never seeded: the OS's entropy, through the env's generator
+        self.independent_draws = independent
+        if seeds is None and not self._rngs:  # never seeded: the OS's entropy, through the env's generator
             self._rngs = [self.np_random] + [np.random.default_rng(int(self.np_random.integers(2**62)))
                                              for _ in range(self.num_envs - 1)]
         self.engine.reset(self._rngs)
@@ -129,7 +163,9 @@ class JointVectorEnv(EngineAccess, VectorEnv):
         if restart.all():  # no slot this step: every scenario is at its first observation
             self._done = zeros
             return engine.observe(), np.zeros(self.num_envs), zeros, zeros.copy(), engine.info()
-        result = engine.step(a, self._draw(), active=~restart if restart.any() else None)
+        active = ~restart if restart.any() else None
+        draws = self._draw_each(active) if self.independent_draws else self._draw()
+        result = engine.step(a, draws, active=active)
         record, reward, terminated, truncated = result.record, result.reward[:, 0], result.terminated, result.truncated
         ended = truncated | terminated
         info = engine.info(record, result.extra)

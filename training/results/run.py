@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import math
+import time
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, cast
 
@@ -29,7 +30,7 @@ import numpy as np
 from annotated_types import Le
 
 import lawn_env
-from agents import Policy, make_policy
+from agents import POLICIES, Policy, make_policy
 from agents.anchors import anchor_name
 from agents.base import JOINT
 from agents.learned import zoo_record
@@ -42,7 +43,10 @@ from ..pool import pool_map
 from .episode import TRANSIENT_SLOTS, Entry, EpisodeResult, EpisodeSpec, Results
 from .stats import SCORE_HIGH, SCORE_LOW
 
-__all__ = ["episode_row", "build_policy", "run_episode", "split_cost",
+#: The most seeds a worker plays together (:func:`play_together`).
+LOCKSTEP = 32
+
+__all__ = ["episode_row", "build_policy", "run_episode", "split_cost", "play_together", "Tally", "LOCKSTEP",
            "evaluate", "per_slot_profile", "policy_env", "own_anchor", "learned_entries", "LIMITS",
            "LIMIT_SETTINGS", "NOISE", "REFERENCE_ROWS", "is_reference_row", "limit_config", "resolve"]
 
@@ -107,29 +111,48 @@ def episode_row(policy: Policy, env_id: str, config: ScenarioConfig, seed: int,
     the control cost's transient and sustained parts (:func:`split_cost`)."""
     if env_id not in lawn_env.ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; valid: {', '.join(lawn_env.ENV_IDS)}")
-    ao_iterations, stage_costs = [], []
-    fallbacks = 0
+    tally = Tally()
 
     def on_step(step: Step) -> None:
-        nonlocal fallbacks
-        plan = policy.last_plan
-        if plan is not None:
-            ao_iterations.append(plan.iterations)
-            fallbacks += plan.info.get("qp_fallbacks", 0)
-        fallbacks += int(step.info.get("mpc_fallbacks", 0))
-        stage_costs.append(float(step.info["stage_cost"]))
+        tally.add(policy.last_plan, step.info, step.decision_s)
 
     env = gym.make(env_id, config=config)
     episode = rollout(env, policy, seed, on_step=on_step)
     env.close()
-    transient, sustained = split_cost(stage_costs, transient_slots)
-    return EpisodeResult.from_row({
-        "policy": policy.name, "env": env_id, "seed": seed, **episode.metrics,
-        "decision_time_median_s": episode.decision_time_median_s,
-        "decision_time_p95_s": float(np.percentile(episode.decision_s, 95)),
-        "ao_iterations_mean": float(np.mean(ao_iterations)) if ao_iterations else math.nan,
-        "qp_fallbacks": fallbacks, "transient_cost": transient, "sustained_cost": sustained,
-        "transient_slots": int(transient_slots), "stage_costs": stage_costs})
+    return tally.result(policy.name, env_id, seed, episode.metrics, transient_slots)
+
+
+class Tally:
+    """What an episode's steps add up to beside the env's metrics: the decision times, the AO iterations
+    of the plans behind the actions, the QP fallbacks (the plans' and the env's MPC's) and the stage costs."""
+
+    def __init__(self) -> None:
+        self.decision_s: list[float] = []
+        self.iterations: list[int] = []
+        self.stage_costs: list[float] = []
+        self.fallbacks = 0
+
+    def add(self, plan: Any, info: Mapping[str, Any], decision_s: float) -> None:
+        """One step: the plan behind its action (None: no plan), the env's info, the decision's time."""
+        if plan is not None:
+            self.iterations.append(plan.iterations)
+            self.fallbacks += plan.info.get("qp_fallbacks", 0)
+        self.fallbacks += int(info.get("mpc_fallbacks", 0))
+        self.stage_costs.append(float(info["stage_cost"]))
+        self.decision_s.append(decision_s)
+
+    def result(self, policy: str, env_id: str, seed: int, metrics: Mapping[str, Any],
+               transient_slots: int) -> EpisodeResult:
+        """The episode's record from the env's ``metrics`` (MODEL.md §6) and the steps added."""
+        transient, sustained = split_cost(self.stage_costs, transient_slots)
+        decision_s = np.array(self.decision_s)
+        return EpisodeResult.from_row({
+            "policy": policy, "env": env_id, "seed": seed, **metrics,
+            "decision_time_median_s": float(np.median(decision_s)) if decision_s.size else math.nan,
+            "decision_time_p95_s": float(np.percentile(decision_s, 95)),
+            "ao_iterations_mean": float(np.mean(self.iterations)) if self.iterations else math.nan,
+            "qp_fallbacks": self.fallbacks, "transient_cost": transient, "sustained_cost": sustained,
+            "transient_slots": int(transient_slots), "stage_costs": self.stage_costs})
 
 
 def build_policy(policy: str, config: ScenarioConfig, env_id: str | None = None,
@@ -150,9 +173,70 @@ def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
     return episode_row(agent, env_id, played, seed, transient_slots).with_(policy=policy)
 
 
-def _run_task(task: EpisodeSpec | tuple[Any, ...], transient_slots: int = TRANSIENT_SLOTS) -> EpisodeResult:
-    spec = EpisodeSpec(*task)
-    return run_episode(spec.policy, spec.env, spec.config, spec.seed, spec.settings, transient_slots)
+def _run_chunk(tasks: Sequence[EpisodeSpec | tuple[Any, ...]],
+               transient_slots: int = TRANSIENT_SLOTS) -> list[EpisodeResult]:
+    """Episodes of one policy, env, scenario and settings (:func:`_chunks`): played together in lockstep
+    when the policy decides a batch at once (:func:`play_together`: each record is the one its seed gets
+    alone), else one by one (:func:`run_episode`)."""
+    specs = [EpisodeSpec(*task) for task in tasks]
+    first = specs[0]
+    if len(specs) > 1:
+        agent, played = build_policy(first.policy, first.config, first.env, first.settings)
+        if agent.batched:
+            rows = play_together(agent, first.env, played, [s.seed for s in specs], transient_slots)
+            return [row.with_(policy=first.policy) for row in rows]
+    return [run_episode(s.policy, s.env, s.config, s.seed, s.settings, transient_slots) for s in specs]
+
+
+def _chunks(specs: list[EpisodeSpec], workers: int) -> list[list[EpisodeSpec]]:
+    """The tasks in order, consecutive tasks of one policy, env, scenario and settings together when the
+    policy decides a batch at once (:func:`batches`; at most :data:`LOCKSTEP`, split evenly over the
+    workers); every other task alone."""
+    out: list[list[EpisodeSpec]] = []
+    start = 0
+    while start < len(specs):
+        key = (*specs[start][:3], dict(specs[start].settings))
+        end = start + 1
+        while end < len(specs) and (*specs[end][:3], dict(specs[end].settings)) == key:
+            end += 1
+        group = specs[start:end]
+        if len(group) > 1 and batches(group[0]):
+            size = min(LOCKSTEP, math.ceil(len(group) / max(1, workers)))
+            out += [group[i:i + size] for i in range(0, len(group), size)]
+        else:
+            out += [[spec] for spec in group]
+        start = end
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _batches(policy: str, env: str, config: ScenarioConfig, settings: tuple[tuple[str, Any], ...]) -> bool:
+    name, _, _ = resolve(policy, config)
+    if name not in POLICIES:  # learned agents and anchors: played one by one
+        return False
+    agent, _ = build_policy(policy, config, env, dict(settings))
+    return bool(agent.batched)
+
+
+def batches(spec: EpisodeSpec) -> bool:
+    """True when the spec's policy decides a batch of scenarios at once (``dv-mpc``'s planner): its seeds
+    are played in lockstep (:func:`play_together`)."""
+    try:
+        return _batches(spec.policy, spec.env, spec.config, tuple(sorted(dict(spec.settings).items())))
+    except TypeError:  # settings that cannot key a cache (unhashable values): one by one
+        return False
+
+
+def evaluate(tasks: Iterable[EpisodeSpec | tuple[Any, ...]], workers: int = 1, progress: bool = True,
+             desc: str = "episodes", transient_slots: int = TRANSIENT_SLOTS) -> list[EpisodeResult]:
+    """Play :class:`.episode.EpisodeSpec` tasks (or tuples of their fields); results in task order,
+    each with its ``transient_cost`` and ``sustained_cost`` split at ``transient_slots``
+    (:func:`split_cost`)."""
+    split_cost((), transient_slots)  # a bad split fails before any episode
+    chunks = _chunks([EpisodeSpec(*task) for task in tasks], workers)
+    played = pool_map(functools.partial(_run_chunk, transient_slots=transient_slots), chunks, workers, progress, desc,
+                      weight=len)
+    return [row for chunk in played for row in chunk]
 
 
 def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SLOTS) -> tuple[float, float]:
@@ -165,13 +249,46 @@ def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SL
     return float(costs[:transient_slots].sum()), float(costs[transient_slots:].sum())
 
 
-def evaluate(tasks: Iterable[EpisodeSpec | tuple[Any, ...]], workers: int = 1, progress: bool = True,
-             desc: str = "episodes", transient_slots: int = TRANSIENT_SLOTS) -> list[EpisodeResult]:
-    """Play :class:`.episode.EpisodeSpec` tasks (or tuples of their fields); results in task order,
-    each with its ``transient_cost`` and ``sustained_cost`` split at ``transient_slots``
-    (:func:`split_cost`)."""
-    split_cost((), transient_slots)  # a bad split fails before any episode
-    return pool_map(functools.partial(_run_task, transient_slots=transient_slots), list(tasks), workers, progress, desc)
+def play_together(policy: Policy, env_id: str, config: ScenarioConfig, seeds: Sequence[int],
+                  transient_slots: int = TRANSIENT_SLOTS) -> list[EpisodeResult]:
+    """The full episodes of ``seeds`` under ``policy`` (built for ``config``), in lockstep: one record per
+    seed, in order, each the one :func:`episode_row` gives its seed alone.
+
+    A policy that decides a batch at once (``Policy.batched``: ``dv-mpc``'s planner) plays them through
+    the native vector env with independent draws (``reset(options={"independent_draws": True})``):
+    scenario i's slots draw from its own seed's generator and the policy keeps each scenario's state
+    apart (``tests/test_lockstep.py``), but a slot costs one Python-level decision for all of them. A
+    decision's time is its share of the batch's (the batch's time over its size)."""
+    if env_id not in lawn_env.ENV_IDS:
+        raise ValueError(f"unknown env id {env_id!r}; valid: {', '.join(lawn_env.ENV_IDS)}")
+    count = len(seeds)
+    env = gym.make_vec(env_id, num_envs=count, vectorization_mode="vector_entry_point", config=config)
+    obs, _ = env.reset(seed=[int(s) for s in seeds],  # type: ignore[arg-type]  # the native env takes a list
+                       options={"independent_draws": True})
+    policy.reset_scenarios(seeds)
+    tallies = [Tally() for _ in seeds]
+    metrics: list[Mapping[str, Any] | None] = [None] * count
+    playing = np.ones(count, dtype=bool)
+    while playing.any():
+        start = time.perf_counter()
+        actions = policy.act_scenarios(obs)
+        share = (time.perf_counter() - start) / count
+        plans = policy.last_plans or [None] * count
+        obs, _, terminated, truncated, info = env.step(actions)
+        for i in np.flatnonzero(playing).tolist():
+            tallies[i].add(plans[i], {key: value[i] for key, value in info.items() if not key.startswith("_")}, share)
+            if terminated[i] or truncated[i]:
+                metrics[i] = info["episode_metrics"][i]
+                playing[i] = False
+    env.close()
+    return [tally.result(policy.name, env_id, int(seed), _ended(found), transient_slots)
+            for tally, seed, found in zip(tallies, seeds, metrics, strict=True)]
+
+
+def _ended(metrics: Mapping[str, Any] | None) -> Mapping[str, Any]:
+    assert metrics is not None  # the loop ran until every episode ended
+    return metrics
+
 
 
 def policy_env(policy: str) -> str:
