@@ -100,45 +100,17 @@ def link_argument(distance_sq_m2: float, power_w: float, c_d: float, c_ce: float
     return x + c_ce if c_ce != 0.0 else x
 
 
-#: :func:`_success_series` serves integer m up to this and x below :data:`_SERIES_MAX_X` (where e^-x is
-#: a normal number); scipy's ``gammaincc`` the rest.
-_SERIES_MAX_M = 64.0
-_SERIES_MAX_X = 700.0
-#: From here on psi is 0 in double precision for those m (a silent link: p = 0 puts x near 1e295).
-_SERIES_ZERO_X = 2000.0
-
-
-@numba.njit(cache=True)
-def _success_series(m: float, x: float) -> float:  # pragma: no cover - compiled
-    """``gammaincc(m, x) = e^-x sum_{j<m} x^j / j!`` for integer m: Erlang's tail, exact in closed form
-    (all terms positive, summed in ascending j: within 1e-13 of scipy's value, which a test checks)
-    and about 15 times faster than scipy's general routine (``benchmarks/expert_decisions.py``), which
-    the planners' searches call thousands of times a decision."""
-    term = 1.0
-    total = 1.0
-    for j in range(1, int(m)):
-        term *= x / j
-        total += term
-    return math.exp(-x) * total
-
-
 @numba.njit(cache=True)
 def outage_law(m: float, x: float, part: int) -> float:  # pragma: no cover - compiled
     """The outage law of one link at the outage argument x (Prop. 1): ``part`` OUTAGE gives
     ``P = Pr(m |h|^2 < x) = gammainc(m, x)``, SUCCESS psi = 1 - P = gammaincc(m, x) (accurate when
-    psi is tiny, where 1 - P has no digits left; Erlang's closed form for integer m,
-    :func:`_success_series`), DENSITY -d psi / dx = x^(m-1) e^(-x) / Gamma(m) (in log form, accurate
-    for large x), ORDER the exponent a of its high-SNR form P ∝ x^a
+    psi is tiny, where 1 - P has no digits left), DENSITY -d psi / dx = x^(m-1) e^(-x) / Gamma(m)
+    (in log form, accurate for large x), ORDER the exponent a of its high-SNR form P ∝ x^a
     (P ~ x^m / Gamma(m+1) as x -> 0: the diversity order m, which the stake prior's closed form
     uses). The four are one law: they change together."""
     if part == OUTAGE:
         return _GAMMAINC(m, x)
     if part == SUCCESS:
-        if m <= _SERIES_MAX_M and m == math.floor(m):
-            if x < _SERIES_MAX_X:
-                return _success_series(m, x)
-            if x >= _SERIES_ZERO_X:  # e^-x x^(m-1) underflows: scipy's value is 0 too (a test checks)
-                return 0.0
         return _GAMMAINCC(m, x)
     if part == ORDER:
         return m

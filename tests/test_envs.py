@@ -345,11 +345,10 @@ def test_v0_ids_stay_registered_and_warn_out_of_date(env_id):
 def test_comm_v0_keeps_its_recorded_episode_under_measurement_noise():
     # The return of this episode under the code before the MPC planned from the measured state (recorded
     # again when every product moved to one fixed summation order, lawn_env.products, the same on every
-    # machine, and when the link's success probability took Erlang's closed form for integer m, which
-    # moves its 12th digit): lawn/Comm-v0 still gives it bit for bit, lawn/Comm-v1 differs.
+    # machine): lawn/Comm-v0 still gives it bit for bit, lawn/Comm-v1 differs.
     with pytest.warns(DeprecationWarning):
         v0 = _random_episode_return("lawn/Comm-v0", seed=3)
-    assert v0 == -17739840.104120035
+    assert v0 == -17739840.10413076
     assert _random_episode_return("lawn/Comm-v1", seed=3) != v0
 
 
