@@ -14,8 +14,11 @@
 
 CPU seconds of this single-threaded process (a busy host's other work does not inflate them).
 
+``--memory B`` reports instead the peak resident memory of ``dv-mpc`` deciding B scenarios at K = 32
+together (the native vector env, a few slots).
+
 Usage: ``python benchmarks/expert_decisions.py [--experts dv-mpc rg-mpc ao-mpc] [--sizes 4 16 32]
-[--batch 256] [--episodes 8] [--json FILE] [--markdown FILE]``; side by side:
+[--batch 256] [--episodes 8] [--json FILE] [--markdown FILE] [--memory B]``; side by side:
 ``python benchmarks/side_by_side.py --commit C --repeats 3 --figures -- python benchmarks/expert_decisions.py``.
 """
 
@@ -106,6 +109,21 @@ def episodes(expert: str, extra: int) -> float:
     return (play(2 + extra) - play(2)) / extra
 
 
+def memory(size: int, k: int = 32, slots: int = 4) -> float:
+    """Peak resident memory (GB) of this process after ``dv-mpc`` decides ``size`` scenarios at K = k together
+    for a few slots (the native vector env's scenarios, independent draws)."""
+    import resource
+
+    config = _config(k)
+    envs = gym.make_vec(JOINT, num_envs=size, vectorization_mode="vector_entry_point", config=config)
+    obs, _ = envs.reset(seed=list(range(size)), options={"independent_draws": True})
+    policy = make_policy("dv-mpc", config)
+    policy.reset_scenarios(list(range(size)))
+    for _ in range(slots):
+        obs, *_ = envs.step(policy.act_scenarios(obs))
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--experts", nargs="+", default=["dv-mpc", "rg-mpc", "ao-mpc"])
@@ -113,9 +131,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--batch", type=int, default=256, help="B of the batched figures (default: %(default)s)")
     parser.add_argument("--slots", type=int, default=12, help="timed slots per figure (default: %(default)s)")
     parser.add_argument("--episodes", type=int, default=8, help="E of the evaluate figures (default: %(default)s)")
+    parser.add_argument("--memory", type=int, metavar="B", help="only the peak memory of B scenarios at K = 32 "
+                        "decided together (this tree's batched interface)")
     parser.add_argument("--json", help="also write the figures to this JSON file")
     parser.add_argument("--markdown", help="also write them as a Markdown table to this file")
     args = parser.parse_args(argv)
+    if args.memory:
+        print(f"peak resident memory, dv-mpc deciding {args.memory} scenarios at K = 32 together: "
+              f"{memory(args.memory):.2f} GB")
+        return 0
     figures: dict[str, float] = {"link law (ns/link)": link_law()}
     for expert in args.experts:
         for k in args.sizes:
