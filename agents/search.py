@@ -29,7 +29,15 @@ from typing import NamedTuple, Protocol
 import numba
 import numpy as np
 
-from lawn_env.channel import DENSITY, POWER_FLOOR_W, SUCCESS, link_argument, link_distance_sq, outage_law
+from lawn_env.channel import (
+    DENSITY,
+    POWER_FLOOR_W,
+    SUCCESS,
+    link_argument,
+    link_distance_sq,
+    outage_law,
+    success_series,
+)
 from lawn_env.drone import hypot
 
 __all__ = ["vector_sum", "min_plus", "project_budget", "project_disc_box", "disc_box_grid", "grid_search", "LINEAR",
@@ -376,6 +384,14 @@ def _value(kind: int, grid: np.ndarray, table: np.ndarray, k: int, psi: float) -
 
 
 @_jit
+def _success(kind: int, m: float, x: float) -> float:  # pragma: no cover - compiled
+    """psi at the outage argument x: ``dv-mpc``'s search (:data:`LINEAR`) in Erlang's closed form
+    (:func:`lawn_env.channel.success_series`), the tabulated planners' (:data:`HERMITE`) by scipy's law as
+    their exact evaluations read it (:func:`lawn_env.channel.outage_law`)."""
+    return success_series(m, x) if kind == LINEAR else outage_law(m, x, SUCCESS)
+
+
+@_jit
 def _split(kind: int, grid: np.ndarray, table: np.ndarray, agv: np.ndarray, positions: np.ndarray, levels: int,
            budget: float, link: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """The tabulated Phi's exact split of the budget in ``levels`` units at every position: (values
@@ -388,7 +404,7 @@ def _split(kind: int, grid: np.ndarray, table: np.ndarray, agv: np.ndarray, posi
             d2 = link_distance_sq(agv[a, 0] - positions[b, 0], agv[a, 1] - positions[b, 1], link[3])
             for j in range(levels + 1):
                 x = link_argument(d2, j * unit, link[1], link[2])
-                costs[b, a, j] = _value(kind, grid, table, a, outage_law(link[0], x, SUCCESS))
+                costs[b, a, j] = _value(kind, grid, table, a, _success(kind, link[0], x))
     values, alloc = min_plus(costs)
     return values, alloc
 
@@ -424,7 +440,7 @@ def _evaluate(lost: np.ndarray, worth: np.ndarray, agv: np.ndarray, power: np.nd
     """Phi(p, q) = sum_k V_k^lost - psi_k w_k of the delivery problem; fills ``psi`` and ``values``."""
     for a in range(lost.size):
         d2 = link_distance_sq(agv[a, 0] - q[0], agv[a, 1] - q[1], link[3])
-        psi[a] = outage_law(link[0], link_argument(d2, power[a], link[1], link[2]), SUCCESS)
+        psi[a] = success_series(link[0], link_argument(d2, power[a], link[1], link[2]))
         values[a] = lost[a] - psi[a] * worth[a]
     return vector_sum(values)
 

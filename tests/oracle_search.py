@@ -1,7 +1,9 @@
 """The planners' search and refinement as they were in Python before :mod:`agents.search` compiled them:
 the oracle the compiled kernels are checked against (``tests/test_search.py``), as cvxpy is the QP's.
 Copied from ``agents/optim.py`` and ``agents/reduced.py`` at 87a95e4, made free functions of a
-:class:`agents.reduced.DeliveryProblem`."""
+:class:`agents.reduced.DeliveryProblem`; the one change: psi as the compiled search evaluates it, in
+Erlang's closed form (``lawn_env.channel.success_series``, checked against scipy in test_channel.py),
+and the coarse scores' ties in grid order (a stable sort)."""
 
 from __future__ import annotations
 
@@ -122,9 +124,16 @@ def disc_box_grid(center: np.ndarray, radius: float, area_m: tuple[float, float,
     return pts
 
 
+def success(problem, power_w, d2):
+    """psi as dv-mpc's search evaluates it (Erlang's closed form, :func:`lawn_env.channel.success_series`)
+    at powers and squared distances that broadcast, one link at a time."""
+    x = problem.link.outage_argument_sq(power_w, d2)
+    return np.vectorize(lambda v: channel.success_series(float(problem.link.m), float(v)), otypes=[float])(x)
+
+
 def phi_at(problem, power_w, q):
     """(Phi, psi) of the delivery problem at (p, q)."""
-    psi = problem.link.success_sq(power_w, problem.link.distance_sq(q, problem.agv_xy))
+    psi = success(problem, power_w, problem.link.distance_sq(q, problem.agv_xy))
     return float((problem.lost - psi * problem.worth).sum()), psi
 
 
@@ -138,7 +147,7 @@ def grid_search(problem, positions, levels, coarse_levels, keep):
     def split(positions, levels):
         units = np.arange(levels + 1) * (problem.budget / levels)
         d2 = problem.link.distance_sq(positions[:, None, :], problem.agv_xy[None, :, :])
-        psi = problem.link.success_sq(units[None, None, :], d2[:, :, None])
+        psi = success(problem, units[None, None, :], d2[:, :, None])
         return min_plus(np.ascontiguousarray(problem.lost[:, None] - psi * problem.worth[:, None]))
 
     if coarse_levels < levels and positions.shape[0] > keep:
