@@ -7,14 +7,13 @@
 * ``EXPERT K=k batch B (ms/scenario)``: B scenarios (seeds 0..B-1) decided together, the median batch's
   time over B. A policy that decides a batch at once (``Policy.batched``: ``dv-mpc``) plans them in one
   call; the others (and every policy of a tree without the batched interface) decide them one by one;
-* ``link law (ns/link)``: the planners' success probability psi = gammaincc(m, x) of the default link
-  (m = 2) over a million outage arguments (``LinkParams.success_at``);
 * ``evaluate EXPERT (s/episode)``: ``training.results.run.evaluate`` of 2 and of 2 + E episodes of the
   default task (``lawn evaluate --workers 1``), the difference over E: an episode beyond start-up.
 
 CPU seconds of this single-threaded process (a busy host's other work does not inflate them).
 
-``--memory B`` reports instead the peak resident memory of ``dv-mpc`` deciding B scenarios at K = 32
+``--link-law`` reports instead psi = gammaincc(2, x) per link by scipy's routine and by Erlang's closed
+form (``lawn_env.channel.success_series``, ``dv-mpc``'s search); ``--memory B`` reports instead the peak resident memory of ``dv-mpc`` deciding B scenarios at K = 32
 together (the native vector env, a few slots).
 
 Usage: ``python benchmarks/expert_decisions.py [--experts dv-mpc rg-mpc ao-mpc] [--sizes 4 16 32]
@@ -82,17 +81,39 @@ def batch(expert: str, k: int, size: int, slots: int) -> float:
     return statistics.median(times[WARMUP:]) / size
 
 
-def link_law() -> float:
-    """CPU nanoseconds per link of the planners' success probability (m = 2) over a million arguments."""
-    link = lawn_env.channel.LinkParams.from_config(ScenarioConfig(), planning=True)
+def link_law() -> tuple[float, float]:
+    """CPU nanoseconds per link of psi (m = 2) over a million outage arguments: scipy's gammaincc (every
+    caller's law, ``LinkParams.success_at``) and Erlang's closed form (``dv-mpc``'s search), each in one
+    compiled loop."""
+    import numba
+
+    from lawn_env import channel
+
+    @numba.njit
+    def scipy_law(x: np.ndarray) -> float:
+        total = 0.0
+        for v in x:
+            total += channel.outage_law(2.0, v, channel.SUCCESS)
+        return total
+
+    @numba.njit
+    def series(x: np.ndarray) -> float:
+        total = 0.0
+        for v in x:
+            total += channel.success_series(2.0, v)
+        return total
+
     x = np.random.default_rng(0).uniform(0.0, 6.0, 1_000_000)
-    link.success_at(x[:10])
-    runs = []
-    for _ in range(3):
-        start = time.process_time()
-        link.success_at(x)
-        runs.append(time.process_time() - start)
-    return 1e9 * min(runs) / x.size
+    out = []
+    for law in (scipy_law, series):
+        law(x[:10])
+        runs = []
+        for _ in range(3):
+            start = time.process_time()
+            law(x)
+            runs.append(time.process_time() - start)
+        out.append(1e9 * min(runs) / x.size)
+    return out[0], out[1]
 
 
 def episodes(expert: str, extra: int) -> float:
@@ -131,6 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--batch", type=int, default=256, help="B of the batched figures (default: %(default)s)")
     parser.add_argument("--slots", type=int, default=12, help="timed slots per figure (default: %(default)s)")
     parser.add_argument("--episodes", type=int, default=8, help="E of the evaluate figures (default: %(default)s)")
+    parser.add_argument("--link-law", action="store_true", help="only the link law's two forms, timed")
     parser.add_argument("--memory", type=int, metavar="B", help="only the peak memory of B scenarios at K = 32 "
                         "decided together (this tree's batched interface)")
     parser.add_argument("--json", help="also write the figures to this JSON file")
@@ -140,7 +162,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"peak resident memory, dv-mpc deciding {args.memory} scenarios at K = 32 together: "
               f"{memory(args.memory):.2f} GB")
         return 0
-    figures: dict[str, float] = {"link law (ns/link)": link_law()}
+    if args.link_law:
+        scipy_ns, series_ns = link_law()
+        print(f"psi (m = 2) per link: scipy's gammaincc {scipy_ns:.1f} ns, Erlang's closed form {series_ns:.1f} ns "
+              f"({scipy_ns / series_ns:.1f}x)")
+        return 0
+    figures: dict[str, float] = {}
     for expert in args.experts:
         for k in args.sizes:
             figures[f"{expert} K={k} single (ms)"] = 1e3 * single(expert, k, args.slots)
