@@ -75,8 +75,9 @@ class Policy:
     def reset_scenarios(self, seeds: Sequence[int | None]) -> None:
         """Start B episodes for :meth:`act_scenarios`, scenario i's as ``reset(seeds[i])`` starts one. Here
         (a policy without a batched decision, a user's own among them) each scenario gets a copy of this
-        policy that plays it alone; a policy with no per-episode state and no randomness serves every
-        scenario itself."""
+        policy that plays it alone (a seed of None draws the copy's own seed from this policy's stream, so
+        no two copies share their randomness); a policy with no per-episode state and nothing drawn at
+        reset (``stateful`` False, no ``_on_reset`` of its own) serves every scenario itself."""
         seeds = list(seeds)
         if not seeds:
             raise ValueError("seeds is empty: reset_scenarios starts one episode per seed")
@@ -88,7 +89,7 @@ class Policy:
         template = copy.deepcopy(self)
         self._rows = [copy.deepcopy(template) for _ in seeds]
         for row, seed in zip(self._rows, seeds, strict=True):
-            row.reset(seed)
+            row.reset(int(self._seed_rng.integers(2**63)) if seed is None else seed)
 
     def act_scenarios(self, observations: np.ndarray) -> np.ndarray:
         """The actions (B, ...) of the observations (B, obs) of the B scenarios :meth:`reset_scenarios` started,

@@ -85,9 +85,14 @@ class DeliveryValuePlanner(ReducedPlannerBase):
 
     # ------------------------------------------------------------------ one scenario's view
     def _first(self) -> _Scenario:
-        if not self.scenarios:
-            self.scenarios = [self._scenario()]
-        return self.scenarios[0]
+        """The first scenario's state; before any plan, a fresh one (not kept: reading it sets no batch size)."""
+        return self.scenarios[0] if self.scenarios else self._scenario()
+
+    @property
+    def batches(self) -> bool:
+        """True when more than one scenario may be planned at once: each keeps its own warm starts only with
+        the compiled QP backend (the reference backends keep one workspace per stack position)."""
+        return self.settings.qp_backend == "compiled"
 
     @property
     def tracker(self) -> AGVTracker:
@@ -143,6 +148,9 @@ class DeliveryValuePlanner(ReducedPlannerBase):
         if len(snapshots) != len(self.scenarios):
             raise ValueError(f"{len(snapshots)} snapshots for a planner playing {len(self.scenarios)} scenarios: "
                              "one per scenario (reset() to start another batch)")
+        if len(snapshots) > 1 and not self.batches:
+            raise ValueError(f"qp_backend={self.settings.qp_backend!r} plans one scenario at a time: several at "
+                             "once need qp_backend='compiled' (each scenario's own warm starts)")
         problems = self._problems(snapshots)
         decided = search.decide(problems, [s.last for s in self.scenarios], self.link_array, self.settings)
         plans = [self._decision(i, snapshot, problem, decided, start)

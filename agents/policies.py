@@ -110,8 +110,9 @@ class PlannerPolicy(Policy):
 
     @property
     def batched(self) -> bool:  # type: ignore[override]  # a property of the solver here
-        """True when the solver plans a batch at once (``plan_scenarios``: ``dv-mpc``'s)."""
-        return hasattr(self.solver, "plan_scenarios")
+        """True when the solver plans a batch at once (``dv-mpc``'s, with the compiled QP backend; on
+        ``lawn/Comm-v1`` under the paper's law it plans as ``rg-mpc``, one scenario at a time)."""
+        return bool(getattr(self.solver, "batches", False))
 
     def reset_scenarios(self, seeds: Sequence[int | None]) -> None:
         """:meth:`Policy.reset_scenarios`; a solver that plans batches starts them all itself."""
@@ -251,7 +252,7 @@ class RGMPCPolicy(PlannerPolicy):
 
 
 class DVMPCPolicy(PlannerPolicy):
-    """The delivery-value expert (agents.reduced.DeliveryValuePlanner): each command planned as if it
+    """The delivery-value expert (agents.dv_mpc.DeliveryValuePlanner): each command planned as if it
     arrives (the psi = 1 MPC), power and the drone chosen to maximise the expected worth of the
     commands delivered, ``sum_k psi_k (V_k^lost - V_k^del)``, the future after each command priced
     under loss (its ``tail``). It plans (p, q) for the increments the AGVs apply: on ``lawn/Comm-v1``

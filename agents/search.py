@@ -15,9 +15,11 @@ scenarios (a single decision is the batch of one):
 
 Every sum is taken in the order the planners' numpy code took it (:func:`vector_sum` is numpy's
 pairwise summation; products sum their index ascending, as :func:`lawn_env.products.matmul`), so the
-compiled decisions are the planners' to the last bit; ``tests/test_search.py`` keeps the pre-compiled
-Python code as the oracle. The one difference: positions whose coarse scores tie exactly keep their
-grid order (numpy's ``argsort`` left their order unspecified).
+compiled decisions are the Python planners' to the last bit: ``tests/oracle_search.py`` keeps the
+pre-compiled Python code as the oracle, which ``tests/test_search.py`` checks against. The differences:
+positions whose coarse scores tie exactly keep their grid order (numpy's ``argsort`` left their order
+unspecified), and ``dv-mpc``'s search evaluates psi in Erlang's closed form
+(:func:`lawn_env.channel.success_series`; the oracle does too).
 """
 
 from __future__ import annotations

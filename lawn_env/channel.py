@@ -134,7 +134,7 @@ SERIES_MAX_X = 700.0
 def success_series(m: float, x: float) -> float:  # pragma: no cover - compiled
     """psi = gammaincc(m, x) in Erlang's closed form ``e^-x sum_{j<m} x^j / j!`` for integer m (all terms
     positive, summed in ascending j): within 2e-13 of scipy's value (:func:`outage_law`, the oracle; a
-    test checks) and about seven times faster (``python benchmarks/expert_decisions.py --link-law``).
+    test checks) and about 13 times faster (``python benchmarks/expert_decisions.py --link-law``).
     What ``dv-mpc``'s compiled search evaluates its thousands of links with (:mod:`agents.search`); every
     other caller, the simulator's and the other planners', reads :func:`outage_law` itself, so their
     decisions keep scipy's last bit. Outside integer m <= 64 and x < 700: :func:`outage_law`'s value."""

@@ -220,3 +220,34 @@ def decide(problem, last, settings):
     origin = min(values, key=lambda name: values[name])
     phi, p, q, _ = refine(problem, *starts[origin], s.refine_iterations)
     return phi, p, q, origin
+
+
+def hermite_grid_search(grid, values, slopes, agv, positions, levels, coarse_levels, keep, budget, link):
+    """ReducedProblem.grid_search of rg-mpc and global-mpc at 87a95e4: V_k tabulated on ``grid`` (values and
+    envelope slopes (M, K)), cubic Hermite between points, psi by scipy's law (LinkParams.success_sq);
+    returns (value, p, q)."""
+    def table(psi):  # the pre-change _hermite kernel's expression, element by element
+        out = np.empty_like(psi)
+        top = grid.size - 2
+        for idx in np.ndindex(psi.shape):
+            x, k = psi[idx], idx[1]
+            i = min(max(int(np.searchsorted(grid, x, side="right")) - 1, 0), top)
+            h = grid[i + 1] - grid[i]
+            t = (x - grid[i]) / h
+            t2 = t * t
+            t3 = t2 * t
+            out[idx] = ((2 * t3 - 3 * t2 + 1) * values[i, k] + (t3 - 2 * t2 + t) * h * slopes[i, k]
+                        + (-2 * t3 + 3 * t2) * values[i + 1, k] + (t3 - t2) * h * slopes[i + 1, k])
+        return out
+
+    def split(positions, levels):
+        units = np.arange(levels + 1) * (budget / levels)
+        d2 = link.distance_sq(positions[:, None, :], agv[None, :, :])
+        return min_plus(np.ascontiguousarray(table(link.success_sq(units[None, None, :], d2[:, :, None]))))
+
+    if coarse_levels < levels and positions.shape[0] > keep:
+        scores, _ = split(positions, coarse_levels)
+        positions = positions[np.argsort(scores, kind="stable")[:keep]]
+    found, alloc = split(positions, levels)
+    best = int(np.argmin(found))
+    return float(found[best]), alloc[best] * (budget / levels), positions[best]

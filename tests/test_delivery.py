@@ -209,11 +209,11 @@ def test_the_tracker_follows_the_applied_acceleration_and_filters_the_measuremen
     policy = make_policy("dv-mpc", config)
     obs, _ = env.reset(seed=5)
     policy.reset(seed=5)
-    tracker = policy.solver.tracker
-    assert tracker.lag_alpha is not None and tracker.filtering
+    assert policy.solver.tracker.lag_alpha is not None and policy.solver.tracker.filtering
     measured, filtered = [], []
     for slot in range(40):
         action = policy.act(obs)
+        tracker = policy.solver.tracker  # the episode's, once it has planned
         assert np.allclose(tracker.applied, env.sim.applied, atol=1e-6)
         truth = env.sim.x_aug[:, 0:2]
         measured.append(np.abs(env.snapshot().x_aug[:, 0:2] - truth).mean())

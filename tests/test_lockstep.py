@@ -122,3 +122,32 @@ def test_a_bad_batch_is_refused_with_what_is_wrong():
     with pytest.raises(ValueError, match="observation"):
         other.reset_scenarios([0, 1])
         other.act_scenarios(obs)
+
+
+class Jitter(Policy):
+    """A user's own policy that draws its action's offset at each reset."""
+
+    name = "jitter"
+
+    def _on_reset(self, rng):
+        self.offset = float(rng.uniform(-1, 1))
+
+    def act(self, obs):
+        return np.full(self.actions.space.shape, self.offset, dtype=np.float32)
+
+
+def test_unseeded_scenarios_draw_their_own_randomness_and_seeded_ones_their_seeds():
+    config = ScenarioConfig(**SHORT)
+    policy = Jitter(config, seed=0)
+    obs = np.zeros((3, policy.layout.size), dtype=np.float32)
+    policy.reset_scenarios([None, None, 7])
+    actions = policy.act_scenarios(obs)
+    alone = Jitter(config)
+    alone.reset(7)
+    assert actions[0, 0] != actions[1, 0] and actions[2, 0] == alone.act(obs[2])[0]
+
+
+def test_a_partial_reset_is_refused_with_why():
+    vec = gym.make_vec("lawn/Joint-v1", num_envs=2, vectorization_mode="vector_entry_point")
+    with pytest.raises(ValueError, match=r"options\['reset_mask'\]: partial resets are not supported"):
+        vec.reset(seed=0, options={"reset_mask": np.array([True, False])})

@@ -150,3 +150,37 @@ def test_a_batch_restarts_one_scenario_and_refuses_another_size():
         planner.plan_scenarios([env.snapshot()] * 3)
     with pytest.raises(ValueError, match="which has shape"):
         planner.reset(np.array([True]))
+
+
+def test_the_tabulated_planners_grid_search_is_the_python_one():
+    """rg-mpc's and global-mpc's grid search (:data:`agents.search.HERMITE`: V_k tabulated with exact QPs,
+    cubic Hermite between points, psi by scipy's law) against the pre-change Python search, bit for bit."""
+    from agents.reduced import ReducedGradientPlanner, ReducedProblem
+
+    config = ScenarioConfig()
+    planner = ReducedGradientPlanner(config)
+    env = gym.make("lawn/Joint-v1", config=config).unwrapped
+    env.reset(seed=2)
+    s = planner.settings
+    for _ in range(4):
+        snapshot = env.snapshot()
+        problem = ReducedProblem(planner.mpc, planner.link, snapshot, config)
+        table = problem.table(planner.psi_grid)
+        positions = search.disc_box_grid(problem.q_prev, problem.reach, np.asarray(problem.area), s.drone_spacing_m,
+                                         s.max_drone_points)
+        value, power, q = problem.grid_search(table, positions, s.power_levels, s.coarse_power_levels,
+                                              s.keep_positions)
+        expected = oracle.hermite_grid_search(table.grid, table.values, table.slopes, problem.agv_xy, positions,
+                                              s.power_levels, s.coarse_power_levels, s.keep_positions,
+                                              problem.budget, problem.link)
+        assert value == expected[0] and np.array_equal(power, expected[1]) and np.array_equal(q, expected[2])
+        env.step(env.action_space.sample() * 0.3)
+
+
+def test_a_reference_qp_backend_plans_one_scenario_at_a_time():
+    policy = make_policy("dv-mpc", ScenarioConfig(), qp_backend="daqp")
+    assert not policy.batched and make_policy("dv-mpc", ScenarioConfig()).batched
+    env = gym.make("lawn/Joint-v1").unwrapped
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="qp_backend='daqp' plans one scenario at a time"):
+        policy.solver.plan_scenarios([env.snapshot(), env.snapshot()])

@@ -57,7 +57,11 @@ __all__ = ["CommVectorEnv", "JointVectorEnv"]
 
 
 def _independent_draws(options: dict[str, Any] | None) -> bool:
-    """The ``independent_draws`` option of a reset (False when absent); the other options are ignored."""
+    """The ``independent_draws`` option of a reset (False when absent). ``reset_mask`` (Gymnasium's partial
+    reset, for envs without autoreset) is refused: these envs autoreset; the other options are ignored."""
+    if options and "reset_mask" in options:
+        raise ValueError("options['reset_mask']: partial resets are not supported; these envs reset an ended "
+                         "scenario themselves (autoreset_mode 'NextStep' or 'SameStep')")
     value = (options or {}).get("independent_draws", False)
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"options['independent_draws']={value!r}: must be True or False")
