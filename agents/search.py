@@ -19,7 +19,7 @@ compiled decisions are the Python planners' to the last bit: ``tests/oracle_sear
 pre-compiled Python code as the oracle, which ``tests/test_search.py`` checks against. The differences:
 positions whose coarse scores tie exactly keep their grid order (numpy's ``argsort`` left their order
 unspecified), and ``dv-mpc``'s search evaluates psi in Erlang's closed form
-(:func:`lawn_env.channel.success_series`; the oracle does too).
+(``lawn_env.channel.outage_law``'s SERIES; the oracle does too).
 """
 
 from __future__ import annotations
@@ -34,11 +34,11 @@ import numpy as np
 from lawn_env.channel import (
     DENSITY,
     POWER_FLOOR_W,
+    SERIES,
     SUCCESS,
     link_argument,
     link_distance_sq,
     outage_law,
-    success_series,
 )
 from lawn_env.drone import hypot
 
@@ -388,9 +388,9 @@ def _value(kind: int, grid: np.ndarray, table: np.ndarray, k: int, psi: float) -
 @_jit
 def _success(kind: int, m: float, x: float) -> float:  # pragma: no cover - compiled
     """psi at the outage argument x: ``dv-mpc``'s search (:data:`LINEAR`) in Erlang's closed form
-    (:func:`lawn_env.channel.success_series`), the tabulated planners' (:data:`HERMITE`) by scipy's law as
-    their exact evaluations read it (:func:`lawn_env.channel.outage_law`)."""
-    return success_series(m, x) if kind == LINEAR else outage_law(m, x, SUCCESS)
+    (:func:`lawn_env.channel.outage_law`'s SERIES), the tabulated planners' (:data:`HERMITE`) by scipy's
+    routine as their exact evaluations read it (SUCCESS)."""
+    return outage_law(m, x, SERIES if kind == LINEAR else SUCCESS)
 
 
 @_jit
@@ -442,7 +442,7 @@ def _evaluate(lost: np.ndarray, worth: np.ndarray, agv: np.ndarray, power: np.nd
     """Phi(p, q) = sum_k V_k^lost - psi_k w_k of the delivery problem; fills ``psi`` and ``values``."""
     for a in range(lost.size):
         d2 = link_distance_sq(agv[a, 0] - q[0], agv[a, 1] - q[1], link[3])
-        psi[a] = success_series(link[0], link_argument(d2, power[a], link[1], link[2]))
+        psi[a] = outage_law(link[0], link_argument(d2, power[a], link[1], link[2]), SERIES)
         values[a] = lost[a] - psi[a] * worth[a]
     return vector_sum(values)
 

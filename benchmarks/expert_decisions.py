@@ -13,7 +13,7 @@
 CPU seconds of this single-threaded process (a busy host's other work does not inflate them).
 
 ``--link-law`` reports instead psi = gammaincc(2, x) per link by scipy's routine and by Erlang's closed
-form (``lawn_env.channel.success_series``, ``dv-mpc``'s search); ``--memory B`` reports instead the peak resident memory of ``dv-mpc`` deciding B scenarios at K = 32
+form (``lawn_env.channel.outage_law``'s SERIES, ``dv-mpc``'s search); ``--memory B`` reports instead the peak resident memory of ``dv-mpc`` deciding B scenarios at K = 32
 together (the native vector env, a few slots).
 
 Usage: ``python benchmarks/expert_decisions.py [--experts dv-mpc rg-mpc ao-mpc] [--sizes 4 16 32]
@@ -100,7 +100,7 @@ def link_law() -> tuple[float, float]:
     def series(x: np.ndarray) -> float:
         total = 0.0
         for v in x:
-            total += channel.success_series(2.0, v)
+            total += channel.outage_law(2.0, v, channel.SERIES)
         return total
 
     x = np.random.default_rng(0).uniform(0.0, 6.0, 1_000_000)

@@ -52,12 +52,12 @@ __all__ = [
     "link_distance_sq",
     "link_argument",
     "outage_law",
-    "success_series",
     "command_delivered",
     "OUTAGE",
     "SUCCESS",
     "DENSITY",
     "ORDER",
+    "SERIES",
 ]
 
 
@@ -78,8 +78,12 @@ llvmlite.binding.add_symbol("lawn_scipy_gammaln", get_cython_function_address("s
                                                                               "gammaln"))
 
 #: What :func:`outage_law` returns: the outage probability, the success probability, the density,
-#: the high-SNR order.
-OUTAGE, SUCCESS, DENSITY, ORDER = 0, 1, 2, 3
+#: the high-SNR order; and SERIES, the success probability in Erlang's closed form for integer m.
+OUTAGE, SUCCESS, DENSITY, ORDER, SERIES = 0, 1, 2, 3, 4
+#: SERIES is Erlang's closed form for integer m up to this and x below :data:`SERIES_MAX_X` (where e^-x
+#: is a normal number), SUCCESS's value elsewhere.
+SERIES_MAX_M = 64.0
+SERIES_MAX_X = 700.0
 
 #: Powers are floored here before dividing; gammainc(m, x) is exactly 1.0 in double precision
 #: at that floor for any geometry, so p = 0 means outage probability 1 without inf/NaN.
@@ -108,11 +112,24 @@ def outage_law(m: float, x: float, part: int) -> float:  # pragma: no cover - co
     psi is tiny, where 1 - P has no digits left), DENSITY -d psi / dx = x^(m-1) e^(-x) / Gamma(m)
     (in log form, accurate for large x), ORDER the exponent a of its high-SNR form P ∝ x^a
     (P ~ x^m / Gamma(m+1) as x -> 0: the diversity order m, which the stake prior's closed form
-    uses). The four are one law: they change together."""
+    uses), and SERIES the success probability again, in Erlang's closed form ``e^-x sum_{j<m} x^j / j!``
+    for integer m (all terms positive, summed in ascending j): within 2e-13 of SUCCESS (a test checks)
+    and about 13 times faster (``python benchmarks/expert_decisions.py --link-law``), what ``dv-mpc``'s
+    compiled search evaluates its thousands of links with (:mod:`agents.search`; every other caller reads
+    SUCCESS, so their decisions keep scipy's last bit). The five are one law: they change together."""
     if part == OUTAGE:
         return _GAMMAINC(m, x)
     if part == SUCCESS:
         return _GAMMAINCC(m, x)
+    if part == SERIES:
+        if m > SERIES_MAX_M or x >= SERIES_MAX_X or m != math.floor(m):
+            return _GAMMAINCC(m, x)
+        term = 1.0
+        total = 1.0
+        for j in range(1, int(m)):
+            term *= x / j
+            total += term
+        return math.exp(-x) * total
     if part == ORDER:
         return m
     if m == 1.0:
@@ -122,30 +139,6 @@ def outage_law(m: float, x: float, part: int) -> float:  # pragma: no cover - co
     else:
         log_x = (m - 1.0) * math.log(x)
     return math.exp(log_x - x - _GAMMALN(m))
-
-
-#: :func:`success_series` is Erlang's closed form for integer m up to this and x below
-#: :data:`SERIES_MAX_X` (where e^-x is a normal number); :func:`outage_law` (scipy's) the rest.
-SERIES_MAX_M = 64.0
-SERIES_MAX_X = 700.0
-
-
-@numba.njit(cache=True)
-def success_series(m: float, x: float) -> float:  # pragma: no cover - compiled
-    """psi = gammaincc(m, x) in Erlang's closed form ``e^-x sum_{j<m} x^j / j!`` for integer m (all terms
-    positive, summed in ascending j): within 2e-13 of scipy's value (:func:`outage_law`, the oracle; a
-    test checks) and about 13 times faster (``python benchmarks/expert_decisions.py --link-law``).
-    What ``dv-mpc``'s compiled search evaluates its thousands of links with (:mod:`agents.search`); every
-    other caller, the simulator's and the other planners', reads :func:`outage_law` itself, so their
-    decisions keep scipy's last bit. Outside integer m <= 64 and x < 700: :func:`outage_law`'s value."""
-    if m > SERIES_MAX_M or x >= SERIES_MAX_X or m != math.floor(m):
-        return outage_law(m, x, SUCCESS)
-    term = 1.0
-    total = 1.0
-    for j in range(1, int(m)):
-        term *= x / j
-        total += term
-    return math.exp(-x) * total
 
 
 @numba.njit(cache=True)

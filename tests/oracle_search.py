@@ -2,7 +2,7 @@
 the oracle the compiled kernels are checked against (``tests/test_search.py``), as cvxpy is the QP's.
 Copied from ``agents/optim.py`` and ``agents/reduced.py`` at 87a95e4, made free functions of a
 :class:`agents.reduced.DeliveryProblem`; the one change: psi as the compiled search evaluates it, in
-Erlang's closed form (``lawn_env.channel.success_series``, checked against scipy in test_channel.py),
+Erlang's closed form (``lawn_env.channel.outage_law``'s SERIES, checked against scipy in test_channel.py),
 and the coarse scores' ties in grid order (a stable sort)."""
 
 from __future__ import annotations
@@ -125,10 +125,11 @@ def disc_box_grid(center: np.ndarray, radius: float, area_m: tuple[float, float,
 
 
 def success(problem, power_w, d2):
-    """psi as dv-mpc's search evaluates it (Erlang's closed form, :func:`lawn_env.channel.success_series`)
+    """psi as dv-mpc's search evaluates it (Erlang's closed form, ``lawn_env.channel.outage_law``'s SERIES)
     at powers and squared distances that broadcast, one link at a time."""
     x = problem.link.outage_argument_sq(power_w, d2)
-    return np.vectorize(lambda v: channel.success_series(float(problem.link.m), float(v)), otypes=[float])(x)
+    m = float(problem.link.m)
+    return np.vectorize(lambda v: channel.outage_law(m, float(v), channel.SERIES), otypes=[float])(x)
 
 
 def phi_at(problem, power_w, q):

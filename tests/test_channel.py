@@ -231,13 +231,13 @@ def test_the_outage_law_is_scipys_gammainc_gammaincc_and_density():
 
 
 def test_erlangs_closed_form_is_scipys_gammaincc_to_rounding():
-    """:func:`lawn_env.channel.success_series` (dv-mpc's search's psi) against scipy: within 2e-13
+    """:func:`lawn_env.channel.outage_law`'s SERIES (dv-mpc's search's psi) against scipy: within 2e-13
     relative for integer m <= 64 and x < 700 (the conditioning of e^-x: 700 eps), scipy's value itself
     elsewhere (non-integer m, m > 64, x >= 700)."""
     xs = np.concatenate([[0.0], np.logspace(-300, np.log10(699.9), 300), np.linspace(0, 60, 200),
                          [700.0, 1e3, 1e295, np.inf]])
     for m in [*range(1, 70), 0.5, 2.75, 37.3]:
-        series = np.array([channel.success_series(float(m), float(x)) for x in xs])
+        series = np.array([channel.outage_law(float(m), float(x), channel.SERIES) for x in xs])
         exact = special.gammaincc(m, xs)
         inside = (float(m) == int(m)) & (m <= 64) & (xs < 700)
         np.testing.assert_allclose(series[inside], exact[inside], rtol=2e-13, atol=0, err_msg=f"m={m}")

@@ -4,7 +4,7 @@ A copy of the package runs once as it is (compiling its kernels into its own cac
 two one-function edits made in place, as a researcher would make them: the outage law
 (:func:`lawn_env.channel.outage_law`: the argument doubled and the high-SNR order raised by one)
 and the AGV transition (:func:`lawn_env.dynamics.agv_matrices`: the velocity damped). The test
-checks that the simulator, the Comm MPC, rg-mpc's link model, the RL interface's prior, the
+checks that the simulator, the Comm MPC, rg-mpc's and dv-mpc's link models, the RL interface's prior, the
 prediction model and the LQR gain all follow the edits, and that the kernels cached before the
 edit are not reused (:mod:`lawn_env.kernel_cache`).
 """
@@ -69,12 +69,19 @@ plan = policy.plan(snap)
 out["rg_psi"] = np.asarray(plan.info["success_probability"]).tolist()
 d2 = planning.distance_sq(plan.drone_position, snap.x_aug[:, 0:2])
 out["rg_x"] = planning.outage_argument_sq(plan.power_w, d2).tolist()
+
+policy = make_policy("dv-mpc", cfg)
+policy.reset(seed=0)
+plan = policy.plan(snap)
+out["dv_psi"] = np.asarray(plan.info["success_probability"]).tolist()
+d2 = planning.distance_sq(plan.drone_position, snap.x_aug[:, 0:2])
+out["dv_x"] = planning.outage_argument_sq(plan.power_w, d2).tolist()
 print(json.dumps(out))
 '''
 
 EDITS = {
-    "lawn_env/channel.py": ('    uses). The four are one law: they change together."""\n',
-                            '    uses). The four are one law: they change together."""\n'
+    "lawn_env/channel.py": ('    SUCCESS, so their decisions keep scipy\'s last bit). The five are one law: they change together."""\n',
+                            '    SUCCESS, so their decisions keep scipy\'s last bit). The five are one law: they change together."""\n'
                             '    if part == ORDER:\n        return m + 1.0\n    x = 2.0 * x\n'),
     "lawn_env/dynamics.py": ("    a[0, 2] = a[1, 3] = dt\n", "    a[0, 2] = a[1, 3] = dt\n    a[2, 2] = a[3, 3] = 0.9\n"),
 }
@@ -117,6 +124,8 @@ def test_one_function_edits_reach_every_env_planner_and_prior(tmp_path):
     np.testing.assert_array_equal(edited["comm_psi"], special.gammaincc(m, 2.0 * edited["comm_x"]))
     np.testing.assert_allclose(base["rg_psi"], special.gammaincc(m, base["rg_x"]), rtol=1e-12)
     np.testing.assert_allclose(edited["rg_psi"], special.gammaincc(m, 2.0 * edited["rg_x"]), rtol=1e-12)
+    np.testing.assert_allclose(base["dv_psi"], special.gammaincc(m, base["dv_x"]), rtol=1e-12)  # the closed form
+    np.testing.assert_allclose(edited["dv_psi"], special.gammaincc(m, 2.0 * edited["dv_x"]), rtol=1e-12)
     for out, order in ((base, m), (edited, m + 1.0)):
         log_w = (np.log(out["stakes"]) + order * np.log(out["prior_d2"])) / (order + 1.0)
         np.testing.assert_allclose(out["prior"], np.exp(log_w - log_w.max()), rtol=1e-12)
