@@ -152,7 +152,7 @@ class DeliveryValuePlanner(ReducedPlannerBase):
             raise ValueError(f"qp_backend={self.settings.qp_backend!r} plans one scenario at a time: several at "
                              "once need qp_backend='compiled' (each scenario's own warm starts)")
         problems = self._problems(snapshots)
-        decided = search.decide(problems, [s.last for s in self.scenarios], self.link_array, self.settings)
+        decided = search.decide(problems, [s.last for s in self.scenarios], self.settings)
         plans = [self._decision(i, snapshot, problem, decided, start)
                  for i, (snapshot, problem) in enumerate(zip(snapshots, problems, strict=True))]
         elapsed = time.perf_counter() - start
@@ -225,7 +225,7 @@ class DeliveryValuePlanner(ReducedPlannerBase):
         for _ in range(self.settings.delivery_start_iterations):
             values = tail.delivery_values(z, reference, psi_bar, slots, queue, Rows(rows, len(snapshots)))
             problems = self._made(snapshots, states, values, rows.tolist())
-            psi = search.decide(problems, [None] * rows.size, self.link_array, self.settings, search_only=True).psi
+            psi = search.decide(problems, [None] * rows.size, self.settings, search_only=True).psi
             weights = np.stack([self._weights(p.worth) for p in problems])
             psi_bar = expected_delivery(psi_bar, psi, weights, 0.0)
         for j, i in enumerate(rows.tolist()):

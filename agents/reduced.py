@@ -32,7 +32,6 @@ Two planners use this:
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from dataclasses import dataclass
@@ -60,7 +59,7 @@ from .optim import disc_box_grid, project_budget, project_disc_box
 from .problem import Plan, SlotProblem
 
 __all__ = ["ReducedProblem", "ValueTable", "PlannerSettings", "SearchSettings", "ReducedSettings",
-           "ReducedGradientPlanner", "GlobalPlanner", "GlobalSettings", "DeliveryProblem", "DeliveryValue",
+           "ReducedGradientPlanner", "GlobalPlanner", "GlobalSettings", "DeliveryProblem",
            "DeliverySettings"]
 
 
@@ -173,25 +172,14 @@ class ReducedProblem(SlotProblem):
         coarse = levels if coarse_levels is None else coarse_levels
         value, power, q = search.grid_search(table.kind, table.grid, table.table, np.ascontiguousarray(self.agv_xy),
                                              np.ascontiguousarray(positions, dtype=float), (levels, coarse, keep),
-                                             float(self.budget), self.link_array)
+                                             float(self.budget), self.link.constants)
         return float(value), power, q
-
-    @functools.cached_property
-    def link_array(self) -> np.ndarray:
-        """The planning link as the compiled search reads it: (m, c_d, c_ce, H^2)."""
-        return link_array(self.link)
-
-
-def link_array(link: channel.LinkParams) -> np.ndarray:
-    """(m, c_d, c_ce, H^2) of ``link``: what :mod:`agents.search`'s kernels read."""
-    c_d, c_ce = link.coefficients
-    return np.array([float(link.m), c_d, c_ce, link.altitude_sq])
 
 
 class ValueFunction(Protocol):
     """V_k(psi) as the compiled grid search reads it (:func:`agents.search.grid_search`): ``kind``
     (:data:`agents.search.LINEAR` or :data:`agents.search.HERMITE`), ``grid`` and ``table``
-    (:class:`ValueTable`, :class:`DeliveryValue`)."""
+    (:class:`ValueTable`)."""
 
     kind: int
     grid: np.ndarray
@@ -244,22 +232,6 @@ class DeliveryProblem(ReducedProblem):
         the psi = 1 one whatever psi."""
         psi = np.asarray(psi, dtype=float)
         return self.lost - psi * self.worth, np.broadcast_to(-self.worth, psi.shape), self.delivered
-
-    def table(self, psi_grid: np.ndarray | None) -> DeliveryValue:
-        """The exact V_k(psi) (linear: no table to interpolate)."""
-        return DeliveryValue(self.lost, self.worth)
-
-
-class DeliveryValue:
-    """V_k(psi) = V_k^lost - psi w_k: the grid search's value function of :class:`DeliveryProblem`
-    (:data:`agents.search.LINEAR`: ``table`` (2, K), lost then worth)."""
-
-    kind = search.LINEAR
-
-    def __init__(self, lost: np.ndarray, worth: np.ndarray):
-        self.lost, self.worth = lost, worth
-        self.grid = np.empty(0)
-        self.table = np.ascontiguousarray(np.stack([lost, worth]), dtype=float)
 
 
 # ---------------------------------------------------------------------- planners
@@ -374,7 +346,6 @@ class ReducedPlannerBase:
         self.settings = settings if settings is not None else self.settings_class()
         self.mpc = self._make_mpc()
         self.link = channel.LinkParams.from_config(config, planning=True)
-        self.link_array = link_array(self.link)
         points = getattr(self.settings, "psi_points", None)  # dv-mpc's values need no table
         self.psi_grid = np.linspace(0.0, 1.0, points) if points is not None else None
 

@@ -36,6 +36,7 @@ from lawn_env.channel import (
     POWER_FLOOR_W,
     SERIES,
     SUCCESS,
+    LinkParams,
     link_argument,
     link_distance_sq,
     outage_law,
@@ -79,6 +80,7 @@ class _Problem(Protocol):
     reach: float
     area: tuple[float, float, float, float]
     budget: float
+    link: LinkParams
 
 
 class _Settings(Protocol):
@@ -98,8 +100,8 @@ class _Settings(Protocol):
     def refine_iterations(self) -> int: ...
 
 
-def decide(problems: Sequence[_Problem], last: Sequence[tuple[np.ndarray, np.ndarray] | None], link: np.ndarray,
-           settings: _Settings, search_only: bool = False) -> Decisions:
+def decide(problems: Sequence[_Problem], last: Sequence[tuple[np.ndarray, np.ndarray] | None], settings: _Settings,
+           search_only: bool = False) -> Decisions:
     """:func:`delivery_decisions` of B problems that share a config (its area and power budget), each
     continuing from its ``last`` (power, move) or from nothing (None)."""
     k = problems[0].lost.size
@@ -113,7 +115,7 @@ def decide(problems: Sequence[_Problem], last: Sequence[tuple[np.ndarray, np.nda
     scenarios = (np.stack([p.lost for p in problems]), np.stack([p.worth for p in problems]),
                  np.stack([p.agv_xy for p in problems]), np.stack([p.q_prev for p in problems]),
                  np.array([p.reach for p in problems], dtype=float))
-    shared = (np.asarray(problems[0].area, dtype=float), float(problems[0].budget), link)
+    shared = (np.asarray(problems[0].area, dtype=float), float(problems[0].budget), problems[0].link.constants)
     resolution = (float(s.drone_spacing_m), int(s.max_drone_points), int(s.power_levels), int(s.coarse_power_levels),
                   int(s.keep_positions), int(s.refine_iterations))
     return Decisions(*delivery_decisions(scenarios, (last_power, last_move, has_last), shared, resolution,

@@ -90,27 +90,20 @@ def link_law() -> tuple[float, float]:
     from lawn_env import channel
 
     @numba.njit
-    def scipy_law(x: np.ndarray) -> float:
+    def law(x: np.ndarray, part: int) -> float:
         total = 0.0
         for v in x:
-            total += channel.outage_law(2.0, v, channel.SUCCESS)
-        return total
-
-    @numba.njit
-    def series(x: np.ndarray) -> float:
-        total = 0.0
-        for v in x:
-            total += channel.outage_law(2.0, v, channel.SERIES)
+            total += channel.outage_law(2.0, v, part)
         return total
 
     x = np.random.default_rng(0).uniform(0.0, 6.0, 1_000_000)
     out = []
-    for law in (scipy_law, series):
-        law(x[:10])
+    for part in (channel.SUCCESS, channel.SERIES):
+        law(x[:10], part)
         runs = []
         for _ in range(3):
             start = time.process_time()
-            law(x)
+            law(x, part)
             runs.append(time.process_time() - start)
         out.append(1e9 * min(runs) / x.size)
     return out[0], out[1]

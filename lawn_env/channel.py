@@ -217,6 +217,12 @@ class LinkParams:
         return scale * self.noise_power_w / self.alpha0, scale * self.ce_error_var
 
     @functools.cached_property
+    def constants(self) -> np.ndarray:
+        """(m, c_d, c_ce, H^2): the link as the planners' compiled searches read it (``agents.search``)."""
+        c_d, c_ce = self.coefficients
+        return np.array([float(self.m), c_d, c_ce, self.altitude_sq])
+
+    @functools.cached_property
     def altitude_sq(self) -> float:
         return self.altitude_m * self.altitude_m
 

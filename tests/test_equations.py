@@ -63,19 +63,13 @@ out["stakes"] = codec.mpc.command_stakes(data).tolist()
 out["prior_d2"] = planning.distance_sq(snap.drone_position, snap.x_aug[:, 0:2]).tolist()
 out["prior"] = codec.power_prior(snap.x_aug, snap.drone_position, data).tolist()
 
-policy = make_policy("rg-mpc", cfg)
-policy.reset(seed=0)
-plan = policy.plan(snap)
-out["rg_psi"] = np.asarray(plan.info["success_probability"]).tolist()
-d2 = planning.distance_sq(plan.drone_position, snap.x_aug[:, 0:2])
-out["rg_x"] = planning.outage_argument_sq(plan.power_w, d2).tolist()
-
-policy = make_policy("dv-mpc", cfg)
-policy.reset(seed=0)
-plan = policy.plan(snap)
-out["dv_psi"] = np.asarray(plan.info["success_probability"]).tolist()
-d2 = planning.distance_sq(plan.drone_position, snap.x_aug[:, 0:2])
-out["dv_x"] = planning.outage_argument_sq(plan.power_w, d2).tolist()
+for name, key in (("rg-mpc", "rg"), ("dv-mpc", "dv")):  # scipy's law, and its closed-form part
+    policy = make_policy(name, cfg)
+    policy.reset(seed=0)
+    plan = policy.plan(snap)
+    out[key + "_psi"] = np.asarray(plan.info["success_probability"]).tolist()
+    d2 = planning.distance_sq(plan.drone_position, snap.x_aug[:, 0:2])
+    out[key + "_x"] = planning.outage_argument_sq(plan.power_w, d2).tolist()
 print(json.dumps(out))
 '''
 

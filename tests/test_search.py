@@ -71,10 +71,10 @@ def test_compiled_decisions_are_the_python_planners(case):
     planner, recorded = _recorded(config, 6 if config.num_agvs > 8 else 12, settings=settings)
     problems = [problem for problem, _ in recorded]
     lasts = [last for _, last in recorded]
-    batch = search.decide(problems, lasts, planner.link_array, planner.settings)
+    batch = search.decide(problems, lasts, planner.settings)
     for i, (problem, last) in enumerate(recorded):
         phi, power, q, origin = oracle.decide(problem, last, planner.settings)
-        alone = search.decide([problem], [last], planner.link_array, planner.settings)
+        alone = search.decide([problem], [last], planner.settings)
         assert search.STARTS[int(alone.origin[0])] == origin
         assert alone.phi[0] == phi and np.array_equal(alone.power[0], power) and np.array_equal(alone.position[0], q)
         for field in search.Decisions._fields:
@@ -86,7 +86,7 @@ def test_a_search_only_decision_is_the_searchs_point():
     planner, recorded = _recorded(config, 3)
     s = planner.settings
     for problem, last in recorded:
-        decided = search.decide([problem], [last], planner.link_array, s, search_only=True)
+        decided = search.decide([problem], [last], s, search_only=True)
         positions = oracle.disc_box_grid(problem.q_prev, problem.reach, problem.area, s.drone_spacing_m,
                                          s.max_drone_points)
         power, q = oracle.grid_search(problem, positions, s.power_levels, s.coarse_power_levels, s.keep_positions)
