@@ -52,6 +52,8 @@ def test_evaluate_chunks_batched_policies_and_plays_the_rest_alone():
     specs += [EpisodeSpec("pid", "lawn/Joint-v1", config, s) for s in range(3)]
     chunks = _chunks(specs, workers=2)
     assert [len(c) for c in chunks] == [3, 2, 1, 1, 1]
+    legacy = [EpisodeSpec("dv-mpc", "lawn/Joint-v0", config, s) for s in range(3)]  # no native vector env
+    assert [len(c) for c in _chunks(legacy, workers=1)] == [1, 1, 1]
     rows = evaluate(specs, progress=False)
     assert [(r.policy, r.seed) for r in rows] == [(s.policy, s.seed) for s in specs]
     for spec, row in zip(specs, rows):

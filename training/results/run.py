@@ -212,15 +212,15 @@ def _chunks(specs: list[EpisodeSpec], workers: int) -> list[list[EpisodeSpec]]:
 @functools.lru_cache(maxsize=64)
 def _batches(policy: str, env: str, config: ScenarioConfig, settings: tuple[tuple[str, Any], ...]) -> bool:
     name, _, _ = resolve(policy, config)
-    if name not in POLICIES:  # learned agents and anchors: played one by one
+    if name not in POLICIES or gym.spec(env).vector_entry_point is None:  # learned agents, anchors, v0 ids
         return False
     agent, _ = build_policy(policy, config, env, dict(settings))
     return bool(agent.batched)
 
 
 def batches(spec: EpisodeSpec) -> bool:
-    """True when the spec's policy decides a batch of scenarios at once (``dv-mpc``'s planner): its seeds
-    are played in lockstep (:func:`play_together`)."""
+    """True when the spec's policy decides a batch of scenarios at once (``dv-mpc``'s planner) on an env
+    with a native vector env (not the v0 ids): its seeds are played in lockstep (:func:`play_together`)."""
     try:
         return _batches(spec.policy, spec.env, spec.config, tuple(sorted(dict(spec.settings).items())))
     except TypeError:  # settings that cannot key a cache (unhashable values): one by one
