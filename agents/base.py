@@ -77,11 +77,15 @@ class Policy:
         (a policy without a batched decision, a user's own among them) each scenario gets a copy of this
         policy that plays it alone (a seed of None draws the copy's own seed from this policy's stream, so
         no two copies share their randomness); a policy with no per-episode state and nothing drawn at
-        reset (``stateful`` False, no ``_on_reset`` of its own) serves every scenario itself."""
+        reset (``stateful`` False, no ``_on_reset`` of its own) serves every scenario itself, and so does a
+        policy that decides a batch at once (:attr:`batched`: it keeps the scenarios apart itself)."""
         seeds = list(seeds)
         if not seeds:
             raise ValueError("seeds is empty: reset_scenarios starts one episode per seed")
         self._rows, self._batch = None, len(seeds)
+        if self.batched:
+            self.reset(seeds[0])
+            return
         if not self.stateful and type(self)._on_reset is Policy._on_reset:
             self.reset(seeds[0])
             self._rows = [self] * len(seeds)

@@ -24,7 +24,7 @@ Registered names (``make_policy(name, config)``):
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -113,17 +113,6 @@ class PlannerPolicy(Policy):
         """True when the solver plans a batch at once (``dv-mpc``'s, with the compiled QP backend; on
         ``lawn/Comm-v1`` under the paper's law it plans as ``rg-mpc``, one scenario at a time)."""
         return bool(getattr(self.solver, "batches", False))
-
-    def reset_scenarios(self, seeds: Sequence[int | None]) -> None:
-        """:meth:`Policy.reset_scenarios`; a solver that plans batches starts them all itself."""
-        if not self.batched:
-            super().reset_scenarios(seeds)
-            return
-        seeds = list(seeds)
-        if not seeds:
-            raise ValueError("seeds is empty: reset_scenarios starts one episode per seed")
-        self.reset(seeds[0])
-        self._rows, self._batch = None, len(seeds)
 
     def act_scenarios(self, observations: np.ndarray) -> np.ndarray:
         """:meth:`Policy.act_scenarios`; a solver that plans batches plans the B scenarios in one call."""
