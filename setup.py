@@ -1,7 +1,7 @@
 """The build step that stamps a wheel with lawn's commit (the project is configured in pyproject.toml).
 
-A wheel or sdist built from a git checkout of lawn carries ``training/_build_info.json``
-(``{"commit", "dirty"}``, :func:`training.provenance.source_stamp`), so that an installed lawn
+A wheel or sdist built from a git checkout of lawn carries ``evaluation/_build_info.json``
+(``{"commit", "dirty"}``, :func:`evaluation.provenance.source_stamp`), so that an installed lawn
 reports the commit it was built from, not that of whatever repository holds the install. An
 editable install reads its checkout's git at run time and gets no stamp; a wheel built from an
 sdist keeps the sdist's stamp.
@@ -17,11 +17,11 @@ from setuptools.command.build_py import build_py
 from setuptools.command.sdist import sdist
 
 ROOT = Path(__file__).resolve().parent
-STAMP = Path("training") / "_build_info.json"
+STAMP = Path("evaluation") / "_build_info.json"
 
 
 def _stamp() -> dict | None:
-    spec = importlib.util.spec_from_file_location("_lawn_provenance", ROOT / "training" / "provenance.py")
+    spec = importlib.util.spec_from_file_location("_lawn_provenance", ROOT / "evaluation" / "provenance.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module.source_stamp(ROOT)

@@ -13,7 +13,7 @@ the rows the learned protocol puts beside every agent):
   interface's default: the zero action a learner of ``lawn/CommRL-v1`` or ``lawn/JointRL-v1``
   starts from.
 
-The seeds are the validation seeds (``training.protocol.VALIDATION_SEED_BASE`` on): the anchor was
+The seeds are the validation seeds (``training.validation.VALIDATION_SEED_BASE`` on): the anchor was
 chosen on them, never on the benchmark's test seeds.
 
 Usage: ``python benchmarks/anchors.py [--episodes 20] [--markdown FILE]``
@@ -25,10 +25,10 @@ import argparse
 from pathlib import Path
 
 from agents import ANCHORS
+from evaluation.run import evaluate
+from evaluation.seeds import VALIDATION_SEED_BASE
+from evaluation.stats import mean_ci, paired_difference
 from lawn_env import ScenarioConfig
-from training.protocol import VALIDATION_SEED_BASE
-from training.results.run import evaluate
-from training.results.stats import mean_ci, paired_difference
 
 ENV_ID = "lawn/Comm-v1"
 

@@ -31,10 +31,10 @@ from dv_mpc import POOR_LINKS, STEADY, TAIL_LIMIT, met  # benchmarks/dv_mpc.py, 
 from report import finish  # benchmarks/report.py, beside this script
 
 import lawn_env  # noqa: F401
+from evaluation.cells import fmt_geometric
+from evaluation.run import EpisodeSpec, evaluate
+from evaluation.stats import costs_of, paired_geometric
 from lawn_env import presets
-from training.results.cells import fmt_geometric
-from training.results.run import EpisodeSpec, evaluate
-from training.results.stats import costs_of, paired_geometric
 
 JOINT = "lawn/Joint-v1"
 EXPERT = "dv-mpc"

@@ -39,11 +39,11 @@ from report import finish  # benchmarks/report.py, beside this script
 
 import lawn_env  # noqa: F401
 from agents import make_policy, rollout
+from evaluation.cells import fmt_geometric
+from evaluation.episode import EpisodeResult
+from evaluation.run import evaluate
+from evaluation.stats import Geometric, costs_of, paired_geometric
 from lawn_env import ScenarioConfig, presets
-from training.results.cells import fmt_geometric
-from training.results.episode import EpisodeResult
-from training.results.run import evaluate
-from training.results.stats import Geometric, costs_of, paired_geometric
 
 JOINT = "lawn/Joint-v1"
 #: Tasks where links are poor: fewer seeds per range (each episode costs K times more).

@@ -7,7 +7,7 @@
 * ``EXPERT K=k batch B (ms/scenario)``: B scenarios (seeds 0..B-1) decided together, the median batch's
   time over B. A policy that decides a batch at once (``Policy.batched``: ``dv-mpc``) plans them in one
   call; the others (and every policy of a tree without the batched interface) decide them one by one;
-* ``evaluate EXPERT (s/episode)``: ``training.results.run.evaluate`` of 2 and of 2 + E episodes of the
+* ``evaluate EXPERT (s/episode)``: ``evaluation.run.evaluate`` of 2 and of 2 + E episodes of the
   default task (``lawn evaluate --workers 1``), the difference over E: an episode beyond start-up.
 
 CPU seconds of this single-threaded process (a busy host's other work does not inflate them).
@@ -111,7 +111,7 @@ def link_law() -> tuple[float, float]:
 
 def episodes(expert: str, extra: int) -> float:
     """CPU seconds per episode beyond start-up of ``evaluate`` (one process) on the default task."""
-    from training.results.run import evaluate
+    from evaluation.run import evaluate
 
     def play(count: int) -> float:
         tasks = [(expert, JOINT, ScenarioConfig(), seed) for seed in range(count)]

@@ -1,11 +1,11 @@
 """The experts' episodes against another commit's: equal costs, or a decision flipped at a near-tie.
 
 ``--record FILE`` plays each expert on the suite's tasks (``lawn_env.presets.SUITE``), seeds
-0..S-1, with the tree it runs in (``training.results.run.evaluate``) and writes every episode's control
+0..S-1, with the tree it runs in (``evaluation.run.evaluate``) and writes every episode's control
 cost. ``--compare THIS OTHER`` reads two such files (this tree's and another commit's, recorded in a
 ``git worktree`` of it) and reports, per expert, the episodes whose costs agree to 1e-6 relative, the
 others listed, and the paired change over all of them (the geometric mean of the cost ratios with a
-bootstrap interval; :mod:`training.results.stats`).
+bootstrap interval; :mod:`evaluation.stats`).
 
 Usage::
 
@@ -29,9 +29,9 @@ TOLERANCE = 1e-6
 
 
 def record(path: Path, experts: list[str], seeds: int, workers: int) -> None:
+    from evaluation.run import evaluate
     from lawn_env import presets
     from lawn_env.presets import SUITE
-    from training.results.run import evaluate
 
     tasks = [(expert, "lawn/Joint-v1", presets.get(task), seed, {}) for task in SUITE for expert in experts
              for seed in range(seeds)]

@@ -1,4 +1,4 @@
-"""The drone grid of the ``limit:fast-drone`` row (training/results/run.py): ``rg-mpc`` at the config's
+"""The drone grid of the ``limit:fast-drone`` row (evaluation/run.py): ``rg-mpc`` at the config's
 largest speed (300 m/s, a 150 m reach) with its drone grid capped at several point counts, against
 ``rg-mpc`` at 15 m/s on the same seeds. Prints, per task and cap, the wall time of the episodes and
 the row's headroom (geometric mean of the per-seed cost ratios - 1, 95 % bootstrap interval); the
@@ -12,10 +12,10 @@ from __future__ import annotations
 import argparse
 import time
 
+from evaluation.cells import fmt_geometric
+from evaluation.run import LIMIT_SETTINGS, evaluate
+from evaluation.stats import paired_geometric
 from lawn_env import presets
-from training.results.cells import fmt_geometric
-from training.results.run import LIMIT_SETTINGS, evaluate
-from training.results.stats import paired_geometric
 
 DEFAULT_CAP = 10_000  # agents.reduced.ReducedSettings.max_drone_points
 

@@ -28,7 +28,7 @@ import numpy as np
 import lawn_env
 from agents import make_policy
 from agents.paired import PairedReward
-from training.protocol import VALIDATION_SEED_BASE
+from evaluation.seeds import VALIDATION_SEED_BASE
 
 #: learner -> (the policy and its settings, or None for the interface's zero action)
 LEARNERS: dict[str, tuple[str, dict[str, float]] | None] = {

@@ -1,10 +1,10 @@
-"""Parallel scaling of episode evaluation (training/pool.py): the pool's start beside the time per
+"""Parallel scaling of episode evaluation (evaluation/pool.py): the pool's start beside the time per
 episode, the map's speed-up, and the whole ``lawn evaluate`` command side by side over worker counts.
 
 1. **The map.** One fixed batch of episodes, ``lawn benchmark``'s default policies
    (``agents.BENCHMARK_POLICIES``) on the default task (``lawn benchmark --episodes N``), played in
    this process (the reference) and by W processes for each W of ``--workers`` (this one and W - 1
-   helpers, training/pool.py). Per W: the time per episode, the speed-up over the reference, the
+   helpers, evaluation/pool.py). Per W: the time per episode, the speed-up over the reference, the
    machine's own ceiling (W independent processes each playing the whole batch at once: W times the
    time alone over their mean time) and the helpers' start (from nothing to every helper ready: an
    interpreter, lawn's imports and its kernel cache), in seconds and in episodes of the reference.
@@ -37,9 +37,9 @@ from pathlib import Path
 from report import finish  # benchmarks/report.py, beside this script
 
 from agents import BENCHMARK_POLICIES
+from evaluation.run import evaluate
 from lawn_env import ScenarioConfig
-from training import pool
-from training.results.run import evaluate
+from evaluation import pool
 
 TARGET_COMMAND = 1.5
 COMMAND = ["evaluate", "--policy", "rg-mpc", "--episodes", "48", "--quiet"]

@@ -1,7 +1,7 @@
 """How many validation seeds a paired validation needs to see a change of 2 %, per suite task.
 
 Model selection pairs each validation with the run's start on the same seeds (the common random
-numbers of the paired reward: ``training.protocol.validation_row``'s ``vs_start``, a mean of per-seed
+numbers of the paired reward: ``training.validation.validation_row``'s ``vs_start``, a mean of per-seed
 relative differences with its 95 % t-interval). Even a policy that changes nothing that matters moves
 every episode a little on poor links, where one flipped delivery sends an episode elsewhere, so the
 interval has a floor: this script measures it with ``noise:dv-mpc`` (``dv-mpc`` on a 1.4 m drone grid
@@ -24,10 +24,10 @@ import math
 from report import finish  # benchmarks/report.py, beside this script
 from scipy import stats
 
+from evaluation.api import compare
+from evaluation.seeds import VALIDATION_SEED_BASE
+from evaluation.stats import paired_difference
 from lawn_env.presets import SUITE
-from training.protocol import VALIDATION_SEED_BASE
-from training.results.api import compare
-from training.results.stats import paired_difference
 
 BOUND = 0.02  # the change a validation should see: its 95 % half-width
 AFFORDABLE = 100  # validation episodes a run can afford every --eval-every steps
@@ -35,7 +35,7 @@ AFFORDABLE = 100  # validation episodes a run can afford every --eval-every step
 
 def seeds_for(half: float, n: int, bound: float = BOUND) -> int:
     """The fewest seeds (at least 2) whose 95 % t-interval half-width is at most ``bound``, for the
-    spread that gave ``half`` on ``n`` seeds (:func:`training.results.stats.mean_ci`'s interval)."""
+    spread that gave ``half`` on ``n`` seeds (:func:`evaluation.stats.mean_ci`'s interval)."""
     sd = half * math.sqrt(n) / stats.t.ppf(0.975, n - 1)
     size = max(2, math.ceil((1.959964 * sd / bound) ** 2))  # the normal quantile: a lower bound
     while stats.t.ppf(0.975, size - 1) * sd / math.sqrt(size) > bound:

@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from evaluation.run import evaluate
 from lawn_env import ScenarioConfig, presets
-from training.results.run import evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
 

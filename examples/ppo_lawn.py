@@ -32,7 +32,7 @@ from torch.distributions.normal import Normal
 
 import lawn_env  # noqa: F401  (registers the lawn/* ids)
 
-EVAL_SEED_BASE = 500_000  # lawn's validation seeds (training/protocol.py): never the training episodes
+EVAL_SEED_BASE = 500_000  # lawn's validation seeds (training/validation.py): never the training episodes
 
 
 @dataclass

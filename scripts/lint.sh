@@ -12,7 +12,7 @@ if [ ! -x "$bin/ruff" ] || [ ! -x "$bin/mypy" ]; then
   echo "lint: ruff and mypy not found; install the test extra (bash scripts/setup.sh full)" >&2
   exit 2
 fi
-if [ "$#" -gt 0 ]; then paths=("$@"); else paths=(lawn_env agents training); fi
+if [ "$#" -gt 0 ]; then paths=("$@"); else paths=(lawn_env agents evaluation training paper lawn_cli); fi
 status=0
 echo "== ruff check ${paths[*]}"
 "$bin/ruff" check "${paths[@]}" || status=1

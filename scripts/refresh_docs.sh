@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Regenerate every generated table and figure of the README and the docs pages from the current code.
-# The blocks' markers name the command and the table file that fill them (training/pages.py); this
-# runs `python -m training.pages refresh`, each distinct command once, one at a time, then the
+# The blocks' markers name the command and the table file that fill them (paper/pages.py); this
+# runs `python -m paper.pages refresh`, each distinct command once, one at a time, then the
 # episode animations (lawn render). --only takes block names or groups (figures benchmark gap dv
 # speed throughput parallel qp fleet learned suite reference clients) and render; --train retrains the agents first
 # (scripts/train_agents.sh; each run's wall time is in docs/LEARNED.md). Generated data goes to runs/ (not committed).
@@ -26,7 +26,7 @@ if [ "$train" = 1 ]; then
   bash scripts/train_agents.sh runs/agents
 fi
 if [ ${#only[@]} -eq 0 ] || [ ${#blocks[@]} -gt 0 ]; then
-  .venv/bin/python -m training.pages refresh ${blocks[@]:+--only "${blocks[@]}"}
+  .venv/bin/python -m paper.pages refresh ${blocks[@]:+--only "${blocks[@]}"}
 fi
 if [ ${#only[@]} -eq 0 ] || [[ " ${only[*]} " == *" render "* ]]; then
   lawn=.venv/bin/lawn

@@ -15,6 +15,7 @@ from agents.search import min_plus
 from lawn_env import channel
 from lawn_env.products import matmul
 
+
 def project_budget(v: np.ndarray, total: float) -> np.ndarray:
     """Exact Euclidean projection of ``v`` (K,) onto {p >= 0, sum p <= total}.
 

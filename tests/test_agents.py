@@ -337,8 +337,8 @@ def test_tracking_rollouts_hold_between_commands(name):
 def test_period_aware_planning_keeps_tracking_where_the_unaware_ablation_collapses():
     """Commands every 3 slots, perfect links (paper-nominal): EPA's MPC that plans with move
     blocking tracks; the ablation that plans as if it commanded every slot does not."""
+    from evaluation.run import run_episode
     from lawn_env import presets
-    from training.results.run import run_episode
 
     base = presets.get("paper-nominal").override(num_slots=60, **{"disturbance.control_period_slots": 3})
     aware = run_episode("epa", "lawn/Joint-v1", base, 0)

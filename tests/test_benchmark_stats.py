@@ -10,9 +10,8 @@ import pytest
 from scipy import stats
 
 import lawn_env
-from lawn_env import ScenarioConfig, presets
-from training.results.episode import TRANSIENT_SLOTS
-from training.results.run import (
+from evaluation.episode import TRANSIENT_SLOTS
+from evaluation.run import (
     LIMIT_SETTINGS,
     LIMITS,
     NOISE,
@@ -23,7 +22,8 @@ from training.results.run import (
     resolve,
     split_cost,
 )
-from training.results.stats import aggregate_score, normalized_score, paired_difference, paired_geometric
+from evaluation.stats import aggregate_score, normalized_score, paired_difference, paired_geometric
+from lawn_env import ScenarioConfig, presets
 
 
 def _flat(tree: dict, prefix: str = "") -> dict:
@@ -200,8 +200,9 @@ def test_suite_v3_adds_tasks_where_links_are_poor():
 
 
 def test_two_ranges_are_compared_apart_with_the_tail_and_the_worst_seed():
-    from training.results.cells import fmt_ranges, fmt_worst
-    from training.results.stats import TAIL_RATIO, TEST_RANGES, compare_ranges, range_of, test_seeds
+    from evaluation.cells import fmt_ranges, fmt_worst
+    from evaluation.seeds import TEST_RANGES, range_of, test_seeds
+    from evaluation.stats import TAIL_RATIO, compare_ranges
 
     seeds = test_seeds(5)
     assert seeds[:5] == list(range(5)) and seeds[5:] == [TEST_RANGES[1] + i for i in range(5)]
@@ -223,11 +224,11 @@ def test_two_ranges_are_compared_apart_with_the_tail_and_the_worst_seed():
 
 
 def test_compare_is_the_python_front_door_of_evaluate(tmp_path):
-    """``training.results.api.compare`` plays the same episodes as ``evaluate``, with each policy's
+    """``evaluation.api.compare`` plays the same episodes as ``evaluate``, with each policy's
     geometric comparison against the reference computed on the same seeds; a result survives its CSV
     row; bad requests are named."""
-    from training.results.api import EpisodeResult, compare
-    from training.results.episode import read_csv, read_results, write_results
+    from evaluation.api import EpisodeResult, compare
+    from evaluation.episode import read_csv, read_results, write_results
 
     result = compare(["epa", "rg-mpc"], config="steady", seeds=[3, 4], settings={"rg-mpc": {"power_levels": 20}})
     rows = evaluate([(p, "lawn/Joint-v1", presets.get("steady"), s, {"power_levels": 20} if p == "rg-mpc" else {})
@@ -264,9 +265,9 @@ def test_statistics_reduce_results_once_per_row_and_compare_any_two_rows():
     """``rows.reduce``: per (task, env, policy) the seeds, each cost's mean and interval and sum, the
     decision time and the score; a comparison of two rows computes what is read, from the same costs
     the functions on results take; a missing row compares to nothing."""
-    from training.results.episode import EpisodeResult
-    from training.results.rows import reduce
-    from training.results.stats import costs_of, mean_ci, paired, paired_geometric
+    from evaluation.episode import EpisodeResult
+    from evaluation.rows import reduce
+    from evaluation.stats import costs_of, mean_ci, paired, paired_geometric
 
     rng = np.random.default_rng(3)
     rows = [EpisodeResult(p, "lawn/Joint-v1", s, control_cost=c, transient_cost=c / 2, sustained_cost=c / 2,
@@ -287,7 +288,7 @@ def test_statistics_reduce_results_once_per_row_and_compare_any_two_rows():
 
 def _benchmark_summary(diverged: float) -> list[dict]:
     """A summary of the main job's eleven rows (their long names), ``diverged`` on ``epa`` only."""
-    from training.results.stats import SUMMARY_METRICS
+    from evaluation.stats import SUMMARY_METRICS
 
     names = ["dv-mpc", "rg-mpc", "ao-mpc", "epa", "sf", "pid", "lqr", "noise:dv-mpc", "limit:fast-drone",
              "limit:perfect-links", "actuator:buffer"]
@@ -308,8 +309,8 @@ def test_plot_summary_names_never_overlap_and_shows_no_empty_diverged_panel(tmp_
 
     from matplotlib.backends.backend_agg import RendererAgg
 
-    from training.results.report import plot_summary
-    from training.results.stats import SUMMARY_METRICS
+    from evaluation.report import plot_summary
+    from evaluation.stats import SUMMARY_METRICS
 
     fig = plot_summary(_benchmark_summary(0.0), tmp_path / "none.png", title="t")
     assert (tmp_path / "none.png").stat().st_size > 0
@@ -340,7 +341,7 @@ def test_results_json_holds_arrays_of_numbers_and_reads_back(tmp_path):
     file valid JSON (NaN as null, infinities as strings); ``read_results`` gives the same results."""
     import json
 
-    from training.results.episode import EpisodeResult, read_results, write_results
+    from evaluation.episode import EpisodeResult, read_results, write_results
 
     rows = evaluate([("epa", "lawn/Joint-v1", presets.get("steady"), s, {}) for s in (3, 4)], progress=False)
     odd = rows[1].with_(rmse_m=math.nan, tracking_cost=math.inf, stage_costs=np.array([1.5, math.nan, -math.inf]),

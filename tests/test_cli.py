@@ -2,7 +2,7 @@ import json
 
 import pytest
 
-from training.cli import main
+from lawn_cli import main
 
 
 def test_demo_writes_metrics_and_plot(tmp_path, capsys):
@@ -92,11 +92,11 @@ def test_the_benchmark_table_is_its_episodes_statistics(tmp_path):
     """summary.md's results table is the statistics of episodes.csv: its columns, one row per policy
     in order, each mean ± 95 % interval and the paired and geometric comparisons with the first
     policy recomputed from the rows."""
-    from training.pages import first_table
-    from training.results.cells import fmt_geometric, fmt_stat
-    from training.results.episode import read_results
-    from training.results.report import RESULT_METRICS
-    from training.results.stats import mean_ci, paired_difference, paired_geometric
+    from evaluation.cells import fmt_geometric, fmt_stat
+    from evaluation.episode import read_results
+    from evaluation.report import RESULT_METRICS
+    from evaluation.stats import mean_ci, paired_difference, paired_geometric
+    from paper.pages import first_table
 
     out = tmp_path / "bench"
     policies = ["epa", "pid", "sf"]
@@ -167,14 +167,14 @@ def test_bad_counts_seeds_and_specs_are_one_line_errors(tmp_path, capsys):
 def test_an_unwritable_out_fails_before_any_episode(tmp_path, capsys, monkeypatch):
     """The output location is checked before computing (a file where a folder is needed,
     a folder where a file is needed), with one line naming --out."""
-    import training.results.run
-    import training.sweep
+    import evaluation.run
+    import evaluation.sweep
 
     def no_work(*args, **kwargs):
         raise AssertionError("episodes ran before --out was checked")
 
-    monkeypatch.setattr(training.results.run, "pool_map", no_work)
-    monkeypatch.setattr(training.sweep, "execute", no_work)
+    monkeypatch.setattr(evaluation.run, "pool_map", no_work)
+    monkeypatch.setattr(evaluation.sweep, "execute", no_work)
     blocker = tmp_path / "a-file"
     blocker.write_text("")
     assert main(["evaluate", "--policy", "rg-mpc", "--episodes", "50", "--out", str(blocker / "r.csv"), "--quiet"]) == 2
@@ -197,9 +197,9 @@ def test_every_help_text_names_its_flags_defaults_and_choices(capsys):
     choices (presets, policies, env ids, figures)."""
     import lawn_env
     from agents import policy_names
+    from lawn_cli import COMMANDS, build_parser
     from lawn_env import presets
-    from training.cli import COMMANDS, build_parser
-    from training.experiments import EXPERIMENTS
+    from paper.experiments import EXPERIMENTS
 
     root = _help([], capsys)
     names = [c.__name__.rsplit(".", 1)[-1] for c in COMMANDS]
@@ -230,7 +230,7 @@ def test_every_help_text_names_its_flags_defaults_and_choices(capsys):
 def test_shared_flags_keep_each_subcommand_s_defaults():
     """A subcommand's own default of a shared flag (benchmark's --seed: None, the paper protocol's 0)
     does not leak into the others (argparse shares a parent parser's actions)."""
-    from training.cli import build_parser
+    from lawn_cli import build_parser
 
     parser = build_parser()
     assert parser.parse_args(["benchmark"]).seed is None
@@ -249,7 +249,7 @@ def test_the_top_level_help_imports_nothing_of_lawn():
     import subprocess
     import sys
 
-    script = ("import sys\nfrom training.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+    script = ("import sys\nfrom lawn_cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
               "print(sorted(m for m in ('lawn_env', 'agents', 'numba') if m in sys.modules))")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True, timeout=60)
     assert "evaluate" in done.stdout and done.stdout.strip().endswith("[]")
@@ -266,8 +266,8 @@ def test_comparisons_refuse_an_rl_id_naming_its_v0_id(tmp_path, capsys):
 
 
 def test_one_episode_commands_say_so_and_render_is_quiet(tmp_path, monkeypatch):
-    import training.cli.render
-    from training.cli import build_parser
+    import lawn_cli.render
+    from lawn_cli import build_parser
 
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")
@@ -275,8 +275,8 @@ def test_one_episode_commands_say_so_and_render_is_quiet(tmp_path, monkeypatch):
         seed = next(a for a in sub.choices[name]._actions if a.dest == "seed")
         assert seed.help.startswith("the episode's seed"), name
     calls = []
-    real = training.cli.render.render_episode  # the command's own name for it (imported at its top)
-    monkeypatch.setattr(training.cli.render, "render_episode",
+    real = lawn_cli.render.render_episode  # the command's own name for it (imported at its top)
+    monkeypatch.setattr(lawn_cli.render, "render_episode",
                         lambda *a, **k: calls.append(k["progress"]) or real(*a, **k))
     out = tmp_path / "e.gif"
     for flags in (["--quiet"], ["--overwrite"]):
@@ -298,7 +298,7 @@ def test_one_episode_commands_say_so_and_render_is_quiet(tmp_path, monkeypatch):
 def test_the_early_start_reads_the_workers_of_a_parallel_command(argv, workers, monkeypatch):
     import os
 
-    from training import cli
+    import lawn_cli as cli
 
     monkeypatch.setattr(os, "cpu_count", lambda: 2)
     assert cli._early_workers(argv) == workers
@@ -310,7 +310,7 @@ def test_a_failed_command_does_not_wait_for_its_helpers(tmp_path):
     import subprocess
     import sys
 
-    script = ("import sys, multiprocessing as mp\nfrom training.cli import main\n"
+    script = ("import sys, multiprocessing as mp\nfrom lawn_cli import main\n"
               "sys.argv = ['lawn', 'evaluate', '--policy', 'nope', '--workers', '3', '--out', 'r.csv']\n"
               "try:\n    main()\nexcept SystemExit as e:\n    print('exit', e.code, len(mp.active_children()))\n")
     done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=120)
@@ -327,7 +327,7 @@ def test_evaluate_counts_its_rows_in_words(tmp_path, capsys):
 
 @pytest.mark.parametrize("policy, setting", [("rg-mpc", "power_levels=60"), ("ao-mpc", "tolerance=1e-3")])
 def test_the_policy_arg_examples_of_the_help_run(tmp_path, policy, setting):
-    from training.cli import build_parser
+    from lawn_cli import build_parser
 
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")
@@ -417,7 +417,7 @@ def test_benchmark_never_writes_the_main_jobs_folder_by_default(tmp_path, monkey
 def test_figures_resume_their_own_mode_and_refuse_the_other(tmp_path, capsys):
     """lawn figures keeps its tables and redraws from them on a rerun of its mode (mode.json); a
     folder of the other mode's figures is refused before any work, unless --overwrite."""
-    from training.cli.figures import holds_results
+    from lawn_cli.figures import holds_results
 
     out = tmp_path / "figures"
     (out / "data").mkdir(parents=True)

@@ -1,4 +1,4 @@
-"""Every row of the README's benchmark table replays its recorded episodes (training/results/digests.py):
+"""Every row of the README's benchmark table replays its recorded episodes (evaluation/digests.py):
 a change that moves any policy's episodes (ao-mpc and sf included) fails here until the digests and
 the tables are regenerated in the same commit (scripts/refresh_docs.sh --only benchmark)."""
 
@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from training.pages import ROOT, block_body, first_table
-from training.results import digests as benchmark
+from evaluation import digests as benchmark
+from paper.pages import ROOT, block_body, first_table
 
 RECORDED = json.loads(benchmark.DIGESTS.read_text())
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from training.pages import block_body, block_names, blocks, find_block, pages, refresh, replace_block
+from paper.pages import block_body, block_names, blocks, find_block, pages, refresh, replace_block
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Every generated block and the page that holds it.
@@ -140,7 +140,7 @@ def test_the_model_specification_is_the_projects():
 
 
 def test_reproduction_document_is_generated_and_explains_every_miss():
-    from training.experiments.reproduction import EXPLANATIONS, heading_anchor
+    from paper.experiments.reproduction import EXPLANATIONS, heading_anchor
 
     text = (ROOT / "docs" / "REPRODUCTION.md").read_text()
     misses = block_body(ROOT / "docs" / "REPRODUCTION.md", "reproduction-misses")

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from markdown_it import MarkdownIt
 
-from training.pages import pages
+from paper.pages import pages
 
 ROOT = Path(__file__).resolve().parent.parent
 OPTIONS = {"slow"}
@@ -138,7 +138,7 @@ def test_every_lawn_command_of_the_docs_parses():
     import io
     import shlex
 
-    from training.cli import build_parser
+    from lawn_cli import build_parser
 
     parser, bad, seen = build_parser(), [], 0
     for page in pages(ROOT):

@@ -11,7 +11,7 @@ A fence's words after the language are its marker:
 
 The blocks of a page run in order in one fresh working directory (a block may read what an earlier
 one wrote), with the repository's ``docs`` and ``examples`` beside it. A ``lawn`` line runs in this
-process (``training.cli.main``) and must exit 0; a ``python`` line runs in a subprocess. A line that
+process (``lawn_cli.main``) and must exit 0; a ``python`` line runs in a subprocess. A line that
 fails is a failing test naming its page and line.
 """
 
@@ -29,7 +29,7 @@ from pathlib import Path
 import pytest
 from markdown_it import MarkdownIt
 
-from training.pages import pages
+from paper.pages import pages
 
 ROOT = Path(__file__).resolve().parent.parent
 SHELLS = ("bash", "sh", "console")
@@ -134,7 +134,7 @@ def _values(words: list[str], start: int):
 
 def run_block(block: ShellBlock, workdir: Path, budget: bool) -> int:
     """Run a block's commands in ``workdir``; returns how many ran. ``budget``: on the small budget."""
-    from training.cli import main
+    from lawn_cli import main
 
     ran = 0
     for line, command in block.commands:
@@ -240,7 +240,7 @@ def test_page_commands_run_with_the_slow_blocks(page, tmp_path, monkeypatch):
 
 def test_the_docs_name_no_flag_a_small_budget_would_miss():
     """The small budget's flags are the commands' own: a renamed flag would leave a budget uncut."""
-    from training.cli import build_parser
+    from lawn_cli import build_parser
 
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")

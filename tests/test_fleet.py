@@ -272,10 +272,10 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
 
     import training.recipes as recipes_module
     from agents import learned, make_policy
+    from evaluation.episode import Play, read_csv
+    from evaluation.protocols import execute, fleet_agents, fleet_protocol
     from lawn_env import ScenarioConfig, presets
-    from training import zoo
-    from training.results.episode import Play, read_csv
-    from training.results.protocols import execute, fleet_agents, fleet_protocol
+    from paper import learned as learned_page
     from training.spec import TrainSpec
     from training.train import train
 
@@ -289,7 +289,7 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     (docs / "LEARNED.md").write_text(page)
     other = {"policy": "bc:runs/agents/bc-comm/seed-0", "env": "lawn/Comm-v1", "seed": "0", "control_cost": "1.0"}
     (docs / "learned" / "episodes.csv").write_text(",".join(other) + "\n" + ",".join(other.values()) + "\n")
-    table = zoo.build_zoo(runs, docs / "LEARNED.md", workers=1, progress=False, episodes=2, target=tmp_path / "zoo",
+    table = learned_page.build_zoo(runs, docs / "LEARNED.md", workers=1, progress=False, episodes=2, target=tmp_path / "zoo",
                           only=["fleet-comm"])
     text = (docs / "LEARNED.md").read_text()
     assert text.startswith("# Learned\n\nkept\n") and text.endswith("<!-- zoo-fleet:end -->\n\nkept too\n")
@@ -302,7 +302,7 @@ def test_the_zoo_builds_the_fleet_section_alone_and_the_table_over_fleet_sizes(t
     assert record["selected_at_steps"] == int(read_csv(runs / "fleet-comm" / "seed-0" / "learning_curve.csv")[-1]
                                               ["timesteps"])  # a clone: its one validation, after the fit
     with pytest.raises(ValueError, match="unknown recipe 'nope'"):
-        zoo.build_zoo(runs, docs / "LEARNED.md", only=["nope"])
+        learned_page.build_zoo(runs, docs / "LEARNED.md", only=["nope"])
 
     monkeypatch.setattr(learned, "ZOO_DIR", tmp_path / "zoo")
     assert fleet_agents() == ["zoo:fleet-comm"]
@@ -354,10 +354,10 @@ def test_the_suite_writes_the_table_over_fleet_sizes_for_the_shipped_fleet_netwo
     """``lawn benchmark --suite`` with a fleet network among the policies: every fleet size of the
     table (``--episodes`` caps its seeds), written beside the suite's files; with ``--docs`` a page
     without the block is refused before anything runs."""
-    from training.cli import main
-    from training.results.episode import Play, read_csv
-    from training.results.protocols import FLEET_SIZES, execute, fleet_protocol
-    from training.results.stats import TEST_RANGES
+    from evaluation.episode import Play, read_csv
+    from evaluation.protocols import FLEET_SIZES, execute, fleet_protocol
+    from evaluation.seeds import TEST_RANGES
+    from lawn_cli import main
 
     sizes = dict.fromkeys(FLEET_SIZES, 1)  # what --episodes 1 caps them to
     block = execute(fleet_protocol(["zoo:fleet-comm"], sizes), Play(1, False), tmp_path).tables["fleet_sizes.md"]
@@ -379,10 +379,11 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
 
     import training.recipes as recipes_module
     from agents import learned, make_policy
+    from evaluation.episode import read_csv
+    from evaluation.seeds import TEST_RANGES
     from lawn_env import presets
+    from paper import learned as learned_page
     from training import zoo
-    from training.results.episode import read_csv
-    from training.results.stats import TEST_RANGES
     from training.spec import TrainSpec
     from training.train import train
 
@@ -402,7 +403,7 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
     monkeypatch.setitem(recipes_module.RECIPES, "ppo-dv-residual", small_rl)
     train(TrainSpec(algo="ppo", env_id="lawn/Joint-v1", config=small_rl.config, timesteps=64, seed=0, eval_every=64,
                     out_dir=runs / "ppo-dv-residual" / "seed-0", hp_overrides=rl_hp, eval_episodes=1, progress=False))
-    table = zoo.build_zoo(runs, docs / "LEARNED.md", workers=1, progress=False, episodes=1, target=tmp_path / "zoo",
+    table = learned_page.build_zoo(runs, docs / "LEARNED.md", workers=1, progress=False, episodes=1, target=tmp_path / "zoo",
                           only=["dv-joint", "ppo-dv-residual"])
     rl = [line for line in table.splitlines() if line.startswith("| `zoo:ppo-dv-residual`")]
     assert len(rl) == 1 and rl[0].split(" | ")[2] == "steady" and rl[0].endswith("| – |")  # no clone target
@@ -429,7 +430,7 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
     with pytest.raises(ValueError, match="zoo:dv-joint was trained on lawn/Joint-v1 with "
                                          "control.law='delivery-certainty-equivalent'"):
         make_policy("zoo:dv-joint", presets.get("wide-k8"))  # its MPC increment anchor plans by the law
-    from training.results.protocols import fleet_agents
+    from evaluation.protocols import fleet_agents
 
     assert "zoo:dv-joint" not in fleet_agents()  # the fleet-size table is for the default-scenario networks
     with pytest.raises(ValueError, match="control.law='delivery'.*control.law='paper'"):
@@ -442,8 +443,8 @@ def test_lawn_benchmark_protocol_fleet_plays_named_networks_on_chosen_sizes(tmp_
     of --sizes, --episodes seeds of each test range; a network that cannot act at a size, sizes without
     the protocol and two protocols at once are refused before any episode."""
     pytest.importorskip("stable_baselines3")
-    from training.cli import main
-    from training.results.episode import read_results
+    from evaluation.episode import read_results
+    from lawn_cli import main
 
     out = tmp_path / "fleet"
     assert main(["benchmark", "--protocol", "fleet", "--policies", "zoo:fleet-comm", "--sizes", "3", "--episodes", "1",

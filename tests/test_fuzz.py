@@ -409,7 +409,7 @@ def bad_command_lines(draw, tmp):
 def test_bad_command_lines_give_one_line_errors_and_a_nonzero_exit(tmp_path, capsys):
     """Every subcommand's bad input: a non-zero exit, no traceback, the last line of stderr an
     error naming the problem; --debug shows the traceback."""
-    from training.cli import main
+    from lawn_cli import main
 
     (tmp_path / "f.csv").write_text("")
     seen = set()

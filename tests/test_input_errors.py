@@ -85,7 +85,7 @@ def test_valid_configs_still_build_and_the_signature_is_kept():
 
 
 def test_the_cli_prints_the_config_error_on_one_line(tmp_path, capsys):
-    from training.cli import main
+    from lawn_cli import main
 
     assert main(["demo", "--out", str(tmp_path), "--set", "num_agvs=0", "--set", "channel.bler=0.7"]) == 2
     err = capsys.readouterr().err
@@ -213,9 +213,9 @@ def test_make_policy_compare_and_the_cli_refuse_an_agent_trained_elsewhere_alike
     the default scenario, as for every policy (gym.make(env_id)'s)."""
     pytest.importorskip("stable_baselines3")
     from agents import trained_config
+    from evaluation.api import compare
+    from lawn_cli import main
     from lawn_env import ScenarioConfig
-    from training.cli import main
-    from training.results.api import compare
 
     config = ScenarioConfig().override(settings) if settings else None
     with pytest.raises(ValueError) as made:

@@ -35,14 +35,14 @@ def _load(path: Path):
 def test_provenance_never_stamps_an_enclosing_repository(tmp_path):
     theirs = _foreign_repo(tmp_path / "project")
     site = tmp_path / "project" / ".venv" / "site-packages"
-    (site / "training").mkdir(parents=True)
-    shutil.copy(ROOT / "training" / "provenance.py", site / "training" / "provenance.py")
-    copy = _load(site / "training" / "provenance.py")
+    (site / "evaluation").mkdir(parents=True)
+    shutil.copy(ROOT / "evaluation" / "provenance.py", site / "evaluation" / "provenance.py")
+    copy = _load(site / "evaluation" / "provenance.py")
     assert copy.source_stamp(site) is None  # the enclosing repository is not lawn's
     assert theirs not in copy.provenance() and copy.provenance().endswith("commit unknown")
-    (site / "training" / "_build_info.json").write_text('{"commit": "0123456789", "dirty": false}')
+    (site / "evaluation" / "_build_info.json").write_text('{"commit": "0123456789", "dirty": false}')
     assert copy.provenance().endswith("commit 0123456789")
-    from training.provenance import source_stamp
+    from evaluation.provenance import source_stamp
 
     assert source_stamp(ROOT)["commit"] == _git(ROOT, "rev-parse", "--short=10", "HEAD")
 
@@ -58,8 +58,8 @@ def test_a_wheel_in_a_foreign_repository_reports_lawns_commit_and_caches_outside
     site = tmp_path / "project" / "site"
     subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(wheel)],
                    check=True, capture_output=True, timeout=300)
-    assert (site / "training" / "_build_info.json").exists()
-    child = ("import training.provenance as p, lawn_env, gymnasium as gym; gym.make('lawn/Joint-v1').reset(seed=0); "
+    assert (site / "evaluation" / "_build_info.json").exists()
+    child = ("import evaluation.provenance as p, lawn_env, gymnasium as gym; gym.make('lawn/Joint-v1').reset(seed=0); "
              "print(p.__file__); print(p.provenance())")
     env = dict(os.environ, PYTHONPATH=str(site), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
     out = subprocess.run([sys.executable, "-c", child], cwd=tmp_path / "project", env=env, capture_output=True,

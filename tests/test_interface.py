@@ -115,7 +115,7 @@ def _zero_action_cost(env_id, seed, interface):
 
 @pytest.mark.parametrize("env_id", ["lawn/Joint-v1", "lawn/Comm-v1"])
 def test_zero_action_of_the_anchored_scheme_is_a_sound_policy(env_id):
-    from training.results.run import run_episode
+    from evaluation.run import run_episode
 
     seeds = range(5)
     zero = np.mean([_zero_action_cost(env_id, s, "rl") for s in seeds])

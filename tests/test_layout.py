@@ -1,5 +1,5 @@
-"""The package's layering (README, Layout): training -> agents -> lawn_env at run time (imports for
-annotations only, under ``if TYPE_CHECKING:``, aside), no import cycles between modules of any
+"""The package's layering (docs/layout.md): lawn_cli -> paper -> training -> evaluation -> agents ->
+lawn_env at run time (imports for annotations only, under ``if TYPE_CHECKING:``, aside), no import cycles between modules of any
 kind (function-level and annotation-only imports included), no module importing another's private
 names, and every public function annotated."""
 
@@ -11,7 +11,10 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("lawn_env", "agents", "training")
+#: The packages, lowest first: each imports only those before it (and itself).
+PACKAGES = ("lawn_env", "agents", "evaluation", "training", "paper", "lawn_cli")
+#: The products apart from the simulator and the policies: small modules, imports at the top.
+PRODUCTS = ("evaluation", "training", "paper", "lawn_cli")
 
 
 def _modules() -> dict[str, Path]:
@@ -105,9 +108,11 @@ def test_no_private_names_imported_across_modules():
     assert PRIVATE == []
 
 
-@pytest.mark.parametrize("lower, upper", [("lawn_env", "agents"), ("lawn_env", "training"), ("agents", "training")])
-def test_layers_point_down(lower, upper):
-    bad = [(m, t) for m, ts in EDGES.items() if m.split(".")[0] == lower for t in ts if t.split(".")[0] == upper]
+@pytest.mark.parametrize("package", PACKAGES)
+def test_layers_point_down(package):
+    rank = {p: i for i, p in enumerate(PACKAGES)}
+    bad = [(m, t) for m, ts in EDGES.items() if m.split(".")[0] == package for t in ts
+           if rank[t.split(".")[0]] > rank[package]]
     assert bad == []
 
 
@@ -232,9 +237,10 @@ def _long_functions(tree: ast.Module, limit: int) -> list[str]:
             if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.end_lineno - n.lineno + 1 > limit]
 
 
-def test_the_training_package_keeps_small_modules_and_functions():
-    """No module of ``training/`` over 400 lines, no function of it over 60."""
-    training = {name: path for name, path in _modules().items() if name.startswith("training")}
+def test_the_products_keep_small_modules_and_functions():
+    """No module of the learning, evaluation, paper and CLI packages over 400 lines, no function of them
+    over 60."""
+    training = {name: path for name, path in _modules().items() if name.split(".")[0] in PRODUCTS}
     assert {name: n for name, path in training.items() if (n := len(path.read_text().splitlines())) > 400} == {}
     long = {name: _long_functions(ast.parse(path.read_text()), 60) for name, path in training.items()}
     assert {name: fs for name, fs in long.items() if fs} == {}
@@ -287,7 +293,7 @@ _ISSUE_NUMBER = re.compile(r"(?<![\w&])#\d{1,4}\b|\b[Ii]ssues? #?\d+")
 def test_no_issue_numbers_in_code():
     """Code says why, not which ticket: no ``#NN`` or ``issue NN`` in the packages, benchmarks, scripts
     or tests (the commit messages and the issue tracker hold that history)."""
-    files = [p for d in ("lawn_env", "agents", "training", "benchmarks", "scripts", "tests", "examples")
+    files = [p for d in (*PACKAGES, "benchmarks", "scripts", "tests", "examples")
              for p in sorted((ROOT / d).rglob("*")) if p.suffix in (".py", ".sh") and ".venv" not in p.parts]
     found = [f"{p.relative_to(ROOT)}:{i}: {line.strip()}" for p in files
              for i, line in enumerate(p.read_text().splitlines(), 1) if _ISSUE_NUMBER.search(line)]
@@ -313,14 +319,8 @@ def _local_imports(path: Path) -> int:
     return count(ast.parse(path.read_text()), False)
 
 
-def test_training_imports_at_the_top_and_keeps_its_chains_short():
-    """training/ imports the project's modules at module level: at most 20 imports inside functions (the
-    CLI's lazy dispatch, optional extras), and no chain of imports within it (run-time imports,
-    function-local ones included; the CLI's dispatch by name aside) longer than 6 modules."""
-    mods = _modules()
-    local = {m: _local_imports(f) for m, f in mods.items() if m.startswith("training")}
-    assert sum(local.values()) <= 20, sorted((n, m) for m, n in local.items() if n)
-    edges = {m: {d for d in ds if d.startswith("training")} for m, ds in EDGES.items() if m.startswith("training")}
+def _longest_chain(edges: dict[str, set[str]]) -> tuple[str, ...]:
+    """The longest chain of imports in ``edges`` (module -> the modules it imports; acyclic)."""
     longest: dict[str, tuple[str, ...]] = {}
 
     def chain(m: str) -> tuple[str, ...]:
@@ -328,8 +328,27 @@ def test_training_imports_at_the_top_and_keeps_its_chains_short():
             longest[m] = max(((m, *chain(d)) for d in edges[m]), key=len, default=(m,))
         return longest[m]
 
-    deepest = max((chain(m) for m in edges), key=len)
+    return max((chain(m) for m in edges), key=len, default=())
+
+
+def test_the_products_import_at_the_top():
+    """The learning, evaluation, paper and CLI packages import the project's modules at module level: at
+    most 20 imports inside functions in all (the CLI's lazy dispatch, optional extras)."""
+    mods = _modules()
+    local = {m: _local_imports(f) for m, f in mods.items() if m.split(".")[0] in PRODUCTS}
+    assert sum(local.values()) <= 20, sorted((n, m) for m, n in local.items() if n)
+
+
+@pytest.mark.parametrize("package", PACKAGES[1:])
+def test_each_package_keeps_its_import_chains_short(package):
+    """No chain of imports within one package (run-time imports, function-local ones included) longer
+    than 6 modules. The simulator is a stack of layers (an env over its interface over the spaces over
+    the core over the config over the dynamics): its chains are reported (docs/layout.md), not held."""
+    edges = {m: {d for d in ds if d.split(".")[0] == package} for m, ds in EDGES.items()
+             if m.split(".")[0] == package}
+    deepest = _longest_chain(edges)
     assert len(deepest) <= 6, " -> ".join(deepest)
+    assert _longest_chain({"a": {"b"}, "b": {"c"}, "c": set(), "d": {"c"}}) == ("a", "b", "c")
 
 
 def test_the_training_pipeline_imports_without_the_rl_extra():
@@ -338,7 +357,7 @@ def test_the_training_pipeline_imports_without_the_rl_extra():
     import subprocess
     import sys
 
-    code = ("import sys, training.spec, training.train, training.recipes, training.zoo, training.results.protocols, "
-            "training.cli.train, training.cli.zoo; print('torch' in sys.modules, 'stable_baselines3' in sys.modules)")
+    code = ("import sys, training.spec, training.train, training.recipes, training.zoo, evaluation.protocols, "
+            "lawn_cli.train, lawn_cli.zoo; print('torch' in sys.modules, 'stable_baselines3' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.split() == ["False", "False"]

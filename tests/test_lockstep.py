@@ -1,4 +1,4 @@
-"""Seeds played in lockstep (:func:`training.results.run.play_together`) give each seed the record it gets alone; the
+"""Seeds played in lockstep (:func:`evaluation.run.play_together`) give each seed the record it gets alone; the
 batched policy interface (``Policy.reset_scenarios``, ``Policy.act_scenarios``) and its checks."""
 
 import math
@@ -10,9 +10,9 @@ import pytest
 import lawn_env  # noqa: F401
 from agents import make_policy
 from agents.base import Policy
+from evaluation.episode import EpisodeSpec
+from evaluation.run import _chunks, evaluate, play_together, run_episode
 from lawn_env import ScenarioConfig, presets
-from training.results.episode import EpisodeSpec
-from training.results.run import _chunks, evaluate, play_together, run_episode
 
 #: Fields that time the decisions: a batch's share is not one decision's clock.
 TIMING = {"decision_time_median_s", "decision_time_p95_s"}

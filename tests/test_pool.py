@@ -1,4 +1,4 @@
-"""The process pool (training/pool.py): the calling process works beside its helpers, every process
+"""The process pool (evaluation/pool.py): the calling process works beside its helpers, every process
 on one thread per library, the helpers kept between maps, and parallel maps that work from an empty
 kernel cache under every start method of the platform (numba compiles in the helpers)."""
 
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from training import pool
+from evaluation import pool
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -182,7 +182,7 @@ def test_parallel_map_compiles_in_the_helpers_from_an_empty_kernel_cache(tmp_pat
     # helpers import it again before their initializer runs
     (tmp_path / "main.py").write_text(textwrap.dedent(f"""
         import coldtask
-        from training.pool import pool_map, start_helpers
+        from evaluation.pool import pool_map, start_helpers
 
         if __name__ == "__main__":
             for start in start_helpers(2, {method!r}):  # the helper has started: it plays tasks too
@@ -207,13 +207,13 @@ def test_a_script_without_the_main_guard_gets_one_line_not_a_spawn_traceback(tmp
     script again; it ends at once with one line saying what to do, and the script's own process plays
     the comparison (the same results as workers=1) instead of a traceback per helper."""
     script = tmp_path / "unguarded.py"
-    script.write_text("from training.results.api import compare\n"
+    script.write_text("from evaluation.api import compare\n"
                       "result = compare(['epa', 'pid'], config={'num_slots': 5}, seeds=range(4), workers=2)\n"
                       "print(result.costs('pid'))\n")
     done = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=300,
                           check=False)
     assert done.returncode == 0, done.stderr
-    from training.results.api import compare
+    from evaluation.api import compare
 
     assert done.stdout.strip() == str(compare(["epa", "pid"], {"num_slots": 5}, range(4)).costs("pid"))
     assert "Traceback" not in done.stderr, done.stderr

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from agents import ANCHORS, AnchorPolicy, anchor_name, make_policy
+from evaluation.episode import EpisodeResult
+from evaluation.run import run_episode
+from evaluation.stats import normalized_score, scores_by_policy
 from lawn_env import ScenarioConfig, presets
-from training.pages import ROOT, first_table
-from training.results.episode import EpisodeResult
-from training.results.run import run_episode
-from training.results.stats import normalized_score, scores_by_policy
+from paper.pages import ROOT, first_table
 
 
 # ---------------------------------------------------------------------- normalized score
@@ -90,7 +90,7 @@ def test_scores_by_policy_pairs_within_task_and_env():
 def test_earlier_scores_stay_computable_beside_v3():
     """v3 puts 100 at dv-mpc on log cost; v2 (100 at dv-mpc-ce, dv-mpc before its loss-aware tail) and
     v1 (at rg-mpc), both on cost, are computed from the same rows when they hold their references."""
-    from training.results.stats import SCORE_REFERENCES, SCORE_SCALES, SCORE_VERSION
+    from evaluation.stats import SCORE_REFERENCES, SCORE_SCALES, SCORE_VERSION
 
     assert SCORE_VERSION == 3 and SCORE_REFERENCES == {1: ("epa", "rg-mpc"), 2: ("epa", "dv-mpc-ce"),
                                                         3: ("epa", "dv-mpc")}
@@ -151,11 +151,11 @@ def test_anchor_names_and_errors():
 # ---------------------------------------------------------------------- the learned protocol
 def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
     pytest.importorskip("stable_baselines3")
-    from training.results.cells import fmt_geometric, fmt_paired
-    from training.results.episode import Entry, Play, read_results
-    from training.results.protocols import execute, learned_protocol
-    from training.results.run import learned_entries, own_anchor
-    from training.results.stats import costs_of, paired_difference, paired_geometric
+    from evaluation.cells import fmt_geometric, fmt_paired
+    from evaluation.episode import Entry, Play, read_results
+    from evaluation.protocols import execute, learned_protocol
+    from evaluation.run import learned_entries, own_anchor
+    from evaluation.stats import costs_of, paired_difference, paired_geometric
 
     agents = ["zoo:ppo-comm", "zoo:bc-comm", "zoo:ppo-comm"]
     anchors = sorted({own_anchor(a) for a in agents})
@@ -189,7 +189,7 @@ def test_learned_protocol_has_the_anchor_rows_and_columns(tmp_path):
 
 
 def test_model_selection_is_paired_against_rg_mpc_on_the_validation_seeds():
-    from training.protocol import selection_key, validation_row
+    from training.validation import selection_key, validation_row
 
     reference = {1: 100.0, 2: 1000.0}  # rg-mpc on two validation seeds, one of them hard
     a = validation_row({1: 110.0, 2: 1000.0}, reference)  # +10 % on the easy seed: +5 % paired, mean 555
@@ -200,7 +200,7 @@ def test_model_selection_is_paired_against_rg_mpc_on_the_validation_seeds():
 
 
 def test_selection_keeps_the_start_unless_a_validation_beats_it_significantly():
-    from training.protocol import selected_validation, validation_row
+    from training.validation import selected_validation, validation_row
 
     reference = {1: 100.0, 2: 100.0, 3: 100.0}
     start_costs = {1: 110.0, 2: 110.0, 3: 110.0}
@@ -233,8 +233,8 @@ def test_suite_tasks_are_presets_with_their_own_scenarios():
 
 def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(tmp_path):
     pytest.importorskip("stable_baselines3")
-    from training.results.episode import Play
-    from training.results.protocols import execute, suite_protocol
+    from evaluation.episode import Play
+    from evaluation.protocols import execute, suite_protocol
 
     policies = ["anchor:stake", "zoo:ppo-comm"]
     tasks = ["default", "wide-k8"]
@@ -248,7 +248,7 @@ def test_every_suite_task_runs_and_learned_agents_report_where_they_cannot_act(t
         "zoo:ppo-comm was trained on lawn/Comm-v1 with num_agvs=4 and acts only there; this scenario has num_agvs=8")
     board, refs = outcome.tables["board.md"], outcome.tables["references.md"]
     assert {p.name for p in tmp_path.iterdir()} == {"episodes.csv", "per_slot.csv", "board.md", "references.md",
-                                                    "structure.md", "tasks.md"}
+                                                    "structure.md", "tasks.md", "per_slot.png"}
     agent = next(line for line in board.splitlines() if line.startswith("| zoo:ppo-comm"))
     assert agent.count("n/a") == 1 and "(1 task)" in agent
     assert all(f"| {task} |" in refs for task in tasks)
@@ -281,7 +281,7 @@ def test_dataset_round_trip_costs_equal_lawn_evaluate(datasets_path):
         assert float(np.sum(episode.infos["stage_cost"][1:])) == pytest.approx(expected, rel=1e-12)
         assert float(-np.sum(episode.rewards)) == pytest.approx(expected, rel=1e-12)
     # Minari's normalized score is the package's score / 100 (epa and dv-mpc on the same seeds)
-    from training.results.stats import normalized_score
+    from evaluation.stats import normalized_score
 
     costs = {p: {7 + i: run_episode(p, "lawn/Comm-v1", ScenarioConfig(), 7 + i).control_cost for i in range(2)}
              for p in ("epa", "dv-mpc")}
@@ -337,8 +337,8 @@ def test_bc_from_a_dataset_is_the_clone_of_live_labelling(datasets_path, tmp_pat
     import torch
     from stable_baselines3 import PPO
 
+    from evaluation.seeds import TRAIN_SEED_BASE
     from training.datasets import create_dataset
-    from training.protocol import TRAIN_SEED_BASE
     from training.spec import TrainSpec
     from training.train import train
 
@@ -358,10 +358,10 @@ def test_bc_from_a_dataset_is_the_clone_of_live_labelling(datasets_path, tmp_pat
 
 def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     pytest.importorskip("stable_baselines3")
+    from paper.learned import build_zoo
     from training.recipes import RECIPES
     from training.spec import TrainSpec
     from training.train import train
-    from training.zoo import build_zoo
 
     runs = tmp_path / "runs"
     (tmp_path / "docs").mkdir()
@@ -369,7 +369,7 @@ def test_zoo_build_tables_have_the_anchor_rows(tmp_path):
     train(TrainSpec(algo="bc", env_id="lawn/Comm-v1", config=ScenarioConfig(), timesteps=120, seed=0, out_dir=runs / "bc-comm" / "seed-0", hp_overrides={"epochs": 1, "dagger_iterations": 0}, progress=False))
     table = build_zoo(runs, tmp_path / "docs" / "LEARNED.md", workers=1, progress=False, episodes=3,
                       target=tmp_path / "zoo")
-    from training.results.run import own_anchor
+    from evaluation.run import own_anchor
 
     anchor = own_anchor(f"bc:{runs / 'bc-comm' / 'seed-0'}")  # the hyperparameter file's interface: anchor:stake
     rows = table.splitlines()
@@ -422,8 +422,8 @@ def test_zoo_stages_on_a_recorded_run(tmp_path):
 
 # ---------------------------------------------------------------------- the command line
 def test_evaluate_prints_the_score_beside_the_cost(tmp_path, capsys):
-    from training.cli import main
-    from training.results.episode import read_csv
+    from evaluation.episode import read_csv
+    from lawn_cli import main
 
     out = tmp_path / "rows.csv"
     common = ["--episodes", "3", "--set", "num_slots=15", "--workers", "1", "--quiet", "--out", str(out)]
@@ -445,7 +445,7 @@ def test_evaluate_prints_the_score_beside_the_cost(tmp_path, capsys):
 
 
 def test_benchmark_protocol_flags_are_checked(tmp_path, capsys):
-    from training.cli import main
+    from lawn_cli import main
 
     out = ["--out", str(tmp_path / "b"), "--quiet"]
     cases = [(["--suite", "--protocol", "learned"], "--suite and --protocol learned are two protocols"),
@@ -461,7 +461,7 @@ def test_benchmark_protocol_flags_are_checked(tmp_path, capsys):
 
 
 def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
-    from training.cli import main
+    from lawn_cli import main
 
     out, docs = tmp_path / "suite", tmp_path / "docs"
     docs.mkdir()
@@ -477,9 +477,9 @@ def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
     page = (docs / "LEADERBOARD.md").read_text()
     assert board.strip() in page and (out / "structure.md").read_text().strip() in page
     assert "1 policies x 1 tasks (k3), test seeds 0-2" in board and (docs / "figures" / "suite-per-slot.png").exists()
-    from training.results.cells import format_score
-    from training.results.episode import read_results
-    from training.results.stats import scores_by_policy
+    from evaluation.cells import format_score
+    from evaluation.episode import read_results
+    from evaluation.stats import scores_by_policy
 
     scores = scores_by_policy(read_results(out / "episodes.csv"))  # the board's scores are the episodes' statistics
     for line in first_table(board)[2:]:
@@ -490,7 +490,7 @@ def test_benchmark_suite_on_a_task_subset_writes_the_board(tmp_path, capsys):
 
 def test_dataset_command_and_bc_from_it(datasets_path, tmp_path, capsys):
     pytest.importorskip("stable_baselines3")
-    from training.cli import main
+    from lawn_cli import main
 
     assert main(["dataset", "create", "--policy", "epa", "--env", "lawn/Comm-v1", "--episodes", "1", "--seed", "3",
                  "--dataset-id", "lawn/test/epa-v0", "--quiet"]) == 0
@@ -562,7 +562,7 @@ def test_train_recipes_skips_finished_runs_restarts_unfinished_ones_and_trains_f
 def test_the_learning_curve_shows_the_paired_interval_against_the_start(tmp_path):
     """``write_learning_curve``: the selected validation's paired change against the run's start and
     its 95 % interval in the summary, and a second panel of that change when the curve has it."""
-    from training.protocol import append_learning_curve, write_learning_curve
+    from training.validation import append_learning_curve, write_learning_curve
 
     spec = {"algo": "ppo", "env": "lawn/Joint-v1", "seed": 0}
     rows = [(0, {"control_cost": 10.0, "control_cost_ci95": 1.0, "vs_reference": 0.1, "vs_reference_ci95": 0.02,
@@ -585,9 +585,9 @@ def test_the_learning_curve_shows_the_paired_interval_against_the_start(tmp_path
 
 
 def test_a_protocol_names_only_tables_it_can_make():
+    from evaluation.episode import Entry
+    from evaluation.protocols import Batch, Protocol
     from lawn_env import ScenarioConfig
-    from training.results.episode import Entry
-    from training.results.protocols import Batch, Protocol
 
     batch = Batch("default", ScenarioConfig(), (Entry("epa", "lawn/Joint-v1"),), (0,))
     with pytest.raises(ValueError, match=r"unknown tables \['boards'\]; valid: summary, learned, board"):

@@ -149,7 +149,7 @@ def test_disc_box_grid_is_feasible():
 
 
 def test_gap_rows_and_summary():
-    from training.experiments.gap import gap_episode, summarize_gaps
+    from paper.experiments.gap import gap_episode, summarize_gaps
 
     cfg = ScenarioConfig(num_slots=6)
     rows = gap_episode(("ao-mpc", "rg-mpc"), "ao-mpc", cfg, seed=3, every=2,

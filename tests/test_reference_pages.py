@@ -13,11 +13,11 @@ from types import ModuleType
 
 import pytest
 
-from training.pages import block_body, blocks, pages
+from paper.pages import block_body, blocks, pages
 
 ROOT = Path(__file__).resolve().parent.parent
 GENERATOR = "docs/_ext/lawn_docs.py"
-REFRESH = "python -m training.pages refresh --only reference"
+REFRESH = "python -m paper.pages refresh --only reference"
 #: Every reference block: its page and the generator's arguments (``python docs/_ext/lawn_docs.py ARGS``).
 REFERENCE = {
     "config": ("docs/configuration.md", "config"),
@@ -84,7 +84,7 @@ def test_the_cli_page_does_not_depend_on_the_machine(lawn_docs, generated, monke
     monkeypatch.setenv("COLUMNS", "40")
     monkeypatch.setattr("os.cpu_count", lambda: 1)
     assert lawn_docs.generate("cli") == generated["cli"]
-    from training.cli import COMMAND_NAMES
+    from lawn_cli import COMMAND_NAMES
 
     assert all(f"### `lawn {c}`" in generated["cli"] for c in COMMAND_NAMES)
 

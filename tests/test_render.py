@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import lawn_env  # noqa: F401
-from training.cli import main
-from training.render import record_frames, render_episode, write_animation
+from evaluation.render import record_frames, render_episode, write_animation
+from lawn_cli import main
 
 
 def test_render_writes_a_gif_of_the_episode(tmp_path, capsys):
@@ -65,7 +65,7 @@ def test_bad_arguments_are_clear_errors(tmp_path, capsys):
 def test_a_missing_mp4_writer_is_refused_before_the_episode(tmp_path, monkeypatch):
     import sys
 
-    from training import render
+    from evaluation import render
 
     monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # as if not installed
     played = []

@@ -11,10 +11,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from evaluation.sweep import SweepTableError, load_spec, read_rows, read_table, run_sweep
 from lawn_env import DisturbanceConfig, ScenarioConfig
-from training.experiments import EXPERIMENTS, make_figures
-from training.pages import ROOT, block_body
-from training.sweep import SweepTableError, load_spec, read_rows, read_table, run_sweep
+from paper.experiments import EXPERIMENTS, make_figures
+from paper.pages import ROOT, block_body
 
 SPEC = {"name": "t", "env": "lawn/Joint-v1", "preset": "default", "set": {"num_slots": 8},
         "grid": {"channel.blocklength": [256, 1024]}, "policies": ["epa", "pid"], "seeds": 3}
@@ -43,7 +43,7 @@ def test_sweep_survives_being_killed(tmp_path):
     spec_file = tmp_path / "spec.json"
     spec_file.write_text(json.dumps(spec))
     table = tmp_path / "k.csv"
-    cmd = [sys.executable, "-m", "training.cli", "sweep", str(spec_file), "--out", str(table), "--workers", "1", "--quiet"]
+    cmd = [sys.executable, "-m", "lawn_cli", "sweep", str(spec_file), "--out", str(table), "--workers", "1", "--quiet"]
     proc = subprocess.Popen(cmd, cwd=os.getcwd())
     deadline = time.time() + 60
     while time.time() < deadline and len(read_table(table)) < 3:
@@ -126,8 +126,8 @@ def test_quick_figures_are_built_from_their_tables(tmp_path):
     assert all((tmp_path / f"{name}.png").exists() for name in EXPERIMENTS)
     with pytest.raises(ValueError, match="unknown figures"):
         make_figures(["fig9"], tmp_path)
-    from training.experiments import check_claims, format_claims, read_claims, write_claims
-    from training.experiments.reproduction import write_reproduction
+    from paper.experiments import check_claims, format_claims, read_claims, write_claims
+    from paper.experiments.reproduction import write_reproduction
 
     (tmp_path / "docs").mkdir()
     shutil.copy2(ROOT / "docs" / "REPRODUCTION.md", tmp_path / "docs" / "REPRODUCTION.md")  # the page's blocks
@@ -155,8 +155,8 @@ def test_quick_figures_are_built_from_their_tables(tmp_path):
 
 
 def test_paired_claims_use_the_same_seeds_and_their_intervals():
-    from training.experiments.claims import multi_claim, paired_claim
-    from training.results.stats import paired_difference, verdict
+    from evaluation.stats import paired_difference, verdict
+    from paper.experiments.claims import multi_claim, paired_claim
 
     a = {0: 90.0, 1: 180.0, 2: 95.0, 3: 9.0}
     b = {0: 100.0, 1: 200.0, 2: 100.0, 4: 1.0}  # seed 3 and 4 unpaired: ignored
@@ -226,7 +226,7 @@ def test_killed_sweep_leaves_no_worker_processes(tmp_path, sig):
     spec_file = tmp_path / "spec.json"
     spec_file.write_text(json.dumps(spec))
     table = tmp_path / "k.csv"
-    cmd = [sys.executable, "-m", "training.cli", "sweep", str(spec_file), "--out", str(table), "--workers", "2",
+    cmd = [sys.executable, "-m", "lawn_cli", "sweep", str(spec_file), "--out", str(table), "--workers", "2",
            "--quiet"]
     proc = subprocess.Popen(cmd, cwd=os.getcwd(), start_new_session=True)
     deadline = time.time() + 90
@@ -255,7 +255,7 @@ def test_sweep_killed_twenty_times_then_resumed_equals_the_clean_table(tmp_path)
     spec_file = tmp_path / "spec.json"
     spec_file.write_text(json.dumps(spec))
     clean, table = tmp_path / "clean.csv", tmp_path / "killed.csv"
-    base = [sys.executable, "-m", "training.cli", "sweep", str(spec_file), "--workers", "2", "--quiet", "--out"]
+    base = [sys.executable, "-m", "lawn_cli", "sweep", str(spec_file), "--workers", "2", "--quiet", "--out"]
     subprocess.run(base + [str(clean)], cwd=os.getcwd(), check=True)
     rng = np.random.default_rng(12)
     interrupted = 0
@@ -321,8 +321,8 @@ def test_sweep_reruns_when_policy_arguments_or_the_version_change(tmp_path, monk
 
 
 def test_summarize_sweep_gives_the_mean_and_interval_per_point_and_policy():
-    from training.results.stats import mean_ci
-    from training.sweep import summarize_sweep
+    from evaluation.stats import mean_ci
+    from evaluation.sweep import summarize_sweep
 
     rows = [{"g": g, "policy": p, "control_cost": c, "rmse_m": 1.0, "outage_rate": 0.0}
             for g, p, c in [(1, "a", 10.0), (1, "a", 14.0), (1, "b", 3.0), (2, "a", 5.0), (2, "a", 7.0)]]

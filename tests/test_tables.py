@@ -1,4 +1,4 @@
-"""training.results (run, stats): the one CSV writer and reader of the reports and the summary statistics."""
+"""evaluation (run, stats): the one CSV writer and reader of the reports and the summary statistics."""
 
 import math
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from training.results.episode import parse_bool, read_csv, write_csv
-from training.results.stats import mean_ci
+from evaluation.episode import parse_bool, read_csv, write_csv
+from evaluation.stats import mean_ci
 
 
 @pytest.mark.parametrize("atomic", [False, True])

@@ -15,10 +15,10 @@ pytest.importorskip("supersuit")
 from stable_baselines3.common.callbacks import BaseCallback
 
 from agents import make_policy
+from evaluation.seeds import VALIDATION_SEED_BASE
+from lawn_cli import main
 from lawn_env import ScenarioConfig
 from training.callbacks import latest_checkpoint
-from training.cli import main
-from training.protocol import VALIDATION_SEED_BASE
 from training.spec import TrainSpec, load_hyperparams
 from training.train import resume, train
 
@@ -220,9 +220,10 @@ def test_errors_name_the_problem(tmp_path, capsys):
 
 
 def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_path):
-    from training.protocol import VALIDATION_SEED_BASE, read_learning_curve
-    from training.results.run import episode_row
-    from training.results.stats import paired_difference
+    from evaluation.run import episode_row
+    from evaluation.seeds import VALIDATION_SEED_BASE
+    from evaluation.stats import paired_difference
+    from training.validation import read_learning_curve
 
     out, summary = _train(tmp_path, "ppo", "lawn/Comm-v1", steps=256, name="rl")
     curve = read_learning_curve(out)
@@ -292,9 +293,8 @@ def test_exported_agent_loads_as_zoo_name(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("name", sorted(__import__("agents.learned", fromlist=["zoo_agents"]).zoo_agents()))
 def test_shipped_agents_load_and_act(name):
-    from agents.learned import zoo_agents
-
     from agents import trained_config
+    from agents.learned import zoo_agents
 
     record = zoo_agents()[name]
     policy = make_policy(f"zoo:{name}", trained_config(f"zoo:{name}"))  # its training scenario (K = 16, 64, a law)
@@ -359,7 +359,7 @@ def test_a_sigkilled_lawn_train_resumes_to_the_uninterrupted_counts(tmp_path):
     import time
 
     def cmd(out):
-        return [sys.executable, "-m", "training.cli", "train", "--algo", "ppo", "--env", "lawn/Joint-v1",
+        return [sys.executable, "-m", "lawn_cli", "train", "--algo", "ppo", "--env", "lawn/Joint-v1",
                 "--timesteps", "2048", "--seed", "3", "--out", str(out), "--n-envs", "2", "--eval-every", "256",
                 "--eval-episodes", "1", "--checkpoint-every", "256", "--quiet", "--set", "num_slots=12",
                 "--hp", "n_steps=64", "--hp", "batch_size=64", "--hp", "n_epochs=2"]
@@ -373,7 +373,7 @@ def test_a_sigkilled_lawn_train_resumes_to_the_uninterrupted_counts(tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert not (tmp_path / "killed" / "model.zip").exists(), "kill it before the end"
-    subprocess.run([sys.executable, "-m", "training.cli", "train", "--resume", str(tmp_path / "killed"), "--quiet"],
+    subprocess.run([sys.executable, "-m", "lawn_cli", "train", "--resume", str(tmp_path / "killed"), "--quiet"],
                    check=True, cwd=os.getcwd())
     assert _history(tmp_path / "killed")[:3] == _history(tmp_path / "whole")[:3]
 
@@ -383,8 +383,8 @@ def test_recipe_commands_parse_as_lawn_train():
     vector env and hyperparameters (shell-quoted JSON) exactly as the recipe trains them."""
     import shlex
 
-    from training.cli import build_parser
-    from training.cli.common import parse_overrides
+    from lawn_cli import build_parser
+    from lawn_cli.common import parse_overrides
     from training.recipes import RECIPES
 
     for recipe in RECIPES.values():
@@ -613,7 +613,7 @@ def test_residual_run_records_its_scheme_and_acts_by_it(tmp_path):
     # the run starts at the anchor: its first validation is the zero residual's episode, which zero:sb3:DIR plays
     assert float(start["control_cost"]) == pytest.approx(zero.unwrapped.episode_metrics()["control_cost"], rel=1e-6)
     from agents.rollouts import rollout
-    from training.results.run import own_anchor, policy_env
+    from evaluation.run import own_anchor, policy_env
 
     at_zero = make_policy(f"zero:sb3:{out}", SMALL)
     assert at_zero.name == f"zero:sb3:{out}" and own_anchor(f"sb3:{out}") == at_zero.name

@@ -23,17 +23,12 @@ from agents.learned import ObsNormalizer, SB3Policy
 from agents.rollouts import Actor
 from agents.runs import algorithm_class
 from agents.timing import DecisionClock
+from evaluation.seeds import TRAIN_SEED_BASE
 from lawn_env import ScenarioConfig
 from lawn_env.interface import InterfaceLike, RLInterface, resolve_interface
 
 from .datasets import dataset_transitions, label_transitions
-from .protocol import (
-    TRAIN_SEED_BASE,
-    append_learning_curve,
-    limit_torch_threads,
-    versions,
-    write_learning_curve,
-)
+from .validation import append_learning_curve, limit_torch_threads, versions, write_learning_curve
 
 __all__ = ["Labeller", "collect", "fit", "BCSettings", "bc_settings", "train_bc", "BC_TARGETS"]
 

@@ -25,11 +25,11 @@ from stable_baselines3.common.callbacks import BaseCallback
 from agents.learned import ObsNormalizer, SB3Policy, marl_policy
 from agents.policies import attach_residual
 from agents.timing import DecisionClock
+from evaluation.seeds import VALIDATION_SEED_BASE
 from lawn_env import PARALLEL_ENV_ID, ScenarioConfig, central_env_id
 from lawn_env.interface import InterfaceLike
 
-from .protocol import (
-    VALIDATION_SEED_BASE,
+from .validation import (
     append_learning_curve,
     read_learning_curve,
     selected_validation,
@@ -160,8 +160,8 @@ def _next_mark(steps: int, every: int) -> int:
 class ControlCostValidation(BaseCallback):
     """Every ``every`` environment steps, run the current policy (deterministic, as ``sb3:DIR`` runs it)
     on ``episodes`` full episodes of the unmodified scenario with the validation seeds ``VALIDATION_SEED_BASE + i``;
-    append its learning-curve row (:func:`~training.protocol.validation_row`) and keep the model
-    :func:`~training.protocol.selected_validation` chooses as ``best_model.zip``. A fresh run is
+    append its learning-curve row (:func:`~training.validation.validation_row`) and keep the model
+    :func:`~training.validation.selected_validation` chooses as ``best_model.zip``. A fresh run is
     validated before its first step (its costs kept in ``validation_start.json``), so selection keeps
     the starting policy (the anchor, or the clone it fine-tunes) unless training beats it significantly."""
 

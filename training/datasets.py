@@ -17,15 +17,14 @@ import numpy as np
 import lawn_env
 from agents import make_policy, rollout
 from agents.errors import MissingExtra
+from evaluation.episode import EpisodeSpec
+from evaluation.provenance import provenance
+from evaluation.run import evaluate
+from evaluation.stats import SCORE_HIGH, SCORE_LOW
 from lawn_env import ENV_IDS, ObservationLayout, ScenarioConfig, env_role, presets
 from lawn_env.interface import InterfaceLike, action_codec, resolve_interface
 from lawn_env.presets import resolve_config
 from lawn_env.spaces import check_action
-
-from .provenance import provenance
-from .results.episode import EpisodeSpec
-from .results.run import evaluate
-from .results.stats import SCORE_HIGH, SCORE_LOW
 
 if TYPE_CHECKING:
     import minari

@@ -1,6 +1,6 @@
 """The distilled agents (the ``distil`` recipes of :mod:`training.recipes`: one fleet network
 cloned from ``dv-mpc`` on the steady suite tasks) compared on those tasks, on two disjoint ranges of
-test seeds (:func:`training.results.stats.compare_ranges`), and shipped: ``lawn zoo build`` runs
+test seeds (:func:`evaluation.stats.compare_ranges`), and shipped: ``lawn zoo build`` runs
 :func:`evaluate_distil` for the page's ``zoo-distil`` block and :func:`export_distil`.
 
 Each agent plays its own env with its own control law (``zoo:dv-comm``'s AGVs apply the delivery
@@ -22,16 +22,17 @@ import numpy as np
 from agents.base import JOINT
 from agents.learned import ZOO_DIR, export_agent, trained_config
 from agents.runs import read_run
+from evaluation.cells import fmt_num, fmt_paired, markdown_table
+from evaluation.episode import Entry, EpisodeResult, Play
+from evaluation.protocols import Batch, Protocol, execute
+from evaluation.report import distil_table
+from evaluation.run import policy_env
+from evaluation.seeds import TEST_RANGES, test_seeds
+from evaluation.stats import SCORE_HIGH, RangeComparison, compare_ranges, costs_of
 from lawn_env import presets
 
-from .protocol import best_validation, read_learning_curve, selected_at, selection_key
 from .recipes import RECIPES, Recipe, finished
-from .results.cells import fmt_num, fmt_paired, markdown_table
-from .results.episode import Entry, EpisodeResult, Play
-from .results.protocols import Batch, Protocol, execute
-from .results.report import distil_table
-from .results.run import policy_env
-from .results.stats import SCORE_HIGH, TEST_RANGES, RangeComparison, compare_ranges, costs_of, test_seeds
+from .validation import best_validation, read_learning_curve, selected_at, selection_key
 
 __all__ = ["DISTIL_EPISODES", "own_law", "distil_protocol", "Distilled", "evaluate_distil", "export_distil"]
 
@@ -99,7 +100,7 @@ def _chosen(r: Recipe, runs: Path) -> Path | None:
 def evaluate_distil(runs: Path, workers: int = 2, progress: bool = True, episodes: int = DISTIL_EPISODES
                     ) -> Distilled:
     """The section's recipes: each one's validation-selected run compared on its tasks
-    (:func:`distil_protocol`) and rendered (:func:`~training.results.report.distil_table`; the RL runs'
+    (:func:`distil_protocol`) and rendered (:func:`~evaluation.report.distil_table`; the RL runs'
     learning curves on the validation seeds beside it)."""
     section = {name: r for name, r in RECIPES.items() if r.section == "distil"}
     found = {name: d for name, r in section.items() if (d := _chosen(r, Path(runs))) is not None}

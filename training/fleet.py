@@ -14,12 +14,13 @@ from typing import Any
 import numpy as np
 
 from agents.learned import SB3Policy
+from evaluation.seeds import TRAIN_SEED_BASE
 from lawn_env import MixedFleetEnv, ScenarioConfig, env_role, presets
 from lawn_env.entities import EntityLayout
 from lawn_env.interface import InterfaceLike, resolve_interface
 
 from .bc import Labeller, checked_settings, collect, save_imitation
-from .protocol import TRAIN_SEED_BASE, limit_torch_threads, versions
+from .validation import limit_torch_threads, versions
 
 __all__ = ["fleet_pairs", "fit_fleet", "dagger_round", "fleet_settings", "task_config", "training_configs",
            "train_fleet"]

@@ -140,7 +140,7 @@ _RESIDUAL_DV: dict[str, Any] = {
 # --hp n_steps=256 --hp batch_size=256 --hp learning_rate=lin_5e-5 --hp 'policy_kwargs={"net_arch": [128, 128],
 # "log_std_init": -2.0}' --out RUNS/ppo-link-k16; the drone alone: --eval-every 30000 --eval-episodes 100,
 # "scale": 0.5, "moves": ["drone"], actor_warmup_steps=10000, learning_rate=lin_2e-4, log_std_init -1.5;
-# the test seeds: training.results.api.compare(["dv-mpc", "sb3:DIR", "zero:sb3:DIR", "noise:dv-mpc"],
+# the test seeds: evaluation.api.compare(["dv-mpc", "sb3:DIR", "zero:sb3:DIR", "noise:dv-mpc"],
 # config="k16", seeds=range(S, S + 50)) for S = 0 and 100000, .geometric (DIR: a copy of the run without
 # best_model.zip, so that sb3:DIR loads the final model).
 #: Multi-agent PPO with the fleet network (training/sb3.py): every agent sees the fleet and which

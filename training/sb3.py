@@ -25,11 +25,12 @@ from agents.paired import PairedReward
 from agents.residual import PARTS, AnchorResidual
 from agents.runs import algorithm_class, read_run
 from agents.timing import DecisionClock
+from evaluation.seeds import TRAIN_SEED_BASE
 from lawn_env import ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig, parallel_env, role_env_id
 from lawn_env.interface import InterfaceLike
 
 from .callbacks import ActorWarmup, Checkpoint, ControlCostValidation, RunCheckpoint, save_model
-from .protocol import TRAIN_SEED_BASE, limit_torch_threads, versions, write_learning_curve
+from .validation import limit_torch_threads, versions, write_learning_curve
 
 __all__ = ["NativeVecEnv", "make_marl_vec_env", "make_train_env", "train_sb3", "setup", "learn", "init_from",
            "start_at_anchor"]

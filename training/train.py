@@ -4,7 +4,7 @@ imports without it.
 
 A run directory holds ``spec.json``, ``run.json``, ``config.json``, ``hyperparams.json`` (the file's
 entry with the ``--hp`` overrides), the model (``model.zip``, ``vecnormalize.pkl``), the model selected
-on the validation seeds (``best_model.zip``; ``learning_curve.csv``, :mod:`training.protocol`), the
+on the validation seeds (``best_model.zip``; ``learning_curve.csv``, :mod:`training.validation`), the
 newest checkpoint (:mod:`training.callbacks`) and TensorBoard logs (``tb/``).
 """
 
@@ -17,12 +17,12 @@ from pathlib import Path
 from typing import Any
 
 from agents.runs import read_json, read_run
+from evaluation.pool import pool_map
+from evaluation.stats import mean_ci
+from evaluation.sweep import execute
 
-from .pool import pool_map
 from .recipes import RECIPES, finished, recipe
-from .results.stats import mean_ci
 from .spec import ALGORITHMS, TrainSpec, split_params
-from .sweep import execute
 
 __all__ = ["train", "train_seeds", "resume", "train_recipes"]
 

@@ -4,14 +4,14 @@ API pages.
 **Generated blocks** (this file's command line). The environment pages, the configuration page and
 the command-line page hold their reference in the page itself, as plain Markdown that reads the same
 on GitHub as on the site: the roles of the docstrings (reST's ``:class:`` or MyST's ``{class}``)
-become plain code spans. Each is a generated block of :mod:`training.pages`::
+become plain code spans. Each is a generated block of :mod:`paper.pages`::
 
     <!-- NAME:begin cmd="python docs/_ext/lawn_docs.py KIND [ARG] --out runs/docs/NAME.md"
          table="runs/docs/NAME.md" group="reference" -->   (one line in the page)
     ...
     <!-- NAME:end -->
 
-``python -m training.pages refresh --only reference`` refreshes them all, and
+``python -m paper.pages refresh --only reference`` refreshes them all, and
 ``tests/test_reference_pages.py`` fails while a page differs from what the code produces. The kinds:
 
 * ``env ID``: an environment page from the env class's docstring (Gymnasium's sections: Description,
@@ -214,7 +214,7 @@ def cli_page() -> str:
     """``lawn --help`` and every subcommand's (nested ones included), each under a heading."""
     from unittest import mock
 
-    from training import cli
+    import lawn_cli as cli
 
     cli.COMMANDS  # noqa: B018  (imports every command first: only building the parser sees the fixed core count)
     with mock.patch("os.cpu_count", return_value=CLI_CORES):
@@ -240,8 +240,9 @@ def api_page(package: str) -> str:
     import importlib
     import pkgutil
 
-    if package not in ("lawn_env", "agents", "training"):
-        raise ValueError(f"lawn-docs api {package!r}: valid packages: lawn_env, agents, training")
+    packages = ("lawn_env", "agents", "evaluation", "training", "paper", "lawn_cli")
+    if package not in packages:
+        raise ValueError(f"lawn-docs api {package!r}: valid packages: {', '.join(packages)}")
     root = importlib.import_module(package)
     modules = sorted(m.name for m in pkgutil.walk_packages(root.__path__, package + ".")
                      if not m.name.endswith("__main__"))

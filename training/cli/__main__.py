@@ -1,7 +1,0 @@
-"""``python -m training.cli``: the ``lawn`` command."""
-
-import sys
-
-from . import main
-
-sys.exit(main())
