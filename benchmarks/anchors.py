@@ -25,6 +25,7 @@ import argparse
 from pathlib import Path
 
 from agents import ANCHORS
+from evaluation.episode import EpisodeSpec
 from evaluation.run import evaluate
 from evaluation.seeds import VALIDATION_SEED_BASE
 from evaluation.stats import mean_ci, paired_difference
@@ -36,7 +37,8 @@ ENV_ID = "lawn/Comm-v1"
 def episode_costs(anchor: str, seeds: list[int], workers: int) -> dict[int, float]:
     """Realized control cost of a policy (an ``anchor:NAME``, or the reference) per seed (full episodes of the
     unmodified scenario, :class:`agents.AnchorPolicy`)."""
-    rows = evaluate([(anchor, ENV_ID, ScenarioConfig(), s, {}) for s in seeds], workers=workers, progress=False)
+    rows = evaluate([EpisodeSpec(anchor, ENV_ID, ScenarioConfig(), s, {}) for s in seeds], workers=workers,
+                    progress=False)
     return {r.seed: r.control_cost for r in rows}
 
 

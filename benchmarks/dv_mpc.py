@@ -40,7 +40,7 @@ from report import finish  # benchmarks/report.py, beside this script
 import lawn_env  # noqa: F401
 from agents import make_policy, rollout
 from evaluation.cells import fmt_geometric
-from evaluation.episode import EpisodeResult
+from evaluation.episode import EpisodeResult, EpisodeSpec
 from evaluation.run import evaluate
 from evaluation.stats import Geometric, costs_of, paired_geometric
 from lawn_env import ScenarioConfig, presets
@@ -65,8 +65,8 @@ def _costs(rows: list[EpisodeResult], policy: str, metric: str = "control_cost")
 def _play(entries: list[tuple], workers: int, desc: str) -> list[tuple[tuple, EpisodeResult]]:
     """``entries``: (policy, config, seed, label...) -> (the entry's extra fields, its result); a policy
     ``(name, settings)`` plays ``name`` with those settings under the row name ``variant_name``."""
-    tasks = [(e[0][0], JOINT, e[1], e[2], e[0][1]) if isinstance(e[0], tuple) else (e[0], JOINT, e[1], e[2], {})
-             for e in entries]
+    tasks = [EpisodeSpec(e[0][0], JOINT, e[1], e[2], e[0][1]) if isinstance(e[0], tuple)
+             else EpisodeSpec(e[0], JOINT, e[1], e[2], {}) for e in entries]
     rows = evaluate(tasks, workers=workers, progress=True, desc=desc)
     return [(entry[3:], row.with_(policy=variant_name(entry[0][1])) if isinstance(entry[0], tuple) else row)
             for entry, row in zip(entries, rows, strict=True)]

@@ -111,10 +111,11 @@ def link_law() -> tuple[float, float]:
 
 def episodes(expert: str, extra: int) -> float:
     """CPU seconds per episode beyond start-up of ``evaluate`` (one process) on the default task."""
+    from evaluation.episode import EpisodeSpec
     from evaluation.run import evaluate
 
     def play(count: int) -> float:
-        tasks = [(expert, JOINT, ScenarioConfig(), seed) for seed in range(count)]
+        tasks = [EpisodeSpec(expert, JOINT, ScenarioConfig(), seed) for seed in range(count)]
         start = time.process_time()
         evaluate(tasks, workers=1, progress=False)
         return time.process_time() - start

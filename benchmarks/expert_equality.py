@@ -29,11 +29,12 @@ TOLERANCE = 1e-6
 
 
 def record(path: Path, experts: list[str], seeds: int, workers: int) -> None:
+    from evaluation.episode import EpisodeSpec
     from evaluation.run import evaluate
     from lawn_env import presets
     from lawn_env.presets import SUITE
 
-    tasks = [(expert, "lawn/Joint-v1", presets.get(task), seed, {}) for task in SUITE for expert in experts
+    tasks = [EpisodeSpec(expert, "lawn/Joint-v1", presets.get(task), seed, {}) for task in SUITE for expert in experts
              for seed in range(seeds)]
     labels = [f"{task}/{expert}/{seed}" for task in SUITE for expert in experts for seed in range(seeds)]
     rows = evaluate(tasks, workers=workers, progress=True, desc="equality")

@@ -13,6 +13,7 @@ import argparse
 import time
 
 from evaluation.cells import fmt_geometric
+from evaluation.episode import EpisodeSpec
 from evaluation.run import LIMIT_SETTINGS, evaluate
 from evaluation.stats import paired_geometric
 from lawn_env import presets
@@ -35,13 +36,13 @@ def main() -> None:
         config = presets.get(task)
         fast = config.override({"drone.max_speed_mps": 300.0})
         seeds = range(args.episodes)
-        base = evaluate([("rg-mpc", "lawn/Joint-v1", config, s, {}) for s in seeds], workers=args.workers,
+        base = evaluate([EpisodeSpec("rg-mpc", "lawn/Joint-v1", config, s, {}) for s in seeds], workers=args.workers,
                         progress=False)
         reference = {r.seed: r.control_cost for r in base}
         times = {}
         for cap in args.caps:
             start = time.perf_counter()
-            rows = evaluate([("rg-mpc", "lawn/Joint-v1", fast, s, {"max_drone_points": cap}) for s in seeds],
+            rows = evaluate([EpisodeSpec("rg-mpc", "lawn/Joint-v1", fast, s, {"max_drone_points": cap}) for s in seeds],
                             workers=args.workers, progress=False)
             times[cap] = time.perf_counter() - start
             g = paired_geometric({r.seed: r.control_cost for r in rows}, reference)

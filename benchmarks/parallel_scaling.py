@@ -37,17 +37,18 @@ from pathlib import Path
 from report import finish  # benchmarks/report.py, beside this script
 
 from agents import BENCHMARK_POLICIES
+from evaluation import pool
+from evaluation.episode import EpisodeSpec
 from evaluation.run import evaluate
 from lawn_env import ScenarioConfig
-from evaluation import pool
 
 TARGET_COMMAND = 1.5
 COMMAND = ["evaluate", "--policy", "rg-mpc", "--episodes", "48", "--quiet"]
 
 
-def _batch(episodes: int) -> list[tuple]:
+def _batch(episodes: int) -> list[EpisodeSpec]:
     config = ScenarioConfig()
-    return [(p, "lawn/Joint-v1", config, s, {}) for p in BENCHMARK_POLICIES for s in range(episodes)]
+    return [EpisodeSpec(p, "lawn/Joint-v1", config, s, {}) for p in BENCHMARK_POLICIES for s in range(episodes)]
 
 
 def _solo(episodes: int) -> float:

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from evaluation.episode import EpisodeSpec
 from evaluation.run import evaluate
 from lawn_env import ScenarioConfig, presets
 
@@ -49,7 +50,7 @@ def main(argv=None) -> int:
             raise SystemExit(f"{agent}: no single recorded run for {name} seed {shipped} in episodes.csv")
         pairs.append((f"zoo:{name}", env, recorded[0]))
     config = ScenarioConfig()
-    tasks = [(policy, env, config, s, {}) for policy, env, _ in pairs for s in seeds]
+    tasks = [EpisodeSpec(policy, env, config, s, {}) for policy, env, _ in pairs for s in seeds]
     rows = evaluate(tasks, workers=args.workers, progress=False)
     new = {(r.policy, r.env, r.seed): r.control_cost for r in rows}
     lines = [f"{len(seeds)} test seeds; the largest relative change of an episode's control cost against "
@@ -94,7 +95,7 @@ def _distil_drift(workers: int) -> list[tuple[str, str, np.ndarray, np.ndarray]]
             then = {int(r["seed"]): float(r["control_cost"]) for r in old if r["policy"] in recorded
                     and r["task"] == task}
             config = presets.get(task).override(law)
-            rows = evaluate([(f"zoo:{name}", env, config, s, {}) for s in sorted(then)], workers=workers,
+            rows = evaluate([EpisodeSpec(f"zoo:{name}", env, config, s, {}) for s in sorted(then)], workers=workers,
                             progress=False)
             now = {r.seed: r.control_cost for r in rows}
             out.append((f"zoo:{name}", f"{env}, {task}", np.array([then[s] for s in sorted(then)]),

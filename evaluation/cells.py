@@ -8,7 +8,7 @@ from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .stats import Geometric, RangeComparison
+    from .stats import Geometric, RangeComparison, Score
 
 __all__ = ["markdown_table", "fmt_pct", "fmt_num", "fmt_geometric", "fmt_paired", "format_score", "fmt_stat",
            "fmt_ranges", "fmt_tail", "fmt_worst"]
@@ -51,7 +51,7 @@ def fmt_paired(mean: float, half: float) -> str:
     return fmt_pct(mean) + ("" if not math.isfinite(half) else f" ± {fmt_pct(half, sign=False)}")
 
 
-def format_score(score: tuple[float, float, float, int] | None) -> str:
+def format_score(score: Score | None) -> str:
     """``96.8 [91.2, 101.5]`` (the interval omitted when undefined), ``–`` for no score."""
     if score is None or not math.isfinite(score[0]):
         return "–"

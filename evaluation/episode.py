@@ -54,8 +54,7 @@ DEFAULT_PLAY = Play()
 
 class EpisodeSpec(NamedTuple):
     """One episode to play: the policy (or reference row) by name, the env it is evaluated on, the
-    scenario, the seed and the policy's settings (``policy_kwargs`` of :func:`agents.make_policy`). A
-    plain tuple of the same fields in this order is taken where a spec is."""
+    scenario, the seed and the policy's settings (``policy_kwargs`` of :func:`agents.make_policy`)."""
 
     policy: str
     env: str

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, NamedTuple, cast
 
 import gymnasium as gym
 import numpy as np
@@ -17,15 +17,23 @@ from lawn_env import ScenarioConfig
 from lawn_env.envs.base import LawnEnv
 from lawn_env.render import plot_episode
 
-__all__ = ["FORMATS", "check_output", "record_frames", "write_animation", "render_episode", "run_demo"]
+__all__ = ["Recording", "FORMATS", "check_output", "record_frames", "write_animation", "render_episode", "run_demo"]
 
 #: Animation formats by file extension.
 FORMATS = (".gif", ".mp4")
 
 
+class Recording(NamedTuple):
+    """An episode's frames, its metrics and the env it was played on."""
+
+    frames: list[np.ndarray]
+    metrics: dict[str, Any]
+    env_id: str
+
+
 def record_frames(policy: str, env_id: str | None = None, seed: int = 0, config: ScenarioConfig | str | None = None,
                   every: int = 1, progress: bool = False,
-                  **policy_args: Any) -> tuple[list[np.ndarray], dict[str, Any], str]:
+                  **policy_args: Any) -> Recording:
     """Play one seeded episode of ``env_id`` (default: the policy's own env) under ``policy`` and
     keep the env's ``rgb_array`` frame of the start and of every ``every``-th slot (and the last),
     with a progress bar over the slots when ``progress``. Returns the frames, the episode's metrics
@@ -60,7 +68,7 @@ def record_frames(policy: str, env_id: str | None = None, seed: int = 0, config:
     if episode.length % every:  # the episode's last slot (at num_slots, or earlier if it terminated)
         frames.append(frame())
     env.close()
-    return frames, dict(episode.metrics), env_id
+    return Recording(frames, dict(episode.metrics), env_id)
 
 
 def check_output(out: Path, fps: float = 8.0) -> None:

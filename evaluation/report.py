@@ -27,7 +27,16 @@ from .cells import (
 )
 from .episode import TRANSIENT_SLOTS, Entry
 from .seeds import TEST_RANGES
-from .stats import SCORE_HIGH, SCORE_LOW, SCORE_VERSION, SUMMARY_METRICS, TAIL_RATIO, Geometric, RangeComparison
+from .stats import (
+    SCORE_HIGH,
+    SCORE_LOW,
+    SCORE_VERSION,
+    SUMMARY_METRICS,
+    TAIL_RATIO,
+    Geometric,
+    RangeComparison,
+    Score,
+)
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -49,7 +58,7 @@ Rows = Sequence[Mapping[str, Any]]  # the rows of a table other than episodes' (
 
 def format_table(summary: list[dict[str, Any]], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS,
                  by: str = "policy", paired: dict[str, tuple[float, float]] | None = None, reference: str | None = None,
-                 scores: Mapping[str, tuple[Any, ...]] | None = None, geometric: Mapping[str, Geometric] | None = None
+                 scores: Mapping[str, Score] | None = None, geometric: Mapping[str, Geometric] | None = None
                  ) -> str:
     """A Markdown table: mean ± 95 % interval per metric (decision time in ms), optionally the score
     (``scores``: policy -> :func:`.stats.normalized_score`) and the cost against ``reference``
@@ -83,7 +92,7 @@ def format_table(summary: list[dict[str, Any]], metrics: Sequence[tuple[str, str
 
 
 def summary_markdown(summary: list[dict[str, Any]], paired: dict[str, tuple[float, float]], reference: str,
-                     scores: Mapping[str, tuple[Any, ...]], geometric: Mapping[str, Geometric]) -> str:
+                     scores: Mapping[str, Score], geometric: Mapping[str, Geometric]) -> str:
     """The benchmark's summary as Markdown: the results table, which the same seeds reproduce digit
     for digit on any machine, then each policy's decision time, which is this machine's."""
     results = format_table(summary, metrics=RESULT_METRICS, paired=paired, reference=reference, scores=scores,
@@ -186,13 +195,14 @@ def board_table(stats: Statistics, rows: Sequence[Entry], tasks: Sequence[str],
     board = []
     for p, env, _ in rows:
         cells = ["n/a" if (task, p) in skipped else format_score(_score(stats, task, env, p)) for task in tasks]
-        iqm, lo, hi, n = stats.aggregate(env, p, tasks)
-        overall = "–" if n == 0 else format_score((iqm, lo, hi, n))
+        iqm = stats.aggregate(env, p, tasks)
+        n = iqm.n
+        overall = "–" if n == 0 else format_score(iqm)
         board.append([p, env, *cells, overall + ("" if n in (0, len(tasks)) else f" ({n} task{'s' * (n != 1)})")])
     return markdown_table(["policy", "env", *tasks, "IQM over tasks [95 %]"], board)
 
 
-def _score(stats: Statistics, task: str, env: str, policy: str) -> tuple[Any, ...] | None:
+def _score(stats: Statistics, task: str, env: str, policy: str) -> Score | None:
     row = stats.row(task, env, policy)
     return row.score if row is not None else None
 

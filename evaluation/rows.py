@@ -18,7 +18,9 @@ from .stats import (
     SCORE_VERSION,
     SUMMARY_METRICS,
     Geometric,
+    Interval,
     RangeComparison,
+    Score,
     aggregate_score,
     compare_ranges,
     costs_of,
@@ -54,10 +56,10 @@ class Versus:
         return paired_geometric(self.costs, self.reference)
 
     @cached_property
-    def paired(self) -> tuple[float, float]:
+    def paired(self) -> Interval:
         """:func:`paired_difference`: the mean relative difference and its 95 % half-width."""
         mean, half, _ = paired_difference(self.costs, self.reference)
-        return mean, half
+        return Interval(mean, half)
 
     @cached_property
     def relative(self) -> list[float]:
@@ -80,10 +82,10 @@ class RowStats:
     key: Key
     episodes: int
     costs: Mapping[int, float]
-    means: Mapping[str, tuple[float, float]]
+    means: Mapping[str, Interval]
     totals: Mapping[str, float]
     decision_ms: float
-    score: tuple[Any, ...] | None
+    score: Score | None
 
     @property
     def seeds(self) -> int:
@@ -133,12 +135,12 @@ class Statistics:
                 out.append(entry)
         return out
 
-    def aggregate(self, env: str, policy: str, tasks: Sequence[str]) -> tuple[float, float, float, int]:
+    def aggregate(self, env: str, policy: str, tasks: Sequence[str]) -> Score:
         """:func:`aggregate_score` of ``policy`` on ``env`` over ``tasks``."""
         return aggregate_score({t: self.inputs[(t, env, policy)] for t in tasks if (t, env, policy) in self.inputs})
 
 
-def _row(key: Key, members: Sequence[EpisodeResult], score: tuple[Any, ...] | None) -> RowStats:
+def _row(key: Key, members: Sequence[EpisodeResult], score: Score | None) -> RowStats:
     task, env, policy = key
     values = {m: costs_of(members, policy, env, task, m) for m, _ in SUMMARY_METRICS}
     times = values["decision_time_median_s"]

@@ -23,7 +23,7 @@ import functools
 import math
 import time
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any, cast
+from typing import Any, NamedTuple, cast
 
 import gymnasium as gym
 import numpy as np
@@ -46,7 +46,8 @@ from .stats import SCORE_HIGH, SCORE_LOW
 #: The most seeds a worker plays together (:func:`play_together`).
 LOCKSTEP = 32
 
-__all__ = ["episode_row", "build_policy", "run_episode", "split_cost", "play_together", "Tally", "LOCKSTEP",
+__all__ = ["Resolved", "Built", "CostSplit", "episode_row", "build_policy", "run_episode", "split_cost",
+           "play_together", "Tally", "LOCKSTEP",
            "evaluate", "per_slot_profile", "policy_env", "own_anchor", "learned_entries", "LIMITS",
            "LIMIT_SETTINGS", "NOISE", "REFERENCE_ROWS", "is_reference_row", "limit_config", "resolve"]
 
@@ -90,18 +91,39 @@ def limit_config(name: str, config: ScenarioConfig) -> ScenarioConfig:
     return config.override({key: value})
 
 
-def resolve(name: str, config: ScenarioConfig, policy_kwargs: Mapping[str, Any] | None = None
-            ) -> tuple[str, ScenarioConfig, dict[str, Any]]:
-    """(policy to build, config to play, policy settings) of a row name: a limit row becomes the
+class Resolved(NamedTuple):
+    """What a row name plays: the policy to build, the config it plays on and its settings."""
+
+    policy: str
+    config: ScenarioConfig
+    settings: dict[str, Any]
+
+
+class Built(NamedTuple):
+    """A row's policy, built, and the config it plays on."""
+
+    policy: Policy
+    config: ScenarioConfig
+
+
+class CostSplit(NamedTuple):
+    """An episode's control cost over its first slots (``transient``) and the rest (``sustained``)."""
+
+    transient: float
+    sustained: float
+
+
+def resolve(name: str, config: ScenarioConfig, policy_kwargs: Mapping[str, Any] | None = None) -> Resolved:
+    """What a row name plays (the policy to build, the config, its settings): a limit row becomes the
     best expert on its config with its settings, a noise-floor row its expert with its settings; any
     other name is returned as given."""
     kwargs = dict(policy_kwargs or {})
     if name in LIMITS:
-        return SCORE_HIGH, limit_config(name, config), {**LIMIT_SETTINGS.get(name, {}), **kwargs}
+        return Resolved(SCORE_HIGH, limit_config(name, config), {**LIMIT_SETTINGS.get(name, {}), **kwargs})
     if name in NOISE:
         expert, settings = NOISE[name]
-        return expert, config, {**settings, **kwargs}
-    return name, config, kwargs
+        return Resolved(expert, config, {**settings, **kwargs})
+    return Resolved(name, config, kwargs)
 
 
 def episode_row(policy: Policy, env_id: str, config: ScenarioConfig, seed: int,
@@ -156,12 +178,12 @@ class Tally:
 
 
 def build_policy(policy: str, config: ScenarioConfig, env_id: str | None = None,
-                 policy_kwargs: Mapping[str, Any] | None = None) -> tuple[Policy, ScenarioConfig]:
+                 policy_kwargs: Mapping[str, Any] | None = None) -> Built:
     """The policy a row name plays and the config it plays on: a limit or noise-floor row
     (:func:`resolve`) is an expert on its lifted config or with its settings; any other
     name is :func:`agents.make_policy` on ``config``."""
     name, played, kwargs = resolve(policy, config, policy_kwargs)
-    return make_policy(name, played, env_id=env_id, **kwargs), played
+    return Built(make_policy(name, played, env_id=env_id, **kwargs), played)
 
 
 def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
@@ -173,12 +195,10 @@ def run_episode(policy: str, env_id: str, config: ScenarioConfig, seed: int,
     return episode_row(agent, env_id, played, seed, transient_slots).with_(policy=policy)
 
 
-def _run_chunk(tasks: Sequence[EpisodeSpec | tuple[Any, ...]],
-               transient_slots: int = TRANSIENT_SLOTS) -> list[EpisodeResult]:
+def _run_chunk(specs: Sequence[EpisodeSpec], transient_slots: int = TRANSIENT_SLOTS) -> list[EpisodeResult]:
     """Episodes of one policy, env, scenario and settings (:func:`_chunks`): played together in lockstep
     when the policy decides a batch at once (:func:`play_together`: each record is the one its seed gets
     alone), else one by one (:func:`run_episode`)."""
-    specs = [EpisodeSpec(*task) for task in tasks]
     first = specs[0]
     if len(specs) > 1:
         agent, played = build_policy(first.policy, first.config, first.env, first.settings)
@@ -227,26 +247,31 @@ def batches(spec: EpisodeSpec) -> bool:
         return False
 
 
-def evaluate(tasks: Iterable[EpisodeSpec | tuple[Any, ...]], workers: int = 1, progress: bool = True,
+def evaluate(tasks: Iterable[EpisodeSpec], workers: int = 1, progress: bool = True,
              desc: str = "episodes", transient_slots: int = TRANSIENT_SLOTS) -> list[EpisodeResult]:
-    """Play :class:`.episode.EpisodeSpec` tasks (or tuples of their fields); results in task order,
+    """Play :class:`.episode.EpisodeSpec` tasks; results in task order,
     each with its ``transient_cost`` and ``sustained_cost`` split at ``transient_slots``
     (:func:`split_cost`)."""
     split_cost((), transient_slots)  # a bad split fails before any episode
-    chunks = _chunks([EpisodeSpec(*task) for task in tasks], workers)
+    specs = list(tasks)
+    wrong = next((i for i, s in enumerate(specs) if not isinstance(s, EpisodeSpec)), None)
+    if wrong is not None:  # a plain tuple's fields would be read by position, in silence
+        raise TypeError(f"evaluate: task {wrong} is {type(specs[wrong]).__name__} {specs[wrong]!r}; expected an "
+                        "EpisodeSpec(policy, env, config, seed, settings)")
+    chunks = _chunks(specs, workers)
     played = pool_map(functools.partial(_run_chunk, transient_slots=transient_slots), chunks, workers, progress, desc,
                       weight=len)
     return [row for chunk in played for row in chunk]
 
 
-def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SLOTS) -> tuple[float, float]:
+def split_cost(stage_costs: Sequence[float], transient_slots: int = TRANSIENT_SLOTS) -> CostSplit:
     """(transient, sustained) control cost of an episode's per-slot stage costs: the sums over slots
     ``0..transient_slots-1`` and ``transient_slots..``; they add up to the episode's control cost (an
     episode no longer than the split is all transient)."""
     if isinstance(transient_slots, bool) or not isinstance(transient_slots, (int, np.integer)) or transient_slots < 0:
         raise ValueError(f"transient_slots={transient_slots!r}: must be an integer >= 0")
     costs = np.asarray(stage_costs, dtype=float)
-    return float(costs[:transient_slots].sum()), float(costs[transient_slots:].sum())
+    return CostSplit(float(costs[:transient_slots].sum()), float(costs[transient_slots:].sum()))
 
 
 def play_together(policy: Policy, env_id: str, config: ScenarioConfig, seeds: Sequence[int],

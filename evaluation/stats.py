@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -27,7 +27,8 @@ from .seeds import TEST_RANGES, range_of
 if TYPE_CHECKING:
     from .episode import EpisodeResult, Results
 
-__all__ = ["SUMMARY_METRICS", "mean_ci", "paired_difference", "Geometric", "paired_geometric", "verdict", "costs_of",
+__all__ = ["SUMMARY_METRICS", "Interval", "Difference", "Score",
+           "mean_ci", "paired_difference", "Geometric", "paired_geometric", "verdict", "costs_of",
            "paired", "SCORE_VERSION",
            "SCORE_REFERENCES", "SCORE_SCALES", "SCORE_LOW", "SCORE_HIGH", "score_references", "score_version",
            "normalized_score", "score_inputs",
@@ -61,26 +62,50 @@ SUMMARY_METRICS = (
 )
 
 
-def mean_ci(values: Iterable[float]) -> tuple[float, float]:
+class Interval(NamedTuple):
+    """A mean and its 95 % interval's half-width (NaN where undefined)."""
+
+    mean: float
+    half: float
+
+
+class Difference(NamedTuple):
+    """A paired difference: its mean, the 95 % half-width and the number of pairs."""
+
+    mean: float
+    half: float
+    pairs: int
+
+
+class Score(NamedTuple):
+    """A normalized score (or its IQM over tasks), the ends of its 95 % bootstrap interval (NaN for
+    fewer than 3 seeds) and the number of seeds (or tasks) it is over."""
+
+    value: float
+    low: float
+    high: float
+    n: int
+
+
+def mean_ci(values: Iterable[float]) -> Interval:
     """Mean and 95 % t-interval half-width (NaN for fewer than two values)."""
     x = np.asarray([float(v) for v in values], dtype=float)
     if x.size == 0:
-        return math.nan, math.nan
+        return Interval(math.nan, math.nan)
     if x.size < 2:
-        return float(x.mean()), math.nan
+        return Interval(float(x.mean()), math.nan)
     from scipy import stats  # here, not at import: the episodes' processes never load scipy.stats
 
-    return float(x.mean()), float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
+    return Interval(float(x.mean()), float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size)))
 
 
-def paired_difference(a: Mapping[int, float], b: Mapping[int, float], relative: bool = True
-                      ) -> tuple[float, float, int]:
+def paired_difference(a: Mapping[int, float], b: Mapping[int, float], relative: bool = True) -> Difference:
     """Mean, 95 % t-interval half-width and count of the per-key difference ``a[k] - b[k]`` over the
     keys (seeds) both hold; ``relative`` divides each difference by ``b[k]`` (a paired comparison)."""
     keys = [k for k in a if k in b]
     diffs = [(float(a[k]) - float(b[k])) / (abs(float(b[k])) if relative else 1.0) for k in keys]
     mean, half = mean_ci(diffs)
-    return mean, half, len(diffs)
+    return Difference(mean, half, len(diffs))
 
 
 @dataclass(frozen=True)
@@ -168,12 +193,11 @@ def costs_of(rows: Results, policy: str, env: str | None = None, task: str | Non
             and (task is None or (r.task or "default") == task) and (v := r.value(metric)) is not None}
 
 
-def paired(rows: Results, policy: str, reference: str, env: str, task: str | None = None
-           ) -> tuple[float, float]:
+def paired(rows: Results, policy: str, reference: str, env: str, task: str | None = None) -> Interval:
     """Mean per-seed relative difference of ``policy``'s cost against ``reference``'s (on ``env``, and
     ``task`` when given) and its 95 % half-width."""
     mean, half, _ = paired_difference(costs_of(rows, policy, env, task), costs_of(rows, reference, env, task))
-    return mean, half
+    return Interval(mean, half)
 
 
 def score_references(version: int = SCORE_VERSION) -> tuple[str, str]:
@@ -210,8 +234,7 @@ def score_version(version: int) -> int:
 
 
 def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: Mapping[int, float],
-                     references: tuple[str, str] | None = None, version: int = SCORE_VERSION
-                     ) -> tuple[float, float, float, int]:
+                     references: tuple[str, str] | None = None, version: int = SCORE_VERSION) -> Score:
     """Score ``version``, its 95 % interval (low end, high end) and seed count of a policy's per-seed
     costs ``cost`` against the references' ``low`` (EPA) and ``high`` (the best expert; ``references``
     names both in messages, default the version's), over the seeds all three hold. NaN interval for
@@ -232,12 +255,12 @@ def normalized_score(cost: Mapping[int, float], low: Mapping[int, float], high: 
                          f"{e.mean():.6g} is not above mean {high_name} {scale} {r.mean():.6g}")
     score = float(_score(e, r, x))
     if len(seeds) < 3:
-        return score, math.nan, math.nan, len(seeds)
+        return Score(score, math.nan, math.nan, len(seeds))
     from scipy import stats  # here, not at import: the episodes' processes never load scipy.stats
 
     res = stats.bootstrap((e, r, x), _score, paired=True, vectorized=True, n_resamples=BOOTSTRAP_RESAMPLES,
                           method="percentile", random_state=np.random.default_rng(BOOTSTRAP_SEED))
-    return score, float(res.confidence_interval.low), float(res.confidence_interval.high), len(seeds)
+    return Score(score, float(res.confidence_interval.low), float(res.confidence_interval.high), len(seeds))
 
 
 def score_inputs(rows: Iterable[EpisodeResult], metric: str = "control_cost", version: int = SCORE_VERSION
@@ -264,7 +287,7 @@ def score_inputs(rows: Iterable[EpisodeResult], metric: str = "control_cost", ve
 
 
 def scores_by_policy(rows: Iterable[EpisodeResult], metric: str = "control_cost", version: int = SCORE_VERSION
-                     ) -> dict[tuple[str, str, str], tuple[Any, ...]]:
+                     ) -> dict[tuple[str, str, str], Score]:
     """Scores (version ``version``) of every (task, env, policy) of evaluation rows
     (:func:`score_inputs`), against the reference rows of the same task and env. Groups without both
     references, sharing no seed with them, or whose references do not separate (EPA not costlier
@@ -276,7 +299,7 @@ def scores_by_policy(rows: Iterable[EpisodeResult], metric: str = "control_cost"
 
 
 def aggregate_score(per_task: Mapping[str, Costs], resamples: int = BOOTSTRAP_RESAMPLES,
-                    version: int = SCORE_VERSION) -> tuple[float, float, float, int]:
+                    version: int = SCORE_VERSION) -> Score:
     """The headline over tasks: rliable's interquartile mean (Agarwal et al., 2021) of the per-task
     scores (``scipy.stats.trim_mean(scores, 0.25)``: the middle four of six), with a 95 % stratified
     bootstrap interval (each task's seeds resampled on their own, its score recomputed, the IQM
@@ -293,13 +316,13 @@ def aggregate_score(per_task: Mapping[str, Costs], resamples: int = BOOTSTRAP_RE
         idx = rng.integers(0, e.size, size=(resamples, e.size))
         draws.append(_score(e[idx], r[idx], x[idx], axis=1))
     if not scores:
-        return math.nan, math.nan, math.nan, 0
+        return Score(math.nan, math.nan, math.nan, 0)
     from scipy import stats
 
     iqm = float(stats.trim_mean(scores, 0.25))
     boot = stats.trim_mean(np.stack(draws, axis=1), 0.25, axis=1)
     lo, hi = np.percentile(boot, [2.5, 97.5])
-    return iqm, float(lo), float(hi), len(scores)
+    return Score(iqm, float(lo), float(hi), len(scores))
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ import json
 import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import lawn_env
 from agents import make_policy
@@ -40,7 +40,7 @@ from .pool import worker_pool
 from .run import run_episode
 from .stats import mean_ci
 
-__all__ = ["SweepSpec", "SweepTableError", "load_spec", "expand", "run_sweep", "read_table", "read_rows",
+__all__ = ["SweepTable", "SweepSpec", "SweepTableError", "load_spec", "expand", "run_sweep", "read_table", "read_rows",
            "config_hash", "summarize_sweep"]
 
 
@@ -179,7 +179,14 @@ def _problem(row: Mapping[str, Any]) -> str | None:
     return None
 
 
-def read_rows(path: Path) -> tuple[list[dict[str, Any]], list[str]]:
+class SweepTable(NamedTuple):
+    """A sweep table's usable rows and a message per row dropped (incomplete or duplicate)."""
+
+    rows: list[dict[str, Any]]
+    dropped: list[str]
+
+
+def read_rows(path: Path) -> SweepTable:
     """The usable rows of a sweep table and a message per dropped row (incomplete or duplicate)."""
     rows, dropped, seen = [], [], set()
     for i, row in enumerate(read_table(path), start=2):  # line 1 is the header
@@ -191,7 +198,7 @@ def read_rows(path: Path) -> tuple[list[dict[str, Any]], list[str]]:
             continue
         seen.add(_key(row))
         rows.append(row)
-    return rows, dropped
+    return SweepTable(rows, dropped)
 
 
 def read_table(path: Path) -> list[dict[str, Any]]:

@@ -10,7 +10,7 @@ import pytest
 from scipy import stats
 
 import lawn_env
-from evaluation.episode import TRANSIENT_SLOTS
+from evaluation.episode import TRANSIENT_SLOTS, EpisodeSpec
 from evaluation.run import (
     LIMIT_SETTINGS,
     LIMITS,
@@ -39,7 +39,7 @@ def _flat(tree: dict, prefix: str = "") -> dict:
 # ---------------------------------------------------------------------- the cost's structure
 @pytest.mark.parametrize("env_id", list(lawn_env.ENV_IDS))
 def test_transient_and_sustained_costs_add_up_to_the_episode_cost(env_id):
-    rows = evaluate([("epa", env_id, ScenarioConfig(), 3, {}), ("rg-mpc", env_id, ScenarioConfig(), 3, {})],
+    rows = evaluate([EpisodeSpec("epa", env_id, ScenarioConfig(), 3, {}), EpisodeSpec("rg-mpc", env_id, ScenarioConfig(), 3, {})],
                     progress=False)
     for row in rows:
         stage = row.stage_costs
@@ -47,7 +47,7 @@ def test_transient_and_sustained_costs_add_up_to_the_episode_cost(env_id):
         assert row.transient_cost == pytest.approx(sum(stage[:TRANSIENT_SLOTS]), rel=1e-12)
         assert row.transient_cost + row.sustained_cost == pytest.approx(row.control_cost, rel=1e-9)
         assert 0 < row.sustained_cost < row.control_cost
-    other = evaluate([("epa", env_id, ScenarioConfig(), 3, {})], progress=False, transient_slots=5)[0]
+    other = evaluate([EpisodeSpec("epa", env_id, ScenarioConfig(), 3, {})], progress=False, transient_slots=5)[0]
     assert other.control_cost == rows[0].control_cost  # the split only reads the episode
     assert other.transient_cost < rows[0].transient_cost and other.transient_slots == 5
 
@@ -60,7 +60,7 @@ def test_split_cost_edges_and_errors():
         with pytest.raises(ValueError, match="transient_slots"):
             split_cost([1.0], bad)
     with pytest.raises(ValueError, match="transient_slots=-2"):
-        evaluate([("epa", "lawn/Joint-v1", ScenarioConfig(), 0, {})], progress=False, transient_slots=-2)
+        evaluate([EpisodeSpec("epa", "lawn/Joint-v1", ScenarioConfig(), 0, {})], progress=False, transient_slots=-2)
 
 
 # ---------------------------------------------------------------------- the geometric comparison
@@ -155,7 +155,7 @@ def test_perfect_links_deliver_every_command_and_planners_see_it():
 
 
 def test_reference_rows_run_under_their_names_and_beat_or_tie_the_expert():
-    rows = evaluate([(p, "lawn/Joint-v1", ScenarioConfig(), 0, {}) for p in ("dv-mpc", "rg-mpc", *REFERENCE_ROWS,
+    rows = evaluate([EpisodeSpec(p, "lawn/Joint-v1", ScenarioConfig(), 0, {}) for p in ("dv-mpc", "rg-mpc", *REFERENCE_ROWS,
                                                                              "noise:rg-mpc")], progress=False)
     cost = {r.policy: r.control_cost for r in rows}
     assert set(cost) == {"dv-mpc", "rg-mpc", "noise:rg-mpc", *REFERENCE_ROWS}
@@ -231,7 +231,7 @@ def test_compare_is_the_python_front_door_of_evaluate(tmp_path):
     from evaluation.episode import read_csv, read_results, write_results
 
     result = compare(["epa", "rg-mpc"], config="steady", seeds=[3, 4], settings={"rg-mpc": {"power_levels": 20}})
-    rows = evaluate([(p, "lawn/Joint-v1", presets.get("steady"), s, {"power_levels": 20} if p == "rg-mpc" else {})
+    rows = evaluate([EpisodeSpec(p, "lawn/Joint-v1", presets.get("steady"), s, {"power_levels": 20} if p == "rg-mpc" else {})
                      for p in ("epa", "rg-mpc") for s in (3, 4)], progress=False)
     def played(r):  # the row less this machine's clock
         return {k: v for k, v in r.as_row().items() if not k.startswith("decision_time")}
@@ -343,7 +343,7 @@ def test_results_json_holds_arrays_of_numbers_and_reads_back(tmp_path):
 
     from evaluation.episode import EpisodeResult, read_results, write_results
 
-    rows = evaluate([("epa", "lawn/Joint-v1", presets.get("steady"), s, {}) for s in (3, 4)], progress=False)
+    rows = evaluate([EpisodeSpec("epa", "lawn/Joint-v1", presets.get("steady"), s, {}) for s in (3, 4)], progress=False)
     odd = rows[1].with_(rmse_m=math.nan, tracking_cost=math.inf, stage_costs=np.array([1.5, math.nan, -math.inf]),
                         mean_power_w=None)  # a NaN, infinities and a field not recorded
     rows = [rows[0], odd]

@@ -12,7 +12,7 @@ import dataclasses
 import json
 import time
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -30,7 +30,7 @@ from lawn_env.interface import InterfaceLike, RLInterface, resolve_interface
 from .datasets import dataset_transitions, label_transitions
 from .validation import append_learning_curve, limit_torch_threads, versions, write_learning_curve
 
-__all__ = ["Labeller", "collect", "fit", "BCSettings", "bc_settings", "train_bc", "BC_TARGETS"]
+__all__ = ["Labeller", "Demonstrations", "collect", "fit", "BCSettings", "bc_settings", "train_bc", "BC_TARGETS"]
 
 #: The algorithms whose policy network behaviour cloning fits (the ``target`` hyperparameter).
 BC_TARGETS = ("ppo", "sac")
@@ -49,8 +49,17 @@ class Labeller:
         return self.clock.timed(make_policy(self.name, config, env_id=env_id))
 
 
+class Demonstrations(NamedTuple):
+    """Labelled transitions: the observations (steps, n), the expert's actions (steps, m) and the
+    control costs of the episodes that ended."""
+
+    observations: np.ndarray
+    actions: np.ndarray
+    costs: list[float]
+
+
 def collect(env_id: str, config: ScenarioConfig, expert: str | Labeller, steps: int, seed: int,
-            interface: InterfaceLike, actor: Actor | None = None) -> tuple[np.ndarray, np.ndarray, list[float]]:
+            interface: InterfaceLike, actor: Actor | None = None) -> Demonstrations:
     """``steps`` transitions of seeded episodes (seed, seed + 1, ...) of the benchmark env: the states ``actor``
     (default: the expert, a policy name or a :class:`Labeller`) visits labelled with the expert's action,
     and the costs of the episodes that ended."""
@@ -77,7 +86,7 @@ def collect(env_id: str, config: ScenarioConfig, expert: str | Labeller, steps: 
         episode += 1
     env.close()
     obs, labels = label_transitions(config, env_id, interface, [(np.array(o), np.array(a)) for o, a in episodes])
-    return obs, labels, costs
+    return Demonstrations(obs, labels, costs)
 
 
 class _Labelling:

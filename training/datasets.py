@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -29,7 +29,8 @@ from lawn_env.spaces import check_action
 if TYPE_CHECKING:
     import minari
 
-__all__ = ["label_transitions", "dataset_transitions", "create_dataset", "load_dataset", "DATA_EXTRA",
+__all__ = ["Pairs", "Recorded", "label_transitions", "dataset_transitions", "create_dataset", "load_dataset",
+           "DATA_EXTRA",
            "DATASET_ENV_IDS"]
 
 DATA_EXTRA = "datasets need the data extra (minari): pip install -e '.[data]' (bash scripts/setup.sh full installs it)"
@@ -37,8 +38,25 @@ DATA_EXTRA = "datasets need the data extra (minari): pip install -e '.[data]' (b
 DATASET_ENV_IDS = ("lawn/Joint-v1", "lawn/Comm-v1")
 
 
+class Pairs(NamedTuple):
+    """Behaviour-cloning pairs: the observations as the learner sees them and the actions in its scheme."""
+
+    observations: np.ndarray
+    actions: np.ndarray
+
+
+class Recorded(NamedTuple):
+    """A dataset's pairs, the control costs and seeds of its episodes and the policy that recorded them."""
+
+    observations: np.ndarray
+    actions: np.ndarray
+    costs: list[float]
+    seeds: list[Any]
+    policy: str | None
+
+
 def label_transitions(config: ScenarioConfig, env_id: str, interface: InterfaceLike,
-                      episodes: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+                      episodes: Iterable[tuple[np.ndarray, np.ndarray]]) -> Pairs:
     """Behaviour-cloning pairs from v0 episodes ((T, n) observations, (T, m) actions): the observations
     as the learner sees them and the actions in the interface's scheme (decoded as v0, encoded in it)."""
     iface = resolve_interface(interface)
@@ -54,11 +72,11 @@ def label_transitions(config: ScenarioConfig, env_id: str, interface: InterfaceL
             act_out.append(scheme.encode(v0.decode(check_action(a, v0.size), *args), *args))
             obs_out.append(iface.observe(np.array(o, dtype=np.float32)))
     n, m = layout.size, scheme.size
-    return (np.array(obs_out, dtype=np.float32).reshape(-1, n), np.array(act_out, dtype=np.float32).reshape(-1, m))
+    return Pairs(np.array(obs_out, dtype=np.float32).reshape(-1, n), np.array(act_out, dtype=np.float32).reshape(-1, m))
 
 
 def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, steps: int, interface: InterfaceLike
-                        ) -> tuple[np.ndarray, np.ndarray, list[float], list[Any], str | None]:
+                        ) -> Recorded:
     """The first ``steps`` transitions of a Minari dataset of ``env_id`` with ``config`` as pairs
     (:func:`label_transitions`), their episodes' control costs and seeds and the policy that recorded them."""
     dataset = load_dataset(dataset_id)
@@ -80,7 +98,7 @@ def dataset_transitions(dataset_id: str, env_id: str, config: ScenarioConfig, st
         costs.append(float(np.sum(episode.infos["stage_cost"][1:])))
         left -= len(actions)
     obs, labels = label_transitions(config, env_id, interface, chosen)
-    return obs, labels, costs, seeds, dataset.storage.metadata.get("algorithm_name")
+    return Recorded(obs, labels, costs, seeds, dataset.storage.metadata.get("algorithm_name"))
 
 
 def _minari() -> Any:  # the minari module (an optional extra: not followed)

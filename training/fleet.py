@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -22,13 +22,22 @@ from lawn_env.interface import InterfaceLike, resolve_interface
 from .bc import Labeller, checked_settings, collect, save_imitation
 from .validation import limit_torch_threads, versions
 
-__all__ = ["fleet_pairs", "fit_fleet", "dagger_round", "fleet_settings", "task_config", "training_configs",
+__all__ = ["EntityPairs", "fleet_pairs", "fit_fleet", "dagger_round", "fleet_settings", "task_config",
+           "training_configs",
            "train_fleet"]
 
 
+class EntityPairs(NamedTuple):
+    """Labelled transitions in the entity layout: the observations (a dict of arrays), the expert's
+    entity actions (steps, A) and which entries carry a label (steps, A)."""
+
+    observations: dict[str, np.ndarray]
+    actions: np.ndarray
+    present: np.ndarray
+
+
 def fleet_pairs(env_id: str, config: ScenarioConfig, steps: int, seed: int, interface: InterfaceLike,
-                expert: str | Labeller = "rg-mpc", actor: Any = None
-                ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+                expert: str | Labeller = "rg-mpc", actor: Any = None) -> EntityPairs:
     """``steps`` labelled transitions of the benchmark env of ``config`` (:func:`training.bc.collect`) in the
     entity layout: the observations (a dict of arrays), the expert's entity actions (steps, A) and
     which entries carry a label (steps, A): the AGVs present and the drone."""
@@ -37,7 +46,7 @@ def fleet_pairs(env_id: str, config: ScenarioConfig, steps: int, seed: int, inte
     layout = EntityLayout(config, env_role(env_id), iface.obs_bound, iface.action_scheme)
     present = np.zeros((len(labels), layout.action_space.shape[0]), dtype=bool)
     present[:, layout.gather] = True
-    return layout.observe(obs), layout.to_entity_actions(labels), present
+    return EntityPairs(layout.observe(obs), layout.to_entity_actions(labels), present)
 
 
 def fit_fleet(model: Any, obs: dict[str, np.ndarray], actions: np.ndarray, present: np.ndarray, epochs: int,
@@ -82,8 +91,7 @@ def fit_fleet(model: Any, obs: dict[str, np.ndarray], actions: np.ndarray, prese
 
 
 def dagger_round(model: Any, env_id: str, configs: Sequence[ScenarioConfig], steps: int, seed: int,
-                 interface: InterfaceLike, expert: str | Labeller = "rg-mpc"
-                 ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+                 interface: InterfaceLike, expert: str | Labeller = "rg-mpc") -> EntityPairs:
     """The states ``model`` visits on the benchmark env of every config (``steps`` each, seeds from
     ``seed``), labelled by the expert (a policy name or a :class:`~training.bc.Labeller`; ``model``
     None: the expert's own states), concatenated."""
@@ -91,8 +99,8 @@ def dagger_round(model: Any, env_id: str, configs: Sequence[ScenarioConfig], ste
     for i, config in enumerate(configs):
         actor = None if model is None else SB3Policy(model, config, env_id, interface)
         parts.append(fleet_pairs(env_id, config, steps, seed + 1000 * i, interface, expert, actor))
-    obs = {key: np.concatenate([p[0][key] for p in parts]) for key in parts[0][0]}
-    return obs, np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts])
+    obs = {key: np.concatenate([p.observations[key] for p in parts]) for key in parts[0].observations}
+    return EntityPairs(obs, np.concatenate([p.actions for p in parts]), np.concatenate([p.present for p in parts]))
 
 
 #: A fleet run's hyperparameters and their defaults (``fleet.yml`` and ``--hp``).

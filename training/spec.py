@@ -13,7 +13,7 @@ import inspect
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, NamedTuple
 
 import gymnasium as gym
 from pydantic import ConfigDict, Field, StrictBool, TypeAdapter
@@ -27,6 +27,7 @@ from lawn_env.errors import raises_config_errors
 from lawn_env.interface import resolve_interface
 
 __all__ = ["ALGORITHMS", "ALGOS", "Algorithm", "TRAIN_ENV_IDS", "NATIVE_ENV_IDS", "LAWN_KEYS", "RunOptions",
+           "Hyperparams",
            "TrainSpec", "load_hyperparams", "split_params", "HYPERPARAMS_DIR"]
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
@@ -167,7 +168,14 @@ def split_params(algo: str, env_id: str, params: Mapping[str, Any]) -> RunOption
     return options
 
 
-def load_hyperparams(algo: str, env_id: str, overrides: Mapping[str, Any] | None = None) -> tuple[dict[str, Any], int]:
+class Hyperparams(NamedTuple):
+    """A run's hyperparameters and the version of the file they come from."""
+
+    params: dict[str, Any]
+    version: int
+
+
+def load_hyperparams(algo: str, env_id: str, overrides: Mapping[str, Any] | None = None) -> Hyperparams:
     """Hyperparameters of ``algo`` for ``env_id`` from its versioned file, with overrides; and the version."""
     if algo not in ALGORITHMS:
         raise ValueError(f"unknown algorithm {algo!r}; valid: {', '.join(ALGORITHMS)}")
@@ -182,7 +190,7 @@ def load_hyperparams(algo: str, env_id: str, overrides: Mapping[str, Any] | None
         raise ValueError(f"no {algo} hyperparameters for {env_id!r} in {name}; it has: {', '.join(have)}")
     params = dict(data[env_id])
     params.update(overrides or {})
-    return params, int(data["version"])
+    return Hyperparams(params, int(data["version"]))
 
 
 # ---------------------------------------------------------------- the spec
@@ -225,7 +233,7 @@ class TrainSpec:
             raise ValueError(f"--vec native runs {', '.join(NATIVE_ENV_IDS)} (got {self.env_id}); pass --vec dummy")
         ALGORITHMS[self.algo].check(self, self.hyperparams()[0])
 
-    def hyperparams(self) -> tuple[dict[str, Any], int]:
+    def hyperparams(self) -> Hyperparams:
         """The run's hyperparameters (the interface resolved to a dict) and the file's version."""
         params, version = load_hyperparams(self.algo, self.env_id, self.hp_overrides)
         if self.n_envs is not None:
@@ -234,7 +242,7 @@ class TrainSpec:
             params["interface"] = self.interface
         if self.env_id != "CartPole-v1":
             params["interface"] = resolve_interface(params.get("interface", "v0")).to_dict()
-        return params, version
+        return Hyperparams(params, version)
 
     def write(self) -> None:
         """``spec.json`` in the run directory (``TrainSpec(**json.load(...))`` is the spec again)."""

@@ -13,7 +13,7 @@ import shutil
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -25,13 +25,13 @@ from evaluation.protocols import execute, learned_protocol
 from evaluation.report import protocol_cells
 from evaluation.rows import Statistics
 from evaluation.seeds import TEST_EPISODES
-from evaluation.stats import SCORE_HIGH, SCORE_VERSION, mean_ci, paired, verdict
+from evaluation.stats import SCORE_HIGH, SCORE_VERSION, Score, mean_ci, paired, verdict
 
 from .recipes import RECIPES, Recipe, finished
 from .validation import best_validation, read_learning_curve, selected_at, selection_key
 
 __all__ = ["finished_runs", "evaluate_zoo", "zoo_tables", "render_zoo",
-           "plot_curves", "export_zoo", "format_zoo_list", "ZooEvaluation", "ZooTables", "Shipped"]
+           "ZooMarkdown", "plot_curves", "export_zoo", "format_zoo_list", "ZooEvaluation", "ZooTables", "Shipped"]
 
 
 @dataclass
@@ -54,7 +54,7 @@ class ZooEvaluation:
         """The protocol's entry of ``policy`` on ``env`` (with its anchor)."""
         return next(e for e in self.entries if e.policy == policy and e.env == env)
 
-    def score(self, policy: str, env: str) -> tuple[Any, ...]:
+    def score(self, policy: str, env: str) -> Score:
         """The policy's normalized score on ``env`` (its references beside it on the same seeds)."""
         row = self.stats.row("default", env, policy)
         if row is None or row.score is None:
@@ -167,7 +167,14 @@ def _run_cells(ev: ZooEvaluation, r: Recipe, run_dir: Path, best: Mapping[str, A
             "wall_time": f"{spec['wall_time_s']:.0f} s"}
 
 
-def render_zoo(tables: ZooTables) -> tuple[str, str]:
+class ZooMarkdown(NamedTuple):
+    """The zoo's tables as Markdown: the recipe table (with its note) and the per-run table."""
+
+    recipes: str
+    runs: str
+
+
+def render_zoo(tables: ZooTables) -> ZooMarkdown:
     """Stage 3: the recipe table (with its note on seeds, sources and the expert against each
     anchor) and the per-run table, as Markdown."""
     head = ["agent", "env", "algorithm, budget per run", "acts around", "control cost",
@@ -181,7 +188,7 @@ def render_zoo(tables: ZooTables) -> tuple[str, str]:
             f"against each anchor (the \"vs own anchor\" of a perfect clone of the expert): {'; '.join(tables.floor)}.")
     table = markdown_table(head, ([row[k] for k in _RECIPE_COLUMNS] for row in tables.recipe_rows))
     per_run = markdown_table(runs_head, ([row[k] for k in _RUN_COLUMNS] for row in tables.run_rows))
-    return f"{table}\n\n{note}", per_run
+    return ZooMarkdown(f"{table}\n\n{note}", per_run)
 
 
 def export_zoo(tables: ZooTables, ev: ZooEvaluation, target: Path = ZOO_DIR) -> list[Path]:
