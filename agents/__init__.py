@@ -14,11 +14,12 @@ kernel_cache.register(Path(__file__).parent)  # before any kernel here: they com
 from .anchors import ANCHORS, AnchorPolicy, anchor_name
 from .ao import AOSettings, AOSolver, expected_cost
 from .base import Planner
-from .dv_mpc import DeliveryValuePlanner
+from .dv_mpc import DeliverySettings, DeliveryValuePlanner
+from .global_mpc import GlobalPlanner
 from .learned import trained_config
 from .policies import BENCHMARK_POLICIES, PAPER_POLICIES, POLICIES, Policy, make_policy, policy_names
 from .problem import Plan
-from .reduced import DeliverySettings, GlobalPlanner, ReducedGradientPlanner, ReducedSettings
+from .rg_mpc import ReducedGradientPlanner, ReducedSettings
 from .rollouts import Episode, Step, rollout
 from .scripted import HeuristicPolicy
 

@@ -37,17 +37,12 @@ from lawn_env.presets import ConfigLike, resolve_config
 
 from .ao import AOSettings, AOSolver
 from .base import COMM, JOINT, Policy
-from .dv_mpc import DeliveryValuePlanner
+from .dv_mpc import DeliverySettings, DeliveryValuePlanner
+from .global_mpc import GlobalPlanner, GlobalSettings
 from .learned import LOADERS, learned_name_forms
 from .problem import Plan
-from .reduced import (
-    DeliverySettings,
-    GlobalPlanner,
-    GlobalSettings,
-    ReducedGradientPlanner,
-    ReducedSettings,
-)
 from .residual import PARTS, ResidualActions, check_residual
+from .rg_mpc import ReducedGradientPlanner, ReducedSettings
 from .scripted import HeuristicPolicy
 from .timing import DecisionClock
 from .tracking import PIDGains, lqr_gain, lqr_rollout, pid_rollout
@@ -228,7 +223,7 @@ class LQRPolicy(PlannerPolicy):
 
 class RGMPCPolicy(PlannerPolicy):
     """The package's best expert: the reduced problem min Phi(p, q) = sum V_k(psi_k) solved directly
-    (coarse exact search, then projected gradient with envelope derivatives; agents.reduced)."""
+    (coarse exact search, then projected gradient with envelope derivatives; agents.rg_mpc)."""
 
     name = "rg-mpc"
 

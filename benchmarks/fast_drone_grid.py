@@ -17,7 +17,7 @@ from training.results.cells import fmt_geometric
 from training.results.run import LIMIT_SETTINGS, evaluate
 from training.results.stats import paired_geometric
 
-DEFAULT_CAP = 10_000  # agents.reduced.ReducedSettings.max_drone_points
+DEFAULT_CAP = 10_000  # agents.rg_mpc.ReducedSettings.max_drone_points
 
 
 def main() -> None:
