@@ -36,7 +36,7 @@ from lawn_env.dynamics import command_mask, planning_period
 from lawn_env.presets import ConfigLike, resolve_config
 
 from .ao import AOSettings, AOSolver
-from .base import COMM, JOINT, Policy
+from .base import COMM, JOINT, BatchPlanner, Planner, Policy
 from .dv_mpc import DeliverySettings, DeliveryValuePlanner
 from .global_mpc import GlobalPlanner, GlobalSettings
 from .learned import LOADERS, learned_name_forms
@@ -50,6 +50,7 @@ from .tracking import PIDGains, lqr_gain, lqr_rollout, pid_rollout
 __all__ = [
     "Policy",
     "PlannerPolicy",
+    "AOPolicy",
     "AOMPCPolicy",
     "EPAPolicy",
     "SFPolicy",
@@ -75,23 +76,25 @@ def snapshot_from_observation(layout: ObservationLayout, config: ScenarioConfig,
 
 
 class PlannerPolicy(Policy):
-    """A policy that plans from the full state (``plan(snapshot)``) and acts on observations."""
+    """A policy that plans from the full state (``plan(snapshot)``, its solver's plan unless it plans
+    otherwise) and acts on observations. A subclass names its solver in :meth:`_make_solver`."""
 
     stateful = True
+    solver: Planner
 
     def __init__(self, config: ConfigLike = None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
         super().__init__(config, env_id, seed)
         self.solver = self._make_solver(**settings)
 
-    def _make_solver(self, **settings: Any) -> Any:
-        return AOSolver(self.config, AOSettings(**settings))
+    def _make_solver(self, **settings: Any) -> Planner:  # pragma: no cover - interface
+        raise NotImplementedError
 
     def _on_reset(self, rng: np.random.Generator) -> None:
         self.solver.reset()
         self.last_plan = None
 
-    def plan(self, snapshot: Snapshot) -> Plan:  # pragma: no cover - interface
-        raise NotImplementedError
+    def plan(self, snapshot: Snapshot) -> Plan:
+        return self.solver.plan(snapshot)
 
     def _commands(self, snapshot: Snapshot) -> np.ndarray:
         """The horizon slots where a command goes out (move blocking, MODEL.md §7)."""
@@ -107,13 +110,14 @@ class PlannerPolicy(Policy):
     def batched(self) -> bool:  # type: ignore[override]  # a property of the solver here
         """True when the solver plans a batch at once (``dv-mpc``'s, with the compiled QP backend; on
         ``lawn/Comm-v1`` under the paper's law it plans as ``rg-mpc``, one scenario at a time)."""
-        return bool(getattr(self.solver, "batches", False))
+        return isinstance(self.solver, BatchPlanner) and self.solver.batches
 
     def act_scenarios(self, observations: np.ndarray) -> np.ndarray:
         """:meth:`Policy.act_scenarios`; a solver that plans batches plans the B scenarios in one call."""
         if not self.batched:
             return super().act_scenarios(observations)
         obs = self.check_scenarios(observations)
+        assert isinstance(self.solver, BatchPlanner)  # what batched says
         snapshots = [snapshot_from_observation(self.layout, self.config, o) for o in obs]
         plans = self.solver.plan_scenarios(snapshots)
         self.last_plans = list(plans)
@@ -128,27 +132,32 @@ class PlannerPolicy(Policy):
                                    None, snapshot.drone_position)
 
 
-class AOMPCPolicy(PlannerPolicy):
+class AOPolicy(PlannerPolicy):
+    """A planner on the paper's AO solver (:class:`agents.AOSolver`): the paper's expert and the baselines
+    that fix some of its blocks."""
+
+    solver: AOSolver
+
+    def _make_solver(self, **settings: Any) -> AOSolver:
+        return AOSolver(self.config, AOSettings(**settings))
+
+
+class AOMPCPolicy(AOPolicy):
     """The paper's expert: alternating optimization over control, power and drone (agents.ao)."""
 
     name = "ao-mpc"
 
-    def plan(self, snapshot: Snapshot) -> Plan:
-        plan: Plan = self.solver.solve(snapshot)
-        return plan
 
-
-class EPAPolicy(PlannerPolicy):
+class EPAPolicy(AOPolicy):
     """Equal power allocation P_max / K; MPC control and drone optimization as the expert."""
 
     name = "epa"
 
     def plan(self, snapshot: Snapshot) -> Plan:
-        plan: Plan = self.solver.solve(snapshot, blocks=("control", "drone"), power_w=self.solver.equal_power())
-        return plan
+        return self.solver.solve(snapshot, blocks=("control", "drone"), power_w=self.solver.equal_power())
 
 
-class SFPolicy(PlannerPolicy):
+class SFPolicy(AOPolicy):
     """Straight flight: a fixed heading (``heading_rad``, default east, across the area from the
     start) at a constant speed drawn uniformly from (0, V_max] at each episode's reset; the drone
     stops at the area's edge. MPC control and Algorithm 1 power as the expert."""
@@ -171,11 +180,10 @@ class SFPolicy(PlannerPolicy):
         c = self.config
         q_next = move_drone(snapshot.drone_position, self.speed_mps * self.heading, c.drone.max_speed_mps, c.slot_s,
                             c.area_m)
-        plan: Plan = self.solver.solve(snapshot, blocks=("control", "power"), drone_position=q_next)
-        return plan
+        return self.solver.solve(snapshot, blocks=("control", "power"), drone_position=q_next)
 
 
-class PIDPolicy(PlannerPolicy):
+class PIDPolicy(AOPolicy):
     """Predictive PID: the PID law rolled out over the horizon replaces the QP; power and drone are
     optimized (Algorithm 1 + SCA, alternated) on the expected cost of its predicted inputs."""
 
@@ -198,11 +206,10 @@ class PIDPolicy(PlannerPolicy):
             c.control.accel_max_mps2, c.control.accel_increment_max_mps2, commands=self._commands(snapshot),
         )
         self.integral = integral  # the integrator advances with the step that is sent
-        plan: Plan = self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
-        return plan
+        return self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
 
 
-class LQRPolicy(PlannerPolicy):
+class LQRPolicy(AOPolicy):
     """Predictive LQR: the fixed infinite-horizon gain of the same DARE (Q1, Q2) replaces the QP;
     power and drone are optimized on the expected cost of its predicted inputs."""
 
@@ -217,8 +224,7 @@ class LQRPolicy(PlannerPolicy):
         increments = lqr_rollout(snapshot.x_aug, snapshot.reference, self.solver.model, self.gain,
                                  c.control.accel_max_mps2, c.control.accel_increment_max_mps2,
                                  commands=self._commands(snapshot))
-        plan: Plan = self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
-        return plan
+        return self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
 
 
 class RGMPCPolicy(PlannerPolicy):
@@ -227,12 +233,8 @@ class RGMPCPolicy(PlannerPolicy):
 
     name = "rg-mpc"
 
-    def _make_solver(self, **settings: Any) -> Any:
+    def _make_solver(self, **settings: Any) -> Planner:
         return ReducedGradientPlanner(self.config, ReducedSettings(**settings))
-
-    def plan(self, snapshot: Snapshot) -> Plan:
-        plan: Plan = self.solver.plan(snapshot)
-        return plan
 
 
 class DVMPCPolicy(PlannerPolicy):
@@ -249,7 +251,7 @@ class DVMPCPolicy(PlannerPolicy):
 
     name = "dv-mpc"
 
-    def _make_solver(self, **settings: Any) -> Any:
+    def _make_solver(self, **settings: Any) -> Planner:
         law = self.config.control.law
         if self.env_id == COMM and law == "paper":
             return ReducedGradientPlanner(self.config, ReducedSettings(**settings))
@@ -263,10 +265,6 @@ class DVMPCPolicy(PlannerPolicy):
             settings = {"tail": _CERTAINTY_EQUIVALENT, **settings}
         return DeliveryValuePlanner(self.config, DeliverySettings(**settings))
 
-    def plan(self, snapshot: Snapshot) -> Plan:
-        plan: Plan = self.solver.plan(snapshot)
-        return plan
-
 
 class DVMPCCertaintyEquivalentPolicy(DVMPCPolicy):
     """``dv-mpc`` with the certainty-equivalent tail (``tail="certainty-equivalent"``): every later command
@@ -275,7 +273,7 @@ class DVMPCCertaintyEquivalentPolicy(DVMPCPolicy):
 
     name = "dv-mpc-ce"
 
-    def _make_solver(self, **settings: Any) -> Any:
+    def _make_solver(self, **settings: Any) -> Planner:
         if settings.get("tail", _CERTAINTY_EQUIVALENT) != _CERTAINTY_EQUIVALENT:
             raise ValueError(f"tail={settings['tail']!r}: {self.name} is dv-mpc with tail='certainty-equivalent' "
                              "(use dv-mpc for another tail)")
@@ -291,12 +289,8 @@ class GlobalMPCPolicy(PlannerPolicy):
 
     name = "global-mpc"
 
-    def _make_solver(self, **settings: Any) -> Any:
+    def _make_solver(self, **settings: Any) -> Planner:
         return GlobalPlanner(self.config, GlobalSettings(**settings))
-
-    def plan(self, snapshot: Snapshot) -> Plan:
-        plan: Plan = self.solver.plan(snapshot)
-        return plan
 
 
 #: The one registry of policy names; the command line reads its choices from here.
