@@ -1,24 +1,14 @@
-"""The policy protocol and the registry of named policies.
+"""The planner policies, the built-in entries of the policy registry, and building a policy by name.
 
 Every policy is built from a scenario config (not from an environment), drives one environment
 id, and offers ``reset(seed)``, ``act(obs) -> action`` and Stable-Baselines3's
 ``predict(observation, state, episode_start, deterministic) -> (action, state)``, so the command
 line and SB3's ``evaluate_policy`` treat them all alike. Planners also offer ``plan(snapshot)``.
 
-Registered names (``make_policy(name, config)``):
-
-===============  =========================================================================
-``dv-mpc``       the delivery-value expert: commands planned as if they arrive, power and drone
-                 spent where delivery is worth most (MODEL.md §4, "Planning under delivery")
-``rg-mpc``       the paper's per-slot problem solved exactly: the reduced problem over (p, q)
-``ao-mpc``       the paper's joint optimization (AO of control QPs, Algorithm 1, SCA)
-``epa``          equal power allocation; MPC control and drone optimization as the expert
-``sf``           straight flight at a seeded random speed; MPC control and PGD power
-``pid``          predictive PID tracking law; power and drone optimized on its predictions
-``lqr``          predictive LQR (the DARE gain); power and drone optimized likewise
-``heuristic``    scripted PD tracking, distance-proportional power, centroid-seeking drone
-``global-mpc``   the global reference for optimality gaps (fine search; seconds per slot)
-===============  =========================================================================
+``make_policy(name, config)`` builds a registered policy (:data:`POLICIES`, :mod:`agents.registry`); the
+built-in entries, each with its one-line description and the lists it is on, are
+:data:`BUILT_IN_POLICIES`. The lists of policies (:data:`BENCHMARK_POLICIES`, :data:`PAPER_POLICIES`,
+the suite's, the experiments' experts) are views of the registry.
 """
 
 from __future__ import annotations
@@ -41,6 +31,7 @@ from .dv_mpc import DeliverySettings, DeliveryValuePlanner
 from .global_mpc import GlobalPlanner, GlobalSettings
 from .learned import LOADERS, learned_name_forms
 from .problem import Plan
+from .registry import POLICIES, Names, PolicyEntry, register
 from .residual import PARTS, ResidualActions, check_residual
 from .rg_mpc import ReducedGradientPlanner, ReducedSettings
 from .scripted import HeuristicPolicy
@@ -59,7 +50,9 @@ __all__ = [
     "RGMPCPolicy",
     "DVMPCPolicy",
     "GlobalMPCPolicy",
+    "BUILT_IN_POLICIES",
     "BENCHMARK_POLICIES",
+    "PAPER_POLICIES",
     "POLICIES",
     "make_policy",
     "attach_residual",
@@ -293,25 +286,41 @@ class GlobalMPCPolicy(PlannerPolicy):
         return GlobalPlanner(self.config, GlobalSettings(**settings))
 
 
-#: The one registry of policy names; the command line reads its choices from here.
-POLICIES: dict[str, Any] = {
-    "dv-mpc": DVMPCPolicy,
-    "dv-mpc-ce": DVMPCCertaintyEquivalentPolicy,
-    "rg-mpc": RGMPCPolicy,
-    "ao-mpc": AOMPCPolicy,
-    "epa": EPAPolicy,
-    "sf": SFPolicy,
-    "pid": PIDPolicy,
-    "lqr": LQRPolicy,
-    "heuristic": HeuristicPolicy,
-    "global-mpc": GlobalMPCPolicy,
-}
+#: The built-in policies, in the order of every list of them (the command line's, the tables' rows).
+BUILT_IN_POLICIES = (
+    PolicyEntry("dv-mpc", DVMPCPolicy, "expert", "the delivery-value expert: commands planned as if they arrive, "
+                "power and drone spent where delivery is worth most (MODEL.md §4, \"Planning under delivery\")",
+                table=True, suite=True),
+    PolicyEntry("dv-mpc-ce", DVMPCCertaintyEquivalentPolicy, "expert",
+                "dv-mpc with the certainty-equivalent tail (the expert before the loss-aware tail)"),
+    PolicyEntry("rg-mpc", RGMPCPolicy, "expert",
+                "the paper's per-slot problem solved exactly: the reduced problem over (p, q)",
+                table=True, suite=True, experiments=True),
+    PolicyEntry("ao-mpc", AOMPCPolicy, "expert", "the paper's joint optimization (AO of control QPs, Algorithm 1, SCA)",
+                table=True, paper=True, suite=True, experiments=True),
+    PolicyEntry("epa", EPAPolicy, "baseline",
+                "equal power allocation; MPC control and drone optimization as the expert",
+                table=True, paper=True, suite=True),
+    PolicyEntry("sf", SFPolicy, "baseline", "straight flight at a seeded random speed; MPC control and PGD power",
+                table=True, paper=True, suite=True),
+    PolicyEntry("pid", PIDPolicy, "baseline",
+                "predictive PID tracking law; power and drone optimized on its predictions",
+                table=True, paper=True, suite=True),
+    PolicyEntry("lqr", LQRPolicy, "baseline", "predictive LQR (the DARE gain); power and drone optimized likewise",
+                table=True, paper=True, suite=True),
+    PolicyEntry("heuristic", HeuristicPolicy, "baseline",
+                "scripted PD tracking, distance-proportional power, centroid-seeking drone", suite=True),
+    PolicyEntry("global-mpc", GlobalMPCPolicy, "reference",
+                "the global reference for optimality gaps (fine search; seconds per slot)"),
+)
+for _entry in BUILT_IN_POLICIES:
+    register(_entry)
 
 #: The paper's comparison: the expert and its four baselines.
-PAPER_POLICIES = ("ao-mpc", "epa", "sf", "pid", "lqr")
-#: What ``lawn benchmark`` compares by default: the package's best expert, the paper's per-slot
-#: problem solved exactly, and the paper's set.
-BENCHMARK_POLICIES = ("dv-mpc", "rg-mpc", *PAPER_POLICIES)
+PAPER_POLICIES = Names("paper")
+#: What ``lawn benchmark`` compares by default (the README's table): the package's best expert, the paper's
+#: per-slot problem solved exactly, and the paper's set.
+BENCHMARK_POLICIES = Names("table")
 
 
 def attach_residual(policy: Policy, settings: Mapping[str, Any] | None, clock: DecisionClock | None = None) -> Policy:
@@ -368,9 +377,10 @@ def make_policy(name: str, config: ConfigLike = None, env_id: str | None = None,
         return attach_residual(policy, getattr(policy, "residual_settings", None))
     env_id = env_id or JOINT
     try:
-        factory = POLICIES[name]
+        entry = POLICIES[name]
     except (KeyError, TypeError):
         raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICIES)}, "
                          f"or {learned_name_forms()} for trained agents") from None
-    built: Policy = factory(config, env_id=env_id, seed=seed, **kwargs)
-    return built
+    if env_id not in entry.env_ids:  # the entry's envs (a Policy class checks its own alike)
+        raise ValueError(f"policy {name!r} drives {', '.join(entry.env_ids)}; got env_id={env_id!r}")
+    return entry.factory(config, env_id=env_id, seed=seed, **kwargs)
