@@ -80,7 +80,8 @@ class PlannerPolicy(Policy):
         self.solver = self._make_solver(**settings)
 
     def _make_solver(self, **settings: Any) -> Planner:  # pragma: no cover - interface
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} names no solver: define _make_solver (AOPolicy's is the "
+                                  "paper's AO solver)")
 
     def _on_reset(self, rng: np.random.Generator) -> None:
         self.solver.reset()
