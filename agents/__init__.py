@@ -2,7 +2,8 @@
 AO-MPC expert and its exact solution ``rg-mpc``, the paper's baselines, a
 scripted heuristic, and wrappers for learned policies. ``make_policy(name, config)`` builds any
 of them (``trained_config(name)``: a learned agent's training scenario); ``POLICIES`` is the
-registry; ``rollout(env, policy, seed)`` runs one episode."""
+registry (:mod:`agents.registry`: one entry per name, ``register`` adds one); ``rollout(env, policy, seed)``
+runs one episode."""
 
 from pathlib import Path
 
@@ -14,11 +15,13 @@ kernel_cache.register(Path(__file__).parent)  # before any kernel here: they com
 from .anchors import ANCHORS, AnchorPolicy, anchor_name
 from .ao import AOSettings, AOSolver, expected_cost
 from .base import Planner
-from .dv_mpc import DeliveryValuePlanner
+from .dv_mpc import DeliverySettings, DeliveryValuePlanner
+from .global_mpc import GlobalPlanner
 from .learned import trained_config
 from .policies import BENCHMARK_POLICIES, PAPER_POLICIES, POLICIES, Policy, make_policy, policy_names
 from .problem import Plan
-from .reduced import DeliverySettings, GlobalPlanner, ReducedGradientPlanner, ReducedSettings
+from .registry import PolicyEntry, register, unregister
+from .rg_mpc import ReducedGradientPlanner, ReducedSettings
 from .rollouts import Episode, Step, rollout
 from .scripted import HeuristicPolicy
 
@@ -35,6 +38,9 @@ __all__ = [
     "POLICIES",
     "PAPER_POLICIES",
     "BENCHMARK_POLICIES",
+    "PolicyEntry",
+    "register",
+    "unregister",
     "ReducedGradientPlanner",
     "ReducedSettings",
     "DeliveryValuePlanner",

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -18,7 +18,7 @@ from lawn_env.spaces import DirectActions
 if TYPE_CHECKING:
     from .problem import Plan
 
-__all__ = ["Policy", "Planner", "JOINT", "COMM"]
+__all__ = ["Policy", "Planner", "BatchPlanner", "JOINT", "COMM"]
 
 JOINT, COMM = "lawn/Joint-v1", "lawn/Comm-v1"
 
@@ -31,6 +31,18 @@ class Planner(Protocol):
     def reset(self) -> None: ...
 
     def plan(self, snapshot: Snapshot) -> Plan: ...
+
+
+@runtime_checkable
+class BatchPlanner(Planner, Protocol):
+    """A :class:`Planner` that may plan B scenarios in one call (:class:`agents.DeliveryValuePlanner`):
+    ``batches`` says whether it does (with the settings it has), ``plan_scenarios`` plans them, scenario
+    i's plan the one it gets planned alone."""
+
+    @property
+    def batches(self) -> bool: ...
+
+    def plan_scenarios(self, snapshots: Sequence[Snapshot]) -> list[Plan]: ...
 
 
 class Policy:

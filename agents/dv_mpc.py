@@ -3,7 +3,7 @@ batch of them.
 
 A command acts only if it arrives and a lost one is seen and replanned at the next slot, so each AGV's
 expected cost is linear in its success probability: ``V_k(psi) = V_k^lost - psi w_k``
-(:class:`agents.reduced.DeliveryProblem`). Two QPs per AGV and slot give ``V^del`` and ``V^lost`` (the
+(:class:`DeliveryProblem`). Two QPs per AGV and slot give ``V^del`` and ``V^lost`` (the
 loss-aware tail's, :class:`lawn_env.tail.LossAwareTail`, or the certainty-equivalent MPC's); the drone's
 position and the power split then maximise ``sum_k psi_k w_k`` by the compiled search and refinement
 of :func:`agents.search.delivery_decisions`.
@@ -12,7 +12,8 @@ of :func:`agents.search.delivery_decisions`.
 their QPs in one stack per psi-bar and slot phase, each scenario warm-started from its own last solve,
 their searches in one compiled call. Each scenario keeps what it carries across slots (the tracker,
 psi-bar, the previous decision), so a scenario of a batch decides exactly as it does alone; a single
-decision (:meth:`~DeliveryValuePlanner.plan`) is the batch of one.
+decision (:meth:`~DeliveryValuePlanner.plan`) is the batch of one. Its settings are
+:class:`DeliverySettings`; the reduction it shares with ``rg-mpc`` and ``global-mpc`` is :mod:`agents.reduced`'s.
 """
 
 from __future__ import annotations
@@ -21,21 +22,107 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from typing import Annotated, Literal
 
 import numpy as np
+from pydantic import Field
+from pydantic.dataclasses import dataclass as pydantic_dataclass
 
+from lawn_env import channel
 from lawn_env.config import ScenarioConfig
 from lawn_env.core import Snapshot
+from lawn_env.errors import raises_config_errors
 from lawn_env.mpc import MPCSolution, OutageAwareMPC, Rows
-from lawn_env.tail import LossAwareTail, expected_delivery
+from lawn_env.tail import (
+    BOUNDS_PROBABILITY,
+    DELIVERY_MEMORY,
+    DELIVERY_START_ITERATIONS,
+    LossAwareTail,
+    expected_delivery,
+)
 
 from . import search
 from .estimation import AGVTracker
 from .optim import project_disc_box
 from .problem import Plan
-from .reduced import DeliveryProblem, DeliverySettings, Evaluation, ReducedPlannerBase
+from .reduced import SETTINGS_CONFIG, Evaluation, ReducedPlannerBase, ReducedProblem, SearchSettings
 
-__all__ = ["DeliveryValuePlanner"]
+__all__ = ["DeliveryProblem", "DeliverySettings", "DeliveryValuePlanner"]
+
+
+class DeliveryProblem(ReducedProblem):
+    """One slot's problem under delivery (MODEL.md §4, "Planning under delivery"):
+
+        Phi(p, q) = sum_k psi_k V_k^del + (1 - psi_k) V_k^lost = sum_k V_k^lost - psi_k(p_k, q) w_k,
+
+    ``V^del`` the MPC's value with every planned increment delivered (psi = 1), ``V^lost`` the same
+    with the next command lost (:meth:`lawn_env.mpc.OutageAwareMPC.delivery_values`: held at zero, or
+    under the buffered actuator the increment its buffer plays, ``snapshot.buffer``) and
+    ``w = V^lost - V^del >= 0`` what delivering AGV k's command is worth. The increments are the
+    psi = 1 solution's at every (p, q). Two QPs per AGV when it is built; an evaluation after that
+    is the channel alone."""
+
+    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig,
+                 state: np.ndarray | None = None, values: tuple[MPCSolution, np.ndarray] | None = None,
+                 moves: int = 1):
+        super().__init__(mpc, link, snapshot, config, state, moves)
+        # (V^del's solution, V^lost): the certainty-equivalent MPC's unless given (the loss-aware tail's)
+        self.delivered, self.lost = mpc.delivery_values(self.data, snapshot.buffer) if values is None else values
+        self.worth = self.lost - self.delivered.value  # w_k >= 0
+
+    def values_at_psi(self, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray, MPCSolution]:
+        """V_k(psi_k) = V^lost - psi w and its slope -w, exactly, for psi (..., K); the solution is
+        the psi = 1 one whatever psi."""
+        psi = np.asarray(psi, dtype=float)
+        return self.lost - psi * self.worth, np.broadcast_to(-self.worth, psi.shape), self.delivered
+
+
+@raises_config_errors(noun="setting")
+@pydantic_dataclass(frozen=True, config=SETTINGS_CONFIG)
+class DeliverySettings(SearchSettings):
+    """Resolution and iteration budget of ``dv-mpc`` (meanings as in :class:`agents.rg_mpc.ReducedSettings`; no psi
+    table: its values are linear in psi). An evaluation costs no QP, so it refines longer."""
+
+    refine_iterations: Annotated[int, Field(ge=0)] = 8
+    model_lag: bool = True
+    """Predict with the actuator lag the config declares (``disturbance.actuator_lag_s``): the MPC's
+    state is x~ and the acceleration the AGV applied, which the planner follows from the commanded
+    accelerations it observes (:class:`agents.estimation.AGVTracker`). Without a lag, no change."""
+    filter_measurements: bool = True
+    """Plan from a Kalman filter's positions and velocities where the config declares measurement
+    noise (``disturbance.measurement_noise_*``; :class:`agents.estimation.AGVTracker`), not from each
+    noisy measurement. Without measurement noise, no change."""
+    tail: Literal["loss-aware", "certainty-equivalent"] = "loss-aware"
+    """How the future after the command is priced (MODEL.md §4): ``"loss-aware"``, every later command
+    delivered with the expected delivery psi-bar and replanned (:class:`lawn_env.tail.LossAwareTail`:
+    the modified Riccati recursion, the command planned as delivered for one step);
+    ``"certainty-equivalent"``, every later command delivered (the psi = 1 MPC over the horizon and
+    the DARE behind it: the expert before the loss-aware tail, which diverges where links lose most
+    commands)."""
+    bounds_probability: Annotated[float, Field(gt=0, le=1)] = BOUNDS_PROBABILITY
+    """The loss-aware tail keeps the bounds of the j-th later command of its plan while
+    ``psi-bar**j`` is at least this (:class:`lawn_env.tail.LossAwareTail`: where the all-delivered path
+    is unlikely its bounds would bind where no AGV will be); the next command's bounds always hold."""
+    delivery_memory: Annotated[float, Field(ge=0, lt=1)] = DELIVERY_MEMORY
+    """The loss-aware tail's psi-bar: ``memory * psi-bar + (1 - memory) * sum_k psi_k w_k / sum_k w_k``
+    after each slot (:func:`lawn_env.tail.expected_delivery`), from 1 at the episode's start."""
+    delivery_weights: Literal["worth", "uniform"] = "worth"
+    """What psi-bar averages the AGVs' success probabilities by: ``"worth"``, what delivering each
+    command is worth (the commands that matter; the default), or ``"uniform"``, the fleet's plain
+    average (docs/experts.md measures both)."""
+    delivery_start_iterations: Annotated[int, Field(ge=0, le=20)] = DELIVERY_START_ITERATIONS
+    """psi-bar at the episode's first slot: this many fixed-point steps from 1 (each the search at
+    psi-bar, then its worth-weighted success); 0 starts from 1."""
+    terminal_success: Annotated[float, Field(gt=0, le=1)] = 1.0
+    """The certainty-equivalent tail's terminal weight: 1, the loss-free DARE's (the paper's Q3); below 1,
+    the modified Riccati equation's at that success probability behind stages priced as delivered
+    (docs/experts.md: measured, not adopted; ``tail="certainty-equivalent"`` only)."""
+
+    def __post_init__(self) -> None:
+        if self.tail == "loss-aware" and self.terminal_success != 1.0:
+            raise ValueError(f"terminal_success={self.terminal_success!r}: a terminal weight of the certainty-"
+                             "equivalent tail; with tail='loss-aware' every stage is priced at the expected "
+                             "delivery (set tail='certainty-equivalent' to use it)")
 
 
 @dataclass

@@ -1,24 +1,14 @@
-"""The policy protocol and the registry of named policies.
+"""The planner policies, the built-in entries of the policy registry, and building a policy by name.
 
 Every policy is built from a scenario config (not from an environment), drives one environment
 id, and offers ``reset(seed)``, ``act(obs) -> action`` and Stable-Baselines3's
 ``predict(observation, state, episode_start, deterministic) -> (action, state)``, so the command
 line and SB3's ``evaluate_policy`` treat them all alike. Planners also offer ``plan(snapshot)``.
 
-Registered names (``make_policy(name, config)``):
-
-===============  =========================================================================
-``dv-mpc``       the delivery-value expert: commands planned as if they arrive, power and drone
-                 spent where delivery is worth most (MODEL.md §4, "Planning under delivery")
-``rg-mpc``       the paper's per-slot problem solved exactly: the reduced problem over (p, q)
-``ao-mpc``       the paper's joint optimization (AO of control QPs, Algorithm 1, SCA)
-``epa``          equal power allocation; MPC control and drone optimization as the expert
-``sf``           straight flight at a seeded random speed; MPC control and PGD power
-``pid``          predictive PID tracking law; power and drone optimized on its predictions
-``lqr``          predictive LQR (the DARE gain); power and drone optimized likewise
-``heuristic``    scripted PD tracking, distance-proportional power, centroid-seeking drone
-``global-mpc``   the global reference for optimality gaps (fine search; seconds per slot)
-===============  =========================================================================
+``make_policy(name, config)`` builds a registered policy (:data:`POLICIES`, :mod:`agents.registry`); the
+built-in entries, each with its one-line description and the lists it is on, are
+:data:`BUILT_IN_POLICIES`. The lists of policies (:data:`BENCHMARK_POLICIES`, :data:`PAPER_POLICIES`,
+the suite's, the experiments' experts) are views of the registry.
 """
 
 from __future__ import annotations
@@ -36,18 +26,14 @@ from lawn_env.dynamics import command_mask, planning_period
 from lawn_env.presets import ConfigLike, resolve_config
 
 from .ao import AOSettings, AOSolver
-from .base import COMM, JOINT, Policy
-from .dv_mpc import DeliveryValuePlanner
+from .base import COMM, JOINT, BatchPlanner, Planner, Policy
+from .dv_mpc import DeliverySettings, DeliveryValuePlanner
+from .global_mpc import GlobalPlanner, GlobalSettings
 from .learned import LOADERS, learned_name_forms
 from .problem import Plan
-from .reduced import (
-    DeliverySettings,
-    GlobalPlanner,
-    GlobalSettings,
-    ReducedGradientPlanner,
-    ReducedSettings,
-)
+from .registry import POLICIES, Names, PolicyEntry, register
 from .residual import PARTS, ResidualActions, check_residual
+from .rg_mpc import ReducedGradientPlanner, ReducedSettings
 from .scripted import HeuristicPolicy
 from .timing import DecisionClock
 from .tracking import PIDGains, lqr_gain, lqr_rollout, pid_rollout
@@ -55,6 +41,7 @@ from .tracking import PIDGains, lqr_gain, lqr_rollout, pid_rollout
 __all__ = [
     "Policy",
     "PlannerPolicy",
+    "AOPolicy",
     "AOMPCPolicy",
     "EPAPolicy",
     "SFPolicy",
@@ -63,7 +50,9 @@ __all__ = [
     "RGMPCPolicy",
     "DVMPCPolicy",
     "GlobalMPCPolicy",
+    "BUILT_IN_POLICIES",
     "BENCHMARK_POLICIES",
+    "PAPER_POLICIES",
     "POLICIES",
     "make_policy",
     "attach_residual",
@@ -80,23 +69,26 @@ def snapshot_from_observation(layout: ObservationLayout, config: ScenarioConfig,
 
 
 class PlannerPolicy(Policy):
-    """A policy that plans from the full state (``plan(snapshot)``) and acts on observations."""
+    """A policy that plans from the full state (``plan(snapshot)``, its solver's plan unless it plans
+    otherwise) and acts on observations. A subclass names its solver in :meth:`_make_solver`."""
 
     stateful = True
+    solver: Planner
 
     def __init__(self, config: ConfigLike = None, env_id: str = JOINT, seed: int | None = None, **settings: Any):
         super().__init__(config, env_id, seed)
         self.solver = self._make_solver(**settings)
 
-    def _make_solver(self, **settings: Any) -> Any:
-        return AOSolver(self.config, AOSettings(**settings))
+    def _make_solver(self, **settings: Any) -> Planner:  # pragma: no cover - interface
+        raise NotImplementedError(f"{type(self).__name__} names no solver: define _make_solver (AOPolicy's is the "
+                                  "paper's AO solver)")
 
     def _on_reset(self, rng: np.random.Generator) -> None:
         self.solver.reset()
         self.last_plan = None
 
-    def plan(self, snapshot: Snapshot) -> Plan:  # pragma: no cover - interface
-        raise NotImplementedError
+    def plan(self, snapshot: Snapshot) -> Plan:
+        return self.solver.plan(snapshot)
 
     def _commands(self, snapshot: Snapshot) -> np.ndarray:
         """The horizon slots where a command goes out (move blocking, MODEL.md §7)."""
@@ -112,13 +104,14 @@ class PlannerPolicy(Policy):
     def batched(self) -> bool:  # type: ignore[override]  # a property of the solver here
         """True when the solver plans a batch at once (``dv-mpc``'s, with the compiled QP backend; on
         ``lawn/Comm-v1`` under the paper's law it plans as ``rg-mpc``, one scenario at a time)."""
-        return bool(getattr(self.solver, "batches", False))
+        return isinstance(self.solver, BatchPlanner) and self.solver.batches
 
     def act_scenarios(self, observations: np.ndarray) -> np.ndarray:
         """:meth:`Policy.act_scenarios`; a solver that plans batches plans the B scenarios in one call."""
         if not self.batched:
             return super().act_scenarios(observations)
         obs = self.check_scenarios(observations)
+        assert isinstance(self.solver, BatchPlanner)  # what batched says
         snapshots = [snapshot_from_observation(self.layout, self.config, o) for o in obs]
         plans = self.solver.plan_scenarios(snapshots)
         self.last_plans = list(plans)
@@ -133,27 +126,32 @@ class PlannerPolicy(Policy):
                                    None, snapshot.drone_position)
 
 
-class AOMPCPolicy(PlannerPolicy):
+class AOPolicy(PlannerPolicy):
+    """A planner on the paper's AO solver (:class:`agents.AOSolver`): the paper's expert and the baselines
+    that fix some of its blocks."""
+
+    solver: AOSolver
+
+    def _make_solver(self, **settings: Any) -> AOSolver:
+        return AOSolver(self.config, AOSettings(**settings))
+
+
+class AOMPCPolicy(AOPolicy):
     """The paper's expert: alternating optimization over control, power and drone (agents.ao)."""
 
     name = "ao-mpc"
 
-    def plan(self, snapshot: Snapshot) -> Plan:
-        plan: Plan = self.solver.solve(snapshot)
-        return plan
 
-
-class EPAPolicy(PlannerPolicy):
+class EPAPolicy(AOPolicy):
     """Equal power allocation P_max / K; MPC control and drone optimization as the expert."""
 
     name = "epa"
 
     def plan(self, snapshot: Snapshot) -> Plan:
-        plan: Plan = self.solver.solve(snapshot, blocks=("control", "drone"), power_w=self.solver.equal_power())
-        return plan
+        return self.solver.solve(snapshot, blocks=("control", "drone"), power_w=self.solver.equal_power())
 
 
-class SFPolicy(PlannerPolicy):
+class SFPolicy(AOPolicy):
     """Straight flight: a fixed heading (``heading_rad``, default east, across the area from the
     start) at a constant speed drawn uniformly from (0, V_max] at each episode's reset; the drone
     stops at the area's edge. MPC control and Algorithm 1 power as the expert."""
@@ -176,11 +174,10 @@ class SFPolicy(PlannerPolicy):
         c = self.config
         q_next = move_drone(snapshot.drone_position, self.speed_mps * self.heading, c.drone.max_speed_mps, c.slot_s,
                             c.area_m)
-        plan: Plan = self.solver.solve(snapshot, blocks=("control", "power"), drone_position=q_next)
-        return plan
+        return self.solver.solve(snapshot, blocks=("control", "power"), drone_position=q_next)
 
 
-class PIDPolicy(PlannerPolicy):
+class PIDPolicy(AOPolicy):
     """Predictive PID: the PID law rolled out over the horizon replaces the QP; power and drone are
     optimized (Algorithm 1 + SCA, alternated) on the expected cost of its predicted inputs."""
 
@@ -203,11 +200,10 @@ class PIDPolicy(PlannerPolicy):
             c.control.accel_max_mps2, c.control.accel_increment_max_mps2, commands=self._commands(snapshot),
         )
         self.integral = integral  # the integrator advances with the step that is sent
-        plan: Plan = self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
-        return plan
+        return self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
 
 
-class LQRPolicy(PlannerPolicy):
+class LQRPolicy(AOPolicy):
     """Predictive LQR: the fixed infinite-horizon gain of the same DARE (Q1, Q2) replaces the QP;
     power and drone are optimized on the expected cost of its predicted inputs."""
 
@@ -222,22 +218,17 @@ class LQRPolicy(PlannerPolicy):
         increments = lqr_rollout(snapshot.x_aug, snapshot.reference, self.solver.model, self.gain,
                                  c.control.accel_max_mps2, c.control.accel_increment_max_mps2,
                                  commands=self._commands(snapshot))
-        plan: Plan = self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
-        return plan
+        return self.solver.solve(snapshot, blocks=("power", "drone"), increments=increments)
 
 
 class RGMPCPolicy(PlannerPolicy):
     """The package's best expert: the reduced problem min Phi(p, q) = sum V_k(psi_k) solved directly
-    (coarse exact search, then projected gradient with envelope derivatives; agents.reduced)."""
+    (coarse exact search, then projected gradient with envelope derivatives; agents.rg_mpc)."""
 
     name = "rg-mpc"
 
-    def _make_solver(self, **settings: Any) -> Any:
+    def _make_solver(self, **settings: Any) -> Planner:
         return ReducedGradientPlanner(self.config, ReducedSettings(**settings))
-
-    def plan(self, snapshot: Snapshot) -> Plan:
-        plan: Plan = self.solver.plan(snapshot)
-        return plan
 
 
 class DVMPCPolicy(PlannerPolicy):
@@ -254,7 +245,7 @@ class DVMPCPolicy(PlannerPolicy):
 
     name = "dv-mpc"
 
-    def _make_solver(self, **settings: Any) -> Any:
+    def _make_solver(self, **settings: Any) -> Planner:
         law = self.config.control.law
         if self.env_id == COMM and law == "paper":
             return ReducedGradientPlanner(self.config, ReducedSettings(**settings))
@@ -268,10 +259,6 @@ class DVMPCPolicy(PlannerPolicy):
             settings = {"tail": _CERTAINTY_EQUIVALENT, **settings}
         return DeliveryValuePlanner(self.config, DeliverySettings(**settings))
 
-    def plan(self, snapshot: Snapshot) -> Plan:
-        plan: Plan = self.solver.plan(snapshot)
-        return plan
-
 
 class DVMPCCertaintyEquivalentPolicy(DVMPCPolicy):
     """``dv-mpc`` with the certainty-equivalent tail (``tail="certainty-equivalent"``): every later command
@@ -280,7 +267,7 @@ class DVMPCCertaintyEquivalentPolicy(DVMPCPolicy):
 
     name = "dv-mpc-ce"
 
-    def _make_solver(self, **settings: Any) -> Any:
+    def _make_solver(self, **settings: Any) -> Planner:
         if settings.get("tail", _CERTAINTY_EQUIVALENT) != _CERTAINTY_EQUIVALENT:
             raise ValueError(f"tail={settings['tail']!r}: {self.name} is dv-mpc with tail='certainty-equivalent' "
                              "(use dv-mpc for another tail)")
@@ -296,33 +283,45 @@ class GlobalMPCPolicy(PlannerPolicy):
 
     name = "global-mpc"
 
-    def _make_solver(self, **settings: Any) -> Any:
+    def _make_solver(self, **settings: Any) -> Planner:
         return GlobalPlanner(self.config, GlobalSettings(**settings))
 
-    def plan(self, snapshot: Snapshot) -> Plan:
-        plan: Plan = self.solver.plan(snapshot)
-        return plan
 
-
-#: The one registry of policy names; the command line reads its choices from here.
-POLICIES: dict[str, Any] = {
-    "dv-mpc": DVMPCPolicy,
-    "dv-mpc-ce": DVMPCCertaintyEquivalentPolicy,
-    "rg-mpc": RGMPCPolicy,
-    "ao-mpc": AOMPCPolicy,
-    "epa": EPAPolicy,
-    "sf": SFPolicy,
-    "pid": PIDPolicy,
-    "lqr": LQRPolicy,
-    "heuristic": HeuristicPolicy,
-    "global-mpc": GlobalMPCPolicy,
-}
+#: The built-in policies, in the order of every list of them (the command line's, the tables' rows).
+BUILT_IN_POLICIES = (
+    PolicyEntry("dv-mpc", DVMPCPolicy, "expert", "the delivery-value expert: commands planned as if they arrive, "
+                "power and drone spent where delivery is worth most (MODEL.md §4, \"Planning under delivery\")",
+                table=True, suite=True),
+    PolicyEntry("dv-mpc-ce", DVMPCCertaintyEquivalentPolicy, "expert",
+                "dv-mpc with the certainty-equivalent tail (the expert before the loss-aware tail)"),
+    PolicyEntry("rg-mpc", RGMPCPolicy, "expert",
+                "the paper's per-slot problem solved exactly: the reduced problem over (p, q)",
+                table=True, suite=True, experiments=True),
+    PolicyEntry("ao-mpc", AOMPCPolicy, "expert", "the paper's joint optimization (AO of control QPs, Algorithm 1, SCA)",
+                table=True, paper=True, suite=True, experiments=True),
+    PolicyEntry("epa", EPAPolicy, "baseline",
+                "equal power allocation; MPC control and drone optimization as the expert",
+                table=True, paper=True, suite=True),
+    PolicyEntry("sf", SFPolicy, "baseline", "straight flight at a seeded random speed; MPC control and PGD power",
+                table=True, paper=True, suite=True),
+    PolicyEntry("pid", PIDPolicy, "baseline",
+                "predictive PID tracking law; power and drone optimized on its predictions",
+                table=True, paper=True, suite=True),
+    PolicyEntry("lqr", LQRPolicy, "baseline", "predictive LQR (the DARE gain); power and drone optimized likewise",
+                table=True, paper=True, suite=True),
+    PolicyEntry("heuristic", HeuristicPolicy, "baseline",
+                "scripted PD tracking, distance-proportional power, centroid-seeking drone", suite=True),
+    PolicyEntry("global-mpc", GlobalMPCPolicy, "reference",
+                "the global reference for optimality gaps (fine search; seconds per slot)"),
+)
+for _entry in BUILT_IN_POLICIES:
+    register(_entry)
 
 #: The paper's comparison: the expert and its four baselines.
-PAPER_POLICIES = ("ao-mpc", "epa", "sf", "pid", "lqr")
-#: What ``lawn benchmark`` compares by default: the package's best expert, the paper's per-slot
-#: problem solved exactly, and the paper's set.
-BENCHMARK_POLICIES = ("dv-mpc", "rg-mpc", *PAPER_POLICIES)
+PAPER_POLICIES = Names("paper")
+#: What ``lawn benchmark`` compares by default (the README's table): the package's best expert, the paper's
+#: per-slot problem solved exactly, and the paper's set.
+BENCHMARK_POLICIES = Names("table")
 
 
 def attach_residual(policy: Policy, settings: Mapping[str, Any] | None, clock: DecisionClock | None = None) -> Policy:
@@ -379,9 +378,10 @@ def make_policy(name: str, config: ConfigLike = None, env_id: str | None = None,
         return attach_residual(policy, getattr(policy, "residual_settings", None))
     env_id = env_id or JOINT
     try:
-        factory = POLICIES[name]
+        entry = POLICIES[name]
     except (KeyError, TypeError):
         raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICIES)}, "
                          f"or {learned_name_forms()} for trained agents") from None
-    built: Policy = factory(config, env_id=env_id, seed=seed, **kwargs)
-    return built
+    if env_id not in entry.env_ids:  # the entry's envs (a Policy class checks its own alike)
+        raise ValueError(f"policy {name!r} drives {', '.join(entry.env_ids)}; got env_id={env_id!r}")
+    return entry.factory(config, env_id=env_id, seed=seed, **kwargs)

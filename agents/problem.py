@@ -1,5 +1,5 @@
 """What both experts share (:mod:`agents.ao`, the paper's AO, and :mod:`agents.reduced`, the
-reduced-problem planners): one slot's planning problem (:class:`SlotProblem`: the snapshot's
+reduction the reduced-problem planners share): one slot's planning problem (:class:`SlotProblem`: the snapshot's
 state, the slot's QP data, the planning link and the feasible sets; evaluates J^ and its pieces),
 the coefficients of J^ per AGV, and the plan a planner returns (:class:`Plan`)."""
 

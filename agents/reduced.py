@@ -1,4 +1,4 @@
-"""The reduced per-slot problem and the planners built on it (MODEL.md §4).
+"""The reduced per-slot problem, the shared reduction of the reduced-problem experts (MODEL.md §4).
 
 For fixed (p, q) the control part splits into one convex QP per AGV whose optimal value V_k
 depends on (p, q) only through psi_k = psi(p_k, q). The per-slot problem is therefore
@@ -10,24 +10,28 @@ derivative of J^_k in psi at the QP optimum, ``2 psi L_k + 2 S_k``, free after e
 
     dPhi/dp_k = V_k'(psi_k) dpsi_k/dp_k,    dPhi/dq = sum_k V_k'(psi_k) dpsi_k/dq.
 
-Two planners use this:
+This module holds what the planners on it share: :class:`ReducedProblem` (Phi with exact QPs, its
+gradient, the projected-gradient refinement and the tabulated grid search), the settings every
+planner's search reads (:class:`PlannerSettings`, :class:`SearchSettings`) and their base
+(:class:`ReducedPlannerBase`). The planners live in modules named after them:
 
-* :class:`GlobalPlanner` (``"global-mpc"``): a reference for small K. Each V_k is tabulated on a
-  fine psi grid with exact QPs (cubic Hermite with the envelope slopes between points); drone
-  positions are searched on a fine grid of the disc ∩ area; for each position the power budget
-  is split exactly on a power grid by min-plus dynamic programming; the best point is then
-  polished by projected gradient on the exact Phi and its value is the exact Phi there (the QPs
-  re-solved at the returned (p, q)). Too slow to control with: it measures optimality gaps.
-* :class:`ReducedGradientPlanner` (``"rg-mpc"``): the fast expert. The same pipeline at a coarse
-  resolution (a few psi points, a coarse drone grid, a coarse power grid) picks a starting point;
-  it is compared by exact Phi with the previous slot's solution and with equal power at hover,
-  and the best is refined by projected gradient with Armijo backtracking and Barzilai-Borwein
-  steps on the exact Phi, alternating p and q, each evaluation K warm-started QPs.
-* :class:`agents.dv_mpc.DeliveryValuePlanner` (``"dv-mpc"``): the same search and refinement on the
-  objective of MODEL.md §4, "Planning under delivery": a command acts only if it arrives and a lost one
-  is seen and replanned at the next slot, so the increments are the psi = 1 MPC's and AGV k's expected cost
-  is ``V_k(psi) = V_k^lost - psi w_k``, linear in psi (:class:`DeliveryProblem`): two QPs per AGV per
-  slot, then no QP in the search or the refinement.
+* :mod:`agents.global_mpc` (``"global-mpc"``, :class:`~agents.global_mpc.GlobalPlanner`): a reference
+  for small K. Each V_k is tabulated on a fine psi grid with exact QPs (cubic Hermite with the envelope
+  slopes between points); drone positions are searched on a fine grid of the disc ∩ area; for each
+  position the power budget is split exactly on a power grid by min-plus dynamic programming; the best
+  point is then polished by projected gradient on the exact Phi and its value is the exact Phi there
+  (the QPs re-solved at the returned (p, q)). Too slow to control with: it measures optimality gaps.
+* :mod:`agents.rg_mpc` (``"rg-mpc"``, :class:`~agents.rg_mpc.ReducedGradientPlanner`): the fast expert.
+  The same pipeline at a coarse resolution (a few psi points, a coarse drone grid, a coarse power grid)
+  picks a starting point; it is compared by exact Phi with the previous slot's solution and with equal
+  power at hover, and the best is refined by projected gradient with Armijo backtracking and
+  Barzilai-Borwein steps on the exact Phi, alternating p and q, each evaluation K warm-started QPs.
+* :mod:`agents.dv_mpc` (``"dv-mpc"``, :class:`~agents.dv_mpc.DeliveryValuePlanner`): the same search and
+  refinement on the objective of MODEL.md §4, "Planning under delivery": a command acts only if it
+  arrives and a lost one is seen and replanned at the next slot, so the increments are the psi = 1 MPC's
+  and AGV k's expected cost is ``V_k(psi) = V_k^lost - psi w_k``, linear in psi
+  (:class:`~agents.dv_mpc.DeliveryProblem`): two QPs per AGV per slot, then no QP in the search or the
+  refinement.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal, Protocol
+from typing import Annotated, Any, Protocol
 
 import numpy as np
 from pydantic import ConfigDict, Field
@@ -48,19 +52,13 @@ from lawn_env.dynamics import cost_coefficients
 from lawn_env.errors import raises_config_errors
 from lawn_env.mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC
 from lawn_env.products import matmul
-from lawn_env.tail import (
-    BOUNDS_PROBABILITY,
-    DELIVERY_MEMORY,
-    DELIVERY_START_ITERATIONS,
-)
 
 from . import search
-from .optim import disc_box_grid, project_budget, project_disc_box
+from .optim import project_budget, project_disc_box
 from .problem import Plan, SlotProblem
 
-__all__ = ["ReducedProblem", "ValueTable", "PlannerSettings", "SearchSettings", "ReducedSettings",
-           "ReducedGradientPlanner", "GlobalPlanner", "GlobalSettings", "DeliveryProblem",
-           "DeliverySettings"]
+__all__ = ["Evaluation", "ReducedProblem", "ValueFunction", "ValueTable", "SETTINGS_CONFIG", "PlannerSettings",
+           "SearchSettings", "ReducedPlannerBase"]
 
 
 @dataclass
@@ -207,42 +205,16 @@ class ValueTable:
         return out
 
 
-class DeliveryProblem(ReducedProblem):
-    """One slot's problem under delivery (MODEL.md §4, "Planning under delivery"):
-
-        Phi(p, q) = sum_k psi_k V_k^del + (1 - psi_k) V_k^lost = sum_k V_k^lost - psi_k(p_k, q) w_k,
-
-    ``V^del`` the MPC's value with every planned increment delivered (psi = 1), ``V^lost`` the same
-    with the next command lost (:meth:`lawn_env.mpc.OutageAwareMPC.delivery_values`: held at zero, or
-    under the buffered actuator the increment its buffer plays, ``snapshot.buffer``) and
-    ``w = V^lost - V^del >= 0`` what delivering AGV k's command is worth. The increments are the
-    psi = 1 solution's at every (p, q). Two QPs per AGV when it is built; an evaluation after that
-    is the channel alone."""
-
-    def __init__(self, mpc: OutageAwareMPC, link: channel.LinkParams, snapshot: Snapshot, config: ScenarioConfig,
-                 state: np.ndarray | None = None, values: tuple[MPCSolution, np.ndarray] | None = None,
-                 moves: int = 1):
-        super().__init__(mpc, link, snapshot, config, state, moves)
-        # (V^del's solution, V^lost): the certainty-equivalent MPC's unless given (the loss-aware tail's)
-        self.delivered, self.lost = mpc.delivery_values(self.data, snapshot.buffer) if values is None else values
-        self.worth = self.lost - self.delivered.value  # w_k >= 0
-
-    def values_at_psi(self, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray, MPCSolution]:
-        """V_k(psi_k) = V^lost - psi w and its slope -w, exactly, for psi (..., K); the solution is
-        the psi = 1 one whatever psi."""
-        psi = np.asarray(psi, dtype=float)
-        return self.lost - psi * self.worth, np.broadcast_to(-self.worth, psi.shape), self.delivered
-
-
 # ---------------------------------------------------------------------- planners
-_CFG = ConfigDict(extra="forbid", allow_inf_nan=False)
+#: What every planner's settings class is validated with: unknown settings and NaN/inf refused.
+SETTINGS_CONFIG = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 @raises_config_errors(noun="setting")
-@pydantic_dataclass(frozen=True, config=_CFG)
+@pydantic_dataclass(frozen=True, config=SETTINGS_CONFIG)
 class PlannerSettings:
     """What every reduced-problem planner's search reads (the fields once; each planner's settings
-    class below changes their defaults and adds its own)."""
+    class, beside its planner, changes their defaults and adds its own)."""
 
     drone_spacing_m: Annotated[float, Field(gt=0)] = 1.5
     """Spacing of the drone grid over the disc ∩ area for the starting point."""
@@ -257,7 +229,7 @@ class PlannerSettings:
 
 
 @raises_config_errors(noun="setting")
-@pydantic_dataclass(frozen=True, config=_CFG)
+@pydantic_dataclass(frozen=True, config=SETTINGS_CONFIG)
 class SearchSettings(PlannerSettings):
     """:class:`PlannerSettings` with the coarse stage of the search (``rg-mpc``'s and ``dv-mpc``'s)."""
 
@@ -267,78 +239,11 @@ class SearchSettings(PlannerSettings):
     """... and the best ``keep_positions`` are split finely."""
 
 
-@raises_config_errors(noun="setting")
-@pydantic_dataclass(frozen=True, config=_CFG)
-class ReducedSettings(SearchSettings):
-    """Resolution and iteration budget of ``rg-mpc``."""
-
-    psi_points: Annotated[int, Field(ge=2)] = 9
-    """psi grid points (uniform on [0, 1]) of the tabulated V_k used to pick the starting point."""
-
-
-@raises_config_errors(noun="setting")
-@pydantic_dataclass(frozen=True, config=_CFG)
-class GlobalSettings(PlannerSettings):
-    """Resolution of the global reference ``global-mpc`` (meanings as in :class:`ReducedSettings`;
-    every drone position is split at the full power resolution, no coarse stage)."""
-
-    drone_spacing_m: Annotated[float, Field(gt=0)] = 0.5
-    max_drone_points: Annotated[int, Field(ge=1)] = 20_000
-    power_levels: Annotated[int, Field(ge=2)] = 200
-    refine_iterations: Annotated[int, Field(ge=0)] = 60
-    psi_points: Annotated[int, Field(ge=2)] = 401
-
-
-@raises_config_errors(noun="setting")
-@pydantic_dataclass(frozen=True, config=_CFG)
-class DeliverySettings(SearchSettings):
-    """Resolution and iteration budget of ``dv-mpc`` (meanings as in :class:`ReducedSettings`; no psi
-    table: its values are linear in psi). An evaluation costs no QP, so it refines longer."""
-
-    refine_iterations: Annotated[int, Field(ge=0)] = 8
-    model_lag: bool = True
-    """Predict with the actuator lag the config declares (``disturbance.actuator_lag_s``): the MPC's
-    state is x~ and the acceleration the AGV applied, which the planner follows from the commanded
-    accelerations it observes (:class:`agents.estimation.AGVTracker`). Without a lag, no change."""
-    filter_measurements: bool = True
-    """Plan from a Kalman filter's positions and velocities where the config declares measurement
-    noise (``disturbance.measurement_noise_*``; :class:`agents.estimation.AGVTracker`), not from each
-    noisy measurement. Without measurement noise, no change."""
-    tail: Literal["loss-aware", "certainty-equivalent"] = "loss-aware"
-    """How the future after the command is priced (MODEL.md §4): ``"loss-aware"``, every later command
-    delivered with the expected delivery psi-bar and replanned (:class:`lawn_env.tail.LossAwareTail`:
-    the modified Riccati recursion, the command planned as delivered for one step);
-    ``"certainty-equivalent"``, every later command delivered (the psi = 1 MPC over the horizon and
-    the DARE behind it: the expert before the loss-aware tail, which diverges where links lose most
-    commands)."""
-    bounds_probability: Annotated[float, Field(gt=0, le=1)] = BOUNDS_PROBABILITY
-    """The loss-aware tail keeps the bounds of the j-th later command of its plan while
-    ``psi-bar**j`` is at least this (:class:`lawn_env.tail.LossAwareTail`: where the all-delivered path
-    is unlikely its bounds would bind where no AGV will be); the next command's bounds always hold."""
-    delivery_memory: Annotated[float, Field(ge=0, lt=1)] = DELIVERY_MEMORY
-    """The loss-aware tail's psi-bar: ``memory * psi-bar + (1 - memory) * sum_k psi_k w_k / sum_k w_k``
-    after each slot (:func:`lawn_env.tail.expected_delivery`), from 1 at the episode's start."""
-    delivery_weights: Literal["worth", "uniform"] = "worth"
-    """What psi-bar averages the AGVs' success probabilities by: ``"worth"``, what delivering each
-    command is worth (the commands that matter; the default), or ``"uniform"``, the fleet's plain
-    average (docs/experts.md measures both)."""
-    delivery_start_iterations: Annotated[int, Field(ge=0, le=20)] = DELIVERY_START_ITERATIONS
-    """psi-bar at the episode's first slot: this many fixed-point steps from 1 (each the search at
-    psi-bar, then its worth-weighted success); 0 starts from 1."""
-    terminal_success: Annotated[float, Field(gt=0, le=1)] = 1.0
-    """The certainty-equivalent tail's terminal weight: 1, the loss-free DARE's (the paper's Q3); below 1,
-    the modified Riccati equation's at that success probability behind stages priced as delivered
-    (docs/experts.md: measured, not adopted; ``tail="certainty-equivalent"`` only)."""
-
-    def __post_init__(self) -> None:
-        if self.tail == "loss-aware" and self.terminal_success != 1.0:
-            raise ValueError(f"terminal_success={self.terminal_success!r}: a terminal weight of the certainty-"
-                             "equivalent tail; with tail='loss-aware' every stage is priced at the expected "
-                             "delivery (set tail='certainty-equivalent' to use it)")
-
-
 class ReducedPlannerBase:
-    settings_class: type[PlannerSettings] = ReducedSettings
+    """What the planners on the reduced problem share: their settings (``settings_class()`` when none are
+    given: each planner's own), the warm-started MPC, the planning link and the psi grid of their table."""
+
+    settings_class: type[PlannerSettings]
     settings: PlannerSettings
 
     def __init__(self, config: ScenarioConfig, settings: PlannerSettings | None = None):
@@ -363,70 +268,3 @@ class ReducedPlannerBase:
         return Plan(increments=best.increments, power_w=best.power_w, drone_position=best.drone_position,
                     objective=best.phi, objective_trace=trace, iterations=1, solve_time_s=time.perf_counter() - start,
                     info=info)
-
-
-class ReducedGradientPlanner(ReducedPlannerBase):
-    """``rg-mpc``: coarse tabulated search, then projected gradient on the exact Phi."""
-
-    settings: SearchSettings  # ReducedSettings (DeliveryValuePlanner: DeliverySettings)
-
-    def __init__(self, config: ScenarioConfig, settings: SearchSettings | None = None):
-        super().__init__(config, settings)
-        self._last: tuple[np.ndarray, np.ndarray] | None = None  # previous slot's (p, velocity)
-
-    def _search(self, problem: ReducedProblem) -> Evaluation:
-        s = self.settings
-        table = problem.table(self.psi_grid)
-        positions = disc_box_grid(problem.q_prev, problem.reach, problem.area, s.drone_spacing_m, s.max_drone_points)
-        _, p, q = problem.grid_search(table, positions, s.power_levels, s.coarse_power_levels, s.keep_positions)
-        return problem.evaluate(p, q)
-
-    def reset(self) -> None:
-        super().reset()
-        self._last = None
-
-    def _problem(self, snapshot: Snapshot) -> ReducedProblem:
-        return ReducedProblem(self.mpc, self.link, snapshot, self.config)
-
-    def plan(self, snapshot: Snapshot) -> Plan:
-        start = time.perf_counter()
-        problem = self._problem(snapshot)
-        k = self.config.num_agvs
-        starts = {"search": self._search(problem),
-                  "equal": problem.evaluate(np.full(k, problem.budget / k), problem.q_prev)}
-        if self._last is not None:
-            p_last, v_last = self._last
-            q_cont = project_disc_box(problem.q_prev + v_last, problem.q_prev, problem.reach, problem.area)
-            starts["previous"] = problem.evaluate(p_last, q_cont)
-        origin = min(starts, key=lambda name: starts[name].phi)
-        best = problem.refine(starts[origin], self.settings.refine_iterations)
-        self._last = (best.power_w.copy(), best.drone_position - problem.q_prev)
-        return self._plan(problem, best, start, {"start": origin,
-                                                 "start_values": {n: e.phi for n, e in starts.items()}})
-
-
-class GlobalPlanner(ReducedPlannerBase):
-    """``global-mpc``: fine tabulated search, exact power split on a grid, exact polish."""
-
-    settings_class = GlobalSettings
-    settings: GlobalSettings
-
-    def __init__(self, config: ScenarioConfig, settings: GlobalSettings | None = None):
-        super().__init__(config, settings)
-
-    def plan(self, snapshot: Snapshot) -> Plan:
-        start = time.perf_counter()
-        problem = ReducedProblem(self.mpc, self.link, snapshot, self.config)
-        s = self.settings
-        table = problem.table(self.psi_grid)
-        positions = disc_box_grid(problem.q_prev, problem.reach, problem.area, s.drone_spacing_m, s.max_drone_points)
-        grid_value, p, q = problem.grid_search(table, positions, s.power_levels)
-        found = problem.evaluate(p, q)
-        best = problem.refine(found, s.refine_iterations)
-        info = {
-            "grid_value": grid_value,  # tabulated Phi at the grid optimum
-            "grid_exact_value": found.phi,  # exact Phi (QPs re-solved) at the grid optimum
-            "resolution": {"psi_points": s.psi_points, "drone_spacing_m": s.drone_spacing_m,
-                           "power_step_w": problem.budget / s.power_levels, "positions": int(positions.shape[0])},
-        }
-        return self._plan(problem, best, start, info)

@@ -1,4 +1,5 @@
-"""The reduced planners' search and refinement, compiled (MODEL.md §4; :mod:`agents.reduced`).
+"""The reduced planners' search and refinement, compiled (MODEL.md §4; :mod:`agents.reduced` and the planners
+on it, :mod:`agents.rg_mpc`, :mod:`agents.global_mpc`, :mod:`agents.dv_mpc`).
 
 One slot's reduced problem is ``min over (p, q) of Phi(p, q) = sum_k V_k(psi_k(p_k, q))``. What
 ``rg-mpc``, ``dv-mpc`` and ``global-mpc`` do with it is here, as numba kernels over a batch of
@@ -71,7 +72,7 @@ class Decisions(NamedTuple):
 
 
 class _Problem(Protocol):
-    """What :func:`decide` reads of one scenario's delivery problem (:class:`agents.reduced.DeliveryProblem`)."""
+    """What :func:`decide` reads of one scenario's delivery problem (:class:`agents.dv_mpc.DeliveryProblem`)."""
 
     lost: np.ndarray
     worth: np.ndarray

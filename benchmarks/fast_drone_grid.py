@@ -18,7 +18,7 @@ from evaluation.run import LIMIT_SETTINGS, evaluate
 from evaluation.stats import paired_geometric
 from lawn_env import presets
 
-DEFAULT_CAP = 10_000  # agents.reduced.ReducedSettings.max_drone_points
+DEFAULT_CAP = 10_000  # agents.rg_mpc.ReducedSettings.max_drone_points
 
 
 def main() -> None:

@@ -31,6 +31,7 @@ from agents import make_policy
 from agents.base import JOINT
 from agents.errors import MissingExtra
 from agents.learned import zoo_agents, zoo_agents_for
+from agents.registry import Names
 from lawn_env import ScenarioConfig, presets
 
 from .episode import DEFAULT_PLAY, Entry, EpisodeResult, EpisodeSpec, Play, write_results, write_rows
@@ -64,9 +65,9 @@ __all__ = ["Batch", "Protocol", "Outcome", "execute", "TABLES", "FILES", "paper_
            "SUITE_POLICIES", "suite_policies", "suite_protocol", "SUITE_BLOCKS", "FLEET_SIZES",
            "FLEET_TARGETS", "FLEET_WORST", "fleet_agents", "fleet_target", "fleet_protocol"]
 
-#: Experts and baselines of the suite (global-mpc, seconds per slot, is the gap study's reference).
-SUITE_POLICIES = ("dv-mpc", "rg-mpc", "ao-mpc", "epa", "sf", "pid", "lqr", "heuristic", "anchor:stake",
-                  "anchor:distance")
+#: Experts and baselines of the suite, the registry's entries with ``suite=True`` (global-mpc, seconds per
+#: slot, is the gap study's reference), then the anchors.
+SUITE_POLICIES = Names("suite", tail=("anchor:stake", "anchor:distance"))
 #: Fleet size -> test seeds (0..n-1 of each test range) of the fleet-size table.
 FLEET_SIZES: dict[int, int] = {3: 100, 4: 100, 8: 100, 16: 40, 32: 40, 64: 20}
 #: The fleet networks' targets against dv-mpc: the upper bound of the geometric interval, per K

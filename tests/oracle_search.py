@@ -1,7 +1,7 @@
 """The planners' search and refinement as they were in Python before :mod:`agents.search` compiled them:
 the oracle the compiled kernels are checked against (``tests/test_search.py``), as cvxpy is the QP's.
 Copied from ``agents/optim.py`` and ``agents/reduced.py`` at 87a95e4, made free functions of a
-:class:`agents.reduced.DeliveryProblem`; the one change: psi as the compiled search evaluates it, in
+:class:`agents.dv_mpc.DeliveryProblem`; the one change: psi as the compiled search evaluates it, in
 Erlang's closed form (``lawn_env.channel.outage_law``'s SERIES, checked against scipy in test_channel.py),
 and the coarse scores' ties in grid order (a stable sort)."""
 

@@ -116,7 +116,7 @@ def test_drone_gradient_matches_finite_differences():
             assert grad[axis] == pytest.approx(fd, rel=1e-5, abs=1e-8 * abs(obj.value(q)))
 
 
-@pytest.mark.parametrize("name", ("rg-mpc",) + PAPER_POLICIES)
+@pytest.mark.parametrize("name", ("rg-mpc", *PAPER_POLICIES))
 def test_plans_satisfy_every_constraint(name):
     policy = make_policy(name, CFG, seed=0)
     policy.reset(0)

@@ -8,7 +8,7 @@ from test_agents import _snapshots
 
 from agents import make_policy, rollout
 from agents.dv_mpc import DeliveryValuePlanner
-from agents.reduced import DeliveryProblem, DeliverySettings
+from agents.dv_mpc import DeliveryProblem, DeliverySettings
 from lawn_env import ScenarioConfig, channel, presets
 from lawn_env.dynamics import command_mask
 from lawn_env.errors import ConfigError

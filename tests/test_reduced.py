@@ -7,7 +7,9 @@ from test_agents import _snapshots
 
 from agents import AOSolver, expected_cost, make_policy
 from agents.optim import disc_box_grid, min_plus_allocation, project_disc_box
-from agents.reduced import GlobalPlanner, GlobalSettings, ReducedGradientPlanner, ReducedProblem
+from agents.global_mpc import GlobalPlanner, GlobalSettings
+from agents.reduced import ReducedProblem
+from agents.rg_mpc import ReducedGradientPlanner
 from lawn_env import ScenarioConfig, channel
 from lawn_env.config import DroneConfig
 from lawn_env.mpc import OutageAwareMPC

@@ -155,7 +155,8 @@ def test_a_batch_restarts_one_scenario_and_refuses_another_size():
 def test_the_tabulated_planners_grid_search_is_the_python_one():
     """rg-mpc's and global-mpc's grid search (:data:`agents.search.HERMITE`: V_k tabulated with exact QPs,
     cubic Hermite between points, psi by scipy's law) against the pre-change Python search, bit for bit."""
-    from agents.reduced import ReducedGradientPlanner, ReducedProblem
+    from agents.reduced import ReducedProblem
+    from agents.rg_mpc import ReducedGradientPlanner
 
     config = ScenarioConfig()
     planner = ReducedGradientPlanner(config)

@@ -8,7 +8,7 @@ from scipy import linalg, optimize
 from test_agents import _snapshots
 
 from agents import make_policy, rollout
-from agents.reduced import DeliverySettings
+from agents.dv_mpc import DeliverySettings
 from lawn_env import ScenarioConfig, presets
 from lawn_env.dynamics import PredictionModel, augmented_matrices, loss_aware_gain, mean_square_radius, modified_riccati
 from lawn_env.errors import ConfigError

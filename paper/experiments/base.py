@@ -9,13 +9,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from agents.registry import Names
+
 if TYPE_CHECKING:  # an annotation only: the claims' module is not the records' import
     from .claims import Claim
 
 __all__ = ["Experiment", "EXPERTS", "BASELINES", "REPORT_SLOT", "SEEDS", "QUICK_SEEDS", "QUICK_SET", "spec",
            "slot_cost", "by_seed", "values"]
 
-EXPERTS = ("rg-mpc", "ao-mpc")
+#: The experts of the paper's figures: the registry's entries with ``experiments=True`` (agents.registry).
+EXPERTS = Names("experiments")
 BASELINES = ("epa", "pid", "lqr")
 #: The paper's "selected time slot" of its rate, blocklength and CE figures.
 REPORT_SLOT = 11
