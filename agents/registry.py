@@ -66,9 +66,9 @@ class PolicyEntry:
     paper: bool = False
     """One of the paper's own comparison, its expert and its baselines (``agents.PAPER_POLICIES``); on the table."""
     suite: bool = False
-    """In the task suite (``training.results.protocols.SUITE_POLICIES``, before its anchors)."""
+    """In the task suite (``evaluation.protocols.SUITE_POLICIES``, before its anchors)."""
     experiments: bool = False
-    """One of the experts of the paper's experiments (``training.experiments.base.EXPERTS``)."""
+    """One of the experts of the paper's experiments (``paper.experiments.base.EXPERTS``)."""
     env_ids: tuple[str, ...] = ()
     """The env ids it acts on (of ``lawn_env.ENV_IDS``); empty: those its factory declares (``factory.env_ids``,
     a :class:`~agents.base.Policy` class's)."""

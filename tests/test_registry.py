@@ -7,11 +7,11 @@ from agents import BENCHMARK_POLICIES, PAPER_POLICIES, POLICIES, PolicyEntry, ma
 from agents.policies import BUILT_IN_POLICIES, RGMPCPolicy, is_policy_name, policy_names
 from agents.registry import Names
 from agents.scripted import HeuristicPolicy
-from training.cli import build_parser, main
-from training.cli.common import policy_help, policy_name
-from training.experiments import base as experiments
-from training.experiments import EXPERIMENTS
-from training.results import protocols
+from evaluation import protocols
+from lawn_cli import build_parser, main
+from lawn_cli.common import policy_help, policy_name
+from paper.experiments import EXPERIMENTS
+from paper.experiments import base as experiments
 
 NEW = "test-expert"
 
