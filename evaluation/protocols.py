@@ -47,7 +47,7 @@ from .report import (
     summary_markdown,
     task_tables,
 )
-from .rows import Statistics, reduce
+from .rows import Statistics, SummaryRow, reduce
 from .run import (
     NOISE,
     REFERENCE_ROWS,
@@ -177,33 +177,15 @@ def execute(protocol: Protocol, play: Play = DEFAULT_PLAY, out: Path | None = No
 
 
 # ---------------------------------------------------------------------- the tables of the protocols
-def _summary_rows(protocol: Protocol, stats: Statistics) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+def _summary_rows(protocol: Protocol, stats: Statistics) -> list[SummaryRow]:
     """The paper protocol's summary (every metric's mean and interval per policy) with each policy
     against the first: the paired mean, the geometric mean of the ratios, the seeds won, the score."""
     batch = protocol.batches[0]
-    env, task, reference = batch.entries[0].env, batch.task or "default", protocol.policies[0]
-    summary = stats.summary(env, protocol.policies, task)
-    paired: dict[str, tuple[float, float]] = {}
-    geometric, scores = {}, {}
-    for entry in summary:
-        policy = entry["policy"]
-        row, vs = stats.row(task, env, policy), stats.versus((task, env, policy), (task, env, reference))
-        if vs is not None and len(vs.relative) > 1:
-            paired[policy] = vs.paired
-        entry[f"cost_vs_{reference}"], entry[f"cost_vs_{reference}_ci95"] = paired.get(policy, (float("nan"),) * 2)
-        if vs is not None and policy != reference:
-            g = geometric[policy] = vs.geometric
-            entry[f"ratio_vs_{reference}"], entry["ratio_low"], entry["ratio_high"] = g.ratio, g.low, g.high
-            entry["seeds_won"] = g.won
-        if row is not None and row.score is not None:
-            scores[policy] = row.score
-            entry["score"], entry["score_low"], entry["score_high"] = row.score[:3]
-    return summary, {"paired": paired, "reference": reference, "scores": scores, "geometric": geometric}
+    return stats.summary(batch.entries[0].env, protocol.policies, batch.task or "default", protocol.policies[0])
 
 
 def _summary(protocol: Protocol, stats: Statistics, seconds: float, play: Play) -> str:
-    summary, parts = _summary_rows(protocol, stats)
-    return summary_markdown(summary, **parts)
+    return summary_markdown(_summary_rows(protocol, stats))
 
 
 def _learned(protocol: Protocol, stats: Statistics, seconds: float, play: Play) -> str:
@@ -250,14 +232,14 @@ TABLES: dict[str, Callable[[Protocol, Statistics, float, Play], str]] = {
 
 
 def _summary_csv(protocol: Protocol, outcome: Outcome, path: Path, play: Play) -> None:
-    write_rows(_summary_rows(protocol, outcome.stats)[0], path)
+    write_rows([row.as_row() for row in _summary_rows(protocol, outcome.stats)], path)
 
 
 def _summary_plot(protocol: Protocol, outcome: Outcome, path: Path, play: Play) -> None:
     batch = protocol.batches[0]
     title = (f"{batch.entries[0].env}, K={batch.config.num_agvs}, {len(batch.seeds)} seeds from {batch.seeds[0]}: "
              "mean ± 95 % interval")
-    plot_summary(_summary_rows(protocol, outcome.stats)[0], path, title=title)
+    plot_summary(_summary_rows(protocol, outcome.stats), path, title=title)
 
 
 def _profiles_plot(protocol: Protocol, outcome: Outcome, path: Path, play: Play) -> None:

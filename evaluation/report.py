@@ -33,7 +33,6 @@ from .stats import (
     SCORE_VERSION,
     SUMMARY_METRICS,
     TAIL_RATIO,
-    Geometric,
     RangeComparison,
     Score,
 )
@@ -41,7 +40,7 @@ from .stats import (
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from .rows import Key, RowStats, Statistics, Versus
+    from .rows import Key, RowStats, Statistics, SummaryRow, Versus
 
 __all__ = ["RESULT_METRICS", "TIMING_METRICS", "format_table", "summary_markdown", "plot_summary", "mean_cell",
            "protocol_cells", "learned_table", "board_table", "references_table", "structure_table", "task_tables",
@@ -56,14 +55,17 @@ _COSTS = ("control_cost", "transient_cost", "sustained_cost")
 Rows = Sequence[Mapping[str, Any]]  # the rows of a table other than episodes' (summaries, per-slot means)
 
 
-def format_table(summary: list[dict[str, Any]], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS,
-                 by: str = "policy", paired: dict[str, tuple[float, float]] | None = None, reference: str | None = None,
-                 scores: Mapping[str, Score] | None = None, geometric: Mapping[str, Geometric] | None = None
-                 ) -> str:
-    """A Markdown table: mean ± 95 % interval per metric (decision time in ms), optionally the score
-    (``scores``: policy -> :func:`.stats.normalized_score`) and the cost against ``reference``
-    (``paired``: the mean relative difference; ``geometric``: the deciding statistic)."""
-    header = [by, "episodes"] + [label.replace("(s)", "(ms)") for _, label in metrics]
+def format_table(rows: Sequence[SummaryRow], metrics: Sequence[tuple[str, str]] = SUMMARY_METRICS,
+                 comparisons: bool = True) -> str:
+    """A Markdown table: mean ± 95 % interval per metric (decision time in ms) and, with
+    ``comparisons``, each column the rows hold: the score (:func:`.stats.normalized_score`) and the
+    cost against the rows' reference (the mean relative difference; the geometric comparison, the
+    deciding statistic)."""
+    reference = next((r.reference for r in rows if r.reference is not None), None)
+    scores = comparisons and any(r.score is not None for r in rows)
+    paired = comparisons and any(r.paired is not None for r in rows)
+    geometric = comparisons and any(r.geometric is not None for r in rows)
+    header = ["policy", "episodes"] + [label.replace("(s)", "(ms)") for _, label in metrics]
     if scores:
         header.insert(3, f"score v{SCORE_VERSION} [95 %]")
     if paired:
@@ -71,38 +73,36 @@ def format_table(summary: list[dict[str, Any]], metrics: Sequence[tuple[str, str
     if geometric:
         header.append(f"cost vs {reference} (geometric [95 %], seeds won)")
     table = []
-    for entry in summary:
-        cells = [str(entry[by]), str(entry["episodes"])]
+    for row in rows:
+        cells = [row.policy, str(row.episodes)]
         for key, _ in metrics:
             scale = 1e3 if key.startswith("decision_time") else 1.0
-            mean, half = entry[key] * scale, entry[f"{key}_ci95"] * scale
+            mean, half = row.means[key].mean * scale, row.means[key].half * scale
             if key == "diverged":  # a flag per episode (lawn_env.core.DIVERGENCE_DISTANCE_M): how many of them
-                cells.append("n/a" if not math.isfinite(mean) else f"{round(mean * entry['episodes'])}")
+                cells.append("n/a" if not math.isfinite(mean) else f"{round(mean * row.episodes)}")
             else:
                 cells.append(f"{fmt_stat(mean)} ± {fmt_stat(half)}")
         if scores:
-            cells.insert(3, format_score(scores.get(entry[by])))
+            cells.insert(3, format_score(row.score))
         if paired:
-            mean, half = paired.get(entry[by], (math.nan, math.nan))
-            cells.append("–" if entry[by] == reference else f"{mean * 100:+.1f} % ± {half * 100:.1f} %")
+            mean, half = row.paired or (math.nan, math.nan)
+            cells.append("–" if row.policy == reference else f"{mean * 100:+.1f} % ± {half * 100:.1f} %")
         if geometric:
-            cells.append("–" if entry[by] == reference else fmt_geometric(geometric.get(entry[by])))
+            cells.append("–" if row.policy == reference else fmt_geometric(row.geometric))
         table.append(cells)
     return markdown_table(header, table)
 
 
-def summary_markdown(summary: list[dict[str, Any]], paired: dict[str, tuple[float, float]], reference: str,
-                     scores: Mapping[str, Score], geometric: Mapping[str, Geometric]) -> str:
+def summary_markdown(rows: Sequence[SummaryRow]) -> str:
     """The benchmark's summary as Markdown: the results table, which the same seeds reproduce digit
     for digit on any machine, then each policy's decision time, which is this machine's."""
-    results = format_table(summary, metrics=RESULT_METRICS, paired=paired, reference=reference, scores=scores,
-                           geometric=geometric)
-    timing = format_table(summary, metrics=TIMING_METRICS)
+    results = format_table(rows, metrics=RESULT_METRICS)
+    timing = format_table(rows, metrics=TIMING_METRICS, comparisons=False)
     return (f"{results}\n\nDecision time (median per episode; mean ± 95 % interval over the episodes), measured on the "
             f"machine that ran it:\n\n{timing}\n")
 
 
-def plot_summary(summary: list[dict[str, Any]], path: Path, title: str = "") -> Figure:
+def plot_summary(rows: Sequence[SummaryRow], path: Path, title: str = "") -> Figure:
     """Bar chart of each summary metric with its 95 % interval, one panel per metric, the policies'
     names upright under every panel (the figure widens with the number of policies so that they never
     overlap); the ``diverged`` panel only when some episode diverged (the title says when none did).
@@ -110,9 +110,9 @@ def plot_summary(summary: list[dict[str, Any]], path: Path, title: str = "") -> 
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    names = [entry["policy"] for entry in summary]
+    names = [row.policy for row in rows]
     colors = [f"C{i % 10}" for i in range(len(names))]
-    diverged = [entry["diverged"] for entry in summary]
+    diverged = [row.means["diverged"].mean for row in rows]
     metrics = [(key, label) for key, label in SUMMARY_METRICS if key != "diverged" or any(d > 0 for d in diverged)]
     notes = [title] if title else []
     if all(d == 0 for d in diverged):
@@ -122,8 +122,8 @@ def plot_summary(summary: list[dict[str, Any]], path: Path, title: str = "") -> 
     for j, (key, label) in enumerate(metrics):
         ax = fig.add_subplot(1, len(metrics), j + 1)
         scale = 1e3 if key.startswith("decision_time") else 1.0
-        means = [entry[key] * scale for entry in summary]
-        errs = [entry[f"{key}_ci95"] * scale for entry in summary]
+        means = [row.means[key].mean * scale for row in rows]
+        errs = [row.means[key].half * scale for row in rows]
         ax.bar(names, means, yerr=errs, color=colors, capsize=3)
         ax.set_title(label.replace("(s)", "(ms)"), fontsize=10)
         ax.set_xlim(-0.6, len(names) - 0.4)

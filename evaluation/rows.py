@@ -10,7 +10,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -123,21 +123,62 @@ class Statistics:
             self._versus[(key, reference)] = Versus(self.rows[key].costs, self.rows[reference].costs)
         return self._versus[(key, reference)]
 
-    def summary(self, env: str, policies: Sequence[str], task: str = "default") -> list[dict[str, Any]]:
-        """Per policy with results on ``env`` and ``task``: ``policy``, ``episodes`` and the mean and
-        95 % half-width of each metric of :data:`SUMMARY_METRICS` (``METRIC``, ``METRIC_ci95``)."""
+    def summary(self, env: str, policies: Sequence[str], task: str = "default", reference: str | None = None
+                ) -> list[SummaryRow]:
+        """Per policy with results on ``env`` and ``task``, in the order of ``policies``: its episodes, the
+        mean and 95 % half-width of each metric of :data:`SUMMARY_METRICS` and its score; with
+        ``reference``, each policy against it per seed (the paired mean difference, over two seeds or
+        more, and the geometric comparison)."""
         out = []
         for row in (self.rows.get((task, env, p)) for p in policies):
-            if row is not None:
-                entry: dict[str, Any] = {"policy": row.key[2], "episodes": row.episodes}
-                for metric, (mean, half) in row.means.items():
-                    entry[metric], entry[f"{metric}_ci95"] = mean, half
-                out.append(entry)
+            if row is None:
+                continue
+            policy, vs = row.key[2], None
+            if reference is not None:
+                vs = self.versus((task, env, policy), (task, env, reference))
+            out.append(SummaryRow(policy, row.episodes, row.means, reference, row.score,
+                                  vs.paired if vs is not None and len(vs.relative) > 1 else None,
+                                  vs.geometric if vs is not None and policy != reference else None))
         return out
 
     def aggregate(self, env: str, policy: str, tasks: Sequence[str]) -> Score:
         """:func:`aggregate_score` of ``policy`` on ``env`` over ``tasks``."""
         return aggregate_score({t: self.inputs[(t, env, policy)] for t in tasks if (t, env, policy) in self.inputs})
+
+
+@dataclass(frozen=True)
+class SummaryRow:
+    """One policy's line of a summary: its episodes, the mean and 95 % half-width of each metric of
+    :data:`SUMMARY_METRICS`, its normalized score (None without its references beside it) and, against
+    the summary's ``reference`` (None: no comparison), the mean per-seed relative difference and the
+    geometric comparison (None where they are undefined)."""
+
+    policy: str
+    episodes: int
+    means: Mapping[str, Interval]
+    reference: str | None = None
+    score: Score | None = None
+    paired: Interval | None = None
+    geometric: Geometric | None = None
+
+    def as_row(self) -> dict[str, str | int | float]:
+        """The row of ``summary.csv``: ``policy``, ``episodes``, ``METRIC`` and ``METRIC_ci95``; with a
+        reference ``cost_vs_REF`` and its ``_ci95`` (NaN where undefined), then, for a policy other than
+        the reference, ``ratio_vs_REF``, ``ratio_low``, ``ratio_high`` and ``seeds_won``; with a score,
+        ``score``, ``score_low`` and ``score_high``."""
+        row: dict[str, str | int | float] = {"policy": self.policy, "episodes": self.episodes}
+        for metric, (mean, half) in self.means.items():
+            row[metric], row[f"{metric}_ci95"] = mean, half
+        if self.reference is not None:
+            ref = self.reference
+            row[f"cost_vs_{ref}"], row[f"cost_vs_{ref}_ci95"] = self.paired or (math.nan, math.nan)
+            if self.geometric is not None:
+                g = self.geometric
+                row[f"ratio_vs_{ref}"], row["ratio_low"], row["ratio_high"] = g.ratio, g.low, g.high
+                row["seeds_won"] = g.won
+        if self.score is not None:
+            row["score"], row["score_low"], row["score_high"] = self.score.value, self.score.low, self.score.high
+        return row
 
 
 def _row(key: Key, members: Sequence[EpisodeResult], score: Score | None) -> RowStats:

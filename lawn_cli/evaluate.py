@@ -4,6 +4,7 @@ with its normalized score."""
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 import lawn_env
@@ -57,14 +58,10 @@ def run(args: argparse.Namespace) -> int:
     mine = [r for r in rows if r.policy == args.policy]
     write_results(mine, out)
     stats = reduce(rows)
-    row = stats.row("default", args.env, args.policy)
-    scores = None if not scored or row is None or row.score is None else {args.policy: row.score}
     note = f" (score: {SCORE_LOW} and {SCORE_HIGH} on the same seeds)" if scored else \
         "" if args.no_score else f" (no score: --policy-arg changes the reference {args.policy} itself)"
     print(f"lawn evaluate: {args.policy} on {args.env}, {args.episodes} episodes from seed {args.seed}{note}")
-    vs = stats.versus(("default", args.env, args.policy), ("default", args.env, SCORE_HIGH))
-    geometric = None if not scored or vs is None or args.policy == SCORE_HIGH else {args.policy: vs.geometric}
-    print(format_table(stats.summary(args.env, [args.policy]), scores=scores, geometric=geometric,
-                       reference=SCORE_HIGH))
+    summary = stats.summary(args.env, [args.policy], reference=SCORE_HIGH if scored else None)
+    print(format_table([replace(row, paired=None, score=row.score if scored else None) for row in summary]))
     print(f"wrote {len(mine)} {'row' if len(mine) == 1 else 'rows'} to {out}")
     return 0

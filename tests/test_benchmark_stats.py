@@ -39,8 +39,8 @@ def _flat(tree: dict, prefix: str = "") -> dict:
 # ---------------------------------------------------------------------- the cost's structure
 @pytest.mark.parametrize("env_id", list(lawn_env.ENV_IDS))
 def test_transient_and_sustained_costs_add_up_to_the_episode_cost(env_id):
-    rows = evaluate([EpisodeSpec("epa", env_id, ScenarioConfig(), 3, {}), EpisodeSpec("rg-mpc", env_id, ScenarioConfig(), 3, {})],
-                    progress=False)
+    rows = evaluate([EpisodeSpec("epa", env_id, ScenarioConfig(), 3, {}),
+                     EpisodeSpec("rg-mpc", env_id, ScenarioConfig(), 3, {})], progress=False)
     for row in rows:
         stage = row.stage_costs
         assert len(stage) == 120 and row.transient_slots == TRANSIENT_SLOTS
@@ -155,8 +155,8 @@ def test_perfect_links_deliver_every_command_and_planners_see_it():
 
 
 def test_reference_rows_run_under_their_names_and_beat_or_tie_the_expert():
-    rows = evaluate([EpisodeSpec(p, "lawn/Joint-v1", ScenarioConfig(), 0, {}) for p in ("dv-mpc", "rg-mpc", *REFERENCE_ROWS,
-                                                                             "noise:rg-mpc")], progress=False)
+    names = ("dv-mpc", "rg-mpc", *REFERENCE_ROWS, "noise:rg-mpc")
+    rows = evaluate([EpisodeSpec(p, "lawn/Joint-v1", ScenarioConfig(), 0, {}) for p in names], progress=False)
     cost = {r.policy: r.control_cost for r in rows}
     assert set(cost) == {"dv-mpc", "rg-mpc", "noise:rg-mpc", *REFERENCE_ROWS}
     assert cost["limit:perfect-links"] < cost["dv-mpc"] and cost["limit:fast-drone"] < cost["dv-mpc"]
@@ -231,7 +231,8 @@ def test_compare_is_the_python_front_door_of_evaluate(tmp_path):
     from evaluation.episode import read_csv, read_results, write_results
 
     result = compare(["epa", "rg-mpc"], config="steady", seeds=[3, 4], settings={"rg-mpc": {"power_levels": 20}})
-    rows = evaluate([EpisodeSpec(p, "lawn/Joint-v1", presets.get("steady"), s, {"power_levels": 20} if p == "rg-mpc" else {})
+    rows = evaluate([EpisodeSpec(p, "lawn/Joint-v1", presets.get("steady"), s,
+                                 {"power_levels": 20} if p == "rg-mpc" else {})
                      for p in ("epa", "rg-mpc") for s in (3, 4)], progress=False)
     def played(r):  # the row less this machine's clock
         return {k: v for k, v in r.as_row().items() if not k.startswith("decision_time")}
@@ -286,19 +287,18 @@ def test_statistics_reduce_results_once_per_row_and_compare_any_two_rows():
     assert stats.versus(("a", "lawn/Joint-v1", "x"), ("a", "lawn/Joint-v1", "nope")) is None
 
 
-def _benchmark_summary(diverged: float) -> list[dict]:
+def _benchmark_summary(diverged: float) -> list:
     """A summary of the main job's eleven rows (their long names), ``diverged`` on ``epa`` only."""
-    from evaluation.stats import SUMMARY_METRICS
+    from evaluation.rows import SummaryRow
+    from evaluation.stats import SUMMARY_METRICS, Interval
 
     names = ["dv-mpc", "rg-mpc", "ao-mpc", "epa", "sf", "pid", "lqr", "noise:dv-mpc", "limit:fast-drone",
              "limit:perfect-links", "actuator:buffer"]
     summary = []
     for i, name in enumerate(names):
-        entry = {"policy": name, "episodes": 20}
-        for key, _ in SUMMARY_METRICS:
-            entry[key], entry[f"{key}_ci95"] = 100.0 + 10 * i, 5.0
-        entry["diverged"], entry["diverged_ci95"] = (diverged if name == "epa" else 0.0), 0.0
-        summary.append(entry)
+        means = {key: Interval(100.0 + 10 * i, 5.0) for key, _ in SUMMARY_METRICS}
+        means["diverged"] = Interval(diverged if name == "epa" else 0.0, 0.0)
+        summary.append(SummaryRow(name, 20, means))
     return summary
 
 
