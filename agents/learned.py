@@ -28,7 +28,7 @@ from lawn_env.interface import InterfaceLike, resolve_interface
 from .anchors import InterfacePolicy, load_anchor
 from .base import COMM, JOINT, Policy
 from .errors import MissingExtra
-from .runs import RL_EXTRA, RunDir, algorithm_class, policy_network_class, read_json, read_run
+from .runs import RL_EXTRA, AgentRecord, RunDir, algorithm_class, policy_network_class, read_json, read_record, read_run
 
 __all__ = ["ObsNormalizer", "SB3Policy", "MARLPolicy", "marl_policy", "LOADERS", "learned_name_forms", "ZOO_DIR",
            "zoo_agents", "zoo_record", "export_agent", "check_scenario", "trained_config", "zoo_agents_for",
@@ -183,7 +183,7 @@ class SB3Policy(InterfacePolicy):
         check_scenario(f"sb3:{path}", trained_env, trained, played, run.interface)
         policy = cls(_load_model(run), played, trained_env, run.interface, ObsNormalizer.load(_selected(path)[1]), seed,
                      label=f"sb3:{path}")
-        return policy._recorded(run.record.get("residual"))
+        return policy._recorded(run.record.residual)
 
     def with_residual(self, actions: Any) -> SB3Policy:
         """Act by the residual scheme (an :class:`agents.residual.ResidualActions` around its anchor:
@@ -277,8 +277,8 @@ def zoo_agents_for(config: ScenarioConfig) -> list[str]:
     names = []
     for name, record in zoo_agents().items():
         try:
-            check_scenario(f"zoo:{name}", record["env"], ScenarioConfig.from_dict(record["config"]), config,
-                           record["interface"])
+            check_scenario(f"zoo:{name}", record.env, ScenarioConfig.from_dict(dict(record.config or {})), config,
+                           record.interface)
         except ValueError:
             continue
         names.append(f"zoo:{name}")
@@ -293,7 +293,7 @@ def trained_config(name: str) -> ScenarioConfig:
     if prefix == "zero":
         return trained_config(rest)
     if prefix == "zoo":
-        return ScenarioConfig.from_dict(zoo_record(rest)["config"])
+        return ScenarioConfig.from_dict(dict(zoo_record(rest).config or {}))
     if prefix in ("sb3", "bc", "marl"):
         return read_run(rest).load_config()
     raise ValueError(f"trained_config({name!r}): not a learned agent; valid forms: zoo:NAME, sb3:DIR, bc:DIR, "
@@ -412,7 +412,7 @@ def marl_policy(network: Any, config: ScenarioConfig, interface: InterfaceLike, 
 
 
 # ---------------------------------------------------------------------- shipped agents (zoo)
-def export_agent(run_dir: Path, out_dir: Path, record: dict[str, Any]) -> Path:
+def export_agent(run_dir: Path, out_dir: Path, record: Mapping[str, Any]) -> Path:
     """Write a run's policy network (weights only: no optimizer state, and for SAC/TD3 the actor
     alone, without critics) and observation statistics as a shipped agent with ``agent.json``."""
     run_dir, out_dir = Path(run_dir), Path(out_dir)
@@ -425,21 +425,22 @@ def export_agent(run_dir: Path, out_dir: Path, record: dict[str, Any]) -> Path:
     normalizer = ObsNormalizer.load(_selected(run_dir)[1])
     if normalizer is not None:
         normalizer.save(out_dir / "normalizer.npz")
-    agent = {"algo": algo, "trainer": run.record.get("trainer", run.algo), "env": run.env, "interface": run.interface,
-             **({"residual": run.record["residual"]} if run.record.get("residual") else {}),
+    agent = {"algo": algo, "trainer": run.record.trainer or run.algo, "env": run.env, "interface": run.interface,
+             **({"residual": run.record.residual} if run.record.residual else {}),
              "config": read_json(run_dir / "config.json"), **record}
+    AgentRecord.model_validate(agent)  # what zoo_record will read back
     (out_dir / "agent.json").write_text(json.dumps(agent, indent=2) + "\n")
     return out_dir
 
 
-def zoo_agents() -> dict[str, dict[str, Any]]:
+def zoo_agents() -> dict[str, AgentRecord]:
     """Shipped agents by name: their ``agent.json`` records."""
     if not ZOO_DIR.is_dir():
         return {}
-    return {p.parent.name: read_json(p) for p in sorted(ZOO_DIR.glob("*/agent.json"))}
+    return {p.parent.name: read_record(p, "zoo") for p in sorted(ZOO_DIR.glob("*/agent.json"))}
 
 
-def zoo_record(name: str) -> dict[str, Any]:
+def zoo_record(name: str) -> AgentRecord:
     """The ``agent.json`` record of the shipped agent ``name``; an unknown name is an error listing the
     shipped ones."""
     agents = zoo_agents()
@@ -452,21 +453,21 @@ def _load_zoo(name: str, config: ScenarioConfig | None = None, env_id: str | Non
               ) -> Policy:
     record = zoo_record(name)
     _sb3()
-    network_class = policy_network_class(record["algo"], f"zoo:{name}: agent.json: ")
+    network_class = policy_network_class(record.algo, f"zoo:{name}: agent.json: ")
     network = load_saved(lambda p: network_class.load(p, device="cpu"), ZOO_DIR / name / "policy.zip",
-                         f"zoo agent's {record['algo']} network")
-    trained = ScenarioConfig.from_dict(record["config"])
+                         f"zoo agent's {record.algo} network")
+    trained = ScenarioConfig.from_dict(dict(record.config or {}))
     cfg = config if config is not None else trained
-    check_scenario(f"zoo:{name}", record["env"], trained, cfg, record["interface"])
+    check_scenario(f"zoo:{name}", record.env, trained, cfg, record.interface)
     normalizer = ObsNormalizer.load(ZOO_DIR / name / "normalizer.npz")
-    if record["env"] == PARALLEL_ENV_ID:
+    if record.env == PARALLEL_ENV_ID:
         if env_id not in (None, JOINT):
             raise ValueError(f"zoo:{name} is a multi-agent policy; it drives {JOINT}, not {env_id}")
-        return marl_policy(network, cfg, record["interface"], normalizer, seed, label=f"zoo:{name}")
-    if env_id not in (None, record["env"]):
-        raise ValueError(f"zoo:{name} was trained on {record['env']}, not {env_id}")
-    policy = SB3Policy(network, cfg, record["env"], record["interface"], normalizer, seed, label=f"zoo:{name}")
-    return policy._recorded(record.get("residual"))
+        return marl_policy(network, cfg, record.interface, normalizer, seed, label=f"zoo:{name}")
+    if env_id not in (None, record.env):
+        raise ValueError(f"zoo:{name} was trained on {record.env}, not {env_id}")
+    policy = SB3Policy(network, cfg, record.env, record.interface, normalizer, seed, label=f"zoo:{name}")
+    return policy._recorded(record.residual)
 
 
 def _no_settings(loader: Callable[..., Policy]) -> Callable[..., Policy]:

@@ -7,9 +7,13 @@ from __future__ import annotations
 
 import importlib
 import json
+import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 from lawn_env import LEGACY_ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig
 
@@ -19,7 +23,8 @@ if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
     from stable_baselines3.common.policies import BasePolicy
 
-__all__ = ["ALGORITHMS", "RL_EXTRA", "RunDir", "algorithm_class", "policy_network_class", "read_json", "read_run"]
+__all__ = ["ALGORITHMS", "RL_EXTRA", "AgentRecord", "Benchmark", "RunDir", "algorithm_class", "policy_network_class",
+           "read_json", "read_run", "read_record"]
 
 #: The SB3 algorithms of runs and shipped agents: name -> (algorithm class, the class of the policy
 #: network a shipped agent keeps: the whole actor-critic policy, or the actor alone for SAC/TD3).
@@ -80,41 +85,129 @@ def read_json(path: Path, context: str = "", missing: str = "") -> Any:
                          f"{exc.msg})") from None
 
 
+class Benchmark(BaseModel):
+    """A shipped agent's figures, recorded when the zoo was built: its test seeds, the reference and
+    its anchor, its score (version, value and interval) and its paired differences (mean, half-width)
+    against the reference and the anchor, or, for an agent of the steady tasks, the geometric change
+    per task, reference and test range."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    test_seeds: str | None = None
+    reference: str | None = None
+    anchor: str | None = None
+    score_version: int | None = None
+    score: list[float] | None = None
+    shipped_vs_reference: list[float] | None = None
+    shipped_vs_anchor: list[float] | None = None
+    across_training_seeds_vs_anchor: list[float] | None = None
+    tasks: dict[str, dict[str, list[float]]] | None = None
+
+
+class AgentRecord(BaseModel):
+    """What a trained agent's files say of it: ``run.json`` of a ``lawn train`` run, ``agent.json`` of
+    a shipped one (the run's fields with the zoo's). ``algo`` and ``env`` are always there; the
+    interface and the residual scheme are the records :func:`lawn_env.interface.resolve_interface`
+    and :func:`agents.residual.check_residual` read; a field a later version adds is kept
+    (``model_extra``), not refused."""
+
+    model_config = ConfigDict(frozen=True, extra="allow")
+
+    algo: str
+    env: str
+    trainer: str | None = None
+    target: str | None = None
+    interface: Mapping[str, Any] | str | None = None
+    residual: Mapping[str, Any] | None = None
+    config: Mapping[str, Any] | None = None
+    seed: int | None = None
+    timesteps: int | None = None
+    num_timesteps: int | None = None
+    eval_every: int | None = None
+    eval_episodes: int | None = None
+    checkpoint_every: int | None = None
+    vec: str | None = None
+    wall_time_s: float | list[float] | None = None
+    expert_decision_s: float | None = None
+    versions: Mapping[str, Any] | None = None
+    # the zoo's fields (agent.json)
+    name: str | None = None
+    label: str | None = None
+    trained_on: str | None = None
+    evaluated_on: str | None = None
+    command: str | None = None
+    budget_steps: int | None = None
+    training_seeds: list[int] | None = None
+    shipped_seed: int | None = None
+    selected_on: str | None = None
+    selected_at_steps: int | None = None
+    benchmark: Benchmark | None = None
+
+    @property
+    def layout(self) -> str | None:
+        """The observation layout of its interface (``entities``, ``flat``; None: the v0 interface)."""
+        return self.interface.get("layout") if isinstance(self.interface, Mapping) else None
+
+    @property
+    def run_seconds(self) -> float:
+        """A run's wall time (``run.json``'s ``wall_time_s``), NaN where it is not recorded (a shipped
+        agent records one per training seed)."""
+        return float(self.wall_time_s) if isinstance(self.wall_time_s, (int, float)) else math.nan
+
+    def as_json(self) -> dict[str, Any]:
+        """The record as its file holds it (the fields it was read or built with)."""
+        return self.model_dump(mode="json", exclude_unset=True)
+
+
+def read_record(path: Path, context: str = "", missing: str = "") -> AgentRecord:
+    """The :class:`AgentRecord` of ``run.json`` or ``agent.json`` at ``path``; a ``ValueError`` naming
+    the file and the field when it is not one (no ``env`` and ``algo``: not written by lawn train)."""
+    data = read_json(path, context, missing)
+    prefix = f"{context} {path.parent}: " if context else f"{path.parent}: "
+    if not isinstance(data, dict) or not {"env", "algo"} <= set(data):
+        raise ValueError(f"{prefix}{path.name} has no 'env' and 'algo' (not written by lawn train)")
+    try:
+        return AgentRecord.model_validate(data)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        raise ValueError(f"{prefix}{path.name}: {'.'.join(map(str, first['loc']))}: {first['msg']} "
+                         f"(got {first.get('input')!r})") from None
+
+
 @dataclass(frozen=True)
 class RunDir:
     """A ``lawn train`` run directory and its ``run.json`` record."""
 
     path: Path
-    record: dict[str, Any]
+    record: AgentRecord
 
     @property
     def env(self) -> str:
         """The env the run trained on, by its current id: a run recorded under a v0 id
         (``lawn_env.LEGACY_ENV_IDS``) plays that id's current version, the same scenario."""
-        env: str = self.record["env"]
+        env = self.record.env
         return LEGACY_ENV_IDS[env][0] if env in LEGACY_ENV_IDS else env
 
     @property
     def algo(self) -> str:
         """The algorithm of the model it holds (behaviour cloning: the target algorithm's; a fleet
         run: ``fleet``, a PPO model whose policy is :class:`agents.fleet.FleetPolicy`)."""
-        if self.record.get("trainer") == "fleet":
+        if self.record.trainer == "fleet":
             return "fleet"
-        algo: str = self.record.get("target", self.record["algo"])
-        return algo
+        return self.record.target or self.record.algo
 
     @property
     def kind(self) -> str:
         """The prefix of its policy name: ``marl`` (the parallel env), ``bc`` (behaviour cloning)
         or ``sb3``."""
-        if self.record.get("env") == PARALLEL_ENV_ID:
+        if self.record.env == PARALLEL_ENV_ID:
             return "marl"
-        return "bc" if self.record.get("trainer") == "bc" else "sb3"
+        return "bc" if self.record.trainer == "bc" else "sb3"
 
     @property
     def interface(self) -> Any:
         """The RL interface the agent trained with (None: the v0 interface)."""
-        return self.record.get("interface")
+        return self.record.interface
 
     def load_config(self, context: str = "", missing: str = "") -> ScenarioConfig:
         """The exact scenario config of the run (``config.json``)."""
@@ -130,10 +223,8 @@ def read_run(path: Path | str, context: str = "", require_model: bool = False) -
     """The run directory at ``path``: a ``ValueError`` (prefixed by ``context``) when it has no
     valid ``run.json`` with an ``env`` and an ``algo``, or, with ``require_model``, no ``model.zip``."""
     path = Path(path)
-    record = read_json(path / "run.json", context, "not a lawn train run directory")
+    record = read_record(path / "run.json", context, "not a lawn train run directory")
     prefix = f"{context} {path}: " if context else f"{path}: "
-    if not isinstance(record, dict) or not {"env", "algo"} <= set(record):
-        raise ValueError(f"{prefix}run.json has no 'env' and 'algo' (not written by lawn train)")
     if require_model and not (path / "model.zip").exists():
         raise ValueError(f"{prefix}no model.zip: the run has not finished (lawn train --resume {path} continues it)")
     return RunDir(path, record)

@@ -339,7 +339,7 @@ def fleet_agents() -> list[str]:
     :func:`agents.learned.zoo_agents_for` leaves them out)."""
     default = set(zoo_agents_for(ScenarioConfig()))
     return [f"zoo:{name}" for name, rec in zoo_agents().items()
-            if (rec.get("interface") or {}).get("layout") == "entities" and f"zoo:{name}" in default]
+            if rec.layout == "entities" and f"zoo:{name}" in default]
 
 
 def fleet_target(policy: str, k: int, c: RangeComparison) -> str:
@@ -347,7 +347,7 @@ def fleet_target(policy: str, k: int, c: RangeComparison) -> str:
     trained on mixed fleets (``trainer: fleet``); "–" for the others (the multi-agent ones are trained at
     one K) and the noise floor."""
     record = zoo_agents().get(policy.partition(":")[2]) if policy.startswith("zoo:") else None
-    if record is None or record.get("trainer") != "fleet":
+    if record is None or record.trainer != "fleet":
         return "–"
     target = FLEET_TARGETS.get(k)
     if target is None:

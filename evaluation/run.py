@@ -323,8 +323,10 @@ def policy_env(policy: str) -> str:
     if prefix == "zero":
         return policy_env(rest)
     if prefix == "zoo":
-        env: str = zoo_record(rest)["evaluated_on"]
-        return env
+        evaluated = zoo_record(rest).evaluated_on
+        if evaluated is None:
+            raise ValueError(f"zoo:{rest}: its agent.json names no env it is evaluated_on (lawn zoo build writes it)")
+        return evaluated
     if prefix in ("sb3", "bc", "marl"):
         env = read_run(rest).env
         return central_env_id(env)
@@ -342,7 +344,7 @@ def own_anchor(policy: str) -> str | None:
         record = read_run(rest).record
     else:
         return None
-    return f"zero:{policy}" if record.get("residual") else anchor_name(record.get("interface"))
+    return f"zero:{policy}" if record.residual else anchor_name(record.interface)
 
 
 def learned_entries(agents: Sequence[str], envs: Sequence[str] | None = None) -> list[Entry]:

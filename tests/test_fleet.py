@@ -379,6 +379,7 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
 
     import training.recipes as recipes_module
     from agents import learned, make_policy
+    from agents.runs import AgentRecord
     from evaluation.episode import read_csv
     from evaluation.seeds import TEST_RANGES
     from lawn_env import presets
@@ -411,7 +412,7 @@ def test_the_zoo_builds_the_distil_section_on_two_test_ranges(tmp_path, monkeypa
     record = json.loads((tmp_path / "zoo" / "ppo-dv-residual" / "agent.json").read_text())
     assert record["residual"]["anchor"] == "dv-mpc"
     assert record["selected_at_steps"] == 0  # one validation episode: no interval, so no step beats the start
-    monkeypatch.setattr(zoo, "zoo_agents", lambda: {"ppo-dv-residual": record})
+    monkeypatch.setattr(zoo, "zoo_agents", lambda: {"ppo-dv-residual": AgentRecord.model_validate(record)})
     assert "ships its start: no validation beat the policy it started from" in zoo.format_zoo_list()
     lines = [line for line in table.splitlines() if line.startswith("| `zoo:dv-joint`")]
     assert [line.split(" | ")[2] for line in lines] == ["steady", "wide-k8"]

@@ -298,7 +298,7 @@ def test_shipped_agents_load_and_act(name):
 
     record = zoo_agents()[name]
     policy = make_policy(f"zoo:{name}", trained_config(f"zoo:{name}"))  # its training scenario (K = 16, 64, a law)
-    assert policy.env_id == record["evaluated_on"]
+    assert policy.env_id == record.evaluated_on
     env = gym.make(policy.env_id, config=policy.config)
     obs, _ = env.reset(seed=0)
     policy.reset(0)

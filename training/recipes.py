@@ -205,8 +205,8 @@ def finished(run_dir: Path, timesteps: int) -> bool:
     """The run in ``run_dir`` has its run.json and its budget (a BC run: any)."""
     if not (run_dir / "run.json").exists():
         return False
-    data = read_run(run_dir).record
-    return int(data.get("num_timesteps", 0)) >= (timesteps if data.get("trainer") != "bc" else 1)
+    record = read_run(run_dir).record
+    return (record.num_timesteps or 0) >= (timesteps if record.trainer != "bc" else 1)
 
 
 def zoo_hyperparams(algo: str = "ppo") -> dict[str, dict[str, Any]]:

@@ -213,7 +213,7 @@ def _net_arch(params: Mapping[str, Any]) -> Any:  # None: SB3's default
 def _check_init_from(init_from: Path, algo: str, params: Mapping[str, Any]) -> None:
     """``--init-from``: a finished run of the same algorithm, interface and network as this run's."""
     source = read_run(init_from, "--init-from")
-    theirs = source.record.get("target", source.record.get("algo"))
+    theirs = source.record.target or source.record.algo
     if theirs != algo:
         raise ValueError(f"--init-from {init_from}: it holds a {theirs} policy, not {algo}")
     if not (init_from / "model.zip").exists():
@@ -222,10 +222,10 @@ def _check_init_from(init_from: Path, algo: str, params: Mapping[str, Any]) -> N
         raise ValueError(f"--init-from {init_from}: it was trained with interface {source.interface}, "
                          f"this run uses {params.get('interface')}; pass the same --interface")
     hp_file = init_from / "hyperparams.json"
-    theirs = _net_arch(json.loads(hp_file.read_text())) if hp_file.exists() else None
-    if theirs is not None and theirs != _net_arch(params):
-        raise ValueError(f"--init-from {init_from}: its network is net_arch={theirs}, this run builds "
-                         f"net_arch={_net_arch(params)}; pass --hp 'policy_kwargs={{\"net_arch\": {theirs}}}'")
+    arch = _net_arch(json.loads(hp_file.read_text())) if hp_file.exists() else None
+    if arch is not None and arch != _net_arch(params):
+        raise ValueError(f"--init-from {init_from}: its network is net_arch={arch}, this run builds "
+                         f"net_arch={_net_arch(params)}; pass --hp 'policy_kwargs={{\"net_arch\": {arch}}}'")
 
 
 @dataclass

@@ -75,7 +75,7 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
 
     out_dir = Path(out_dir)
     run = read_run(out_dir, "--resume")
-    record = dict(run.record)
+    record = run.record.as_json()
     trainer = record.get("trainer", record["algo"])
     if trainer not in ALGORITHMS or ALGORITHMS[trainer].settings is not None:
         raise ValueError(f"--resume {out_dir}: {trainer} runs are not resumable (no checkpoints); rerun lawn train")

@@ -18,7 +18,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from agents.learned import ZOO_DIR, export_agent, zoo_agents
-from agents.runs import RunDir, read_run
+from agents.runs import AgentRecord, Benchmark, RunDir, read_run
 from evaluation.cells import fmt_num, fmt_paired, fmt_pct, markdown_table
 from evaluation.episode import Entry, EpisodeResult, Play
 from evaluation.protocols import execute, learned_protocol
@@ -72,7 +72,7 @@ class Shipped:
 
     recipe: Recipe
     run_dir: Path
-    specs: list[dict[str, Any]]
+    specs: list[AgentRecord]
     env: str
     across: tuple[float, float]  # mean and 95 % half-width of vs-own-anchor across training seeds
 
@@ -131,14 +131,14 @@ def zoo_tables(ev: ZooEvaluation) -> ZooTables:
             run_rows += [_run_cells(ev, r, d, best, d == chosen, env) for d, best in zip(dirs, validation, strict=True)]
             specs = [ev.runs[d].record for d in dirs]
             algo = {"bc": "BC", "fleet": "DAgger"}.get(r.algo, r.algo.upper())
-            budget = (f"{algo}, {int(specs[0].get('num_timesteps', r.timesteps)):,} steps"
-                      f"{'' if r.num_agvs == 4 else f' at K = {r.num_agvs}'}, "
-                      f"{np.mean([s['wall_time_s'] for s in specs]):.0f} s")
-            label = f"{r.label} (`zoo:{r.name}`, seed {ev.runs[chosen].record['seed']})"
+            steps = specs[0].num_timesteps if specs[0].num_timesteps is not None else r.timesteps
+            budget = (f"{algo}, {steps:,} steps{'' if r.num_agvs == 4 else f' at K = {r.num_agvs}'}, "
+                      f"{np.mean([s.run_seconds for s in specs]):.0f} s")
+            label = f"{r.label} (`zoo:{r.name}`, seed {ev.runs[chosen].record.seed})"
             recipe_rows.append(_cells(ev, ev.runs[chosen].policy_name, env, label, budget,
                                       f"{fmt_paired(*across)} ({len(dirs)} seeds)"))
             shipped.append(Shipped(r, chosen, specs, env, across))
-    sources = sorted({rd.record.get("versions", {}).get("source", "not recorded") for rd in ev.runs.values()})
+    sources = sorted({(rd.record.versions or {}).get("source", "not recorded") for rd in ev.runs.values()})
     floor = [f"`{a}` on {env} {fmt_paired(*paired(ev.rows, SCORE_HIGH, a, env))}" for a, env, _ in ev.entries
              if a.startswith("anchor:")]
     return ZooTables(recipe_rows, run_rows, shipped, sources, floor, ev.episodes)
@@ -160,11 +160,12 @@ def _run_cells(ev: ZooEvaluation, r: Recipe, run_dir: Path, best: Mapping[str, A
     spec = ev.runs[run_dir].record
     c = protocol_cells(ev.stats, ev.entry(ev.runs[run_dir].policy_name, env))
     vs = fmt_pct(best["vs_reference"]) if "vs_reference" in best else "–"
-    validation = f"{vs} ({fmt_num(best['control_cost'])}, {spec.get('eval_episodes', '?')})"
-    return {"recipe": f"`{r.name}`{' (shipped)' if chosen else ''}", "seed": str(spec["seed"]),
+    episodes = spec.eval_episodes if spec.eval_episodes is not None else "?"
+    validation = f"{vs} ({fmt_num(best['control_cost'])}, {episodes})"
+    return {"recipe": f"`{r.name}`{' (shipped)' if chosen else ''}", "seed": str(spec.seed),
             "anchor": c["anchor"], "validation": validation,
             "score": c["score"], "vs_ref": c["vs_ref"], "vs_anchor": c["vs_anchor"], "worst": c["worst"],
-            "wall_time": f"{spec['wall_time_s']:.0f} s"}
+            "wall_time": f"{spec.run_seconds:.0f} s"}
 
 
 class ZooMarkdown(NamedTuple):
@@ -229,12 +230,12 @@ def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
     anchor = ev.anchor(policy) or None
     record = {
         "name": r.name, "label": r.label, "trained_on": r.env_id, "evaluated_on": s.env,
-        "command": r.command(), "budget_steps": int(s.specs[0].get("num_timesteps", r.timesteps)),
-        "training_seeds": [spec["seed"] for spec in s.specs], "shipped_seed": run.record["seed"],
+        "command": r.command(), "budget_steps": s.specs[0].num_timesteps or r.timesteps,
+        "training_seeds": [spec.seed for spec in s.specs], "shipped_seed": run.record.seed,
         "selected_on": "lowest paired relative difference against rg-mpc on the validation seeds (500000 + i), "
                        "never the test seeds",
         "selected_at_steps": selected_at(s.run_dir),
-        "wall_time_s": [round(spec["wall_time_s"], 1) for spec in s.specs],
+        "wall_time_s": [round(spec.run_seconds, 1) for spec in s.specs],
         "benchmark": {"test_seeds": f"0-{episodes - 1}", "reference": SCORE_HIGH, "anchor": anchor,
                       "score_version": SCORE_VERSION, "score": list(ev.score(policy, s.env)[:3]),
                       "shipped_vs_reference": list(paired(ev.rows, policy, SCORE_HIGH, s.env)),
@@ -254,30 +255,30 @@ def format_zoo_list() -> str:
         return "no shipped agents (lawn zoo build exports them)"
     lines = []
     for name, rec in agents.items():
-        trainer = rec.get("trainer") or (RECIPES[name].algo if name in RECIPES else rec.get("algo"))
-        algo = trainer if trainer == rec.get("algo") else f"{trainer}, a {rec.get('algo')} network"
-        bench = rec.get("benchmark", {})
-        ship = bench.get("shipped_vs_reference", [math.nan, math.nan])
-        gain = bench.get("shipped_vs_anchor", [math.nan, math.nan])
-        lines.append(f"zoo:{name}  {rec.get('label', '')}")
-        lines.append(f"  drives {rec.get('evaluated_on')} (trained on {rec.get('trained_on')}, {algo}), "
-                     f"{rec.get('budget_steps', 0):,} steps, training seeds {rec.get('training_seeds')}, shipped seed "
-                     f"{rec.get('shipped_seed')}")
-        if rec.get("selected_at_steps") == 0 and trainer not in ("bc", "fleet"):
+        trainer = rec.trainer or (RECIPES[name].algo if name in RECIPES else rec.algo)
+        algo = trainer if trainer == rec.algo else f"{trainer}, a {rec.algo} network"
+        bench = rec.benchmark or Benchmark()
+        ship = bench.shipped_vs_reference or [math.nan, math.nan]
+        gain = bench.shipped_vs_anchor or [math.nan, math.nan]
+        lines.append(f"zoo:{name}  {rec.label or ''}")
+        lines.append(f"  drives {rec.evaluated_on} (trained on {rec.trained_on}, {algo}), "
+                     f"{rec.budget_steps or 0:,} steps, training seeds {rec.training_seeds}, shipped seed "
+                     f"{rec.shipped_seed}")
+        if rec.selected_at_steps == 0 and trainer not in ("bc", "fleet"):
             lines.append("  ships its start: no validation beat the policy it started from (selected at 0 steps)")
-        if "tasks" in bench:  # a steady-task agent: geometric change per task and test range
-            for task, refs in bench["tasks"].items():
+        if bench.tasks is not None:  # a steady-task agent: geometric change per task and test range
+            for task, refs in bench.tasks.items():
                 cells = ", ".join(f"vs {ref} {' / '.join(fmt_pct(x) for x in changes)}"
                                   for ref, changes in refs.items())
-                lines.append(f"  {task}, test seeds {bench.get('test_seeds')} (geometric, per range): {cells}")
+                lines.append(f"  {task}, test seeds {bench.test_seeds} (geometric, per range): {cells}")
         else:
             same = verdict(gain[0], gain[1], "negative") == "not significant"  # no measured change from its anchor
-            lines.append(f"  test seeds {bench.get('test_seeds')}: cost vs rg-mpc {fmt_paired(*ship)}, vs its anchor "
-                         f"{bench.get('anchor', '?')} {fmt_paired(*gain)}"
+            lines.append(f"  test seeds {bench.test_seeds}: cost vs rg-mpc {fmt_paired(*ship)}, vs its anchor "
+                         f"{bench.anchor or '?'} {fmt_paired(*gain)}"
                          + (" (no different from its anchor)" if same else "")
-                         + f", score v{bench.get('score_version', '?')} {bench.get('score', [math.nan])[0]:.1f} "
+                         + f", score v{bench.score_version or '?'} {(bench.score or [math.nan])[0]:.1f} "
                          f"(recorded when the zoo was built; the leaderboard scores v{SCORE_VERSION})")
-        lines.append(f"  trained with: {rec.get('command')}")
+        lines.append(f"  trained with: {rec.command}")
     return "\n".join(lines)
 
 
