@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
 
 from agents.errors import MissingExtra
 from training.spec import ALGOS, TRAIN_ENV_IDS, TrainSpec
 from training.train import resume, train, train_seeds
+from training.validation import RunSummary
 
 from .common import command, config_of, count, parse_overrides, seed
 
@@ -87,23 +87,24 @@ def run(args: argparse.Namespace) -> int:
 
 def _resume(args: argparse.Namespace) -> int:
     summary = resume(Path(args.resume), timesteps=args.timesteps, progress=not args.quiet)
-    start = summary["resumed_from"]
+    start = summary.resumed_from
     print(f"lawn train: resumed {args.resume} from its checkpoint at {start} steps" if start is not None else
           f"lawn train: {args.resume} had no checkpoint; trained it again from the start")
     _report(summary, args.resume)
     return 0
 
 
-def _report(summary: dict[str, Any], out: str) -> None:
-    print(f"lawn train: {summary['algo']} on {summary['env']}, seed {summary['seed']}, "
-          f"{summary['timesteps']} steps in {summary['wall_time_s']:.1f} s{_expert_part(summary)}")
+def _report(summary: RunSummary, out: str) -> None:
+    print(f"lawn train: {summary.algo} on {summary.env}, seed {summary.seed}, "
+          f"{summary.timesteps} steps in {summary.wall_time_s or 0.0:.1f} s{_expert_part(summary)}")
     for key in ("final_validation_cost", "best_validation_cost", "best_at_timesteps", "bc_loss_first", "bc_loss_last"):
-        if summary.get(key) is not None:
-            print(f"  {key:<24}{summary[key]:.6g}")
+        value = getattr(summary, key)
+        if value is not None:
+            print(f"  {key:<24}{value:.6g}")
     print(f"wrote {out}/ (model.zip, run.json, config.json, hyperparams.json, learning curve, summary.md)")
 
 
-def _expert_part(summary: dict[str, Any]) -> str:
+def _expert_part(summary: RunSummary) -> str:
     """How much of the run the expert's decisions took (a run where no expert decides: nothing)."""
-    share = summary.get("expert_share")
+    share = summary.expert_share
     return f" ({100 * share:.0f} % of it in the expert's decisions)" if share else ""

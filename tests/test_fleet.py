@@ -191,8 +191,8 @@ def test_lawn_train_fleet_runs_dagger_and_its_network_drives_any_k(tmp_path):
     config = presets.get("default").override(num_agvs=4, num_slots=8)
     hp = {"fleet_sizes": [3, 4], "epochs": 2, "dagger_iterations": 1, "dagger_timesteps": 8, "width": 16, "heads": 2}
     summary = train(TrainSpec(algo="fleet", env_id="lawn/Comm-v1", config=config, timesteps=16, seed=0, out_dir=tmp_path / "run", hp_overrides=hp, eval_episodes=1, progress=False))
-    assert summary["bc_loss_last"] < summary["bc_loss_first"]
-    assert 0 < summary["expert_share"] < 1  # rg-mpc labels every state of every round
+    assert summary.bc_loss_last < summary.bc_loss_first
+    assert 0 < summary.expert_share < 1  # rg-mpc labels every state of every round
     wide = config.override(num_agvs=8)
     policy = make_policy(f"sb3:{tmp_path / 'run'}", wide, env_id="lawn/Comm-v1")
     run = rollout(gym.make("lawn/Comm-v1", config=wide), policy, seed=3)

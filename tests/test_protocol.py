@@ -572,8 +572,8 @@ def test_the_learning_curve_shows_the_paired_interval_against_the_start(tmp_path
     for steps, row in rows:
         append_learning_curve(tmp_path, steps, row)
     summary = write_learning_curve(tmp_path, spec)
-    assert summary["best_at_timesteps"] == 64  # -5 % ± 1 %: significantly better than the start
-    assert (summary["best_validation_vs_start"], summary["best_validation_vs_start_ci95"]) == (-0.05, 0.01)
+    assert summary.best_at_timesteps == 64  # -5 % ± 1 %: significantly better than the start
+    assert (summary.best_validation_vs_start, summary.best_validation_vs_start_ci95) == (-0.05, 0.01)
     from PIL import Image
 
     with Image.open(tmp_path / "learning_curve.png") as image:

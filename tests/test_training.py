@@ -110,7 +110,7 @@ def test_a_killed_and_resumed_run_equals_an_uninterrupted_one(tmp_path, algo, en
     out = tmp_path / "killed"
     assert not (out / "model.zip").exists() and latest_checkpoint(out).steps < kill_at
     summary = resume(out, progress=False)
-    assert summary["resumed_from"] == kill_at // 128 * 128  # the last checkpoint (every 128 steps) before the kill
+    assert summary.resumed_from == kill_at // 128 * 128  # the last checkpoint (every 128 steps) before the kill
     steps, updates, curve, episodes = _history(out)
     assert (steps, updates, curve) == _history(whole)[:3] and steps == 640 and updates > 0
     # the monitor kept the episodes before the checkpoint and appended the rest (12-slot episodes;
@@ -130,7 +130,7 @@ def test_resume_extends_finished_runs_only_when_asked_and_restarts_runs_without_
         resume(out)
     assert (out / "model.zip").read_bytes() == model  # untouched
     summary = resume(out, timesteps=512, progress=False)
-    assert run_steps(out) == 512 and summary["timesteps"] == 512 and summary["resumed_from"] == 256
+    assert run_steps(out) == 512 and summary.timesteps == 512 and summary.resumed_from == 256
     with pytest.raises(ValueError, match="finished \\(512 steps, target 128\\); pass --timesteps above 512"):
         resume(out, timesteps=128)
     with pytest.raises(ValueError, match="no run.json"):
@@ -141,7 +141,7 @@ def test_resume_extends_finished_runs_only_when_asked_and_restarts_runs_without_
     early = tmp_path / "early"
     assert latest_checkpoint(early) is None
     summary = resume(early, progress=False)
-    assert summary["resumed_from"] is None and run_steps(early) == 256
+    assert summary.resumed_from is None and run_steps(early) == 256
     assert _history(early)[:3] == (256, 2 * 2, [0, 128, 256])  # 2 rollouts of 2 x 64 steps, 2 epochs each
     # a damaged run directory names the file
     (early / "hyperparams.json").unlink()
@@ -159,11 +159,11 @@ def test_behaviour_cloning_reduces_loss_and_warm_starts_ppo(tmp_path):
     history = json.loads((out / "bc_losses.json").read_text())
     assert history[0]["losses"][-1] < history[0]["losses"][0]
     assert history[1]["samples"] == 156
-    assert summary["bc_loss_last"] < summary["bc_loss_first"]
+    assert summary.bc_loss_last < summary.bc_loss_first
     record = json.loads((out / "run.json").read_text())  # the expert's labels: 156 decisions of the run's time
     assert 0 < record["expert_decision_s"] < record["wall_time_s"]
-    assert summary["expert_share"] == round(record["expert_decision_s"] / record["wall_time_s"], 3)
-    assert f"- expert_share: {summary['expert_share']}" in (out / "summary.md").read_text()
+    assert summary.expert_share == round(record["expert_decision_s"] / record["wall_time_s"], 3)
+    assert f"- expert_share: {summary.expert_share}" in (out / "summary.md").read_text()
     with pytest.raises(ValueError, match="bc runs are not resumable"):
         resume(out, timesteps=10_000)
     metrics = _run_episode(make_policy(f"bc:{out}"), "lawn/Comm-v1")
@@ -235,8 +235,8 @@ def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_
     assert curve[0]["vs_start"] == 0.0 and all(math.isnan(r["vs_start_ci95"]) for r in curve[1:])
     # on one validation seed no later policy is significantly better than the start: the start is kept
     best = curve[0]
-    assert summary["best_at_timesteps"] == 0 and summary["best_validation_vs_reference"] == best["vs_reference"]
-    assert summary["best_validation_cost"] == best["control_cost"]
+    assert summary.best_at_timesteps == 0 and summary.best_validation_vs_reference == best["vs_reference"]
+    assert summary.best_validation_cost == best["control_cost"]
     policy = make_policy(f"sb3:{out}")
     assert policy.interface.action_scheme == "anchored" and policy.env_id == "lawn/Comm-v1"
     seeds = [VALIDATION_SEED_BASE]  # _train validates on one episode
@@ -644,7 +644,7 @@ def test_a_residual_of_the_link_on_the_paired_reward_records_its_expert_time(tmp
     record = json.loads((out / "run.json").read_text())
     assert record["residual"] == residual
     assert 0 < record["expert_decision_s"] < record["wall_time_s"]
-    assert summary["expert_share"] == round(record["expert_decision_s"] / record["wall_time_s"], 3) > 0
+    assert summary.expert_share == round(record["expert_decision_s"] / record["wall_time_s"], 3) > 0
     policy = make_policy(f"sb3:{out}", SMALL)
     assert policy.residual.size == SMALL.num_agvs + 2 and policy.network.action_space.shape == (SMALL.num_agvs + 2,)
     state = json.loads(next((out / "checkpoints").glob("*/state.json")).read_text())

@@ -273,13 +273,13 @@ def test_sb3_trains_on_the_native_vector_env(tmp_path):
                               seed=0, out_dir=tmp_path / "run", n_envs=4,
                               hp_overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, eval_every=128,
                               eval_episodes=1, checkpoint_every=128, progress=False, interface="v0", vec="native"))
-    assert summary["timesteps"] == 256 and summary["best_validation_cost"] > 0
+    assert summary.timesteps == 256 and summary.best_validation_cost > 0
     # the training protocol's default (the RL interface) on Comm-v1's native vector env
     summary = train(TrainSpec(algo="ppo", env_id="lawn/Comm-v1", config=ScenarioConfig(num_slots=12), timesteps=128,
                               seed=0, out_dir=tmp_path / "comm", n_envs=4,
                               hp_overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, eval_every=128,
                               eval_episodes=1, checkpoint_every=128, progress=False, vec="native"))
-    assert summary["timesteps"] == 128 and summary["best_validation_cost"] > 0
+    assert summary.timesteps == 128 and summary.best_validation_cost > 0
     with pytest.raises(ValueError, match="native"):
         TrainSpec(algo="ppo", env_id="lawn/Parallel-v0", config=ScenarioConfig(num_slots=12), timesteps=64, seed=0,
                   out_dir=tmp_path / "rl", n_envs=2, progress=False, vec="native")

@@ -28,7 +28,7 @@ from lawn_env import ScenarioConfig
 from lawn_env.interface import InterfaceLike, RLInterface, resolve_interface
 
 from .datasets import dataset_transitions, label_transitions
-from .validation import append_learning_curve, limit_torch_threads, versions, write_learning_curve
+from .validation import RunSummary, append_learning_curve, limit_torch_threads, versions, write_learning_curve
 
 __all__ = ["Labeller", "Demonstrations", "collect", "fit", "BCSettings", "bc_settings", "train_bc", "BC_TARGETS"]
 
@@ -232,7 +232,7 @@ def _expert_data(spec: Any, st: BCSettings, episode_seed: int, clock: DecisionCl
     return obs, actions, costs, {"id": spec.dataset, "episode_seeds": seeds}, recorded or "unrecorded"
 
 
-def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> dict[str, Any]:
+def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> RunSummary:
     """Clone, DAgger and save the run of ``spec`` (a :class:`training.spec.TrainSpec`)."""
     limit_torch_threads()
     st = bc_settings(params)
@@ -255,7 +255,7 @@ def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> dict[str, An
 
 
 def save_imitation(spec: Any, model: Any, record: dict[str, Any], hyperparams: dict[str, Any],
-                   history: list[dict[str, Any]]) -> dict[str, Any]:
+                   history: list[dict[str, Any]]) -> RunSummary:
     """Validate an imitation-trained model once on ``spec.eval_episodes`` validation seeds and write
     its run; ``run.json`` last (a run with it is a finished one), nothing at all on a failure before."""
     from .callbacks import ControlCostValidation, save_model
@@ -274,4 +274,4 @@ def save_imitation(spec: Any, model: Any, record: dict[str, Any], hyperparams: d
     append_learning_curve(out_dir, record["num_timesteps"], row)
     summary = write_learning_curve(out_dir, record)
     (out_dir / "run.json").write_text(json.dumps(record, indent=2))
-    return summary | {"bc_loss_first": history[0]["losses"][0], "bc_loss_last": history[-1]["losses"][-1]}
+    return dataclasses.replace(summary, bc_loss_first=history[0]["losses"][0], bc_loss_last=history[-1]["losses"][-1])

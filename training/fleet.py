@@ -20,7 +20,7 @@ from lawn_env.entities import EntityLayout
 from lawn_env.interface import InterfaceLike, resolve_interface
 
 from .bc import Labeller, checked_settings, collect, save_imitation
-from .validation import limit_torch_threads, versions
+from .validation import RunSummary, limit_torch_threads, versions
 
 __all__ = ["EntityPairs", "fleet_pairs", "fit_fleet", "dagger_round", "fleet_settings", "task_config",
            "training_configs",
@@ -160,7 +160,7 @@ def _dagger(model: Any, env_id: str, configs: list[Any], st: dict[str, Any], tim
     return history
 
 
-def train_fleet(spec: Any, params: Mapping[str, Any], version: int) -> dict[str, Any]:
+def train_fleet(spec: Any, params: Mapping[str, Any], version: int) -> RunSummary:
     """``lawn train --algo fleet``: DAgger of a :class:`agents.fleet.FleetPolicy` on every size of
     ``fleet_sizes``, saved as a PPO model (``sb3:DIR`` loads it), validated on the spec's own K."""
     from stable_baselines3 import PPO

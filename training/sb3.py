@@ -30,7 +30,7 @@ from lawn_env import ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig, parallel_env, rol
 from lawn_env.interface import InterfaceLike
 
 from .callbacks import ActorWarmup, Checkpoint, ControlCostValidation, RunCheckpoint, save_model
-from .validation import limit_torch_threads, versions, write_learning_curve
+from .validation import RunSummary, limit_torch_threads, versions, write_learning_curve
 
 __all__ = ["NativeVecEnv", "make_marl_vec_env", "make_train_env", "train_sb3", "setup", "learn", "init_from",
            "start_at_anchor"]
@@ -177,7 +177,7 @@ def _lawn_wrappers(env: Any, paired: Mapping[str, Any] | None, residual: Mapping
 
 
 def train_sb3(spec: Any, params: dict[str, Any], options: Any, version: int,
-              callbacks: list[Any] | None = None) -> dict[str, Any]:
+              callbacks: list[Any] | None = None) -> RunSummary:
     """Train the SB3 run of ``spec`` (a :class:`training.spec.TrainSpec`) with its hyperparameters and
     their :class:`~training.spec.RunOptions`; a model SB3 refuses to build leaves nothing behind."""
     if spec.init_from is not None:
@@ -275,7 +275,7 @@ def setup(record: dict[str, Any], options: Any, config: ScenarioConfig, out_dir:
     return Run(record, model, env, hooks + list(callbacks or []), out_dir, wall_before, start is not None, clock)
 
 
-def learn(run: Run, progress: bool) -> dict[str, Any]:
+def learn(run: Run, progress: bool) -> RunSummary:
     """Train a set-up run to its timestep target; save the model, its statistics and the curve."""
     model, env, out_dir = run.model, run.env, run.out_dir
     remaining = int(run.record["timesteps"]) - model.num_timesteps

@@ -23,12 +23,13 @@ from evaluation.sweep import execute
 
 from .recipes import RECIPES, finished, recipe
 from .spec import ALGORITHMS, TrainSpec, split_params
+from .validation import RunSummary
 
 __all__ = ["train", "train_seeds", "resume", "train_recipes"]
 
 
 # ---------------------------------------------------------------- runs
-def train(spec: TrainSpec, callbacks: list[Any] | None = None) -> dict[str, Any]:
+def train(spec: TrainSpec, callbacks: list[Any] | None = None) -> RunSummary:
     """Train the run of ``spec`` from scratch; returns its summary (also written to ``spec.out_dir``).
     ``callbacks`` are extra SB3 callbacks, run after the run's own (validation, checkpoints)."""
     if (spec.out_dir / "run.json").exists():
@@ -36,7 +37,7 @@ def train(spec: TrainSpec, callbacks: list[Any] | None = None) -> dict[str, Any]
     params, version = spec.hyperparams()
     algorithm = ALGORITHMS[spec.algo]
     if algorithm.settings is not None:  # a trainer of its own (fleet, bc)
-        summary: dict[str, Any] = algorithm.load()(spec, params, version)
+        summary: RunSummary = algorithm.load()(spec, params, version)
     else:
         from .sb3 import train_sb3  # here: this module imports without the rl extra
 
@@ -55,18 +56,18 @@ def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: st
     # absolute: a worker writes where this process means, whatever its own working directory
     specs = [dataclasses.replace(spec, seed=s, out_dir=(spec.out_dir / f"seed-{s}").absolute(), progress=progress)
              for s in seeds]
-    summaries = sorted(execute(train, specs, workers, backend), key=lambda r: seeds.index(r["seed"]))
-    best = [s["best_validation_cost"] for s in summaries]
-    mean, half = mean_ci(best)
-    result = {"algo": spec.algo, "env": spec.env_id, "seeds": list(seeds), "runs": summaries,
+    summaries = sorted(execute(train, specs, workers, backend), key=lambda r: seeds.index(r.seed))
+    best = [s.best_validation_cost for s in summaries]
+    mean, half = mean_ci(b for b in best if b is not None)
+    result = {"algo": spec.algo, "env": spec.env_id, "seeds": list(seeds), "runs": [s.as_json() for s in summaries],
               "best_validation_cost_mean": mean, "best_validation_cost_ci95": half,
-              "wall_time_s": [s["wall_time_s"] for s in summaries],
-              "expert_share": [s.get("expert_share") for s in summaries]}
+              "wall_time_s": [s.wall_time_s for s in summaries],
+              "expert_share": [s.expert_share for s in summaries]}
     (spec.out_dir / "seeds.json").write_text(json.dumps(result, indent=2))
     return result
 
 
-def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -> dict[str, Any]:
+def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -> RunSummary:
     """Continue an interrupted run from its last checkpoint up to its (or a new) timestep target, with
     the update count of an uninterrupted run, its history appended to the checkpoint's and an
     off-policy replay buffer restored; a run killed before its first checkpoint restarts from scratch."""
@@ -108,8 +109,7 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
         record["expert_decision_s"] = float(checkpoint.state.get("expert_decision_s", 0.0))
     (out_dir / "run.json").write_text(json.dumps(record, indent=2))
     summary = learn(setup(record, options, config, out_dir, checkpoint), progress=progress)
-    summary["resumed_from"] = checkpoint.steps if checkpoint is not None else None
-    return summary
+    return dataclasses.replace(summary, resumed_from=checkpoint.steps if checkpoint is not None else None)
 
 
 def train_recipes(runs: Path, names: list[str] | None = None, workers: int = 2, progress: bool = True) -> list[Path]:

@@ -5,8 +5,10 @@ summary written from the periodic validation."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import platform
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +22,7 @@ from evaluation.provenance import provenance
 from evaluation.seeds import VALIDATION_SEED_BASE
 from evaluation.stats import mean_ci, paired_difference
 
-__all__ = ["VALIDATION_REFERENCE", "CURVE_FIELDS",
+__all__ = ["RunSummary", "VALIDATION_REFERENCE", "CURVE_FIELDS",
            "limit_torch_threads", "versions", "read_learning_curve", "selection_key", "selected_validation",
            "validation_costs", "validation_reference", "validation_row", "append_learning_curve",
            "write_learning_curve"]
@@ -130,7 +132,39 @@ def append_learning_curve(run_dir: Path, timesteps: int, row: Mapping[str, float
         writer.writerow({"timesteps": timesteps, **row})
 
 
-def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict[str, Any]:
+@dataclass(frozen=True)
+class RunSummary:
+    """A training run's summary (``summary.md``, what ``lawn train`` prints): the run, its wall time
+    and the share of it the expert's decisions took, the last and the selected validation (its cost,
+    its paired change against the reference and against the run's start, and when it was), and, for
+    an imitation run, its first and last loss; for a resumed run, the checkpoint it resumed from."""
+
+    algo: str
+    env: str
+    seed: int
+    timesteps: int | None
+    wall_time_s: float | None
+    expert_decision_s: float | None
+    expert_share: float | None
+    interface: Any
+    final_validation_cost: float | None
+    best_validation_cost: float | None
+    best_validation_vs_reference: float | None
+    best_validation_vs_start: float | None
+    best_validation_vs_start_ci95: float | None
+    best_at_timesteps: int | None
+    bc_loss_first: float | None = None
+    bc_loss_last: float | None = None
+    resumed_from: int | None = None
+
+    def as_json(self) -> dict[str, Any]:
+        """The summary's fields, an imitation run's losses and a resume's checkpoint only where set."""
+        data = dataclasses.asdict(self)
+        return {k: v for k, v in data.items() if v is not None or k not in ("bc_loss_first", "bc_loss_last",
+                                                                                "resumed_from")}
+
+
+def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> RunSummary:
     """learning_curve.png and summary.md from the periodic validation (``learning_curve.csv``): the
     validation cost, and the paired change against the run's start with its 95 % interval (what model
     selection reads: a change within the interval is not one)."""
@@ -139,20 +173,20 @@ def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> dict[str, An
     if rows:
         _plot_curve(rows, out_dir / "learning_curve.png", f"{spec['algo']} on {spec['env']}, seed {spec['seed']}")
     best = selected_validation(rows)
-    summary = {
-        "algo": spec["algo"], "env": spec["env"], "seed": spec["seed"], "timesteps": spec.get("num_timesteps"),
-        "wall_time_s": spec.get("wall_time_s"), "expert_decision_s": spec.get("expert_decision_s"),
-        "expert_share": _share(spec.get("expert_decision_s"), spec.get("wall_time_s")),
-        "interface": spec.get("interface"),
-        "final_validation_cost": rows[-1]["control_cost"] if rows else None,
-        "best_validation_cost": best["control_cost"] if best else None,
-        "best_validation_vs_reference": best.get("vs_reference") if best else None,
-        "best_validation_vs_start": best.get("vs_start") if best else None,
-        "best_validation_vs_start_ci95": best.get("vs_start_ci95") if best else None,
-        "best_at_timesteps": int(best["timesteps"]) if best else None,
-    }
+    summary = RunSummary(
+        algo=spec["algo"], env=spec["env"], seed=spec["seed"], timesteps=spec.get("num_timesteps"),
+        wall_time_s=spec.get("wall_time_s"), expert_decision_s=spec.get("expert_decision_s"),
+        expert_share=_share(spec.get("expert_decision_s"), spec.get("wall_time_s")),
+        interface=spec.get("interface"),
+        final_validation_cost=rows[-1]["control_cost"] if rows else None,
+        best_validation_cost=best["control_cost"] if best else None,
+        best_validation_vs_reference=best.get("vs_reference") if best else None,
+        best_validation_vs_start=best.get("vs_start") if best else None,
+        best_validation_vs_start_ci95=best.get("vs_start_ci95") if best else None,
+        best_at_timesteps=int(best["timesteps"]) if best else None,
+    )
     lines = [f"# {spec['algo']} on {spec['env']}", ""]
-    lines += [f"- {k}: {v}" for k, v in summary.items()]
+    lines += [f"- {k}: {v}" for k, v in summary.as_json().items()]
     (out_dir / "summary.md").write_text("\n".join(lines) + "\n")
     return summary
 
