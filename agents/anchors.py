@@ -33,7 +33,7 @@ from .base import COMM, JOINT, Policy
 __all__ = ["InterfacePolicy", "AnchorPolicy", "ANCHORS", "anchor_name"]
 
 #: The anchors by name: the interface whose zero action each one plays (None: the v0 interface).
-ANCHORS: dict[str, Any] = {
+ANCHORS: dict[str, dict[str, str] | None] = {
     "hover": None,
     "distance": {"base": "rl", "power_anchor": "distance"},
     "stake": {"base": "rl", "power_anchor": "stake"},

@@ -35,7 +35,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Annotated, Any
+from typing import Annotated
 
 import numpy as np
 import numpy.typing as npt
@@ -155,6 +155,15 @@ class _Point:
     sca_iterations: int = 0
 
 
+@dataclass
+class _SlotMemory:
+    """The step sizes carried across one slot's AO iterations: the power step's last Barzilai-Borwein
+    trial (None: none yet) and the SCA trust region's start."""
+
+    pgd_trial: float | None = None
+    sca_t: float = 1.0
+
+
 class AOSolver:
     """Alternating optimization over (controls, power, drone) for one scenario config."""
 
@@ -167,7 +176,7 @@ class AOSolver:
         self.mpc = OutageAwareMPC.from_config(config, backend=self.settings.qp_backend)
         self.link = channel.LinkParams.from_config(config, planning=True)
         self.power_budget_w = config.power_budget_w
-        self._memory: dict[str, Any] = {}
+        self._memory = _SlotMemory()
 
     def reset(self) -> None:
         """Drop warm starts (per episode)."""
@@ -212,7 +221,7 @@ class AOSolver:
         p = self.equal_power() if s.pgd_restart_equal else np.array(p_current, dtype=float)
         value, state = objective.value(p)
         grad = objective.gradient(state)
-        trial = self._memory.get("pgd_trial")  # the last BB step of this slot, if any
+        trial = self._memory.pgd_trial  # the last BB step of this slot, if any
         iterations = 0
         for iterations in range(1, s.pgd_max_iterations + 1):  # noqa: B007 - the count is read after the loop
             gnorm = math.sqrt(float(matmul(grad, grad)))
@@ -236,7 +245,7 @@ class AOSolver:
             p, grad, value = p_new, grad_new, value_new
             if math.sqrt(float(matmul(step, step))) < s.pgd_tolerance * budget:
                 break
-        self._memory["pgd_trial"] = trial
+        self._memory.pgd_trial = trial
         if value <= current:
             return p, value, iterations
         return p_current, current, iterations
@@ -250,7 +259,7 @@ class AOSolver:
         iterations = 0
         # the safeguard's backtracking starts from twice the last accepted fraction (kept across the
         # AO iterations of a slot)
-        t_start = self._memory.get("sca_t", 1.0)
+        t_start = self._memory.sca_t
         for iterations in range(1, s.sca_max_iterations + 1):  # noqa: B007 - the count is read after the loop
             grad = objective.gradient(q)
             target = linear_argmin_disc_box(grad, prob.q_prev, prob.reach, prob.area)
@@ -273,7 +282,7 @@ class AOSolver:
             if t * length < 2.0 * s.sca_tolerance_m:
                 break
             t_start = min(1.0, 2.0 * t)
-        self._memory["sca_t"] = t_start
+        self._memory.sca_t = t_start
         return q, value, iterations
 
     # ------------------------------------------------------------------ the AO loop
@@ -292,7 +301,7 @@ class AOSolver:
         start = time.perf_counter()
         _check_blocks(blocks, increments)
         prob = SlotProblem(self.mpc, self.link, snapshot, self.config)
-        self._memory = {}  # step sizes carried across the AO iterations of this slot
+        self._memory = _SlotMemory()  # step sizes carried across the AO iterations of this slot
         point = self._initial_point(prob, snapshot, increments, power_w, drone_position)
         self._alternate_until_converged(prob, blocks, point)
         before_final = point.value

@@ -27,7 +27,7 @@ The anchor's cost is paid every slot: a ``dv-mpc`` decision is about 1.7 ms at K
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypedDict
 
 import gymnasium as gym
 import numpy as np
@@ -39,14 +39,26 @@ from lawn_env.spaces import check_action
 
 from .base import COMM, JOINT, Policy
 
-__all__ = ["ResidualActions", "AnchorResidual", "check_residual", "PARTS"]
+__all__ = ["ResidualActions", "AnchorResidual", "ResidualSettings", "check_residual", "PARTS"]
 
 #: The parts of an anchored action a residual can move, in the action's order (Joint's increments
 #: first; Comm has no ``increment``).
 PARTS = ("increment", "power", "drone")
 
 
-def check_residual(residual: Any) -> dict[str, Any]:
+class _Residual(TypedDict):
+    anchor: str
+    scale: float
+
+
+class ResidualSettings(_Residual, total=False):
+    """A residual scheme's settings, checked: the anchor policy, the scale of the learner's move and
+    the parts it moves (absent: all of :data:`PARTS`)."""
+
+    moves: list[str]
+
+
+def check_residual(residual: Any) -> ResidualSettings:
     """A residual's settings, ``{"anchor": NAME, "scale": s, "moves": [PART, ...]}`` with
     ``0 < s <= 2`` and ``moves`` a non-empty subset of :data:`PARTS` (optional: all), checked (an
     error naming the field otherwise). ``moves`` is kept only when it leaves a part out, in
@@ -59,7 +71,7 @@ def check_residual(residual: Any) -> dict[str, Any]:
         raise ValueError(f"residual anchor={anchor!r}: a policy name (agents.make_policy), e.g. 'dv-mpc'")
     if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0.0 < scale <= 2.0:
         raise ValueError(f"residual scale={scale!r}: a number in (0, 2] (the action's range is [-1, 1])")
-    checked: dict[str, Any] = {"anchor": anchor, "scale": float(scale)}
+    checked: ResidualSettings = {"anchor": anchor, "scale": float(scale)}
     moves = residual.get("moves", PARTS)
     if (isinstance(moves, str) or not isinstance(moves, (list, tuple)) or not moves
             or any(part not in PARTS for part in moves) or len(set(moves)) != len(moves)):

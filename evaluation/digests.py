@@ -12,7 +12,7 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 from agents import BENCHMARK_POLICIES
 from agents.base import JOINT
@@ -29,7 +29,16 @@ DIGESTS = Path(__file__).resolve().parent / "episode_digests.json"
 DIGEST_SEEDS = (0, 1)
 
 
-def episode_record(policy: str, seed: int) -> dict[str, Any]:
+class Digest(TypedDict):
+    """One recorded episode of a README row: its seed, control cost (10 significant digits) and the
+    digest of its per-slot costs, outage rate and RMSE."""
+
+    seed: int
+    control_cost: float
+    digest: str
+
+
+def episode_record(policy: str, seed: int) -> Digest:
     """One seeded episode of a README row on the default task: its digest and its control cost."""
     r = run_episode(policy, JOINT, ScenarioConfig(), seed)
     values = [f"{float(x):.10g}" for x in (*(r.stage_costs if r.stage_costs is not None else ()), r.outage_rate,
@@ -38,7 +47,7 @@ def episode_record(policy: str, seed: int) -> dict[str, Any]:
             "digest": hashlib.sha256(" ".join(values).encode()).hexdigest()[:16]}
 
 
-def digest_records(rows: Sequence[str] = README_ROWS) -> dict[str, list[dict[str, Any]]]:
+def digest_records(rows: Sequence[str] = README_ROWS) -> dict[str, list[Digest]]:
     """Every row's episodes (:func:`episode_record`), by row name."""
     return {name: [episode_record(name, s) for s in DIGEST_SEEDS] for name in rows}
 

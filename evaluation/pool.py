@@ -24,12 +24,26 @@ from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field
 from typing import Any
 
 __all__ = ["worker_pool", "shared_pool", "start_helpers", "stop_helpers", "shutdown_shared_pool", "HelperDied",
            "pool_map", "single_threaded", "chunk_size", "resolve_start_method"]
 
-_SHARED: dict[str, Any] = {"pool": None, "helpers": 0, "pid": 0, "method": None, "starts": [], "cwd": None}
+@dataclass
+class _Shared:
+    """This process's persistent pool: the pool, its helper count, the process that made it, its start
+    method, the futures of its helpers' starts and the working directory it was made in."""
+
+    pool: ProcessPoolExecutor | None = None
+    helpers: int = 0
+    pid: int = 0
+    method: str | None = None
+    starts: list[Future[int]] = field(default_factory=list)
+    cwd: str | None = None
+
+
+_SHARED = _Shared()
 
 #: The environment variable that picks the helpers' start method (default ``spawn``).
 START_METHOD_VARIABLE = "LAWN_START_METHOD"
@@ -123,17 +137,18 @@ def shared_pool(helpers: int, start_method: str | None = None) -> ProcessPoolExe
     every later call with the same count, start method and working directory, replaced when one of
     them changes or the pool broke."""
     method = resolve_start_method(start_method)
-    pool: ProcessPoolExecutor | None = _SHARED["pool"]
-    if pool is not None and _SHARED["pid"] != os.getpid():  # a forked child: the parent's pool is not its own
+    pool: ProcessPoolExecutor | None = _SHARED.pool
+    if pool is not None and _SHARED.pid != os.getpid():  # a forked child: the parent's pool is not its own
         _forget()
         pool = None
-    if pool is not None and (_SHARED["helpers"] != helpers or _SHARED["method"] != method
-                             or _SHARED["cwd"] != os.getcwd() or getattr(pool, "_broken", False)):
+    if pool is not None and (_SHARED.helpers != helpers or _SHARED.method != method
+                             or _SHARED.cwd != os.getcwd() or getattr(pool, "_broken", False)):
         shutdown_shared_pool()  # a new working directory too: the helpers resolve the tasks' relative paths
         pool = None
     if pool is None:
         pool = worker_pool(helpers, method)
-        _SHARED.update(pool=pool, helpers=helpers, pid=os.getpid(), method=method, starts=[], cwd=os.getcwd())
+        _SHARED.pool, _SHARED.helpers, _SHARED.pid, _SHARED.method = pool, helpers, os.getpid(), method
+        _SHARED.starts, _SHARED.cwd = [], os.getcwd()
     return pool
 
 
@@ -146,15 +161,15 @@ def start_helpers(workers: int, start_method: str | None = None) -> list[Future[
     if workers <= 1 or multiprocessing.parent_process() is not None:
         return []
     pool = shared_pool(workers - 1, start_method)
-    if not _SHARED["starts"]:  # spawn workers start on demand: a small task each
-        _SHARED["starts"] = [pool.submit(_ready) for _ in range(workers - 1)]
-    return list(_SHARED["starts"])
+    if not _SHARED.starts:  # spawn workers start on demand: a small task each
+        _SHARED.starts = [pool.submit(_ready) for _ in range(workers - 1)]
+    return list(_SHARED.starts)
 
 
 def _forget() -> tuple[ProcessPoolExecutor | None, int]:
     """Drop the persistent pool from this process's record; returns it and the process that made it."""
-    pool, owner = _SHARED["pool"], _SHARED["pid"]
-    _SHARED.update(pool=None, helpers=0, pid=0, method=None, starts=[])
+    pool, owner = _SHARED.pool, _SHARED.pid
+    _SHARED.pool, _SHARED.helpers, _SHARED.pid, _SHARED.method, _SHARED.starts = None, 0, 0, None, []
     return pool, owner
 
 
@@ -241,7 +256,7 @@ class _HelperMap:
                  weight: Callable[[Any], int]):
         self.fn, self.tasks, self.workers, self.bar, self.weight = fn, tasks, workers, bar, weight
         self.starts = start_helpers(workers, start_method)
-        self.pool = _SHARED["pool"]
+        self.pool = _SHARED.pool
         self.lock = threading.RLock()  # a callback may run in the thread that holds it (a future already done)
         self.returned = threading.Condition(self.lock)
         self.pending = deque(range(len(tasks)))  # task indices not yet handed out, in order
@@ -255,6 +270,8 @@ class _HelperMap:
                           "rerun with --workers 1 (workers=1) to play them in this process and see what fails")
 
     def hand_out(self) -> None:
+        if self.pool is None:  # no helpers (workers <= 1, or inside a worker): every task plays here
+            return
         with self.lock:
             ready = sum(1 for f in self.starts if f.done() and not f.cancelled() and f.exception() is None)
             while self.pending and not self.failure and len(self.in_flight) < 2 * ready:

@@ -25,7 +25,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 from agents import make_policy
 from agents.base import JOINT
@@ -140,7 +140,7 @@ class Outcome(NamedTuple):
     results: list[EpisodeResult]
     stats: Statistics
     tables: dict[str, str]
-    per_slot: list[dict[str, Any]]
+    per_slot: list[dict[str, str | int | float]]
     seconds: float
 
 

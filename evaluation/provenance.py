@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import subprocess
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 __all__ = ["provenance", "source_stamp", "BUILD_INFO"]
 
@@ -33,7 +33,14 @@ def _git(root: Path, *args: str) -> str:
     return done.stdout.strip()
 
 
-def source_stamp(root: Path = _ROOT) -> dict[str, Any] | None:
+class Stamp(TypedDict):
+    """The commit a checkout or a wheel was made from, and whether tracked files differed from it."""
+
+    commit: str
+    dirty: bool
+
+
+def source_stamp(root: Path = _ROOT) -> Stamp | None:
     """``{"commit", "dirty"}`` of the lawn checkout at ``root`` (``dirty``: a tracked file other than
     the generated outputs differs from the commit); None when ``root`` is not the top of a git work
     tree that tracks ``evaluation/provenance.py`` (an install inside someone else's repository)."""
@@ -49,12 +56,14 @@ def source_stamp(root: Path = _ROOT) -> dict[str, Any] | None:
     return {"commit": commit, "dirty": bool(dirty)}
 
 
-def _build_stamp() -> dict[str, Any] | None:
+def _build_stamp() -> Stamp | None:
     try:
         stamp = json.loads(BUILD_INFO.read_text())
     except (OSError, ValueError):
         return None
-    return stamp if isinstance(stamp, dict) and "commit" in stamp else None
+    if not isinstance(stamp, dict) or not isinstance(stamp.get("commit"), str):
+        return None
+    return {"commit": stamp["commit"], "dirty": bool(stamp.get("dirty", False))}
 
 
 def provenance() -> str:

@@ -66,11 +66,11 @@ LIMITS: dict[str, tuple[str, Any]] = {
     "actuator:buffer": ("control.actuator", "buffer"),
 }
 #: name -> the settings of the expert a limit row plays with (bounded time per decision).
-LIMIT_SETTINGS: dict[str, dict[str, Any]] = {
+LIMIT_SETTINGS: dict[str, Mapping[str, Any]] = {
     "limit:fast-drone": {"max_drone_points": 1_000},
 }
 #: name -> the expert a noise-floor row plays and its settings that differ (harmlessly) from its defaults.
-NOISE: dict[str, tuple[str, dict[str, Any]]] = {
+NOISE: dict[str, tuple[str, Mapping[str, Any]]] = {
     f"noise:{SCORE_HIGH}": (SCORE_HIGH, {"drone_spacing_m": 1.4}),
     "noise:rg-mpc": ("rg-mpc", {"drone_spacing_m": 1.4}),
 }
@@ -96,7 +96,7 @@ class Resolved(NamedTuple):
 
     policy: str
     config: ScenarioConfig
-    settings: dict[str, Any]
+    settings: Mapping[str, Any]
 
 
 class Built(NamedTuple):
@@ -361,14 +361,14 @@ def learned_entries(agents: Sequence[str], envs: Sequence[str] | None = None) ->
     return out
 
 
-def per_slot_profile(results: Results) -> list[dict[str, Any]]:
+def per_slot_profile(results: Results) -> list[dict[str, str | int | float]]:
     """The mean stage cost per slot over the episodes of every (task, env, policy) of results that
     hold their per-slot trace (``stage_costs``): one row per slot (``per_slot.csv``)."""
     groups: dict[tuple[str, str, str], list[np.ndarray]] = {}
     for r in results:
         if r.stage_costs is not None:
             groups.setdefault((r.task or "default", r.env, r.policy), []).append(r.stage_costs)
-    out = []
+    out: list[dict[str, str | int | float]] = []
     for (task, env, policy), traces in groups.items():
         mean = np.mean(np.asarray(traces, dtype=float), axis=0)
         out += [{"task": task, "env": env, "policy": policy, "slot": n, "mean_stage_cost": float(c),

@@ -15,7 +15,6 @@ import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -48,7 +47,7 @@ def distil_target(rg: RangeComparison, dv: RangeComparison, ms: float) -> str:
     return "met" if rg.below(DISTIL_VS_RG - 1e-12) and dv.below(DISTIL_VS_DV) and ms <= DISTIL_MS else "missed"
 
 
-def own_law(policy: str) -> dict[str, Any]:
+def own_law(policy: str) -> dict[str, str]:
     """The control law ``policy`` (a learned agent, :func:`agents.learned.trained_config`) was trained
     with, as config settings."""
     return {"control.law": trained_config(policy).control.law}

@@ -64,7 +64,7 @@ class RunOptions:
     start_at_anchor: bool = False
     paired_anchor: str | None = None
     """Train on the paired reward against this policy (:class:`agents.paired.PairedReward`)."""
-    residual: dict[str, Any] | None = None
+    residual: Mapping[str, Any] | None = None
     """Act by the residual scheme around a policy, ``{"anchor": NAME, "scale": s, "moves": [...]}``
     (:mod:`agents.residual`)."""
     algo_kwargs: dict[str, Any] = Field(default_factory=dict)

@@ -35,7 +35,7 @@ def limit_torch_threads() -> None:
     torch.set_num_threads(1)
 
 
-def versions() -> dict[str, Any]:
+def versions() -> dict[str, str]:
     """The versions of lawn, SB3, torch, Gymnasium and Python, and the source commit."""
     import gymnasium
     import stable_baselines3
