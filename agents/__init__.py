@@ -12,6 +12,8 @@ from lawn_env import kernel_cache
 kernel_cache.register(Path(__file__).parent)  # before any kernel here: they compile lawn_env's equations in
 
 
+from lawn_env.rollouts import Episode, Step, rollout
+
 from .anchors import ANCHORS, AnchorPolicy, anchor_name
 from .ao import AOSettings, AOSolver, expected_cost
 from .base import Planner
@@ -22,7 +24,6 @@ from .policies import BENCHMARK_POLICIES, PAPER_POLICIES, POLICIES, Policy, make
 from .problem import Plan
 from .registry import PolicyEntry, register, unregister
 from .rg_mpc import ReducedGradientPlanner, ReducedSettings
-from .rollouts import Episode, Step, rollout
 from .scripted import HeuristicPolicy
 
 __all__ = [

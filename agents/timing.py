@@ -2,7 +2,7 @@
 of the decisions of every policy it times (:meth:`DecisionClock.timed`).
 
 Training pays for an expert wherever one decides: the residual scheme's anchor and the paired
-reward's shadow episode every step (:mod:`agents.residual`, :mod:`agents.paired`), the labels of
+reward's shadow episode every step (:mod:`agents.residual`, :mod:`training.paired`), the labels of
 behaviour cloning and DAgger, and the anchor of a residual agent under validation. A run times
 them on one clock and records the sum beside its wall time (``run.json``: ``expert_decision_s``;
 ``summary.md``: ``expert_share``), so a run's cost splits into the learner's and the expert's.

@@ -1,4 +1,4 @@
-"""What the paired reward (agents.paired) does to the returns a learner sees: their spread over
+"""What the paired reward (training.paired) does to the returns a learner sees: their spread over
 seeds with and without pairing, for learners near and far from the anchor (``dv-mpc``).
 
 The learners, each on ``lawn/Joint-v1`` with the RL interface's scaled reward and termination:
@@ -27,7 +27,7 @@ import numpy as np
 
 import lawn_env
 from agents import make_policy
-from agents.paired import PairedReward
+from training.paired import PairedReward
 from evaluation.seeds import VALIDATION_SEED_BASE
 
 #: learner -> (the policy and its settings, or None for the interface's zero action)

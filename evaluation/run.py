@@ -34,10 +34,10 @@ from agents import POLICIES, Policy, make_policy
 from agents.anchors import anchor_name
 from agents.base import JOINT
 from agents.learned import zoo_record
-from agents.rollouts import Step, rollout
 from agents.runs import read_run
 from lawn_env import ScenarioConfig, central_env_id
 from lawn_env.config import DroneConfig
+from lawn_env.rollouts import Step, rollout
 
 from .episode import TRANSIENT_SLOTS, Entry, EpisodeResult, EpisodeSpec, Results
 from .pool import pool_map

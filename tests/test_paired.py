@@ -1,4 +1,4 @@
-"""The paired reward (agents.paired): the anchor's copy shares the agent's randomness slot by slot,
+"""The paired reward (training.paired): the anchor's copy shares the agent's randomness slot by slot,
 and what it subtracts over an episode does not depend on the agent's actions."""
 
 import dataclasses
@@ -9,7 +9,7 @@ import pytest
 
 import lawn_env
 from agents import make_policy
-from agents.paired import PairedReward
+from training.paired import PairedReward
 
 SHORT = {"num_slots": 12}
 

@@ -8,7 +8,7 @@ import pytest
 import lawn_env
 from agents import make_policy
 from agents.residual import AnchorResidual, ResidualActions, check_residual
-from agents.rollouts import rollout
+from lawn_env.rollouts import rollout
 
 SHORT = {"num_slots": 12}
 #: The fleet networks' interface: no MPC in the decode, dv-mpc's decisions inside its range.

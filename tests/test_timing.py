@@ -6,8 +6,8 @@ import pytest
 
 import lawn_env
 from agents import make_policy
-from agents.rollouts import rollout
 from agents.timing import DecisionClock, TimedPolicy
+from lawn_env.rollouts import rollout
 
 
 def test_a_timed_policy_acts_as_the_policy_and_counts_its_decisions():

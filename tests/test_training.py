@@ -571,7 +571,7 @@ def test_paired_reward_run_trains_on_the_paired_reward_and_logs_the_envs_own(tmp
     assert json.loads((out / "hyperparams.json").read_text())["paired_anchor"] == "epa"
     from stable_baselines3.common.monitor import Monitor
 
-    from agents.paired import PairedReward
+    from training.paired import PairedReward
     from training.sb3 import make_train_env
 
     venv = make_train_env("lawn/Joint-v1", SMALL, 1, 0, False, tmp_path / "m", interface="rl",
@@ -612,8 +612,8 @@ def test_residual_run_records_its_scheme_and_acts_by_it(tmp_path):
         zero.step(np.zeros(zero.action_space.shape, np.float32))
     # the run starts at the anchor: its first validation is the zero residual's episode, which zero:sb3:DIR plays
     assert float(start["control_cost"]) == pytest.approx(zero.unwrapped.episode_metrics()["control_cost"], rel=1e-6)
-    from agents.rollouts import rollout
     from evaluation.run import own_anchor, policy_env
+    from lawn_env.rollouts import rollout
 
     at_zero = make_policy(f"zero:sb3:{out}", SMALL)
     assert at_zero.name == f"zero:sb3:{out}" and own_anchor(f"sb3:{out}") == at_zero.name

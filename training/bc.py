@@ -20,12 +20,12 @@ import numpy as np
 from agents import Step, make_policy, rollout
 from agents.base import Policy
 from agents.learned import ObsNormalizer, SB3Policy
-from agents.rollouts import Actor
 from agents.runs import algorithm_class
 from agents.timing import DecisionClock
 from evaluation.seeds import TRAIN_SEED_BASE
 from lawn_env import ScenarioConfig
 from lawn_env.interface import InterfaceLike, RLInterface, resolve_interface
+from lawn_env.rollouts import Actor
 
 from .datasets import dataset_transitions, label_transitions
 from .validation import RunSummary, append_learning_curve, limit_torch_threads, versions, write_learning_curve

@@ -112,7 +112,7 @@ _DISTIL_JOINT = {**_DISTIL, "task_settings": _DELIVERY,
                  "interface": {"base": "rl", "power_anchor": "distance", "increment_anchor": "mpc",
                                "residual_scale": 2.0, "power_log_range": 4.0}}
 #: RL past the anchor: PPO whose action moves dv-mpc's decision (agents/residual.py: a quarter of the
-#: action range), on the paired reward against dv-mpc on the same seed (agents/paired.py), started at
+#: action range), on the paired reward against dv-mpc on the same seed (training/paired.py), started at
 #: dv-mpc (the output layer zeroed) with small exploration; the interface decodes without an MPC. The
 #: critic learns the paired return for 20,000 steps before the actor moves, at half the step size (without
 #: the warm-up and at lin_1e-4 the first 30,000 steps took the validation cost 8.7 % above the start).

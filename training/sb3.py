@@ -21,13 +21,13 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from agents import make_policy
 from agents.learned import load_saved
-from agents.paired import PairedReward
 from agents.residual import PARTS, AnchorResidual
 from agents.runs import algorithm_class, read_run
 from agents.timing import DecisionClock
 from evaluation.seeds import TRAIN_SEED_BASE
 from lawn_env import ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig, parallel_env, role_env_id
 from lawn_env.interface import InterfaceLike
+from training.paired import PairedReward
 
 from .callbacks import ActorWarmup, Checkpoint, ControlCostValidation, RunCheckpoint, save_model
 from .validation import RunSummary, limit_torch_threads, versions, write_learning_curve
@@ -126,7 +126,7 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
     """A seeded, monitored SB3 VecEnv with optional VecNormalize (``normalize``: true or its options;
     ``vecnormalize_path``: saved statistics). Keywords: ``interface``, ``append_monitor`` (a resumed
     run's monitor logs), ``vec`` (``"native"``: :class:`NativeVecEnv`, no monitor files), ``paired``
-    (:class:`agents.paired.PairedReward`'s keywords: every env's reward paired with an anchor's; the
+    (:class:`training.paired.PairedReward`'s keywords: every env's reward paired with an anchor's; the
     monitor logs keep the env's own rewards), ``residual`` (the residual scheme's settings,
     :func:`agents.residual.check_residual`) and ``clock`` (the :class:`agents.timing.DecisionClock`
     both anchors decide on)."""
@@ -163,7 +163,7 @@ def make_train_env(env_id: str, config: ScenarioConfig, n_envs: int, seed: int, 
 def _lawn_wrappers(env: Any, paired: Mapping[str, Any] | None, residual: Mapping[str, Any] | None,
                    clock: DecisionClock) -> Any:
     """A monitored env with the residual scheme (:class:`agents.residual.AnchorResidual`) and then
-    the paired reward (:class:`agents.paired.PairedReward`), each when given its keywords; both
+    the paired reward (:class:`training.paired.PairedReward`), each when given its keywords; both
     anchors decide on ``clock`` (the run's expert time)."""
     base = env.unwrapped
     env_id = role_env_id(base.role)

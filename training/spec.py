@@ -63,7 +63,7 @@ class RunOptions:
     init_log_std: Annotated[float, Field(ge=-20, strict=True)] | None = None
     start_at_anchor: bool = False
     paired_anchor: str | None = None
-    """Train on the paired reward against this policy (:class:`agents.paired.PairedReward`)."""
+    """Train on the paired reward against this policy (:class:`training.paired.PairedReward`)."""
     residual: Mapping[str, Any] | None = None
     """Act by the residual scheme around a policy, ``{"anchor": NAME, "scale": s, "moves": [...]}``
     (:mod:`agents.residual`)."""

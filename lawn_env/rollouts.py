@@ -18,7 +18,7 @@ from typing import Any, Protocol, cast
 import gymnasium as gym
 import numpy as np
 
-from lawn_env.core import Snapshot
+from .core import Snapshot
 
 __all__ = ["Actor", "Step", "Episode", "rollout"]
 

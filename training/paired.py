@@ -30,11 +30,10 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 import numpy as np
 
+from agents.base import Policy
+from agents.policies import make_policy
 from lawn_env import role_env_id
 from lawn_env.envs.base import LawnEnv
-
-from .base import Policy
-from .policies import make_policy
 
 __all__ = ["PairedReward"]
 
