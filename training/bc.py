@@ -28,6 +28,7 @@ from lawn_env.interface import InterfaceLike, RLInterface, resolve_interface
 from lawn_env.rollouts import Actor
 
 from .datasets import dataset_transitions, label_transitions
+from .spec import Hyperparameters
 from .validation import RunSummary, append_learning_curve, limit_torch_threads, versions, write_learning_curve
 
 __all__ = ["Labeller", "Demonstrations", "collect", "fit", "BCSettings", "bc_settings", "train_bc", "BC_TARGETS"]
@@ -162,10 +163,10 @@ class BCSettings:
     learning_rate: float
     dagger_iterations: int
     dagger_timesteps: int
-    policy_kwargs: dict[str, Any]
+    policy_kwargs: Hyperparameters
 
 
-def checked_settings(params: Mapping[str, Any], defaults: Mapping[str, Any], noun: str) -> dict[str, Any]:
+def checked_settings(params: Mapping[str, Any], defaults: Mapping[str, Any], noun: str) -> Hyperparameters:
     """``params`` over ``defaults``, numbers as the default's type (``n_envs`` ignored: the expert's
     rollouts run in one env); an unknown key raises an error naming it."""
     p = {**defaults, **{k: v for k, v in params.items() if k != "n_envs"}}
@@ -254,7 +255,7 @@ def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> RunSummary:
     return summary
 
 
-def save_imitation(spec: Any, model: Any, record: dict[str, Any], hyperparams: dict[str, Any],
+def save_imitation(spec: Any, model: Any, record: dict[str, Any], hyperparams: Hyperparameters,
                    history: list[dict[str, Any]]) -> RunSummary:
     """Validate an imitation-trained model once on ``spec.eval_episodes`` validation seeds and write
     its run; ``run.json`` last (a run with it is a finished one), nothing at all on a failure before."""

@@ -20,6 +20,7 @@ from lawn_env.entities import EntityLayout
 from lawn_env.interface import InterfaceLike, resolve_interface
 
 from .bc import Labeller, checked_settings, collect, save_imitation
+from .spec import Hyperparameters
 from .validation import RunSummary, limit_torch_threads, versions
 
 __all__ = ["EntityPairs", "fleet_pairs", "fit_fleet", "dagger_round", "fleet_settings", "task_config",
@@ -112,7 +113,7 @@ _FLEET_KEYS = {"interface": "rl", "expert": "rg-mpc", "fleet_sizes": (3, 4, 8), 
                "width": 64, "heads": 4, "layers": 2}
 
 
-def fleet_settings(params: Mapping[str, Any]) -> dict[str, Any]:
+def fleet_settings(params: Mapping[str, Any]) -> Hyperparameters:
     """A fleet run's hyperparameters, checked: the interface in the entity layout, the sizes sorted."""
     p = checked_settings(params, _FLEET_KEYS, "fleet")
     network = {key: p.pop(key) for key in ("width", "heads", "layers")}
@@ -142,7 +143,7 @@ def training_configs(config: ScenarioConfig, st: Mapping[str, Any]) -> list[Scen
     return [config.override(dict(st["task_settings"]), num_agvs=k) for k in st["fleet_sizes"]]
 
 
-def _dagger(model: Any, env_id: str, configs: list[Any], st: dict[str, Any], timesteps: int,
+def _dagger(model: Any, env_id: str, configs: list[Any], st: Hyperparameters, timesteps: int,
             episode_seed: int, expert: Labeller) -> list[dict[str, Any]]:
     """The expert's round and the DAgger rounds, each followed by a fit; the loss history."""
     per_size = max(1, timesteps // len(configs))

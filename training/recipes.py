@@ -16,7 +16,7 @@ from typing import Any, Literal
 from agents.runs import read_run
 from lawn_env import PARALLEL_ENV_ID, RL_ENV_IDS, ScenarioConfig, central_env_id, presets
 
-from .spec import LAWN_KEYS, TrainSpec, load_hyperparams
+from .spec import LAWN_KEYS, Hyperparameters, TrainSpec, load_hyperparams
 
 __all__ = ["Recipe", "RECIPES", "SECTIONS", "DISTIL_TASKS", "recipe", "finished",
            "ZOO_VALIDATION_EPISODES", "zoo_hyperparams"]
@@ -32,7 +32,7 @@ class Recipe:
     env_id: str
     timesteps: int
     seeds: tuple[int, ...] = (0, 1, 2)
-    hp: dict[str, Any] = field(default_factory=dict)
+    hp: Hyperparameters = field(default_factory=dict)
     init_from: str | None = None  # another recipe's name: seed s starts from that recipe's seed s
     eval_every: int = 25_000
     vec: Literal["dummy", "native"] = "dummy"  # lawn train --vec: "native" trains on lawn's batched vector env
@@ -88,7 +88,7 @@ _FINE_TUNE = {"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2
 #: From scratch: the distance prior and the centroid drone (no MPC in the action; the Comm env's
 #: own MPC still drives the AGVs), and the exploration and step size a learner far from the
 #: optimum needs (log-std -1, 3e-4 decayed).
-_SCRATCH: dict[str, Any] = {"interface": {"base": "rl", "power_anchor": "distance"}, "learning_rate": "lin_3e-4",
+_SCRATCH: Hyperparameters = {"interface": {"base": "rl", "power_anchor": "distance"}, "learning_rate": "lin_3e-4",
                             "policy_kwargs": {"net_arch": [128, 128], "log_std_init": -1.0}}
 #: From scratch on Joint: the same, with the LQR baseline's increments under the residual.
 _SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_anchor": "lqr"}}
@@ -116,7 +116,7 @@ _DISTIL_JOINT = {**_DISTIL, "task_settings": _DELIVERY,
 #: dv-mpc (the output layer zeroed) with small exploration; the interface decodes without an MPC. The
 #: critic learns the paired return for 20,000 steps before the actor moves, at half the step size (without
 #: the warm-up and at lin_1e-4 the first 30,000 steps took the validation cost 8.7 % above the start).
-_RESIDUAL_DV: dict[str, Any] = {
+_RESIDUAL_DV: Hyperparameters = {
     "interface": {"base": "rl", "power_anchor": "distance", "increment_anchor": "lqr", "residual_scale": 2.0,
                   "power_log_range": 4.0},
     "residual": {"anchor": "dv-mpc", "scale": 0.25}, "paired_anchor": "dv-mpc", "start_at_anchor": True,
@@ -209,7 +209,7 @@ def finished(run_dir: Path, timesteps: int) -> bool:
     return (record.num_timesteps or 0) >= (timesteps if record.trainer != "bc" else 1)
 
 
-def zoo_hyperparams(algo: str = "ppo") -> dict[str, dict[str, Any]]:
+def zoo_hyperparams(algo: str = "ppo") -> dict[str, Hyperparameters]:
     """rl-zoo3's hyperparameters of ``algo`` for every RL id whose base env's entry trains on the RL
     interface: without the keys only ``lawn train`` knows, dicts as the strings rl-zoo3 evaluates, and
     the budget (``n_timesteps``) of the plain recipe on that env."""

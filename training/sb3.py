@@ -30,6 +30,7 @@ from lawn_env.interface import InterfaceLike
 from training.paired import PairedReward
 
 from .callbacks import ActorWarmup, Checkpoint, ControlCostValidation, RunCheckpoint, save_model
+from .spec import Hyperparameters
 from .validation import RunSummary, limit_torch_threads, versions, write_learning_curve
 
 __all__ = ["NativeVecEnv", "make_marl_vec_env", "make_train_env", "train_sb3", "setup", "learn", "init_from",
@@ -176,7 +177,7 @@ def _lawn_wrappers(env: Any, paired: Mapping[str, Any] | None, residual: Mapping
     return PairedReward(env, shadow, **{k: v for k, v in paired.items() if k != "anchor"})
 
 
-def train_sb3(spec: Any, params: dict[str, Any], options: Any, version: int,
+def train_sb3(spec: Any, params: Hyperparameters, options: Any, version: int,
               callbacks: list[Any] | None = None) -> RunSummary:
     """Train the SB3 run of ``spec`` (a :class:`training.spec.TrainSpec`) with its hyperparameters and
     their :class:`~training.spec.RunOptions`; a model SB3 refuses to build leaves nothing behind."""

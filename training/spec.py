@@ -27,7 +27,7 @@ from lawn_env.errors import raises_config_errors
 from lawn_env.interface import resolve_interface
 
 __all__ = ["ALGORITHMS", "ALGOS", "Algorithm", "TRAIN_ENV_IDS", "NATIVE_ENV_IDS", "LAWN_KEYS", "RunOptions",
-           "Hyperparams",
+           "Hyperparams", "Hyperparameters",
            "TrainSpec", "load_hyperparams", "split_params", "HYPERPARAMS_DIR"]
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
@@ -46,6 +46,12 @@ LAWN_KEYS: dict[str, tuple[str, ...] | None] = {
 }
 #: Constructor arguments ``lawn train`` sets itself: not hyperparameters.
 _SET_BY_LAWN = {"self", "env", "policy", "seed", "verbose", "tensorboard_log"}
+
+
+#: Hyperparameters as a file and ``--hp`` give them: the algorithm's keyword arguments (SB3's, or an
+#: imitation trainer's settings), free-form by design (each algorithm takes its own, and checks them),
+#: with lawn train's own options (:data:`LAWN_KEYS`, checked by :class:`RunOptions`).
+Hyperparameters = dict[str, Any]
 
 
 # ---------------------------------------------------------------- the options of an SB3 run
@@ -67,7 +73,7 @@ class RunOptions:
     residual: Mapping[str, Any] | None = None
     """Act by the residual scheme around a policy, ``{"anchor": NAME, "scale": s, "moves": [...]}``
     (:mod:`agents.residual`)."""
-    algo_kwargs: dict[str, Any] = Field(default_factory=dict)
+    algo_kwargs: Hyperparameters = Field(default_factory=dict)
 
 
 def lr_schedule(value: Any, key: str = "learning_rate") -> Any:
@@ -171,7 +177,7 @@ def split_params(algo: str, env_id: str, params: Mapping[str, Any]) -> RunOption
 class Hyperparams(NamedTuple):
     """A run's hyperparameters and the version of the file they come from."""
 
-    params: dict[str, Any]
+    params: Hyperparameters
     version: int
 
 
@@ -210,7 +216,7 @@ class TrainSpec:
     out_dir: Path
     seed: Annotated[int, Field(ge=0)] = 0
     config: ScenarioConfig = Field(default_factory=ScenarioConfig)
-    hp_overrides: dict[str, Any] = Field(default_factory=dict)
+    hp_overrides: Hyperparameters = Field(default_factory=dict)
     n_envs: Count | None = None
     interface: str | dict[str, Any] | None = None
     vec: Literal["dummy", "native"] = "dummy"
@@ -268,7 +274,7 @@ class Algorithm:
         module, name = (which or self.learner).split(":")
         return getattr(importlib.import_module(module), name)
 
-    def check(self, spec: TrainSpec, params: dict[str, Any]) -> None:
+    def check(self, spec: TrainSpec, params: Hyperparameters) -> None:
         if self.settings is None:
             split_params(spec.algo, spec.env_id, params)
         else:
