@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
           f"preset {args.preset}, K={cfg.num_agvs}; gap = (J^ - J^_global) / J^_global")
     print(format_gap_table(summary))
     print(f"the global reference gives some link less than 5 % of P_max on {global_power_shares(rows)} of "
-          f"{len({(r['seed'], r['slot']) for r in rows})} slots")
+          f"{len({(r.seed, r.slot) for r in rows})} slots")
     if conv:
         print(format_convergence(conv, args.convergence_slots))
     print(f"wrote {args.out}/gap_rows.csv, gap_summary.csv, gap_summary.md, gap.png"

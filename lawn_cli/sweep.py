@@ -23,6 +23,6 @@ def run(args: argparse.Namespace) -> int:
     spec = load_spec(args.spec)
     rows = run_sweep(spec, Path(args.out), workers=args.workers, backend=args.backend, progress=not args.quiet,
                      extend=args.extend)
-    print(f"lawn sweep {spec['name']}: {len(rows)} rows in {args.out}; mean ± 95 % interval")
-    print(summarize_sweep(rows, list(spec["grid"])))
+    print(f"lawn sweep {spec.name}: {len(rows)} rows in {args.out}; mean ± 95 % interval")
+    print(summarize_sweep(rows, list(spec.grid)))
     return 0

@@ -156,14 +156,15 @@ def test_gap_rows_and_summary():
     cfg = ScenarioConfig(num_slots=6)
     rows = gap_episode(("ao-mpc", "rg-mpc"), "ao-mpc", cfg, seed=3, every=2,
                        global_settings={"psi_points": 41, "drone_spacing_m": 2.5, "power_levels": 40})
-    assert [r["slot"] for r in rows if r["policy"] == "rg-mpc"] == [0, 2, 4]
+    assert [r.slot for r in rows if r.policy == "rg-mpc"] == [0, 2, 4]
     for r in rows:
-        assert r["gap"] == pytest.approx((r["objective"] - r["global_objective"]) / r["global_objective"])
+        assert r.gap == pytest.approx((r.objective - r.global_objective) / r.global_objective)
     summary = summarize_gaps(rows)
-    assert {e["policy"] for e in summary} == {"ao-mpc", "rg-mpc"}
-    ao = next(e for e in summary if e["policy"] == "ao-mpc")
-    assert ao["slots"] == 3 and ao["gap_median"] <= ao["gap_p90"] <= ao["gap_max"]
-    assert 0 <= ao["worse_than_rg-mpc"] <= 3
+    assert {e.policy for e in summary} == {"ao-mpc", "rg-mpc"}
+    ao = next(e for e in summary if e.policy == "ao-mpc")
+    assert ao.slots == 3 and ao.gap_median <= ao.gap_p90 <= ao.gap_max
+    assert 0 <= ao.worse_than["rg-mpc"] <= 3
+    assert list(ao.as_row())[-1] == "worse_than_rg-mpc"
 
 
 def test_paper_ao_is_no_better_than_epa_per_slot_where_rg_mpc_is():

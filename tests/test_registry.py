@@ -56,7 +56,7 @@ def test_a_new_expert_needs_one_entry(new_expert, tmp_path, capsys):
     assert protocols.SUITE_POLICIES[-3:] == (NEW, "anchor:stake", "anchor:distance")
     assert NEW in protocols.suite_policies()
     assert experiments.EXPERTS == ("rg-mpc", "ao-mpc", NEW)
-    assert EXPERIMENTS["rate"].sweeps(True)["rate"]["policies"] == ["rg-mpc", "ao-mpc", NEW]
+    assert EXPERIMENTS["rate"].sweeps(True)["rate"].policies == ("rg-mpc", "ao-mpc", NEW)
     assert NEW not in BENCHMARK_POLICIES  # table=False
     # and it is built by name
     policy = make_policy(NEW, {"num_slots": 3})

@@ -21,7 +21,12 @@ SPEC = {"name": "t", "env": "lawn/Joint-v1", "preset": "default", "set": {"num_s
 
 
 def _keys(rows):
-    return [(r["channel.blocklength"], r["policy"], r["seed"]) for r in rows]
+    return [(r.grid["channel.blocklength"], r.policy, r.seed) for r in rows]
+
+
+def _cells(rows):
+    """The rows as the table's text: what a sweep row is equal by."""
+    return [{k: str(v) for k, v in r.as_row().items()} for r in rows]
 
 
 def test_sweep_rows_and_resume(tmp_path):
@@ -31,11 +36,11 @@ def test_sweep_rows_and_resume(tmp_path):
     rows = run_sweep(SPEC, table, progress=False)
     assert len(rows) == 12 and len(set(_keys(rows))) == 12
     again = run_sweep(SPEC, table, progress=False)  # nothing left to do
-    assert again == rows
+    assert _cells(again) == _cells(rows)
     uninterrupted = run_sweep(SPEC, tmp_path / "u.csv", progress=False)
-    by_key = {k: r["control_cost"] for k, r in zip(_keys(uninterrupted), uninterrupted)}
-    assert all(by_key[k] == r["control_cost"] for k, r in zip(_keys(rows), rows))
-    assert rows[0]["lawn_version"] and json.loads(rows[0]["config"])["num_slots"] == 8
+    by_key = {k: r.result.control_cost for k, r in zip(_keys(uninterrupted), uninterrupted)}
+    assert all(by_key[k] == r.result.control_cost for k, r in zip(_keys(rows), rows))
+    assert rows[0].lawn_version and json.loads(rows[0].config)["num_slots"] == 8
 
 
 def test_sweep_survives_being_killed(tmp_path):
@@ -55,7 +60,7 @@ def test_sweep_survives_being_killed(tmp_path):
     subprocess.run(cmd, cwd=os.getcwd(), check=True)
     rows = read_table(table)
     assert len(rows) == 24 and len(set(_keys(rows))) == 24
-    assert [r for r in rows[: len(killed)]] == killed  # finished rows kept as they were
+    assert _cells(rows[: len(killed)]) == _cells(killed)  # finished rows kept as they were
 
 
 def test_sweep_resume_is_keyed_by_the_resolved_config_and_refuses_foreign_tables(tmp_path):
@@ -64,13 +69,13 @@ def test_sweep_resume_is_keyed_by_the_resolved_config_and_refuses_foreign_tables
     small = dict(SPEC, grid={"channel.blocklength": [256]}, policies=["epa"], seeds=2)
     table = tmp_path / "t.csv"
     first = run_sweep(small, table, progress=False)
-    assert len(first) == 2 and len({r["config_hash"] for r in first}) == 1
+    assert len(first) == 2 and len({r.config_hash for r in first}) == 1
     changed = dict(small, set={"num_slots": 9})
     with pytest.raises(SweepTableError, match="holds 2 rows that sweep 't' would not produce.*--extend"):
         run_sweep(changed, table, progress=False)
     extended = run_sweep(changed, table, progress=False, extend=True)
-    assert len(extended) == 4 and {json.loads(r["config"])["num_slots"] for r in extended} == {8, 9}
-    assert len({r["config_hash"] for r in extended}) == 2
+    assert len(extended) == 4 and {json.loads(r.config)["num_slots"] for r in extended} == {8, 9}
+    assert len({r.config_hash for r in extended}) == 2
     other = tmp_path / "other.csv"
     run_sweep(dict(small, grid={"power_budget_dbw": [0.0]}, name="o"), other, progress=False)
     with pytest.raises(SweepTableError):
@@ -87,11 +92,26 @@ def test_sweep_drops_truncated_and_duplicated_rows_and_reruns_them(tmp_path):
     table.write_text("\n".join([header, body[0], body[0], body[1], body[2][: len(body[2]) // 3]]) + "\n")
     with pytest.warns(UserWarning, match="dropped 2 unusable rows.*line 3: a duplicate.*line 5: its config is not complete JSON"):
         again = run_sweep(small, table, progress=False)
-    assert len(again) == 3 and sorted(int(r["seed"]) for r in again) == [0, 1, 2]
-    by_seed = {r["seed"]: r["control_cost"] for r in rows}
-    assert all(by_seed[r["seed"]] == r["control_cost"] for r in again)  # the rerun row is the same episode
-    read, dropped = read_rows(table)
-    assert len(read) == 3 and not dropped
+    assert len(again) == 3 and sorted(r.seed for r in again) == [0, 1, 2]
+    by_seed = {r.seed: r.result.control_cost for r in rows}
+    assert all(by_seed[r.seed] == r.result.control_cost for r in again)  # the rerun row is the same episode
+    read = read_rows(table)
+    assert len(read.rows) == 3 and not read.dropped
+
+
+def test_a_table_rewritten_through_its_records_is_the_same_file(tmp_path):
+    """Rows read back (SweepRow.from_row) and written again (as_row) give the table's bytes: the same
+    columns in the same order, every cell as it was."""
+    small = dict(SPEC, grid={"channel.blocklength": [256]}, policies=["epa", "pid"], seeds=2)
+    table = tmp_path / "t.csv"
+    run_sweep(small, table, progress=False)
+    written = table.read_bytes()
+    lines = table.read_text().splitlines()
+    table.write_text("\n".join([*lines, lines[1]]) + "\n")  # a duplicate: dropped, the table rewritten
+    with pytest.warns(UserWarning, match="dropped 1 unusable rows"):
+        rows = run_sweep(small, table, progress=False)
+    assert table.read_bytes() == written
+    assert {r.policy for r in rows} == {"epa", "pid"} and all(r.grid == {"channel.blocklength": "256"} for r in rows)
 
 
 def test_sweep_spec_errors(tmp_path):
@@ -294,7 +314,7 @@ def test_sweep_drops_a_row_whose_config_does_not_match_its_hash_and_reruns_it(tm
     table.write_text(tampered)
     with pytest.warns(UserWarning, match="dropped 1 unusable rows.*its config does not match its config_hash"):
         again = run_sweep(small, table, progress=False)
-    assert [r["control_cost"] for r in again] == [r["control_cost"] for r in rows]  # rerun: the same episode
+    assert [r.result.control_cost for r in again] == [r.result.control_cost for r in rows]  # rerun: the same episode
 
 
 def test_sweep_refuses_an_unknown_backend(tmp_path):
@@ -312,20 +332,23 @@ def test_sweep_reruns_when_policy_arguments_or_the_version_change(tmp_path, monk
     with pytest.raises(SweepTableError, match="holds 1 rows"):
         run_sweep(tuned, table, progress=False)  # another policy argument: not this sweep's row
     both = run_sweep(tuned, table, progress=False, extend=True)
-    assert sorted(r["policy_args"] for r in both) == ['{"tolerance": 0.001}', "{}"]
+    assert sorted(r.policy_args for r in both) == ['{"tolerance": 0.001}', "{}"]
     monkeypatch.setattr(lawn_env, "__version__", "99.0.0")
     with pytest.raises(SweepTableError, match="another lawn version than 99.0.0"):
         run_sweep(small, table, progress=False)
     newer = run_sweep(small, table, progress=False, extend=True)
-    assert sorted(r["lawn_version"] for r in newer) == sorted([first[0]["lawn_version"]] * 2 + ["99.0.0"])
+    assert sorted(r.lawn_version for r in newer) == sorted([first[0].lawn_version] * 2 + ["99.0.0"])
 
 
 def test_summarize_sweep_gives_the_mean_and_interval_per_point_and_policy():
+    from evaluation.episode import EpisodeResult
     from evaluation.stats import mean_ci
-    from evaluation.sweep import summarize_sweep
+    from evaluation.sweep import SweepRow, summarize_sweep
 
-    rows = [{"g": g, "policy": p, "control_cost": c, "rmse_m": 1.0, "outage_rate": 0.0}
-            for g, p, c in [(1, "a", 10.0), (1, "a", 14.0), (1, "b", 3.0), (2, "a", 5.0), (2, "a", 7.0)]]
+    rows = [SweepRow("s", {"g": g}, EpisodeResult(p, "lawn/Joint-v1", i, control_cost=c, rmse_m=1.0, outage_rate=0.0),
+                     "0", "h", "{}", "{}")
+            for i, (g, p, c) in enumerate([("1", "a", 10.0), ("1", "a", 14.0), ("1", "b", 3.0), ("2", "a", 5.0),
+                                            ("2", "a", 7.0)])]
     lines = summarize_sweep(rows, ["g"]).splitlines()
     assert lines[0] == "| g | policy | runs | control_cost | rmse_m | outage_rate |" and lines[1] == "|---|" * 1 + "---|" * 5
     mean, half = mean_ci([10.0, 14.0])

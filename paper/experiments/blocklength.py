@@ -2,23 +2,22 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from evaluation.cells import fmt_paired
 from evaluation.stats import paired_difference
+from evaluation.sweep import SweepSpec
 
-from .base import EXPERTS, REPORT_SLOT, SEEDS, Experiment, Tables, by_seed, slot_cost, spec, values
+from .base import EXPERTS, REPORT_SLOT, SEEDS, Experiment, Metric, Tables, by_seed, slot_cost, spec, values
 from .claims import Claim, multi_claim, paired_claim
 from .plots import STYLE, curve, label_axes, new_figure, save
 
 BLOCK_POLICIES = (*EXPERTS, "epa", "sf")
 
 
-def _blocklength_sweeps(quick: bool) -> dict[str, dict[str, Any]]:
+def _blocklength_sweeps(quick: bool) -> dict[str, SweepSpec]:
     lengths = [256, 2048] if quick else [128, 256, 1024, 4096]
     return {"blocklength": spec("blocklength", {"channel.blocklength": lengths}, BLOCK_POLICIES, quick),
             "blocklength-ibl": spec("blocklength-ibl", {"channel.infinite_blocklength": [True]}, BLOCK_POLICIES, quick)}
@@ -28,9 +27,9 @@ def _blocklength_plot(tables: Tables, path: Path) -> None:
     rows, ibl = tables["blocklength"], tables["blocklength-ibl"]
     fig = new_figure()
     ax = fig.add_subplot(111)
-    for policy in dict.fromkeys(r["policy"] for r in rows):
+    for policy in dict.fromkeys(r.policy for r in rows):
         curve(ax, rows, "channel.blocklength", "control_cost", policy)
-        limit = [float(r["control_cost"]) for r in ibl if r["policy"] == policy]
+        limit = [r.result.control_cost for r in ibl if r.policy == policy]
         if limit:
             ax.axhline(np.mean(limit), color=STYLE.get(policy, ("k",))[0], ls=":", lw=1)
     ax.set_xscale("log", base=2)
@@ -45,15 +44,15 @@ def _blocklength_claims(tables: Tables) -> list[Claim]:
     lengths = [int(x) for x in values(rows, "channel.blocklength")]
     l0, l1 = lengths[0], lengths[-1]
 
-    def at(policy: str, length: int, metric: str | Callable[..., Any] = "control_cost") -> dict[int, float]:
-        return by_seed(rows, metric, policy=policy, **{"channel.blocklength": length})
+    def at(policy: str, length: int, metric: Metric = "control_cost") -> dict[int, float]:
+        return by_seed(rows, metric, policy, {"channel.blocklength": length})
 
     out = []
-    for p in dict.fromkeys(r["policy"] for r in rows):
+    for p in dict.fromkeys(r.policy for r in rows):
         out.append(paired_claim("blocklength", f"blocklength.falls.{p}", f"{p}: cost falls as the blocklength grows "
                                 f"(l = {l0} → {l1})", "episode control cost, paired per seed", at(p, l1), at(p, l0),
                                 "negative"))
-        limit = by_seed(ibl, "control_cost", policy=p)
+        limit = by_seed(ibl, "control_cost", p)
         m1, h1, n = paired_difference(at(p, l1), limit)
         m0, _, _ = paired_difference(at(p, l0), limit)
         ok = (m1 - h1 <= 0 <= m1 + h1) or (0 < m1 < m0)

@@ -3,18 +3,18 @@ variance, at -30 dBW and at the 0 dBW floor."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
-from .base import BASELINES, EXPERTS, REPORT_SLOT, SEEDS, Experiment, Tables, by_seed, slot_cost, spec, values
+from evaluation.sweep import SweepSpec
+
+from .base import BASELINES, EXPERTS, REPORT_SLOT, SEEDS, Experiment, Metric, Tables, by_seed, slot_cost, spec, values
 from .claims import Claim, multi_claim
 from .plots import curve, label_axes, new_figure, save
 
 CE_BUDGET_DBW = -30.0
 
 
-def _ce_sweeps(quick: bool) -> dict[str, dict[str, Any]]:
+def _ce_sweeps(quick: bool) -> dict[str, SweepSpec]:
     policies, rhos = EXPERTS + BASELINES, [0.0, 0.1] if quick else [0.0, 0.01, 0.05, 0.1]
     return {"ce": spec("ce", {"channel.ce_error_var": rhos}, policies, quick, preset="paper-nominal",
                        set_={"power_budget_dbw": CE_BUDGET_DBW}),
@@ -26,7 +26,7 @@ def _ce_plot(tables: Tables, path: Path) -> None:
     for j, (name, budget) in enumerate((("ce", CE_BUDGET_DBW), ("ce-floor", 0.0))):
         ax = fig.add_subplot(1, 2, j + 1)
         rows = tables[name]
-        for policy in dict.fromkeys(r["policy"] for r in rows):
+        for policy in dict.fromkeys(r.policy for r in rows):
             curve(ax, rows, "channel.ce_error_var", "rmse_m", policy)
         label_axes(ax, f"R_th = 1, P_max = {budget:g} dBW" + (" (the floor: power cannot matter)" if j else ""),
                    "normalized CE error variance ρ", "tracking RMSE (m)")
@@ -37,10 +37,10 @@ def _ce_claims(tables: Tables) -> list[Claim]:
     rows = tables["ce"]
     rhos = values(rows, "channel.ce_error_var")
     lo, hi = rhos[0], rhos[-1]
-    policies = list(dict.fromkeys(r["policy"] for r in rows))
+    policies = list(dict.fromkeys(r.policy for r in rows))
 
-    def rmse(policy: str, rho: float, metric: str | Callable[..., Any] = "rmse_m") -> dict[int, float]:
-        return by_seed(rows, metric, policy=policy, **{"channel.ce_error_var": rho})
+    def rmse(policy: str, rho: float, metric: Metric = "rmse_m") -> dict[int, float]:
+        return by_seed(rows, metric, policy, {"channel.ce_error_var": rho})
 
     growth = {p: {s: v - rmse(p, lo)[s] for s, v in rmse(p, hi).items()} for p in policies}
     out = [multi_claim("ce", "ce.rmse-grows", f"RMSE grows with the CE error variance, every policy (ρ = {lo:g} → "
@@ -59,8 +59,8 @@ def _ce_claims(tables: Tables) -> list[Claim]:
     out.append(multi_claim("ce", "ce.floor", "at 0 dBW (project's check): power and position cannot lower the outage "
                            "floor, so the experts tie with EPA (within ±1 %)",
                            "RMSE vs EPA at ρ = 0.1, paired per seed",
-                           [(e, by_seed(tables["ce-floor"], "rmse_m", policy=e, **floor),
-                             by_seed(tables["ce-floor"], "rmse_m", policy="epa", **floor)) for e in EXPERTS], "tie"))
+                           [(e, by_seed(tables["ce-floor"], "rmse_m", e, floor),
+                             by_seed(tables["ce-floor"], "rmse_m", "epa", floor)) for e in EXPERTS], "tie"))
     return out
 
 

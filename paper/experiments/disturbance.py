@@ -4,25 +4,26 @@ control-period ablation."""
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from evaluation.episode import parse_bool
 from evaluation.stats import mean_ci
+from evaluation.sweep import SpecValue, SweepRow, SweepSpec
 
-from .base import EXPERTS, SEEDS, Experiment, Tables, by_seed, spec, values
+from .base import EXPERTS, SEEDS, Builder, Experiment, Tables, by_seed, spec, values
 from .claims import Claim, multi_claim, paired_claim
 from .plots import STYLE, curve, label_axes, new_figure, plot_traces, save, trace_rows
+from .rows import TraceRow
 
 DIST_CASES = [("nominal", "default", "rg-mpc"), ("nominal", "default", "epa"), ("disturbed", "disturbed", "rg-mpc"),
               ("disturbed", "disturbed", "epa")]
 
 
-def _disturbance_sweeps(quick: bool) -> dict[str, dict[str, Any]]:
-    period = {"disturbance.control_period_slots": [2] if quick else [1, 2, 3],
+def _disturbance_sweeps(quick: bool) -> dict[str, SweepSpec]:
+    period: dict[str, list[SpecValue]] = {"disturbance.control_period_slots": [2] if quick else [1, 2, 3],
               "disturbance.period_aware_planning": [True, False]}
     return {"disturbance-costs": spec("disturbance-costs", {"preset": ["default", "disturbed"]}, (*EXPERTS, "epa"),
                                       quick),
@@ -32,13 +33,13 @@ def _disturbance_sweeps(quick: bool) -> dict[str, dict[str, Any]]:
 def _disturbance_plot(tables: Tables, path: Path) -> None:
     fig = new_figure(ncols=3, width=4.0)
     rows = tables["disturbance-costs"]
-    variants = list(dict.fromkeys(r["preset"] for r in rows))
-    policies = list(dict.fromkeys(r["policy"] for r in rows))
+    variants = list(dict.fromkeys(r.grid["preset"] for r in rows))
+    policies = list(dict.fromkeys(r.policy for r in rows))
     width = 0.8 / len(policies)
     for j, metric in enumerate(("control_cost", "rmse_m")):
         ax = fig.add_subplot(1, 3, j + 1)
         for i, policy in enumerate(policies):
-            st = [mean_ci([float(r[metric]) for r in rows if r["policy"] == policy and r["preset"] == v])
+            st = [mean_ci([r.metric(metric) for r in rows if r.policy == policy and r.grid["preset"] == v])
                   for v in variants]
             ax.bar(np.arange(len(variants)) + i * width, [m for m, _ in st], width,
                    yerr=[h if math.isfinite(h) else 0.0 for _, h in st], color=STYLE.get(policy, ("k",))[0], capsize=3,
@@ -50,21 +51,21 @@ def _disturbance_plot(tables: Tables, path: Path) -> None:
     ax = fig.add_subplot(1, 3, 3)
     per = tables["disturbance-period"]
     for aware, ls in ((True, "-"), (False, ":")):
-        sub = [r for r in per if parse_bool(r["disturbance.period_aware_planning"]) == aware]
-        for policy in dict.fromkeys(r["policy"] for r in sub):
+        sub = [r for r in per if parse_bool(r.grid["disturbance.period_aware_planning"]) == aware]
+        for policy in dict.fromkeys(r.policy for r in sub):
             curve(ax, sub, "disturbance.control_period_slots", "control_cost", policy,
                   label=f"{policy}, {'plans with' if aware else 'ignores'} the period", ls=ls)
     ax.set_yscale("log")
     label_axes(ax, "disturbed: control period (ablation)", "commands every P slots", "control cost")
     save(fig, path)
-    plot_traces(tables["disturbance"], path.with_name(path.name + "-paths"), DIST_CASES)
+    plot_traces(tables.rows("disturbance", TraceRow), path.with_name(path.name + "-paths"), DIST_CASES)
 
 
-def _period_costs(rows: Sequence[Mapping[str, Any]], policy: str, period: int, aware: bool) -> dict[int, float]:
+def _period_costs(rows: Sequence[SweepRow], policy: str, period: int, aware: bool) -> dict[int, float]:
     """{seed: control cost} of ``policy`` at control period ``period``, planning with it or not."""
-    return {int(r["seed"]): float(r["control_cost"]) for r in rows
-            if r["policy"] == policy and int(float(r["disturbance.control_period_slots"])) == period
-            and parse_bool(r["disturbance.period_aware_planning"]) == aware}
+    return {r.seed: r.result.control_cost for r in rows
+            if r.policy == policy and int(float(r.grid["disturbance.control_period_slots"])) == period
+            and parse_bool(r.grid["disturbance.period_aware_planning"]) == aware}
 
 
 def _disturbance_claims(tables: Tables) -> list[Claim]:
@@ -75,11 +76,11 @@ def _disturbance_claims(tables: Tables) -> list[Claim]:
             trend = " (the same trend under disturbances)" if variant != "default" else ""
             out.append(paired_claim("disturbance", f"disturbance.beats-epa.{variant}.{e}",
                                     f"{variant}: {e} beats EPA{trend}", "episode control cost, paired per seed",
-                                    by_seed(rows, "control_cost", policy=e, preset=variant),
-                                    by_seed(rows, "control_cost", policy="epa", preset=variant), "negative"))
+                                    by_seed(rows, "control_cost", e, {"preset": variant}),
+                                    by_seed(rows, "control_cost", "epa", {"preset": variant}), "negative"))
     per = tables["disturbance-period"]
     periods = [int(p) for p in values(per, "disturbance.control_period_slots") if p > 1]
-    for policy in dict.fromkeys(r["policy"] for r in per):
+    for policy in dict.fromkeys(r.policy for r in per):
         parts = [(f"P={p}", _period_costs(per, policy, p, True), _period_costs(per, policy, p, False))
                  for p in periods]
         if parts:
@@ -92,5 +93,6 @@ def _disturbance_claims(tables: Tables) -> list[Claim]:
 EXPERIMENT = Experiment("disturbance", "default vs `disturbed` (wind, gusts, actuator lag, noise, commands every 2 "
                         f"slots), rg-mpc, ao-mpc, epa, {SEEDS} seeds; control period 1–3 with and without period-aware "
                         f"planning, {SEEDS} seeds", sweeps=_disturbance_sweeps,
-                        builders={"disturbance": lambda out, quick: trace_rows(DIST_CASES, quick)},
+                        builders={"disturbance": Builder(lambda out, quick: trace_rows(DIST_CASES, quick),
+                                                         TraceRow.from_row)},
                         plot=_disturbance_plot, claims=_disturbance_claims)

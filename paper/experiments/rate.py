@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
-from .base import EXPERTS, REPORT_SLOT, SEEDS, Experiment, Tables, by_seed, slot_cost, spec, values
+from evaluation.sweep import SweepSpec
+
+from .base import EXPERTS, REPORT_SLOT, SEEDS, Experiment, Metric, Tables, by_seed, slot_cost, spec, values
 from .claims import Claim, multi_claim
 from .plots import curve, label_axes, new_figure, save
 
 
-def _rate_sweeps(quick: bool) -> dict[str, dict[str, Any]]:
+def _rate_sweeps(quick: bool) -> dict[str, SweepSpec]:
     grid = {"channel.rate_threshold_bps_hz": [6.0, 10.0] if quick else [6.0, 8.0, 10.0],
             "power_budget_dbw": [0.0, 3.0] if quick else [-3.0, 0.0, 3.0]}
     return {"rate": spec("rate", grid, EXPERTS, quick)}
@@ -21,12 +21,12 @@ def _rate_sweeps(quick: bool) -> dict[str, dict[str, Any]]:
 def _rate_plot(tables: Tables, path: Path) -> None:
     rows = tables["rate"]
     fig = new_figure(ncols=2, width=4.6)
-    panels: tuple[tuple[str | Callable[..., Any], str], ...] = (("control_cost", "episode control cost"),
-                                                      (slot_cost, f"stage cost at slot {REPORT_SLOT}"))
+    panels: tuple[tuple[Metric, str], ...] = (("control_cost", "episode control cost"),
+                                              (slot_cost, f"stage cost at slot {REPORT_SLOT}"))
     for j, (metric, label) in enumerate(panels):
         ax = fig.add_subplot(1, 2, j + 1)
         for i, p in enumerate(values(rows, "power_budget_dbw")):
-            sub = [r for r in rows if float(r["power_budget_dbw"]) == p]
+            sub = [r for r in rows if float(r.grid["power_budget_dbw"]) == p]
             for policy in EXPERTS:
                 curve(ax, sub, "channel.rate_threshold_bps_hz", metric, policy, label=f"{policy}, {p:g} dBW",
                       color=f"C{i}", ls="-" if policy == "rg-mpc" else "--")
@@ -43,8 +43,7 @@ def _rate_claims(tables: Tables) -> list[Claim]:
     for e in EXPERTS:
         for metric, mlabel, tag in (("control_cost", "episode control cost", ""),
                                     (slot_cost, f"stage cost at slot {REPORT_SLOT}", "-slot")):
-            at = {(rate, b): by_seed(rows, metric, policy=e,
-                                     **{"channel.rate_threshold_bps_hz": rate, "power_budget_dbw": b})
+            at = {(rate, b): by_seed(rows, metric, e, {"channel.rate_threshold_bps_hz": rate, "power_budget_dbw": b})
                   for rate in (r0, r1) for b in budgets}
             out.append(multi_claim("rate", f"rate.rises{tag}.{e}", f"{e}: cost rises with R_th ({r0:g} → {r1:g}), at "
                                    "every P_max", f"{mlabel}, paired per seed",

@@ -9,12 +9,11 @@ import json
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
-from evaluation.episode import write_rows
-from evaluation.sweep import SweepTableError, read_rows, read_table, run_sweep
+from evaluation.episode import read_csv, write_rows
+from evaluation.sweep import SweepRow, SweepTableError, read_rows, run_sweep
 
-from .base import Experiment
+from .base import Experiment, TableRow, Tables
 from .claims import Claim
 from .registry import EXPERIMENTS
 
@@ -22,10 +21,10 @@ __all__ = ["tables_of", "make_figures", "read_mode", "check_claims"]
 
 
 def tables_of(exp: Experiment, out: Path, quick: bool = False, workers: int = 1, progress: bool = False,
-              run: bool = True) -> dict[str, list[dict[str, Any]]]:
+              run: bool = True) -> Tables:
     """The experiment's tables in ``out/data`` (with ``run``: their missing rows run first)."""
 
-    tables = {}
+    sweeps: dict[str, list[SweepRow]] = {}
     for name, spec in exp.sweeps(quick).items():
         path = out / "data" / f"{name}.csv"
         if run:
@@ -34,13 +33,14 @@ def tables_of(exp: Experiment, out: Path, quick: bool = False, workers: int = 1,
             except SweepTableError as exc:
                 raise SweepTableError(f"{exc}. For `lawn figures`: delete {path} or choose another --out (the "
                                       "figure's table was written by another spec or version)") from None
-        tables[name] = read_rows(path)[0]
-    for name, build in exp.builders.items():
+        sweeps[name] = read_rows(path).rows
+    built: dict[str, list[TableRow]] = {}
+    for name, builder in exp.builders.items():
         path = out / "data" / f"{name}.csv"
         if run and not path.exists():
-            write_rows(build(out, quick), path)
-        tables[name] = read_table(path)
-    return tables
+            write_rows([r.as_row() for r in builder.build(out, quick)], path)
+        built[name] = [builder.read(cells) for cells in read_csv(path)]
+    return Tables(sweeps, built)
 
 
 def make_figures(names: Sequence[str], out: Path, quick: bool = False, workers: int = 1,
