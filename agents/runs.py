@@ -127,6 +127,7 @@ class AgentRecord(BaseModel):
     eval_episodes: int | None = None
     checkpoint_every: int | None = None
     vec: str | None = None
+    init_from: str | None = None
     wall_time_s: float | list[float] | None = None
     expert_decision_s: float | None = None
     versions: Mapping[str, Any] | None = None

@@ -22,7 +22,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 from agents import make_policy
 from agents.learned import load_saved
 from agents.residual import PARTS, AnchorResidual
-from agents.runs import algorithm_class, read_run
+from agents.runs import AgentRecord, algorithm_class, read_run
 from agents.timing import DecisionClock
 from evaluation.seeds import TRAIN_SEED_BASE
 from lawn_env import ENV_IDS, PARALLEL_ENV_ID, ScenarioConfig, parallel_env, role_env_id
@@ -183,15 +183,17 @@ def train_sb3(spec: Any, params: Hyperparameters, options: Any, version: int,
     their :class:`~training.spec.RunOptions`; a model SB3 refuses to build leaves nothing behind."""
     if spec.init_from is not None:
         _check_init_from(spec.init_from, spec.algo, params)
-    record = {"algo": spec.algo, "env": spec.env_id, "seed": spec.seed, "timesteps": spec.timesteps,
-              "hyperparams_version": version, "interface": params.get("interface"), "eval_every": spec.eval_every,
-              "eval_episodes": spec.eval_episodes, "checkpoint_every": spec.checkpoint_every,
-              "init_from": str(spec.init_from) if spec.init_from else None, "vec": spec.vec,
-              **({"residual": options.residual} if options.residual else {}), "versions": versions()}
+    record = AgentRecord.model_validate({
+        "algo": spec.algo, "env": spec.env_id, "seed": spec.seed, "timesteps": spec.timesteps,
+        "hyperparams_version": version, "interface": params.get("interface"), "eval_every": spec.eval_every,
+        "eval_episodes": spec.eval_episodes, "checkpoint_every": spec.checkpoint_every,
+        "init_from": str(spec.init_from) if spec.init_from else None, "vec": spec.vec,
+        **({"residual": options.residual} if options.residual else {}), "versions": versions()})
     out_dir = spec.out_dir
     existed = out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
-    for name, data in (("config.json", spec.config.to_dict()), ("hyperparams.json", params), ("run.json", record)):
+    for name, data in (("config.json", spec.config.to_dict()), ("hyperparams.json", params),
+                       ("run.json", record.as_json())):
         (out_dir / name).write_text(json.dumps(data, indent=2))  # before SB3 adds its defaults to policy_kwargs
     spec.write()
     try:
@@ -233,7 +235,7 @@ def _check_init_from(init_from: Path, algo: str, params: Mapping[str, Any]) -> N
 class Run:
     """A run ready to learn: its record (``run.json``), model, env and callbacks."""
 
-    record: dict[str, Any]
+    record: AgentRecord
     model: Any
     env: Any
     hooks: list[Any]
@@ -243,19 +245,19 @@ class Run:
     clock: DecisionClock  # the anchors' decisions: the residual's, the paired reward's shadow, validation's
 
 
-def setup(record: dict[str, Any], options: Any, config: ScenarioConfig, out_dir: Path, start: Checkpoint | None,
+def setup(record: AgentRecord, options: Any, config: ScenarioConfig, out_dir: Path, start: Checkpoint | None,
           callbacks: list[Any] | None = None) -> Run:
     """The env, the model and the callbacks of a run (new, or resumed from ``start``)."""
     from stable_baselines3.common.utils import set_random_seed
 
     limit_torch_threads()
     done_steps = start.steps if start else 0
-    env_seed = TRAIN_SEED_BASE + 1000 * int(record["seed"]) + done_steps  # a resumed run: fresh, seeded episodes
+    env_seed = TRAIN_SEED_BASE + 1000 * int(record.seed or 0) + done_steps  # a resumed run: fresh, seeded episodes
     clock = DecisionClock()
     set_random_seed(env_seed)
-    env = make_train_env(record["env"], config, options.n_envs, env_seed, options.normalize, out_dir / "monitor",
+    env = make_train_env(record.env, config, options.n_envs, env_seed, options.normalize, out_dir / "monitor",
                          vecnormalize_path=start.file("vecnormalize.pkl") if start else None,
-                         interface=options.interface, append_monitor=start is not None, vec=record.get("vec", "dummy"),
+                         interface=options.interface, append_monitor=start is not None, vec=record.vec or "dummy",
                          paired=None if options.paired_anchor is None else
                          {"anchor": options.paired_anchor, "gamma": float(options.algo_kwargs.get("gamma", 0.99))},
                          residual=options.residual, clock=clock)
@@ -264,13 +266,13 @@ def setup(record: dict[str, Any], options: Any, config: ScenarioConfig, out_dir:
     except BaseException:
         env.close()
         raise
-    wall_before = float(record.get("wall_time_s", 0.0))
+    wall_before = 0.0 if record.wall_time_s is None else record.run_seconds
     hooks: list[BaseCallback] = []
-    if record["env"] != "CartPole-v1":
-        hooks.append(ControlCostValidation(record["env"], config, options.interface, int(record["eval_episodes"]),
-                                           max(int(record["eval_every"]), 1), out_dir, options.residual, clock))
-    hooks.append(RunCheckpoint(out_dir, max(int(record["checkpoint_every"]), 1), wall_time_before=wall_before,
-                               clock=clock, expert_before=float(record.get("expert_decision_s", 0.0))))
+    if record.env != "CartPole-v1":
+        hooks.append(ControlCostValidation(record.env, config, options.interface, int(record.eval_episodes or 0),
+                                           max(int(record.eval_every or 0), 1), out_dir, options.residual, clock))
+    hooks.append(RunCheckpoint(out_dir, max(int(record.checkpoint_every or 0), 1), wall_time_before=wall_before,
+                               clock=clock, expert_before=record.expert_decision_s or 0.0))
     if options.actor_warmup_steps > 0:
         hooks.append(ActorWarmup(options.actor_warmup_steps))
     return Run(record, model, env, hooks + list(callbacks or []), out_dir, wall_before, start is not None, clock)
@@ -279,26 +281,27 @@ def setup(record: dict[str, Any], options: Any, config: ScenarioConfig, out_dir:
 def learn(run: Run, progress: bool) -> RunSummary:
     """Train a set-up run to its timestep target; save the model, its statistics and the curve."""
     model, env, out_dir = run.model, run.env, run.out_dir
-    remaining = int(run.record["timesteps"]) - model.num_timesteps
+    remaining = int(run.record.timesteps or 0) - model.num_timesteps
     began = time.perf_counter()
     if remaining > 0:
         model.learn(total_timesteps=remaining, callback=run.hooks, reset_num_timesteps=not run.resumed,
                     progress_bar=progress, tb_log_name="run")
     elapsed = time.perf_counter() - began
     save_model(model, out_dir)
-    expert_s = float(run.record.get("expert_decision_s", 0.0)) + run.clock.seconds  # a resumed run: both parts
-    record = dict(run.record, num_timesteps=int(model.num_timesteps), updates=int(getattr(model, "_n_updates", 0)),
-                  wall_time_s=float(elapsed + run.wall_before), expert_decision_s=expert_s)
-    (out_dir / "run.json").write_text(json.dumps(record, indent=2))
-    summary = write_learning_curve(out_dir, record)
+    expert_s = (run.record.expert_decision_s or 0.0) + run.clock.seconds  # a resumed run: both parts
+    record = run.record.model_copy(update={
+        "num_timesteps": int(model.num_timesteps), "updates": int(getattr(model, "_n_updates", 0)),
+        "wall_time_s": float(elapsed + run.wall_before), "expert_decision_s": expert_s})
+    (out_dir / "run.json").write_text(json.dumps(record.as_json(), indent=2))
+    summary = write_learning_curve(out_dir, record.as_json())
     env.close()
     return summary
 
 
-def _model(record: dict[str, Any], env: Any, start: Checkpoint | None, out_dir: Path, options: Any) -> Any:
+def _model(record: AgentRecord, env: Any, start: Checkpoint | None, out_dir: Path, options: Any) -> Any:
     """The model a run trains: its checkpoint's, or a new one (from a cloned run's weights, at the
     anchor, with the fine-tuning's exploration noise as the options ask)."""
-    cls = algorithm_class(record["algo"])
+    cls = algorithm_class(record.algo)
     if start:
         model = load_saved(lambda p: cls.load(p, env=env, tensorboard_log=str(out_dir / "tb")),
                            start.path / "model.zip", "checkpoint model")
@@ -306,12 +309,12 @@ def _model(record: dict[str, Any], env: Any, start: Checkpoint | None, out_dir: 
         if buffer is not None:
             model.load_replay_buffer(str(buffer))
         return model
-    model = cls(options.policy, env, seed=int(record["seed"]) if record["env"] != PARALLEL_ENV_ID else None, verbose=0,
+    model = cls(options.policy, env, seed=int(record.seed or 0) if record.env != PARALLEL_ENV_ID else None, verbose=0,
                 tensorboard_log=str(out_dir / "tb"), **options.algo_kwargs)
-    if record.get("init_from"):
-        init_from(model, Path(record["init_from"]), env)
+    if record.init_from:
+        init_from(model, Path(record.init_from), env)
     elif options.start_at_anchor:
-        start_at_anchor(model, record["algo"])
+        start_at_anchor(model, record.algo)
     if options.init_log_std is not None:  # exploration noise of a fine-tuned policy (after the cloned weights)
         import torch
 

@@ -16,7 +16,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from agents.runs import read_json, read_run
+from agents.runs import AgentRecord, read_json, read_run
 from evaluation.pool import pool_map
 from evaluation.stats import mean_ci
 from evaluation.sweep import execute
@@ -108,7 +108,7 @@ def resume(out_dir: Path, timesteps: int | None = None, progress: bool = True) -
         record["wall_time_s"] = float(checkpoint.state.get("wall_time_s", 0.0))
         record["expert_decision_s"] = float(checkpoint.state.get("expert_decision_s", 0.0))
     (out_dir / "run.json").write_text(json.dumps(record, indent=2))
-    summary = learn(setup(record, options, config, out_dir, checkpoint), progress=progress)
+    summary = learn(setup(AgentRecord.model_validate(record), options, config, out_dir, checkpoint), progress=progress)
     return dataclasses.replace(summary, resumed_from=checkpoint.steps if checkpoint is not None else None)
 
 
