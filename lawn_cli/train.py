@@ -75,12 +75,12 @@ def run(args: argparse.Namespace) -> int:
         return 0
     result = train_seeds(spec, args.seeds, workers=args.workers, backend=args.backend)
     print(f"lawn train: {args.algo} on {args.env}, seeds {args.seeds}")
-    for r in result["runs"]:
-        print(f"  seed {r['seed']}: best validation cost {r['best_validation_cost']:.6g} "
-              f"at {r['best_at_timesteps']} steps, {r['timesteps']} steps in {r['wall_time_s']:.0f} s"
+    for r in result.runs:
+        print(f"  seed {r.seed}: best validation cost {r.best_validation_cost:.6g} "
+              f"at {r.best_at_timesteps} steps, {r.timesteps} steps in {r.wall_time_s or 0.0:.0f} s"
               f"{_expert_part(r)}")
-    print(f"  across seeds: {result['best_validation_cost_mean']:.6g} ± "
-          f"{result['best_validation_cost_ci95']:.3g} (95 % interval)")
+    print(f"  across seeds: {result.best_validation_cost_mean:.6g} ± "
+          f"{result.best_validation_cost_ci95:.3g} (95 % interval)")
     print(f"wrote {args.out}/seed-*/ and {args.out}/seeds.json")
     return 0
 

@@ -266,7 +266,7 @@ def test_several_training_seeds_in_one_command(tmp_path):
         run = json.loads((tmp_path / "multi" / f"seed-{s}" / "run.json").read_text())
         assert run["seed"] == s and (tmp_path / "multi" / f"seed-{s}" / "learning_curve.png").exists()
     saved = json.loads((tmp_path / "multi" / "seeds.json").read_text())
-    assert saved == json.loads(json.dumps(result))  # what it returns is what it wrote
+    assert saved == json.loads(json.dumps(result.as_json()))  # what it returns is what it wrote
     assert saved["seeds"] == [3, 4] and [r["seed"] for r in saved["runs"]] == [3, 4]
     best = [r["best_validation_cost"] for r in saved["runs"]]
     assert saved["best_validation_cost_mean"] == pytest.approx(np.mean(best))

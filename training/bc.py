@@ -12,7 +12,7 @@ import dataclasses
 import json
 import time
 from collections.abc import Mapping
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypedDict
 
 import gymnasium as gym
 import numpy as np
@@ -31,7 +31,8 @@ from .datasets import dataset_transitions, label_transitions
 from .spec import Hyperparameters
 from .validation import RunSummary, append_learning_curve, limit_torch_threads, versions, write_learning_curve
 
-__all__ = ["Labeller", "Demonstrations", "collect", "fit", "BCSettings", "bc_settings", "train_bc", "BC_TARGETS"]
+__all__ = ["Labeller", "Round", "Demonstrations", "collect", "fit", "BCSettings", "bc_settings", "train_bc",
+           "BC_TARGETS"]
 
 #: The algorithms whose policy network behaviour cloning fits (the ``target`` hyperparameter).
 BC_TARGETS = ("ppo", "sac")
@@ -48,6 +49,15 @@ class Labeller:
     def policy(self, config: ScenarioConfig, env_id: str) -> Policy:
         """The expert for ``config`` on ``env_id``, timed on the clock."""
         return self.clock.timed(make_policy(self.name, config, env_id=env_id))
+
+
+class Round(TypedDict):
+    """One fit of an imitation run (``bc_losses.json``): round 0 on the expert's states, then each DAgger
+    round; the samples it fitted on and its loss after each epoch."""
+
+    round: int
+    samples: int
+    losses: list[float]
 
 
 class Demonstrations(NamedTuple):
@@ -188,7 +198,7 @@ def bc_settings(params: Mapping[str, Any]) -> BCSettings:
 
 def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: BCSettings, expert: Labeller, obs: np.ndarray,
                        actions: np.ndarray, seed: int, episode_seed: int
-                       ) -> tuple[Any, Any, np.ndarray, list[dict[str, Any]]]:
+                       ) -> tuple[Any, Any, np.ndarray, list[Round]]:
     """Fit the clone, then the DAgger rounds; the normalizing env (the expert's observation statistics),
     the model, every observation and every round's losses."""
     from stable_baselines3.common.running_mean_std import RunningMeanStd
@@ -206,15 +216,15 @@ def _clone_with_dagger(env_id: str, config: ScenarioConfig, st: BCSettings, expe
         normalized_obs: np.ndarray = venv.normalize_obs(o).astype(np.float32)
         return normalized_obs
 
-    history = [{"round": 0, "samples": len(obs), "losses": fit(model, normalized(obs), actions, st.epochs,
-                                                                st.batch_size, st.learning_rate, seed)}]
+    history = [Round(round=0, samples=len(obs), losses=fit(model, normalized(obs), actions, st.epochs,
+                                                           st.batch_size, st.learning_rate, seed))]
     for it in range(1, st.dagger_iterations + 1):
         actor = SB3Policy(model, config, env_id, st.interface, ObsNormalizer.from_vecnormalize(venv))
         new_obs, new_act, _ = collect(env_id, config, expert, st.dagger_timesteps, episode_seed + 100 * it,
                                       st.interface, actor=actor)
         obs, actions = np.concatenate([obs, new_obs]), np.concatenate([actions, new_act])
-        history.append({"round": it, "samples": len(obs), "losses": fit(model, normalized(obs), actions, st.epochs,
-                                                                         st.batch_size, st.learning_rate, seed + it)})
+        history.append(Round(round=it, samples=len(obs), losses=fit(model, normalized(obs), actions, st.epochs,
+                                                                    st.batch_size, st.learning_rate, seed + it)))
     return venv, model, obs, history
 
 
@@ -256,7 +266,7 @@ def train_bc(spec: Any, params: Mapping[str, Any], version: int) -> RunSummary:
 
 
 def save_imitation(spec: Any, model: Any, record: dict[str, Any], hyperparams: Hyperparameters,
-                   history: list[dict[str, Any]]) -> RunSummary:
+                   history: list[Round]) -> RunSummary:
     """Validate an imitation-trained model once on ``spec.eval_episodes`` validation seeds and write
     its run; ``run.json`` last (a run with it is a finished one), nothing at all on a failure before."""
     from .callbacks import ControlCostValidation, save_model

@@ -18,7 +18,7 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from stable_baselines3.common.callbacks import BaseCallback
 
@@ -47,13 +47,24 @@ HISTORY_FILES = ("learning_curve.csv", "monitor/*.csv")
 BEST_FILES = ("best_model.zip", "best_vecnormalize.pkl")
 
 
+class CheckpointState(TypedDict, total=False):
+    """A checkpoint's ``state.json``: its steps and updates, the run's wall time and the expert's
+    decision time so far, and the byte length of each history file then (:data:`HISTORY_FILES`)."""
+
+    steps: int
+    updates: int
+    wall_time_s: float
+    expert_decision_s: float
+    history: dict[str, int]
+
+
 @dataclass(frozen=True)
 class Checkpoint:
     """One complete checkpoint directory."""
 
     path: Path
     steps: int
-    state: dict[str, Any]
+    state: CheckpointState
 
     def file(self, name: str) -> Path | None:
         """``name`` in the checkpoint; None where it was not saved (normalization statistics, a replay buffer)."""
@@ -77,7 +88,7 @@ def _history(out_dir: Path) -> dict[str, int]:
             for pattern in HISTORY_FILES for path in sorted(out_dir.glob(pattern))}
 
 
-def write_checkpoint(out_dir: Path, model: Any, state: dict[str, Any]) -> Checkpoint:
+def write_checkpoint(out_dir: Path, model: Any, state: CheckpointState) -> Checkpoint:
     """Save ``model`` (with its statistics and replay buffer) and the run's history lengths as
     ``checkpoints/<steps>/``, atomically; older checkpoints are removed."""
     out_dir = Path(out_dir)
@@ -93,7 +104,7 @@ def write_checkpoint(out_dir: Path, model: Any, state: dict[str, Any]) -> Checkp
     for name in BEST_FILES:
         if (out_dir / name).exists():
             shutil.copy2(out_dir / name, tmp / name)
-    state = dict(state, steps=steps, updates=int(getattr(model, "_n_updates", 0)), history=_history(out_dir))
+    state = {**state, "steps": steps, "updates": int(getattr(model, "_n_updates", 0)), "history": _history(out_dir)}
     (tmp / "state.json").write_text(json.dumps(state, indent=2))
     final = root / str(steps)
     shutil.rmtree(final, ignore_errors=True)

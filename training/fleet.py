@@ -19,7 +19,7 @@ from lawn_env import MixedFleetEnv, ScenarioConfig, env_role, presets
 from lawn_env.entities import EntityLayout
 from lawn_env.interface import InterfaceLike, resolve_interface
 
-from .bc import Labeller, checked_settings, collect, save_imitation
+from .bc import Labeller, Round, checked_settings, collect, save_imitation
 from .spec import Hyperparameters
 from .validation import RunSummary, limit_torch_threads, versions
 
@@ -144,20 +144,20 @@ def training_configs(config: ScenarioConfig, st: Mapping[str, Any]) -> list[Scen
 
 
 def _dagger(model: Any, env_id: str, configs: list[Any], st: Hyperparameters, timesteps: int,
-            episode_seed: int, expert: Labeller) -> list[dict[str, Any]]:
+            episode_seed: int, expert: Labeller) -> list[Round]:
     """The expert's round and the DAgger rounds, each followed by a fit; the loss history."""
     per_size = max(1, timesteps // len(configs))
     obs, actions, present = dagger_round(None, env_id, configs, per_size, episode_seed, st["interface"], expert)
     fit_args = (st["epochs"], st["batch_size"], st["learning_rate"])
-    history = [{"round": 0, "samples": len(actions), "losses": fit_fleet(model, obs, actions, present, *fit_args,
-                                                                          seed=episode_seed)}]
+    history = [Round(round=0, samples=len(actions), losses=fit_fleet(model, obs, actions, present, *fit_args,
+                                                                     seed=episode_seed))]
     for it in range(1, st["dagger_iterations"] + 1):
         more = dagger_round(model, env_id, configs, max(1, st["dagger_timesteps"] // len(configs)),
                             episode_seed + 100 * it, st["interface"], expert)
         obs = {key: np.concatenate([obs[key], more[0][key]]) for key in obs}
         actions, present = np.concatenate([actions, more[1]]), np.concatenate([present, more[2]])
-        history.append({"round": it, "samples": len(actions),
-                        "losses": fit_fleet(model, obs, actions, present, *fit_args, seed=episode_seed + it)})
+        history.append(Round(round=it, samples=len(actions),
+                             losses=fit_fleet(model, obs, actions, present, *fit_args, seed=episode_seed + it)))
     return history
 
 

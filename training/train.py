@@ -25,7 +25,7 @@ from .recipes import RECIPES, finished, recipe
 from .spec import ALGORITHMS, TrainSpec, split_params
 from .validation import RunSummary
 
-__all__ = ["train", "train_seeds", "resume", "train_recipes"]
+__all__ = ["SeedsSummary", "train", "train_seeds", "resume", "train_recipes"]
 
 
 # ---------------------------------------------------------------- runs
@@ -46,7 +46,27 @@ def train(spec: TrainSpec, callbacks: list[Any] | None = None) -> RunSummary:
     return summary
 
 
-def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: str = "process") -> dict[str, Any]:
+@dataclasses.dataclass(frozen=True)
+class SeedsSummary:
+    """A run per training seed (:func:`train_seeds`): each run's summary, in the order of the seeds, and
+    the selected models' validation cost across seeds (its mean and 95 % half-width)."""
+
+    algo: str
+    env: str
+    seeds: list[int]
+    runs: list[RunSummary]
+    best_validation_cost_mean: float
+    best_validation_cost_ci95: float
+
+    def as_json(self) -> dict[str, object]:
+        """``seeds.json``: the fields, the runs' summaries, and each run's wall time and expert share."""
+        return {"algo": self.algo, "env": self.env, "seeds": self.seeds, "runs": [r.as_json() for r in self.runs],
+                "best_validation_cost_mean": self.best_validation_cost_mean,
+                "best_validation_cost_ci95": self.best_validation_cost_ci95,
+                "wall_time_s": [r.wall_time_s for r in self.runs], "expert_share": [r.expert_share for r in self.runs]}
+
+
+def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: str = "process") -> SeedsSummary:
     """Train ``spec`` once per seed into ``spec.out_dir/seed-<s>`` (``workers`` processes, or Ray, as
     ``lawn sweep``) and summarize the selected models' validation costs across seeds."""
 
@@ -59,11 +79,8 @@ def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: st
     summaries = sorted(execute(train, specs, workers, backend), key=lambda r: seeds.index(r.seed))
     best = [s.best_validation_cost for s in summaries]
     mean, half = mean_ci(b for b in best if b is not None)
-    result = {"algo": spec.algo, "env": spec.env_id, "seeds": list(seeds), "runs": [s.as_json() for s in summaries],
-              "best_validation_cost_mean": mean, "best_validation_cost_ci95": half,
-              "wall_time_s": [s.wall_time_s for s in summaries],
-              "expert_share": [s.expert_share for s in summaries]}
-    (spec.out_dir / "seeds.json").write_text(json.dumps(result, indent=2))
+    result = SeedsSummary(spec.algo, spec.env_id, list(seeds), summaries, mean, half)
+    (spec.out_dir / "seeds.json").write_text(json.dumps(result.as_json(), indent=2))
     return result
 
 
