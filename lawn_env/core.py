@@ -31,6 +31,7 @@ from . import drone, metrics
 from .config import ScenarioConfig
 from .dynamics import POSITION
 from .metrics import DIVERGENCE_DISTANCE_M, TOTALS, Metrics, Totals
+from .references import Curve
 from .slot import step, step_rows
 from .state import (
     SLOT_CONSTANTS,
@@ -128,7 +129,7 @@ class Simulation:
     buffer: np.ndarray
     buffer_age: np.ndarray
     slot: np.ndarray
-    paths: list
+    paths: list[list[Curve] | None]
 
     def __init__(self, config: ScenarioConfig, num_envs: int = 1):
         if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
@@ -166,11 +167,13 @@ class Simulation:
         state = self.state
         if state.slot.size == 1:  # one scenario: a view
             n = int(state.slot[0])
-            return state.reference[:, :, n : n + self.horizon + 1]
+            window: np.ndarray = state.reference[:, :, n : n + self.horizon + 1]
+            return window
         idx = state.slot[:, None] + self._window[None, :]
-        return state.reference[np.arange(state.slot.size)[:, None], :, idx].transpose(0, 2, 1, 3)
+        windows: np.ndarray = state.reference[np.arange(state.slot.size)[:, None], :, idx].transpose(0, 2, 1, 3)
+        return windows
 
-    def episode_metrics(self, rows: Sequence[int] | np.ndarray = (0,)) -> list[dict]:
+    def episode_metrics(self, rows: Sequence[int] | np.ndarray = (0,)) -> list[Metrics]:
         """:func:`episode_metrics` of the scenarios ``rows`` (indices; a single env's is row 0),
         computed together."""
         return episode_metrics(self.params, self.state, rows)
@@ -209,7 +212,7 @@ class ScenarioView:
         return int(self._sim.state.slot[self.i])
 
     @property
-    def paths(self) -> list:
+    def paths(self) -> list[Curve] | None:
         return self._sim.state.paths[self.i]
 
     @property
@@ -252,7 +255,7 @@ class ScenarioView:
             buffer=buffer_queue(self.buffer, self.buffer_age) if self._sim.params.buffer_length else None,
         )
 
-    def episode_metrics(self) -> dict:
+    def episode_metrics(self) -> Metrics:
         """Metrics of MODEL.md §6 over the slots run so far (decision time is the caller's)."""
         return self._sim.episode_metrics([self.i])[0]
 
@@ -297,7 +300,7 @@ class Trail:
         # one's arrays); a reset writes into the current one, after which the trail restarts
         self._states.append(self.view._sim.state)
 
-    def trajectories(self) -> dict:
+    def trajectories(self) -> dict[str, np.ndarray]:
         """Drone (n+1, 2), AGV (n+1, K, 2) and reference (n+1, K, 2) positions of slots 0..n."""
         i, n = self.view.i, len(self._states)
         return {"drone_position": np.array([s.drone_position[i] for s in self._states]),

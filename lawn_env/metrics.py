@@ -61,7 +61,8 @@ class Totals:
     @property
     def control_cost(self) -> np.ndarray:
         """Tracking + effort."""
-        return self.packed[..., TRACKING] + self.packed[..., EFFORT]
+        total: np.ndarray = self.packed[..., TRACKING] + self.packed[..., EFFORT]
+        return total
 
     @property
     def outage_p(self) -> np.ndarray:

@@ -11,7 +11,7 @@ columns :mod:`lawn_env.metrics` names.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 import numba
 import numpy as np
@@ -28,7 +28,7 @@ __all__ = ["SlotInputs", "SlotOutputs", "step", "step_rows"]
 _POS0, _VEL0, _ACCEL0 = dynamics.POSITION.start, dynamics.VELOCITY.start, dynamics.ACCELERATION.start
 
 
-def _array(dtype, ndim: int, out: bool = False, layout: str = "A") -> numba.types.Array:
+def _array(dtype: numba.types.Type, ndim: int, out: bool = False, layout: str = "A") -> numba.types.Array:
     """An argument type of the slot kernel: inputs read-only in any layout (a step's states are
     views of the last step's rows), the parameters' matrices and the outputs C-contiguous."""
     return numba.types.Array(dtype, ndim, "C" if out else layout, readonly=not out)
@@ -53,6 +53,21 @@ class SlotInputs(NamedTuple):
     plan: np.ndarray  # (B, K, L, 2): the later increments each packet carries (buffered actuator), L = N_p - 1
     buffer: np.ndarray  # (B, K, L, 2): the AGVs' buffers; (B, K, 0, 2) under the hold actuator
     buffer_age: np.ndarray  # (B, K): how many of the buffer's increments have been played (L: spent)
+
+
+class SlotConstants(Protocol):
+    """A :data:`lawn_env.state.SLOT_CONSTANTS` record as the kernel reads it (its fields by name: numba types
+    the record itself; this spells it for the type checker)."""
+
+    lag_alpha: float
+    accel_max: float
+    altitude_sq: float
+    c_d: float
+    c_ce: float
+    m: float
+    step_t: np.ndarray  # (8, 8)
+    cost_w: np.ndarray  # (8, 2)
+    accel_effect_t: np.ndarray  # (2, 4)
 
 
 class SlotOutputs(NamedTuple):
@@ -89,7 +104,9 @@ _SLOT_SIGNATURE = numba.types.none(
 
 
 @numba.njit(cache=True, inline="always")
-def _links(inp, c, out, rows):  # pragma: no cover - compiled
+def _links(  # pragma: no cover - compiled
+    inp: SlotInputs, c: SlotConstants, out: SlotOutputs, rows: np.ndarray,
+) -> None:
     """Step 1: per link, the outage argument at the drone's next position, the outage probability,
     the delivery, and the packed row [x~, du applied] with du saturated: the command where it arrives;
     where none arrives (lost, or a slot without commands) zero under the hold actuator and the
@@ -123,7 +140,7 @@ def _links(inp, c, out, rows):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
-def _played(buffer, age, b, i, a):  # pragma: no cover - compiled
+def _played(buffer: np.ndarray, age: np.ndarray, b: int, i: int, a: int) -> float:  # pragma: no cover - compiled
     """The increment AGV i of scenario b plays without a packet under the buffered actuator: its
     buffer's next one, zero (a hold) once the buffer is spent."""
     j = age[b, i]
@@ -131,7 +148,7 @@ def _played(buffer, age, b, i, a):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
-def _buffers(inp, out):  # pragma: no cover - compiled
+def _buffers(inp: SlotInputs, out: SlotOutputs) -> None:  # pragma: no cover - compiled
     """Step 1b (buffered actuator): a delivered packet replaces the AGV's buffer with the later
     increments it carries (none played yet); otherwise the buffer advances by the one it played."""
     buffer, age, plan, send, delivered = inp.buffer, inp.buffer_age, inp.plan, inp.send, out.delivered
@@ -147,7 +164,8 @@ def _buffers(inp, out):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
-def _lag(x_aug, applied, lag_alpha, applied_next, flat, accel_effect_t):  # pragma: no cover - compiled
+def _lag(x_aug: np.ndarray, applied: np.ndarray, lag_alpha: float, applied_next: np.ndarray, flat: np.ndarray,
+         accel_effect_t: np.ndarray) -> None:  # pragma: no cover - compiled
     """Step 3 (actuator lag): the AGV moves with the applied acceleration instead of the commanded
     u[n]; the difference enters through A~'s acceleration columns."""
     num, k = x_aug.shape[0], x_aug.shape[1]
@@ -167,7 +185,9 @@ def _lag(x_aug, applied, lag_alpha, applied_next, flat, accel_effect_t):  # prag
 
 
 @numba.njit(cache=True, inline="always")
-def _process_noise(packed, process_position, process_velocity):  # pragma: no cover - compiled
+def _process_noise(  # pragma: no cover - compiled
+    packed: np.ndarray, process_position: np.ndarray, process_velocity: np.ndarray,
+) -> None:
     """Step 3 (process noise): added to the next positions and velocities where drawn."""
     k = packed.shape[1]
     for b in range(process_position.shape[0]):
@@ -181,7 +201,8 @@ def _process_noise(packed, process_position, process_velocity):  # pragma: no co
 
 
 @numba.njit(cache=True, inline="always")
-def _errors(packed, reference, slot, err, squares):  # pragma: no cover - compiled
+def _errors(packed: np.ndarray, reference: np.ndarray, slot: np.ndarray, err: np.ndarray,
+            squares: np.ndarray) -> None:  # pragma: no cover - compiled
     """Step 4: the packed error against the reference at slot n+1, and its squares."""
     num, k = packed.shape[0], packed.shape[1]
     for b in range(num):
@@ -195,7 +216,7 @@ def _errors(packed, reference, slot, err, squares):  # pragma: no cover - compil
 
 
 @numba.njit(cache=True, inline="always")
-def _accumulate(inp, out, err):  # pragma: no cover - compiled
+def _accumulate(inp: SlotInputs, out: SlotOutputs, err: np.ndarray) -> None:  # pragma: no cover - compiled
     """Step 5: the slot's stage costs summed over AGVs (left to right) and the episode's running
     sums (:data:`lawn_env.metrics.TOTALS`, ``out.totals_next`` holding the last slot's) advanced, the
     outage and power sums on command slots only."""
@@ -225,7 +246,9 @@ def _accumulate(inp, out, err):  # pragma: no cover - compiled
 
 
 @numba.njit([_SLOT_SIGNATURE], cache=True)
-def _slot(inputs, constants, outputs):  # pragma: no cover - compiled
+def _slot(  # pragma: no cover - compiled
+    inputs: tuple[np.ndarray, ...], constants: np.ndarray, outputs: tuple[np.ndarray, ...],
+) -> None:
     """One slot of B scenarios (see :func:`step`): 1. the links (:func:`_links`) and, under the
     buffered actuator, the buffers (:func:`_buffers`); 2. the transition,
     [x~[n+1], du] = [x~, du applied] @ step_t (:func:`lawn_env.products.product_into`: one summation
@@ -348,9 +371,10 @@ def step_rows(params: SimParams, state: SimState, decisions: Decisions, draws: S
         sub.x_obs = sub.x_aug
     if state.error_obs is state.tracking_error:
         sub.error_obs = sub.tracking_error
-    taken = Decisions(*[None if a is None else np.asarray(a)[idx] for a in decisions])  # type: ignore[arg-type]
-    sub_draws = SlotDraws(*[None if d is None else d[idx] for d in draws])  # type: ignore[arg-type]
-    new_sub, record = step(params, sub, taken, sub_draws)
+    # each field's rows, field by field (the arrays that are None stay None)
+    taken: list[Any] = [None if a is None else np.asarray(a)[idx] for a in decisions]
+    drawn: list[Any] = [None if d is None else d[idx] for d in draws]
+    new_sub, record = step(params, sub, Decisions(*taken), SlotDraws(*drawn))
     merged: dict[str, Any] = {}
     for name in _STEPPED:
         new = getattr(new_sub, name)

@@ -83,7 +83,7 @@ class SimParams:
     power_budget_w: float
     drone_start: np.ndarray  # (2,)
     envelope: references.Envelope | None  # None: the paths are not fitted into the AGVs' envelope
-    fixed_paths: list | None
+    fixed_paths: list[references.Curve] | None
     fixed_reference: np.ndarray | None  # (K, T, 6) of the fixed path set
     disturbance: DisturbanceConfig
     disturbed: bool
@@ -204,14 +204,14 @@ class SimState:
     last_delivered: np.ndarray  # (B, K) bool
     last_outage_probability: np.ndarray  # (B, K)
     reference: np.ndarray  # (B, K, T, 6)
-    paths: list  # per scenario, its K paths
+    paths: list[list[references.Curve] | None]  # per scenario, its K paths (None before a first reset)
     totals: np.ndarray  # (B, 5 + 3K), columns lawn_env.metrics.TOTALS
     buffer: np.ndarray  # (B, K, L, 2) the AGVs' buffered increments (L = 0 under the hold actuator)
     buffer_age: np.ndarray  # (B, K) int64: how many of them have been played since their packet (L: spent)
 
     @property
     def num_envs(self) -> int:
-        return self.x_aug.shape[0]
+        return int(self.x_aug.shape[0])
 
     @property
     def sums(self) -> Totals:
