@@ -2,7 +2,8 @@
 
 * :class:`Totals`: the running sums of B scenarios by name, over the packed array
   ``SimState.totals`` (B, 5 + 3K) the slot kernel advances (one array crosses into compiled code
-  as cheaply as one argument); the kernel writes its columns through the offsets named here.
+  as cheaply as one argument); the kernel writes its columns through the offsets named here, which
+  numba compiles in as constants (so this file stamps the kernels' cache, :mod:`lawn_env.kernel_cache`).
 * :func:`episode_metrics`: MODEL.md §6's metrics of the slots each scenario has run, from its sums.
 """
 

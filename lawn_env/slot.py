@@ -4,13 +4,14 @@
 state and the slot's record, its arguments untouched) and :func:`step_rows` (the same for chosen
 rows). The compiled kernel composes the equations of :mod:`lawn_env.channel` (the link) and
 :mod:`lawn_env.dynamics` (the control set, the transition, the lag, the measurement) and holds none
-of its own; it reads :class:`SlotInputs` and writes :class:`SlotOutputs`, both built by keyword and
-handed over as the plain tuples numba types fastest, and it advances the running sums through the
-columns :mod:`lawn_env.metrics` names.
+of its own; it reads :class:`SlotInputs` (which :func:`step` builds by name) and writes
+:class:`SlotOutputs`, both handed over as the plain tuples numba types fastest, and it advances the
+running sums through the columns :mod:`lawn_env.metrics` names.
 """
 
 from __future__ import annotations
 
+import operator
 from typing import Any, NamedTuple, Protocol
 
 import numba
@@ -281,8 +282,11 @@ def _slot(  # pragma: no cover - compiled
 
 _NO_NOISE = np.zeros((0, 0, 2))  # the slot kernel's "no process noise"
 _NO_PLAN = np.zeros((0, 0, 0, 2))  # the slot kernel's plan under the hold actuator
-# x~[n+1], the error x~[n+1] - x~_ref[n+1] and du applied in the kernel's rows (2, B, K, 8), as built indices
-# (a view through one prebuilt index costs a fifth of one through two slicings)
+#: :class:`SlotInputs` from a dict of them by name, as the plain tuple the kernel takes (in the fields' order):
+#: built by name at the price of a dict display (a NamedTuple's keywords cost twice as much per slot)
+_INPUTS = operator.itemgetter(*SlotInputs.__annotations__)
+# x~[n+1], the error x~[n+1] - x~_ref[n+1] and du applied in the kernel's rows (2, B, K, 8), as prebuilt indices
+# (one indexing per view, not two)
 _X_NEXT, _ERROR, _APPLIED = ((0, slice(None), slice(None), slice(0, 6)), (1, slice(None), slice(None), slice(0, 6)),
                              (0, slice(None), slice(None), slice(6, 8)))
 
@@ -315,15 +319,15 @@ def step(params: SimParams, state: SimState, decisions: Decisions, draws: SlotDr
     if params.buffer_length:
         plan = _plan(params, decisions.plan, num, k)
         buffer_next, age_next = np.empty(state.buffer.shape), np.empty(state.buffer_age.shape, np.int64)
-    inputs = SlotInputs(
-        x_aug=x_aug, increment=increment, send=send, power=power, drone_next=drone_next, fading=draws.fading,
-        reference=state.reference, slot=state.slot, applied=state.applied,
-        process_position=_NO_NOISE if draws.process_position is None else draws.process_position,
-        process_velocity=_NO_NOISE if draws.process_velocity is None else draws.process_velocity,
-        drone_prev=state.drone_position, totals=state.totals, plan=plan, buffer=state.buffer,
-        buffer_age=state.buffer_age)
+    inputs = _INPUTS({  # SlotInputs by name
+        "x_aug": x_aug, "increment": increment, "send": send, "power": power, "drone_next": drone_next,
+        "fading": draws.fading, "reference": state.reference, "slot": state.slot, "applied": state.applied,
+        "process_position": _NO_NOISE if draws.process_position is None else draws.process_position,
+        "process_velocity": _NO_NOISE if draws.process_velocity is None else draws.process_velocity,
+        "drone_prev": state.drone_position, "totals": state.totals, "plan": plan, "buffer": state.buffer,
+        "buffer_age": state.buffer_age})
     slot = np.empty(num, np.int64)
-    _slot(inputs[:], params.constants,  # the tuples plain (the signature's)
+    _slot(inputs, params.constants,
           (rows, terms, delivered, outage_p, applied, costs, totals, buffer_next, age_next, slot))  # SlotOutputs
     x_next, error, applied_increment = rows[_X_NEXT], rows[_ERROR], rows[_APPLIED]
     x_obs, error_obs = x_next, error
