@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -117,13 +118,17 @@ def outage_law(m: float, x: float, part: int) -> float:  # pragma: no cover - co
     and about 13 times faster (``python benchmarks/expert_decisions.py --link-law``), what ``dv-mpc``'s
     compiled search evaluates its thousands of links with (:mod:`agents.search`; every other caller reads
     SUCCESS, so their decisions keep scipy's last bit). The five are one law: they change together."""
+    scipy: float  # what scipy's compiled functions return (numba's external functions, untyped to mypy)
     if part == OUTAGE:
-        return _GAMMAINC(m, x)
+        scipy = _GAMMAINC(m, x)
+        return scipy
     if part == SUCCESS:
-        return _GAMMAINCC(m, x)
+        scipy = _GAMMAINCC(m, x)
+        return scipy
     if part == SERIES:
         if m > SERIES_MAX_M or x >= SERIES_MAX_X or m != math.floor(m):
-            return _GAMMAINCC(m, x)
+            scipy = _GAMMAINCC(m, x)
+            return scipy
         term = 1.0
         total = 1.0
         for j in range(1, int(m)):
@@ -153,24 +158,28 @@ def command_delivered(normalized_fading: float, x: float) -> bool:  # pragma: no
 
 
 @numba.vectorize(["float64(float64, float64, int64)"], cache=True)
-def _law_dufunc(m, x, part):  # pragma: no cover - compiled
-    return outage_law(m, x, part)
+def _law_dufunc(m: float, x: float, part: int) -> float:  # pragma: no cover - compiled
+    value: float = outage_law(m, x, part)
+    return value
 
 
 @numba.vectorize(["float64(float64, float64, float64, float64)"], cache=True)
-def _argument_dufunc(distance_sq_m2, power_w, c_d, c_ce):  # pragma: no cover - compiled
-    return link_argument(distance_sq_m2, power_w, c_d, c_ce)
+def _argument_dufunc(  # pragma: no cover - compiled
+    distance_sq_m2: float, power_w: float, c_d: float, c_ce: float,
+) -> float:
+    value: float = link_argument(distance_sq_m2, power_w, c_d, c_ce)
+    return value
 
 
 @numba.njit(cache=True)
-def _distance_rows(diff, altitude_sq, out):  # pragma: no cover - compiled
+def _distance_rows(diff: np.ndarray, altitude_sq: float, out: np.ndarray) -> None:  # pragma: no cover - compiled
     for i in range(diff.shape[0]):
         out[i] = link_distance_sq(diff[i, 0], diff[i, 1], altitude_sq)
 
 
-# numpy's ufuncs of the compiled loops (numba's wrappers dispatch several times slower)
-_law = _law_dufunc.ufunc
-_argument = _argument_dufunc.ufunc
+# numpy's ufuncs of the compiled loops (numba's wrappers dispatch several times slower), as their callers call them
+_law: Callable[[float, npt.ArrayLike, int], np.ndarray] = _law_dufunc.ufunc
+_argument: Callable[[npt.ArrayLike, npt.ArrayLike, float, float], np.ndarray] = _argument_dufunc.ufunc
 
 
 @dataclass(frozen=True)
@@ -269,9 +278,10 @@ class LinkParams:
         Nakagami-m): the Lagrange condition gives ``p_k ∝ (w_k d_k^(2a))^(1/(a+1))``. Weights
         (..., K) for stakes ``w`` > 0 and squared distances (..., K), computed in logs (``d^(2a)``
         overflows for large a) and scaled so that the largest is 1."""
-        m = outage_law(float(self.m), 0.0, ORDER)
-        log_w = (np.log(stake) + m * np.log(distance_sq_m2)) / (m + 1.0)
-        return np.exp(log_w - log_w.max(axis=-1, keepdims=True))
+        m: float = outage_law(float(self.m), 0.0, ORDER)
+        log_w: np.ndarray = (np.log(stake) + m * np.log(distance_sq_m2)) / (m + 1.0)
+        weights: np.ndarray = np.exp(log_w - log_w.max(axis=-1, keepdims=True))
+        return weights
 
 
 def distance_sq(drone_xy: np.ndarray, agv_xy: np.ndarray, altitude_m: float) -> np.ndarray:

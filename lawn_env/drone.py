@@ -22,7 +22,7 @@ __all__ = ["move_drone", "toward", "hypot", "move_rows", "drift"]
 
 
 @numba.njit(cache=True, inline="always")
-def _split(x):  # pragma: no cover - compiled
+def _split(x: float) -> tuple[float, float]:  # pragma: no cover - compiled
     """Veltkamp's split: x = hi + lo exactly, each half with 26 significant bits."""
     t = x * 134217729.0  # 2^27 + 1
     hi = t - (t - x)
@@ -30,7 +30,7 @@ def _split(x):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
-def _mul(x, y):  # pragma: no cover - compiled
+def _mul(x: float, y: float) -> tuple[float, float]:  # pragma: no cover - compiled
     """Dekker's exact product: x * y = hi + lo, hi the rounded product."""
     xh, xl = _split(x)
     yh, yl = _split(y)
@@ -60,7 +60,8 @@ def hypot(a: float, b: float) -> float:  # pragma: no cover - compiled
         return top
     tiny = 2.2250738585072014e-308  # DBL_MIN
     if math.frexp(top)[1] < -1023:  # subnormal: lift to normal numbers, as CPython does
-        return tiny * hypot(x0 / tiny, x1 / tiny)
+        lifted: float = hypot(x0 / tiny, x1 / tiny)
+        return tiny * lifted
     scale = math.ldexp(1.0, -math.frexp(top)[1])
     csum, frac1, frac2 = 1.0, 0.0, 0.0
     for v in (x0, x1):
@@ -71,7 +72,7 @@ def hypot(a: float, b: float) -> float:  # pragma: no cover - compiled
         csum = s_hi
         frac1 += p_lo
         frac2 += s_lo
-    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
+    h: float = math.sqrt(csum - 1.0 + (frac1 + frac2))
     p_hi, p_lo = _mul(-h, h)
     s_hi = csum + p_hi
     s_lo = (csum - s_hi) + p_hi
@@ -84,7 +85,7 @@ def hypot(a: float, b: float) -> float:  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
-def _clip(v, lo, hi):  # pragma: no cover - compiled
+def _clip(v: float, lo: float, hi: float) -> float:  # pragma: no cover - compiled
     """Python's ``min(max(v, lo), hi)``, signed zeros and all."""
     if lo > v:  # noqa: PLR1730 - numba's max/min differ from Python's on signed zeros and NaN
         v = lo
@@ -110,7 +111,10 @@ def move_rows(  # noqa: PLR0913 - a compiled kernel (up to 12 arguments)
 
 
 @numba.njit(cache=True)
-def _toward(position, target, max_speed, slot_s, x0, x1, y0, y1, out):  # noqa: PLR0913  # pragma: no cover - compiled
+def _toward(  # noqa: PLR0913  # pragma: no cover - compiled
+    position: np.ndarray, target: np.ndarray, max_speed: float, slot_s: float, x0: float, x1: float, y0: float,
+    y1: float, out: np.ndarray,
+) -> None:
     reach = max_speed * slot_s
     velocity = np.empty((position.shape[0], 2))
     for i in range(position.shape[0]):

@@ -68,7 +68,8 @@ def saturate(u_prev: float, du: float, accel_max: float) -> float:  # pragma: no
 
 @numba.vectorize(["float64(float64, float64, float64)"], cache=True)
 def _saturate_dufunc(u_prev: float, du: float, accel_max: float) -> float:  # pragma: no cover - compiled
-    return saturate(u_prev, du, accel_max)
+    value: float = saturate(u_prev, du, accel_max)
+    return value
 
 
 #: :func:`saturate` over arrays (broadcasting, a new array): numpy's ufunc of the compiled loop,
@@ -184,7 +185,8 @@ def modified_riccati(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray,
             raise ValueError(f"success={success!r}: the modified Riccati equation does not converge (at or below "
                              "the critical arrival probability of these dynamics)")
         s = settled
-    return 0.5 * (s + s.T)
+    symmetric: np.ndarray = 0.5 * (s + s.T)
+    return symmetric
 
 
 def _value_iteration(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, success: float,
@@ -221,6 +223,7 @@ def dare(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, max_iterati
     ``solve_discrete_are`` (LAPACK on the CPU's BLAS kernel) is not; scipy is the tests' oracle. Raises
     ``ValueError`` when the iteration does not settle (no stabilizing solution)."""
     n = a.shape[0]
+    hk: np.ndarray
     ak, gk, hk = np.array(a, dtype=float), matmul(b, solve(r, b.T)), np.array(q, dtype=float)
     for _ in range(max_iterations):
         w = np.eye(n) + matmul(gk, hk)
@@ -294,7 +297,8 @@ def command_mask(slot: int, horizon: int, period: int) -> np.ndarray:
     ``slot + i`` is True only at those slots; in between the AGV holds its acceleration. (horizon,) bool."""
     if period == 1:
         return np.ones(horizon, dtype=bool)
-    return (slot + np.arange(horizon)) % period == 0
+    sends: np.ndarray = (slot + np.arange(horizon)) % period == 0
+    return sends
 
 
 def planning_period(config: ScenarioSettings) -> int:
@@ -328,7 +332,7 @@ class PredictionModel:
     increment_sum: np.ndarray  # T, (2N_p, 2N_p)
     q1_tiled: np.ndarray | None  # diag(Q1) repeated N_p times: Q4's diagonal blocks, (6 N_p,); None: others
     # (slot_s, horizon, q1_diag, q2_diag[, terminal_success, lag_alpha]): what it is built from, its cache key
-    key: tuple
+    key: tuple[Any, ...]
 
     @classmethod
     def from_config(cls, config: ScenarioSettings, terminal_success: float = 1.0, lag: bool = False) -> PredictionModel:
@@ -348,7 +352,7 @@ class PredictionModel:
         return int(self.c.shape[1])
 
     @classmethod
-    def from_key(cls, key: tuple) -> PredictionModel:
+    def from_key(cls, key: tuple[Any, ...]) -> PredictionModel:
         """The model built from :attr:`key`'s values (slot_s, horizon, q1_diag, q2_diag[, terminal_success,
         lag_alpha])."""
         return _build_model(*key)
@@ -375,21 +379,25 @@ class PredictionModel:
         """r' Q4 r for residuals r (..., 6(N_p+1)): Q4 = diag(Q1 x N_p, Q3) with Q1 diagonal, so the
         first N_p blocks are a weighted sum of squares and only the terminal block is a 6 x 6 form
         (a model whose stage weights are not Q1's, ``q1_tiled`` None: the full form)."""
+        cost: np.ndarray
         if self.q1_tiled is None:
-            return (matmul(r, self.q4) * r).sum(axis=-1)
+            cost = (matmul(r, self.q4) * r).sum(axis=-1)
+            return cost
         head, tail = r[..., :-6], r[..., -6:]
-        return matmul(head * head, self.q1_tiled) + (matmul(tail, self.q3) * tail).sum(axis=-1)
+        cost = matmul(head * head, self.q1_tiled) + (matmul(tail, self.q3) * tail).sum(axis=-1)
+        return cost
 
     def predict(self, x_aug: np.ndarray, dmu: np.ndarray, psi: npt.ArrayLike) -> np.ndarray:
         """Expected predicted states chi = C x~ + psi F Delta-mu, (K, N_p+1, 6)."""
         k = x_aug.shape[0]
         psi = np.broadcast_to(np.asarray(psi, dtype=float), (k,))
         chi = matmul(x_aug, self.c.T) + psi[:, None] * matmul(dmu.reshape(k, -1), self.f.T)
-        return chi.reshape(k, self.horizon + 1, -1)
+        windows: np.ndarray = chi.reshape(k, self.horizon + 1, -1)
+        return windows
 
 
 @functools.lru_cache(maxsize=32)
-def _build_model(slot_s: float, horizon: int, q1_diag: tuple, q2_diag: tuple,
+def _build_model(slot_s: float, horizon: int, q1_diag: tuple[float, ...], q2_diag: tuple[float, ...],
                  terminal_success: float = 1.0, lag_alpha: float = -1.0) -> PredictionModel:
     a_aug, b_aug = augmented_matrices(slot_s)
     q1 = np.diag(np.asarray(q1_diag, dtype=float))
@@ -421,7 +429,8 @@ def step_augmented(x_aug: np.ndarray, du: np.ndarray, a_aug: np.ndarray, b_aug: 
 
     A lost command is ``du = 0`` (the AGV keeps u[n-1]; MODEL.md §3).
     """
-    return matmul(x_aug, a_aug.T) + matmul(du, b_aug.T)
+    x_next: np.ndarray = matmul(x_aug, a_aug.T) + matmul(du, b_aug.T)
+    return x_next
 
 
 def packed_step_matrices(a_aug: np.ndarray, b_aug: np.ndarray, q1_diag: npt.ArrayLike,

@@ -1,7 +1,7 @@
 """The compiled kernels' on-disk cache follows every source file they compile from.
 
 numba's cache (``cache=True``) keys a kernel by the stamp of the file that defines it. The slot
-kernel in ``core.py`` compiles ``channel.outage_law``, ``dynamics.saturate`` and the other
+kernel in ``slot.py`` compiles ``channel.outage_law``, ``dynamics.saturate`` and the other
 equations into itself, so with numba's own stamp an edit of ``channel.py`` would leave the cached
 slot kernel computing the old equation while every array method follows the new one. Each
 equation lives in one function (the point of the layout) only if editing it reaches every caller,

@@ -15,6 +15,8 @@ their independence of the batch.
 
 from __future__ import annotations
 
+from typing import cast
+
 import numba
 import numpy as np
 
@@ -58,8 +60,10 @@ def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out = np.empty((rows.shape[0], columns.shape[1]))
     product_into(rows, columns, out)
     if a.ndim == 1 and b.ndim == 1:
-        return np.float64(out[0, 0])  # numpy's scalar, as a @ b gives
-    return out.reshape(a.shape[:-1] + (b.shape[1:] if b.ndim == 2 else ()))
+        # numpy's scalar, as a @ b gives (and types as an array, as numpy's annotations of a @ b do)
+        return cast(np.ndarray, np.float64(out[0, 0]))
+    product: np.ndarray = out.reshape(a.shape[:-1] + (b.shape[1:] if b.ndim == 2 else ()))
+    return product
 
 
 @numba.njit(cache=True)

@@ -153,10 +153,12 @@ class AxisPencils:
         c = np.ascontiguousarray  # one argument layout: the solver compiles once, not once per caller's views
         stack = (c(s, dtype=np.float64), c(q, dtype=np.float64), c(lower, dtype=np.float64),
                  c(upper, dtype=np.float64), c(phase, dtype=np.int64))
-        return solve_stack(stack, self.arrays, active, float(tol), int(max_iter))
+        solved: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] = solve_stack(stack, self.arrays, active,
+                                                                                    float(tol), int(max_iter))
+        return solved
 
     @cached_property
-    def arrays(self) -> tuple:
+    def arrays(self) -> tuple[np.ndarray, ...]:
         """The :class:`Pencils` fields, as the plain tuple :func:`solve_stack` takes."""
         return (self.free, self.num_free, self.group_end, self.w, self.lam, self.g, self.p0, self.p1)
 
@@ -242,7 +244,7 @@ class WorkingSet(NamedTuple):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def solve_stack(stack: tuple, pencils: tuple, active: np.ndarray, tol: float,
+def solve_stack(stack: tuple[np.ndarray, ...], pencils: tuple[np.ndarray, ...], active: np.ndarray, tol: float,
                 max_iter: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Compiled loop over M AGV problems x 2 axes (see :meth:`AxisPencils.solve`): ``stack`` holds
     the :class:`Stack` fields, ``pencils`` the :class:`Pencils` fields. The reduced constraint rows
@@ -303,7 +305,9 @@ def solve_stack(stack: tuple, pencils: tuple, active: np.ndarray, tol: float,
 
 
 @_kernel
-def _reduce_axis(st, pen, i, ax, ap, tol, pt, bd):  # pragma: no cover - compiled
+def _reduce_axis(  # pragma: no cover - compiled
+    st: Stack, pen: Pencils, i: int, ax: int, ap: AxisProblem, tol: float, pt: Point, bd: Rows,
+) -> None:
     """Problem ``i``'s linear term ``pt.qa``, row bounds ``bd.lo``, ``bd.up`` and feasibility
     thresholds ``bd.tlo``, ``bd.tup`` on the free variables of axis ``ax``. The running-sum rows
     between two free increments are one row with the tightest of their bounds."""
@@ -328,7 +332,9 @@ def _reduce_axis(st, pen, i, ax, ap, tol, pt, bd):  # pragma: no cover - compile
 
 
 @_kernel
-def _unconstrained_minimizer(ap, lam, s, pt):  # pragma: no cover - compiled
+def _unconstrained_minimizer(  # pragma: no cover - compiled
+    ap: AxisProblem, lam: np.ndarray, s: float, pt: Point,
+) -> None:
     """``d = 1 / (1 + s lambda)`` (``lam`` the pencil's eigenvalues), the unconstrained minimizer
     ``z0 = -W diag(d) W' q`` and its row values ``az0`` (the increments and their running sums)."""
     wv, d, n, nf, y = ap.w, ap.d, ap.n, ap.nf, pt.y
@@ -351,7 +357,9 @@ def _unconstrained_minimizer(ap, lam, s, pt):  # pragma: no cover - compiled
 
 
 @_kernel
-def _start_set(ap, bd, pt, ws, previous):  # pragma: no cover - compiled
+def _start_set(  # pragma: no cover - compiled
+    ap: AxisProblem, bd: Rows, pt: Point, ws: WorkingSet, previous: np.ndarray,
+) -> int:
     """The first working set: the rows of ``previous`` (the problem's previous working set, (m,)
     int8 sides, cleared as it is read), then the rows the unconstrained minimizer violates, each
     taken while the set stays linearly independent. All start with zero multipliers: feasible for
@@ -382,7 +390,9 @@ def _start_set(ap, bd, pt, ws, previous):  # pragma: no cover - compiled
 
 
 @_kernel
-def _iterate(ap, bd, pt, ws, nw, max_iter):  # pragma: no cover - compiled
+def _iterate(  # pragma: no cover - compiled
+    ap: AxisProblem, bd: Rows, pt: Point, ws: WorkingSet, nw: int, max_iter: int,
+) -> tuple[int, int, bool]:
     """The dual active-set iterations from a start set of ``nw`` rows: (the final set's size, the
     iterations, whether the problem is solved), a solved problem's point in ``pt.zz``. Unsolved: the
     iteration cap, or a dependent row whose multiplier can grow without limit (inconsistent
@@ -420,7 +430,7 @@ def _iterate(ap, bd, pt, ws, nw, max_iter):  # pragma: no cover - compiled
 
 
 @_kernel
-def _equality_multipliers(bd, pt, ws, nw):  # pragma: no cover - compiled
+def _equality_multipliers(bd: Rows, pt: Point, ws: WorkingSet, nw: int) -> None:  # pragma: no cover - compiled
     """The working set's equality-constrained multipliers: ``M_WW lst = -(slack of z0)``."""
     for t in range(nw):
         r = ws.rows[t]
@@ -429,7 +439,7 @@ def _equality_multipliers(bd, pt, ws, nw):  # pragma: no cover - compiled
 
 
 @_kernel
-def _first_to_zero(lmb, lst, nw):  # pragma: no cover - compiled
+def _first_to_zero(lmb: np.ndarray, lst: np.ndarray, nw: int) -> tuple[int, float]:  # pragma: no cover - compiled
     """The first multiplier to reach zero on the way from ``lmb`` to ``lst``: (its position, the
     fraction of the way); (-1, 1.0) when none does."""
     blocking = -1
@@ -444,7 +454,7 @@ def _first_to_zero(lmb, lst, nw):  # pragma: no cover - compiled
 
 
 @_kernel
-def _all_zero(values, nw):  # pragma: no cover - compiled
+def _all_zero(values: np.ndarray, nw: int) -> bool:  # pragma: no cover - compiled
     for t in range(nw):  # noqa: SIM110 - numba compiles the loop, not all() over a generator
         if values[t] != 0.0:
             return False
@@ -452,7 +462,7 @@ def _all_zero(values, nw):  # pragma: no cover - compiled
 
 
 @_kernel
-def _drop_negative(ap, ws, nw):  # pragma: no cover - compiled
+def _drop_negative(ap: AxisProblem, ws: WorkingSet, nw: int) -> int:  # pragma: no cover - compiled
     """At a zero start (multipliers all zero) every row with a negative multiplier ``lst`` can
     leave at once: the multipliers stay zero, feasible for the dual. The factor is rebuilt; returns
     the set's new size."""
@@ -471,7 +481,9 @@ def _drop_negative(ap, ws, nw):  # pragma: no cover - compiled
 
 
 @_kernel
-def _most_violated(ap, bd, pt, ws, nw):  # pragma: no cover - compiled
+def _most_violated(  # pragma: no cover - compiled
+    ap: AxisProblem, bd: Rows, pt: Point, ws: WorkingSet, nw: int,
+) -> tuple[int, float]:
     """The primal point ``zz = z0 - W D G_W' (sgn lmb)`` and the row it violates most beyond the
     row's threshold: (row, side +1 upper / -1 lower); (-1, 0.0) when it violates none."""
     wv, gv, d, n, nf, y = ap.w, ap.g, ap.d, ap.n, ap.nf, pt.y
@@ -504,7 +516,9 @@ def _most_violated(ap, bd, pt, ws, nw):  # pragma: no cover - compiled
 
 
 @_kernel
-def _exchange_dependent(ap, ws, nw, r, side):  # pragma: no cover - compiled
+def _exchange_dependent(  # pragma: no cover - compiled
+    ap: AxisProblem, ws: WorkingSet, nw: int, r: int, side: float,
+) -> int:
     """Row ``r`` (side ``side``, already marked in ``member``) depends on the working set's rows
     (``col`` holds ``L^-1 M_W,r``): move along the null direction of the set's rows (z unchanged,
     the new multiplier grows) until a multiplier of the set reaches zero, and exchange that row for
@@ -532,7 +546,7 @@ def _exchange_dependent(ap, ws, nw, r, side):  # pragma: no cover - compiled
 
 
 @_kernel
-def _refine(ap, bd, pt, ws, nw):  # pragma: no cover - compiled
+def _refine(ap: AxisProblem, bd: Rows, pt: Point, ws: WorkingSet, nw: int) -> None:  # pragma: no cover - compiled
     """One step of iterative refinement of ``zz``: ``z = z0 - (...)`` loses digits to cancellation
     when |z0| >> |z| (small Q2, far from the reference); project z back onto the working set's
     equalities, ``dz = P^-1 A_W' mu`` with ``M_WW mu = (bound - A z)_W``, unless the residual is
@@ -568,7 +582,7 @@ def _refine(ap, bd, pt, ws, nw):  # pragma: no cover - compiled
 
 
 @_kernel
-def _within_rows(ap, bd, pt):  # pragma: no cover - compiled
+def _within_rows(ap: AxisProblem, bd: Rows, pt: Point) -> bool:  # pragma: no cover - compiled
     """Whether the answer ``pt.zz`` meets every row, the working set's included, within ten times the
     row's feasibility threshold: a set that holds two inconsistent rows (an increment bound and a
     running-sum bound of the same increment, |u[n-1]| beyond a_max by more than one increment) can end
@@ -584,7 +598,9 @@ def _within_rows(ap, bd, pt):  # pragma: no cover - compiled
 
 
 @_kernel
-def _add_objective(p0, p1, s, nf, pt, obj):  # pragma: no cover - compiled
+def _add_objective(  # pragma: no cover - compiled
+    p0: np.ndarray, p1: np.ndarray, s: float, nf: int, pt: Point, obj: float,
+) -> float:
     """``obj`` plus the axis problem's objective ``1/2 z'(s P1 + P0) z + q'z`` at ``pt.zz``, term by
     term (``p0``, ``p1`` the pencil's; P0 is diagonal)."""
     zz = pt.zz
@@ -597,7 +613,9 @@ def _add_objective(p0, p1, s, nf, pt, obj):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _dual_entry(gv, d, r1, s1, r2, s2, nf):  # pragma: no cover - compiled
+def _dual_entry(  # pragma: no cover - compiled
+    gv: np.ndarray, d: np.ndarray, r1: int, s1: float, r2: int, s2: float, nf: int,
+) -> float:
     acc = 0.0
     for k in range(nf):
         acc += gv[r1, k] * d[k] * gv[r2, k]
@@ -605,7 +623,7 @@ def _dual_entry(gv, d, r1, s1, r2, s2, nf):  # pragma: no cover - compiled
 
 
 @_kernel
-def _append(ap, ws, nw, r, side):  # pragma: no cover - compiled
+def _append(ap: AxisProblem, ws: WorkingSet, nw: int, r: int, side: float) -> bool:  # pragma: no cover - compiled
     """Extend the Cholesky factor by row ``r`` (side ``side``); False (factor unchanged, ``col``
     holding ``L^-1 M_W,r``) when the row is linearly dependent on the working set's rows."""
     gv, d, nf, rows, sgn, chol, cinv, col = ap.g, ap.d, ap.nf, ws.rows, ws.sgn, ws.chol, ws.cinv, ws.col
@@ -628,7 +646,7 @@ def _append(ap, ws, nw, r, side):  # pragma: no cover - compiled
 
 
 @_kernel
-def _push(ws, nw, r, side, mult):  # pragma: no cover - compiled
+def _push(ws: WorkingSet, nw: int, r: int, side: float, mult: float) -> int:  # pragma: no cover - compiled
     """Row ``r`` (side ``side``, multiplier ``mult``) joins the working set, whose factor the caller
     has extended; returns the set's new size."""
     ws.rows[nw] = r
@@ -639,7 +657,7 @@ def _push(ws, nw, r, side, mult):  # pragma: no cover - compiled
 
 
 @_kernel
-def _factor(ap, ws, nw):  # pragma: no cover - compiled
+def _factor(ap: AxisProblem, ws: WorkingSet, nw: int) -> None:  # pragma: no cover - compiled
     """Cholesky factor of the working set's dual Hessian from scratch."""
     gv, d, nf, rows, sgn, chol, cinv = ap.g, ap.d, ap.nf, ws.rows, ws.sgn, ws.chol, ws.cinv
     for t in range(nw):
@@ -655,7 +673,7 @@ def _factor(ap, ws, nw):  # pragma: no cover - compiled
 
 
 @_kernel
-def _drop_factor_row(chol, cinv, nw, t):  # pragma: no cover - compiled
+def _drop_factor_row(chol: np.ndarray, cinv: np.ndarray, nw: int, t: int) -> None:  # pragma: no cover - compiled
     """The Cholesky factor without row and column ``t`` of its matrix, in O(nw^2): the trailing
     block takes a rank-one update with the dropped column (Givens rotations), then moves up."""
     # rank-one update L22 L22' + x x' with x = chol[t+1:nw, t] (overwritten as it goes)
@@ -679,7 +697,7 @@ def _drop_factor_row(chol, cinv, nw, t):  # pragma: no cover - compiled
 
 
 @_kernel
-def _remove(ws, nw, t):  # pragma: no cover - compiled
+def _remove(ws: WorkingSet, nw: int, t: int) -> int:  # pragma: no cover - compiled
     """Entry ``t`` leaves the working set's rows, sides and multipliers; returns the set's new size."""
     rows, sgn, lmb = ws.rows, ws.sgn, ws.lmb
     for u in range(t, nw - 1):
@@ -690,7 +708,9 @@ def _remove(ws, nw, t):  # pragma: no cover - compiled
 
 
 @_kernel
-def _chol_solve(chol, cinv, nw, rhs, out):  # pragma: no cover - compiled
+def _chol_solve(  # pragma: no cover - compiled
+    chol: np.ndarray, cinv: np.ndarray, nw: int, rhs: np.ndarray, out: np.ndarray,
+) -> None:
     """out = (L L')^-1 rhs on the leading nw entries."""
     for t in range(nw):
         acc = rhs[t]
@@ -705,7 +725,9 @@ def _chol_solve(chol, cinv, nw, rhs, out):  # pragma: no cover - compiled
 
 
 @_kernel
-def _chol_solve_l(chol, cinv, nw, half, out):  # pragma: no cover - compiled
+def _chol_solve_l(  # pragma: no cover - compiled
+    chol: np.ndarray, cinv: np.ndarray, nw: int, half: np.ndarray, out: np.ndarray,
+) -> None:
     """out = L'^-1 half (``half`` = L^-1 b already): the second half of :func:`_chol_solve`."""
     for t in range(nw - 1, -1, -1):
         acc = half[t]

@@ -42,6 +42,7 @@ __all__ = [
     "RoundedRectangle",
     "Sinusoid",
     "SplinePath",
+    "Curve",
     "Envelope",
     "envelope_violation",
     "fit_envelope",
@@ -119,6 +120,10 @@ class _Curve:
         """Reference augmented states [x, y, v_x, v_y, a_x, a_y] at times ``t`` (s): (T, 6)."""
         table: np.ndarray = evaluate_paths([self], t)[0]
         return table
+
+
+#: A reference path of any family: what :func:`paper_paths` and :func:`sample_paths` return.
+Curve = _Curve
 
 
 def evaluate_paths(paths: Sequence[_Curve], t: np.ndarray) -> np.ndarray:

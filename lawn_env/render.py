@@ -15,6 +15,10 @@ import numpy as np
 from .dynamics import POSITION
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.colors import Colormap, LogNorm
+    from matplotlib.figure import Figure
+
     from .config import ScenarioConfig
     from .core import ScenarioView, Trail
 
@@ -26,13 +30,13 @@ _OUTAGE_RANGE = (1e-6, 1.0)
 _OUTAGE_CMAP = "RdYlGn_r"
 
 
-def _outage_scale():
+def _outage_scale() -> tuple[LogNorm, Colormap]:
     from matplotlib import colormaps, colors
 
     return colors.LogNorm(*_OUTAGE_RANGE), colormaps[_OUTAGE_CMAP]
 
 
-def _axes(fig):
+def _axes(fig: Figure) -> Axes:
     """The scene's axes and, beside them, the links' colour bar, at fixed places (a frame depends
     on the state it shows alone, not on the frames drawn before it)."""
     from matplotlib.cm import ScalarMappable
@@ -44,7 +48,8 @@ def _axes(fig):
     return ax
 
 
-def _draw(ax, sim, trail, *, links: bool = True, trails: bool = True, title: str | None = None):
+def _draw(ax: Axes, sim: ScenarioView, trail: Trail, *, links: bool = True, trails: bool = True,
+          title: str | None = None) -> Axes:
     from matplotlib import cm
 
     x0, x1, y0, y1 = sim.area
@@ -67,9 +72,9 @@ def _draw(ax, sim, trail, *, links: bool = True, trails: bool = True, title: str
     pos = sim.x_aug[:, POSITION]
     ax.scatter(pos[:, 0], pos[:, 1], c=palette, s=30, zorder=3, label="AGVs")
     q = sim.drone_position
-    trail = traj["drone_position"]
-    if trails and len(trail) > 1:
-        ax.plot(trail[:, 0], trail[:, 1], "-", color="k", lw=1.0, alpha=0.7)
+    flown = traj["drone_position"]
+    if trails and len(flown) > 1:
+        ax.plot(flown[:, 0], flown[:, 1], "-", color="k", lw=1.0, alpha=0.7)
     ax.scatter([q[0]], [q[1]], marker="^", c="k", s=80, zorder=4, label="drone")
     if links:
         norm, cmap = _outage_scale()
@@ -106,7 +111,8 @@ class Renderer:
             self._plt.pause(0.001)
             return None
         self.canvas.draw()
-        return np.asarray(self.canvas.buffer_rgba())[:, :, :3].copy()
+        frame: np.ndarray = np.asarray(self.canvas.buffer_rgba())[:, :, :3].copy()
+        return frame
 
     def close(self) -> None:
         if self.human:

@@ -21,7 +21,7 @@ followed by 3 global features (see :meth:`ObservationLayout.feature_names`).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import gymnasium as gym
 import numba
@@ -139,7 +139,7 @@ def direct_rows(a: np.ndarray, increment_size: int, limits: np.ndarray, position
 
 
 @numba.njit(cache=True)
-def _first_outside(a):  # pragma: no cover - compiled
+def _first_outside(a: np.ndarray) -> int:  # pragma: no cover - compiled
     """The flat index of the first entry outside [-1, 1] or NaN, -1 when there is none."""
     flat = a.ravel()
     for i in range(flat.size):
@@ -208,13 +208,14 @@ class ActionCodec:
         if a.ndim > 1:
             return self._decode_rows(a, x_aug, reference, drone_position, slot)
         ref = None if reference is None else reference[None]
-        x = None if x_aug is None else np.asarray(x_aug)[None]
+        x = x_aug if x_aug is None else np.asarray(x_aug)[None]
         d = self._decode_rows(a[None], x, ref, np.asarray(drone_position)[None],
                               None if slot is None else np.asarray(slot).reshape(1))
         return Decisions(None if d.increment is None else d.increment[0], d.power_w[0], d.drone_next[0],
                          None if d.plan is None else d.plan[0])
 
-    def _decode_rows(self, actions, x_aug, reference, drone_position, slot) -> Decisions:  # pragma: no cover
+    def _decode_rows(self, actions: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
+                     drone_position: np.ndarray, slot: int | np.ndarray | None) -> Decisions:  # pragma: no cover
         raise NotImplementedError
 
     def encode(self, decision: Decisions, x_aug: np.ndarray, reference: np.ndarray | None,
@@ -241,7 +242,8 @@ class DirectActions(ActionCodec):
             self.size += self.plan_size
             self.space = gym.spaces.Box(-1.0, 1.0, shape=(self.size,), dtype=np.float32)
 
-    def _decode_rows(self, actions, x_aug, reference, drone_position, slot) -> Decisions:
+    def _decode_rows(self, actions: np.ndarray, x_aug: np.ndarray, reference: np.ndarray | None,
+                     drone_position: np.ndarray, slot: int | np.ndarray | None) -> Decisions:
         num, k = actions.shape[0], self.num_agvs
         increment = np.empty((num, k, 2)) if self.increment_size else None
         power, drone_next = np.empty((num, k)), np.empty((num, 2))
@@ -273,7 +275,8 @@ class DirectActions(ActionCodec):
                 raise ValueError(f"decision.plan has shape {plan.shape}; this action carries "
                                  f"({self.num_agvs}, {self.buffer_length}, 2) (K, N_p - 1, 2)")
             parts.append(plan.reshape(-1) / lim["increment_max"])
-        return np.clip(np.concatenate(parts), -1.0, 1.0).astype(np.float32)
+        action: np.ndarray = np.clip(np.concatenate(parts), -1.0, 1.0).astype(np.float32)
+        return action
 
 
 #: What the compiled encode reads of an :class:`ObservationLayout`, by name (one record): where
@@ -288,10 +291,32 @@ OBS_CODEC = np.dtype([("state", "i8"), ("error", "i8"), ("reference", "i8"), ("r
                       ("inverse_budget", "f8")])
 
 
+class ObsCodec(Protocol):
+    """An :data:`OBS_CODEC` record as the kernels read it (its fields by name: numba types the record
+    itself; this spells it for the type checker): the features' offsets, then their scales."""
+
+    state: int
+    error: int
+    reference: int
+    relative_to_drone: int
+    outage_probability: int
+    delivered: int
+    power: int
+    agv_features: int
+    window: int
+    state_scale: np.ndarray
+    state_shift: np.ndarray
+    reference_scale: np.ndarray
+    center: np.ndarray
+    inverse_half_extent: np.ndarray
+    inverse_budget: float
+
+
 @numba.njit(cache=True)
 def _encode_rows(  # noqa: PLR0913 - a compiled kernel (up to 12 arguments)
-    out, table, slot, state, reference, codec, num_slots, bound, clip_table,
-):  # pragma: no cover - compiled
+    out: np.ndarray, table: np.ndarray, slot: np.ndarray, state: tuple[np.ndarray, ...], reference: np.ndarray,
+    codec: np.ndarray, num_slots: int, bound: float, clip_table: bool,
+) -> None:  # pragma: no cover - compiled
     """Every observation row, each feature computed in float64 as :meth:`ObservationLayout.encode`
     documents, rounded once to float32 and clipped to ``bound`` in float32 (``state``: the scenarios'
     observed states, errors, drone positions, last outage probabilities, deliveries and powers;
@@ -314,7 +339,9 @@ def _encode_rows(  # noqa: PLR0913 - a compiled kernel (up to 12 arguments)
 
 
 @numba.njit(cache=True)
-def _encode_windows(row, reference, n, off, sc, b32):  # pragma: no cover - compiled
+def _encode_windows(  # pragma: no cover - compiled
+    row: np.ndarray, reference: np.ndarray, n: int, off: ObsCodec, sc: ObsCodec, b32: np.float32,
+) -> None:
     """One scenario's reference windows at slot n: positions relative to slot n's, scaled."""
     for i in range(reference.shape[0]):
         col = i * off.agv_features + off.reference
@@ -327,7 +354,9 @@ def _encode_windows(row, reference, n, off, sc, b32):  # pragma: no cover - comp
 
 
 @numba.njit(cache=True)
-def _encode_state(row, b, state, off, sc, b32):  # pragma: no cover - compiled
+def _encode_state(  # pragma: no cover - compiled
+    row: np.ndarray, b: int, state: tuple[np.ndarray, ...], off: ObsCodec, sc: ObsCodec, b32: np.float32,
+) -> None:
     """One scenario's state-dependent features: per AGV its state, error, position relative to the
     drone, last outage, delivery and power; then the drone's position."""
     x_obs, error_obs, drone, outage, delivered, power = state
@@ -351,12 +380,13 @@ def _encode_state(row, b, state, off, sc, b32):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
-def _clip32(v, b32):  # pragma: no cover - compiled
+def _clip32(v: np.float32, b32: np.float32) -> np.float32:  # pragma: no cover - compiled
     """A float32 feature clipped to [-b32, b32]."""
     if v > b32:
         return b32
-    if v < -b32:
-        return -b32
+    low: np.float32 = -b32
+    if v < low:
+        return low
     return v
 
 
@@ -481,7 +511,8 @@ class ObservationLayout:
         win = windows.copy()
         win[..., POSITION] -= windows[..., 0:1, POSITION]
         win *= self._ref_scale
-        return win.reshape((*win.shape[:-2], -1))
+        features: np.ndarray = win.reshape((*win.shape[:-2], -1))
+        return features
 
     def encode(self, sim: Simulation, bound: float | None = None, table: SlotTable | None = None) -> np.ndarray:
         """Observations of every scenario of a :class:`~lawn_env.core.Simulation` at its current
@@ -543,7 +574,7 @@ class ObservationLayout:
                              + (f": {hint}" if hint else ""))
         return array
 
-    def decode(self, obs: np.ndarray) -> dict:
+    def decode(self, obs: np.ndarray) -> dict[str, Any]:
         """Planner state from an observation: ``x_aug`` (K, 6), ``reference`` (K, N_p+1, 6),
         ``drone_position`` (2,), ``slot``, ``last_power_w`` (K,), ``outage_probability`` (K,),
         ``buffer`` (K, N_p - 1, 2) under the buffered actuator (:attr:`lawn_env.core.Snapshot.buffer`), else None.
