@@ -360,12 +360,12 @@ def test_joint_v0_make_vec_is_gymnasiums_sync_vector_env():
 
 
 def test_a_run_recorded_under_a_v0_id_plays_its_current_version(tmp_path):
-    from agents.runs import RunDir
+    from agents.runs import AgentRecord, RunDir
 
     for legacy, (current, _) in lawn_env.LEGACY_ENV_IDS.items():
-        assert RunDir(tmp_path, {"env": legacy, "algo": "ppo"}).env == current
-    assert RunDir(tmp_path, {"env": "lawn/Comm-v1", "algo": "ppo"}).env == "lawn/Comm-v1"
-    assert RunDir(tmp_path, {"env": lawn_env.PARALLEL_ENV_ID, "algo": "ppo"}).env == lawn_env.PARALLEL_ENV_ID
+        assert RunDir(tmp_path, AgentRecord(**{"env": legacy, "algo": "ppo"})).env == current
+    assert RunDir(tmp_path, AgentRecord(**{"env": "lawn/Comm-v1", "algo": "ppo"})).env == "lawn/Comm-v1"
+    assert RunDir(tmp_path, AgentRecord(**{"env": lawn_env.PARALLEL_ENV_ID, "algo": "ppo"})).env == lawn_env.PARALLEL_ENV_ID
 
 
 def test_every_env_id_has_one_role_from_one_table():
