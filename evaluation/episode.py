@@ -27,6 +27,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from lawn_env import ScenarioConfig
+from lawn_env.metrics import EpisodeMetrics
 
 __all__ = ["TRANSIENT_SLOTS", "Play", "DEFAULT_PLAY", "EpisodeSpec", "Entry", "EpisodeResult", "Results",
            "write_results", "read_results", "write_rows", "write_csv", "read_csv", "parse_bool"]
@@ -135,6 +136,14 @@ class EpisodeResult:
                 got = int(got)
             row[f.name] = got
         return row
+
+    @classmethod
+    def from_metrics(cls, metrics: EpisodeMetrics, **fields: Any) -> EpisodeResult:
+        """The result of an episode's metrics (MODEL.md §6, :class:`lawn_env.metrics.EpisodeMetrics`)
+        and ``fields`` (the policy, env and seed, the decision statistics, the cost's split, the stage
+        costs), each value as its field's type (arrays as float arrays, the flag as a bool)."""
+        values = {**metrics.as_dict(), **fields}
+        return cls(**{k: v for k, v in ((k, _parse(k, v)) for k, v in values.items()) if v is not None})
 
     @classmethod
     def from_row(cls, row: Mapping[str, Any]) -> EpisodeResult:

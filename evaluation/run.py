@@ -37,6 +37,7 @@ from agents.learned import zoo_record
 from agents.runs import read_run
 from lawn_env import ScenarioConfig, central_env_id
 from lawn_env.config import DroneConfig
+from lawn_env.metrics import EpisodeMetrics
 from lawn_env.rollouts import Step, rollout
 
 from .episode import TRANSIENT_SLOTS, Entry, EpisodeResult, EpisodeSpec, Results
@@ -141,7 +142,7 @@ def episode_row(policy: Policy, env_id: str, config: ScenarioConfig, seed: int,
     env = gym.make(env_id, config=config)
     episode = rollout(env, policy, seed, on_step=on_step)
     env.close()
-    return tally.result(policy.name, env_id, seed, episode.metrics, transient_slots)
+    return tally.result(policy.name, env_id, seed, episode.record, transient_slots)
 
 
 class Tally:
@@ -163,18 +164,18 @@ class Tally:
         self.stage_costs.append(float(info["stage_cost"]))
         self.decision_s.append(decision_s)
 
-    def result(self, policy: str, env_id: str, seed: int, metrics: Mapping[str, Any],
+    def result(self, policy: str, env_id: str, seed: int, metrics: EpisodeMetrics,
                transient_slots: int) -> EpisodeResult:
         """The episode's record from the env's ``metrics`` (MODEL.md §6) and the steps added."""
         transient, sustained = split_cost(self.stage_costs, transient_slots)
         decision_s = np.array(self.decision_s)
-        return EpisodeResult.from_row({
-            "policy": policy, "env": env_id, "seed": seed, **metrics,
-            "decision_time_median_s": float(np.median(decision_s)) if decision_s.size else math.nan,
-            "decision_time_p95_s": float(np.percentile(decision_s, 95)),
-            "ao_iterations_mean": float(np.mean(self.iterations)) if self.iterations else math.nan,
-            "qp_fallbacks": self.fallbacks, "transient_cost": transient, "sustained_cost": sustained,
-            "transient_slots": int(transient_slots), "stage_costs": self.stage_costs})
+        return EpisodeResult.from_metrics(
+            metrics, policy=policy, env=env_id, seed=seed,
+            decision_time_median_s=float(np.median(decision_s)) if decision_s.size else math.nan,
+            decision_time_p95_s=float(np.percentile(decision_s, 95)),
+            ao_iterations_mean=float(np.mean(self.iterations)) if self.iterations else math.nan,
+            qp_fallbacks=self.fallbacks, transient_cost=transient, sustained_cost=sustained,
+            transient_slots=int(transient_slots), stage_costs=self.stage_costs)
 
 
 def build_policy(policy: str, config: ScenarioConfig, env_id: str | None = None,
@@ -292,7 +293,7 @@ def play_together(policy: Policy, env_id: str, config: ScenarioConfig, seeds: Se
                        options={"independent_draws": True})
     policy.reset_scenarios(seeds)
     tallies = [Tally() for _ in seeds]
-    metrics: list[Mapping[str, Any] | None] = [None] * count
+    metrics: list[EpisodeMetrics | None] = [None] * count
     playing = np.ones(count, dtype=bool)
     while playing.any():
         start = time.perf_counter()
@@ -303,14 +304,14 @@ def play_together(policy: Policy, env_id: str, config: ScenarioConfig, seeds: Se
         for i in np.flatnonzero(playing).tolist():
             tallies[i].add(plans[i], {key: value[i] for key, value in info.items() if not key.startswith("_")}, share)
             if terminated[i] or truncated[i]:
-                metrics[i] = info["episode_metrics"][i]
+                metrics[i] = EpisodeMetrics.from_dict(info["episode_metrics"][i])
                 playing[i] = False
     env.close()
     return [tally.result(policy.name, env_id, int(seed), _ended(found), transient_slots)
             for tally, seed, found in zip(tallies, seeds, metrics, strict=True)]
 
 
-def _ended(metrics: Mapping[str, Any] | None) -> Mapping[str, Any]:
+def _ended(metrics: EpisodeMetrics | None) -> EpisodeMetrics:
     assert metrics is not None  # the loop ran until every episode ended
     return metrics
 

@@ -30,7 +30,7 @@ import numpy as np
 from . import drone, metrics
 from .config import ScenarioConfig
 from .dynamics import POSITION
-from .metrics import DIVERGENCE_DISTANCE_M, TOTALS, Metrics, Totals
+from .metrics import DIVERGENCE_DISTANCE_M, TOTALS, EpisodeMetrics, Totals
 from .references import Curve
 from .slot import step, step_rows
 from .state import (
@@ -81,9 +81,9 @@ def control_costs(state: SimState, rows: Any = slice(None)) -> np.ndarray:
     return Totals(state.totals[rows]).control_cost
 
 
-def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np.ndarray) -> list[Metrics]:
+def episode_metrics(params: SimParams, state: SimState, rows: Sequence[int] | np.ndarray) -> list[EpisodeMetrics]:
     """Metrics of MODEL.md §6 over the slots each scenario of ``rows`` has run in its episode, one
-    dict per row (:func:`lawn_env.metrics.episode_metrics`; the decision time is the caller's)."""
+    record per row (:func:`lawn_env.metrics.episode_metrics`; the decision time is the caller's)."""
     rows = np.asarray(rows, dtype=np.int64).reshape(-1)
     return metrics.episode_metrics(Totals(state.totals[rows]), state.slot[rows], params.command_period)
 
@@ -173,7 +173,7 @@ class Simulation:
         windows: np.ndarray = state.reference[np.arange(state.slot.size)[:, None], :, idx].transpose(0, 2, 1, 3)
         return windows
 
-    def episode_metrics(self, rows: Sequence[int] | np.ndarray = (0,)) -> list[Metrics]:
+    def episode_metrics(self, rows: Sequence[int] | np.ndarray = (0,)) -> list[EpisodeMetrics]:
         """:func:`episode_metrics` of the scenarios ``rows`` (indices; a single env's is row 0),
         computed together."""
         return episode_metrics(self.params, self.state, rows)
@@ -255,7 +255,7 @@ class ScenarioView:
             buffer=buffer_queue(self.buffer, self.buffer_age) if self._sim.params.buffer_length else None,
         )
 
-    def episode_metrics(self) -> Metrics:
+    def episode_metrics(self) -> EpisodeMetrics:
         """Metrics of MODEL.md §6 over the slots run so far (decision time is the caller's)."""
         return self._sim.episode_metrics([self.i])[0]
 

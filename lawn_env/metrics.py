@@ -4,17 +4,26 @@
   ``SimState.totals`` (B, 5 + 3K) the slot kernel advances (one array crosses into compiled code
   as cheaply as one argument); the kernel writes its columns through the offsets named here, which
   numba compiles in as constants (so this file stamps the kernels' cache, :mod:`lawn_env.kernel_cache`).
-* :func:`episode_metrics`: MODEL.md §6's metrics of the slots each scenario has run, from its sums.
+* :class:`EpisodeMetrics`: MODEL.md §6's metrics of one scenario's episode, by name;
+  :func:`episode_metrics` reads them from the sums of the slots each scenario has run. The envs'
+  ``info["episode_metrics"]`` is the record as a dict (:meth:`EpisodeMetrics.as_dict`), as
+  Gymnasium's info is.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+
 import numpy as np
 
-#: One scenario's metrics: counts, costs and rates by name, the per-AGV ones as lists.
+#: One scenario's metrics as the envs' info carries them: counts, costs and rates by name, the per-AGV
+#: ones as lists (:meth:`EpisodeMetrics.as_dict`).
 Metrics = dict[str, float | int | list[float]]
 
-__all__ = ["Metrics", "Totals", "TOTALS", "TRACKING", "EFFORT", "OUTAGE_P", "PATH", "PER_AGV", "DIVERGENCE_DISTANCE_M",
+__all__ = ["Metrics", "EpisodeMetrics", "Totals",
+           "TOTALS", "TRACKING", "EFFORT", "OUTAGE_P", "PATH", "PER_AGV", "DIVERGENCE_DISTANCE_M",
            "episode_metrics"]
 
 #: The columns of the running sums (B, 5 + 3K) in order: the tracking and effort costs, the predicted
@@ -96,15 +105,48 @@ class Totals:
         return self.packed[..., PER_AGV + 3 * self.num_agvs]
 
 
-def episode_metrics(totals: Totals, slots: np.ndarray, command_period: int) -> list[Metrics]:
-    """Metrics of MODEL.md §6 over the ``slots`` (B,) each of B scenarios has run in its episode, from
-    its running sums (the decision time is the caller's), one dict per scenario: ``slots``,
-    ``control_cost`` (tracking + effort), ``tracking_cost``, ``effort_cost``, ``rmse_m``,
-    ``rmse_per_agv_m``, ``outage_rate``, ``outage_rate_predicted``, ``outage_rate_per_agv`` (over the
-    commands sent: with commands every ``command_period`` slots P, the slots n with n % P == 0),
-    ``mean_power_w`` (the power radiated per link, averaged over every slot: 0 W on a slot without a
-    command), ``drone_path_length_m``, ``max_tracking_error_m`` (the largest position error of any AGV
-    at any slot) and ``diverged`` (1 when it passed :data:`DIVERGENCE_DISTANCE_M`, else 0)."""
+@dataclass(frozen=True)
+class EpisodeMetrics:
+    """MODEL.md §6's metrics of one scenario's episode over the slots it has run (the decision time is
+    the caller's): ``control_cost`` (tracking + effort) and its parts, the RMSE of the position errors
+    (over the AGVs and per AGV), the outage rates over the commands sent (with commands every P slots,
+    the slots n with n % P == 0; realized, predicted, per AGV), the power radiated per link averaged
+    over every slot (0 W on a slot without a command), the drone's path length, the largest position
+    error of any AGV at any slot and ``diverged`` (1 when it passed :data:`DIVERGENCE_DISTANCE_M`)."""
+
+    slots: int
+    control_cost: float
+    tracking_cost: float
+    effort_cost: float
+    rmse_m: float
+    rmse_per_agv_m: list[float]
+    outage_rate: float
+    outage_rate_predicted: float
+    outage_rate_per_agv: list[float]
+    mean_power_w: list[float]
+    drone_path_length_m: float
+    max_tracking_error_m: float
+    diverged: int
+
+    def as_dict(self) -> Metrics:
+        """The metrics by name, in field order (the envs' ``info["episode_metrics"]``)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    @classmethod
+    def from_dict(cls, metrics: Mapping[str, object]) -> EpisodeMetrics:
+        """The record of an env's ``info["episode_metrics"]``; a ``ValueError`` naming the keys that are
+        missing or not metrics."""
+        names = [f.name for f in dataclasses.fields(cls)]
+        missing, unknown = [n for n in names if n not in metrics], [k for k in metrics if k not in names]
+        if missing or unknown:
+            raise ValueError(f"episode metrics {sorted(metrics)}: missing {missing}, unknown {unknown}; the "
+                             f"metrics are {', '.join(names)}")
+        return cls(**metrics)  # type: ignore[arg-type]  # every name checked above; the values are the env's
+
+
+def episode_metrics(totals: Totals, slots: np.ndarray, command_period: int) -> list[EpisodeMetrics]:
+    """:class:`EpisodeMetrics` over the ``slots`` (B,) each of B scenarios has run in its episode, from
+    its running sums (``command_period``: commands every P slots), one per scenario."""
     n, k, period = slots, totals.num_agvs, command_period
     if np.any(n == 0):
         raise RuntimeError("no slot has been simulated yet")
@@ -117,9 +159,7 @@ def episode_metrics(totals: Totals, slots: np.ndarray, command_period: int) -> l
                   (outages.sum(axis=1) / nk).tolist(), (totals.outage_p / nk).tolist(), (outages / per).tolist(),
                   (power / n[:, None]).tolist(), totals.path.tolist(), largest.tolist(),
                   (largest > DIVERGENCE_DISTANCE_M).astype(int).tolist(), strict=True)
-    return [dict(zip(_METRICS, values, strict=True)) for values in columns]
-
-
-_METRICS = ("slots", "control_cost", "tracking_cost", "effort_cost", "rmse_m", "rmse_per_agv_m", "outage_rate",
-            "outage_rate_predicted", "outage_rate_per_agv", "mean_power_w", "drone_path_length_m",
-            "max_tracking_error_m", "diverged")
+    return [EpisodeMetrics(slots=s, control_cost=c, tracking_cost=tc, effort_cost=ec, rmse_m=r, rmse_per_agv_m=ra,
+                           outage_rate=o, outage_rate_predicted=op, outage_rate_per_agv=oa, mean_power_w=pw,
+                           drone_path_length_m=pl, max_tracking_error_m=mx, diverged=d)
+            for s, c, tc, ec, r, ra, o, op, oa, pw, pl, mx, d in columns]

@@ -19,6 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 from .core import Snapshot
+from .metrics import EpisodeMetrics
 
 __all__ = ["Actor", "Step", "Episode", "rollout"]
 
@@ -75,6 +76,11 @@ class Episode:
                              "ended it: it has no episode metrics")
         metrics: dict[str, Any] = self.info["episode_metrics"]
         return metrics
+
+    @property
+    def record(self) -> EpisodeMetrics:
+        """:attr:`metrics` as the typed record (:class:`lawn_env.metrics.EpisodeMetrics`)."""
+        return EpisodeMetrics.from_dict(self.metrics)
 
     @property
     def decision_time_median_s(self) -> float:

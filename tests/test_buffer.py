@@ -82,7 +82,7 @@ def test_the_buffer_equals_its_emulation_on_perfect_links():
                       SlotDraws(np.full((1, k), DELIVERED)))
         np.testing.assert_allclose(buffered.x_aug, emulated.x_aug, rtol=0, atol=1e-12)
     b, e = buffered.episode_metrics()[0], emulated.episode_metrics()[0]
-    assert b["control_cost"] == pytest.approx(e["control_cost"], rel=1e-12)
+    assert b.control_cost == pytest.approx(e.control_cost, rel=1e-12)
 
 
 def _rollout_value(cp, model, ctl, z0, ref, first, pinned, blocked):

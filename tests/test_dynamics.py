@@ -178,7 +178,7 @@ def test_a_slot_without_a_command_transmits_nothing():
             power = np.full((1, cfg.num_agvs), 0.25 if n % 2 == 0 else hold_power)
             decisions = Decisions(rng.uniform(-1, 1, (1, cfg.num_agvs, 2)), power, view.drone_target(np.zeros(2))[None])
             sim.step(decisions, sim.draw(draws))
-        metrics.append(sim.episode_metrics()[0])
+        metrics.append(sim.episode_metrics()[0].as_dict())
     low, high = metrics
     assert low == high  # every metric, the outage rates and the mean power included
     assert high["mean_power_w"] == pytest.approx([0.25 * 11 / 21] * cfg.num_agvs)  # 11 command slots of 21, 0 W between

@@ -424,7 +424,7 @@ class LawnEnv(EngineAccess, gym.Env):
         info = engine.info(result.record, result.extra, i=0)
         if truncated or terminated:
             self._done = True
-            info["episode_metrics"] = self.sim.episode_metrics()
+            info["episode_metrics"] = self.sim.episode_metrics().as_dict()
         if self.render_mode == "human":
             self.render()
         return obs, float(result.reward[0, 0]), terminated, truncated, info
@@ -451,7 +451,8 @@ class LawnEnv(EngineAccess, gym.Env):
         return self.engine.kept_trail.trajectories()
 
     def episode_metrics(self) -> dict[str, Any]:
-        return self.sim.episode_metrics()
+        """MODEL.md §6's metrics of the episode so far, as the last step's ``info["episode_metrics"]``."""
+        return self.sim.episode_metrics().as_dict()
 
     def render(self) -> np.ndarray | None:
         return self.engine.render(self.render_mode)

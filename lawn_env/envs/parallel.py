@@ -273,7 +273,7 @@ class LawnParallelEnv(EngineAccess, ParallelEnv):  # type: ignore[misc]  # petti
 
     def episode_metrics(self) -> dict[str, Any]:
         """MODEL.md §6's metrics of the episode so far (the central envs put them in the last info)."""
-        return self.sim.episode_metrics()
+        return self.sim.episode_metrics().as_dict()
 
     def snapshot(self) -> Snapshot:
         """Full system state for external planners (see :class:`lawn_env.core.Snapshot`)."""

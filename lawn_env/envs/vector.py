@@ -181,7 +181,7 @@ class JointVectorEnv(EngineAccess, VectorEnv):
             metrics = np.full(self.num_envs, None, dtype=object)
             rows = np.flatnonzero(ended)
             for i, values in zip(rows.tolist(), sim.episode_metrics(rows), strict=True):
-                metrics[i] = values
+                metrics[i] = values.as_dict()
             info["episode_metrics"], info["_episode_metrics"] = metrics, ended
             info["episode_control_cost"] = np.where(ended, control_costs(sim.state), 0.0)
             info["_episode_control_cost"] = ended
