@@ -6,8 +6,8 @@ measuring a change against the commit before it.
 
 The other tree is ``--before`` (default ``../before-C``), made with ``git worktree add`` when it is
 not there yet. CMD runs in each tree (its working directory, with that tree first on ``PYTHONPATH``;
-``python`` is this interpreter, so ``-- python -m lawn_cli benchmark --workers 2 --quiet`` times
-``lawn benchmark``), once untimed in each (numba's kernels compiled into each tree's cache), then
+``python`` is this interpreter, so ``-- python benchmarks/lawn_command.py benchmark --workers 2 --quiet``
+times ``lawn benchmark`` in either tree, before the command line moved to ``lawn_cli`` as after), once untimed in each (numba's kernels compiled into each tree's cache), then
 ``--repeats`` times in turn, this tree first. Without ``--figures`` the figure is the command's wall
 time; with it, CMD is a benchmark that writes its figures as a flat JSON object to the file named
 by the ``--json FILE`` the tool appends (``benchmarks/hot_paths.py``: env steps, vector steps and
