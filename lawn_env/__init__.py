@@ -18,7 +18,10 @@ from gymnasium.envs.registration import register, registry
 from . import channel, drone, dynamics, presets, references
 from .config import ChannelConfig, ControlConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 from .core import Simulation, Snapshot
-from .envs import CommEnv, JointEnv, LawnParallelEnv, MixedFleetEnv, env, parallel_env, raw_env
+from .envs.comm import CommEnv
+from .envs.joint import JointEnv
+from .envs.mixed import MixedFleetEnv
+from .envs.parallel import LawnParallelEnv, env, parallel_env, raw_env
 from .errors import ConfigError, UnknownConfigKeyError
 from .interface import RL_INTERFACE, RLInterface, action_codec
 from .presets import resolve_config

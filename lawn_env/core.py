@@ -5,7 +5,8 @@ Its parts, each in its module and re-exported here for the packages that use the
 * :mod:`lawn_env.state`: :class:`SimParams` (what the config fixes), :class:`SimState` (the episode
   state of B scenarios as plain arrays with a leading batch axis), :class:`Decisions`,
   :class:`SlotDraws` and :class:`SlotRecord` (what a slot takes and produces), :func:`draw_slot` (a
-  slot's randomness, in one documented order) and :func:`reset` (new episodes for chosen rows);
+  slot's randomness, in one documented order), :func:`reset` (new episodes for chosen rows) and the
+  buffered actuator's :func:`later_increments` and :func:`buffer_queue`;
 * :mod:`lawn_env.slot`: :func:`step` (one slot of every scenario over one compiled kernel:
   ``step(params, state, decisions, draws)`` returns the new state and the slot's record, its arguments
   untouched) and :func:`step_rows`;
@@ -40,8 +41,10 @@ from .state import (
     SimState,
     SlotDraws,
     SlotRecord,
+    buffer_queue,
     draw_slot,
     empty_state,
+    later_increments,
     link_outage,
     link_success,
     reset,
@@ -51,28 +54,6 @@ __all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "Sna
            "Trail", "Totals", "draw_slot", "reset", "step", "step_rows", "episode_metrics", "control_costs",
            "link_outage", "buffer_queue", "later_increments", "link_success", "SLOT_CONSTANTS", "TOTALS",
            "DIVERGENCE_DISTANCE_M"]
-
-
-def buffer_queue(buffer: np.ndarray, age: np.ndarray) -> np.ndarray:
-    """The increments the AGVs of a buffered actuator play on their next slots without a packet, in
-    order: of buffers (..., K, L, 2) and their ages (..., K), (..., K, L, 2) with entry j the buffer's
-    element ``age + j``, zero past its end (a new array)."""
-    buffer = np.asarray(buffer, dtype=float)
-    length = buffer.shape[-2]
-    index = np.asarray(age, dtype=np.int64)[..., None] + np.arange(length)
-    out = np.take_along_axis(buffer, np.minimum(index, max(length - 1, 0))[..., None], axis=-2) if length else buffer
-    return np.where((index < length)[..., None], out, 0.0)
-
-
-def later_increments(sequence: np.ndarray, length: int) -> np.ndarray:
-    """What a buffered actuator's packet carries after the command of the planned increments
-    ``sequence`` (..., N, 2), the first being the command: its next ``length`` (L = N_p - 1), zeros past
-    the sequence's end (an AGV that has played them all holds), a new array (..., L, 2)."""
-    sequence = np.asarray(sequence, dtype=float)
-    plan = np.zeros((*sequence.shape[:-2], length, 2))
-    later = sequence[..., 1 : 1 + length, :]
-    plan[..., : later.shape[-2], :] = later
-    return plan
 
 
 def control_costs(state: SimState, rows: Any = slice(None)) -> np.ndarray:

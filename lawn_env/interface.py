@@ -69,13 +69,13 @@ from pydantic.dataclasses import dataclass
 
 from .channel import LinkParams
 from .config import PositiveFloat, ScenarioConfig
-from .core import Decisions, later_increments
 from .drone import toward
 from .dynamics import ACCELERATION, POSITION, PredictionModel, saturate_increment
 from .errors import raises_config_errors
 from .mpc import DEFAULT_BACKEND, OutageAwareMPC, SlotData
 from .products import matmul
 from .spaces import ActionCodec, DirectActions
+from .state import Decisions, later_increments
 from .tail import DeliveryLaw
 
 __all__ = ["RLInterface", "V0_INTERFACE", "RL_INTERFACE", "OBS_LIMIT", "STAKE_FLOOR", "resolve_interface",
@@ -297,7 +297,7 @@ class AnchoredActions(ActionCodec):
 
     def _later(self, sequence: np.ndarray) -> np.ndarray | None:
         """The plan a buffered actuator's packet carries after the command (None under hold): the
-        anchor's later increments (:func:`lawn_env.core.later_increments`)."""
+        anchor's later increments (:func:`lawn_env.state.later_increments`)."""
         return later_increments(sequence, self.buffer_length) if self.buffer_length else None
 
     def _distance_sq(self, x_aug: np.ndarray, drone_next: np.ndarray) -> np.ndarray:

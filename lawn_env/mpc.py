@@ -541,7 +541,7 @@ class OutageAwareMPC:
         """The slot's QPs with the next command lost: its increment held at zero, the AGV keeping
         u[n-1] until the command after it (MODEL.md §4, "Planning under delivery"); or, with ``queue``
         (..., K, L, 2), the increments a buffered actuator plays on the next slots without a packet
-        (:func:`lawn_env.core.buffer_queue`; MODEL.md §3), pinned to the one it plays then
+        (:func:`lawn_env.state.buffer_queue`; MODEL.md §3), pinned to the one it plays then
         (:meth:`_played`). The next command is the horizon's first increment that may be non-zero
         (:func:`command_mask`; the first with commands every slot; none when the period outlasts the
         horizon, and then nothing is held). Its phases are ``P .. 2P-1`` of the compiled pencils."""

@@ -27,9 +27,9 @@ import gymnasium as gym
 import numba
 import numpy as np
 
-from .core import Decisions, buffer_queue
 from .drone import move_rows
 from .dynamics import POSITION
+from .state import Decisions, buffer_queue
 
 if TYPE_CHECKING:
     from .config import ScenarioConfig
@@ -418,7 +418,7 @@ class ObservationLayout:
     next 2 (N_p - 1)    under ``control.actuator="buffer"`` only: the buffer's      / Delta-a_max
                         increments in the order the AGV plays them on its next
                         slots without a packet, zeros once spent
-                        (:func:`lawn_env.core.buffer_queue`)
+                        (:func:`lawn_env.state.buffer_queue`)
     ==================  ==========================================================  ====================================
 
     Global features (3, at the end): drone position (2, like AGV positions), slot n / N.

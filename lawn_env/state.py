@@ -5,7 +5,10 @@
 * :class:`SimState`: the episode state of B scenarios as plain arrays with a leading batch axis
   (augmented AGV states, drone positions, slots, references, the last slot's links, the episode's
   running sums for the metrics of MODEL.md §6, :class:`lawn_env.metrics.Totals`).
-* :class:`Decisions`, :class:`SlotDraws`, :class:`SlotRecord`: what a slot takes and produces.
+* :class:`Decisions`, :class:`SlotDraws`, :class:`SlotRecord`: what a slot takes and produces;
+  :func:`later_increments` (what a buffered actuator's packet carries after its command) and
+  :func:`buffer_queue` (what its AGVs play without a packet), for the planners and codecs that
+  build or read those buffers without the simulation's object.
 * :func:`draw_slot`: a slot's randomness for B scenarios from one generator, in one documented
   order; :func:`reset`: new episodes for chosen rows, each drawing from its own generator.
 
@@ -27,7 +30,7 @@ from .dynamics import POSITION, PredictionModel, initial_state, measure, packed_
 from .metrics import Totals
 
 __all__ = ["SimParams", "SimState", "SlotDraws", "SlotRecord", "Decisions", "SLOT_CONSTANTS", "draw_slot",
-           "empty_state", "reset", "link_outage", "link_success"]
+           "empty_state", "reset", "link_outage", "link_success", "buffer_queue", "later_increments"]
 
 
 def link_outage(x_aug: np.ndarray, drone_xy: np.ndarray, power_w: np.ndarray,
@@ -183,6 +186,28 @@ class Decisions(NamedTuple):
     power_w: np.ndarray
     drone_next: np.ndarray
     plan: np.ndarray | None = None
+
+
+def buffer_queue(buffer: np.ndarray, age: np.ndarray) -> np.ndarray:
+    """The increments the AGVs of a buffered actuator play on their next slots without a packet, in
+    order: of buffers (..., K, L, 2) and their ages (..., K), (..., K, L, 2) with entry j the buffer's
+    element ``age + j``, zero past its end (a new array)."""
+    buffer = np.asarray(buffer, dtype=float)
+    length = buffer.shape[-2]
+    index = np.asarray(age, dtype=np.int64)[..., None] + np.arange(length)
+    out = np.take_along_axis(buffer, np.minimum(index, max(length - 1, 0))[..., None], axis=-2) if length else buffer
+    return np.where((index < length)[..., None], out, 0.0)
+
+
+def later_increments(sequence: np.ndarray, length: int) -> np.ndarray:
+    """What a buffered actuator's packet carries after the command of the planned increments
+    ``sequence`` (..., N, 2), the first being the command: its next ``length`` (L = N_p - 1), zeros past
+    the sequence's end (an AGV that has played them all holds), a new array (..., L, 2)."""
+    sequence = np.asarray(sequence, dtype=float)
+    plan = np.zeros((*sequence.shape[:-2], length, 2))
+    later = sequence[..., 1 : 1 + length, :]
+    plan[..., : later.shape[-2], :] = later
+    return plan
 
 
 @dataclass(eq=False, slots=True, kw_only=True)

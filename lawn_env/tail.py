@@ -390,7 +390,7 @@ class LossAwareTail:
         """(the delivered solution: the planned increments (..., K, N, 2) and V^del (..., K); V^lost
         (..., K)) at psi-bar and slot (each one per scenario (...), or one for all). Under the buffered
         actuator ``queue`` (..., K, L, 2) is what each AGV plays without a packet
-        (:func:`lawn_env.core.buffer_queue`), and V^lost plays it (:meth:`OutageAwareMPC.lost_command`).
+        (:func:`lawn_env.state.buffer_queue`), and V^lost plays it (:meth:`OutageAwareMPC.lost_command`).
         ``rows``: the leading axis is those scenarios of a batch, each continuing its own warm starts
         (:class:`lawn_env.mpc.Rows`; a batched planner's: its scenarios decide as each would alone)."""
         start = time.perf_counter()
