@@ -40,6 +40,8 @@ __all__ = [
     "horizon_weights",
     "increment_sum_matrix",
     "PredictionModel",
+    "PlanningSystem",
+    "planning_system",
     "step_augmented",
     "packed_step_matrices",
     "cost_coefficients",
@@ -422,6 +424,62 @@ def _build_model(slot_s: float, horizon: int, q1_diag: tuple[float, ...], q2_dia
     extra = (terminal_success, lag_alpha) if (terminal_success, lag_alpha) != (1.0, -1.0) else ()
     key = (slot_s, horizon, q1_diag, q2_diag, *extra)
     return PredictionModel(slot_s=slot_s, horizon=horizon, key=key, **arrays)
+
+
+@dataclass(frozen=True, eq=False)
+class PlanningSystem:
+    """The system a loss-aware tail (:mod:`lawn_env.tail`) plans over, built once per (slot, horizon, Q1,
+    Q2, period, lag): the transition ``a``, ``b`` of the augmented AGV (x~, 6 states) or, with an
+    actuator lag (``lag_alpha`` >= 0, :func:`lag_alpha`), of the lag's 8-state (x~ and the applied
+    acceleration; :func:`lag_matrices`), the weights ``q`` (Q1 on x~ alone) and ``r`` (Q2), and its
+    prediction matrices ``c``, ``f`` over the horizon (:func:`prediction_matrices`). Use
+    :meth:`from_config` or :func:`planning_system`; instances are cached by ``key`` and shared (the
+    arrays are read-only)."""
+
+    slot_s: float
+    horizon: int
+    period: int
+    a: np.ndarray
+    b: np.ndarray
+    q: np.ndarray
+    r: np.ndarray
+    c: np.ndarray
+    f: np.ndarray
+    # (slot_s, horizon, q1_diag, q2_diag, period, lag_alpha): what it is built from, its cache key
+    key: tuple[Any, ...]
+
+    @classmethod
+    def from_config(cls, config: ScenarioSettings, lag: bool = False) -> PlanningSystem:
+        """The system of ``config``'s AGVs with the control period the planners know
+        (:func:`planning_period`), over the config's horizon or, where the period is longer, over one
+        that holds the next command and one after it; ``lag`` predicts with the config's actuator lag,
+        where it has one."""
+        ctl = config.control
+        alpha = lag_alpha(float(config.slot_s), float(config.disturbance.actuator_lag_s)) if lag else -1.0
+        period = planning_period(config)
+        horizon = max(int(ctl.horizon), period + 1)  # the next command and one after it inside the horizon
+        return planning_system(float(config.slot_s), horizon, tuple(ctl.q1_diag), tuple(ctl.q2_diag), period, alpha)
+
+    @property
+    def state_dim(self) -> int:
+        """Entries of the state: 6 (x~), 8 with the actuator lag (x~ and the applied acceleration)."""
+        return int(self.a.shape[0])
+
+
+@functools.lru_cache(maxsize=16)
+def planning_system(slot_s: float, horizon: int, q1_diag: tuple[float, ...], q2_diag: tuple[float, ...],
+                    period: int, alpha: float = -1.0) -> PlanningSystem:
+    """The shared :class:`PlanningSystem` of these values (``alpha`` >= 0: with the actuator lag)."""
+    a, b = lag_matrices(slot_s, alpha) if alpha >= 0.0 else augmented_matrices(slot_s)
+    n = a.shape[0]
+    q = np.zeros((n, n))
+    q[:6, :6] = np.diag(np.asarray(q1_diag, dtype=float))
+    r = np.diag(np.asarray(q2_diag, dtype=float))
+    c, f = prediction_matrices(a, b, int(horizon))
+    for arr in (a, b, q, r, c, f):
+        arr.setflags(write=False)
+    return PlanningSystem(slot_s=float(slot_s), horizon=int(horizon), period=int(period), a=a, b=b, q=q, r=r, c=c,
+                          f=f, key=(slot_s, horizon, q1_diag, q2_diag, period, alpha))
 
 
 def step_augmented(x_aug: np.ndarray, du: np.ndarray, a_aug: np.ndarray, b_aug: np.ndarray) -> np.ndarray:

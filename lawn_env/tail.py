@@ -56,7 +56,7 @@ import functools
 import math
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -64,16 +64,13 @@ from scipy import linalg
 
 from .dynamics import (
     ACCELERATION,
+    PlanningSystem,
     PredictionModel,
-    augmented_matrices,
     command_mask,
     increment_sum_matrix,
-    lag_alpha,
-    lag_matrices,
     loss_aware_gain,
     modified_riccati,
-    planning_period,
-    prediction_matrices,
+    planning_system,
 )
 from .mpc import DEFAULT_BACKEND, MPCSolution, OutageAwareMPC, Rows
 from .products import matmul
@@ -82,8 +79,9 @@ from .qp import AxisPencils
 if TYPE_CHECKING:
     from .config import ScenarioConfig
 
-__all__ = ["LossAwareTail", "DeliveryLaw", "TailModel", "tail_model", "expected_delivery", "first_delivery",
-           "PSI_GRID", "PSI_FLOOR", "TAILS", "BOUNDS_PROBABILITY", "DELIVERY_MEMORY", "DELIVERY_START_ITERATIONS"]
+__all__ = ["LossAwareTail", "DeliveryLaw", "TailModel", "tail_model", "shared_tail", "expected_delivery",
+           "first_delivery", "PSI_GRID", "PSI_FLOOR", "TAILS", "BOUNDS_PROBABILITY", "DELIVERY_MEMORY",
+           "DELIVERY_START_ITERATIONS"]
 
 #: The tails a delivery-value planner can price the future with: ``"loss-aware"`` (this module) and
 #: ``"certainty-equivalent"`` (every later command delivered: the psi = 1 MPC and its DARE).
@@ -153,17 +151,18 @@ class _Maps(NamedTuple):
 
 
 class TailModel:
-    """The loss-aware tail of one system (the transition A, B of its n-state, the weights Q (n x n) and
-    R (2 x 2), the horizon N, the control period P): per psi-bar on :data:`PSI_GRID` and slot phase,
-    the recursion of the module docstring, its QP's prediction model and the QP's compiled pencils,
-    built on first use and kept (read-only; shared by every tail of the system: :func:`tail_model`)."""
+    """The loss-aware tail of one system (:class:`lawn_env.dynamics.PlanningSystem`: the transition A, B
+    of its n-state, the weights Q (n x n) and R (2 x 2), the horizon N, the control period P and the
+    prediction matrices): per psi-bar on :data:`PSI_GRID` and slot phase, the recursion of the module
+    docstring, its QP's prediction model and the QP's compiled pencils, built on first use and kept
+    (read-only; shared by every tail of the system: :func:`shared_tail`)."""
 
-    def __init__(self, a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, horizon: int, period: int,
-                 slot_s: float, key: tuple[Any, ...]):
-        self.a, self.b, self.q, self.r = a, b, q, r
-        self.horizon, self.period, self.slot_s, self.key = int(horizon), int(period), float(slot_s), key
-        self.state_dim = a.shape[0]
-        self.c, self.f = prediction_matrices(a, b, self.horizon)
+    def __init__(self, system: PlanningSystem):
+        self.system = system
+        self.a, self.b, self.q, self.r = system.a, system.b, system.q, system.r
+        self.horizon, self.period, self.slot_s, self.key = system.horizon, system.period, system.slot_s, system.key
+        self.state_dim = system.state_dim
+        self.c, self.f = system.c, system.f
         self._terminal: dict[int, np.ndarray] = {}
         self._stages: dict[tuple[int, int], _Stages] = {}
         self._models: dict[tuple[int, int], tuple[PredictionModel, AxisPencils]] = {}
@@ -303,19 +302,17 @@ class TailModel:
 
 
 @functools.lru_cache(maxsize=16)
+def shared_tail(system: PlanningSystem) -> TailModel:
+    """The :class:`TailModel` of ``system``, shared by every tail of it."""
+    return TailModel(system)
+
+
 def tail_model(slot_s: float, horizon: int, q1_diag: tuple[float, ...], q2_diag: tuple[float, ...], period: int,
                alpha: float = -1.0) -> TailModel:
-    """The shared :class:`TailModel` of a system: the augmented AGV (x~, 6 states) or, with an actuator
-    lag (``alpha`` >= 0, :func:`lawn_env.dynamics.lag_alpha`), the lag's 8-state (x~ and the applied
-    acceleration; Q1 weighs x~ alone)."""
-    a, b = lag_matrices(slot_s, alpha) if alpha >= 0.0 else augmented_matrices(slot_s)
-    n = a.shape[0]
-    q = np.zeros((n, n))
-    q[:6, :6] = np.diag(np.asarray(q1_diag, dtype=float))
-    r = np.diag(np.asarray(q2_diag, dtype=float))
-    for arr in (a, b, q, r):
-        arr.setflags(write=False)
-    return TailModel(a, b, q, r, horizon, period, slot_s, (slot_s, horizon, q1_diag, q2_diag, period, alpha))
+    """The shared :class:`TailModel` of a system (:func:`lawn_env.dynamics.planning_system`): the augmented
+    AGV (x~, 6 states) or, with an actuator lag (``alpha`` >= 0, :func:`lawn_env.dynamics.lag_alpha`), the
+    lag's 8-state (x~ and the applied acceleration; Q1 weighs x~ alone)."""
+    return shared_tail(planning_system(slot_s, horizon, q1_diag, q2_diag, period, alpha))
 
 
 class LossAwareTail:
@@ -345,11 +342,8 @@ class LossAwareTail:
                     backend: str = DEFAULT_BACKEND, warm: bool = True) -> LossAwareTail:
         """The tail of ``config``'s AGVs (its horizon, weights, bounds and the control period the planners
         know); ``lag`` predicts with its actuator lag, where it has one."""
-        ctl, d = config.control, config.disturbance
-        alpha = lag_alpha(float(config.slot_s), float(d.actuator_lag_s)) if lag else -1.0
-        period = planning_period(config)
-        horizon = max(int(ctl.horizon), period + 1)  # the next command and one after it inside the horizon
-        model = tail_model(float(config.slot_s), horizon, tuple(ctl.q1_diag), tuple(ctl.q2_diag), period, alpha)
+        ctl = config.control
+        model = shared_tail(PlanningSystem.from_config(config, lag))
         return cls(model, config.num_agvs, ctl.accel_max_mps2, ctl.accel_increment_max_mps2, bounds_probability,
                    backend, warm)
 
