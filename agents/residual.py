@@ -35,7 +35,7 @@ import numpy as np
 from lawn_env import ObservationLayout, ScenarioConfig, env_role, role_env_id
 from lawn_env.envs.base import LawnEnv
 from lawn_env.interface import InterfaceLike, action_codec, resolve_interface
-from lawn_env.spaces import check_action
+from lawn_env.spaces import DirectActions, check_action
 
 from .base import COMM, JOINT, Policy
 
@@ -102,7 +102,7 @@ class ResidualActions:
         if self.anchor.env_id != env_id:
             raise ValueError(f"anchor {self.anchor.name!r} drives {self.anchor.env_id}, not {env_id}")
         role = env_role(env_id)
-        self.scheme, self.v0 = action_codec(config, role, self.interface), action_codec(config, role, None)
+        self.scheme, self.v0 = action_codec(config, role, self.interface), DirectActions(config, role)
         self.layout = ObservationLayout(config)
         self.scale = settings["scale"]
         #: the entries of the interface's action the learner moves (``moves``' parts)

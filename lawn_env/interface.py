@@ -215,9 +215,9 @@ def action_codec(config: ScenarioConfig, role: str = "joint", interface: Interfa
     :class:`~lawn_env.spaces.DirectActions` or :class:`AnchoredActions` (``mpc_backend``: the QP
     backend of the anchor's MPC)."""
     iface = resolve_interface(interface)
-    if iface.action_scheme == "direct":
-        return DirectActions(config, role)
-    return AnchoredActions(config, role, iface, mpc_backend)
+    if iface.action_scheme == "anchored":
+        return AnchoredActions(config, role, iface, mpc_backend)
+    return DirectActions(config, role)
 
 
 class AnchoredActions(ActionCodec):
