@@ -277,7 +277,7 @@ def zoo_agents_for(config: ScenarioConfig) -> list[str]:
     names = []
     for name, record in zoo_agents().items():
         try:
-            check_scenario(f"zoo:{name}", record.env, ScenarioConfig.from_dict(dict(record.config or {})), config,
+            check_scenario(f"zoo:{name}", record.env, ScenarioConfig.from_dict(dict(record.scenario)), config,
                            record.interface)
         except ValueError:
             continue
@@ -293,7 +293,7 @@ def trained_config(name: str) -> ScenarioConfig:
     if prefix == "zero":
         return trained_config(rest)
     if prefix == "zoo":
-        return ScenarioConfig.from_dict(dict(zoo_record(rest).config or {}))
+        return ScenarioConfig.from_dict(dict(zoo_record(rest).scenario))
     if prefix in ("sb3", "bc", "marl"):
         return read_run(rest).load_config()
     raise ValueError(f"trained_config({name!r}): not a learned agent; valid forms: zoo:NAME, sb3:DIR, bc:DIR, "
@@ -420,15 +420,15 @@ def export_agent(run_dir: Path, out_dir: Path, record: Mapping[str, Any]) -> Pat
     model = _load_model(run)
     # a fleet network is loaded by its own class (ALGORITHMS["fleet"]), whoever trained it
     algo = "fleet" if type(getattr(model, "policy", None)).__name__ == "FleetPolicy" else run.algo
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (model.actor if algo in ("sac", "td3") else model.policy).save(str(out_dir / "policy.zip"))
-    normalizer = ObsNormalizer.load(_selected(run_dir)[1])
-    if normalizer is not None:
-        normalizer.save(out_dir / "normalizer.npz")
     agent = {"algo": algo, "trainer": run.record.trainer or run.algo, "env": run.env, "interface": run.interface,
              **({"residual": run.record.residual} if run.record.residual else {}),
              "config": read_json(run_dir / "config.json"), **record}
-    AgentRecord.model_validate(agent)  # what zoo_record will read back
+    AgentRecord.model_validate(agent)  # what zoo_record will read back, checked before any file is written
+    normalizer = ObsNormalizer.load(_selected(run_dir)[1])
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (model.actor if algo in ("sac", "td3") else model.policy).save(str(out_dir / "policy.zip"))
+    if normalizer is not None:
+        normalizer.save(out_dir / "normalizer.npz")
     (out_dir / "agent.json").write_text(json.dumps(agent, indent=2) + "\n")
     return out_dir
 
@@ -456,7 +456,7 @@ def _load_zoo(name: str, config: ScenarioConfig | None = None, env_id: str | Non
     network_class = policy_network_class(record.algo, f"zoo:{name}: agent.json: ")
     network = load_saved(lambda p: network_class.load(p, device="cpu"), ZOO_DIR / name / "policy.zip",
                          f"zoo agent's {record.algo} network")
-    trained = ScenarioConfig.from_dict(dict(record.config or {}))
+    trained = ScenarioConfig.from_dict(dict(record.scenario))
     cfg = config if config is not None else trained
     check_scenario(f"zoo:{name}", record.env, trained, cfg, record.interface)
     normalizer = ObsNormalizer.load(ZOO_DIR / name / "normalizer.npz")

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import importlib
 import json
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -149,11 +148,32 @@ class AgentRecord(BaseModel):
         """The observation layout of its interface (``entities``, ``flat``; None: the v0 interface)."""
         return self.interface.get("layout") if isinstance(self.interface, Mapping) else None
 
+    def require(self, name: str) -> Any:
+        """The value of field ``name``; a ``ValueError`` naming it when the record does not hold it (not
+        written by lawn train, or by an older one)."""
+        value = getattr(self, name, None) if name in type(self).model_fields else (self.model_extra or {}).get(name)
+        if value is None:
+            raise ValueError(f"the run's record has no {name!r} (run.json or agent.json not written by lawn train)")
+        return value
+
     @property
     def run_seconds(self) -> float:
-        """A run's wall time (``run.json``'s ``wall_time_s``), NaN where it is not recorded (a shipped
-        agent records one per training seed)."""
-        return float(self.wall_time_s) if isinstance(self.wall_time_s, (int, float)) else math.nan
+        """A run's wall time (``run.json``'s ``wall_time_s``); a ``ValueError`` where it is not one number
+        (not recorded, or a shipped agent's one per training seed)."""
+        seconds = self.require("wall_time_s")
+        if not isinstance(seconds, (int, float)):
+            raise ValueError(f"the run's record has wall_time_s={seconds!r}, not one run's wall time")
+        return float(seconds)
+
+    def steps(self, default: int) -> int:
+        """The steps the run trained (``num_timesteps``), ``default`` where it does not record them."""
+        return default if self.num_timesteps is None else self.num_timesteps
+
+    @property
+    def scenario(self) -> Mapping[str, Any]:
+        """The scenario config a shipped agent records (``agent.json``'s ``config``)."""
+        config: Mapping[str, Any] = self.require("config")
+        return config
 
     def as_json(self) -> dict[str, Any]:
         """The record as its file holds it (the fields it was read or built with)."""

@@ -131,7 +131,8 @@ def _curve_table(name: str, run_dir: Path, shipped: bool) -> str:
                                                                                r.get("vs_start_ci95", math.nan)),
              fmt_paired(r["vs_reference"], r["vs_reference_ci95"])] for r in rows]
     head = ["steps", "validation cost", "vs start (paired)", "vs rg-mpc (paired)"]
-    wall = read_run(run_dir).record.run_seconds
+    record = read_run(run_dir).record
+    wall = math.nan if record.wall_time_s is None else record.run_seconds
     return (f"`{name}` ({run_dir.name}{', shipped' if shipped else ''}; {wall / 60:.0f} min), learning curve on the "
             "validation seeds:\n\n" + markdown_table(head, body))
 
@@ -151,8 +152,8 @@ def _export(name: str, run_dir: Path, policy: str, d: Distilled, target: Path) -
         per_task[task] = {ref: [g.change for g in compare_ranges(mine, costs_of(d.rows, ref, JOINT, task)).ranges]
                           for ref in (SCORE_HIGH, "rg-mpc")}
     record = {"name": name, "label": r.label, "trained_on": r.env_id, "evaluated_on": env, "command": r.command(),
-              "budget_steps": run.record.num_timesteps or r.timesteps, "training_seeds": list(r.seeds),
-              "shipped_seed": run.record.seed, "wall_time_s": [round(run.record.run_seconds, 1)],
+              "budget_steps": run.record.steps(r.timesteps), "training_seeds": list(r.seeds),
+              "shipped_seed": run.record.require("seed"), "wall_time_s": [round(run.record.run_seconds, 1)],
               "selected_on": "lowest selected validation against rg-mpc on the validation seeds (500000 + i)",
               "selected_at_steps": selected_at(run_dir),
               "benchmark": {"test_seeds": " and ".join(f"{b}-{b + d.episodes - 1}" for b in TEST_RANGES),

@@ -252,7 +252,8 @@ def setup(record: AgentRecord, options: Any, config: ScenarioConfig, out_dir: Pa
 
     limit_torch_threads()
     done_steps = start.steps if start else 0
-    env_seed = TRAIN_SEED_BASE + 1000 * int(record.seed or 0) + done_steps  # a resumed run: fresh, seeded episodes
+    seed = int(record.require("seed"))
+    env_seed = TRAIN_SEED_BASE + 1000 * seed + done_steps  # a resumed run: fresh, seeded episodes
     clock = DecisionClock()
     set_random_seed(env_seed)
     env = make_train_env(record.env, config, options.n_envs, env_seed, options.normalize, out_dir / "monitor",
@@ -269,9 +270,9 @@ def setup(record: AgentRecord, options: Any, config: ScenarioConfig, out_dir: Pa
     wall_before = 0.0 if record.wall_time_s is None else record.run_seconds
     hooks: list[BaseCallback] = []
     if record.env != "CartPole-v1":
-        hooks.append(ControlCostValidation(record.env, config, options.interface, int(record.eval_episodes or 0),
-                                           max(int(record.eval_every or 0), 1), out_dir, options.residual, clock))
-    hooks.append(RunCheckpoint(out_dir, max(int(record.checkpoint_every or 0), 1), wall_time_before=wall_before,
+        hooks.append(ControlCostValidation(record.env, config, options.interface, int(record.require("eval_episodes")),
+                                           max(int(record.require("eval_every")), 1), out_dir, options.residual, clock))
+    hooks.append(RunCheckpoint(out_dir, max(int(record.require("checkpoint_every")), 1), wall_time_before=wall_before,
                                clock=clock, expert_before=record.expert_decision_s or 0.0))
     if options.actor_warmup_steps > 0:
         hooks.append(ActorWarmup(options.actor_warmup_steps))
@@ -281,7 +282,7 @@ def setup(record: AgentRecord, options: Any, config: ScenarioConfig, out_dir: Pa
 def learn(run: Run, progress: bool) -> RunSummary:
     """Train a set-up run to its timestep target; save the model, its statistics and the curve."""
     model, env, out_dir = run.model, run.env, run.out_dir
-    remaining = int(run.record.timesteps or 0) - model.num_timesteps
+    remaining = int(run.record.require("timesteps")) - model.num_timesteps
     began = time.perf_counter()
     if remaining > 0:
         model.learn(total_timesteps=remaining, callback=run.hooks, reset_num_timesteps=not run.resumed,
@@ -309,7 +310,8 @@ def _model(record: AgentRecord, env: Any, start: Checkpoint | None, out_dir: Pat
         if buffer is not None:
             model.load_replay_buffer(str(buffer))
         return model
-    model = cls(options.policy, env, seed=int(record.seed or 0) if record.env != PARALLEL_ENV_ID else None, verbose=0,
+    seed = int(record.require("seed")) if record.env != PARALLEL_ENV_ID else None
+    model = cls(options.policy, env, seed=seed, verbose=0,
                 tensorboard_log=str(out_dir / "tb"), **options.algo_kwargs)
     if record.init_from:
         init_from(model, Path(record.init_from), env)

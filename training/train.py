@@ -77,8 +77,11 @@ def train_seeds(spec: TrainSpec, seeds: list[int], workers: int = 1, backend: st
     specs = [dataclasses.replace(spec, seed=s, out_dir=(spec.out_dir / f"seed-{s}").absolute(), progress=progress)
              for s in seeds]
     summaries = sorted(execute(train, specs, workers, backend), key=lambda r: seeds.index(r.seed))
-    best = [s.best_validation_cost for s in summaries]
-    mean, half = mean_ci(b for b in best if b is not None)
+    unvalidated = [s.seed for s in summaries if s.best_validation_cost is None]
+    if unvalidated:
+        raise ValueError(f"seeds {unvalidated}: their runs recorded no validation, so there is no cost across seeds "
+                         "(lawn_env.ENV_IDS validate; CartPole-v1 does not)")
+    mean, half = mean_ci(float(s.best_validation_cost or 0.0) for s in summaries)
     result = SeedsSummary(spec.algo, spec.env_id, list(seeds), summaries, mean, half)
     (spec.out_dir / "seeds.json").write_text(json.dumps(result.as_json(), indent=2))
     return result

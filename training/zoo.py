@@ -131,10 +131,10 @@ def zoo_tables(ev: ZooEvaluation) -> ZooTables:
             run_rows += [_run_cells(ev, r, d, best, d == chosen, env) for d, best in zip(dirs, validation, strict=True)]
             specs = [ev.runs[d].record for d in dirs]
             algo = {"bc": "BC", "fleet": "DAgger"}.get(r.algo, r.algo.upper())
-            steps = specs[0].num_timesteps if specs[0].num_timesteps is not None else r.timesteps
+            steps = specs[0].steps(r.timesteps)
             budget = (f"{algo}, {steps:,} steps{'' if r.num_agvs == 4 else f' at K = {r.num_agvs}'}, "
                       f"{np.mean([s.run_seconds for s in specs]):.0f} s")
-            label = f"{r.label} (`zoo:{r.name}`, seed {ev.runs[chosen].record.seed})"
+            label = f"{r.label} (`zoo:{r.name}`, seed {ev.runs[chosen].record.require('seed')})"
             recipe_rows.append(_cells(ev, ev.runs[chosen].policy_name, env, label, budget,
                                       f"{fmt_paired(*across)} ({len(dirs)} seeds)"))
             shipped.append(Shipped(r, chosen, specs, env, across))
@@ -162,7 +162,7 @@ def _run_cells(ev: ZooEvaluation, r: Recipe, run_dir: Path, best: Mapping[str, A
     vs = fmt_pct(best["vs_reference"]) if "vs_reference" in best else "–"
     episodes = spec.eval_episodes if spec.eval_episodes is not None else "?"
     validation = f"{vs} ({fmt_num(best['control_cost'])}, {episodes})"
-    return {"recipe": f"`{r.name}`{' (shipped)' if chosen else ''}", "seed": str(spec.seed),
+    return {"recipe": f"`{r.name}`{' (shipped)' if chosen else ''}", "seed": str(spec.require("seed")),
             "anchor": c["anchor"], "validation": validation,
             "score": c["score"], "vs_ref": c["vs_ref"], "vs_anchor": c["vs_anchor"], "worst": c["worst"],
             "wall_time": f"{spec.run_seconds:.0f} s"}
@@ -230,8 +230,8 @@ def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
     anchor = ev.anchor(policy) or None
     record = {
         "name": r.name, "label": r.label, "trained_on": r.env_id, "evaluated_on": s.env,
-        "command": r.command(), "budget_steps": s.specs[0].num_timesteps or r.timesteps,
-        "training_seeds": [spec.seed for spec in s.specs], "shipped_seed": run.record.seed,
+        "command": r.command(), "budget_steps": s.specs[0].steps(r.timesteps),
+        "training_seeds": [spec.require("seed") for spec in s.specs], "shipped_seed": run.record.require("seed"),
         "selected_on": "lowest paired relative difference against rg-mpc on the validation seeds (500000 + i), "
                        "never the test seeds",
         "selected_at_steps": selected_at(s.run_dir),
