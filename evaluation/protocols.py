@@ -261,7 +261,10 @@ def paper_protocol(policies: Sequence[str], env_id: str, config: ScenarioConfig,
     the first, the episodes with their per-slot costs: ``episodes.csv``, ``summary.md`` (with ``epa``
     and ``dv-mpc`` among the policies, the normalized score; every policy against the first per seed,
     as a mean of relative differences and as a geometric mean of cost ratios, the deciding statistic,
-    docs/benchmark.md), ``summary.csv`` and ``benchmark.png``."""
+    docs/benchmark.md), ``summary.csv`` and ``benchmark.png``. Every policy is built once here: a bad
+    name or one that cannot act on ``env_id`` fails before any episode."""
+    for name in policies:
+        build_policy(name, config, env_id)
     batch = Batch(None, config, tuple(Entry(p, env_id) for p in policies), tuple(range(seed, seed + episodes)))
     return Protocol("benchmark", (batch,), {"summary.md": "summary"}, policies=tuple(policies), keep_traces=True,
                     files={"summary.csv": "summary-csv", "benchmark.png": "summary-plot"})

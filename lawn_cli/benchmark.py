@@ -21,7 +21,7 @@ from evaluation.protocols import (
     suite_policies,
     suite_protocol,
 )
-from evaluation.run import REFERENCE_ROWS, build_policy
+from evaluation.run import REFERENCE_ROWS
 from evaluation.seeds import TEST_EPISODES
 from evaluation.stats import SCORE_HIGH, SCORE_LOW, SCORE_VERSION
 from lawn_env import presets
@@ -114,8 +114,6 @@ def _paper(args: argparse.Namespace) -> tuple[Protocol, str]:
     args.seed = 0 if args.seed is None else args.seed
     cfg = config_of(args)
     policies = list(args.policies or (*BENCHMARK_POLICIES, *REFERENCE_ROWS)) + included(args.include)
-    for name in policies:
-        build_policy(name, cfg, args.env)  # fail fast
     episodes = args.episodes or 20
     return (paper_protocol(policies, args.env, cfg, episodes, args.seed),
             (f"lawn benchmark: {args.env}, preset {args.preset}, K={cfg.num_agvs}, {episodes} seeds from "

@@ -12,13 +12,13 @@ from evaluation.protocols import SUITE_BLOCKS, Protocol
 
 from .pages import block_names, replace_block
 
-__all__ = ["suite_pages", "check_suite_pages", "write_suite_pages"]
+__all__ = ["check_suite_pages", "write_suite_pages"]
 
 #: The fleet-size table's block of LEARNED.md and the file of the suite run it comes from.
 FLEET_BLOCK = ("fleet-generalization", "fleet_sizes.md")
 
 
-def suite_pages(protocol: Protocol) -> dict[str, list[tuple[str, str]]]:
+def _suite_pages(protocol: Protocol) -> dict[str, list[tuple[str, str]]]:
     """The pages a suite run writes: page -> its (block, table file) pairs (LEARNED.md only when the
     run plays fleet networks on the fleet sizes)."""
     pages = {"LEADERBOARD.md": [(block, f"{name}.md") for name, block in SUITE_BLOCKS.items()]}
@@ -29,7 +29,7 @@ def suite_pages(protocol: Protocol) -> dict[str, list[tuple[str, str]]]:
 
 def check_suite_pages(protocol: Protocol, docs: Path) -> None:
     """Refuse, before any episode, a ``docs`` folder whose pages lack a block the suite writes."""
-    for page, blocks in suite_pages(protocol).items():
+    for page, blocks in _suite_pages(protocol).items():
         path = docs / page
         present = block_names(path.read_text() if path.exists() else "")
         missing = [block for block, _ in blocks if block not in present]
@@ -40,9 +40,12 @@ def check_suite_pages(protocol: Protocol, docs: Path) -> None:
 def write_suite_pages(protocol: Protocol, tables: dict[str, str], out: Path, docs: Path) -> None:
     """Splice a suite run's tables (by file, as :func:`evaluation.protocols.execute` returns them) into
     the blocks of ``docs`` and copy its per-slot figure (``out/per_slot.png``) to
-    ``docs/figures/suite-per-slot.png``."""
+    ``docs/figures/suite-per-slot.png``; every block and the figure are checked before a page is changed."""
+    check_suite_pages(protocol, docs)
+    if not (out / "per_slot.png").exists():
+        raise ValueError(f"{out}: no per_slot.png (the suite run writes it); the docs are left as they were")
     source = f"lawn benchmark --suite --docs {docs}"
-    for page, blocks in suite_pages(protocol).items():
+    for page, blocks in _suite_pages(protocol).items():
         for block, file in blocks:
             replace_block(docs / page, block, tables[file], source=source)
     (docs / "figures").mkdir(parents=True, exist_ok=True)

@@ -32,7 +32,7 @@ from training.zoo import (
 
 from .pages import block_names, replace_body
 
-__all__ = ["build_zoo", "merged_rows", "read_text", "write_atomic"]
+__all__ = ["build_zoo", "merged_rows"]
 
 
 def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True,
@@ -55,7 +55,7 @@ def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True
     if not built and distilled is None:
         raise ValueError(f"{runs}: no finished recipe runs (lawn zoo train --runs {runs} trains them)")
     rendered = {section: render_zoo(tables) for section, (_, tables) in built.items()}
-    page = read_text(out_doc)
+    page = _read_text(out_doc)
     source = "lawn zoo build" + (f" --only {' '.join(names)}" if names else "")
     if "main" in built:
         for name, text in zip(("zoo-main", "zoo-runs"), rendered["main"], strict=True):
@@ -71,7 +71,7 @@ def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True
     if built:
         rows = merged_rows(read_results(out_doc.parent / "learned" / "episodes.csv"), built)
         write_results(rows, out_doc.parent / "learned" / "episodes.csv", atomic=True)
-    write_atomic(out_doc, page)
+    _write_atomic(out_doc, page)
     if export:
         for ev, tables in built.values():
             export_zoo(tables, ev, target)
@@ -86,7 +86,7 @@ def _sections(names: list[str], out_doc: Path) -> list[str]:
         recipe(name)  # an unknown name is an error that names the recipes
     sections = [x for x in SECTIONS if not names or any(RECIPES[n].section == x for n in names)]
     for section, block in (("fleet", "zoo-fleet"), ("distil", "zoo-distil")):
-        if names and "main" not in sections and section in sections and block not in block_names(read_text(out_doc)):
+        if names and "main" not in sections and section in sections and block not in block_names(_read_text(out_doc)):
             raise ValueError(f"{out_doc}: no generated block {block!r} to rebuild; build the whole page (lawn zoo "
                              "build without --only)")
     return sections
@@ -113,12 +113,12 @@ def _plot_main_curves(ev: ZooEvaluation, out_doc: Path, workers: int) -> None:
                 out_doc.parent / "learned" / "curves.png")
 
 
-def read_text(path: Path) -> str:
+def _read_text(path: Path) -> str:
     """The file's text, empty when it does not exist."""
     return Path(path).read_text() if Path(path).exists() else ""
 
 
-def write_atomic(path: Path, text: str) -> None:
+def _write_atomic(path: Path, text: str) -> None:
     """Write ``text`` through a temporary file renamed over ``path``."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + ".tmp")
