@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     for r in result.runs:
         print(f"  seed {r.seed}: best validation cost {r.best_validation_cost:.6g} "
               f"at {r.best_at_timesteps} steps, {r.timesteps} steps in {r.wall_time_s or 0.0:.0f} s"
-              f"{_expert_part(r)}")
+              f"{_rate_part(r)}{_expert_part(r)}")
     print(f"  across seeds: {result.best_validation_cost_mean:.6g} ± "
           f"{result.best_validation_cost_ci95:.3g} (95 % interval)")
     print(f"wrote {args.out}/seed-*/ and {args.out}/seeds.json")
@@ -96,12 +96,18 @@ def _resume(args: argparse.Namespace) -> int:
 
 def _report(summary: RunSummary, out: str) -> None:
     print(f"lawn train: {summary.algo} on {summary.env}, seed {summary.seed}, "
-          f"{summary.timesteps} steps in {summary.wall_time_s or 0.0:.1f} s{_expert_part(summary)}")
+          f"{summary.timesteps} steps in {summary.wall_time_s or 0.0:.1f} s{_rate_part(summary)}"
+          f"{_expert_part(summary)}")
     for key in ("final_validation_cost", "best_validation_cost", "best_at_timesteps", "bc_loss_first", "bc_loss_last"):
         value = getattr(summary, key)
         if value is not None:
             print(f"  {key:<24}{value:.6g}")
     print(f"wrote {out}/ (model.zip, run.json, config.json, hyperparams.json, learning curve, summary.md)")
+
+
+def _rate_part(summary: RunSummary) -> str:
+    """The run's environment steps per second of wall time (validation and checkpoints included)."""
+    return f", {summary.steps_per_s:,.0f} steps/s" if summary.steps_per_s else ""
 
 
 def _expert_part(summary: RunSummary) -> str:

@@ -39,10 +39,14 @@ __all__ = ["NativeVecEnv", "make_marl_vec_env", "make_train_env", "train_sb3", "
 
 class NativeVecEnv(VecEnv):
     """``n_envs`` scenarios of ``env_id`` in one batched simulation (same-step autoreset, SB3's
-    convention), on ``interface`` (None: the id's own)."""
+    convention), on ``interface`` (None: the id's own). With ``independent_draws`` (the default) each
+    scenario draws its slots' randomness from its own generator, so scenario i's episodes are those of
+    SB3's ``DummyVecEnv`` of single envs seeded ``seed + i``, step for step, and a run on either is the
+    same run; without, every scenario's draws come from scenario 0's generator (a few microseconds a
+    step less)."""
 
     def __init__(self, config: ScenarioConfig, n_envs: int, env_id: str = "lawn/Joint-v1",
-                 interface: InterfaceLike = None):
+                 interface: InterfaceLike = None, independent_draws: bool = True):
         kwargs: dict[str, Any] = {} if interface is None else {"interface": interface}
         self.venv = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", config=config,
                                  autoreset_mode="SameStep", **kwargs)
@@ -50,10 +54,11 @@ class NativeVecEnv(VecEnv):
         self._seed: int | None = None
         self._actions: np.ndarray | None = None
         self.render_mode = None
+        self.independent_draws = bool(independent_draws)
 
     def reset(self) -> np.ndarray:
         obs: np.ndarray
-        obs, _ = self.venv.reset(seed=self._seed)
+        obs, _ = self.venv.reset(seed=self._seed, options={"independent_draws": self.independent_draws})
         self._seed = None
         return obs
 
@@ -250,7 +255,7 @@ def setup(record: AgentRecord, options: Any, config: ScenarioConfig, out_dir: Pa
     """The env, the model and the callbacks of a run (new, or resumed from ``start``)."""
     from stable_baselines3.common.utils import set_random_seed
 
-    limit_torch_threads()
+    limit_torch_threads(options.torch_threads)
     done_steps = start.steps if start else 0
     seed = int(record.require("seed"))
     env_seed = TRAIN_SEED_BASE + 1000 * seed + done_steps  # a resumed run: fresh, seeded episodes

@@ -40,7 +40,7 @@ NATIVE_ENV_IDS = tuple(i for i in (*ENV_IDS, *RL_ENV_IDS) if gym.spec(i).vector_
 #: Hyperparameter keys that ``lawn train`` reads itself (the rest go to the SB3 algorithm), with the
 #: algorithms each applies to (None: all).
 LAWN_KEYS: dict[str, tuple[str, ...] | None] = {
-    "n_envs": None, "normalize": None, "policy": None, "interface": None,
+    "n_envs": None, "normalize": None, "policy": None, "interface": None, "torch_threads": None,
     "actor_warmup_steps": ("ppo", "a2c"), "init_log_std": ("ppo", "a2c"), "start_at_anchor": ("ppo", "sac"),
     "paired_anchor": ("ppo", "sac", "a2c", "td3"), "residual": ("ppo", "sac", "a2c", "td3"),
 }
@@ -73,6 +73,9 @@ class RunOptions:
     residual: Mapping[str, Any] | None = None
     """Act by the residual scheme around a policy, ``{"anchor": NAME, "scale": s, "moves": [...]}``
     (:mod:`agents.residual`)."""
+    torch_threads: Annotated[int, Field(ge=1, le=256, strict=True)] = 1
+    """Threads of torch's CPU kernels: 1 (the default) for runs side by side, the cores of the machine for
+    one run alone (a large batch's update is most of an RL-scale run's time)."""
     algo_kwargs: Hyperparameters = Field(default_factory=dict)
 
 

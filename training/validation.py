@@ -27,12 +27,12 @@ __all__ = ["RunSummary", "VALIDATION_REFERENCE", "CURVE_FIELDS",
            "validation_costs", "validation_reference", "validation_row", "append_learning_curve",
            "write_learning_curve"]
 
-def limit_torch_threads() -> None:
-    """One torch thread: the networks are small, and more oversubscribe the cores of runs side by side
-    (SAC's update was 100x slower with two concurrent runs)."""
+def limit_torch_threads(threads: int = 1) -> None:
+    """``threads`` torch threads (default one: the networks are small, and more oversubscribe the cores of
+    runs side by side; SAC's update was 100x slower with two concurrent runs)."""
     import torch
 
-    torch.set_num_threads(1)
+    torch.set_num_threads(threads)
 
 
 def versions() -> dict[str, str]:
@@ -153,6 +153,7 @@ class RunSummary:
     best_validation_vs_start: float | None
     best_validation_vs_start_ci95: float | None
     best_at_timesteps: int | None
+    steps_per_s: float | None = None
     bc_loss_first: float | None = None
     bc_loss_last: float | None = None
     resumed_from: int | None = None
@@ -184,11 +185,17 @@ def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> RunSummary:
         best_validation_vs_start=best.get("vs_start") if best else None,
         best_validation_vs_start_ci95=best.get("vs_start_ci95") if best else None,
         best_at_timesteps=int(best["timesteps"]) if best else None,
+        steps_per_s=_rate(spec.get("num_timesteps"), spec.get("wall_time_s")),
     )
     lines = [f"# {spec['algo']} on {spec['env']}", ""]
     lines += [f"- {k}: {v}" for k, v in summary.as_json().items()]
     (out_dir / "summary.md").write_text("\n".join(lines) + "\n")
     return summary
+
+
+def _rate(steps: int | None, seconds: float | None) -> float | None:
+    """Environment steps per second of wall time, to 3 significant digits (None when either is unknown)."""
+    return float(f"{steps / seconds:.3g}") if steps and seconds else None
 
 
 def _share(part: float | None, whole: float | None) -> float | None:

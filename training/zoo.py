@@ -249,6 +249,13 @@ def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
     return target
 
 
+def _rate(rec: AgentRecord) -> str:
+    """`` at N steps/s``: the budget over the mean wall time of the training runs ("" where not recorded)."""
+    seconds = rec.wall_time_s if isinstance(rec.wall_time_s, list) else [rec.wall_time_s]
+    known = [float(x) for x in seconds if x]
+    return f" at {rec.budget_steps / float(np.mean(known)):,.0f} steps/s" if rec.budget_steps and known else ""
+
+
 def format_zoo_list() -> str:
     agents = zoo_agents()
     if not agents:
@@ -262,8 +269,8 @@ def format_zoo_list() -> str:
         gain = bench.shipped_vs_anchor or [math.nan, math.nan]
         lines.append(f"zoo:{name}  {rec.label or ''}")
         lines.append(f"  drives {rec.evaluated_on} (trained on {rec.trained_on}, {algo}), "
-                     f"{rec.budget_steps or 0:,} steps, training seeds {rec.training_seeds}, shipped seed "
-                     f"{rec.shipped_seed}")
+                     f"{rec.budget_steps or 0:,} steps{_rate(rec)}, training seeds {rec.training_seeds}, "
+                     f"shipped seed {rec.shipped_seed}")
         if rec.selected_at_steps == 0 and trainer not in ("bc", "fleet"):
             lines.append("  ships its start: no validation beat the policy it started from (selected at 0 steps)")
         if bench.tasks is not None:  # a steady-task agent: geometric change per task and test range
