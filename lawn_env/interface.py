@@ -42,7 +42,10 @@ accelerating; single slots cost up to 1e7), so every environment also takes
     bounds at their corners, and only a controller that plans with the bounds takes them well.)
 
 * **Reward** ``"scaled"``: ``-min(cost, cost_clip) / cost_scale`` per slot, in
-  ``[-cost_clip / cost_scale, 0]``. The raw stage cost and its terms stay in ``info``.
+  ``[-cost_clip / cost_scale, 0]``; ``"log"``: ``-log(1 + min(cost, cost_clip) / cost_scale)``, in
+  ``[-log(1 + cost_clip / cost_scale), 0]`` (a slot's cost counted by its order of magnitude: the
+  default task's first slots cost hundreds, its later ones a few units, and a scaled reward clipped
+  at 100 is flat over a third of the prior's cost there). The raw stage cost and its terms stay in ``info``.
 * **Termination** past ``termination_distance_m`` of position error of any AGV, with the reward
   of the remaining slots at its floor added as a penalty, so that ending early is never better
   than continuing (every remaining slot would have earned at least that floor).
@@ -89,8 +92,9 @@ class RLInterface:
 
     action_scheme: Literal["direct", "anchored"] = "direct"
     """``direct``: the v0 actions; ``anchored``: measured from a safe anchor."""
-    reward: Literal["cost", "scaled"] = "cost"
-    """``cost``: minus the stage cost (v0); ``scaled``: minus the clipped, scaled stage cost."""
+    reward: Literal["cost", "scaled", "log"] = "cost"
+    """``cost``: minus the stage cost (v0); ``scaled``: minus the clipped, scaled stage cost; ``log``: minus
+    the log of one plus the clipped, scaled stage cost."""
     cost_scale: PositiveFloat = 10.0
     """Stage-cost units per unit of reward (of the order of an expert's cost per slot at the defaults)."""
     cost_clip: PositiveFloat = 100.0
@@ -121,9 +125,9 @@ class RLInterface:
 
     @model_validator(mode="after")
     def _check(self) -> RLInterface:
-        if self.termination_distance_m is not None and self.reward != "scaled":
+        if self.termination_distance_m is not None and self.reward == "cost":
             raise ValueError(
-                f"termination_distance_m={self.termination_distance_m} needs reward='scaled' (got "
+                f"termination_distance_m={self.termination_distance_m} needs reward='scaled' or 'log' (got "
                 f"reward={self.reward!r}): the penalty that makes ending early never pay is the reward floor "
                 "of the remaining slots, and the raw cost has no floor")
         return self
@@ -131,12 +135,18 @@ class RLInterface:
     @property
     def reward_floor(self) -> float:
         """The lowest reward of one slot (``-inf`` for the raw cost)."""
-        return -self.cost_clip / self.cost_scale if self.reward == "scaled" else -math.inf
+        if self.reward == "cost":
+            return -math.inf
+        return -self.cost_clip / self.cost_scale if self.reward == "scaled" else -math.log1p(self.cost_clip /
+                                                                                             self.cost_scale)
 
     def rewards_from_costs(self, costs: np.ndarray) -> np.ndarray:
         """The slots' rewards for realized stage costs (any shape)."""
         costs = np.asarray(costs, dtype=float)
-        return -costs if self.reward == "cost" else -np.minimum(costs, self.cost_clip) / self.cost_scale
+        if self.reward == "cost":
+            return -costs
+        scaled = np.minimum(costs, self.cost_clip) / self.cost_scale
+        return -scaled if self.reward == "scaled" else -np.log1p(scaled)
 
     def terminates(self, position_error_m: np.ndarray) -> np.ndarray:
         """Per scenario: termination is on and some AGV's position error exceeds the bound;
