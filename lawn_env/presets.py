@@ -7,12 +7,13 @@ Register more with :func:`register` (a duplicate name raises).
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 from .config import ChannelConfig, DisturbanceConfig, DroneConfig, ReferenceConfig, ScenarioConfig
 
-__all__ = ["PRESETS", "SUITE", "SUITE_V1", "SUITE_V2", "SUITE_VERSION", "get", "names", "register", "resolve_config",
-           "ConfigLike"]
+__all__ = ["PRESETS", "SUITE", "SUITE_V1", "SUITE_V2", "SUITE_VERSION", "LADDER", "Rung", "get", "names", "register",
+           "resolve_config", "ConfigLike"]
 
 PRESETS: dict[str, ScenarioConfig] = {}
 #: What every ``config=`` argument takes: a ScenarioConfig, a dict of its fields, a preset name or None.
@@ -92,6 +93,38 @@ register("steady-gusty", ScenarioConfig(disturbance=DisturbanceConfig(
 register("wide-k8", ScenarioConfig(num_agvs=8, area_m=(0.0, 300.0, 0.0, 300.0), power_budget_dbw=3.0,
                                    drone=DroneConfig(start_m=(150.0, 150.0)),
                                    reference=ReferenceConfig(initial_offset_std_m=0.0)))
+
+# The learners' ladder (docs/LEARNED.md, "The ladder"): tasks below ``default`` that each leave one thing
+# to learn, so that where learning from scratch stops can be read rung by rung.
+_FIXED_DRONE = DroneConfig(start_m=(100.0, 100.0), max_speed_mps=0.01)
+#: Only the power split is learned: a steady start with the drone held at the area's centre (its reach,
+#: 5 mm a slot, is the least the config allows), so the drone's half of the action moves nothing.
+register("learn-power", ScenarioConfig(drone=_FIXED_DRONE, reference=_STEADY_REFERENCE))
+#: Only the AGVs' tracking is learned (on ``lawn/Joint-v1``): a steady start over links that lose nothing
+#: (R_th = 1 bit/s/Hz, the ``paper-nominal`` threshold: outage below 1e-6 everywhere), so the power and
+#: the drone change nothing and the cost is the increments'.
+register("learn-tracking", ScenarioConfig(channel=ChannelConfig(rate_threshold_bps_hz=1.0), drone=_STEADY_DRONE,
+                                          reference=_STEADY_REFERENCE))
+
+
+@dataclass(frozen=True)
+class Rung:
+    """One rung of :data:`LADDER`: a preset, the env a learner acts on there and what is left to learn."""
+
+    preset: str
+    env_id: str
+    learns: str
+
+
+#: The ladder from the easiest rung to the scenario itself: one decision, then another, then two, then
+#: the paper's task with its transient (``default`` on Comm), then with the AGVs' tracking too (on Joint).
+LADDER: tuple[Rung, ...] = (
+    Rung("learn-power", "lawn/Comm-v1", "the power split (the drone held, a steady start)"),
+    Rung("learn-tracking", "lawn/Joint-v1", "the AGVs' increments (links that lose nothing, a steady start)"),
+    Rung("steady", "lawn/Comm-v1", "the power split and the drone (a steady start)"),
+    Rung("default", "lawn/Comm-v1", "the power split and the drone, from the start's transient"),
+    Rung("default", "lawn/Joint-v1", "the power split, the drone and the increments, from the transient"),
+)
 
 #: The task suite of ``lawn benchmark --suite`` and the leaderboard (docs/LEADERBOARD.md): preset
 #: names, default first. A change of its members or of their configs is a new SUITE_VERSION.

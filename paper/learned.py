@@ -32,7 +32,11 @@ from training.zoo import (
 
 from .pages import block_names, replace_body
 
-__all__ = ["build_zoo", "merged_rows"]
+__all__ = ["build_zoo", "merged_rows", "SECTION_BLOCKS"]
+
+#: The sections written into one generated block each (both their tables), beside ``main``'s two
+#: blocks (``zoo-main``, ``zoo-runs``) and ``distil``'s own.
+SECTION_BLOCKS = {"fleet": "zoo-fleet", "scratch": "zoo-scratch"}
 
 
 def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True,
@@ -60,8 +64,9 @@ def build_zoo(runs: Path, out_doc: Path, workers: int = 2, progress: bool = True
     if "main" in built:
         for name, text in zip(("zoo-main", "zoo-runs"), rendered["main"], strict=True):
             page = replace_body(page, name, text, source=source, where=str(out_doc))
-    if "fleet" in built:
-        page = replace_body(page, "zoo-fleet", "\n\n".join(rendered["fleet"]), source=source, where=str(out_doc))
+    for section, block in SECTION_BLOCKS.items():
+        if section in built:
+            page = replace_body(page, block, "\n\n".join(rendered[section]), source=source, where=str(out_doc))
     if distilled is not None:
         page = replace_body(page, "zoo-distil", distilled.block, source=source, where=str(out_doc))
         (out_doc.parent / "learned").mkdir(parents=True, exist_ok=True)
@@ -85,7 +90,7 @@ def _sections(names: list[str], out_doc: Path) -> list[str]:
     for name in names:
         recipe(name)  # an unknown name is an error that names the recipes
     sections = [x for x in SECTIONS if not names or any(RECIPES[n].section == x for n in names)]
-    for section, block in (("fleet", "zoo-fleet"), ("distil", "zoo-distil")):
+    for section, block in (*SECTION_BLOCKS.items(), ("distil", "zoo-distil")):
         if names and "main" not in sections and section in sections and block not in block_names(_read_text(out_doc)):
             raise ValueError(f"{out_doc}: no generated block {block!r} to rebuild; build the whole page (lawn zoo "
                              "build without --only)")

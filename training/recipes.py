@@ -40,6 +40,8 @@ class Recipe:
     num_agvs: int = 4  # the fleet it trains on (lawn train --set num_agvs=K); every recipe is evaluated at K = 4
     preset: str = "default"  # the scenario it trains and validates on (lawn train --preset)
     settings: dict[str, Any] = field(default_factory=dict)  # config keys over the preset (lawn train --set)
+    eval_episodes: int = 20  # validation episodes (ZOO_VALIDATION_EPISODES unless the recipe needs more)
+    checkpoint_every: int = 10_000  # steps between the run's checkpoints (lawn train --checkpoint-every)
 
     @property
     def config(self) -> ScenarioConfig:
@@ -57,12 +59,16 @@ class Recipe:
         source recipe's run of the same seed)."""
         return TrainSpec(algo=self.algo, env_id=self.env_id, config=self.config, timesteps=self.timesteps, seed=seed,
                          out_dir=runs / self.name / f"seed-{seed}", hp_overrides=dict(self.hp),
-                         eval_every=self.eval_every, eval_episodes=ZOO_VALIDATION_EPISODES, progress=False,
+                         eval_every=self.eval_every, eval_episodes=self.eval_episodes,
+                         checkpoint_every=self.checkpoint_every, progress=False,
                          vec=self.vec, init_from=runs / self.init_from / f"seed-{seed}" if self.init_from else None)
 
     def command(self) -> str:
         parts = [f"lawn train --algo {self.algo} --env {self.env_id} --timesteps {self.timesteps}",
-                 f"--seeds {' '.join(map(str, self.seeds))}", f"--out RUNS/{self.name}"]
+                 f"--seeds {' '.join(map(str, self.seeds))}", f"--out RUNS/{self.name}",
+                 f"--eval-every {self.eval_every} --eval-episodes {self.eval_episodes}"]
+        if self.checkpoint_every != 10_000:
+            parts.append(f"--checkpoint-every {self.checkpoint_every}")
         parts += [f"--hp {shlex.quote(f'{k}={json.dumps(v)}')}" for k, v in self.hp.items()]
         if self.vec != "dummy":
             parts.append(f"--vec {self.vec}")
@@ -85,13 +91,24 @@ _BC_AT_SCALE = {"dagger_iterations": 4, "dagger_timesteps": 10_000,
                 "policy_kwargs": {"net_arch": [256, 256], "log_std_init": -1.0}}
 _FINE_TUNE = {"learning_rate": "lin_5e-5", "clip_range": 0.1, "init_log_std": -2.5, "actor_warmup_steps": 10_000,
               "policy_kwargs": {"net_arch": [256, 256], "log_std_init": -1.0}}  # the clone's network
-#: From scratch: the distance prior and the centroid drone (no MPC in the action; the Comm env's
-#: own MPC still drives the AGVs), and the exploration and step size a learner far from the
-#: optimum needs (log-std -1, 3e-4 decayed).
-_SCRATCH: Hyperparameters = {"interface": {"base": "rl", "power_anchor": "distance"}, "learning_rate": "lin_3e-4",
-                            "policy_kwargs": {"net_arch": [128, 128], "log_std_init": -1.0}}
+#: From scratch at RL scale: the distance prior and the centroid drone (no MPC in the action; the Comm
+#: env's own MPC still drives the AGVs), started at that prior (the output layer zeroed: the untrained
+#: policy's mean is the zero action, so the curve's "vs start" is the change against the prior), on 256
+#: scenarios of the native vector env. A rollout is one whole episode of each (120 slots: every update
+#: sees every phase of the episode, the transient and the steady part alike), 30,720 steps, taken in 4
+#: minibatches of 7,680 for 4 epochs; a 64 x 64 network (the update is most of a run's time, and 128 x 128
+#: learned no faster per step on the ladder's first rung). At 8 scenarios, 2,048-step rollouts in
+#: minibatches of 256 for 10 epochs and 128 x 128 (the version before), a million steps moved nothing
+#: (+0.4 % +- 1.7 % against the prior) at a ninth of the speed (benchmarks/scratch_throughput.py).
+_SCRATCH: Hyperparameters = {"interface": {"base": "rl", "power_anchor": "distance", "reward": "log",
+                                          "cost_clip": 10_000.0}, "start_at_anchor": True,
+                            "n_envs": 256, "n_steps": 120, "batch_size": 7680, "n_epochs": 4,
+                            "learning_rate": "lin_3e-4", "policy_kwargs": {"net_arch": [64, 64], "log_std_init": -1.0}}
 #: From scratch on Joint: the same, with the LQR baseline's increments under the residual.
-_SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_anchor": "lqr"}}
+_SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_anchor": "lqr", "residual_scale": 0.2}}
+#: The scratch runs' budget (10 M steps, as RL is compared) and their validation: every 500,000 steps
+#: on 50 seeds (at 20 the interval on the change against the start was +-12 % on default).
+_SCRATCH_STEPS, _SCRATCH_EVERY, _SCRATCH_EPISODES = 10_000_000, 500_000, 50
 
 #: One network for every fleet size (agents/fleet.py, training/hyperparams/fleet.yml): one training
 #: seed (a run is about 25 minutes, two side by side on 2 cores).
@@ -174,9 +191,16 @@ RECIPES: dict[str, Recipe] = {r.name: r for r in (
     Recipe("ppo-marl-fleet-k64", "PPO multi-agent, fleet network, trained at K = 64", "ppo", PARALLEL_ENV_ID,
            30_000, seeds=_FLEET_SEEDS, hp=_MARL_FLEET, eval_every=10_000, section="fleet", num_agvs=64),
     Recipe("ppo-comm-scratch", "PPO from the distance prior (no MPC in the action)", "ppo", "lawn/Comm-v1",
-           1_000_000, hp=_SCRATCH, eval_every=100_000, vec="native"),
+           _SCRATCH_STEPS, hp=_SCRATCH, eval_every=_SCRATCH_EVERY, eval_episodes=_SCRATCH_EPISODES,
+           checkpoint_every=_SCRATCH_EVERY, vec="native", section="scratch"),
     Recipe("ppo-joint-scratch", "PPO from the distance prior and the LQR (no MPC in the action)", "ppo",
-           "lawn/Joint-v1", 1_000_000, hp=_SCRATCH_JOINT, eval_every=100_000, vec="native"),
+           "lawn/Joint-v1", _SCRATCH_STEPS, hp=_SCRATCH_JOINT, eval_every=_SCRATCH_EVERY,
+           eval_episodes=_SCRATCH_EPISODES, checkpoint_every=_SCRATCH_EVERY, vec="native", section="scratch"),
+    *(Recipe(f"ppo-{rung.preset}-scratch", f"PPO from the prior on the ladder's rung {rung.preset!r}: {rung.learns}",
+             "ppo", rung.env_id, _SCRATCH_STEPS, hp=_SCRATCH if rung.env_id == "lawn/Comm-v1" else _SCRATCH_JOINT,
+             eval_every=_SCRATCH_EVERY, eval_episodes=_SCRATCH_EPISODES, checkpoint_every=_SCRATCH_EVERY,
+           vec="native", section="ladder",
+             preset=rung.preset) for rung in presets.LADDER if rung.preset != "default"),
     Recipe("ppo-comm", "PPO (RL interface)", "ppo", "lawn/Comm-v1", 300_000, eval_every=50_000, vec="native"),
     Recipe("ppo-joint", "PPO (RL interface, residual on the MPC)", "ppo", "lawn/Joint-v1", 300_000, eval_every=50_000,
            vec="native"),
@@ -190,8 +214,10 @@ RECIPES: dict[str, Recipe] = {r.name: r for r in (
 
 
 #: The sections of docs/LEARNED.md (``lawn zoo build`` rebuilds whole sections): ``main``, the
-#: page's tables; ``fleet``, the fleet networks' tables (generated block ``zoo-fleet``).
-SECTIONS: tuple[str, ...] = ("main", "fleet", "distil")
+#: page's tables; ``fleet``, the fleet networks' tables (generated block ``zoo-fleet``); ``scratch``, the
+#: agents learned from their prior at RL scale (``zoo-scratch``). The ladder's recipes (section
+#: ``ladder``) ship no agent: ``python -m paper.ladder`` writes their block.
+SECTIONS: tuple[str, ...] = ("main", "fleet", "distil", "scratch")
 
 
 def recipe(name: str) -> Recipe:
