@@ -145,7 +145,7 @@ class RLInterface:
         costs = np.asarray(costs, dtype=float)
         if self.reward == "cost":
             return -costs
-        scaled = np.minimum(costs, self.cost_clip) / self.cost_scale
+        scaled: np.ndarray = np.minimum(costs, self.cost_clip) / self.cost_scale
         return -scaled if self.reward == "scaled" else -np.log1p(scaled)
 
     def terminates(self, position_error_m: np.ndarray) -> np.ndarray:

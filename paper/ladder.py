@@ -109,8 +109,8 @@ class RungResult:
 
     def gaps(self, policy: str) -> list[Gap]:
         """The gap ``policy`` closes on each test range."""
-        return [gap_closed(*(_in_range(self.costs[p], i) for p in (policy, self.prior, EXPERT)))
-                for i in range(len(TEST_RANGES))]
+        return [gap_closed(_in_range(self.costs[policy], i), _in_range(self.costs[self.prior], i),
+                           _in_range(self.costs[EXPERT], i)) for i in range(len(TEST_RANGES))]
 
 
 def _in_range(costs: Mapping[int, float], index: int) -> dict[int, float]:

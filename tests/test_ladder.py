@@ -154,3 +154,25 @@ def test_the_scratch_recipes_say_what_they_train_with():
         assert "--eval-episodes 50" in r.command() and "--checkpoint-every 500000" in r.command()
         params = spec.hyperparams().params
         assert params["n_envs"] * params["n_steps"] == 30_720 and params["batch_size"] == 7_680
+
+
+def test_the_ladder_page_from_a_tiny_run(tmp_path, monkeypatch):
+    """``python -m paper.ladder`` end to end on one rung: the prior, dv-mpc and a run on both test ranges,
+    the table, the episodes and the figure written after everything was played."""
+    import paper.ladder as ladder
+
+    r = recipe("ppo-learn-power-scratch")
+    runs = tmp_path / "runs"
+    spec = dataclasses.replace(r.spec(runs, 0), timesteps=128, eval_every=128, eval_episodes=2, checkpoint_every=128,
+                               hp_overrides={**r.hp, "n_envs": 16, "n_steps": 8, "batch_size": 64})
+    train(spec)
+    monkeypatch.setattr(ladder, "finished", lambda run_dir, steps: (run_dir / "run.json").exists())
+    out = tmp_path / "out"
+    assert ladder.main(["--runs", str(runs), "--out", str(out), "--episodes", "3", "--workers", "1", "--quiet"]) == 0
+    table = (out / "ladder.md").read_text()
+    assert "`learn-power` (Comm-v1)" in table and "`ppo-learn-power-scratch` seed 0" in table
+    assert sum(line.startswith("|") for line in table.splitlines()) == 3  # one run: the other rungs have none here
+    assert "| 0 % [0, 0] | 0 % [0, 0] |" in table  # its selected model is its start, the prior: nothing closed
+    assert (out / "ladder.png").stat().st_size > 0 and len((out / "ladder.csv").read_text().splitlines()) == 1 + 3 * 6
+    with pytest.raises(ValueError, match="no finished run"):
+        ladder.evaluate_ladder(tmp_path / "empty", episodes=3, workers=1, progress=False)
