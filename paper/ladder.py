@@ -39,7 +39,7 @@ from evaluation.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, paired_geometr
 from lawn_env import presets
 from lawn_env.interface import resolve_interface
 from training.recipes import RECIPES, Recipe, finished
-from training.validation import best_validation, read_learning_curve, selection_key
+from training.validation import read_learning_curve, run_key
 
 __all__ = ["EXPERT", "ladder_recipes", "gap_closed", "Gap", "RungResult", "evaluate_ladder", "render_ladder",
            "plot_ladder", "Ladder", "main"]
@@ -148,7 +148,7 @@ def evaluate_ladder(runs: Path, episodes: int = TEST_EPISODES, workers: int = 2,
         for row in rows:
             if row.env == rung.env_id and row.task == rung.preset:
                 costs.setdefault(row.policy, {})[row.seed] = row.control_cost
-        shipped = min(dirs, key=lambda d: selection_key(best_validation(d)))
+        shipped = min(dirs, key=run_key)
         out.append(RungResult(rung, r, prior, costs, dirs, shipped))
     return Ladder(out, rows)
 
@@ -204,7 +204,8 @@ def _rate(run_dir: Path) -> str:
 
 def plot_ladder(ladder: Ladder, path: Path) -> None:
     """One panel per rung: each run's validation change against its start (the prior) with its 95 %
-    interval over training steps, and the expert's change against the prior on the first test range."""
+    interval over training steps (the measure its selection read: the paired mean, or the geometric mean
+    of the cost ratios), and the expert's change against the prior on the first test range."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -216,17 +217,21 @@ def plot_ladder(ladder: Ladder, path: Path) -> None:
         for d in res.runs:
             rows = [r for r in read_learning_curve(d) if "vs_start" in r]
             t = np.array([r["timesteps"] for r in rows]) / 1e6
-            m = 100 * np.array([r["vs_start"] for r in rows])
-            h = 100 * np.nan_to_num(np.array([r["vs_start_ci95"] for r in rows]))
-            ax.plot(t, m, "-o", ms=2, label=d.name)
-            ax.fill_between(t, m - h, m + h, alpha=0.15)
+            geometric = all("vs_start_geometric_high" in r for r in rows)  # what its selection read
+            key = "vs_start_geometric" if geometric else "vs_start"
+            m = 100 * np.array([r[key] for r in rows])
+            lo, hi = ((100 * np.nan_to_num(np.array([r[f"{key}_{b}"] for r in rows]), nan=0.0) for b in ("low", "high"))
+                      if geometric else (m - 100 * np.nan_to_num(np.array([r["vs_start_ci95"] for r in rows])),
+                                         m + 100 * np.nan_to_num(np.array([r["vs_start_ci95"] for r in rows]))))
+            ax.plot(t, m, "-o", ms=2, label=f"{d.name}{' (geometric)' if geometric else ''}")
+            ax.fill_between(t, lo, hi, alpha=0.15)
         expert = paired_geometric(_in_range(res.costs[EXPERT], 0), _in_range(res.costs[res.prior], 0))
         ax.axhline(100 * expert.change, color="k", ls="--", lw=1, label=f"{EXPERT} (test seeds)")
         ax.axhline(0.0, color="0.5", lw=0.8)
         ax.set_title(f"{res.rung.preset} ({res.rung.env_id.removeprefix('lawn/')})", fontsize=9)
         ax.set_xlabel("environment steps (millions)", fontsize=8)
         if j == 0:
-            ax.set_ylabel("validation cost vs the prior (%)\n(paired mean, 95 % CI)", fontsize=8)
+            ax.set_ylabel("validation cost vs the prior (%)\n(paired, 95 % CI)", fontsize=8)
         ax.legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(path)

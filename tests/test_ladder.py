@@ -17,7 +17,7 @@ from paper.ladder import EXPERT, gap_closed, ladder_recipes
 from training.recipes import RECIPES, recipe
 from training.spec import TrainSpec, split_params
 from training.train import train
-from training.validation import read_learning_curve
+from training.validation import read_learning_curve, selection_of
 
 
 def _episode_metrics(preset, env_id, policy="anchor:distance-lqr", seed=0):
@@ -112,6 +112,8 @@ def test_a_tiny_scratch_run_on_every_rung_records_its_speed_and_its_curve(tmp_pa
     assert curve[0]["vs_start"] == 0.0  # the start is the prior: the curve's change is against it
     assert all(math.isfinite(row["control_cost"]) for row in curve)
     assert resolve_interface(spec.hyperparams().params["interface"]).reward == "log"
+    assert selection_of(spec.out_dir) == r.hp.get("selection", "relative")  # the run records its selection rule
+    assert all("vs_start_geometric_high" in row for row in curve[1:])
 
 
 @pytest.mark.parametrize("env_id", ["lawn/Comm-v1", "lawn/Joint-v1"])

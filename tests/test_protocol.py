@@ -218,6 +218,24 @@ def test_selection_keeps_the_start_unless_a_validation_beats_it_significantly():
     assert selected_validation([]) is None
 
 
+def test_the_geometric_rule_sees_a_gain_on_a_heavy_tailed_start_that_the_relative_mean_does_not():
+    from training.validation import selected_validation, selection_key, validation_row
+
+    reference = {s: 100.0 for s in range(20)}
+    start_costs = {s: 10_000.0 if s < 5 else 100.0 for s in range(20)}  # five seeds where an AGV is lost
+    learned = {s: 150.0 if s < 5 else 110.0 for s in range(20)}  # saves them, 10 % dearer on the others
+    start = {"timesteps": 0, **validation_row(start_costs, reference, start_costs)}
+    row = {"timesteps": 1, **validation_row(learned, reference, start_costs)}
+    assert row["vs_start"] + row["vs_start_ci95"] > 0  # the relative mean's interval reaches past no change
+    assert row["vs_start_geometric_high"] < 0 < row["vs_start_geometric_high"] + 1  # the geometric one does not
+    assert row["vs_start_geometric"] == pytest.approx(np.exp(np.mean(np.log([150 / 1e4] * 5 + [1.1] * 15))) - 1)
+    assert selected_validation([start, row]) is start
+    assert selected_validation([start, row], "geometric") is row
+    assert selection_key(row, "geometric") == row["vs_reference_geometric"] != selection_key(row)
+    with pytest.raises(ValueError, match="'median'.*relative, geometric"):
+        selected_validation([start], "median")
+
+
 # ---------------------------------------------------------------------- the task suite
 def test_suite_tasks_are_presets_with_their_own_scenarios():
     for suite in (presets.SUITE, presets.SUITE_V2, presets.SUITE_V1):

@@ -348,6 +348,10 @@ def test_zoo_command_lists_the_shipped_agents(capsys):
     printed = capsys.readouterr().out
     for name in zoo_agents():
         assert f"zoo:{name}" in printed
+    for name in ("ppo-comm-scratch", "ppo-joint-scratch"):  # each agent's budget and its runs' speed
+        rec = zoo_agents()[name]
+        rate = rec.budget_steps / np.mean(rec.wall_time_s)
+        assert f"{rec.budget_steps:,} steps at {rate:,.0f} steps/s" in printed
     assert main(["zoo", "build", "--runs", "/nonexistent/runs", "--quiet"]) == 2
     assert "no finished recipe runs" in capsys.readouterr().err
 

@@ -33,6 +33,7 @@ from .validation import (
     append_learning_curve,
     read_learning_curve,
     selected_validation,
+    selection_of,
     validation_costs,
     validation_reference,
     validation_row,
@@ -180,6 +181,7 @@ class ControlCostValidation(BaseCallback):
                  out_dir: Path, residual: Mapping[str, Any] | None = None,
                  clock: DecisionClock | None = None):
         super().__init__(verbose=0)
+        self.selection = selection_of(Path(out_dir))  # the rule the run's record names (relative unless chosen)
         self.env_id, self.config, self.interface, self.residual = env_id, config, interface, residual
         self.clock = clock  # the run's expert time: the residual's anchor decides on it
         self.episodes, self.every, self.out_dir = episodes, every, Path(out_dir)
@@ -231,7 +233,7 @@ class ControlCostValidation(BaseCallback):
         append_learning_curve(self.out_dir, self.num_timesteps, row)
         self.logger.record("validation/control_cost", row["control_cost"])
         self.logger.record("validation/vs_reference", row["vs_reference"])
-        best = selected_validation(read_learning_curve(self.out_dir))
+        best = selected_validation(read_learning_curve(self.out_dir), self.selection)
         if best is not None and best["timesteps"] == self.num_timesteps:
             save_model(self.model, self.out_dir, "best_")
 

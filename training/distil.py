@@ -31,7 +31,7 @@ from evaluation.stats import SCORE_HIGH, RangeComparison, compare_ranges, costs_
 from lawn_env import presets
 
 from .recipes import RECIPES, Recipe, finished
-from .validation import best_validation, read_learning_curve, selected_at, selection_key
+from .validation import read_learning_curve, run_key, selected_at
 
 __all__ = ["DISTIL_EPISODES", "own_law", "distil_protocol", "Distilled", "evaluate_distil", "export_distil"]
 
@@ -92,7 +92,7 @@ def _chosen(r: Recipe, runs: Path) -> Path | None:
     dirs = _finished(r, runs)
     if not dirs:
         return None
-    keys = [selection_key(best_validation(d)) for d in dirs]
+    keys = [run_key(d) for d in dirs]
     return dirs[int(np.argmin(keys))]
 
 

@@ -105,7 +105,12 @@ _SCRATCH: Hyperparameters = {"interface": {"base": "rl", "power_anchor": "distan
                             "n_envs": 256, "n_steps": 120, "batch_size": 7680, "n_epochs": 4,
                             "learning_rate": "lin_3e-4", "policy_kwargs": {"net_arch": [64, 64], "log_std_init": -1.0}}
 #: From scratch on Joint: the same, with the LQR baseline's increments under the residual.
-_SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_anchor": "lqr", "residual_scale": 0.2}}
+#: Its runs are selected by the geometric mean of the per-seed cost ratios: the prior's validation costs
+#: are heavy-tailed (1,249 +- 775 on 50 seeds: the seeds where an AGV is lost), and on a first run by the
+#: relative rule the final network closed 45 % [17, 63] of the prior's gap to dv-mpc on the validation
+#: seeds while its relative mean against the prior, -8 % +- 13 %, never cleared the gate (it shipped the prior).
+_SCRATCH_JOINT = {**_SCRATCH, "interface": {**_SCRATCH["interface"], "increment_anchor": "lqr", "residual_scale": 0.2},
+                  "selection": "geometric"}
 #: The scratch runs' budget (10 M steps, as RL is compared) and their validation: every 500,000 steps
 #: on 50 seeds (at 20 the interval on the change against the start was +-12 % on default).
 _SCRATCH_STEPS, _SCRATCH_EVERY, _SCRATCH_EPISODES = 10_000_000, 500_000, 50

@@ -193,7 +193,8 @@ def train_sb3(spec: Any, params: Hyperparameters, options: Any, version: int,
         "hyperparams_version": version, "interface": params.get("interface"), "eval_every": spec.eval_every,
         "eval_episodes": spec.eval_episodes, "checkpoint_every": spec.checkpoint_every,
         "init_from": str(spec.init_from) if spec.init_from else None, "vec": spec.vec,
-        **({"residual": options.residual} if options.residual else {}), "versions": versions()})
+        **({"residual": options.residual} if options.residual else {}),
+        **({"selection": options.selection} if options.selection != "relative" else {}), "versions": versions()})
     out_dir = spec.out_dir
     existed = out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -40,7 +40,7 @@ NATIVE_ENV_IDS = tuple(i for i in (*ENV_IDS, *RL_ENV_IDS) if gym.spec(i).vector_
 #: Hyperparameter keys that ``lawn train`` reads itself (the rest go to the SB3 algorithm), with the
 #: algorithms each applies to (None: all).
 LAWN_KEYS: dict[str, tuple[str, ...] | None] = {
-    "n_envs": None, "normalize": None, "policy": None, "interface": None, "torch_threads": None,
+    "n_envs": None, "normalize": None, "policy": None, "interface": None, "torch_threads": None, "selection": None,
     "actor_warmup_steps": ("ppo", "a2c"), "init_log_std": ("ppo", "a2c"), "start_at_anchor": ("ppo", "sac"),
     "paired_anchor": ("ppo", "sac", "a2c", "td3"), "residual": ("ppo", "sac", "a2c", "td3"),
 }
@@ -76,6 +76,10 @@ class RunOptions:
     torch_threads: Annotated[int, Field(ge=1, le=256, strict=True)] = 1
     """Threads of torch's CPU kernels: 1 (the default) for runs side by side, the cores of the machine for
     one run alone (a large batch's update is most of an RL-scale run's time)."""
+    selection: Literal["relative", "geometric"] = "relative"
+    """Model selection's measure against the run's start and the reference (:data:`training.validation.SELECTIONS`):
+    the paired relative difference, or the geometric mean of the per-seed cost ratios (where the start's
+    costs are heavy-tailed, a relative mean follows its cheap seeds)."""
     algo_kwargs: Hyperparameters = Field(default_factory=dict)
 
 

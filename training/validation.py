@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import platform
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -20,10 +21,11 @@ from agents import Policy, make_policy, rollout
 from evaluation.episode import read_csv
 from evaluation.provenance import provenance
 from evaluation.seeds import VALIDATION_SEED_BASE
-from evaluation.stats import mean_ci, paired_difference
+from evaluation.stats import mean_ci, paired_difference, paired_geometric
 
 __all__ = ["RunSummary", "VALIDATION_REFERENCE", "CURVE_FIELDS",
            "limit_torch_threads", "versions", "read_learning_curve", "selection_key", "selected_validation",
+           "SELECTIONS", "selection_of", "run_key",
            "validation_costs", "validation_reference", "validation_row", "append_learning_curve",
            "write_learning_curve"]
 
@@ -50,7 +52,10 @@ def versions() -> dict[str, str]:
 #: relative differences against ``rg-mpc`` and against the run's starting policy (its first validation),
 #: each with its 95 % half-width.
 CURVE_FIELDS = ("timesteps", "control_cost", "control_cost_ci95", "vs_reference", "vs_reference_ci95",
-                "vs_start", "vs_start_ci95")
+                "vs_start", "vs_start_ci95", "vs_reference_geometric", "vs_start_geometric", "vs_start_geometric_low",
+                "vs_start_geometric_high")
+#: Model selection's rules (``lawn train --hp selection=...``, :func:`selected_validation`).
+SELECTIONS = ("relative", "geometric")
 #: The policy whose costs on the validation seeds pair every validation.
 VALIDATION_REFERENCE = "rg-mpc"
 
@@ -62,27 +67,56 @@ def read_learning_curve(run_dir: Path) -> list[dict[str, float]]:
             for r in read_csv(Path(run_dir) / "learning_curve.csv")]
 
 
-def selection_key(row: Mapping[str, float]) -> float:
-    """What model selection minimizes: the paired relative difference against ``rg-mpc`` (pairing on
-    the same seeds keeps one heavy-tailed episode from deciding, as it can the mean cost, which runs
-    recorded without the column fall back to)."""
+def selection_key(row: Mapping[str, float], rule: str = "relative") -> float:
+    """What model selection minimizes: by the ``relative`` rule the paired relative difference against
+    ``rg-mpc`` (pairing on the same seeds keeps one heavy-tailed episode from deciding, as it can the
+    mean cost, which runs recorded without the column fall back to); by the ``geometric`` rule the
+    geometric mean of the per-seed cost ratios against it, less one (a halving and a doubling weigh
+    alike, so neither the seeds where an AGV is lost nor the cheap ones decide)."""
+    if rule == "geometric" and "vs_reference_geometric" in row:
+        return float(row["vs_reference_geometric"])
     return float(row["vs_reference"]) if "vs_reference" in row else float(row["control_cost"])
 
 
-def selected_validation(rows: Sequence[Mapping[str, float]]) -> Mapping[str, float] | None:
+def _beats_start(row: Mapping[str, float], rule: str) -> bool:
+    """The row's paired 95 % interval against the run's start lies below no change (by the rule's measure;
+    a row without the rule's columns by the relative one; a row without any: an older run, eligible)."""
+    if rule == "geometric" and "vs_start_geometric_high" in row:
+        return float(row["vs_start_geometric_high"]) < 0
+    return "vs_start" not in row or float(row["vs_start"]) + float(row["vs_start_ci95"]) < 0
+
+
+def selected_validation(rows: Sequence[Mapping[str, float]], rule: str = "relative") -> Mapping[str, float] | None:
     """The lowest :func:`selection_key` among the starting policy (the first row) and the validations
-    significantly better than it (paired 95 % interval against the start below zero): the plain
-    minimum of a few validations on 20 seeds often picks a policy better only by chance (the winner's
-    curse). Rows without ``vs_start`` (behaviour cloning, older runs) are all eligible; None for none."""
-    eligible = [r for i, r in enumerate(rows)
-                if i == 0 or "vs_start" not in r or float(r["vs_start"]) + float(r["vs_start_ci95"]) < 0]
-    return min(eligible, key=selection_key, default=None)
+    significantly better than it (paired 95 % interval against the start below zero, by ``rule``'s
+    measure, :data:`SELECTIONS`): the plain minimum of a few validations on 20 seeds often picks a
+    policy better only by chance (the winner's curse). Rows without ``vs_start`` (behaviour cloning,
+    older runs) are all eligible; None for none."""
+    if rule not in SELECTIONS:
+        raise ValueError(f"selection rule {rule!r}: valid: {', '.join(SELECTIONS)}")
+    eligible = [r for i, r in enumerate(rows) if i == 0 or _beats_start(r, rule)]
+    return min(eligible, key=lambda r: selection_key(r, rule), default=None)
+
+
+def selection_of(run_dir: Path) -> str:
+    """The model-selection rule a run recorded (``run.json``'s ``selection``; ``relative`` before the rule
+    was a choice)."""
+    path = Path(run_dir) / "run.json"
+    data = json.loads(path.read_text()) if path.exists() else {}
+    return str(data.get("selection") or "relative")
 
 
 def best_validation(run_dir: Path) -> Mapping[str, float]:
-    """A run's selected validation (:func:`selected_validation` over its learning curve); a run
-    without one: an infinite cost, which selection never prefers."""
-    return selected_validation(read_learning_curve(Path(run_dir))) or {"control_cost": float("inf")}
+    """A run's selected validation (:func:`selected_validation` over its learning curve by its rule); a
+    run without one: an infinite cost, which selection never prefers."""
+    rows = read_learning_curve(Path(run_dir))
+    return selected_validation(rows, selection_of(run_dir)) or {"control_cost": float("inf")}
+
+
+def run_key(run_dir: Path) -> float:
+    """What choosing among a recipe's runs minimizes: the :func:`selection_key` of each run's selected
+    validation, by its rule."""
+    return selection_key(best_validation(run_dir), selection_of(run_dir))
 
 
 def selected_at(run_dir: Path) -> int | None:
@@ -114,9 +148,13 @@ def validation_row(costs: Mapping[int, float], reference: Mapping[int, float],
     starting policy's costs on the same seeds)."""
     mean, half = mean_ci(list(costs.values()))
     diff, diff_half, _ = paired_difference(costs, reference)
-    row = {"control_cost": mean, "control_cost_ci95": half, "vs_reference": diff, "vs_reference_ci95": diff_half}
+    row = {"control_cost": mean, "control_cost_ci95": half, "vs_reference": diff, "vs_reference_ci95": diff_half,
+           "vs_reference_geometric": paired_geometric(costs, reference).change}
     if start is not None:
         row["vs_start"], row["vs_start_ci95"], _ = paired_difference(costs, start)
+        g = paired_geometric(costs, start)
+        row["vs_start_geometric"], row["vs_start_geometric_low"], row["vs_start_geometric_high"] = (
+            g.change, g.low - 1.0, g.high - 1.0)
     return row
 
 
@@ -173,7 +211,7 @@ def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> RunSummary:
     rows = read_learning_curve(out_dir)
     if rows:
         _plot_curve(rows, out_dir / "learning_curve.png", f"{spec['algo']} on {spec['env']}, seed {spec['seed']}")
-    best = selected_validation(rows)
+    best = selected_validation(rows, str(spec.get("selection") or "relative"))
     summary = RunSummary(
         algo=spec["algo"], env=spec["env"], seed=spec["seed"], timesteps=spec.get("num_timesteps"),
         wall_time_s=spec.get("wall_time_s"), expert_decision_s=spec.get("expert_decision_s"),

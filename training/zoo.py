@@ -28,7 +28,7 @@ from evaluation.seeds import TEST_EPISODES
 from evaluation.stats import SCORE_HIGH, SCORE_VERSION, Score, mean_ci, paired, verdict
 
 from .recipes import RECIPES, Recipe, finished
-from .validation import best_validation, read_learning_curve, selected_at, selection_key
+from .validation import best_validation, read_learning_curve, run_key, selected_at
 
 __all__ = ["finished_runs", "evaluate_zoo", "zoo_tables", "render_zoo",
            "ZooMarkdown", "plot_curves", "export_zoo", "format_zoo_list", "ZooEvaluation", "ZooTables", "Shipped"]
@@ -125,7 +125,7 @@ def zoo_tables(ev: ZooEvaluation) -> ZooTables:
             if r.evaluated_on != env:
                 continue
             validation = [best_validation(d) for d in dirs]
-            chosen = dirs[int(np.argmin([selection_key(v) for v in validation]))]
+            chosen = dirs[int(np.argmin([run_key(d) for d in dirs]))]
             gains = [paired(ev.rows, ev.runs[d].policy_name, ev.anchor(ev.runs[d].policy_name), env) for d in dirs]
             across = mean_ci(g[0] for g in gains)
             run_rows += [_run_cells(ev, r, d, best, d == chosen, env) for d, best in zip(dirs, validation, strict=True)]
