@@ -39,7 +39,7 @@ from evaluation.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, paired_geometr
 from lawn_env import presets
 from lawn_env.interface import resolve_interface
 from training.recipes import RECIPES, Recipe, finished
-from training.validation import read_learning_curve, run_key
+from training.validation import read_learning_curve, run_key, selection_of
 
 __all__ = ["EXPERT", "ladder_recipes", "gap_closed", "Gap", "RungResult", "evaluate_ladder", "render_ladder",
            "plot_ladder", "Ladder", "main"]
@@ -217,7 +217,7 @@ def plot_ladder(ladder: Ladder, path: Path) -> None:
         for d in res.runs:
             rows = [r for r in read_learning_curve(d) if "vs_start" in r]
             t = np.array([r["timesteps"] for r in rows]) / 1e6
-            geometric = all("vs_start_geometric_high" in r for r in rows)  # what its selection read
+            geometric = selection_of(d) == "geometric" and all("vs_start_geometric_high" in r for r in rows)
             key = "vs_start_geometric" if geometric else "vs_start"
             m = 100 * np.array([r[key] for r in rows])
             lo, hi = ((100 * np.nan_to_num(np.array([r[f"{key}_{b}"] for r in rows]), nan=0.0) for b in ("low", "high"))

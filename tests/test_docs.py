@@ -23,6 +23,8 @@ BLOCKS = {"benchmark": "README.md", "benchmark-nominal": "docs/policies.md", "ga
           "main-job-timing": "docs/performance.md", "suite-timing": "docs/performance.md",
           "fast-drone-grid": "docs/benchmark.md", "parallel-scaling": "docs/performance.md",
           "parallel-scaling-16": "docs/performance.md", "ppo-example": "docs/clients.md", "zoo-fleet": "docs/LEARNED.md", "zoo-distil": "docs/LEARNED.md",
+          "zoo-scratch": "docs/LEARNED.md", "zoo-ladder": "docs/LEARNED.md", "learning-signal": "docs/LEARNED.md",
+          "scratch-throughput": "docs/LEARNED.md", "scratch-throughput-2": "docs/LEARNED.md",
           "fleet-generalization": "docs/LEARNED.md", "fleet-decision": "docs/performance.md",
           "dv-mpc": "docs/experts.md", "dv-mpc-refinements": "docs/experts.md", "loss-stability": "docs/experts.md",
           "buffer": "docs/experts.md",

@@ -161,7 +161,7 @@ def test_the_scratch_recipes_say_what_they_train_with():
 def test_the_ladder_page_from_a_tiny_run(tmp_path, monkeypatch):
     """``python -m paper.ladder`` end to end on one rung: the prior, dv-mpc and a run on both test ranges,
     the table, the episodes and the figure written after everything was played."""
-    import paper.ladder as ladder
+    from paper import ladder
 
     r = recipe("ppo-learn-power-scratch")
     runs = tmp_path / "runs"

@@ -221,7 +221,7 @@ def test_selection_keeps_the_start_unless_a_validation_beats_it_significantly():
 def test_the_geometric_rule_sees_a_gain_on_a_heavy_tailed_start_that_the_relative_mean_does_not():
     from training.validation import selected_validation, selection_key, validation_row
 
-    reference = {s: 100.0 for s in range(20)}
+    reference = dict.fromkeys(range(20), 100.0)
     start_costs = {s: 10_000.0 if s < 5 else 100.0 for s in range(20)}  # five seeds where an AGV is lost
     learned = {s: 150.0 if s < 5 else 110.0 for s in range(20)}  # saves them, 10 % dearer on the others
     start = {"timesteps": 0, **validation_row(start_costs, reference, start_costs)}
@@ -232,7 +232,7 @@ def test_the_geometric_rule_sees_a_gain_on_a_heavy_tailed_start_that_the_relativ
     assert selected_validation([start, row]) is start
     assert selected_validation([start, row], "geometric") is row
     assert selection_key(row, "geometric") == row["vs_reference_geometric"] != selection_key(row)
-    with pytest.raises(ValueError, match="'median'.*relative, geometric"):
+    with pytest.raises(ValueError, match=r"'median'.*relative, geometric"):
         selected_validation([start], "median")
 
 

@@ -228,7 +228,8 @@ def test_interface_trained_agents_are_evaluated_on_full_unmodified_episodes(tmp_
     out, summary = _train(tmp_path, "ppo", "lawn/Comm-v1", steps=256, name="rl")
     curve = read_learning_curve(out)
     header = (out / "learning_curve.csv").read_text().splitlines()[0]
-    assert header == "timesteps,control_cost,control_cost_ci95,vs_reference,vs_reference_ci95,vs_start,vs_start_ci95"
+    assert header == ("timesteps,control_cost,control_cost_ci95,vs_reference,vs_reference_ci95,vs_start,vs_start_ci95,"
+                      "vs_reference_geometric,vs_start_geometric,vs_start_geometric_low,vs_start_geometric_high")
     assert [r["timesteps"] for r in curve] == [0, 128, 256]  # the starting policy is validated too
     start = json.loads((out / "validation_start.json").read_text())
     assert list(start) == [str(VALIDATION_SEED_BASE)] and float(start[str(VALIDATION_SEED_BASE)]) == curve[0]["control_cost"]

@@ -280,8 +280,8 @@ def format_zoo_list() -> str:
                 lines.append(f"  {task}, test seeds {bench.test_seeds} (geometric, per range): {cells}")
         else:
             same = verdict(gain[0], gain[1], "negative") == "not significant"  # no measured change from its anchor
-            lines.append(f"  test seeds {bench.test_seeds}: cost vs rg-mpc {fmt_paired(*ship)}, vs its anchor "
-                         f"{bench.anchor or '?'} {fmt_paired(*gain)}"
+            lines.append(f"  test seeds {bench.test_seeds}: cost vs {bench.reference or 'rg-mpc'} {fmt_paired(*ship)}, "
+                         f"vs its anchor {bench.anchor or '?'} {fmt_paired(*gain)}"
                          + (" (no different from its anchor)" if same else "")
                          + f", score v{bench.score_version or '?'} {(bench.score or [math.nan])[0]:.1f} "
                          f"(recorded when the zoo was built; the leaderboard scores v{SCORE_VERSION})")
