@@ -130,6 +130,7 @@ class AgentRecord(BaseModel):
     wall_time_s: float | list[float] | None = None
     expert_decision_s: float | None = None
     versions: Mapping[str, Any] | None = None
+    selection: str | None = None  # the model-selection rule (training.validation.SELECTIONS; None: relative)
     # the zoo's fields (agent.json)
     name: str | None = None
     label: str | None = None
@@ -164,6 +165,15 @@ class AgentRecord(BaseModel):
         if not isinstance(seconds, (int, float)):
             raise ValueError(f"the run's record has wall_time_s={seconds!r}, not one run's wall time")
         return float(seconds)
+
+    @property
+    def steps_per_s(self) -> float | None:
+        """Environment steps per second of wall time: a run's steps over its wall time, a shipped agent's
+        budget over its training runs' mean wall time; None where either is not recorded."""
+        steps = self.num_timesteps if self.num_timesteps is not None else self.budget_steps
+        seconds = self.wall_time_s if isinstance(self.wall_time_s, list) else [self.wall_time_s]
+        known = [float(x) for x in seconds if x]
+        return steps / (sum(known) / len(known)) if steps and known else None
 
     def steps(self, default: int) -> int:
         """The steps the run trained (``num_timesteps``), ``default`` where it does not record them."""

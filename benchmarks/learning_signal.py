@@ -1,7 +1,7 @@
 """Where learning from scratch stops: what the learner's reward tells it, per rung of the ladder.
 
 For each rung of ``lawn_env.presets.LADDER`` and the interface of its scratch recipe
-(``training.recipes``), on ``--seeds`` validation seeds (500,000..), common random numbers throughout:
+(``paper.ladder.ladder_recipes``), on ``--seeds`` validation seeds (500,000..), common random numbers throughout:
 
 * **signal against noise per slot.** The prior (the interface's zero action) and ``dv-mpc`` play the
   same seeds; per slot, the reward the learner would get (the interface's transform of the stage cost)
@@ -38,16 +38,11 @@ from agents import make_policy
 from agents.anchors import anchor_name
 from lawn_env import presets
 from lawn_env.interface import resolve_interface
+from paper.ladder import ladder_recipes
 from training.datasets import label_transitions
-from training.recipes import RECIPES
 
 SEED_BASE = 500_000  # the validation seeds: no test seed is used to diagnose
 T0 = (0, 3, 10, 40)  # the slots whose one decision is swapped
-
-
-def _recipe(rung: presets.Rung):  # the scratch recipe of a rung (paper.ladder's pairing)
-    return next(r for r in RECIPES.values() if r.name.endswith("-scratch") and r.preset == rung.preset
-                and r.env_id == rung.env_id)
 
 
 def play(env_id: str, config, prior, expert, seed: int, swap: int | None = None, record: bool = False):
@@ -73,7 +68,7 @@ def play(env_id: str, config, prior, expert, seed: int, swap: int | None = None,
 
 
 def diagnose(rung: presets.Rung, seeds: int, rewards: list[str]) -> dict[str, float]:
-    recipe = _recipe(rung)
+    recipe = dict(ladder_recipes())[rung]
     config, env_id = presets.get(rung.preset), rung.env_id
     iface = resolve_interface(recipe.hp["interface"])
     prior_name = anchor_name(iface)

@@ -197,9 +197,8 @@ def _mean_cost(costs: Mapping[int, float]) -> str:
 
 def _rate(run_dir: Path) -> str:
     """The run's steps per second of wall time (its record)."""
-    record = read_run(run_dir).record
-    steps, seconds = record.num_timesteps, record.wall_time_s
-    return f"{steps / seconds:,.0f}" if steps and isinstance(seconds, float) and seconds > 0 else "–"
+    rate = read_run(run_dir).record.steps_per_s
+    return f"{rate:,.0f}" if rate else "–"
 
 
 def plot_ladder(ladder: Ladder, path: Path) -> None:

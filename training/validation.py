@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import json
 import platform
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -18,6 +17,7 @@ import numpy as np
 
 import lawn_env
 from agents import Policy, make_policy, rollout
+from agents.runs import AgentRecord, read_record
 from evaluation.episode import read_csv
 from evaluation.provenance import provenance
 from evaluation.seeds import VALIDATION_SEED_BASE
@@ -100,10 +100,9 @@ def selected_validation(rows: Sequence[Mapping[str, float]], rule: str = "relati
 
 def selection_of(run_dir: Path) -> str:
     """The model-selection rule a run recorded (``run.json``'s ``selection``; ``relative`` before the rule
-    was a choice)."""
+    was a choice, and for a run whose record is not written yet)."""
     path = Path(run_dir) / "run.json"
-    data = json.loads(path.read_text()) if path.exists() else {}
-    return str(data.get("selection") or "relative")
+    return (read_record(path).selection if path.exists() else None) or "relative"
 
 
 def best_validation(run_dir: Path) -> Mapping[str, float]:
@@ -223,7 +222,7 @@ def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> RunSummary:
         best_validation_vs_start=best.get("vs_start") if best else None,
         best_validation_vs_start_ci95=best.get("vs_start_ci95") if best else None,
         best_at_timesteps=int(best["timesteps"]) if best else None,
-        steps_per_s=_rate(spec.get("num_timesteps"), spec.get("wall_time_s")),
+        steps_per_s=_rate(AgentRecord.model_validate(spec).steps_per_s),
     )
     lines = [f"# {spec['algo']} on {spec['env']}", ""]
     lines += [f"- {k}: {v}" for k, v in summary.as_json().items()]
@@ -231,9 +230,9 @@ def write_learning_curve(out_dir: Path, spec: Mapping[str, Any]) -> RunSummary:
     return summary
 
 
-def _rate(steps: int | None, seconds: float | None) -> float | None:
-    """Environment steps per second of wall time, to 3 significant digits (None when either is unknown)."""
-    return float(f"{steps / seconds:.3g}") if steps and seconds else None
+def _rate(steps_per_s: float | None) -> float | None:
+    """A run's steps per second to 3 significant digits (None when not recorded)."""
+    return float(f"{steps_per_s:.3g}") if steps_per_s else None
 
 
 def _share(part: float | None, whole: float | None) -> float | None:

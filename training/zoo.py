@@ -250,10 +250,8 @@ def _export(s: Shipped, ev: ZooEvaluation, target_dir: Path) -> Path:
 
 
 def _rate(rec: AgentRecord) -> str:
-    """`` at N steps/s``: the budget over the mean wall time of the training runs ("" where not recorded)."""
-    seconds = rec.wall_time_s if isinstance(rec.wall_time_s, list) else [rec.wall_time_s]
-    known = [float(x) for x in seconds if x]
-    return f" at {rec.budget_steps / float(np.mean(known)):,.0f} steps/s" if rec.budget_steps and known else ""
+    """`` at N steps/s`` of a shipped agent's training runs ("" where not recorded)."""
+    return f" at {rec.steps_per_s:,.0f} steps/s" if rec.steps_per_s else ""
 
 
 def format_zoo_list() -> str:
