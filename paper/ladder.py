@@ -10,7 +10,7 @@ The gap closed is measured on the log of the cost, geometric over seeds::
 with a 95 % percentile bootstrap interval over the seeds (the three costs of a seed resampled
 together). 100 % is ``dv-mpc``'s cost, 0 % the prior's; above 100 % the agent is cheaper than ``dv-mpc``.
 
-    python -m paper.ladder --runs runs/agents --out runs/ladder [--episodes 100] [--workers 2]
+    python -m paper.ladder --runs runs/agents --out runs/ladder [--episodes 100] [--workers 2] [--overwrite]
 
 writes ``ladder.md`` (the table the page's ``zoo-ladder`` block holds), ``ladder.csv`` (every episode)
 and ``ladder.png`` (the curves).
@@ -46,6 +46,8 @@ __all__ = ["EXPERT", "ladder_recipes", "gap_closed", "Gap", "RungResult", "evalu
 
 #: What every rung's gap is measured to.
 EXPERT = "dv-mpc"
+#: The files ``main`` writes into ``--out``.
+OUTPUTS = ("ladder.md", "ladder.csv", "ladder.png")
 
 
 def ladder_recipes() -> list[tuple[presets.Rung, Recipe]]:
@@ -243,9 +245,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=TEST_EPISODES, help="test seeds of each range")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--quiet", action="store_true")
+    parser.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     args = parser.parse_args(argv)
     if args.episodes < 3:
         parser.error(f"--episodes {args.episodes}: at least 3 (the bootstrap interval)")
+    there = [name for name in OUTPUTS if (Path(args.out) / name).exists()]
+    if there and not args.overwrite:
+        parser.error(f"--out {args.out} already holds {', '.join(there)}; pass --overwrite to replace them")
     ladder = evaluate_ladder(Path(args.runs), args.episodes, args.workers, not args.quiet)
     table = render_ladder(ladder)  # everything is computed before the first file is written
     out = Path(args.out)

@@ -158,7 +158,7 @@ def test_the_scratch_recipes_say_what_they_train_with():
         assert params["n_envs"] * params["n_steps"] == 30_720 and params["batch_size"] == 7_680
 
 
-def test_the_ladder_page_from_a_tiny_run(tmp_path, monkeypatch):
+def test_the_ladder_page_from_a_tiny_run(tmp_path, monkeypatch, capsys):
     """``python -m paper.ladder`` end to end on one rung: the prior, dv-mpc and a run on both test ranges,
     the table, the episodes and the figure written after everything was played."""
     from paper import ladder
@@ -176,5 +176,10 @@ def test_the_ladder_page_from_a_tiny_run(tmp_path, monkeypatch):
     assert sum(line.startswith("|") for line in table.splitlines()) == 3  # one run: the other rungs have none here
     assert "| 0 % [0, 0] | 0 % [0, 0] |" in table  # its selected model is its start, the prior: nothing closed
     assert (out / "ladder.png").stat().st_size > 0 and len((out / "ladder.csv").read_text().splitlines()) == 1 + 3 * 6
+    before = (out / "ladder.md").read_text()
+    with pytest.raises(SystemExit):  # an earlier run's files are kept unless asked
+        ladder.main(["--runs", str(runs), "--out", str(out), "--episodes", "3", "--workers", "1", "--quiet"])
+    assert (out / "ladder.md").read_text() == before
+    assert "pass --overwrite" in capsys.readouterr().err
     with pytest.raises(ValueError, match="no finished run"):
         ladder.evaluate_ladder(tmp_path / "empty", episodes=3, workers=1, progress=False)
